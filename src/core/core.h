@@ -1,0 +1,93 @@
+/* core — status codes, error messages with file/line, logging, timers,
+ * small dense 3x3 algebra and a polar decomposition robust to det F <= 0.
+ *
+ * Every function that can fail returns int: NH_OK (0) or one of nh_status.
+ * The failing site records a message with nh_error_set(); callers propagate
+ * the code with NH_TRY and the front end prints nh_error_message() once.
+ * Matrices are 3x3, row-major, double[9]: A[3*i + j] = A_ij. */
+#ifndef NH_CORE_H
+#define NH_CORE_H
+
+#include <stddef.h>
+
+#ifndef NH_VERSION
+#define NH_VERSION "0.0.0"
+#endif
+
+typedef enum {
+  NH_OK = 0,
+  NH_ERR_INPUT,   /* bad scene, argument or template: the user can fix it (exit 2) */
+  NH_ERR_NUMERIC, /* not positive definite, NaN, no convergence (exit 1) */
+  NH_ERR_IO,      /* a file could not be written or read (exit 1) */
+  NH_ERR_MEMORY,  /* allocation failed (exit 1) */
+  NH_ERR_INTERNAL /* a broken invariant: a bug (exit 1) */
+} nh_status;
+
+/* Record a message for status code `code` (printf format) and return `code`.
+ * The message replaces any earlier one. `src_file`/`src_line` are the C
+ * source location, kept for debugging (NH_DEBUG_ERRORS=1 prints them). */
+int nh_error_set(int code, const char *src_file, int src_line, const char *fmt, ...)
+    __attribute__((format(printf, 4, 5)));
+/* The last recorded message ("" if none). */
+const char *nh_error_message(void);
+/* Forget the last message. */
+void nh_error_clear(void);
+/* Exit status for a status code: 0 ok, 2 input, 1 otherwise. */
+int nh_error_exit_status(int code);
+
+#define NH_ERROR(code, ...) nh_error_set((code), __FILE__, __LINE__, __VA_ARGS__)
+#define NH_TRY(expr)                                                                               \
+  do {                                                                                             \
+    int nh_rc_ = (expr);                                                                           \
+    if (nh_rc_) return nh_rc_;                                                                     \
+  } while (0)
+#define NH_CHECK(cond, code, ...)                                                                  \
+  do {                                                                                             \
+    if (!(cond)) return NH_ERROR((code), __VA_ARGS__);                                             \
+  } while (0)
+
+/* Allocation that records NH_ERR_MEMORY on failure. calloc semantics. */
+void *nh_calloc(size_t n, size_t size);
+/* Grow *ptr to hold at least `need` items of `size` bytes (capacity doubles).
+ * Returns NH_OK or NH_ERR_MEMORY (the old block is kept on failure). */
+int nh_grow(void **ptr, int *capacity, int need, size_t size);
+
+/* ---- logging ---- */
+typedef enum { NH_LOG_QUIET = 0, NH_LOG_INFO = 1, NH_LOG_DEBUG = 2 } nh_log_level;
+void nh_log_set_level(nh_log_level level);
+nh_log_level nh_log_get_level(void);
+/* Informational line on stderr (suppressed by --quiet). */
+void nh_log_info(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
+/* Warning line on stderr (always shown). */
+void nh_log_warn(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
+
+/* ---- timers ---- */
+/* Monotonic wall time in seconds. */
+double nh_time_now(void);
+
+/* ---- 3x3 algebra ---- */
+void nh_mat3_identity(double A[9]);
+void nh_mat3_mul(const double A[9], const double B[9], double C[9]);    /* C = A B   */
+void nh_mat3_mul_tn(const double A[9], const double B[9], double C[9]); /* C = Aᵀ B  */
+void nh_mat3_mul_nt(const double A[9], const double B[9], double C[9]); /* C = A Bᵀ  */
+void nh_mat3_transpose(const double A[9], double At[9]);
+void nh_mat3_vec(const double A[9], const double x[3], double y[3]);  /* y = A x  */
+void nh_mat3_tvec(const double A[9], const double x[3], double y[3]); /* y = Aᵀ x */
+double nh_mat3_det(const double A[9]);
+/* Inverse; returns NH_ERR_NUMERIC if |det| <= tiny (no message recorded). */
+int nh_mat3_inverse(const double A[9], double Ainv[9]);
+/* Rotation matrix from a rotation vector (axis * angle), Rodrigues' formula. */
+void nh_mat3_rotation(const double rotvec[3], double R[9]);
+
+/* Symmetric eigen-decomposition by cyclic Jacobi: S = V diag(w) Vᵀ, w sorted
+ * descending, V's columns orthonormal with det V = +1. */
+void nh_mat3_sym_eigen(const double S[9], double w[3], double V[9]);
+
+/* Polar decomposition F = R U with R a proper rotation (det R = +1) for every
+ * F, including det F <= 0 and rank-deficient F: from the SVD F = P Σ Qᵀ with
+ * the sign of the smallest singular value flipped when det F < 0, R = P Qᵀ
+ * (the "rotation-variant" SVD of invertible FEM). F = 0 gives R = I.
+ * Never produces NaN for finite F. */
+void nh_polar_rotation(const double F[9], double R[9]);
+
+#endif

@@ -1,0 +1,54 @@
+/* error.c — the last error message, allocation helpers and exit statuses.
+ *
+ * One message slot per thread: the failing site fills it, NH_TRY carries the
+ * code up, and the front end prints it once. A later error replaces an
+ * earlier one, so the message a user sees is the one closest to the cause
+ * that was recorded last — callers that add context record a new message. */
+#include "core/core.h"
+
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static _Thread_local char nh_message[2048];
+
+int nh_error_set(int code, const char *src_file, int src_line, const char *fmt, ...) {
+  va_list ap;
+  va_start(ap, fmt);
+  vsnprintf(nh_message, sizeof nh_message, fmt, ap);
+  va_end(ap);
+  const char *dbg = getenv("NH_DEBUG_ERRORS");
+  if (dbg && dbg[0] == '1') fprintf(stderr, "[%s:%d] %s\n", src_file, src_line, nh_message);
+  return code;
+}
+
+const char *nh_error_message(void) {
+  return nh_message;
+}
+
+void nh_error_clear(void) {
+  nh_message[0] = '\0';
+}
+
+int nh_error_exit_status(int code) {
+  if (code == NH_OK) return 0;
+  return code == NH_ERR_INPUT ? 2 : 1;
+}
+
+void *nh_calloc(size_t n, size_t size) {
+  void *p = calloc(n ? n : 1, size ? size : 1);
+  if (!p) NH_ERROR(NH_ERR_MEMORY, "out of memory allocating %zu x %zu bytes", n, size);
+  return p;
+}
+
+int nh_grow(void **ptr, int *capacity, int need, size_t size) {
+  if (need <= *capacity) return NH_OK;
+  int cap = *capacity > 0 ? *capacity : 16;
+  while (cap < need) cap *= 2;
+  void *p = realloc(*ptr, (size_t)cap * size);
+  if (!p) return NH_ERROR(NH_ERR_MEMORY, "out of memory growing an array to %d items", cap);
+  *ptr = p;
+  *capacity = cap;
+  return NH_OK;
+}

@@ -1,0 +1,82 @@
+/* fem — the corotational trilinear hexahedron (docs/theory.md §2).
+ *
+ * Per element, with rest corners X, displacements u (current corners
+ * x = X + u) and the rest stiffness K₀ (2x2x2 Gauss, isotropic elasticity):
+ *   F   = I + Σₐ uₐ ⊗ ∇N_a(0)    deformation gradient at the centre
+ *   R   = polar rotation of F     (robust to det F <= 0, core/mat3.c)
+ *   fₑ  = R K₀ (Rᵀ x − X)         internal force (blockwise R per node)
+ *   Kₑ  ≈ R K₀ Rᵀ                 tangent (the variation of R is dropped)
+ * Lumped mass ρ Vₑ / 8 per node; an immersed cell scales stiffness and mass
+ * by its fill fraction φ. Matrices are row-major, 24x24, row 3a+i is node a,
+ * component i. Voigt order for stresses: xx, yy, zz, yz, xz, xy. */
+#ifndef NH_FEM_H
+#define NH_FEM_H
+
+#include "core/core.h"
+#include "mesh/mesh.h"
+
+typedef struct {
+  double young, poisson, density;
+} nh_material;
+
+/* Rest stiffness K0 (24x24) by 2x2x2 Gauss quadrature, the shape-function
+ * gradients G0[8][3] = ∇_X N_a at the centre, and the volume.
+ * Fails with NH_ERR_NUMERIC (message names nothing: the caller knows the
+ * cell) if the Jacobian is not positive at a Gauss point. */
+int nh_hex_stiffness(const double X[24], double lambda, double mu, double K0[576], double G0[24],
+                     double *volume);
+
+/* Corotational internal force f[24] and (if Kt != NULL) tangent R K0 Rᵀ, and
+ * the rotation R[9] of the element, at nodal displacements u[24]. */
+void nh_hex_corot(const double X[24], const double u[24], const double K0[576], const double G0[24],
+                  double R[9], double f[24], double Kt[576]);
+
+/* Cauchy stress at the centre, σ = R (λ tr ε I + 2 μ ε) Rᵀ with ε the
+ * symmetric gradient of d = Rᵀx − X at the centre; s[6] in Voigt order. */
+void nh_hex_center_stress(const double X[24], const double u[24], const double G0[24],
+                          double lambda, double mu, double s[6]);
+
+/* von Mises equivalent stress of s[6] (Voigt). */
+double nh_von_mises(const double s[6]);
+
+/* Lamé parameters from E and ν. */
+void nh_lame(double young, double poisson, double *lambda, double *mu);
+
+/* The tissue model: material, per-cell element data and the lumped mass.
+ * Element data are shared between cells of identical rest shape (all cells
+ * of a uniform grid share one K0), found by hashing the rest corners. */
+typedef struct nh_tissue {
+  const nh_mesh *mesh; /* borrowed */
+  nh_material material;
+  double lambda, mu;
+  int n_shapes, cap_shapes;
+  double *K0;      /* 576 per shape */
+  double *G0;      /* 24 per shape */
+  double *volume;  /* per shape */
+  double *key;     /* 24 per shape: corners relative to corner 0 */
+  int *cell_shape; /* per cell (leaves only meaningful), -1 if not computed */
+  int cap_cells;
+  double *mass; /* lumped nodal mass, per node */
+  int cap_nodes;
+} nh_tissue;
+
+/* Element data for every leaf of `mesh` and the lumped mass.
+ * Fails with NH_ERR_INPUT if a cell has a non-positive Jacobian (an inverted
+ * rest cell is a meshing error), NH_ERR_MEMORY. */
+int nh_tissue_create(const nh_mesh *mesh, const nh_material *material, nh_tissue **out);
+/* Recompute element data of new cells and the lumped mass after the mesh changed. */
+int nh_tissue_update(nh_tissue *tissue);
+void nh_tissue_destroy(nh_tissue **tissue);
+
+/* The element of leaf c at nodal displacements u (3 per node): force f[24]
+ * and tangent Kt[576] (may be NULL), both scaled by φ. */
+void nh_tissue_element(const nh_tissue *tissue, int c, const double *u, double f[24],
+                       double Kt[576]);
+
+/* Elastic energy Σₑ ½ φ dₑᵀ K0 dₑ (dₑ = Rᵀxₑ − Xₑ) at displacements u. */
+double nh_tissue_energy(const nh_tissue *tissue, const double *u);
+
+/* Centre stress of leaf c at displacements u (Voigt, Pa). */
+void nh_tissue_cell_stress(const nh_tissue *tissue, int c, const double *u, double s[6]);
+
+#endif

@@ -1,0 +1,186 @@
+/* csv.c — append-only CSV tables, mkdir -p and atomic text files.
+ *
+ * CSV tables (steps.csv, probes.csv, ...) grow by one row per step, so they
+ * are the one kind of output that is not written through tmp + rename: the
+ * file is created (truncated) with its header and every row is appended and
+ * flushed at once, so a run that is killed or fails keeps every row it
+ * completed. Each row is formatted into memory first and handed to stdio in
+ * one fwrite, which keeps partial lines to the rare case of a full disk.
+ *
+ * Format: RFC 4180 style, comma separated, '\n' line ends, a header line of
+ * column names (quoted only if a name contains a comma, quote or newline).
+ * Rows are formatted by the caller (printf style), who owns the quoting of
+ * its fields; numbers meant to be read back exactly should use %.17g. A
+ * trailing newline in the caller's format is dropped, so a row is always
+ * exactly one line.
+ *
+ * nh_mkdir_p creates every missing component of a path (mode 0777 minus the
+ * umask) and accepts components that already exist as directories.
+ * nh_write_text writes a whole file through "<path>.tmp" and rename(), the
+ * same atomic scheme as the VTU writer. All failures return NH_ERR_IO with a
+ * message naming the path and strerror(errno). */
+#include "io/io.h"
+
+#include <errno.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <sys/types.h>
+
+struct nh_csv {
+  FILE *file;
+  char *path;
+};
+
+static char *copy_string(const char *s) {
+  char *c = nh_calloc(strlen(s) + 1, 1);
+  if (c) strcpy(c, s);
+  return c;
+}
+
+static void put_csv_field(FILE *f, const char *s) {
+  if (!strpbrk(s, ",\"\r\n")) {
+    fputs(s, f);
+    return;
+  }
+  fputc('"', f);
+  for (; *s; ++s) {
+    if (*s == '"') fputc('"', f);
+    fputc(*s, f);
+  }
+  fputc('"', f);
+}
+
+int nh_csv_create(const char *path, int n_columns, const char *const *columns, nh_csv **out) {
+  NH_CHECK(path && out && n_columns >= 1 && columns, NH_ERR_INTERNAL,
+           "nh_csv_create: bad arguments");
+  *out = NULL;
+  nh_csv *csv = nh_calloc(1, sizeof *csv);
+  if (!csv) return NH_ERR_MEMORY;
+  csv->path = copy_string(path);
+  if (!csv->path) {
+    free(csv);
+    return NH_ERR_MEMORY;
+  }
+  csv->file = fopen(path, "w");
+  if (!csv->file) {
+    int rc = NH_ERROR(NH_ERR_IO, "cannot create CSV file '%s': %s", path, strerror(errno));
+    nh_csv_destroy(&csv);
+    return rc;
+  }
+  for (int i = 0; i < n_columns; ++i) {
+    if (i) fputc(',', csv->file);
+    put_csv_field(csv->file, columns[i] ? columns[i] : "");
+  }
+  fputc('\n', csv->file);
+  if (fflush(csv->file) != 0 || ferror(csv->file)) {
+    int rc = NH_ERROR(NH_ERR_IO, "cannot write CSV file '%s': %s", path, strerror(errno));
+    nh_csv_destroy(&csv);
+    return rc;
+  }
+  *out = csv;
+  return NH_OK;
+}
+
+int nh_csv_row(nh_csv *csv, const char *fmt, ...) {
+  NH_CHECK(csv && csv->file && fmt, NH_ERR_INTERNAL, "nh_csv_row: bad arguments");
+  char small[1024];
+  char *line = small;
+  va_list ap;
+  va_start(ap, fmt);
+  int n = vsnprintf(small, sizeof small, fmt, ap);
+  va_end(ap);
+  NH_CHECK(n >= 0, NH_ERR_INTERNAL, "CSV '%s': formatting a row failed", csv->path);
+  if ((size_t)n + 2 > sizeof small) {
+    line = malloc((size_t)n + 2);
+    if (!line) return NH_ERROR(NH_ERR_MEMORY, "out of memory writing CSV '%s'", csv->path);
+    va_start(ap, fmt);
+    vsnprintf(line, (size_t)n + 1, fmt, ap);
+    va_end(ap);
+  }
+  size_t len = (size_t)n;
+  while (len > 0 && (line[len - 1] == '\n' || line[len - 1] == '\r')) --len;
+  line[len++] = '\n';
+  int ok = fwrite(line, 1, len, csv->file) == len && fflush(csv->file) == 0;
+  int saved_errno = errno;
+  if (line != small) free(line);
+  if (!ok)
+    return NH_ERROR(NH_ERR_IO, "cannot write CSV file '%s': %s", csv->path, strerror(saved_errno));
+  return NH_OK;
+}
+
+void nh_csv_destroy(nh_csv **csv) {
+  if (!csv || !*csv) return;
+  nh_csv *c = *csv;
+  /* Every row was flushed already; a close error here has nothing left to lose. */
+  if (c->file) fclose(c->file);
+  free(c->path);
+  free(c);
+  *csv = NULL;
+}
+
+static int is_directory(const char *path) {
+  struct stat st;
+  return stat(path, &st) == 0 && S_ISDIR(st.st_mode);
+}
+
+int nh_mkdir_p(const char *path) {
+  NH_CHECK(path, NH_ERR_INTERNAL, "nh_mkdir_p: NULL path");
+  NH_CHECK(path[0] != '\0', NH_ERR_IO, "cannot create directory '': empty path");
+  char *p = copy_string(path);
+  if (!p) return NH_ERR_MEMORY;
+  int rc = NH_OK;
+  /* Create each prefix that ends at a '/' (skipping a leading one), then the whole path. */
+  for (char *s = p + 1;; ++s) {
+    if (*s != '/' && *s != '\0') continue;
+    char saved = *s;
+    *s = '\0';
+    if (mkdir(p, 0777) != 0 && !(errno == EEXIST && is_directory(p))) {
+      int e = errno;
+      if (e == EEXIST) e = ENOTDIR;
+      rc = NH_ERROR(NH_ERR_IO, "cannot create directory '%s' (at '%s'): %s", path, p, strerror(e));
+      break;
+    }
+    *s = saved;
+    if (saved == '\0') break;
+    while (s[1] == '/') ++s; /* "a//b" */
+    if (s[1] == '\0') break; /* trailing slash */
+  }
+  free(p);
+  return rc;
+}
+
+int nh_write_text(const char *path, const char *text) {
+  NH_CHECK(path && text, NH_ERR_INTERNAL, "nh_write_text: NULL argument");
+  size_t tmp_len = strlen(path) + 5;
+  char *tmp = nh_calloc(tmp_len, 1);
+  if (!tmp) return NH_ERR_MEMORY;
+  snprintf(tmp, tmp_len, "%s.tmp", path);
+  int rc = NH_OK;
+  FILE *f = fopen(tmp, "w");
+  if (!f) {
+    rc = NH_ERROR(NH_ERR_IO, "cannot write file '%s': %s", path, strerror(errno));
+    free(tmp);
+    return rc;
+  }
+  size_t len = strlen(text);
+  int failed = fwrite(text, 1, len, f) != len;
+  int saved_errno = failed ? errno : 0;
+  if (fclose(f) != 0 && !failed) {
+    failed = 1;
+    saved_errno = errno;
+  }
+  if (!failed && rename(tmp, path) != 0) {
+    failed = 1;
+    saved_errno = errno;
+  }
+  if (failed) {
+    remove(tmp);
+    rc = NH_ERROR(NH_ERR_IO, "cannot write file '%s': %s", path,
+                  saved_errno ? strerror(saved_errno) : "write error");
+  }
+  free(tmp);
+  return rc;
+}

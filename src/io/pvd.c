@@ -1,0 +1,171 @@
+/* pvd.c — ParaView collection files (.pvd): the time series of one object.
+ *
+ * A PVD is a small XML file listing (time, file) pairs:
+ *
+ *   <?xml version="1.0"?>
+ *   <VTKFile type="Collection" version="0.1" byte_order="LittleEndian">
+ *     <Collection>
+ *       <DataSet timestep="0.01" group="" part="0" file="tissue_000001.vtu"/>
+ *       ...
+ *     </Collection>
+ *   </VTKFile>
+ *
+ * ParaView opens it as one time-varying dataset. File names are relative to
+ * the PVD's folder, as the caller passes them.
+ *
+ * Choices:
+ * - The collection keeps its frames in memory and every nh_pvd_add rewrites
+ *   the whole file through nh_write_text (tmp + rename). Appending in place
+ *   would leave the closing tags missing whenever a run is killed; rewriting
+ *   keeps the file always valid and listing exactly the frames written so
+ *   far. The cost is O(frames) per add, negligible next to a VTU frame.
+ * - nh_pvd_create writes the empty collection at once, so an unwritable
+ *   folder fails before the first step rather than after it.
+ * - Times are printed with %.17g, which reproduces the double exactly, so a
+ *   script can match PVD times against the CSV times bit for bit.
+ * - File names are XML-escaped (a tool may be named "a&b"). */
+#include "io/io.h"
+
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+struct nh_pvd {
+  char *path;
+  int n_frames, cap_frames;
+  double *times;
+  char **files;
+};
+
+/* A growing text buffer. */
+typedef struct {
+  char *s;
+  size_t len, cap;
+} text_buf;
+
+static int buf_reserve(text_buf *b, size_t extra) {
+  if (b->len + extra + 1 <= b->cap) return NH_OK;
+  size_t cap = b->cap ? b->cap : 1024;
+  while (cap < b->len + extra + 1) cap *= 2;
+  char *p = realloc(b->s, cap);
+  if (!p) return NH_ERROR(NH_ERR_MEMORY, "out of memory writing a PVD collection");
+  b->s = p;
+  b->cap = cap;
+  return NH_OK;
+}
+
+static int buf_printf(text_buf *b, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+static int buf_printf(text_buf *b, const char *fmt, ...) {
+  va_list ap;
+  va_start(ap, fmt);
+  int n = vsnprintf(NULL, 0, fmt, ap);
+  va_end(ap);
+  if (n < 0) return NH_ERROR(NH_ERR_INTERNAL, "PVD: formatting failed");
+  NH_TRY(buf_reserve(b, (size_t)n));
+  va_start(ap, fmt);
+  vsnprintf(b->s + b->len, (size_t)n + 1, fmt, ap);
+  va_end(ap);
+  b->len += (size_t)n;
+  return NH_OK;
+}
+
+static int buf_put_xml_attr(text_buf *b, const char *s) {
+  for (; *s; ++s) {
+    switch (*s) {
+    case '&':
+      NH_TRY(buf_printf(b, "&amp;"));
+      break;
+    case '<':
+      NH_TRY(buf_printf(b, "&lt;"));
+      break;
+    case '>':
+      NH_TRY(buf_printf(b, "&gt;"));
+      break;
+    case '"':
+      NH_TRY(buf_printf(b, "&quot;"));
+      break;
+    default:
+      NH_TRY(buf_printf(b, "%c", *s));
+    }
+  }
+  return NH_OK;
+}
+
+static int pvd_render(const nh_pvd *pvd, text_buf *b) {
+  NH_TRY(buf_printf(b, "<?xml version=\"1.0\"?>\n"
+                       "<VTKFile type=\"Collection\" version=\"0.1\" "
+                       "byte_order=\"LittleEndian\">\n"
+                       "  <Collection>\n"));
+  for (int i = 0; i < pvd->n_frames; ++i) {
+    NH_TRY(buf_printf(b, "    <DataSet timestep=\"%.17g\" group=\"\" part=\"0\" file=\"",
+                      pvd->times[i]));
+    NH_TRY(buf_put_xml_attr(b, pvd->files[i]));
+    NH_TRY(buf_printf(b, "\"/>\n"));
+  }
+  return buf_printf(b, "  </Collection>\n</VTKFile>\n");
+}
+
+static int pvd_write(const nh_pvd *pvd) {
+  text_buf b = {0};
+  int rc = pvd_render(pvd, &b);
+  if (rc == NH_OK) rc = nh_write_text(pvd->path, b.s);
+  free(b.s);
+  return rc;
+}
+
+int nh_pvd_create(const char *path, nh_pvd **out) {
+  NH_CHECK(path && out, NH_ERR_INTERNAL, "nh_pvd_create: NULL argument");
+  *out = NULL;
+  nh_pvd *pvd = nh_calloc(1, sizeof *pvd);
+  if (!pvd) return NH_ERR_MEMORY;
+  pvd->path = nh_calloc(strlen(path) + 1, 1);
+  if (!pvd->path) {
+    nh_pvd_destroy(&pvd);
+    return NH_ERR_MEMORY;
+  }
+  strcpy(pvd->path, path);
+  int rc = pvd_write(pvd);
+  if (rc) {
+    nh_pvd_destroy(&pvd);
+    return rc;
+  }
+  *out = pvd;
+  return NH_OK;
+}
+
+int nh_pvd_add(nh_pvd *pvd, double time, const char *file) {
+  NH_CHECK(pvd && file, NH_ERR_INTERNAL, "nh_pvd_add: NULL argument");
+  if (pvd->n_frames == pvd->cap_frames) {
+    int cap = pvd->cap_frames;
+    NH_TRY(nh_grow((void **)&pvd->times, &cap, pvd->n_frames + 1, sizeof *pvd->times));
+    /* Grow files to the same capacity; keep cap_frames at the smaller of the two. */
+    int cap_files = pvd->cap_frames;
+    NH_TRY(nh_grow((void **)&pvd->files, &cap_files, cap, sizeof *pvd->files));
+    pvd->cap_frames = cap;
+  }
+  char *copy = nh_calloc(strlen(file) + 1, 1);
+  if (!copy) return NH_ERR_MEMORY;
+  strcpy(copy, file);
+  pvd->times[pvd->n_frames] = time;
+  pvd->files[pvd->n_frames] = copy;
+  pvd->n_frames++;
+  int rc = pvd_write(pvd);
+  if (rc) {
+    /* Keep memory and disk in agreement: the frame is not in the collection. */
+    pvd->n_frames--;
+    free(copy);
+  }
+  return rc;
+}
+
+void nh_pvd_destroy(nh_pvd **pvd) {
+  if (!pvd || !*pvd) return;
+  nh_pvd *p = *pvd;
+  for (int i = 0; i < p->n_frames; ++i) free(p->files[i]);
+  free(p->files);
+  free(p->times);
+  free(p->path);
+  free(p);
+  *pvd = NULL;
+}

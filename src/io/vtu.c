@@ -1,0 +1,298 @@
+/* vtu.c — one VTK XML UnstructuredGrid piece, written atomically.
+ *
+ * The file is the VTK XML "UnstructuredGrid" format, version 1.0, with every
+ * DataArray stored in a single <AppendedData encoding="raw"> block:
+ *
+ *   <?xml version="1.0"?>
+ *   <VTKFile type="UnstructuredGrid" version="1.0" byte_order="LittleEndian"
+ *            header_type="UInt64">
+ *     <UnstructuredGrid><Piece NumberOfPoints="N" NumberOfCells="M">
+ *       <PointData> Float64 fields..., Int32 flag </PointData>
+ *       <CellData>  Float64 fields... </CellData>
+ *       <Points>    Float64 x 3 </Points>
+ *       <Cells>     Int32 connectivity, Int32 offsets, UInt8 types </Cells>
+ *     </Piece></UnstructuredGrid>
+ *     <AppendedData encoding="raw">
+ *       _[n0][bytes of array 0][n1][bytes of array 1]...
+ *     </AppendedData>
+ *   </VTKFile>
+ *
+ * Each array's `offset` attribute counts bytes from the first byte after the
+ * '_' to its 8-byte (UInt64) byte count n_k, which is followed by exactly n_k
+ * bytes of little-endian data. Arrays are appended in the order the XML
+ * declares them, offsets are plain decimal integers, and a newline follows
+ * the last byte: meshio's raw reader depends on all three (it finds arrays by
+ * walking offsets in order and cuts the data at the last newline).
+ *
+ * Choices:
+ * - Raw rather than base64 or zlib: the tissue frame of a 32x16x16 grid is
+ *   written every few steps, and raw costs one fwrite per array. No per-value
+ *   formatting touches the binary part; the only conversion is types (int to
+ *   UInt8), done into one buffer.
+ * - connectivity and offsets are Int32, straight from the caller's int arrays
+ *   (no copy). An int holds any index needlehex can allocate; VTK and meshio
+ *   read Int32 cell arrays like Int64 ones. If a mesh ever outgrows 2^31
+ *   connectivity entries this becomes Int64 with a conversion buffer.
+ * - NumberOfComponents is written only for vector fields (> 1), as VTK's
+ *   own writer does: VTK defaults it to 1, and meshio then reads a scalar
+ *   field as shape (n,) rather than (n, 1).
+ * - offsets follow the version-1.0 convention: n_cells entries, the end of
+ *   each cell in connectivity (no leading 0).
+ * - On a big-endian host the arrays are byte-swapped through a small buffer,
+ *   so the file is always little-endian as the header says.
+ * - An empty piece (0 points and/or 0 cells) is valid: its arrays have a
+ *   byte count of 0 and no data. VTK reads it; meshio 5 cannot read a file
+ *   with 0 cells (a meshio limitation, not a format one).
+ * - Inconsistent input (offsets decreasing, an index outside [0, n_points),
+ *   a field with components < 1) is a caller bug: NH_ERR_INTERNAL, nothing
+ *   written.
+ * - Atomicity: everything goes to "<path>.tmp", which is closed (errors of
+ *   the final flush included) and renamed over <path>. On any failure the tmp
+ *   file is removed and NH_ERR_IO names the path and strerror(errno). There is
+ *   no fsync: the rename protects readers and killed runs, not power loss. */
+#include "io/io.h"
+
+#include <errno.h>
+#include <limits.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+_Static_assert(sizeof(int) == 4, "Int32 arrays are written straight from int arrays");
+_Static_assert(sizeof(double) == 8, "Float64 arrays are written straight from double arrays");
+
+/* One DataArray: its XML attributes and where its bytes come from. */
+typedef struct {
+  const char *type; /* "Float64", "Int32", "UInt8" */
+  const char *name;
+  int components; /* NumberOfComponents, written only when > 1 */
+  const void *data;
+  size_t elem_size;
+  size_t count; /* number of elements (tuples x components) */
+  uint64_t offset;
+} vtu_array;
+
+static vtu_array make_array(const char *type, const char *name, int components, const void *data,
+                            size_t elem_size, size_t count) {
+  return (vtu_array){.type = type,
+                     .name = name,
+                     .components = components,
+                     .data = data,
+                     .elem_size = elem_size,
+                     .count = count};
+}
+
+static int host_is_little_endian(void) {
+  const uint16_t one = 1;
+  unsigned char first;
+  memcpy(&first, &one, 1);
+  return first == 1;
+}
+
+/* Write `count` elements of `elem_size` bytes as little-endian. Returns 0 or -1
+ * with errno set. */
+static int write_le(FILE *f, const void *data, size_t elem_size, size_t count) {
+  if (count == 0) return 0;
+  if (elem_size == 1 || host_is_little_endian())
+    return fwrite(data, elem_size, count, f) == count ? 0 : -1;
+  unsigned char buf[4096];
+  const unsigned char *src = data;
+  size_t per = sizeof buf / elem_size;
+  for (size_t done = 0; done < count;) {
+    size_t n = count - done < per ? count - done : per;
+    for (size_t i = 0; i < n; ++i)
+      for (size_t b = 0; b < elem_size; ++b)
+        buf[i * elem_size + b] = src[(done + i) * elem_size + elem_size - 1 - b];
+    if (fwrite(buf, elem_size, n, f) != n) return -1;
+    done += n;
+  }
+  return 0;
+}
+
+/* Attribute value with the XML specials escaped. */
+static void put_xml_attr(FILE *f, const char *s) {
+  for (; *s; ++s) {
+    switch (*s) {
+    case '&':
+      fputs("&amp;", f);
+      break;
+    case '<':
+      fputs("&lt;", f);
+      break;
+    case '>':
+      fputs("&gt;", f);
+      break;
+    case '"':
+      fputs("&quot;", f);
+      break;
+    default:
+      fputc(*s, f);
+    }
+  }
+}
+
+static void put_array_xml(FILE *f, const vtu_array *a) {
+  fprintf(f, "        <DataArray type=\"%s\" Name=\"", a->type);
+  put_xml_attr(f, a->name);
+  fputc('"', f);
+  if (a->components > 1) fprintf(f, " NumberOfComponents=\"%d\"", a->components);
+  fprintf(f, " format=\"appended\" offset=\"%llu\"/>\n", (unsigned long long)a->offset);
+}
+
+/* Check what the writer relies on; a failure is a bug in the caller. */
+static int check_grid(const char *path, const nh_vtu_grid *g) {
+  NH_CHECK(g->n_points >= 0 && g->n_cells >= 0, NH_ERR_INTERNAL,
+           "VTU '%s': negative size (%d points, %d cells)", path, g->n_points, g->n_cells);
+  NH_CHECK(g->n_points == 0 || g->points, NH_ERR_INTERNAL, "VTU '%s': points missing", path);
+  if (g->n_cells > 0) {
+    NH_CHECK(g->offsets && g->connectivity, NH_ERR_INTERNAL,
+             "VTU '%s': connectivity or offsets missing", path);
+    int prev = 0;
+    for (int c = 0; c < g->n_cells; ++c) {
+      NH_CHECK(g->offsets[c] >= prev, NH_ERR_INTERNAL,
+               "VTU '%s': offsets[%d] = %d is below the previous offset %d", path, c, g->offsets[c],
+               prev);
+      prev = g->offsets[c];
+    }
+    for (int k = 0; k < prev; ++k)
+      NH_CHECK(g->connectivity[k] >= 0 && g->connectivity[k] < g->n_points, NH_ERR_INTERNAL,
+               "VTU '%s': connectivity[%d] = %d outside [0, %d)", path, k, g->connectivity[k],
+               g->n_points);
+    if (g->types) {
+      for (int c = 0; c < g->n_cells; ++c)
+        NH_CHECK(g->types[c] >= 0 && g->types[c] <= UCHAR_MAX, NH_ERR_INTERNAL,
+                 "VTU '%s': cell %d has type %d, not a VTK cell type", path, c, g->types[c]);
+    } else {
+      NH_CHECK(g->type >= 0 && g->type <= UCHAR_MAX, NH_ERR_INTERNAL,
+               "VTU '%s': cell type %d is not a VTK cell type", path, g->type);
+    }
+  }
+  for (int pass = 0; pass < 2; ++pass) {
+    int n = pass ? g->n_cell_fields : g->n_point_fields;
+    const nh_field *fields = pass ? g->cell_fields : g->point_fields;
+    int tuples = pass ? g->n_cells : g->n_points;
+    NH_CHECK(n == 0 || fields, NH_ERR_INTERNAL, "VTU '%s': fields missing", path);
+    for (int i = 0; i < n; ++i) {
+      NH_CHECK(fields[i].name && fields[i].components >= 1 && (tuples == 0 || fields[i].data),
+               NH_ERR_INTERNAL, "VTU '%s': %s field %d has no name, components or data", path,
+               pass ? "cell" : "point", i);
+    }
+  }
+  return NH_OK;
+}
+
+int nh_vtu_write(const char *path, const nh_vtu_grid *grid) {
+  NH_CHECK(path && grid, NH_ERR_INTERNAL, "nh_vtu_write: NULL argument");
+  NH_TRY(check_grid(path, grid));
+
+  const size_t np = (size_t)grid->n_points, nc = (size_t)grid->n_cells;
+  const size_t nconn = nc ? (size_t)grid->offsets[nc - 1] : 0;
+
+  /* The types array is the only one that needs converting. */
+  unsigned char *types = nh_calloc(nc ? nc : 1, 1);
+  if (!types) return NH_ERR_MEMORY;
+  for (size_t c = 0; c < nc; ++c)
+    types[c] = (unsigned char)(grid->types ? grid->types[c] : grid->type);
+
+  /* Arrays in the order they appear in the XML (and in the appended block). */
+  const int n_arrays =
+      grid->n_point_fields + (grid->point_int_flags ? 1 : 0) + grid->n_cell_fields + 4;
+  vtu_array *arrays = nh_calloc((size_t)n_arrays, sizeof *arrays);
+  if (!arrays) {
+    free(types);
+    return NH_ERR_MEMORY;
+  }
+  int k = 0;
+  for (int i = 0; i < grid->n_point_fields; ++i) {
+    const nh_field *fld = &grid->point_fields[i];
+    arrays[k++] = make_array("Float64", fld->name, fld->components, fld->data, 8,
+                             np * (size_t)fld->components);
+  }
+  if (grid->point_int_flags)
+    arrays[k++] = make_array("Int32", grid->point_flag_name ? grid->point_flag_name : "flag", 1,
+                             grid->point_int_flags, 4, np);
+  const int first_cell_field = k;
+  for (int i = 0; i < grid->n_cell_fields; ++i) {
+    const nh_field *fld = &grid->cell_fields[i];
+    arrays[k++] = make_array("Float64", fld->name, fld->components, fld->data, 8,
+                             nc * (size_t)fld->components);
+  }
+  const int points_index = k;
+  arrays[k++] = make_array("Float64", "Points", 3, grid->points, 8, 3 * np);
+  arrays[k++] = make_array("Int32", "connectivity", 1, grid->connectivity, 4, nconn);
+  arrays[k++] = make_array("Int32", "offsets", 1, grid->offsets, 4, nc);
+  arrays[k++] = make_array("UInt8", "types", 1, types, 1, nc);
+  uint64_t offset = 0;
+  for (int i = 0; i < n_arrays; ++i) {
+    arrays[i].offset = offset;
+    offset += sizeof(uint64_t) + arrays[i].elem_size * arrays[i].count;
+  }
+
+  int rc = NH_OK;
+  size_t tmp_len = strlen(path) + 5;
+  char *tmp = nh_calloc(tmp_len, 1);
+  if (!tmp) {
+    free(arrays);
+    free(types);
+    return NH_ERR_MEMORY;
+  }
+  snprintf(tmp, tmp_len, "%s.tmp", path);
+
+  FILE *f = fopen(tmp, "wb");
+  if (!f) {
+    rc = NH_ERROR(NH_ERR_IO, "cannot write VTU file '%s': %s", path, strerror(errno));
+    goto done;
+  }
+
+  fputs("<?xml version=\"1.0\"?>\n"
+        "<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" byte_order=\"LittleEndian\""
+        " header_type=\"UInt64\">\n"
+        "  <UnstructuredGrid>\n",
+        f);
+  fprintf(f, "    <Piece NumberOfPoints=\"%d\" NumberOfCells=\"%d\">\n", grid->n_points,
+          grid->n_cells);
+  fputs("      <PointData>\n", f);
+  for (int i = 0; i < first_cell_field; ++i) put_array_xml(f, &arrays[i]);
+  fputs("      </PointData>\n      <CellData>\n", f);
+  for (int i = first_cell_field; i < points_index; ++i) put_array_xml(f, &arrays[i]);
+  fputs("      </CellData>\n      <Points>\n", f);
+  put_array_xml(f, &arrays[points_index]);
+  fputs("      </Points>\n      <Cells>\n", f);
+  for (int i = points_index + 1; i < n_arrays; ++i) put_array_xml(f, &arrays[i]);
+  fputs("      </Cells>\n    </Piece>\n  </UnstructuredGrid>\n"
+        "  <AppendedData encoding=\"raw\">\n   _",
+        f);
+
+  int failed = ferror(f);
+  for (int i = 0; i < n_arrays && !failed; ++i) {
+    uint64_t bytes = (uint64_t)(arrays[i].elem_size * arrays[i].count);
+    failed = write_le(f, &bytes, sizeof bytes, 1) ||
+             write_le(f, arrays[i].data, arrays[i].elem_size, arrays[i].count);
+  }
+  if (!failed) {
+    fputs("\n  </AppendedData>\n</VTKFile>\n", f);
+    failed = ferror(f);
+  }
+  /* fclose flushes the last buffer: its failure (disk full) is a write failure. */
+  int saved_errno = failed ? errno : 0;
+  if (fclose(f) != 0 && !failed) {
+    failed = 1;
+    saved_errno = errno;
+  }
+  if (!failed && rename(tmp, path) != 0) {
+    failed = 1;
+    saved_errno = errno;
+  }
+  if (failed) {
+    remove(tmp);
+    rc = NH_ERROR(NH_ERR_IO, "cannot write VTU file '%s': %s", path,
+                  saved_errno ? strerror(saved_errno) : "write error");
+  }
+
+done:
+  free(tmp);
+  free(arrays);
+  free(types);
+  return rc;
+}

@@ -1,0 +1,113 @@
+/* main.c — the command-line front end (../shared/SCENE.md, docs/scene.md).
+ *
+ *   needlehex run SCENE.yaml [--out DIR] [--set KEY=VALUE ...] [--quiet]
+ *   needlehex check SCENE.yaml [--set KEY=VALUE ...]
+ *   needlehex --help | --version
+ *
+ * Exit status: 0 success; 1 the simulation failed (the message names the
+ * step); 2 bad scene or arguments (the message names file, line and key).
+ * Every error is one line on stderr, prefixed "needlehex: ". */
+#include "core/core.h"
+#include "scene/scene.h"
+#include "sim/sim.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static const char *nh_usage =
+    "usage: needlehex run SCENE.yaml [--out DIR] [--set KEY=VALUE ...] [--quiet]\n"
+    "       needlehex check SCENE.yaml [--set KEY=VALUE ...]\n"
+    "       needlehex --help | --version\n"
+    "\n"
+    "  run      simulate the scene; outputs go to output.dir (default out/<name>)\n"
+    "  check    validate the scene (and the mesh it builds), print what will be modelled\n"
+    "  --out DIR          write outputs to DIR (overrides output.dir)\n"
+    "  --set KEY=VALUE    override a scene key by dotted path, e.g. --set tissue.grid=[16,8,8]\n"
+    "  --quiet            no progress line and no summary\n"
+    "\n"
+    "exit status: 0 success, 1 simulation failed, 2 bad scene or arguments\n";
+
+static int nh_fail(int code) {
+  fprintf(stderr, "needlehex: %s\n", nh_error_message());
+  return nh_error_exit_status(code);
+}
+
+int main(int argc, char **argv) {
+  if (argc < 2) {
+    fputs(nh_usage, stderr);
+    return 2;
+  }
+  if (!strcmp(argv[1], "--help") || !strcmp(argv[1], "-h")) {
+    fputs(nh_usage, stdout);
+    return 0;
+  }
+  if (!strcmp(argv[1], "--version")) {
+    printf("needlehex %s\n", NH_VERSION);
+    return 0;
+  }
+  const char *command = argv[1];
+  int is_run = !strcmp(command, "run"), is_check = !strcmp(command, "check");
+  if (!is_run && !is_check)
+    return nh_fail(NH_ERROR(NH_ERR_INPUT, "unknown command '%s' (try --help)", command));
+
+  const char *scene_path = NULL, *out_dir = NULL;
+  int quiet = 0, n_set = 0;
+  const char **sets = calloc((size_t)argc + 1, sizeof(char *));
+  if (!sets) return nh_fail(NH_ERROR(NH_ERR_MEMORY, "out of memory"));
+  int rc = NH_OK;
+  for (int i = 2; i < argc && !rc; i++) {
+    const char *a = argv[i];
+    if (!strcmp(a, "--set") || !strcmp(a, "--out")) {
+      if (i + 1 >= argc) {
+        rc = NH_ERROR(NH_ERR_INPUT, "%s needs a value", a);
+        break;
+      }
+      if (a[2] == 's')
+        sets[n_set++] = argv[++i];
+      else
+        out_dir = argv[++i];
+    } else if (!strncmp(a, "--set=", 6)) {
+      sets[n_set++] = a + 6;
+    } else if (!strncmp(a, "--out=", 6)) {
+      out_dir = a + 6;
+    } else if (!strcmp(a, "--quiet") || !strcmp(a, "-q")) {
+      quiet = 1;
+    } else if (a[0] == '-') {
+      rc = NH_ERROR(NH_ERR_INPUT, "unknown option '%s' (try --help)", a);
+    } else if (!scene_path) {
+      scene_path = a;
+    } else {
+      rc = NH_ERROR(NH_ERR_INPUT, "unexpected argument '%s': one scene file per run", a);
+    }
+  }
+  if (!rc && !scene_path)
+    rc = NH_ERROR(NH_ERR_INPUT, "%s needs a scene file (try --help)", command);
+  if (!rc && out_dir && strlen(out_dir) >= NH_PATH_MAX)
+    rc = NH_ERROR(NH_ERR_INPUT, "--out: path too long");
+  if (rc) {
+    free(sets);
+    return nh_fail(rc);
+  }
+  if (quiet) nh_log_set_level(NH_LOG_QUIET);
+
+  nh_scene *scene = NULL;
+  nh_sim *sim = NULL;
+  rc = nh_scene_load(scene_path, n_set, sets, &scene);
+  free(sets);
+  if (rc) return nh_fail(rc);
+  if (out_dir) snprintf(scene->output.dir, sizeof scene->output.dir, "%s", out_dir);
+
+  nh_sim_options opt = {.dry_run = is_check, .progress = is_run && !quiet};
+  rc = nh_sim_create(scene, &opt, &sim);
+  if (!rc && is_check) nh_scene_print(scene, stdout);
+  if (!rc && is_check)
+    printf("mesh: %d nodes (%d dofs, %d free), %d cells\n", nh_sim_mesh(sim)->n_nodes,
+           3 * nh_sim_mesh(sim)->n_nodes, nh_system_free_dofs(nh_sim_system(sim)),
+           nh_sim_mesh(sim)->n_leaves);
+  if (!rc && is_run) rc = nh_sim_run(sim);
+  int status = rc ? nh_fail(rc) : 0;
+  nh_sim_destroy(&sim);
+  nh_scene_destroy(&scene);
+  return status;
+}

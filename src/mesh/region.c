@@ -1,0 +1,115 @@
+/* region.c — regions of the scene on the mesh: nodes inside a region
+ * (Dirichlet sets) and consistent nodal forces of a load region.
+ *
+ * A load is a total force F spread as a uniform force density over the
+ * tissue inside its region (docs/theory.md §5), so the nodal forces are
+ *     f_a = (F / V) ∫_{Ω ∩ region} φ N_a dV,   V = ∫_{Ω ∩ region} φ dV,
+ * and refining the mesh does not change the load. For a cell whose rest
+ * shape is an axis-aligned box (every cell of a box grid and of its regular
+ * templates) the intersection with a box region is a box in natural
+ * coordinates, and since N_a is a product of 1D linear factors the integral
+ * factorises into three exact 1D integrals. Other cells (distorted meshes of
+ * the tests) are sampled by 6³ sub-cell midpoints. */
+#include "mesh/mesh.h"
+
+#include <math.h>
+#include <stdlib.h>
+
+int nh_region_contains(const nh_region *r, const double x[3], double tol) {
+  for (int k = 0; k < 3; k++)
+    if (x[k] < r->min[k] - tol || x[k] > r->max[k] + tol) return 0;
+  return 1;
+}
+
+static double nh_mesh_tol(const nh_mesh *m) {
+  return 1e-9 * fmax(m->spacing[0], fmax(m->spacing[1], m->spacing[2]));
+}
+
+int nh_mesh_nodes_in_region(const nh_mesh *m, const nh_region *r, unsigned char *flags) {
+  int count = 0;
+  double tol = nh_mesh_tol(m);
+  for (int i = 0; i < m->n_nodes; i++)
+    if (nh_region_contains(r, m->X + 3 * i, tol)) {
+      count++;
+      if (flags) flags[i] = 1;
+    }
+  return count;
+}
+
+/* True if the 8 corners are those of an axis-aligned box [lo, hi]. */
+static int nh_cell_is_box(const double Xe[24], double lo[3], double hi[3]) {
+  for (int k = 0; k < 3; k++) lo[k] = Xe[k], hi[k] = Xe[18 + k];
+  double tol = 1e-12 * (fabs(hi[0] - lo[0]) + fabs(hi[1] - lo[1]) + fabs(hi[2] - lo[2]));
+  for (int a = 0; a < 8; a++)
+    for (int k = 0; k < 3; k++) {
+      double want = nh_hex_corner[a][k] < 0 ? lo[k] : hi[k];
+      if (fabs(Xe[3 * a + k] - want) > tol) return 0;
+    }
+  return hi[0] > lo[0] && hi[1] > lo[1] && hi[2] > lo[2];
+}
+
+/* ∫ N_a dV over cell ∩ region for the 8 nodes; returns the volume. */
+static double nh_cell_region_integrals(const double Xe[24], const nh_region *r, double w[8]) {
+  double lo[3], hi[3];
+  for (int a = 0; a < 8; a++) w[a] = 0.0;
+  if (nh_cell_is_box(Xe, lo, hi)) {
+    double I[3][2]; /* I[k][0]: ∫ ½(1-ξ) dξ, I[k][1]: ∫ ½(1+ξ) dξ over the clipped interval */
+    double jac = 1.0;
+    for (int k = 0; k < 3; k++) {
+      double a = fmax(lo[k], r->min[k]), b = fmin(hi[k], r->max[k]);
+      if (b <= a) return 0.0;
+      double h = hi[k] - lo[k];
+      double s0 = -1 + 2 * (a - lo[k]) / h, s1 = -1 + 2 * (b - lo[k]) / h;
+      double len = s1 - s0, sq = 0.5 * (s1 * s1 - s0 * s0);
+      I[k][0] = 0.5 * (len - sq);
+      I[k][1] = 0.5 * (len + sq);
+      jac *= 0.5 * h;
+    }
+    double vol = 0.0;
+    for (int a = 0; a < 8; a++) {
+      w[a] = jac * I[0][nh_hex_corner[a][0] > 0] * I[1][nh_hex_corner[a][1] > 0] *
+             I[2][nh_hex_corner[a][2] > 0];
+      vol += w[a];
+    }
+    return vol;
+  }
+  const int n = 6;
+  double vol = 0.0;
+  for (int i = 0; i < n; i++)
+    for (int j = 0; j < n; j++)
+      for (int k = 0; k < n; k++) {
+        double xi[3] = {-1 + (2 * i + 1.0) / n, -1 + (2 * j + 1.0) / n, -1 + (2 * k + 1.0) / n};
+        double N[8], dN[8][3], x[3] = {0, 0, 0}, J[9] = {0};
+        nh_hex_shape(xi, N);
+        nh_hex_dshape(xi, dN);
+        for (int a = 0; a < 8; a++)
+          for (int p = 0; p < 3; p++) {
+            x[p] += N[a] * Xe[3 * a + p];
+            for (int q = 0; q < 3; q++) J[3 * p + q] += Xe[3 * a + p] * dN[a][q];
+          }
+        if (!nh_region_contains(r, x, 0.0)) continue;
+        double dv = fabs(nh_mat3_det(J)) * 8.0 / (n * n * n);
+        for (int a = 0; a < 8; a++) w[a] += N[a] * dv;
+        vol += dv;
+      }
+  return vol;
+}
+
+int nh_mesh_region_load(const nh_mesh *m, const nh_region *r, const double force[3], double *f) {
+  double volume = 0.0, Xe[24], w[8];
+  for (int l = 0; l < m->n_leaves; l++) {
+    int c = m->leaves[l];
+    nh_mesh_cell_coords(m, m->X, c, Xe);
+    volume += m->fill[c] * nh_cell_region_integrals(Xe, r, w);
+  }
+  NH_CHECK(volume > 0.0, NH_ERR_INPUT, "%s: the load region holds no tissue", r->where);
+  for (int l = 0; l < m->n_leaves; l++) {
+    int c = m->leaves[l];
+    nh_mesh_cell_coords(m, m->X, c, Xe);
+    if (nh_cell_region_integrals(Xe, r, w) == 0.0) continue;
+    for (int a = 0; a < 8; a++)
+      for (int k = 0; k < 3; k++)
+        f[3 * m->cells[8 * c + a] + k] += force[k] * m->fill[c] * w[a] / volume;
+  }
+  return NH_OK;
+}

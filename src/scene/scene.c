@@ -1,0 +1,848 @@
+/* scene.c — the scene schema: YAML tree to a validated nh_scene.
+ *
+ * nh_scene_load parses the file into a yaml_tree, applies the `--set`
+ * overrides to the tree (so an override is checked exactly like a value in
+ * the file), keeps the tree's YAML text as the scene as run, and then walks
+ * the schema section by section, filling defaults and checking types and
+ * ranges. The schema is written out as code, one function per section, rather
+ * than as a table: the sections have cross-checks (end vs steps, min < max,
+ * unique probe names, a domain that is exactly one of box/brain/mask) that a
+ * table would hide.
+ *
+ * Messages. Every error is one NH_ERR_INPUT message
+ *     FILE:LINE: KEY: reason          (a value from the file)
+ *     --set:K: KEY: reason (--set T)  (a value from the K-th override, text T)
+ * where LINE is the line of the offending value, of the unknown key, or — for a
+ * missing required key — of the mapping that lacks it. Every mapping's keys
+ * are checked before its values, so a misspelt key is reported as unknown
+ * (with a "did you mean" hint for a near miss) rather than as a missing one.
+ * Keys of later features (adapt, tools, targets, tissue.domain.brain/mask)
+ * are recognised and refused as not supported in this version; an override
+ * that starts with one of the top-level ones is refused before it is
+ * applied, so that "--set tools.0.x=1" says so instead of "index beyond".
+ *
+ * Types. A number is a plain scalar that strtod consumes entirely and that is
+ * finite; an integer is a number that is integral and fits in an int (8.0 is
+ * accepted); a bool is true/false; a quoted scalar is always a string, so
+ * young: "1e6" is refused. A YAML null (`key:` with nothing after it) is an
+ * empty section for mappings and lists and an error for values.
+ *
+ * Nothing here is global: the context of one load (file name, overrides)
+ * travels in an nh_ctx. */
+#include "scene/scene.h"
+
+#include "scene/yaml_tree.h"
+
+#include <limits.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define NH_KEY_MAX   256
+#define NH_STEPS_MAX 1000000000.0
+
+/* What one load knows, for messages. */
+typedef struct {
+  const char *file;
+  const char *const *overrides;
+  int n_overrides;
+} nh_ctx;
+
+/* "FILE:LINE" or "--set:K" of a node (the top of the file when NULL). */
+static void location(const nh_ctx *c, const nh_yaml_node *at, char *buf, size_t cap) {
+  if (at && at->source > 0)
+    snprintf(buf, cap, "--set:%d", at->source);
+  else
+    snprintf(buf, cap, "%s:%d", c->file, at && at->line > 0 ? at->line : 1);
+}
+
+/* Record the one input error of this load: "LOC: KEY: reason". */
+static int fail(const nh_ctx *c, const nh_yaml_node *at, const char *key, const char *fmt, ...)
+    __attribute__((format(printf, 4, 5)));
+static int fail(const nh_ctx *c, const nh_yaml_node *at, const char *key, const char *fmt, ...) {
+  char loc[NH_PATH_MAX + 32], msg[1024], text[512];
+  va_list ap;
+  va_start(ap, fmt);
+  vsnprintf(msg, sizeof msg, fmt, ap);
+  va_end(ap);
+  location(c, at, loc, sizeof loc);
+  if (at && at->source > 0 && at->source <= c->n_overrides) {
+    nh_yaml_one_line(text, sizeof text, c->overrides[at->source - 1]);
+    return NH_ERROR(NH_ERR_INPUT, "%s: %s: %s (--set %s)", loc, key, msg, text);
+  }
+  return NH_ERROR(NH_ERR_INPUT, "%s: %s: %s", loc, key, msg);
+}
+
+/* "LOC: KEY" for the `where` fields. */
+static void make_where(const nh_ctx *c, const nh_yaml_node *at, const char *key, char *where) {
+  char loc[NH_PATH_MAX + 32];
+  location(c, at, loc, sizeof loc);
+  nh_yaml_join(where, NH_WHERE_MAX, loc, ": ", key); /* a very long file name is cut */
+}
+
+/* "parent.key" (or "key" at the top) into buf[NH_KEY_MAX]. */
+static const char *join(char *buf, const char *parent, const char *key) {
+  nh_yaml_join(buf, NH_KEY_MAX, parent, parent[0] ? "." : "", key);
+  return buf;
+}
+
+/* "parent.i" into buf[NH_KEY_MAX]. */
+static const char *join_index(char *buf, const char *parent, int i) {
+  char index[16];
+  snprintf(index, sizeof index, "%d", i);
+  nh_yaml_join(buf, NH_KEY_MAX, parent, ".", index);
+  return buf;
+}
+
+/* A short, one-line rendering of a node for messages: 'text', a list, ... */
+static const char *describe(const nh_yaml_node *n, char *buf, size_t cap) {
+  if (n->kind == NH_YAML_MAP) return "a mapping";
+  if (n->kind == NH_YAML_SEQ) return "a list";
+  if (nh_yaml_is_null(n)) return "nothing";
+  size_t j = 0;
+  buf[j++] = '\'';
+  for (const char *p = n->text; *p && j + 8 < cap; ++p) {
+    if (p - n->text >= 60) {
+      memcpy(buf + j, "...", 3);
+      j += 3;
+      break;
+    }
+    buf[j++] = (unsigned char)*p < 0x20 ? '?' : *p; /* keep the message on one line */
+  }
+  buf[j++] = '\'';
+  buf[j] = '\0';
+  return buf;
+}
+
+/* Edit distance (Levenshtein) of two short keys, capped at 9. */
+static int edit_distance(const char *a, const char *b) {
+  size_t la = strlen(a), lb = strlen(b);
+  if (la > 31 || lb > 31) return 9;
+  int d[32][32];
+  for (size_t i = 0; i <= la; ++i) d[i][0] = (int)i;
+  for (size_t j = 0; j <= lb; ++j) d[0][j] = (int)j;
+  for (size_t i = 1; i <= la; ++i)
+    for (size_t j = 1; j <= lb; ++j) {
+      int sub = d[i - 1][j - 1] + (a[i - 1] != b[j - 1]);
+      int del = d[i - 1][j] + 1, ins = d[i][j - 1] + 1;
+      d[i][j] = sub < del ? (sub < ins ? sub : ins) : (del < ins ? del : ins);
+    }
+  return d[la][lb];
+}
+
+static int in_list(const char *key, const char *const *list) {
+  for (; list && *list; ++list)
+    if (!strcmp(key, *list)) return 1;
+  return 0;
+}
+
+/* Refuse keys of `map` that are not in `allowed` (NULL-terminated); keys in
+ * `later` (NULL-terminated, may be NULL) are refused as not supported yet. */
+static int check_keys(const nh_ctx *c, const nh_yaml_node *map, const char *path,
+                      const char *const *allowed, const char *const *later) {
+  char key[NH_KEY_MAX];
+  for (int i = 0; i < map->n; ++i) {
+    const nh_yaml_node *k = map->keys[i];
+    if (in_list(k->text, allowed)) continue;
+    join(key, path, k->text);
+    if (in_list(k->text, later))
+      return fail(c, k, key, "not supported in this version of needlehex");
+    const char *best = NULL;
+    int best_d = 3;
+    for (const char *const *a = allowed; *a; ++a) {
+      int d = edit_distance(k->text, *a);
+      if (d < best_d) best_d = d, best = *a;
+    }
+    if (best) return fail(c, k, key, "unknown key (did you mean '%s'?)", best);
+    return fail(c, k, key, "unknown key");
+  }
+  return NH_OK;
+}
+
+/* ---- typed values ---- */
+
+static int as_number(const nh_ctx *c, const nh_yaml_node *n, const char *key, double *out) {
+  char d[96];
+  if (n->kind != NH_YAML_SCALAR || nh_yaml_is_null(n))
+    return fail(c, n, key, "expected a number, got %s", describe(n, d, sizeof d));
+  if (n->quoted)
+    return fail(c, n, key, "expected a number, got the quoted string %s", describe(n, d, sizeof d));
+  char *end = NULL;
+  double v = strtod(n->text, &end);
+  if (end == n->text || *end || n->text[0] == ' ' || n->text[0] == '\t')
+    return fail(c, n, key, "expected a number, got %s", describe(n, d, sizeof d));
+  if (!isfinite(v))
+    return fail(c, n, key, "expected a finite number, got %s", describe(n, d, sizeof d));
+  *out = v;
+  return NH_OK;
+}
+
+static int as_int(const nh_ctx *c, const nh_yaml_node *n, const char *key, int *out) {
+  char d[96];
+  double v = 0;
+  if (n->kind != NH_YAML_SCALAR || nh_yaml_is_null(n) || n->quoted)
+    return fail(c, n, key, "expected an integer, got %s", describe(n, d, sizeof d));
+  char *end = NULL;
+  v = strtod(n->text, &end);
+  if (end == n->text || *end || !isfinite(v) || v != floor(v))
+    return fail(c, n, key, "expected an integer, got %s", describe(n, d, sizeof d));
+  if (v > INT_MAX || v < INT_MIN)
+    return fail(c, n, key, "%s is too large for an integer", describe(n, d, sizeof d));
+  *out = (int)v;
+  return NH_OK;
+}
+
+static int as_bool(const nh_ctx *c, const nh_yaml_node *n, const char *key, int *out) {
+  char d[96];
+  if (n->kind == NH_YAML_SCALAR && !n->quoted) {
+    const char *t = n->text;
+    if (!strcmp(t, "true") || !strcmp(t, "True") || !strcmp(t, "TRUE")) return *out = 1, NH_OK;
+    if (!strcmp(t, "false") || !strcmp(t, "False") || !strcmp(t, "FALSE")) return *out = 0, NH_OK;
+  }
+  return fail(c, n, key, "expected true or false, got %s", describe(n, d, sizeof d));
+}
+
+static int as_string(const nh_ctx *c, const nh_yaml_node *n, const char *key, char *out,
+                     size_t cap) {
+  char d[96];
+  if (n->kind != NH_YAML_SCALAR || nh_yaml_is_null(n))
+    return fail(c, n, key, "expected a string, got %s", describe(n, d, sizeof d));
+  if (strlen(n->text) >= cap)
+    return fail(c, n, key, "%s is longer than %zu characters", describe(n, d, sizeof d), cap - 1);
+  memcpy(out, n->text, strlen(n->text) + 1);
+  return NH_OK;
+}
+
+/* A list of exactly 3 numbers (integers if `ints`). */
+static int as_triple(const nh_ctx *c, const nh_yaml_node *n, const char *key, int ints, double *out,
+                     int *iout) {
+  char d[96], item[NH_KEY_MAX];
+  const char *what = ints ? "integers" : "numbers";
+  if (n->kind != NH_YAML_SEQ)
+    return fail(c, n, key, "expected a list of 3 %s, got %s", what, describe(n, d, sizeof d));
+  if (n->n != 3)
+    return fail(c, n, key, "expected a list of 3 %s, got %d entr%s", what, n->n,
+                n->n == 1 ? "y" : "ies");
+  for (int i = 0; i < 3; ++i) {
+    join_index(item, key, i);
+    if (ints)
+      NH_TRY(as_int(c, n->items[i], item, &iout[i]));
+    else
+      NH_TRY(as_number(c, n->items[i], item, &out[i]));
+  }
+  return NH_OK;
+}
+
+static int as_vec3(const nh_ctx *c, const nh_yaml_node *n, const char *key, double out[3]) {
+  return as_triple(c, n, key, 0, out, NULL);
+}
+
+static int as_ivec3(const nh_ctx *c, const nh_yaml_node *n, const char *key, int out[3]) {
+  return as_triple(c, n, key, 1, NULL, out);
+}
+
+/* ---- keys of a mapping ---- */
+
+/* The value of `name` in `map` (NULL if absent); a required key that is absent
+ * is an error at the line of `map`. */
+static int field(const nh_ctx *c, const nh_yaml_node *map, const char *path, const char *name,
+                 int required, const nh_yaml_node **out) {
+  char key[NH_KEY_MAX];
+  *out = nh_yaml_get(map, name, NULL);
+  if (!*out && required) return fail(c, map, join(key, path, name), "required key missing");
+  return NH_OK;
+}
+
+/* A mapping section: NULL when absent or null; an error if it is something
+ * else (or absent while required). */
+static int section(const nh_ctx *c, const nh_yaml_node *map, const char *path, const char *name,
+                   int required, const nh_yaml_node **out) {
+  char key[NH_KEY_MAX], d[96];
+  NH_TRY(field(c, map, path, name, required, out));
+  if (!*out) return NH_OK;
+  if ((*out)->kind == NH_YAML_MAP) return NH_OK;
+  if (nh_yaml_is_null(*out) && !required) {
+    *out = NULL;
+    return NH_OK;
+  }
+  return fail(c, *out, join(key, path, name), "expected a mapping, got %s",
+              describe(*out, d, sizeof d));
+}
+
+/* A list section: NULL when absent or null. */
+static int list_section(const nh_ctx *c, const nh_yaml_node *map, const char *path,
+                        const char *name, const nh_yaml_node **out) {
+  char key[NH_KEY_MAX], d[96];
+  NH_TRY(field(c, map, path, name, 0, out));
+  if (!*out || (*out)->kind == NH_YAML_SEQ) return NH_OK;
+  if (nh_yaml_is_null(*out)) {
+    *out = NULL;
+    return NH_OK;
+  }
+  return fail(c, *out, join(key, path, name), "expected a list, got %s",
+              describe(*out, d, sizeof d));
+}
+
+/* Typed optional/required fields: the target is left untouched when absent. */
+static int get_number(const nh_ctx *c, const nh_yaml_node *map, const char *path, const char *name,
+                      int required, double *out, const nh_yaml_node **at) {
+  char key[NH_KEY_MAX];
+  const nh_yaml_node *n;
+  NH_TRY(field(c, map, path, name, required, &n));
+  if (at) *at = n;
+  return n ? as_number(c, n, join(key, path, name), out) : NH_OK;
+}
+
+static int get_int(const nh_ctx *c, const nh_yaml_node *map, const char *path, const char *name,
+                   int *out, const nh_yaml_node **at) {
+  char key[NH_KEY_MAX];
+  const nh_yaml_node *n;
+  NH_TRY(field(c, map, path, name, 0, &n));
+  if (at) *at = n;
+  return n ? as_int(c, n, join(key, path, name), out) : NH_OK;
+}
+
+static int get_vec3(const nh_ctx *c, const nh_yaml_node *map, const char *path, const char *name,
+                    int required, double out[3], const nh_yaml_node **at) {
+  char key[NH_KEY_MAX];
+  const nh_yaml_node *n;
+  NH_TRY(field(c, map, path, name, required, &n));
+  if (at) *at = n;
+  return n ? as_vec3(c, n, join(key, path, name), out) : NH_OK;
+}
+
+/* Refuse a value below (or at, if strict) a bound. */
+static int at_least(const nh_ctx *c, const nh_yaml_node *at, const char *path, const char *name,
+                    double v, double bound, int strict) {
+  char key[NH_KEY_MAX];
+  if (!at) return NH_OK;
+  if (strict && !(v > bound))
+    return fail(c, at, join(key, path, name), "must be greater than %g, got %g", bound, v);
+  if (!strict && !(v >= bound))
+    return fail(c, at, join(key, path, name), "must be at least %g, got %g", bound, v);
+  return NH_OK;
+}
+
+/* ---- sections ---- */
+
+static const char *const axis_name[3] = {"x", "y", "z"};
+
+/* {min: [3], max: [3]} with max > min (strict) or max >= min in every
+ * component. */
+static int read_box(const nh_ctx *c, const nh_yaml_node *box, const char *path, int strict,
+                    double min[3], double max[3]) {
+  static const char *const keys[] = {"min", "max", NULL};
+  char key[NH_KEY_MAX], d[96];
+  if (box->kind != NH_YAML_MAP)
+    return fail(c, box, path, "expected a mapping {min: [x, y, z], max: [x, y, z]}, got %s",
+                describe(box, d, sizeof d));
+  NH_TRY(check_keys(c, box, path, keys, NULL));
+  const nh_yaml_node *at_max;
+  NH_TRY(get_vec3(c, box, path, "min", 1, min, NULL));
+  NH_TRY(get_vec3(c, box, path, "max", 1, max, &at_max));
+  for (int i = 0; i < 3; ++i)
+    if (strict ? !(max[i] > min[i]) : !(max[i] >= min[i]))
+      return fail(c, at_max, join(key, path, "max"),
+                  "must be %s min in every component (%s: max %g, min %g)",
+                  strict ? "greater than" : "at least", axis_name[i], max[i], min[i]);
+  return NH_OK;
+}
+
+/* A region {box: {min, max}} at `node` (for tissue.fixed items). */
+static int read_region(const nh_ctx *c, const nh_yaml_node *node, const char *path,
+                       nh_region *region) {
+  static const char *const keys[] = {"box", NULL};
+  char key[NH_KEY_MAX], d[96];
+  if (node->kind != NH_YAML_MAP)
+    return fail(c, node, path, "expected a region {box: {min: [...], max: [...]}}, got %s",
+                describe(node, d, sizeof d));
+  NH_TRY(check_keys(c, node, path, keys, NULL));
+  const nh_yaml_node *box;
+  NH_TRY(field(c, node, path, "box", 1, &box));
+  region->kind = NH_REGION_BOX;
+  NH_TRY(read_box(c, box, join(key, path, "box"), 0, region->min, region->max));
+  make_where(c, node, path, region->where);
+  return NH_OK;
+}
+
+/* [[t0, s0], [t1, s1], ...] with strictly increasing times. */
+static int read_schedule(const nh_ctx *c, const nh_yaml_node *node, const char *path,
+                         nh_schedule *s) {
+  char d[96], item[NH_KEY_MAX], sub[NH_KEY_MAX];
+  if (nh_yaml_is_null(node)) return NH_OK;
+  if (node->kind != NH_YAML_SEQ)
+    return fail(c, node, path, "expected a list of [time, factor] pairs, got %s",
+                describe(node, d, sizeof d));
+  if (node->n == 0) return NH_OK;
+  s->t = nh_calloc((size_t)node->n, sizeof *s->t);
+  s->value = nh_calloc((size_t)node->n, sizeof *s->value);
+  if (!s->t || !s->value) return NH_ERR_MEMORY;
+  for (int i = 0; i < node->n; ++i) {
+    const nh_yaml_node *p = node->items[i];
+    join_index(item, path, i);
+    if (p->kind != NH_YAML_SEQ || p->n != 2)
+      return fail(c, p, item, "expected a pair [time, factor], got %s",
+                  p->kind == NH_YAML_SEQ ? (p->n == 1 ? "1 entry" : "a list of another length")
+                                         : describe(p, d, sizeof d));
+    NH_TRY(as_number(c, p->items[0], join_index(sub, item, 0), &s->t[i]));
+    NH_TRY(as_number(c, p->items[1], join_index(sub, item, 1), &s->value[i]));
+    if (i > 0 && !(s->t[i] > s->t[i - 1]))
+      return fail(c, p->items[0], join_index(sub, item, 0),
+                  "times must increase strictly (%g after %g)", s->t[i], s->t[i - 1]);
+    s->n = i + 1;
+  }
+  return NH_OK;
+}
+
+/* {box: {min, max}, force: [3], schedule: [[t, s], ...]} */
+static int read_load(const nh_ctx *c, const nh_yaml_node *node, const char *path, nh_load *load) {
+  static const char *const keys[] = {"box", "force", "schedule", NULL};
+  char key[NH_KEY_MAX], d[96];
+  if (node->kind != NH_YAML_MAP)
+    return fail(c, node, path, "expected a load {box: {min, max}, force: [fx, fy, fz]}, got %s",
+                describe(node, d, sizeof d));
+  NH_TRY(check_keys(c, node, path, keys, NULL));
+  const nh_yaml_node *box, *schedule;
+  NH_TRY(field(c, node, path, "box", 1, &box));
+  load->region.kind = NH_REGION_BOX;
+  NH_TRY(read_box(c, box, join(key, path, "box"), 0, load->region.min, load->region.max));
+  NH_TRY(get_vec3(c, node, path, "force", 1, load->force, NULL));
+  NH_TRY(field(c, node, path, "schedule", 0, &schedule));
+  if (schedule) NH_TRY(read_schedule(c, schedule, join(key, path, "schedule"), &load->schedule));
+  make_where(c, node, path, load->where);
+  make_where(c, node, path, load->region.where);
+  return NH_OK;
+}
+
+static int read_time(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
+  static const char *const keys[] = {"mode", "step", "end", "steps", NULL};
+  const nh_yaml_node *t, *at_step, *at_end, *at_steps, *at_mode;
+  char d[96];
+  s->time.mode = NH_MODE_DYNAMIC;
+  s->time.step = 0.01;
+  s->time.steps = 100;
+  NH_TRY(section(c, root, "", "time", 0, &t));
+  if (!t) return NH_OK;
+  NH_TRY(check_keys(c, t, "time", keys, NULL));
+  NH_TRY(field(c, t, "time", "mode", 0, &at_mode));
+  if (at_mode) {
+    const char *m = at_mode->kind == NH_YAML_SCALAR ? at_mode->text : "";
+    if (!strcmp(m, "dynamic"))
+      s->time.mode = NH_MODE_DYNAMIC;
+    else if (!strcmp(m, "static"))
+      s->time.mode = NH_MODE_STATIC;
+    else
+      return fail(c, at_mode, "time.mode", "expected dynamic or static, got %s",
+                  describe(at_mode, d, sizeof d));
+  }
+  NH_TRY(get_number(c, t, "time", "step", 0, &s->time.step, &at_step));
+  NH_TRY(at_least(c, at_step, "time", "step", s->time.step, 0, 1));
+  double end = 0;
+  NH_TRY(get_number(c, t, "time", "end", 0, &end, &at_end));
+  NH_TRY(at_least(c, at_end, "time", "end", end, 0, 1));
+  NH_TRY(get_int(c, t, "time", "steps", &s->time.steps, &at_steps));
+  NH_TRY(at_least(c, at_steps, "time", "steps", s->time.steps, 1, 0));
+  if (at_end && at_steps) {
+    /* Report at whichever of the two comes second. */
+    int steps_later = at_steps->source > at_end->source ||
+                      (at_steps->source == at_end->source && at_steps->line >= at_end->line);
+    return steps_later
+               ? fail(c, at_steps, "time.steps", "give either time.end or time.steps, not both")
+               : fail(c, at_end, "time.end", "give either time.end or time.steps, not both");
+  }
+  if (at_end) {
+    double steps = floor(end / s->time.step + 0.5);
+    if (steps > NH_STEPS_MAX)
+      return fail(c, at_end, "time.end", "end / step = %g steps is more than %g", steps,
+                  NH_STEPS_MAX);
+    s->time.steps = steps < 1 ? 1 : (int)steps;
+  }
+  return NH_OK;
+}
+
+static int read_material(const nh_ctx *c, const nh_yaml_node *tissue, nh_scene *s) {
+  static const char *const keys[] = {"young", "poisson", "density", NULL};
+  const char *path = "tissue.material";
+  const nh_yaml_node *m, *at;
+  NH_TRY(section(c, tissue, "tissue", "material", 1, &m));
+  NH_TRY(check_keys(c, m, path, keys, NULL));
+  NH_TRY(get_number(c, m, path, "young", 1, &s->tissue.young, &at));
+  NH_TRY(at_least(c, at, path, "young", s->tissue.young, 0, 1));
+  double nu = 0;
+  NH_TRY(get_number(c, m, path, "poisson", 1, &nu, &at));
+  if (nu >= 0.5)
+    return fail(c, at, "tissue.material.poisson",
+                "%g is not below 0.5: incompressible (or beyond) materials are not supported; "
+                "use a value below 0.5, e.g. 0.49",
+                nu);
+  if (nu <= -1)
+    return fail(c, at, "tissue.material.poisson", "must be greater than -1, got %g", nu);
+  s->tissue.poisson = nu;
+  s->tissue.density = 1000;
+  NH_TRY(get_number(c, m, path, "density", 0, &s->tissue.density, &at));
+  NH_TRY(at_least(c, at, path, "density", s->tissue.density, 0, 1));
+  return NH_OK;
+}
+
+static int read_tissue(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
+  static const char *const keys[] = {"domain", "grid",  "material", "damping",
+                                     "fixed",  "loads", NULL};
+  static const char *const domain_keys[] = {"box", "brain", "mask", NULL};
+  static const char *const damping_keys[] = {"mass", "stiffness", NULL};
+  char key[NH_KEY_MAX];
+  const nh_yaml_node *t, *domain, *n;
+  NH_TRY(section(c, root, "", "tissue", 1, &t));
+  NH_TRY(check_keys(c, t, "tissue", keys, NULL));
+
+  /* domain: exactly one of box, brain, mask; only box exists for now. */
+  NH_TRY(section(c, t, "tissue", "domain", 1, &domain));
+  NH_TRY(check_keys(c, domain, "tissue.domain", domain_keys, NULL));
+  if (domain->n == 0) return fail(c, domain, "tissue.domain", "give one of box, brain, mask");
+  if (domain->n > 1)
+    return fail(c, domain->keys[1], join(key, "tissue.domain", domain->keys[1]->text),
+                "give exactly one of box, brain, mask (%s is already given)",
+                domain->keys[0]->text);
+  if (strcmp(domain->keys[0]->text, "box") != 0)
+    return fail(c, domain->keys[0], join(key, "tissue.domain", domain->keys[0]->text),
+                "not supported in this version of needlehex (use box)");
+  NH_TRY(
+      read_box(c, domain->items[0], "tissue.domain.box", 1, s->tissue.box_min, s->tissue.box_max));
+
+  /* grid */
+  s->tissue.grid[0] = 8, s->tissue.grid[1] = 4, s->tissue.grid[2] = 4;
+  NH_TRY(field(c, t, "tissue", "grid", 0, &n));
+  if (n) {
+    NH_TRY(as_ivec3(c, n, "tissue.grid", s->tissue.grid));
+    double nodes = 1;
+    for (int i = 0; i < 3; ++i) {
+      if (s->tissue.grid[i] < 1)
+        return fail(c, n->items[i], join_index(key, "tissue.grid", i),
+                    "a cell count must be at least 1, got %d", s->tissue.grid[i]);
+      nodes *= s->tissue.grid[i] + 1.0;
+    }
+    if (3 * nodes > INT_MAX) return fail(c, n, "tissue.grid", "%g nodes are too many", nodes);
+  }
+
+  NH_TRY(read_material(c, t, s));
+
+  const nh_yaml_node *damping, *at;
+  NH_TRY(section(c, t, "tissue", "damping", 0, &damping));
+  if (damping) {
+    NH_TRY(check_keys(c, damping, "tissue.damping", damping_keys, NULL));
+    NH_TRY(get_number(c, damping, "tissue.damping", "mass", 0, &s->tissue.damping_mass, &at));
+    NH_TRY(at_least(c, at, "tissue.damping", "mass", s->tissue.damping_mass, 0, 0));
+    NH_TRY(get_number(c, damping, "tissue.damping", "stiffness", 0, &s->tissue.damping_stiffness,
+                      &at));
+    NH_TRY(at_least(c, at, "tissue.damping", "stiffness", s->tissue.damping_stiffness, 0, 0));
+  }
+
+  /* fixed: where_fixed points at the key `fixed:`, or at `tissue:` without it. */
+  const nh_yaml_node *fixed, *fixed_key, *tissue_key;
+  NH_TRY(list_section(c, t, "tissue", "fixed", &fixed));
+  nh_yaml_get(t, "fixed", &fixed_key);
+  nh_yaml_get(root, "tissue", &tissue_key);
+  make_where(c, fixed_key ? fixed_key : tissue_key, "tissue.fixed", s->tissue.where_fixed);
+  if (fixed && fixed->n > 0) {
+    s->tissue.fixed = nh_calloc((size_t)fixed->n, sizeof *s->tissue.fixed);
+    if (!s->tissue.fixed) return NH_ERR_MEMORY;
+    for (int i = 0; i < fixed->n; ++i) {
+      NH_TRY(
+          read_region(c, fixed->items[i], join_index(key, "tissue.fixed", i), &s->tissue.fixed[i]));
+      s->tissue.n_fixed = i + 1;
+    }
+  }
+
+  const nh_yaml_node *loads;
+  NH_TRY(list_section(c, t, "tissue", "loads", &loads));
+  if (loads && loads->n > 0) {
+    s->tissue.loads = nh_calloc((size_t)loads->n, sizeof *s->tissue.loads);
+    if (!s->tissue.loads) return NH_ERR_MEMORY;
+    for (int i = 0; i < loads->n; ++i) {
+      /* Count the load first so that destroy frees a half-read schedule. */
+      s->tissue.n_loads = i + 1;
+      NH_TRY(
+          read_load(c, loads->items[i], join_index(key, "tissue.loads", i), &s->tissue.loads[i]));
+    }
+  }
+  return NH_OK;
+}
+
+static int read_solver(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
+  static const char *const keys[] = {"tolerance", "max_iterations", "threads", NULL};
+  const nh_yaml_node *m, *at;
+  s->solver.tolerance = 1e-8;
+  s->solver.max_iterations = 30;
+  s->solver.threads = 0;
+  NH_TRY(section(c, root, "", "solver", 0, &m));
+  if (!m) return NH_OK;
+  NH_TRY(check_keys(c, m, "solver", keys, NULL));
+  NH_TRY(get_number(c, m, "solver", "tolerance", 0, &s->solver.tolerance, &at));
+  NH_TRY(at_least(c, at, "solver", "tolerance", s->solver.tolerance, 0, 1));
+  NH_TRY(get_int(c, m, "solver", "max_iterations", &s->solver.max_iterations, &at));
+  NH_TRY(at_least(c, at, "solver", "max_iterations", s->solver.max_iterations, 1, 0));
+  NH_TRY(get_int(c, m, "solver", "threads", &s->solver.threads, &at));
+  NH_TRY(at_least(c, at, "solver", "threads", s->solver.threads, 0, 0));
+  return NH_OK;
+}
+
+static int read_probes(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
+  static const char *const keys[] = {"name", "point", NULL};
+  char path[NH_KEY_MAX], key[NH_KEY_MAX], d[96];
+  const nh_yaml_node *list;
+  NH_TRY(list_section(c, root, "", "probes", &list));
+  if (!list || list->n == 0) return NH_OK;
+  s->probes = nh_calloc((size_t)list->n, sizeof *s->probes);
+  if (!s->probes) return NH_ERR_MEMORY;
+  for (int i = 0; i < list->n; ++i) {
+    const nh_yaml_node *p = list->items[i], *at;
+    nh_probe *probe = &s->probes[i];
+    join_index(path, "probes", i);
+    if (p->kind != NH_YAML_MAP)
+      return fail(c, p, path, "expected a probe {name: ..., point: [x, y, z]}, got %s",
+                  describe(p, d, sizeof d));
+    NH_TRY(check_keys(c, p, path, keys, NULL));
+    NH_TRY(field(c, p, path, "name", 1, &at));
+    NH_TRY(as_string(c, at, join(key, path, "name"), probe->name, sizeof probe->name));
+    /* The name goes into probes.csv and the VTU point data: keep it one plain field. */
+    if (!probe->name[0] || strpbrk(probe->name, ",\"\n\r\t"))
+      return fail(c, at, key, "%s must be non-empty, without commas, quotes or tabs",
+                  describe(at, d, sizeof d));
+    for (int j = 0; j < i; ++j)
+      if (!strcmp(s->probes[j].name, probe->name))
+        return fail(c, at, key, "%s is already the name of probes.%d", describe(at, d, sizeof d),
+                    j);
+    NH_TRY(get_vec3(c, p, path, "point", 1, probe->point, NULL));
+    make_where(c, p, path, probe->where);
+    s->n_probes = i + 1;
+  }
+  return NH_OK;
+}
+
+static int read_output(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
+  static const char *const keys[] = {"dir", "every", "hdf5", NULL};
+  const nh_yaml_node *m, *at;
+  nh_yaml_join(s->output.dir, sizeof s->output.dir, "out", "/", s->name);
+  s->output.every = 1;
+  s->output.hdf5 = 0;
+  NH_TRY(section(c, root, "", "output", 0, &m));
+  if (!m) return NH_OK;
+  NH_TRY(check_keys(c, m, "output", keys, NULL));
+  NH_TRY(field(c, m, "output", "dir", 0, &at));
+  if (at) {
+    NH_TRY(as_string(c, at, "output.dir", s->output.dir, sizeof s->output.dir));
+    if (!s->output.dir[0]) return fail(c, at, "output.dir", "must not be empty");
+  }
+  NH_TRY(get_int(c, m, "output", "every", &s->output.every, &at));
+  NH_TRY(at_least(c, at, "output", "every", s->output.every, 0, 0));
+  NH_TRY(field(c, m, "output", "hdf5", 0, &at));
+  if (at) NH_TRY(as_bool(c, at, "output.hdf5", &s->output.hdf5));
+  return NH_OK;
+}
+
+static int read_name(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
+  const nh_yaml_node *at;
+  char d[96];
+  NH_TRY(field(c, root, "", "name", 1, &at));
+  NH_TRY(as_string(c, at, "name", s->name, sizeof s->name));
+  size_t len = strlen(s->name);
+  if (len == 0 ||
+      strspn(s->name, "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz"
+                      "0123456789._-") != len ||
+      !strcmp(s->name, ".") || !strcmp(s->name, ".."))
+    return fail(c, at, "name",
+                "%s may only contain letters, digits, '.', '_' and '-' (it names the output "
+                "folder)",
+                describe(at, d, sizeof d));
+  return NH_OK;
+}
+
+/* The whole schema, in the order of SCENE.md. */
+static int read_scene(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
+  static const char *const keys[] = {"name",   "time",   "gravity", "tissue",
+                                     "solver", "probes", "output",  NULL};
+  static const char *const later[] = {"adapt", "tools", "targets", NULL};
+  NH_TRY(check_keys(c, root, "", keys, later));
+  NH_TRY(read_name(c, root, s));
+  NH_TRY(read_time(c, root, s));
+  NH_TRY(get_vec3(c, root, "", "gravity", 0, s->gravity, NULL));
+  NH_TRY(read_tissue(c, root, s));
+  NH_TRY(read_solver(c, root, s));
+  NH_TRY(read_probes(c, root, s));
+  NH_TRY(read_output(c, root, s));
+  return NH_OK;
+}
+
+/* Refuse an override of a later feature before it touches the tree. */
+static int check_override(const nh_ctx *c, int k) {
+  static const char *const later[] = {"adapt", "tools", "targets", NULL};
+  const char *text = c->overrides[k - 1];
+  char one_line[512];
+  if (!text) return NH_ERROR(NH_ERR_INPUT, "--set:%d: missing KEY=VALUE", k);
+  nh_yaml_one_line(one_line, sizeof one_line, text);
+  size_t n = strcspn(text, ".=");
+  for (const char *const *l = later; *l; ++l)
+    if (strlen(*l) == n && !strncmp(text, *l, n))
+      return NH_ERROR(NH_ERR_INPUT,
+                      "--set:%d: %s: not supported in this version of needlehex "
+                      "(--set %s)",
+                      k, *l, one_line);
+  return NH_OK;
+}
+
+/* Parse, override, keep the text, read the schema. */
+/* time.end and time.steps say the same thing two ways. When an override sets
+ * one of them and the file gives the other, the override wins and the file's
+ * key is dropped, so that `--set time.steps=20` works on a scene that gives
+ * time.end. Both in the file, or both in overrides, remain an error
+ * (reported by read_scene). */
+static void resolve_time_length(nh_yaml_node *root) {
+  nh_yaml_node *time = (nh_yaml_node *)nh_yaml_get(root, "time", NULL);
+  if (!time || time->kind != NH_YAML_MAP) return;
+  int i_end = -1, i_steps = -1;
+  for (int i = 0; i < time->n; i++) {
+    if (!strcmp(time->keys[i]->text, "end")) i_end = i;
+    if (!strcmp(time->keys[i]->text, "steps")) i_steps = i;
+  }
+  if (i_end < 0 || i_steps < 0) return;
+  int s_end = time->items[i_end]->source, s_steps = time->items[i_steps]->source;
+  if ((s_end == 0) == (s_steps == 0)) return;
+  int drop = s_end == 0 ? i_end : i_steps;
+  nh_yaml_free(&time->keys[drop]);
+  nh_yaml_free(&time->items[drop]);
+  for (int i = drop; i + 1 < time->n; i++) {
+    time->keys[i] = time->keys[i + 1];
+    time->items[i] = time->items[i + 1];
+  }
+  time->n--;
+}
+
+static int load(const nh_ctx *c, nh_scene *s, nh_yaml_node **root) {
+  char d[96];
+  NH_TRY(nh_yaml_parse_file(c->file, root));
+  if (nh_yaml_is_null(*root))
+    return NH_ERROR(NH_ERR_INPUT,
+                    "%s:1: the scene is empty: expected a mapping with at least name and tissue",
+                    c->file);
+  if ((*root)->kind != NH_YAML_MAP)
+    return NH_ERROR(NH_ERR_INPUT,
+                    "%s:%d: the scene must be a mapping (name: ..., tissue: ...), got %s", c->file,
+                    (*root)->line, describe(*root, d, sizeof d));
+  for (int k = 1; k <= c->n_overrides; ++k) {
+    NH_TRY(check_override(c, k));
+    NH_TRY(nh_yaml_apply_override(*root, k, c->overrides[k - 1]));
+  }
+  resolve_time_length(*root);
+  NH_TRY(nh_yaml_emit(*root, &s->yaml));
+  return read_scene(c, *root, s);
+}
+
+int nh_scene_load(const char *path, int n_overrides, const char *const *overrides, nh_scene **out) {
+  *out = NULL;
+  if (!path) return NH_ERROR(NH_ERR_INPUT, "no scene file given");
+  if (n_overrides < 0 || (n_overrides > 0 && !overrides))
+    return NH_ERROR(NH_ERR_INTERNAL, "nh_scene_load: bad override array");
+  if (strlen(path) >= NH_PATH_MAX)
+    return NH_ERROR(NH_ERR_INPUT, "%.64s...: the scene path is longer than %d characters", path,
+                    NH_PATH_MAX - 1);
+  nh_scene *s = nh_calloc(1, sizeof *s);
+  if (!s) return NH_ERR_MEMORY;
+  memcpy(s->file, path, strlen(path) + 1);
+  nh_ctx c = {.file = path, .overrides = overrides, .n_overrides = n_overrides};
+  nh_yaml_node *root = NULL;
+  int rc = load(&c, s, &root);
+  nh_yaml_free(&root);
+  if (rc) {
+    nh_scene_destroy(&s);
+    return rc;
+  }
+  *out = s;
+  return NH_OK;
+}
+
+void nh_scene_destroy(nh_scene **scene) {
+  if (!scene || !*scene) return;
+  nh_scene *s = *scene;
+  for (int i = 0; i < s->tissue.n_loads; ++i) {
+    free(s->tissue.loads[i].schedule.t);
+    free(s->tissue.loads[i].schedule.value);
+  }
+  free(s->tissue.loads);
+  free(s->tissue.fixed);
+  free(s->probes);
+  free(s->yaml);
+  free(s);
+  *scene = NULL;
+}
+
+double nh_schedule_eval(const nh_schedule *s, double t) {
+  if (!s || s->n == 0) return 1.0;
+  if (t <= s->t[0]) return s->value[0];
+  if (t >= s->t[s->n - 1]) return s->value[s->n - 1];
+  /* Binary search for the interval t[lo] <= t < t[lo + 1]. */
+  int lo = 0, hi = s->n - 1;
+  while (hi - lo > 1) {
+    int mid = lo + (hi - lo) / 2;
+    if (s->t[mid] <= t)
+      lo = mid;
+    else
+      hi = mid;
+  }
+  double w = (t - s->t[lo]) / (s->t[hi] - s->t[lo]);
+  return (1 - w) * s->value[lo] + w * s->value[hi];
+}
+
+static void print_box(FILE *f, const double min[3], const double max[3]) {
+  fprintf(f, "[%g, %g, %g] .. [%g, %g, %g] m", min[0], min[1], min[2], max[0], max[1], max[2]);
+}
+
+void nh_scene_print(const nh_scene *s, void *stdio_file) {
+  FILE *f = stdio_file ? stdio_file : stdout;
+  fprintf(f, "scene     %s (%s)\n", s->name, s->file);
+  fprintf(f, "time      %s, %d steps of %g s (end %g s)\n",
+          s->time.mode == NH_MODE_STATIC ? "static" : "dynamic", s->time.steps, s->time.step,
+          s->time.steps * s->time.step);
+  fprintf(f, "gravity   [%g, %g, %g] m/s^2\n", s->gravity[0], s->gravity[1], s->gravity[2]);
+  fprintf(f, "tissue    box ");
+  print_box(f, s->tissue.box_min, s->tissue.box_max);
+  fprintf(f, ", grid %d x %d x %d cells (%d nodes)\n", s->tissue.grid[0], s->tissue.grid[1],
+          s->tissue.grid[2],
+          (s->tissue.grid[0] + 1) * (s->tissue.grid[1] + 1) * (s->tissue.grid[2] + 1));
+  fprintf(f, "material  E = %g Pa, nu = %g, density %g kg/m^3\n", s->tissue.young,
+          s->tissue.poisson, s->tissue.density);
+  fprintf(f, "damping   mass %g 1/s, stiffness %g s\n", s->tissue.damping_mass,
+          s->tissue.damping_stiffness);
+  fprintf(f, "fixed     %d region%s\n", s->tissue.n_fixed, s->tissue.n_fixed == 1 ? "" : "s");
+  for (int i = 0; i < s->tissue.n_fixed; ++i) {
+    fprintf(f, "          tissue.fixed.%d: box ", i);
+    print_box(f, s->tissue.fixed[i].min, s->tissue.fixed[i].max);
+    fprintf(f, "\n");
+  }
+  fprintf(f, "loads     %d\n", s->tissue.n_loads);
+  for (int i = 0; i < s->tissue.n_loads; ++i) {
+    const nh_load *l = &s->tissue.loads[i];
+    fprintf(f, "          tissue.loads.%d: force [%g, %g, %g] N over box ", i, l->force[0],
+            l->force[1], l->force[2]);
+    print_box(f, l->region.min, l->region.max);
+    if (l->schedule.n > 0)
+      fprintf(f, ", schedule of %d point%s", l->schedule.n, l->schedule.n == 1 ? "" : "s");
+    fprintf(f, "\n");
+  }
+  fprintf(f, "solver    tolerance %g, at most %d iterations, ", s->solver.tolerance,
+          s->solver.max_iterations);
+  if (s->solver.threads > 0)
+    fprintf(f, "%d thread%s\n", s->solver.threads, s->solver.threads == 1 ? "" : "s");
+  else
+    fprintf(f, "all cores\n");
+  fprintf(f, "probes    %d\n", s->n_probes);
+  for (int i = 0; i < s->n_probes; ++i)
+    fprintf(f, "          %s at [%g, %g, %g] m\n", s->probes[i].name, s->probes[i].point[0],
+            s->probes[i].point[1], s->probes[i].point[2]);
+  if (s->output.every > 0)
+    fprintf(f, "output    %s, a frame every %d step%s, hdf5 %s\n", s->output.dir, s->output.every,
+            s->output.every == 1 ? "" : "s", s->output.hdf5 ? "yes" : "no");
+  else
+    fprintf(f, "output    %s, the last step only, hdf5 %s\n", s->output.dir,
+            s->output.hdf5 ? "yes" : "no");
+}

@@ -1,0 +1,116 @@
+/* scene — reading a YAML scene (libyaml) into validated plain structs in SI
+ * units, with defaults and `--set KEY=VALUE` overrides by dotted path.
+ *
+ * The contract is ../shared/SCENE.md; docs/scene.md lists every key. Every
+ * error is NH_ERR_INPUT with one message of the form
+ *     FILE:LINE: KEY: what is wrong
+ * where KEY is the dotted path (e.g. tissue.material.poisson) and, for an
+ * override, FILE:LINE is "--set" and the override's position (e.g.
+ * "--set:2: tissue.grid: ..."). Values that other modules validate later
+ * (e.g. a fixed region that contains no node) carry their `where` string so
+ * those modules can report in the same form. */
+#ifndef NH_SCENE_H
+#define NH_SCENE_H
+
+#include "core/core.h"
+
+#define NH_NAME_MAX  64
+#define NH_WHERE_MAX 320 /* "FILE:LINE: KEY" */
+#define NH_PATH_MAX  1024
+
+typedef enum { NH_MODE_DYNAMIC = 0, NH_MODE_STATIC = 1 } nh_time_mode;
+typedef enum { NH_REGION_BOX = 0 } nh_region_kind;
+
+typedef struct {
+  nh_region_kind kind;
+  double min[3], max[3]; /* box: closed, inclusive bounds */
+  char where[NH_WHERE_MAX];
+} nh_region;
+
+/* A piecewise-linear factor of time: (t[i], value[i]) sorted by t; constant
+ * beyond both ends. n == 0 means the constant 1. */
+typedef struct {
+  int n;
+  double *t, *value;
+} nh_schedule;
+
+typedef struct {
+  nh_region region;
+  double force[3];      /* total force, N */
+  nh_schedule schedule; /* loads[i].schedule: [[t0, s0], [t1, s1], ...] */
+  char where[NH_WHERE_MAX];
+} nh_load;
+
+typedef struct {
+  char name[NH_NAME_MAX];
+  double point[3];
+  char where[NH_WHERE_MAX];
+} nh_probe;
+
+typedef struct nh_scene {
+  char file[NH_PATH_MAX]; /* the scene file as given */
+  char name[NH_NAME_MAX]; /* name (required) */
+
+  struct {
+    nh_time_mode mode; /* time.mode: dynamic (default) | static */
+    double step;       /* time.step, s (default 0.01) */
+    int steps; /* number of steps: time.steps, or round(time.end / time.step); default 100 */
+  } time;
+
+  double gravity[3]; /* gravity, m/s² (default 0) */
+
+  struct {
+    double box_min[3], box_max[3]; /* tissue.domain.box (required) */
+    int grid[3];                   /* tissue.grid (default [8, 4, 4]); each >= 1 */
+    double young;                  /* tissue.material.young, Pa (required, > 0) */
+    double poisson;                /* tissue.material.poisson (required, in (-1, 0.5)) */
+    double density;                /* tissue.material.density, kg/m³ (default 1000, > 0) */
+    double damping_mass;           /* tissue.damping.mass (Rayleigh α, 1/s, default 0, >= 0) */
+    double damping_stiffness;      /* tissue.damping.stiffness (Rayleigh β, s, default 0, >= 0) */
+    int n_fixed;
+    nh_region *fixed; /* tissue.fixed: list of {box: {min, max}} */
+    int n_loads;
+    nh_load *loads; /* tissue.loads: list of {box, force, schedule?} */
+    char where_fixed[NH_WHERE_MAX];
+  } tissue;
+
+  struct {
+    double tolerance;   /* solver.tolerance: static Newton relative residual (default 1e-8) */
+    int max_iterations; /* solver.max_iterations: static Newton (default 30) */
+    int threads;        /* solver.threads: OpenMP threads, 0 = all cores (default 0) */
+  } solver;
+
+  int n_probes;
+  nh_probe *probes; /* probes: list of {name, point} */
+
+  struct {
+    char dir[NH_PATH_MAX]; /* output.dir (default "out/<name>") */
+    int every;             /* output.every: frame every N steps, 0 = last step only (default 1) */
+    int hdf5;              /* output.hdf5 (default false; accepted, not yet written) */
+  } output;
+
+  char *yaml; /* the scene as run, overrides applied, as YAML text (owned) */
+} nh_scene;
+
+/* Read and validate the scene `path` and apply the overrides
+ * `overrides[0..n_overrides)`, each "dotted.path=VALUE" where VALUE is a YAML
+ * flow scalar or sequence (e.g. "tissue.grid=[16,8,8]",
+ * "tools.0.interaction.friction=0.1"). A path that names no key of the
+ * schema, or an index beyond a list, is an error. An override may add a key
+ * that the file leaves out.
+ * Output: *out, to be freed with nh_scene_destroy.
+ * Fails with NH_ERR_INPUT (message FILE:LINE: KEY: reason) on an unreadable
+ * file, malformed YAML, an unknown key, a wrong type, a missing required key,
+ * or a value out of range; NH_ERR_MEMORY on allocation failure. */
+int nh_scene_load(const char *path, int n_overrides, const char *const *overrides, nh_scene **out);
+
+/* Free a scene and set *scene = NULL (accepts NULL). */
+void nh_scene_destroy(nh_scene **scene);
+
+/* Value of a schedule at time t (1 if the schedule is empty). */
+double nh_schedule_eval(const nh_schedule *s, double t);
+
+/* Print a human-readable summary of what will be modelled (for `check`). */
+void nh_scene_print(const nh_scene *scene, void *stdio_file);
+
+#endif

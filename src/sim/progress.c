@@ -1,0 +1,51 @@
+/* progress.c — what a run prints while it goes and when it ends.
+ *
+ * On a terminal, one line rewritten in place (at most 5 times a second):
+ * step/total, simulated time, DOFs, ms per step, ETA. When stderr is not a
+ * terminal (CI, logs), a plain line every 10 % of the run or every 10 s.
+ * At the end a summary: steps, DOFs, median ms/step by phase, output folder. */
+#include "sim/sim_impl.h"
+
+#include <stdio.h>
+#include <unistd.h>
+
+void nh_progress_start(nh_sim *s) {
+  s->progress.t_start = s->progress.t_last_print = nh_time_now();
+  s->progress.is_tty = isatty(fileno(stderr));
+  s->progress.printed = 0;
+}
+
+void nh_progress_update(nh_sim *s) {
+  int total = s->scene->time.steps;
+  double now = nh_time_now(), elapsed = now - s->progress.t_start;
+  double per_step = elapsed / s->step;
+  double eta = per_step * (total - s->step);
+  int dofs = 3 * s->mesh->n_nodes;
+  if (s->progress.is_tty) {
+    if (now - s->progress.t_last_print < 0.2 && s->step < total) return;
+    fprintf(stderr, "\r  step %d/%d  t = %.4g s  dofs %d  %.2f ms/step  ETA %.1f s   ", s->step,
+            total, s->time, dofs, 1e3 * per_step, eta);
+    s->progress.printed = 1;
+  } else {
+    int tenth = total >= 10 ? total / 10 : 1;
+    if (s->step % tenth != 0 && now - s->progress.t_last_print < 10.0 && s->step < total) return;
+    fprintf(stderr, "  step %d/%d  t = %.4g s  dofs %d  %.2f ms/step  ETA %.1f s\n", s->step, total,
+            s->time, dofs, 1e3 * per_step, eta);
+  }
+  s->progress.t_last_print = now;
+}
+
+void nh_progress_finish(nh_sim *s) {
+  if (s->progress.is_tty && s->progress.printed) fputc('\n', stderr);
+  double t[NH_PHASES];
+  nh_sim_median_times(s, t);
+  fprintf(stderr,
+          "%s: %d steps, %d dofs (%d free), %d cells, %.2f s\n"
+          "  median ms/step: assemble %.3f  factor %.3f  solve %.3f  constraints %.3f  "
+          "adapt %.3f  output %.3f  | step %.3f\n",
+          s->scene->name, s->step, 3 * s->mesh->n_nodes, nh_system_free_dofs(s->system),
+          s->mesh->n_leaves, nh_time_now() - s->progress.t_start, 1e3 * t[NH_PHASE_ASSEMBLE],
+          1e3 * t[NH_PHASE_FACTOR], 1e3 * t[NH_PHASE_SOLVE], 1e3 * t[NH_PHASE_CONSTRAINTS],
+          1e3 * t[NH_PHASE_ADAPT], 1e3 * t[NH_PHASE_OUTPUT], 1e3 * t[NH_PHASE_STEP]);
+  if (!s->options.dry_run) fprintf(stderr, "  output: %s/\n", s->scene->output.dir);
+}

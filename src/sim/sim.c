@@ -1,0 +1,365 @@
+/* sim.c — the step loop (DESIGN.md, "Data flow of one run").
+ *
+ * One step: external forces at the new time (loads by their schedules,
+ * gravity), then either a backward-Euler step (dynamic) or a Newton solve to
+ * equilibrium under the loads of that pseudo-time (static); then rows of
+ * steps.csv and probes.csv, and a frame when due. Every phase is timed and
+ * the times are kept per step for the summary. The initial state is frame 0,
+ * so a time series always starts at rest. */
+#include "sim/sim_impl.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static const char *const nh_step_columns[] = {
+    "step",        "time",    "dofs",          "free_dofs",  "cells",    "hanging",
+    "constraints", "eta",     "eta_rel",       "iterations", "residual", "t_assemble",
+    "t_factor",    "t_solve", "t_constraints", "t_adapt",    "t_output", "t_step"};
+static const char *const nh_probe_columns[] = {"step", "time", "name", "x", "y",
+                                               "z",    "ux",   "uy",   "uz"};
+
+void nh_sim_destroy(nh_sim **sim) {
+  if (!sim || !*sim) return;
+  nh_sim *s = *sim;
+  nh_system_destroy(&s->system);
+  nh_tissue_destroy(&s->tissue);
+  nh_mesh_destroy(&s->mesh);
+  free(s->fixed);
+  free(s->u);
+  free(s->x);
+  free(s->v);
+  free(s->f_ext);
+  free(s->load_unit);
+  free(s->probe_cell);
+  free(s->probe_xi);
+  free(s->phase_times);
+  nh_csv_destroy(&s->steps_csv);
+  nh_csv_destroy(&s->probes_csv);
+  nh_pvd_destroy(&s->tissue_pvd);
+  nh_pvd_destroy(&s->points_pvd);
+  free(s);
+  *sim = NULL;
+}
+
+const nh_mesh *nh_sim_mesh(const nh_sim *s) {
+  return s->mesh;
+}
+const nh_tissue *nh_sim_tissue(const nh_sim *s) {
+  return s->tissue;
+}
+nh_system *nh_sim_system(nh_sim *s) {
+  return s->system;
+}
+double *nh_sim_displacements(nh_sim *s) {
+  return s->u;
+}
+double *nh_sim_velocities(nh_sim *s) {
+  return s->v;
+}
+const unsigned char *nh_sim_fixed(const nh_sim *s) {
+  return s->fixed;
+}
+int nh_sim_step_index(const nh_sim *s) {
+  return s->step;
+}
+double nh_sim_time(const nh_sim *s) {
+  return s->time;
+}
+
+void nh_sim_external_force(const nh_sim *s, double t, double *f) {
+  const int n = 3 * s->mesh->n_nodes;
+  const nh_scene *sc = s->scene;
+  for (int i = 0; i < n; i++) f[i] = s->tissue->mass[i / 3] * sc->gravity[i % 3];
+  for (int l = 0; l < sc->tissue.n_loads; l++) {
+    double factor = nh_schedule_eval(&sc->tissue.loads[l].schedule, t);
+    if (factor == 0.0) continue;
+    const double *u = s->load_unit + (size_t)l * n;
+    for (int i = 0; i < n; i++) f[i] += factor * u[i];
+  }
+}
+
+void nh_sim_probe_displacement(const nh_sim *s, int i, double u[3]) {
+  double N[8];
+  nh_hex_shape(s->probe_xi + 3 * i, N);
+  const int *e = s->mesh->cells + 8 * s->probe_cell[i];
+  u[0] = u[1] = u[2] = 0.0;
+  for (int a = 0; a < 8; a++)
+    for (int k = 0; k < 3; k++) u[k] += N[a] * s->u[3 * e[a] + k];
+}
+
+double nh_sim_kinetic_energy(const nh_sim *s) {
+  double e = 0.0;
+  for (int i = 0; i < 3 * s->mesh->n_nodes; i++)
+    e += 0.5 * s->tissue->mass[i / 3] * s->v[i] * s->v[i];
+  return e;
+}
+
+static int nh_cmp_double(const void *a, const void *b) {
+  double x = *(const double *)a, y = *(const double *)b;
+  return (x > y) - (x < y);
+}
+
+void nh_sim_median_times(const nh_sim *s, double t[7]) {
+  for (int p = 0; p < NH_PHASES; p++) t[p] = 0.0;
+  if (s->step == 0) return;
+  double *buf = malloc(sizeof(double) * (size_t)s->step);
+  if (!buf) return;
+  for (int p = 0; p < NH_PHASES; p++) {
+    for (int k = 0; k < s->step; k++) buf[k] = s->phase_times[NH_PHASES * k + p];
+    qsort(buf, (size_t)s->step, sizeof(double), nh_cmp_double);
+    t[p] = s->step % 2 ? buf[s->step / 2] : 0.5 * (buf[s->step / 2 - 1] + buf[s->step / 2]);
+  }
+  free(buf);
+}
+
+/* ---- outputs ---- */
+
+static int nh_write_frame(nh_sim *s) {
+  const nh_mesh *m = s->mesh;
+  const nh_scene *sc = s->scene;
+  char name[64], path[NH_PATH_MAX + 64];
+  int rc = NH_OK;
+  int nc = m->n_leaves, np = m->n_nodes;
+  int *conn = malloc(sizeof(int) * 8 * (size_t)(nc ? nc : 1));
+  int *offsets = malloc(sizeof(int) * (size_t)(nc ? nc : 1));
+  int *flags = malloc(sizeof(int) * (size_t)(np ? np : 1));
+  double *cell = malloc(sizeof(double) * 3 * (size_t)(nc ? nc : 1));
+  int n_pr = sc->n_probes;
+  double *pp = malloc(sizeof(double) * 3 * (size_t)(n_pr ? n_pr : 1));
+  double *pu = malloc(sizeof(double) * 3 * (size_t)(n_pr ? n_pr : 1));
+  int *pconn = malloc(sizeof(int) * (size_t)(n_pr ? n_pr : 1));
+  int *poff = malloc(sizeof(int) * (size_t)(n_pr ? n_pr : 1));
+  if (!conn || !offsets || !flags || !cell || !pp || !pu || !pconn || !poff) {
+    rc = NH_ERROR(NH_ERR_MEMORY, "out of memory writing a frame");
+    goto done;
+  }
+  for (int l = 0; l < nc; l++) {
+    int c = m->leaves[l];
+    memcpy(conn + 8 * l, m->cells + 8 * c, 8 * sizeof(int));
+    offsets[l] = 8 * (l + 1);
+    double sig[6];
+    nh_tissue_cell_stress(s->tissue, c, s->u, sig);
+    cell[l] = nh_von_mises(sig);
+    cell[nc + l] = m->level[c];
+    cell[2 * nc + l] = m->fill[c];
+  }
+  for (int i = 0; i < np; i++) {
+    flags[i] = s->fixed[i];
+    for (int k = 0; k < 3; k++) s->x[3 * i + k] = m->X[3 * i + k] + s->u[3 * i + k];
+  }
+  nh_field pf[2] = {{"displacement", 3, s->u}, {"velocity", 3, s->v}};
+  nh_field cf[3] = {{"von_mises", 1, cell}, {"level", 1, cell + nc}, {"fill", 1, cell + 2 * nc}};
+  nh_vtu_grid g = {.n_points = np,
+                   .points = s->x,
+                   .n_cells = nc,
+                   .connectivity = conn,
+                   .offsets = offsets,
+                   .type = NH_VTK_HEXAHEDRON,
+                   .n_point_fields = 2,
+                   .point_fields = pf,
+                   .n_cell_fields = 3,
+                   .cell_fields = cf,
+                   .point_int_flags = flags,
+                   .point_flag_name = "fixed"};
+  snprintf(name, sizeof name, "tissue_%06d.vtu", s->step);
+  snprintf(path, sizeof path, "%s/%s", sc->output.dir, name);
+  if ((rc = nh_vtu_write(path, &g)) || (rc = nh_pvd_add(s->tissue_pvd, s->time, name))) goto done;
+
+  if (n_pr > 0) {
+    for (int i = 0; i < n_pr; i++) {
+      nh_sim_probe_displacement(s, i, pu + 3 * i);
+      for (int k = 0; k < 3; k++) pp[3 * i + k] = sc->probes[i].point[k] + pu[3 * i + k];
+      pconn[i] = i;
+      poff[i] = i + 1;
+    }
+    nh_field ppf[1] = {{"displacement", 3, pu}};
+    nh_vtu_grid pg = {.n_points = n_pr,
+                      .points = pp,
+                      .n_cells = n_pr,
+                      .connectivity = pconn,
+                      .offsets = poff,
+                      .type = NH_VTK_VERTEX,
+                      .n_point_fields = 1,
+                      .point_fields = ppf};
+    snprintf(name, sizeof name, "points_%06d.vtu", s->step);
+    snprintf(path, sizeof path, "%s/%s", sc->output.dir, name);
+    if ((rc = nh_vtu_write(path, &pg)) || (rc = nh_pvd_add(s->points_pvd, s->time, name)))
+      goto done;
+  }
+  s->last_frame = s->step;
+done:
+  free(conn), free(offsets), free(flags), free(cell);
+  free(pp), free(pu), free(pconn), free(poff);
+  return rc;
+}
+
+static int nh_write_probe_rows(nh_sim *s) {
+  const nh_scene *sc = s->scene;
+  for (int i = 0; i < sc->n_probes; i++) {
+    double u[3];
+    nh_sim_probe_displacement(s, i, u);
+    const double *p = sc->probes[i].point;
+    NH_TRY(nh_csv_row(s->probes_csv, "%d,%.17g,%s,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g", s->step,
+                      s->time, sc->probes[i].name, p[0] + u[0], p[1] + u[1], p[2] + u[2], u[0],
+                      u[1], u[2]));
+  }
+  return NH_OK;
+}
+
+static int nh_open_outputs(nh_sim *s) {
+  const nh_scene *sc = s->scene;
+  char path[NH_PATH_MAX + 64];
+  const char *dir = sc->output.dir;
+  NH_TRY(nh_mkdir_p(dir));
+  snprintf(path, sizeof path, "%s/scene.yaml", dir);
+  NH_TRY(nh_write_text(path, sc->yaml ? sc->yaml : ""));
+  snprintf(path, sizeof path, "%s/steps.csv", dir);
+  NH_TRY(nh_csv_create(path, (int)(sizeof nh_step_columns / sizeof *nh_step_columns),
+                       nh_step_columns, &s->steps_csv));
+  snprintf(path, sizeof path, "%s/probes.csv", dir);
+  NH_TRY(nh_csv_create(path, 9, nh_probe_columns, &s->probes_csv));
+  snprintf(path, sizeof path, "%s/tissue.pvd", dir);
+  NH_TRY(nh_pvd_create(path, &s->tissue_pvd));
+  if (sc->n_probes > 0) {
+    snprintf(path, sizeof path, "%s/points.pvd", dir);
+    NH_TRY(nh_pvd_create(path, &s->points_pvd));
+  }
+  NH_TRY(nh_write_probe_rows(s));
+  return nh_write_frame(s);
+}
+
+/* ---- construction ---- */
+
+static int nh_sim_build(nh_sim *s) {
+  const nh_scene *sc = s->scene;
+  NH_TRY(nh_mesh_create_box(sc->tissue.box_min, sc->tissue.box_max, sc->tissue.grid, &s->mesh));
+  nh_mesh *m = s->mesh;
+  const int n = 3 * m->n_nodes;
+  s->fixed = calloc((size_t)m->n_nodes, 1);
+  s->x = malloc(sizeof(double) * (size_t)n);
+  s->u = calloc((size_t)n, sizeof(double));
+  s->v = calloc((size_t)n, sizeof(double));
+  s->f_ext = calloc((size_t)n, sizeof(double));
+  s->load_unit =
+      calloc((size_t)n * (size_t)(sc->tissue.n_loads ? sc->tissue.n_loads : 1), sizeof(double));
+  s->probe_cell = malloc(sizeof(int) * (size_t)(sc->n_probes ? sc->n_probes : 1));
+  s->probe_xi = malloc(sizeof(double) * 3 * (size_t)(sc->n_probes ? sc->n_probes : 1));
+  if (!s->fixed || !s->x || !s->u || !s->v || !s->f_ext || !s->load_unit || !s->probe_cell ||
+      !s->probe_xi)
+    return NH_ERROR(NH_ERR_MEMORY, "out of memory building the model (%d nodes)", m->n_nodes);
+  for (int r = 0; r < sc->tissue.n_fixed; r++) {
+    const nh_region *reg = &sc->tissue.fixed[r];
+    NH_CHECK(nh_mesh_nodes_in_region(m, reg, s->fixed) > 0, NH_ERR_INPUT,
+             "%s: the region [%g, %g, %g] - [%g, %g, %g] contains no node of the mesh", reg->where,
+             reg->min[0], reg->min[1], reg->min[2], reg->max[0], reg->max[1], reg->max[2]);
+  }
+  nh_material mat = {sc->tissue.young, sc->tissue.poisson, sc->tissue.density};
+  NH_TRY(nh_tissue_create(m, &mat, &s->tissue));
+  for (int l = 0; l < sc->tissue.n_loads; l++)
+    NH_TRY(nh_mesh_region_load(m, &sc->tissue.loads[l].region, sc->tissue.loads[l].force,
+                               s->load_unit + (size_t)l * n));
+  for (int i = 0; i < sc->n_probes; i++)
+    NH_CHECK(
+        nh_mesh_locate(m, sc->probes[i].point, &s->probe_cell[i], s->probe_xi + 3 * i) == NH_OK,
+        NH_ERR_INPUT, "%s: the point [%g, %g, %g] lies outside the tissue", sc->probes[i].where,
+        sc->probes[i].point[0], sc->probes[i].point[1], sc->probes[i].point[2]);
+  int rc = nh_system_create(s->tissue, s->fixed, &s->system);
+  if (rc == NH_ERR_INPUT)
+    return NH_ERROR(NH_ERR_INPUT, "%s: every node of the tissue is fixed: nothing to simulate",
+                    sc->tissue.where_fixed);
+  NH_TRY(rc);
+  s->integrator = (nh_integrator){.dt = sc->time.step,
+                                  .alpha = sc->tissue.damping_mass,
+                                  .beta = sc->tissue.damping_stiffness,
+                                  .tolerance = sc->solver.tolerance,
+                                  .max_iterations = sc->solver.max_iterations,
+                                  .threads = sc->solver.threads};
+  s->cap_steps = sc->time.steps;
+  s->phase_times =
+      calloc((size_t)NH_PHASES * (size_t)(s->cap_steps ? s->cap_steps : 1), sizeof(double));
+  if (!s->phase_times) return NH_ERROR(NH_ERR_MEMORY, "out of memory: timing table");
+  s->last_frame = -1;
+  return NH_OK;
+}
+
+int nh_sim_create(const nh_scene *scene, const nh_sim_options *options, nh_sim **out) {
+  *out = NULL;
+  nh_sim *s = nh_calloc(1, sizeof *s);
+  if (!s) return NH_ERR_MEMORY;
+  s->scene = scene;
+  if (options) s->options = *options;
+  int rc = nh_sim_build(s);
+  if (!rc && !s->options.dry_run) rc = nh_open_outputs(s);
+  if (rc) {
+    nh_sim_destroy(&s);
+    return rc;
+  }
+  *out = s;
+  return NH_OK;
+}
+
+/* ---- stepping ---- */
+
+int nh_sim_step(nh_sim *s) {
+  const nh_scene *sc = s->scene;
+  if (s->step >= s->cap_steps) {
+    int cap = 2 * s->cap_steps + 16;
+    double *pt = realloc(s->phase_times, sizeof(double) * NH_PHASES * (size_t)cap);
+    if (!pt) return NH_ERROR(NH_ERR_MEMORY, "out of memory: timing table");
+    s->phase_times = pt;
+    s->cap_steps = cap;
+  }
+  double t0 = nh_time_now();
+  double t_new = (s->step + 1) * sc->time.step;
+  nh_sim_external_force(s, t_new, s->f_ext);
+  nh_step_stats st = {0};
+  int rc = sc->time.mode == NH_MODE_STATIC
+               ? nh_solve_static(s->system, &s->integrator, s->f_ext, s->u, &st)
+               : nh_step_dynamic(s->system, &s->integrator, s->f_ext, s->u, s->v, &st);
+  if (rc) {
+    char reason[1024];
+    snprintf(reason, sizeof reason, "%s", nh_error_message());
+    return NH_ERROR(rc, "step %d (t = %g s): %s", s->step + 1, t_new, reason);
+  }
+  s->step++;
+  s->time = t_new;
+  s->last = st;
+  double t1 = nh_time_now();
+  if (!s->options.dry_run) {
+    int due =
+        (sc->output.every > 0 && s->step % sc->output.every == 0) || s->step == sc->time.steps;
+    NH_TRY(nh_write_probe_rows(s));
+    if (due && s->last_frame != s->step) NH_TRY(nh_write_frame(s));
+  }
+  double t2 = nh_time_now();
+  double *pt = s->phase_times + NH_PHASES * (size_t)(s->step - 1);
+  pt[NH_PHASE_ASSEMBLE] = st.t_assemble;
+  pt[NH_PHASE_FACTOR] = st.t_factor;
+  pt[NH_PHASE_SOLVE] = st.t_solve;
+  pt[NH_PHASE_CONSTRAINTS] = 0.0;
+  pt[NH_PHASE_ADAPT] = 0.0;
+  pt[NH_PHASE_OUTPUT] = t2 - t1;
+  pt[NH_PHASE_STEP] = t2 - t0;
+  if (!s->options.dry_run) {
+    const nh_mesh *m = s->mesh;
+    NH_TRY(nh_csv_row(s->steps_csv,
+                      "%d,%.17g,%d,%d,%d,0,0,nan,nan,%d,%.6g,%.6e,%.6e,%.6e,0,0,%.6e,%.6e", s->step,
+                      s->time, 3 * m->n_nodes, nh_system_free_dofs(s->system), m->n_leaves,
+                      st.iterations, st.residual, st.t_assemble, st.t_factor, st.t_solve,
+                      pt[NH_PHASE_OUTPUT], pt[NH_PHASE_STEP]));
+  }
+  return NH_OK;
+}
+
+int nh_sim_run(nh_sim *s) {
+  if (s->options.progress) nh_progress_start(s);
+  int rc = NH_OK;
+  while (s->step < s->scene->time.steps) {
+    if ((rc = nh_sim_step(s))) break;
+    if (s->options.progress) nh_progress_update(s);
+  }
+  if (s->options.progress) nh_progress_finish(s);
+  return rc;
+}

@@ -1,0 +1,53 @@
+/* sim — the step loop: builds the model a scene names, advances it, probes
+ * it, times every phase and writes the outputs of SCENE.md. */
+#ifndef NH_SIM_H
+#define NH_SIM_H
+
+#include "core/core.h"
+#include "fem/fem.h"
+#include "mesh/mesh.h"
+#include "scene/scene.h"
+#include "solve/solve.h"
+
+typedef struct nh_sim nh_sim;
+
+typedef struct {
+  int dry_run;  /* build and validate only: no output folder, no files (`check`) */
+  int progress; /* print a progress line and a summary on stderr */
+} nh_sim_options;
+
+/* Build mesh, tissue, loads, probes and the linear system for `scene`
+ * (borrowed: it must outlive the simulation), and unless dry_run create the
+ * output folder and write the initial frame (step 0).
+ * Fails with NH_ERR_INPUT for scene errors only the mesh reveals (a fixed
+ * region with no node, a load region with no tissue, a probe outside the
+ * tissue: message FILE:LINE: KEY: reason), NH_ERR_IO, NH_ERR_MEMORY. */
+int nh_sim_create(const nh_scene *scene, const nh_sim_options *options, nh_sim **out);
+void nh_sim_destroy(nh_sim **sim);
+
+/* Advance one step (and write its rows and, when due, its frame).
+ * Fails with NH_ERR_NUMERIC / NH_ERR_IO; the message names the step. */
+int nh_sim_step(nh_sim *sim);
+/* Run every remaining step, with progress and a closing summary if asked. */
+int nh_sim_run(nh_sim *sim);
+
+/* Inspection (tests, tools). */
+const nh_mesh *nh_sim_mesh(const nh_sim *sim);
+const nh_tissue *nh_sim_tissue(const nh_sim *sim);
+nh_system *nh_sim_system(nh_sim *sim);
+double *nh_sim_displacements(nh_sim *sim); /* u = x − X, 3 per node (writable: tests set states) */
+double *nh_sim_velocities(nh_sim *sim);    /* v, 3 per node */
+const unsigned char *nh_sim_fixed(const nh_sim *sim);
+/* External force at time t (3 per node): loads by their schedules + M g. */
+void nh_sim_external_force(const nh_sim *sim, double t, double *f);
+int nh_sim_step_index(const nh_sim *sim);
+double nh_sim_time(const nh_sim *sim);
+/* Displacement of probe i (interpolated in its cell). */
+void nh_sim_probe_displacement(const nh_sim *sim, int i, double u[3]);
+/* Kinetic energy ½ vᵀ M v. */
+double nh_sim_kinetic_energy(const nh_sim *sim);
+/* Median seconds per step of each phase so far (assemble, factor, solve,
+ * constraints, adapt, output, step). */
+void nh_sim_median_times(const nh_sim *sim, double t[7]);
+
+#endif

@@ -1,0 +1,55 @@
+/* sim_impl.h — private to the sim module: the simulation state and the
+ * progress reporter shared by sim.c and progress.c. */
+#ifndef NH_SIM_IMPL_H
+#define NH_SIM_IMPL_H
+
+#include "io/io.h"
+#include "sim/sim.h"
+
+enum {
+  NH_PHASE_ASSEMBLE,
+  NH_PHASE_FACTOR,
+  NH_PHASE_SOLVE,
+  NH_PHASE_CONSTRAINTS,
+  NH_PHASE_ADAPT,
+  NH_PHASE_OUTPUT,
+  NH_PHASE_STEP,
+  NH_PHASES
+};
+
+typedef struct {
+  double t_start, t_last_print;
+  int is_tty, printed;
+} nh_progress;
+
+struct nh_sim {
+  const nh_scene *scene;
+  nh_sim_options options;
+  nh_mesh *mesh;
+  nh_tissue *tissue;
+  nh_system *system;
+  nh_integrator integrator;
+  unsigned char *fixed;
+  double *u, *v;     /* displacement and velocity, 3 per node */
+  double *x;         /* current positions X + u, for output */
+  double *f_ext;     /* 3 per node, work */
+  double *load_unit; /* n_loads x 3 n: nodal forces of each load at factor 1 */
+  int *probe_cell;
+  double *probe_xi; /* 3 per probe */
+  int step;         /* steps done */
+  double time;
+  double *phase_times; /* NH_PHASES per step */
+  int cap_steps;
+  nh_step_stats last;
+  /* outputs */
+  nh_csv *steps_csv, *probes_csv;
+  nh_pvd *tissue_pvd, *points_pvd;
+  int last_frame;
+  nh_progress progress;
+};
+
+void nh_progress_start(nh_sim *sim);
+void nh_progress_update(nh_sim *sim);
+void nh_progress_finish(nh_sim *sim);
+
+#endif

@@ -1,0 +1,88 @@
+/* solve — the tissue's linear system and its time integrators
+ * (docs/theory.md §3-4, the seed's Eqs. 11-14).
+ *
+ * nh_system owns the map from nodal DOFs to free unknowns (fixed DOFs are
+ * eliminated), the sparsity pattern of A (upper triangle, CSC, free DOFs
+ * only), a per-cell scatter map, a colouring of the cells for race-free
+ * parallel assembly, and the CHOLMOD factor. The symbolic analysis is done
+ * once per pattern (nh_system_create); every nh_system_factor is numeric
+ * only. */
+#ifndef NH_SOLVE_H
+#define NH_SOLVE_H
+
+#include "core/core.h"
+#include "fem/fem.h"
+#include "mesh/mesh.h"
+
+typedef struct nh_system nh_system;
+
+/* Build the DOF map, pattern, scatter maps and colouring of the leaves of
+ * `tissue->mesh`; fixed[i] != 0 fixes all three DOFs of node i.
+ * Fails with NH_ERR_INPUT if every DOF is fixed, NH_ERR_MEMORY. */
+int nh_system_create(const nh_tissue *tissue, const unsigned char *fixed, nh_system **out);
+void nh_system_destroy(nh_system **sys);
+
+int nh_system_free_dofs(const nh_system *sys);
+/* Number of colours of the cell colouring. */
+int nh_system_colours(const nh_system *sys);
+
+/* Assemble A = cM M + cK K(u) (K the corotational tangent at nodal
+ * displacements u) into the system, the internal force f_int (3 per node,
+ * all DOFs) and, if v != NULL, the product Kv = K(u) v (3 per node). threads: 0 = OpenMP default, 1
+ * = serial (in the same colour order, so the result is bitwise that of any thread count), n = n
+ * threads. */
+void nh_system_assemble(nh_system *sys, const double *u, const double *v, double cM, double cK,
+                        double *f_int, double *Kv, int threads);
+
+/* Numeric Cholesky factorisation of the assembled A (symbolic analysis on
+ * first use). Fails with NH_ERR_NUMERIC if A is not positive definite
+ * (CHOLMOD's common->status is checked) — message names the column. */
+int nh_system_factor(nh_system *sys);
+
+/* Solve A x = b for free-DOF vectors (length nh_system_free_dofs). */
+int nh_system_solve(nh_system *sys, const double *b, double *x);
+
+/* y = A x for free-DOF vectors, with the assembled A. */
+void nh_system_apply(const nh_system *sys, const double *x, double *y);
+
+/* Gather the free entries of a nodal vector (3 per node) / scatter them
+ * back (fixed entries untouched). */
+void nh_system_gather(const nh_system *sys, const double *full, double *free_part);
+void nh_system_scatter(const nh_system *sys, const double *free_part, double *full);
+
+/* Timings and counts of one step. */
+typedef struct {
+  double t_assemble, t_factor, t_solve; /* s */
+  int iterations;                       /* Newton iterations (static), 1 (dynamic) */
+  double residual;                      /* relative residual reached (static) */
+} nh_step_stats;
+
+/* Integrator settings. */
+typedef struct {
+  double dt;          /* time step h, s */
+  double alpha, beta; /* Rayleigh damping C = α M + β K */
+  double tolerance;   /* static: relative residual */
+  int max_iterations; /* static: Newton iterations */
+  int threads;        /* assembly threads (0 = all) */
+} nh_integrator;
+
+/* One backward-Euler step with one linearisation (seed Eq. 13):
+ *   A = (1 + hα) M + (hβ + h²) K,
+ *   A dv = h (f_ext − f_int(u) − α M v − β K v) − h² K v,
+ *   v ← v + dv,  u ← u + h v.
+ * u (displacements), v: 3 per node (fixed DOFs keep their values, their v
+ * stays 0);
+ * f_ext: 3 per node. Fails with NH_ERR_NUMERIC (A not positive definite, or
+ * a non-finite value). */
+int nh_step_dynamic(nh_system *sys, const nh_integrator *in, const double *f_ext, double *u,
+                    double *v, nh_step_stats *stats);
+
+/* Quasi-static equilibrium f_int(u) = f_ext by Newton's method on
+ * K du = f_ext − f_int(u), starting from u (fixed DOFs keep their values, so
+ * prescribed boundary displacements are imposed by setting them in u). Converged
+ * when |r| <= tolerance · max(|f_ext|, |f_int| over all DOFs, tiny).
+ * Fails with NH_ERR_NUMERIC if it does not converge in max_iterations. */
+int nh_solve_static(nh_system *sys, const nh_integrator *in, const double *f_ext, double *u,
+                    nh_step_stats *stats);
+
+#endif

@@ -1,0 +1,491 @@
+/* test_scene — the scene module: defaults, values, --set overrides, schedules,
+ * steps from end/step, the scene-as-run text re-loading to the same struct,
+ * and the exact form of input errors (FILE:LINE: KEY: ...).
+ *
+ * The scenes are written by this program into a fresh temporary directory, so
+ * the expected lines and values sit next to the text they come from. Silent
+ * on success; on failure prints what was expected and what came out and
+ * returns 1. */
+#include "scene/scene.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+static int failures = 0;
+static char dir[256];
+
+#define EXPECT(cond, ...)                                                                          \
+  do {                                                                                             \
+    if (!(cond)) {                                                                                 \
+      fprintf(stderr, "%s:%d: FAILED %s: ", __FILE__, __LINE__, #cond);                            \
+      fprintf(stderr, __VA_ARGS__);                                                                \
+      fprintf(stderr, "\n");                                                                       \
+      ++failures;                                                                                  \
+    }                                                                                              \
+  } while (0)
+
+#define EXPECT_NUM(actual, expected)                                                               \
+  EXPECT(fabs((double)(actual) - (double)(expected)) <= 1e-12 * (1 + fabs((double)(expected))),    \
+         "%s: expected %.17g, got %.17g (tolerance 1e-12 relative)", #actual, (double)(expected),  \
+         (double)(actual))
+
+#define EXPECT_STR(actual, expected)                                                               \
+  EXPECT(strcmp((actual), (expected)) == 0, "%s: expected '%s', got '%s'", #actual, (expected),    \
+         (actual))
+
+/* Write `text` to DIR/name and return the path (static buffer, one at a time). */
+static const char *write_scene(const char *name, const char *text) {
+  static char path[512];
+  snprintf(path, sizeof path, "%s/%s", dir, name);
+  FILE *f = fopen(path, "w");
+  if (!f) {
+    fprintf(stderr, "cannot write %s\n", path);
+    exit(1);
+  }
+  fputs(text, f);
+  fclose(f);
+  return path;
+}
+
+/* Load, expecting success; NULL (and a failure) otherwise. */
+static nh_scene *load_ok(const char *path, int n, const char *const *overrides, int line) {
+  nh_scene *s = NULL;
+  int rc = nh_scene_load(path, n, overrides, &s);
+  if (rc || !s) {
+    fprintf(stderr, "%s:%d: FAILED: loading %s: expected success, got %d: %s\n", __FILE__, line,
+            path, rc, nh_error_message());
+    ++failures;
+    return NULL;
+  }
+  return s;
+}
+
+static const char *minimal = "name: minimal\n"
+                             "tissue:\n"
+                             "  domain:\n"
+                             "    box: {min: [0, 0, 0], max: [0.04, 0.02, 0.02]}\n"
+                             "  material: {young: 1.0e6, poisson: 0.3}\n";
+
+static void test_defaults(void) {
+  const char *path = write_scene("minimal.yaml", minimal);
+  nh_scene *s = load_ok(path, 0, NULL, __LINE__);
+  if (!s) return;
+  EXPECT_STR(s->name, "minimal");
+  EXPECT_STR(s->file, path);
+  EXPECT(s->time.mode == NH_MODE_DYNAMIC, "mode %d", (int)s->time.mode);
+  EXPECT_NUM(s->time.step, 0.01);
+  EXPECT(s->time.steps == 100, "steps: expected 100, got %d", s->time.steps);
+  for (int i = 0; i < 3; ++i) EXPECT_NUM(s->gravity[i], 0);
+  EXPECT_NUM(s->tissue.box_max[0], 0.04);
+  EXPECT_NUM(s->tissue.box_max[2], 0.02);
+  EXPECT(s->tissue.grid[0] == 8 && s->tissue.grid[1] == 4 && s->tissue.grid[2] == 4,
+         "grid: expected [8, 4, 4], got [%d, %d, %d]", s->tissue.grid[0], s->tissue.grid[1],
+         s->tissue.grid[2]);
+  EXPECT_NUM(s->tissue.young, 1.0e6);
+  EXPECT_NUM(s->tissue.poisson, 0.3);
+  EXPECT_NUM(s->tissue.density, 1000);
+  EXPECT_NUM(s->tissue.damping_mass, 0);
+  EXPECT_NUM(s->tissue.damping_stiffness, 0);
+  EXPECT(s->tissue.n_fixed == 0 && s->tissue.n_loads == 0 && s->n_probes == 0,
+         "fixed %d loads %d probes %d", s->tissue.n_fixed, s->tissue.n_loads, s->n_probes);
+  EXPECT_NUM(s->solver.tolerance, 1e-8);
+  EXPECT(s->solver.max_iterations == 30, "max_iterations %d", s->solver.max_iterations);
+  EXPECT(s->solver.threads == 0, "threads %d", s->solver.threads);
+  EXPECT_STR(s->output.dir, "out/minimal");
+  EXPECT(s->output.every == 1, "every %d", s->output.every);
+  EXPECT(s->output.hdf5 == 0, "hdf5 %d", s->output.hdf5);
+  EXPECT(s->yaml && strstr(s->yaml, "minimal"), "yaml text: %s", s->yaml ? s->yaml : "(null)");
+  char where[NH_WHERE_MAX];
+  snprintf(where, sizeof where, "%s:2: tissue.fixed", path);
+  EXPECT_STR(s->tissue.where_fixed, where);
+  nh_scene_destroy(&s);
+  EXPECT(s == NULL, "destroy must set the pointer to NULL");
+  nh_scene_destroy(&s); /* NULL is accepted */
+}
+
+static const char *full =
+    "# a scene that sets every key\n"                                   /* 1 */
+    "name: full-1.0_x\n"                                                /* 2 */
+    "time:\n"                                                           /* 3 */
+    "  mode: static\n"                                                  /* 4 */
+    "  step: 0.25\n"                                                    /* 5 */
+    "  end: 2.0\n"                                                      /* 6 */
+    "gravity: [0, 0, -9.81]\n"                                          /* 7 */
+    "tissue:\n"                                                         /* 8 */
+    "  domain:\n"                                                       /* 9 */
+    "    box: {min: [-1, -2, -3], max: [1, 2, 3]}\n"                    /* 10 */
+    "  grid: [6, 5, 4]\n"                                               /* 11 */
+    "  material: {young: 2.5e4, poisson: -0.25, density: 1040}\n"       /* 12 */
+    "  damping: {mass: 0.5, stiffness: 0.001}\n"                        /* 13 */
+    "  fixed:\n"                                                        /* 14 */
+    "    - {box: {min: [-1, -2, -3], max: [-0.9, 2, 3]}}\n"             /* 15 */
+    "    - box:\n"                                                      /* 16 */
+    "        min: [0.9, -2, -3]\n"                                      /* 17 */
+    "        max: [1, 2, 3]\n"                                          /* 18 */
+    "  loads:\n"                                                        /* 19 */
+    "    - box: {min: [0, 0, 0], max: [1, 2, 3]}\n"                     /* 20 */
+    "      force: [1, 2, -3.5]\n"                                       /* 21 */
+    "      schedule: [[0, 0], [1, 2], [3, 2], [4, 0]]\n"                /* 22 */
+    "    - {box: {min: [0, 0, 0], max: [0, 0, 0]}, force: [0, 0, 1]}\n" /* 23 */
+    "solver: {tolerance: 1.0e-10, max_iterations: 12, threads: 3}\n"    /* 24 */
+    "probes:\n"                                                         /* 25 */
+    "  - {name: \"1\", point: [0.5, 0, 0]}\n"                           /* 26 */
+    "  - {name: tip, point: [1, 2, 3]}\n"                               /* 27 */
+    "output:\n"                                                         /* 28 */
+    "  dir: results/full run\n"                                         /* 29 */
+    "  every: 0\n"                                                      /* 30 */
+    "  hdf5: true\n";                                                   /* 31 */
+
+/* Every value of `full`, compared field by field (where strings excluded). */
+static void check_full(const nh_scene *s, const char *what) {
+  EXPECT(!strcmp(s->name, "full-1.0_x"), "%s: name '%s'", what, s->name);
+  EXPECT(s->time.mode == NH_MODE_STATIC, "%s: mode %d", what, (int)s->time.mode);
+  EXPECT_NUM(s->time.step, 0.25);
+  EXPECT(s->time.steps == 8, "%s: steps: expected 2.0 / 0.25 = 8, got %d", what, s->time.steps);
+  EXPECT_NUM(s->gravity[2], -9.81);
+  EXPECT_NUM(s->tissue.box_min[1], -2);
+  EXPECT_NUM(s->tissue.box_max[2], 3);
+  EXPECT(s->tissue.grid[0] == 6 && s->tissue.grid[1] == 5 && s->tissue.grid[2] == 4,
+         "%s: grid [%d, %d, %d]", what, s->tissue.grid[0], s->tissue.grid[1], s->tissue.grid[2]);
+  EXPECT_NUM(s->tissue.young, 2.5e4);
+  EXPECT_NUM(s->tissue.poisson, -0.25);
+  EXPECT_NUM(s->tissue.density, 1040);
+  EXPECT_NUM(s->tissue.damping_mass, 0.5);
+  EXPECT_NUM(s->tissue.damping_stiffness, 0.001);
+  EXPECT(s->tissue.n_fixed == 2, "%s: n_fixed %d", what, s->tissue.n_fixed);
+  if (s->tissue.n_fixed == 2) {
+    EXPECT_NUM(s->tissue.fixed[0].max[0], -0.9);
+    EXPECT_NUM(s->tissue.fixed[1].min[0], 0.9);
+    EXPECT_NUM(s->tissue.fixed[1].max[1], 2);
+  }
+  EXPECT(s->tissue.n_loads == 2, "%s: n_loads %d", what, s->tissue.n_loads);
+  if (s->tissue.n_loads == 2) {
+    EXPECT_NUM(s->tissue.loads[0].force[2], -3.5);
+    EXPECT(s->tissue.loads[0].schedule.n == 4, "%s: schedule n %d", what,
+           s->tissue.loads[0].schedule.n);
+    EXPECT(s->tissue.loads[1].schedule.n == 0, "%s: schedule n %d", what,
+           s->tissue.loads[1].schedule.n);
+    EXPECT_NUM(s->tissue.loads[1].force[2], 1);
+  }
+  EXPECT_NUM(s->solver.tolerance, 1e-10);
+  EXPECT(s->solver.max_iterations == 12 && s->solver.threads == 3, "%s: solver %d %d", what,
+         s->solver.max_iterations, s->solver.threads);
+  EXPECT(s->n_probes == 2, "%s: n_probes %d", what, s->n_probes);
+  if (s->n_probes == 2) {
+    EXPECT(!strcmp(s->probes[0].name, "1"), "%s: probe name '%s'", what, s->probes[0].name);
+    EXPECT(!strcmp(s->probes[1].name, "tip"), "%s: probe name '%s'", what, s->probes[1].name);
+    EXPECT_NUM(s->probes[0].point[0], 0.5);
+    EXPECT_NUM(s->probes[1].point[2], 3);
+  }
+  EXPECT(!strcmp(s->output.dir, "results/full run"), "%s: dir '%s'", what, s->output.dir);
+  EXPECT(s->output.every == 0 && s->output.hdf5 == 1, "%s: output %d %d", what, s->output.every,
+         s->output.hdf5);
+}
+
+static void test_values_and_where(void) {
+  const char *path = write_scene("full.yaml", full);
+  nh_scene *s = load_ok(path, 0, NULL, __LINE__);
+  if (!s) return;
+  check_full(s, "full.yaml");
+  char where[NH_WHERE_MAX];
+  snprintf(where, sizeof where, "%s:14: tissue.fixed", path);
+  EXPECT_STR(s->tissue.where_fixed, where);
+  snprintf(where, sizeof where, "%s:15: tissue.fixed.0", path);
+  EXPECT_STR(s->tissue.fixed[0].where, where);
+  snprintf(where, sizeof where, "%s:16: tissue.fixed.1", path);
+  EXPECT_STR(s->tissue.fixed[1].where, where);
+  snprintf(where, sizeof where, "%s:20: tissue.loads.0", path);
+  EXPECT_STR(s->tissue.loads[0].where, where);
+  EXPECT_STR(s->tissue.loads[0].region.where, where);
+  snprintf(where, sizeof where, "%s:27: probes.1", path);
+  EXPECT_STR(s->probes[1].where, where);
+
+  /* The scene as run, written out and read back, gives the same struct. */
+  const char *again = write_scene("full_as_run.yaml", s->yaml);
+  nh_scene *t = load_ok(again, 0, NULL, __LINE__);
+  if (t) {
+    check_full(t, "full_as_run.yaml");
+    EXPECT_STR(t->yaml, s->yaml); /* and writing it again changes nothing */
+    nh_scene_destroy(&t);
+  }
+  nh_scene_destroy(&s);
+}
+
+static void test_steps_from_end(void) {
+  static const struct {
+    const char *time;
+    int steps;
+  } cases[] = {
+      {"{step: 0.01, end: 2.0}", 200}, /* 2.0 / 0.01 = 200 */
+      {"{step: 0.3, end: 1.0}", 3},    /* 3.33 rounds to 3 */
+      {"{step: 0.4, end: 1.0}", 3},    /* 2.5 rounds up to 3 */
+      {"{step: 0.01, end: 0.001}", 1}, /* 0.1 rounds to 0: at least 1 */
+      {"{end: 0.5}", 50},              /* default step 0.01 */
+      {"{steps: 7}", 7},
+      {"{step: 0.5}", 100}, /* default steps */
+  };
+  for (size_t i = 0; i < sizeof cases / sizeof cases[0]; ++i) {
+    char text[1024];
+    snprintf(text, sizeof text, "%stime: %s\n", minimal, cases[i].time);
+    const char *path = write_scene("steps.yaml", text);
+    nh_scene *s = load_ok(path, 0, NULL, __LINE__);
+    if (!s) continue;
+    EXPECT(s->time.steps == cases[i].steps, "time: %s: expected %d steps, got %d", cases[i].time,
+           cases[i].steps, s->time.steps);
+    nh_scene_destroy(&s);
+  }
+}
+
+static void test_overrides(void) {
+  const char *path = write_scene("override.yaml", full);
+  const char *sets[] = {
+      "tissue.grid=[16,8,8]",      /* a list replaced whole */
+      "tissue.grid.2=9",           /* then one of its items */
+      "tissue.material.young=3e5", /* a scalar */
+      "time.steps=5",              /* a key absent from the file */
+      "time.mode=dynamic",
+      "tissue.fixed.1.box.min=[0.5, -2, -3]", /* through a list by index */
+      "output.hdf5=false",
+      "name=renamed",
+      "probes.0.name='2'",
+      "solver.threads=1",
+  };
+  int n = (int)(sizeof sets / sizeof sets[0]);
+  nh_scene *s = NULL;
+  int rc = nh_scene_load(path, n, sets, &s);
+  /* steps (override) replaces the file's end. */
+  EXPECT(rc == NH_OK, "steps overriding the file's end: expected success, got %d (%s)", rc,
+         nh_error_message());
+  if (s) {
+    EXPECT(s->time.steps == 5, "steps: expected the override's 5, got %d", s->time.steps);
+    EXPECT(!strstr(s->yaml, "end:"), "the scene as run still holds time.end:\n%s", s->yaml);
+  }
+  nh_scene_destroy(&s);
+
+  sets[3] = "time.step=0.5"; /* a key absent from the file, without the conflict */
+  s = load_ok(path, n, sets, __LINE__);
+  if (!s) return;
+  EXPECT(s->tissue.grid[0] == 16 && s->tissue.grid[1] == 8 && s->tissue.grid[2] == 9,
+         "grid: expected [16, 8, 9], got [%d, %d, %d]", s->tissue.grid[0], s->tissue.grid[1],
+         s->tissue.grid[2]);
+  EXPECT_NUM(s->tissue.young, 3e5);
+  EXPECT(s->time.steps == 4, "steps: expected 2.0 / 0.5 = 4, got %d", s->time.steps);
+  EXPECT(s->time.mode == NH_MODE_DYNAMIC, "mode %d", (int)s->time.mode);
+  EXPECT_NUM(s->tissue.fixed[1].min[0], 0.5);
+  EXPECT(s->output.hdf5 == 0, "hdf5 %d", s->output.hdf5);
+  EXPECT_STR(s->name, "renamed");
+  EXPECT_STR(s->output.dir, "results/full run"); /* given in the file, not derived */
+  EXPECT_STR(s->probes[0].name, "2");
+  EXPECT(s->solver.threads == 1, "threads %d", s->solver.threads);
+  /* A region replaced by an override reports the override as its origin. */
+  nh_scene *t = NULL;
+  const char *region_set[] = {"tissue.fixed.0={box: {min: [0, 0, 0], max: [1, 1, 1]}}"};
+  t = load_ok(path, 1, region_set, __LINE__);
+  if (t) {
+    EXPECT_STR(t->tissue.fixed[0].where, "--set:1: tissue.fixed.0");
+    nh_scene_destroy(&t);
+  }
+  /* The scene as run carries the overrides. */
+  const char *again = write_scene("override_as_run.yaml", s->yaml);
+  t = load_ok(again, 0, NULL, __LINE__);
+  if (t) {
+    EXPECT(t->tissue.grid[2] == 9 && t->time.steps == 4 && !strcmp(t->name, "renamed") &&
+               !strcmp(t->probes[0].name, "2") && t->tissue.fixed[1].min[0] == 0.5,
+           "re-loaded scene as run differs:\n%s", s->yaml);
+    nh_scene_destroy(&t);
+  }
+  nh_scene_destroy(&s);
+
+  /* Keys absent from the file, with their sections: damping, solver, gravity. */
+  path = write_scene("minimal.yaml", minimal);
+  const char *add[] = {"tissue.damping.mass=0.25", "tissue.damping.stiffness=1e-3",
+                       "solver.max_iterations=7",  "gravity=[0, -9.81, 0]",
+                       "output.every=3",           "tissue.density_not_here_but=1"};
+  s = load_ok(path, 5, add, __LINE__);
+  if (s) {
+    EXPECT_NUM(s->tissue.damping_mass, 0.25);
+    EXPECT_NUM(s->tissue.damping_stiffness, 1e-3);
+    EXPECT(s->solver.max_iterations == 7, "max_iterations %d", s->solver.max_iterations);
+    EXPECT_NUM(s->gravity[1], -9.81);
+    EXPECT(s->output.every == 3, "every %d", s->output.every);
+    EXPECT_NUM(s->solver.tolerance, 1e-8); /* the rest of a created section keeps defaults */
+    nh_scene_destroy(&s);
+  }
+  /* ... but a key the schema does not know is refused, naming the override. */
+  rc = nh_scene_load(path, 6, add, &s);
+  EXPECT(rc == NH_ERR_INPUT && s == NULL, "unknown key by --set: rc %d", rc);
+  EXPECT_STR(
+      nh_error_message(),
+      "--set:6: tissue.density_not_here_but: unknown key (--set tissue.density_not_here_but=1)");
+}
+
+static void test_schedule(void) {
+  double t[] = {0, 1, 3, 4}, v[] = {0, 2, 2, 0};
+  nh_schedule s = {4, t, v};
+  static const double at[][2] = {{-1, 0},  {0, 0},      {0.5, 1}, {1, 2}, {2, 2},
+                                 {3.5, 1}, {3.75, 0.5}, {4, 0},   {10, 0}};
+  for (size_t i = 0; i < sizeof at / sizeof at[0]; ++i) {
+    double got = nh_schedule_eval(&s, at[i][0]);
+    EXPECT(fabs(got - at[i][1]) <= 1e-15, "schedule at t = %g: expected %g, got %.17g", at[i][0],
+           at[i][1], got);
+  }
+  nh_schedule empty = {0, NULL, NULL};
+  EXPECT(nh_schedule_eval(&empty, 3.0) == 1.0, "empty schedule: expected 1");
+  EXPECT(nh_schedule_eval(NULL, 3.0) == 1.0, "NULL schedule: expected 1");
+  double t1[] = {2}, v1[] = {0.5};
+  nh_schedule one = {1, t1, v1};
+  EXPECT(nh_schedule_eval(&one, 0) == 0.5 && nh_schedule_eval(&one, 9) == 0.5,
+         "one-point schedule: expected the constant 0.5");
+  /* Linear between two points: the midpoint of a random-ish interval. */
+  double t2[] = {0.125, 0.625}, v2[] = {-3, 5};
+  nh_schedule two = {2, t2, v2};
+  EXPECT(fabs(nh_schedule_eval(&two, 0.375) - 1.0) <= 1e-15, "midpoint: expected 1, got %.17g",
+         nh_schedule_eval(&two, 0.375));
+  /* The schedule read from a scene is the same function. */
+  const char *path = write_scene("full.yaml", full);
+  nh_scene *sc = load_ok(path, 0, NULL, __LINE__);
+  if (sc) {
+    EXPECT_NUM(nh_schedule_eval(&sc->tissue.loads[0].schedule, 3.5), 1.0);
+    EXPECT_NUM(nh_schedule_eval(&sc->tissue.loads[1].schedule, 3.5), 1.0);
+    nh_scene_destroy(&sc);
+  }
+}
+
+/* Bad scenes: the message, exactly or by its start ("FILE:LINE: KEY: "). */
+static void test_errors(void) {
+  static const struct {
+    const char *name;   /* file name in DIR */
+    const char *text;   /* the scene */
+    const char *set;    /* one override, or NULL */
+    const char *prefix; /* the message starts with DIR/name + this (or with this for --set) */
+  } cases[] = {
+      {"wrong_type.yaml",
+       "name: w\ntissue:\n  domain: {box: {min: [0,0,0], max: [1,1,1]}}\n"
+       "  grid: [8, abc, 4]\n  material: {young: 1, poisson: 0.3}\n",
+       NULL, ":4: tissue.grid.1: expected an integer, got 'abc'"},
+      {"short_list.yaml",
+       "name: w\ntissue:\n  domain: {box: {min: [0,0], max: [1,1,1]}}\n"
+       "  material: {young: 1, poisson: 0.3}\n",
+       NULL, ":3: tissue.domain.box.min: expected a list of 3 numbers, got 2 entries"},
+      {"unknown.yaml",
+       "name: w\ntissue:\n  domain: {box: {min: [0,0,0], max: [1,1,1]}}\n"
+       "  material: {young: 1, poisson: 0.3, densty: 3}\n",
+       NULL, ":4: tissue.material.densty: unknown key (did you mean 'density'?)"},
+      {"missing_tissue.yaml", "# comment\n\nname: w\ntime: {steps: 3}\n", NULL,
+       ":3: tissue: required key missing"},
+      {"missing_young.yaml",
+       "name: w\ntissue:\n  domain: {box: {min: [0,0,0], max: [1,1,1]}}\n"
+       "  material:\n    poisson: 0.3\n",
+       NULL, ":5: tissue.material.young: required key missing"},
+      {"nu.yaml",
+       "name: w\ntissue:\n  domain: {box: {min: [0,0,0], max: [1,1,1]}}\n"
+       "  material:\n    young: 1\n    poisson: 0.5\n",
+       NULL, ":6: tissue.material.poisson: 0.5 is not below 0.5: incompressible"},
+      {"young.yaml",
+       "name: w\ntissue:\n  domain: {box: {min: [0,0,0], max: [1,1,1]}}\n"
+       "  material:\n    young: -2\n    poisson: 0.3\n",
+       NULL, ":5: tissue.material.young: must be greater than 0, got -2"},
+      {"both.yaml", "name: w\ntime:\n  end: 1\n  steps: 3\n", NULL,
+       ":4: time.steps: give either time.end or time.steps, not both"},
+      {"box.yaml",
+       "name: w\ntissue:\n  domain:\n    box:\n      min: [0, 0, 0]\n      max: [1, 1, 0]\n"
+       "  material: {young: 1, poisson: 0.3}\n",
+       NULL,
+       ":6: tissue.domain.box.max: must be greater than min in every component (z: max 0, "
+       "min 0)"},
+      {"brain.yaml", "name: w\ntissue:\n  domain:\n    brain: {size: [1, 1, 1]}\n", NULL,
+       ":4: tissue.domain.brain: not supported in this version of needlehex"},
+      {"tools.yaml", "name: w\ntools: []\n", NULL,
+       ":2: tools: not supported in this version of needlehex"},
+      {"dup.yaml", "name: w\nname: v\n", NULL, ":2: name: duplicate key (first given at line 1)"},
+      {"alias.yaml", "name: &n w\n", NULL, ":1: name: anchors (&n) and aliases are not supported"},
+      {"docs.yaml", "name: w\n---\nname: v\n", NULL,
+       ":2: a second YAML document starts here; a scene is one document"},
+      {"malformed.yaml", "name: w\ntissue:\n  grid: [8, 4\n", NULL, ":4: malformed YAML: "},
+      {"badname.yaml", "name: a/b\n", NULL, ":1: name: 'a/b' may only contain letters"},
+      {"empty.yaml", "", NULL, ":1: the scene is empty"},
+      {"schedule.yaml",
+       "name: w\ntissue:\n  domain: {box: {min: [0,0,0], max: [1,1,1]}}\n"
+       "  material: {young: 1, poisson: 0.3}\n  loads:\n    - box: {min: [0,0,0], max: [1,1,1]}\n"
+       "      force: [0, 0, 1]\n      schedule:\n        - [0, 0]\n        - [0, 1]\n",
+       NULL, ":10: tissue.loads.0.schedule.1.0: times must increase strictly (0 after 0)"},
+      {"probes.yaml",
+       "name: w\ntissue:\n  domain: {box: {min: [0,0,0], max: [1,1,1]}}\n"
+       "  material: {young: 1, poisson: 0.3}\nprobes:\n  - {name: a, point: [0, 0, 0]}\n"
+       "  - {name: a, point: [1, 0, 0]}\n",
+       NULL, ":7: probes.1.name: 'a' is already the name of probes.0"},
+      {"set_index.yaml", NULL, "tissue.fixed.3.box.min=[0,0,0]",
+       "--set:1: tissue.fixed.3: index 3 beyond the list of 1 (--set "
+       "tissue.fixed.3.box.min=[0,0,0])"},
+      {"set_unknown.yaml", NULL, "tissue.material.stiffnes=3",
+       "--set:1: tissue.material.stiffnes: unknown key (--set tissue.material.stiffnes=3)"},
+      {"set_type.yaml", NULL, "tissue.grid=[16,x,8]",
+       "--set:1: tissue.grid.1: expected an integer, got 'x' (--set tissue.grid=[16,x,8])"},
+      {"set_syntax.yaml", NULL, "tissue.grid",
+       "--set:1: expected KEY=VALUE (e.g. tissue.grid=[16,8,8]), got 'tissue.grid'"},
+      {"set_malformed.yaml", NULL, "tissue.grid=[1,2", "--set:1: tissue.grid: malformed YAML: "},
+      {"set_tools.yaml", NULL, "tools.0.length=1",
+       "--set:1: tools: not supported in this version of needlehex (--set tools.0.length=1)"},
+      {"set_scalar.yaml", NULL, "name.first=x",
+       "--set:1: name.first: name is a single value, not a mapping or a list"},
+  };
+  const char *with_fixed = "name: w\n"
+                           "tissue:\n"
+                           "  domain: {box: {min: [0,0,0], max: [1,1,1]}}\n"
+                           "  material: {young: 1, poisson: 0.3}\n"
+                           "  fixed:\n"
+                           "    - {box: {min: [0,0,0], max: [0,1,1]}}\n";
+  for (size_t i = 0; i < sizeof cases / sizeof cases[0]; ++i) {
+    const char *path = write_scene(cases[i].name, cases[i].text ? cases[i].text : with_fixed);
+    char expected[1024];
+    if (cases[i].set)
+      snprintf(expected, sizeof expected, "%s", cases[i].prefix);
+    else
+      snprintf(expected, sizeof expected, "%s%s", path, cases[i].prefix);
+    nh_scene *s = NULL;
+    nh_error_clear();
+    int rc = nh_scene_load(path, cases[i].set ? 1 : 0, &cases[i].set, &s);
+    const char *msg = nh_error_message();
+    EXPECT(rc == NH_ERR_INPUT && s == NULL, "%s: expected NH_ERR_INPUT, got %d (%s)", cases[i].name,
+           rc, msg);
+    EXPECT(strncmp(msg, expected, strlen(expected)) == 0,
+           "%s: message\n  expected to start with: %s\n  got:                    %s", cases[i].name,
+           expected, msg);
+    EXPECT(!strchr(msg, '\n'), "%s: the message must be one line: %s", cases[i].name, msg);
+    nh_scene_destroy(&s);
+  }
+  nh_scene *s = NULL;
+  char missing[512];
+  snprintf(missing, sizeof missing, "%s/no_such_scene.yaml", dir);
+  int rc = nh_scene_load(missing, 0, NULL, &s);
+  EXPECT(rc == NH_ERR_INPUT && strstr(nh_error_message(), "no_such_scene.yaml: cannot open"),
+         "missing file: rc %d, '%s'", rc, nh_error_message());
+}
+
+int main(void) {
+  const char *tmp = getenv("TMPDIR");
+  snprintf(dir, sizeof dir, "%s/nh_test_scene_XXXXXX", tmp && tmp[0] ? tmp : "/tmp");
+  if (!mkdtemp(dir)) {
+    perror("mkdtemp");
+    return 1;
+  }
+  test_defaults();
+  test_values_and_where();
+  test_steps_from_end();
+  test_overrides();
+  test_schedule();
+  test_errors();
+  if (failures == 0) {
+    /* Clean up only on success, so a failure leaves its scenes to look at. */
+    char cmd[512];
+    snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
+    if (system(cmd) != 0) fprintf(stderr, "could not remove %s\n", dir);
+  } else {
+    fprintf(stderr, "test_scene: %d failure%s (scenes kept in %s)\n", failures,
+            failures == 1 ? "" : "s", dir);
+  }
+  return failures ? 1 : 0;
+}
