@@ -6,7 +6,15 @@
  *
  * Exit status: 0 success; 1 the simulation failed (the message names the
  * step); 2 bad scene or arguments (the message names file, line and key).
- * Every error is one line on stderr, prefixed "needlehex: ". */
+ * Every error is one line on stderr, prefixed "needlehex: ".
+ *
+ * Threads: CHOLMOD's BLAS (Debian's OpenBLAS, pthread build) keeps its
+ * workers spinning for ~0.1 s after each call, and an OpenMP team that also
+ * spins then fights them for the two cores: on the 16x8x8 phantom assembly
+ * went from 1.8 ms to 58 ms per step. With OMP_WAIT_POLICY=passive the
+ * OpenMP threads sleep instead, which measured best at every size
+ * (docs/performance.md). libgomp reads the variable before main runs, so
+ * when the user has not set it we set it and re-execute ourselves once. */
 #include "core/core.h"
 #include "scene/scene.h"
 #include "sim/sim.h"
@@ -14,6 +22,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 static const char *nh_usage =
     "usage: needlehex run SCENE.yaml [--out DIR] [--set KEY=VALUE ...] [--quiet]\n"
@@ -33,7 +42,16 @@ static int nh_fail(int code) {
   return nh_error_exit_status(code);
 }
 
+/* Set OMP_WAIT_POLICY=passive (unless the user chose) and re-execute. On
+ * failure to re-execute, carry on with the default policy. */
+static void nh_passive_threads(char **argv) {
+  if (getenv("OMP_WAIT_POLICY")) return;
+  if (setenv("OMP_WAIT_POLICY", "passive", 1) != 0) return;
+  execv("/proc/self/exe", argv);
+}
+
 int main(int argc, char **argv) {
+  nh_passive_threads(argv);
   if (argc < 2) {
     fputs(nh_usage, stderr);
     return 2;
