@@ -22,7 +22,7 @@ int main(void) {
   unsigned char *fixed = calloc((size_t)m->n_nodes, 1);
   for (int i = 0; i < m->n_nodes; i++) fixed[i] = m->X[3 * i] > 0.0399;
   nh_system *s;
-  CHECK_OK(nh_system_create(t, fixed, &s));
+  CHECK_OK(nh_system_create(t, fixed, NULL, &s));
   CHECK(nh_system_colours(s) == 8, "a structured grid needs 8 colours, got %d",
         nh_system_colours(s));
   int n = 3 * m->n_nodes, nf = nh_system_free_dofs(s);

@@ -38,7 +38,7 @@ static void run(const double A[9], const double c[3], const char *what) {
   nh_tissue *t;
   CHECK_OK(nh_tissue_create(m, &mat, &t));
   nh_system *s;
-  CHECK_OK(nh_system_create(t, fixed, &s));
+  CHECK_OK(nh_system_create(t, fixed, NULL, &s));
   int n = 3 * m->n_nodes;
   double *x = malloc(sizeof(double) * n), *f = calloc(n, sizeof(double)), umax = 0.0;
   for (int i = 0; i < m->n_nodes; i++) {

@@ -1,7 +1,9 @@
 /* locate.c — trilinear shape functions and point location.
  *
  * A material point is located in two stages: the initial grid is regular, so
- * its level-0 cell follows from the point's grid coordinates; below it the
+ * its level-0 cell follows from the point's grid coordinates (when the grid's
+ * nodes have been moved, the 26 neighbours of that cell are tried too, and
+ * the cell whose inverse map puts the point inside is taken); below it the
  * point descends through the refinement hierarchy, choosing the child whose
  * inverse map puts it inside [-1, 1]³ (with a small tolerance, so points on
  * faces are found). The inverse map is Newton's method on the trilinear map,
@@ -63,10 +65,19 @@ int nh_mesh_locate(const nh_mesh *m, const double x[3], int *cell, double xi[3])
     if (ijk[k] < 0) ijk[k] = 0;
     if (ijk[k] >= m->grid[k]) ijk[k] = m->grid[k] - 1;
   }
-  int c = ijk[0] + m->grid[0] * (ijk[1] + m->grid[1] * ijk[2]);
+  int c = -1;
   double Xe[24];
-  nh_mesh_cell_coords(m, m->X, c, Xe);
-  if (nh_hex_invert(Xe, x, xi)) return NH_ERR_INPUT;
+  for (int d = 0; d < 27 && c < 0; d++) {
+    int q[3] = {ijk[0] + (d + 1) % 3 - 1, ijk[1] + (d / 3 + 1) % 3 - 1,
+                ijk[2] + (d / 9 + 1) % 3 - 1};
+    if (q[0] < 0 || q[1] < 0 || q[2] < 0 || q[0] >= m->grid[0] || q[1] >= m->grid[1] ||
+        q[2] >= m->grid[2])
+      continue;
+    int cand = q[0] + m->grid[0] * (q[1] + m->grid[1] * q[2]);
+    nh_mesh_cell_coords(m, m->X, cand, Xe);
+    if (nh_hex_invert(Xe, x, xi) == NH_OK && nh_inside(xi, tol)) c = cand;
+  }
+  if (c < 0) return NH_ERR_INPUT;
   while (m->first_child[c] >= 0) {
     int found = -1;
     for (int ch = m->first_child[c]; ch < m->first_child[c] + m->n_children[c]; ch++) {

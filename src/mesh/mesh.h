@@ -88,4 +88,75 @@ int nh_mesh_nodes_in_region(const nh_mesh *mesh, const nh_region *region, unsign
 int nh_mesh_region_load(const nh_mesh *mesh, const nh_region *region, const double force[3],
                         double *f);
 
+/* ---- refinement templates (mesh/template.c) ----
+ * A template is a set of nodes in the parent's natural coordinates [-1, 1]³
+ * and child cells (8 node indices each, VTK order); format in
+ * templates/README.md. */
+typedef struct nh_template {
+  char path[NH_PATH_MAX];
+  int n_nodes;
+  double *xi; /* 3 per node, natural coordinates of the parent */
+  int n_children;
+  int *children; /* 8 per child, indices into the template's nodes */
+} nh_template;
+
+/* Read and validate a template file: every child has a positive Jacobian at
+ * its 2x2x2 Gauss points, the children's volumes sum to the parent's (8),
+ * no child overlaps another, children are conforming among themselves, and
+ * the nodes on each parent face form a tensor-product grid that includes the
+ * face's corners. Fails with NH_ERR_INPUT, message "FILE:LINE: reason" (the
+ * line of the offending entry; line 0 for whole-file properties). */
+int nh_template_load(const char *path, nh_template **out);
+void nh_template_destroy(nh_template **tmpl);
+
+/* ---- refinement (mesh/refine.c) ---- */
+
+/* Where the nodes created by one refinement came from, for the transfer of
+ * state (the seed's Eq. 17): node first_new + k lies at natural coordinates
+ * xi[3k..3k+2] of cell parent[k] (a cell that was a leaf before). */
+typedef struct {
+  int first_new, n_new;
+  int *parent;
+  double *xi;
+  int cap;
+} nh_refine_info;
+
+/* Replace each leaf cells[0..n) by the children of `tmpl`. Rest positions of
+ * new nodes by Eq. 17 from the parent's corners; a node at a position where
+ * a node already exists (a neighbour refined earlier, or a sibling) is that
+ * node: nodes are never duplicated. Leaves are rebuilt. `info` (may be NULL)
+ * receives where the new nodes lie. Fails with NH_ERR_INPUT if a cell is not
+ * a leaf, NH_ERR_MEMORY. */
+int nh_mesh_refine(nh_mesh *mesh, const nh_template *tmpl, const int *cells, int n,
+                   nh_refine_info *info);
+void nh_refine_info_free(nh_refine_info *info);
+
+/* Smallest edge length of cell c's rest shape. */
+double nh_mesh_cell_size(const nh_mesh *mesh, int c);
+
+/* ---- hanging nodes (mesh/hanging.c) ----
+ * A node is hanging when it lies on a face or an edge of a leaf without
+ * being one of its corners; its displacement is the trilinear interpolation
+ * of the coarsest such leaf. Chains are resolved: the masters listed are
+ * never hanging themselves. */
+typedef struct nh_hanging {
+  int n_hanging;
+  int *node;      /* n_hanging: the hanging nodes */
+  int *start;     /* n_hanging + 1: range of each node's masters */
+  int *master;    /* masters (non-hanging nodes) */
+  double *weight; /* interpolation weights, sum 1 per hanging node */
+  int *index;     /* per mesh node: its position in `node`, or -1 */
+} nh_hanging;
+
+/* Detect the hanging nodes of the leaves and resolve their chains. Nodes with
+ * skip[i] != 0 (fixed nodes; may be NULL) are never hanging: a prescribed
+ * value wins over interpolation. Output *out, free with nh_hanging_destroy.
+ * Fails with NH_ERR_INTERNAL if a node lies inside a leaf or the chains form
+ * a cycle (a broken mesh), NH_ERR_MEMORY. */
+int nh_hanging_detect(const nh_mesh *mesh, const unsigned char *skip, nh_hanging **out);
+void nh_hanging_destroy(nh_hanging **hanging);
+/* Set the hanging entries of a nodal field (3 per node) to the
+ * interpolation of their masters. */
+void nh_hanging_interpolate(const nh_hanging *hanging, double *field, int components);
+
 #endif

@@ -265,7 +265,7 @@ static int nh_sim_build(nh_sim *s) {
         nh_mesh_locate(m, sc->probes[i].point, &s->probe_cell[i], s->probe_xi + 3 * i) == NH_OK,
         NH_ERR_INPUT, "%s: the point [%g, %g, %g] lies outside the tissue", sc->probes[i].where,
         sc->probes[i].point[0], sc->probes[i].point[1], sc->probes[i].point[2]);
-  int rc = nh_system_create(s->tissue, s->fixed, &s->system);
+  int rc = nh_system_create(s->tissue, s->fixed, NULL, &s->system);
   if (rc == NH_ERR_INPUT)
     return NH_ERROR(NH_ERR_INPUT, "%s: every node of the tissue is fixed: nothing to simulate",
                     sc->tissue.where_fixed);

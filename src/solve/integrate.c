@@ -55,8 +55,12 @@ int nh_step_dynamic(nh_system *s, const nh_integrator *in, const double *f_ext, 
   NH_TRY(nh_system_solve(s, b, dv));
   if (!nh_all_finite(dv, s->n_free))
     return NH_ERROR(NH_ERR_NUMERIC, "the velocity update is not finite");
-  for (int j = 0; j < s->n_free; j++) v[s->dof_of[j]] += dv[j];
-  for (int j = 0; j < s->n_free; j++) u[s->dof_of[j]] += h * v[s->dof_of[j]];
+  double *dv_full = s->work[3];
+  nh_system_scatter(s, dv, dv_full);
+  for (int i = 0; i < n; i++) {
+    v[i] += dv_full[i];
+    u[i] += h * v[i];
+  }
   double t3 = nh_time_now();
   if (stats) {
     stats->t_assemble = t1 - t0;
@@ -90,7 +94,8 @@ int nh_solve_static(nh_system *s, const nh_integrator *in, const double *f_ext, 
     NH_TRY(nh_system_factor(s));
     double t2 = nh_time_now();
     NH_TRY(nh_system_solve(s, b, du));
-    for (int j = 0; j < s->n_free; j++) u[s->dof_of[j]] += du[j];
+    nh_system_scatter(s, du, s->work[3]);
+    for (int i = 0; i < n; i++) u[i] += s->work[3][i];
     double t3 = nh_time_now();
     t_fac += t2 - t1;
     t_sol += t3 - t2;

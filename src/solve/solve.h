@@ -17,9 +17,11 @@
 typedef struct nh_system nh_system;
 
 /* Build the DOF map, pattern, scatter maps and colouring of the leaves of
- * `tissue->mesh`; fixed[i] != 0 fixes all three DOFs of node i.
+ * `tissue->mesh`; fixed[i] != 0 fixes all three DOFs of node i. Hanging
+ * nodes (may be NULL) are eliminated: u = P u_free, A = Pᵀ A P.
  * Fails with NH_ERR_INPUT if every DOF is fixed, NH_ERR_MEMORY. */
-int nh_system_create(const nh_tissue *tissue, const unsigned char *fixed, nh_system **out);
+int nh_system_create(const nh_tissue *tissue, const unsigned char *fixed, const nh_hanging *hanging,
+                     nh_system **out);
 void nh_system_destroy(nh_system **sys);
 
 int nh_system_free_dofs(const nh_system *sys);
@@ -45,8 +47,10 @@ int nh_system_solve(nh_system *sys, const double *b, double *x);
 /* y = A x for free-DOF vectors, with the assembled A. */
 void nh_system_apply(const nh_system *sys, const double *x, double *y);
 
-/* Gather the free entries of a nodal vector (3 per node) / scatter them
- * back (fixed entries untouched). */
+/* Restrict a nodal vector (3 per node) to the unknowns, b = Pᵀ full (a
+ * hanging node's entry goes to its masters); and prolong, full = P part
+ * (every entry: fixed ones become 0, hanging ones their masters'
+ * interpolation). Without hanging nodes these are gather and scatter. */
 void nh_system_gather(const nh_system *sys, const double *full, double *free_part);
 void nh_system_scatter(const nh_system *sys, const double *free_part, double *full);
 

@@ -2,7 +2,12 @@
  * assembly of A = cM M + cK K.
  *
  * Fixed DOFs are eliminated: the unknowns are the free DOFs, numbered in node
- * order so that each column's rows come out sorted. The pattern is the upper
+ * order so that each column's rows come out sorted. Hanging nodes, when
+ * given, are eliminated too: u = P u_free with P the interpolation of their
+ * masters (mesh/hanging.c), and A = Pᵀ Aₑ P is assembled leaf by leaf:
+ * a leaf with a hanging corner contributes Tᵀ Aₑ T, T mapping its corners to
+ * its effective (master) nodes. The lumped mass enters Aₑ as a diagonal, so
+ * PᵀMP couples the masters of a hanging node as it must. The pattern is the upper
  * triangle (CHOLMOD stype = +1) of the node graph (two nodes are coupled when
  * they share a leaf). Each leaf stores where each entry of its 24x24 matrix
  * goes (576 ints, -1 for the lower triangle and fixed DOFs), computed once
@@ -10,7 +15,9 @@
  *
  * Parallel assembly without races: leaves are coloured greedily so that no
  * two leaves of one colour share a node; colours run one after the other,
- * the leaves of a colour in parallel. Every entry then receives its
+ * the leaves of a colour in parallel. Leaves with a hanging corner share
+ * masters with many others (every fine leaf on a coarse face couples that
+ * face's corners), so they form one last group assembled serially. Every entry then receives its
  * contributions in colour order whatever the thread count, so the serial and
  * the parallel result are bitwise equal. */
 #include "solve/system_impl.h"
@@ -41,7 +48,14 @@ void nh_system_destroy(nh_system **sys) {
   cholmod_finish(&s->cm);
   free(s->free_of);
   free(s->dof_of);
-  free(s->diag);
+  free(s->exp_start);
+  free(s->exp_node);
+  free(s->exp_w);
+  free(s->eff_start);
+  free(s->eff_node);
+  free(s->eff_T);
+  free(s->emap_start);
+  free(s->emap);
   free(s->scatter);
   free(s->colour_start);
   free(s->colour_leaf);
@@ -56,13 +70,42 @@ static int nh_int_cmp(const void *a, const void *b) {
   return (x > y) - (x < y);
 }
 
+/* The nodes leaf l couples: its effective nodes if it has a hanging corner
+ * (eff_start[l] < eff_start[l + 1]), else its 8 corners. */
+static int nh_leaf_nodes(const nh_system *s, int l, const int **nodes) {
+  int n_eff = s->eff_start[l + 1] - s->eff_start[l];
+  if (n_eff > 0) {
+    *nodes = s->eff_node + s->eff_start[l];
+    return n_eff;
+  }
+  *nodes = s->tissue->mesh->cells + 8 * s->tissue->mesh->leaves[l];
+  return 8;
+}
+
+/* Position of entry (row, col), row <= col, in the CSC upper triangle. */
+static int nh_find_entry(const int *Ap, const int *Ai, int row, int col) {
+  int lo = Ap[col], hi = Ap[col + 1] - 1;
+  while (lo < hi) { /* rows of a column are sorted */
+    int mid = (lo + hi) / 2;
+    if (Ai[mid] < row)
+      lo = mid + 1;
+    else
+      hi = mid;
+  }
+  return lo;
+}
+
 /* Node adjacency (CSR, each list sorted, self included). */
-static int nh_node_graph(const nh_mesh *m, int **ptr_out, int **adj_out) {
+static int nh_node_graph(const nh_system *s, int **ptr_out, int **adj_out) {
+  const nh_mesh *m = s->tissue->mesh;
   int n = m->n_nodes;
   int *count = calloc((size_t)n + 1, sizeof(int));
   if (!count) return NH_ERROR(NH_ERR_MEMORY, "out of memory: node graph");
-  for (int l = 0; l < m->n_leaves; l++)
-    for (int a = 0; a < 8; a++) count[m->cells[8 * m->leaves[l] + a] + 1] += 8;
+  for (int l = 0; l < m->n_leaves; l++) {
+    const int *nodes;
+    int k = nh_leaf_nodes(s, l, &nodes);
+    for (int a = 0; a < k; a++) count[nodes[a] + 1] += k;
+  }
   for (int i = 0; i < n; i++) count[i + 1] += count[i];
   int *adj = malloc(sizeof(int) * (size_t)(count[n] ? count[n] : 1));
   int *fill = malloc(sizeof(int) * (size_t)(n ? n : 1));
@@ -72,9 +115,10 @@ static int nh_node_graph(const nh_mesh *m, int **ptr_out, int **adj_out) {
   }
   memcpy(fill, count, sizeof(int) * (size_t)n);
   for (int l = 0; l < m->n_leaves; l++) {
-    const int *e = m->cells + 8 * m->leaves[l];
-    for (int a = 0; a < 8; a++)
-      for (int b = 0; b < 8; b++) adj[fill[e[a]]++] = e[b];
+    const int *e;
+    int k = nh_leaf_nodes(s, l, &e);
+    for (int a = 0; a < k; a++)
+      for (int b = 0; b < k; b++) adj[fill[e[a]]++] = e[b];
   }
   /* Sort and deduplicate each list in place, then compact. */
   int out = 0;
@@ -92,7 +136,8 @@ static int nh_node_graph(const nh_mesh *m, int **ptr_out, int **adj_out) {
   return NH_OK;
 }
 
-/* Greedy colouring: colour = lowest not used by a leaf sharing a node. */
+/* Greedy colouring of the plain leaves: colour = lowest not used by a leaf
+ * sharing a node. Leaves with a hanging corner go to a last, serial group. */
 static int nh_colour_leaves(nh_system *s) {
   const nh_mesh *m = s->tissue->mesh;
   uint64_t *used = calloc((size_t)m->n_nodes, sizeof(uint64_t));
@@ -103,6 +148,8 @@ static int nh_colour_leaves(nh_system *s) {
   }
   int n_colours = 0;
   for (int l = 0; l < m->n_leaves; l++) {
+    colour[l] = -1;
+    if (s->eff_start[l + 1] > s->eff_start[l]) continue;
     const int *e = m->cells + 8 * m->leaves[l];
     uint64_t mask = 0;
     for (int a = 0; a < 8; a++) mask |= used[e[a]];
@@ -116,17 +163,19 @@ static int nh_colour_leaves(nh_system *s) {
     for (int a = 0; a < 8; a++) used[e[a]] |= (uint64_t)1 << c;
     if (c + 1 > n_colours) n_colours = c + 1;
   }
+  for (int l = 0; l < m->n_leaves; l++)
+    if (colour[l] < 0) colour[l] = n_colours; /* the serial group */
   s->n_colours = n_colours;
-  s->colour_start = calloc((size_t)n_colours + 1, sizeof(int));
+  s->colour_start = calloc((size_t)n_colours + 2, sizeof(int));
   s->colour_leaf = malloc(sizeof(int) * (size_t)(m->n_leaves ? m->n_leaves : 1));
   if (!s->colour_start || !s->colour_leaf) {
     free(used), free(colour);
     return NH_ERROR(NH_ERR_MEMORY, "out of memory: colouring");
   }
   for (int l = 0; l < m->n_leaves; l++) s->colour_start[colour[l] + 1]++;
-  for (int c = 0; c < n_colours; c++) s->colour_start[c + 1] += s->colour_start[c];
-  int next[64];
-  for (int c = 0; c < n_colours; c++) next[c] = s->colour_start[c];
+  for (int c = 0; c <= n_colours; c++) s->colour_start[c + 1] += s->colour_start[c];
+  int next[65];
+  for (int c = 0; c <= n_colours; c++) next[c] = s->colour_start[c];
   for (int l = 0; l < m->n_leaves; l++) s->colour_leaf[next[colour[l]]++] = l;
   free(used);
   free(colour);
@@ -136,7 +185,7 @@ static int nh_colour_leaves(nh_system *s) {
 static int nh_system_pattern(nh_system *s) {
   const nh_mesh *m = s->tissue->mesh;
   int *ptr = NULL, *adj = NULL;
-  NH_TRY(nh_node_graph(m, &ptr, &adj));
+  NH_TRY(nh_node_graph(s, &ptr, &adj));
   /* Count entries per column. */
   size_t nnz = 0;
   for (int col = 0; col < s->n_free; col++) {
@@ -153,8 +202,7 @@ static int nh_system_pattern(nh_system *s) {
   }
   s->A = cholmod_allocate_sparse((size_t)s->n_free, (size_t)s->n_free, nnz, 1, 1, 1, CHOLMOD_REAL,
                                  &s->cm);
-  s->diag = malloc(sizeof(int) * (size_t)s->n_free);
-  if (!s->A || !s->diag) {
+  if (!s->A) {
     free(ptr), free(adj);
     return NH_ERROR(NH_ERR_MEMORY, "out of memory: matrix with %zu entries", nnz);
   }
@@ -167,7 +215,6 @@ static int nh_system_pattern(nh_system *s) {
       for (int i = 0; i < 3; i++) {
         int r = s->free_of[3 * adj[k] + i];
         if (r >= 0 && r <= col) {
-          if (r == col) s->diag[col] = pos;
           Ai[pos++] = r;
         }
       }
@@ -176,31 +223,99 @@ static int nh_system_pattern(nh_system *s) {
   free(ptr);
   free(adj);
 
+  /* Maps: 576 entries per leaf for plain leaves, (3 n_eff)² for the others. */
   s->scatter = malloc(sizeof(int) * 576 * (size_t)(m->n_leaves ? m->n_leaves : 1));
-  if (!s->scatter) return NH_ERROR(NH_ERR_MEMORY, "out of memory: scatter maps");
+  s->emap_start = malloc(sizeof(int) * ((size_t)m->n_leaves + 1));
+  if (!s->scatter || !s->emap_start) return NH_ERROR(NH_ERR_MEMORY, "out of memory: scatter maps");
+  size_t n_emap = 0;
   for (int l = 0; l < m->n_leaves; l++) {
-    const int *e = m->cells + 8 * m->leaves[l];
-    int *map = s->scatter + 576 * (size_t)l;
-    for (int r = 0; r < 24; r++)
-      for (int c = 0; c < 24; c++) {
+    int k = s->eff_start[l + 1] - s->eff_start[l];
+    s->emap_start[l] = (int)n_emap;
+    n_emap += (size_t)9 * k * k;
+  }
+  s->emap_start[m->n_leaves] = (int)n_emap;
+  s->emap = malloc(sizeof(int) * (n_emap ? n_emap : 1));
+  if (!s->emap) return NH_ERROR(NH_ERR_MEMORY, "out of memory: scatter maps");
+  for (int l = 0; l < m->n_leaves; l++) {
+    const int *e;
+    int k = nh_leaf_nodes(s, l, &e);
+    int plain = s->eff_start[l + 1] == s->eff_start[l];
+    int *map = plain ? s->scatter + 576 * (size_t)l : s->emap + s->emap_start[l];
+    int nd = 3 * k;
+    for (int r = 0; r < nd; r++)
+      for (int c = 0; c < nd; c++) {
         int fr = s->free_of[3 * e[r / 3] + r % 3], fc = s->free_of[3 * e[c / 3] + c % 3];
-        map[24 * r + c] = -1;
-        if (fr < 0 || fc < 0 || fr > fc) continue;
-        int lo = Ap[fc], hi = Ap[fc + 1] - 1;
-        while (lo < hi) { /* rows of a column are sorted */
-          int mid = (lo + hi) / 2;
-          if (Ai[mid] < fr)
-            lo = mid + 1;
-          else
-            hi = mid;
-        }
-        map[24 * r + c] = lo;
+        map[nd * r + c] = (fr < 0 || fc < 0 || fr > fc) ? -1 : nh_find_entry(Ap, Ai, fr, fc);
       }
   }
   return NH_OK;
 }
 
-int nh_system_create(const nh_tissue *tissue, const unsigned char *fixed, nh_system **out) {
+/* P node by node (exp_*), and the effective nodes and T of leaves with a
+ * hanging corner (eff_*). */
+static int nh_system_prolongation(nh_system *s, const unsigned char *fixed, const nh_hanging *h) {
+  const nh_mesh *m = s->tissue->mesh;
+  int n = m->n_nodes, total = 0;
+  for (int v = 0; v < n; v++) {
+    int k = h && h->n_hanging ? h->index[v] : -1;
+    total += k >= 0 ? h->start[k + 1] - h->start[k] : 1;
+  }
+  s->exp_start = malloc(sizeof(int) * ((size_t)n + 1));
+  s->exp_node = malloc(sizeof(int) * (size_t)(total ? total : 1));
+  s->exp_w = malloc(sizeof(double) * (size_t)(total ? total : 1));
+  s->eff_start = calloc((size_t)m->n_leaves + 1, sizeof(int));
+  if (!s->exp_start || !s->exp_node || !s->exp_w || !s->eff_start)
+    return NH_ERROR(NH_ERR_MEMORY, "out of memory: hanging-node elimination");
+  int p = 0;
+  for (int v = 0; v < n; v++) {
+    s->exp_start[v] = p;
+    int k = h && h->n_hanging ? h->index[v] : -1;
+    if (k >= 0) {
+      for (int q = h->start[k]; q < h->start[k + 1]; q++)
+        if (s->free_of[3 * h->master[q]] >= 0)
+          s->exp_node[p] = h->master[q], s->exp_w[p++] = h->weight[q];
+    } else if (s->free_of[3 * v] >= 0) {
+      s->exp_node[p] = v, s->exp_w[p++] = 1.0;
+    }
+  }
+  s->exp_start[n] = p;
+  (void)fixed;
+  /* Effective nodes of leaves with a hanging corner: union of the corners'
+   * expansions, in first-seen order. */
+  int cap = 0, used = 0;
+  s->eff_node = NULL;
+  s->eff_T = NULL;
+  int capT = 0;
+  for (int l = 0; l < m->n_leaves; l++) {
+    const int *e = m->cells + 8 * m->leaves[l];
+    s->eff_start[l] = used;
+    int any = 0;
+    for (int a = 0; a < 8; a++) any |= h && h->n_hanging && h->index[e[a]] >= 0;
+    if (!any) continue;
+    int start = used;
+    for (int a = 0; a < 8; a++)
+      for (int q = s->exp_start[e[a]]; q < s->exp_start[e[a] + 1]; q++) {
+        int v = s->exp_node[q], found = 0;
+        for (int r = start; r < used && !found; r++) found = s->eff_node[r] == v;
+        if (found) continue;
+        NH_TRY(nh_grow((void **)&s->eff_node, &cap, used + 1, sizeof(int)));
+        s->eff_node[used++] = v;
+      }
+    NH_TRY(nh_grow((void **)&s->eff_T, &capT, 8 * used, sizeof(double)));
+    int k = used - start;
+    double *T = s->eff_T + 8 * start; /* T[a * k + p] */
+    for (int i = 0; i < 8 * k; i++) T[i] = 0.0;
+    for (int a = 0; a < 8; a++)
+      for (int q = s->exp_start[e[a]]; q < s->exp_start[e[a] + 1]; q++)
+        for (int r = 0; r < k; r++)
+          if (s->eff_node[start + r] == s->exp_node[q]) T[a * k + r] += s->exp_w[q];
+  }
+  s->eff_start[m->n_leaves] = used;
+  return NH_OK;
+}
+
+int nh_system_create(const nh_tissue *tissue, const unsigned char *fixed, const nh_hanging *hanging,
+                     nh_system **out) {
   *out = NULL;
   const nh_mesh *m = tissue->mesh;
   nh_system *s = nh_calloc(1, sizeof *s);
@@ -230,7 +345,8 @@ int nh_system_create(const nh_tissue *tissue, const unsigned char *fixed, nh_sys
     for (int a = 0; a < 8; a++) used[m->cells[8 * m->leaves[l] + a]] = 1;
   for (int i = 0; i < m->n_nodes; i++)
     for (int k = 0; k < 3; k++) {
-      if (used[i] && !(fixed && fixed[i])) {
+      int hang = hanging && hanging->n_hanging && hanging->index[i] >= 0;
+      if (used[i] && !(fixed && fixed[i]) && !hang) {
         s->dof_of[s->n_free] = 3 * i + k;
         s->free_of[3 * i + k] = s->n_free++;
       } else {
@@ -242,12 +358,40 @@ int nh_system_create(const nh_tissue *tissue, const unsigned char *fixed, nh_sys
     rc = NH_ERROR(NH_ERR_INPUT, "every degree of freedom is fixed: nothing to solve");
     goto fail;
   }
-  if ((rc = nh_system_pattern(s)) || (rc = nh_colour_leaves(s))) goto fail;
+  if ((rc = nh_system_prolongation(s, fixed, hanging)) || (rc = nh_system_pattern(s)) ||
+      (rc = nh_colour_leaves(s)))
+    goto fail;
   *out = s;
   return NH_OK;
 fail:
   nh_system_destroy(&s);
   return rc;
+}
+
+/* Ã = Tᵀ Aₑ T of a leaf with a hanging corner, scattered through its map. */
+static void nh_scatter_expanded(const nh_system *s, int l, const double *Ae, double *Ax) {
+  int k = s->eff_start[l + 1] - s->eff_start[l], nd = 3 * k;
+  const double *T = s->eff_T + 8 * s->eff_start[l];
+  const int *map = s->emap + s->emap_start[l];
+  double *B = malloc(sizeof(double) * 24 * (size_t)nd); /* B = Aₑ T */
+  if (!B) return; /* cannot happen in practice; the factorisation then fails loudly */
+  for (int r = 0; r < 24; r++)
+    for (int q = 0; q < k; q++)
+      for (int j = 0; j < 3; j++) {
+        double sum = 0.0;
+        for (int b = 0; b < 8; b++) sum += Ae[24 * r + 3 * b + j] * T[b * k + q];
+        B[nd * r + 3 * q + j] = sum;
+      }
+  for (int p = 0; p < k; p++)
+    for (int i = 0; i < 3; i++)
+      for (int c = 0; c < nd; c++) {
+        int pos = map[nd * (3 * p + i) + c];
+        if (pos < 0) continue;
+        double sum = 0.0;
+        for (int a = 0; a < 8; a++) sum += T[a * k + p] * B[nd * (3 * a + i) + c];
+        Ax[pos] += sum;
+      }
+  free(B);
 }
 
 void nh_system_assemble(nh_system *s, const double *u, const double *v, double cM, double cK,
@@ -259,15 +403,16 @@ void nh_system_assemble(nh_system *s, const double *u, const double *v, double c
   memset(f_int, 0, sizeof(double) * 3 * (size_t)m->n_nodes);
   if (Kv) memset(Kv, 0, sizeof(double) * 3 * (size_t)m->n_nodes);
   int nt = threads > 0 ? threads : omp_get_max_threads();
-  for (int colour = 0; colour < s->n_colours; colour++) {
+  for (int colour = 0; colour <= s->n_colours; colour++) {
     int lo = s->colour_start[colour], hi = s->colour_start[colour + 1];
     /* A parallel region costs tens of µs (far more when cores are shared):
-     * only colours of at least 128 cells (≈ 1 ms of element work) are split. */
-#pragma omp parallel for num_threads(nt) schedule(static) if (nt > 1 && hi - lo >= 128)
+     * only colours of at least 128 cells (≈ 1 ms of element work) are split;
+     * the last group (leaves with hanging corners) is serial. */
+    int parallel = nt > 1 && hi - lo >= 128 && colour < s->n_colours;
+#pragma omp parallel for num_threads(nt) schedule(static) if (parallel)
     for (int k = lo; k < hi; k++) {
       int l = s->colour_leaf[k], c = m->leaves[l];
       const int *e = m->cells + 8 * c;
-      const int *map = s->scatter + 576 * (size_t)l;
       double f[24], K[576];
       nh_tissue_element(t, c, u, f, K);
       for (int a = 0; a < 8; a++)
@@ -281,12 +426,19 @@ void nh_system_assemble(nh_system *s, const double *u, const double *v, double c
           Kv[3 * e[r / 3] + r % 3] += sum;
         }
       }
-      for (int r = 0; r < 576; r++)
-        if (map[r] >= 0) Ax[map[r]] += cK * K[r];
+      /* Aₑ = cK Kₑ + cM Mₑ, Mₑ the lumped mass ρ φ Vₑ / 8 per corner. */
+      double me = t->material.density * m->fill[c] * t->volume[t->cell_shape[c]] / 8.0;
+      for (int r = 0; r < 576; r++) K[r] *= cK;
+      for (int r = 0; r < 24; r++) K[25 * r] += cM * me;
+      if (s->eff_start[l + 1] > s->eff_start[l]) {
+        nh_scatter_expanded(s, l, K, Ax);
+      } else {
+        const int *map = s->scatter + 576 * (size_t)l;
+        for (int r = 0; r < 576; r++)
+          if (map[r] >= 0) Ax[map[r]] += K[r];
+      }
     }
   }
-  if (cM != 0.0)
-    for (int j = 0; j < s->n_free; j++) Ax[s->diag[j]] += cM * t->mass[s->dof_of[j] / 3];
 }
 
 void nh_system_apply(const nh_system *s, const double *x, double *y) {
@@ -302,9 +454,21 @@ void nh_system_apply(const nh_system *s, const double *x, double *y) {
 }
 
 void nh_system_gather(const nh_system *s, const double *full, double *part) {
-  for (int j = 0; j < s->n_free; j++) part[j] = full[s->dof_of[j]];
+  memset(part, 0, sizeof(double) * (size_t)s->n_free);
+  for (int v = 0; v < s->n_nodes; v++)
+    for (int q = s->exp_start[v]; q < s->exp_start[v + 1]; q++) {
+      const int *f = s->free_of + 3 * s->exp_node[q];
+      for (int i = 0; i < 3; i++) part[f[i]] += s->exp_w[q] * full[3 * v + i];
+    }
 }
 
 void nh_system_scatter(const nh_system *s, const double *part, double *full) {
-  for (int j = 0; j < s->n_free; j++) full[s->dof_of[j]] = part[j];
+  for (int v = 0; v < s->n_nodes; v++) {
+    double x[3] = {0, 0, 0};
+    for (int q = s->exp_start[v]; q < s->exp_start[v + 1]; q++) {
+      const int *f = s->free_of + 3 * s->exp_node[q];
+      for (int i = 0; i < 3; i++) x[i] += s->exp_w[q] * part[f[i]];
+    }
+    for (int i = 0; i < 3; i++) full[3 * v + i] = x[i];
+  }
 }

@@ -9,16 +9,30 @@ struct nh_system {
   const nh_tissue *tissue; /* borrowed; tissue->mesh is the mesh */
   int n_nodes;
   int n_free;
-  int *free_of; /* 3 per node: free index, -1 if fixed */
+  int *free_of; /* 3 per node: free index, -1 if fixed or hanging */
   int *dof_of;  /* n_free: the nodal DOF of each unknown */
+
+  /* u = P u_free, node by node: node v's value is Σ w u(exp_node) over
+   * exp_start[v] .. exp_start[v+1] (itself for a free node, its non-fixed
+   * masters for a hanging node, nothing for a fixed one). */
+  int *exp_start, *exp_node;
+  double *exp_w;
+
+  /* Leaves with a hanging corner assemble Tᵀ Aₑ T over their effective
+   * nodes eff_node[eff_start[l] .. eff_start[l+1]) (an empty range for a
+   * plain leaf), with T (8 per effective node, T[a k + p]) and a map of
+   * (3 k)² positions from emap_start[l]. */
+  int *eff_start, *eff_node;
+  double *eff_T;
+  int *emap_start, *emap;
 
   /* A, upper triangle, CSC over free DOFs; values live in A->x. */
   cholmod_common cm;
   cholmod_sparse *A;
   cholmod_factor *L;
-  int *diag; /* n_free: position of the diagonal entry of each column */
 
-  int *scatter; /* 576 per leaf (leaf order): position in A->x of K_e[r][c], -1 if not stored */
+  int *scatter; /* 576 per plain leaf (leaf order): position in A->x of K_e[r][c], -1 if not stored
+                 */
   int n_colours;
   int *colour_start; /* n_colours + 1 */
   int *colour_leaf;  /* leaf indices grouped by colour */

@@ -1,0 +1,268 @@
+/* hanging.c — hanging nodes of a nonconforming hexahedral mesh (docs/theory.md,
+ * "Hanging nodes").
+ *
+ * A node is hanging when it lies on the boundary (a face or an edge) of a
+ * leaf without being one of that leaf's corners: the leaf does not see it, so
+ * without a constraint the displacement would jump there. Its value is tied
+ * to the trilinear interpolation of the leaf at the node's natural
+ * coordinates; when several leaves contain it (e.g. on an edge shared by two
+ * coarse cells) the coarsest is used (ties: the lowest cell index), which is
+ * the one whose interpolation all finer ones agree with.
+ *
+ * Detection: node rest positions are sorted into buckets the size of the
+ * smallest leaf; each leaf visits the buckets its bounding box covers and
+ * tests the nodes there (natural coordinates exactly for box-shaped leaves,
+ * by Newton inversion otherwise). A node strictly inside a leaf means a
+ * broken mesh and is reported.
+ *
+ * Chains: a master can itself be hanging (a refined cell next to a cell
+ * refined twice). Each hanging node's masters are expanded recursively until
+ * only non-hanging nodes remain, merging repeated masters; a cycle is
+ * detected by marking nodes in progress. */
+#include "mesh/mesh.h"
+
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+void nh_hanging_destroy(nh_hanging **hanging) {
+  if (!hanging || !*hanging) return;
+  nh_hanging *h = *hanging;
+  free(h->node);
+  free(h->start);
+  free(h->master);
+  free(h->weight);
+  free(h->index);
+  free(h);
+  *hanging = NULL;
+}
+
+void nh_hanging_interpolate(const nh_hanging *h, double *field, int comps) {
+  if (!h) return;
+  for (int k = 0; k < h->n_hanging; k++) {
+    double *f = field + (size_t)comps * h->node[k];
+    for (int i = 0; i < comps; i++) f[i] = 0.0;
+    for (int p = h->start[k]; p < h->start[k + 1]; p++)
+      for (int i = 0; i < comps; i++)
+        f[i] += h->weight[p] * field[(size_t)comps * h->master[p] + i];
+  }
+}
+
+typedef struct {
+  int64_t key;
+  int node;
+} nh_bucket_entry;
+
+static int nh_entry_cmp(const void *a, const void *b) {
+  const nh_bucket_entry *x = a, *y = b;
+  if (x->key != y->key) return x->key < y->key ? -1 : 1;
+  return (x->node > y->node) - (x->node < y->node);
+}
+
+/* Box leaves: natural coordinates by scaling; others by Newton. */
+static int nh_natural(const double Xe[24], const double x[3], double xi[3]) {
+  int box = 1;
+  for (int a = 0; a < 8 && box; a++)
+    for (int k = 0; k < 3 && box; k++) {
+      double want = nh_hex_corner[a][k] < 0 ? Xe[k] : Xe[18 + k];
+      box = fabs(Xe[3 * a + k] - want) <= 1e-12 * fabs(Xe[18 + k] - Xe[k]);
+    }
+  if (box) {
+    for (int k = 0; k < 3; k++) xi[k] = -1.0 + 2.0 * (x[k] - Xe[k]) / (Xe[18 + k] - Xe[k]);
+    return NH_OK;
+  }
+  return nh_hex_invert(Xe, x, xi);
+}
+
+/* Raw (unresolved) masters of each node: the corners of its coarsest leaf. */
+typedef struct {
+  int *cell;  /* per node: the leaf it hangs on, or -1 */
+  double *xi; /* 3 per node */
+} nh_raw;
+
+static int nh_find_raw(const nh_mesh *m, const unsigned char *skip, nh_raw *raw) {
+  int n = m->n_nodes, rc = NH_OK;
+  double bucket = INFINITY;
+  for (int l = 0; l < m->n_leaves; l++) bucket = fmin(bucket, nh_mesh_cell_size(m, m->leaves[l]));
+  const double tol = 1e-9 * bucket; /* positions: far below any cell size */
+  double lo[3] = {INFINITY, INFINITY, INFINITY};
+  for (int i = 0; i < n; i++)
+    for (int k = 0; k < 3; k++) lo[k] = fmin(lo[k], m->X[3 * i + k]);
+  int64_t dim[3] = {0, 0, 0};
+  for (int i = 0; i < n; i++)
+    for (int k = 0; k < 3; k++) {
+      int64_t b = (int64_t)floor((m->X[3 * i + k] - lo[k]) / bucket) + 1;
+      if (b + 1 > dim[k]) dim[k] = b + 1;
+    }
+  nh_bucket_entry *e = malloc(sizeof *e * (size_t)(n ? n : 1));
+  if (!e) return NH_ERROR(NH_ERR_MEMORY, "out of memory detecting hanging nodes");
+  for (int i = 0; i < n; i++) {
+    int64_t b[3];
+    for (int k = 0; k < 3; k++) b[k] = (int64_t)floor((m->X[3 * i + k] - lo[k]) / bucket);
+    e[i].key = b[0] + dim[0] * (b[1] + dim[1] * b[2]);
+    e[i].node = i;
+  }
+  qsort(e, (size_t)n, sizeof *e, nh_entry_cmp);
+  for (int i = 0; i < n; i++) raw->cell[i] = -1;
+  for (int l = 0; l < m->n_leaves && !rc; l++) {
+    int c = m->leaves[l];
+    double Xe[24], bmin[3] = {INFINITY, INFINITY, INFINITY},
+                   bmax[3] = {-INFINITY, -INFINITY, -INFINITY};
+    nh_mesh_cell_coords(m, m->X, c, Xe);
+    for (int a = 0; a < 8; a++)
+      for (int k = 0; k < 3; k++)
+        bmin[k] = fmin(bmin[k], Xe[3 * a + k]), bmax[k] = fmax(bmax[k], Xe[3 * a + k]);
+    int64_t b0[3], b1[3];
+    for (int k = 0; k < 3; k++) {
+      b0[k] = (int64_t)floor((bmin[k] - tol - lo[k]) / bucket);
+      b1[k] = (int64_t)floor((bmax[k] + tol - lo[k]) / bucket);
+      if (b0[k] < 0) b0[k] = 0;
+    }
+    const int *corner = m->cells + 8 * c;
+    for (int64_t bz = b0[2]; bz <= b1[2]; bz++)
+      for (int64_t by = b0[1]; by <= b1[1]; by++)
+        for (int64_t bx = b0[0]; bx <= b1[0]; bx++) {
+          int64_t key = bx + dim[0] * (by + dim[1] * bz);
+          int lo_i = 0, hi_i = n; /* first entry with this key */
+          while (lo_i < hi_i) {
+            int mid = (lo_i + hi_i) / 2;
+            if (e[mid].key < key)
+              lo_i = mid + 1;
+            else
+              hi_i = mid;
+          }
+          for (int p = lo_i; p < n && e[p].key == key; p++) {
+            int v = e[p].node;
+            const double *x = m->X + 3 * v;
+            if (x[0] < bmin[0] - tol || x[0] > bmax[0] + tol || x[1] < bmin[1] - tol ||
+                x[1] > bmax[1] + tol || x[2] < bmin[2] - tol || x[2] > bmax[2] + tol)
+              continue;
+            int is_corner = 0;
+            for (int a = 0; a < 8; a++) is_corner |= corner[a] == v;
+            if (is_corner) continue;
+            double xi[3];
+            if (nh_natural(Xe, x, xi)) continue;
+            double amax = fmax(fabs(xi[0]), fmax(fabs(xi[1]), fabs(xi[2])));
+            if (amax > 1 + 1e-8) continue;
+            if (amax < 1 - 1e-8) {
+              rc = NH_ERROR(NH_ERR_INTERNAL, "node %d lies inside leaf cell %d: broken mesh", v, c);
+              break;
+            }
+            if (skip && skip[v]) continue;
+            int old = raw->cell[v];
+            if (old < 0 || m->level[c] < m->level[old] ||
+                (m->level[c] == m->level[old] && c < old)) {
+              raw->cell[v] = c;
+              memcpy(raw->xi + 3 * v, xi, sizeof xi);
+            }
+          }
+        }
+  }
+  free(e);
+  return rc;
+}
+
+/* Resolved master lists, built recursively. */
+typedef struct {
+  const nh_mesh *m;
+  nh_raw *raw;
+  int *state; /* 0 new, 1 in progress, 2 done */
+  int **list;
+  double **wts;
+  int *len;
+} nh_resolver;
+
+static int nh_add_master(nh_resolver *r, int v, int master, double w, int *cap) {
+  for (int p = 0; p < r->len[v]; p++)
+    if (r->list[v][p] == master) {
+      r->wts[v][p] += w;
+      return NH_OK;
+    }
+  if (r->len[v] == *cap) {
+    int c2 = *cap;
+    NH_TRY(nh_grow((void **)&r->list[v], cap, *cap + 1, sizeof(int)));
+    NH_TRY(nh_grow((void **)&r->wts[v], &c2, c2 + 1, sizeof(double)));
+  }
+  r->list[v][r->len[v]] = master;
+  r->wts[v][r->len[v]++] = w;
+  return NH_OK;
+}
+
+static int nh_resolve(nh_resolver *r, int v) {
+  if (r->state[v] == 2) return NH_OK;
+  if (r->state[v] == 1)
+    return NH_ERROR(NH_ERR_INTERNAL, "hanging node %d depends on itself (a cycle of masters)", v);
+  r->state[v] = 1;
+  const int *corner = r->m->cells + 8 * r->raw->cell[v];
+  double N[8];
+  nh_hex_shape(r->raw->xi + 3 * v, N);
+  int cap = 0;
+  for (int a = 0; a < 8; a++) {
+    if (fabs(N[a]) < 1e-14) continue;
+    int u = corner[a];
+    if (r->raw->cell[u] < 0) {
+      NH_TRY(nh_add_master(r, v, u, N[a], &cap));
+    } else {
+      NH_TRY(nh_resolve(r, u));
+      for (int p = 0; p < r->len[u]; p++)
+        NH_TRY(nh_add_master(r, v, r->list[u][p], N[a] * r->wts[u][p], &cap));
+    }
+  }
+  r->state[v] = 2;
+  return NH_OK;
+}
+
+int nh_hanging_detect(const nh_mesh *m, const unsigned char *skip, nh_hanging **out) {
+  *out = NULL;
+  int n = m->n_nodes, rc = NH_OK;
+  nh_raw raw = {malloc(sizeof(int) * (size_t)(n ? n : 1)),
+                malloc(sizeof(double) * 3 * (size_t)(n ? n : 1))};
+  nh_resolver r = {.m = m, .raw = &raw};
+  r.state = calloc((size_t)(n ? n : 1), sizeof(int));
+  r.list = calloc((size_t)(n ? n : 1), sizeof(int *));
+  r.wts = calloc((size_t)(n ? n : 1), sizeof(double *));
+  r.len = calloc((size_t)(n ? n : 1), sizeof(int));
+  nh_hanging *h = calloc(1, sizeof *h);
+  if (!raw.cell || !raw.xi || !r.state || !r.list || !r.wts || !r.len || !h) {
+    rc = NH_ERROR(NH_ERR_MEMORY, "out of memory detecting hanging nodes");
+    goto done;
+  }
+  if ((rc = nh_find_raw(m, skip, &raw))) goto done;
+  int count = 0, total = 0;
+  for (int v = 0; v < n && !rc; v++)
+    if (raw.cell[v] >= 0) {
+      rc = nh_resolve(&r, v);
+      count++;
+      total += r.len[v];
+    }
+  if (rc) goto done;
+  h->n_hanging = count;
+  h->node = malloc(sizeof(int) * (size_t)(count ? count : 1));
+  h->start = malloc(sizeof(int) * (size_t)(count + 1));
+  h->master = malloc(sizeof(int) * (size_t)(total ? total : 1));
+  h->weight = malloc(sizeof(double) * (size_t)(total ? total : 1));
+  h->index = malloc(sizeof(int) * (size_t)(n ? n : 1));
+  if (!h->node || !h->start || !h->master || !h->weight || !h->index) {
+    rc = NH_ERROR(NH_ERR_MEMORY, "out of memory detecting hanging nodes");
+    goto done;
+  }
+  int k = 0, p = 0;
+  for (int v = 0; v < n; v++) {
+    h->index[v] = -1;
+    if (raw.cell[v] < 0) continue;
+    h->index[v] = k;
+    h->node[k] = v;
+    h->start[k] = p;
+    for (int q = 0; q < r.len[v]; q++, p++) h->master[p] = r.list[v][q], h->weight[p] = r.wts[v][q];
+    k++;
+  }
+  h->start[k] = p;
+done:
+  if (r.list)
+    for (int v = 0; v < n; v++) free(r.list[v]), free(r.wts[v]);
+  free(r.list), free(r.wts), free(r.len), free(r.state), free(raw.cell), free(raw.xi);
+  if (rc) nh_hanging_destroy(&h);
+  *out = h;
+  return rc;
+}

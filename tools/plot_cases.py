@@ -1,0 +1,179 @@
+#!/usr/bin/python3
+"""Plots of the cases in cases/ for docs/cases.md: runs the simulator, reads
+its CSV outputs and writes PNGs to docs/img/.
+
+    tools/plot_cases.py [--binary build/needlehex] [--out docs/img]
+
+- cantilever_convergence.png: tip deflection error against Timoshenko beam
+  theory versus cell size, grids 10n x n x n for n = 1, 2, 4, 8 (ν = 0,
+  static tolerance 1e-11, as tests/test_cantilever.c), with a slope-2 line.
+- phantom_probes.png: ux(t) of probes 1-7 of cases/phantom-tissue.yaml.
+- phantom_profile.png: ux at t = 0.5 s along the probe line on the grids
+  8x4x4, 16x8x8 and 32x16x16.
+
+It also prints the numbers behind the plots as Markdown tables. Needs numpy
+and matplotlib (Debian's python3-numpy, python3-matplotlib).
+"""
+import argparse
+import csv
+import math
+import os
+import subprocess
+import sys
+import tempfile
+
+import numpy as np
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def run(binary, case, out, sets=()):
+    cmd = [binary, "run", os.path.join(ROOT, "cases", case), "--quiet", "--out", out]
+    for s in sets:
+        cmd += ["--set", s]
+    subprocess.run(cmd, check=True)
+
+
+def read_probes(out):
+    """{name: (t[], ux[], uy[], uz[])} from probes.csv."""
+    series = {}
+    with open(os.path.join(out, "probes.csv")) as f:
+        for r in csv.DictReader(f):
+            series.setdefault(r["name"], []).append(
+                (float(r["time"]), float(r["ux"]), float(r["uy"]), float(r["uz"])))
+    return {k: tuple(np.array(c) for c in zip(*v)) for k, v in series.items()}
+
+
+def timoshenko_tip():
+    """Tip deflection of cases/cantilever.yaml at ν = 0: the formula of
+    tests/test_cantilever.c (load P spread uniformly over x in [L-a, L])."""
+    E, nu, L, b, P, a = 1.0e6, 0.0, 0.1, 0.01, 1.0e-3, 0.001
+    I, A, G = b ** 4 / 12, b * b, E / (2 * (1 + nu))
+    kappa = 10 * (1 + nu) / (12 + 11 * nu)
+    s0, s1 = L - a, L
+    bend = (L * (s1 ** 3 - s0 ** 3) - (s1 ** 4 - s0 ** 4) / 4) / (6 * E * I)
+    shear = 0.5 * (s1 * s1 - s0 * s0) / (kappa * G * A)
+    return P / a * (bend + shear), P / a * bend
+
+
+def cantilever(binary, tmp, img):
+    beam, eb = timoshenko_tip()
+    ns = [1, 2, 4, 8]
+    d = []
+    for n in ns:
+        out = os.path.join(tmp, "cantilever_%d" % n)
+        run(binary, "cantilever.yaml", out,
+            ["tissue.grid=[%d,%d,%d]" % (10 * n, n, n), "tissue.material.poisson=0",
+             "solver.tolerance=1e-11"])
+        t, ux, uy, uz = read_probes(out)["tip"]
+        d.append(-uz[-1])
+    d = np.array(d)
+    h = 0.01 / np.array(ns)  # cell edge: 0.1 m / 10n = 0.01 m / n
+    err = np.abs(d - beam) / beam
+    p = math.log2((d[2] - d[1]) / (d[3] - d[2]))
+    extrap = d[3] + (d[3] - d[2]) / (2 ** p - 1)
+
+    print("Timoshenko tip deflection %.6e m (Euler-Bernoulli %.6e m)" % (beam, eb))
+    print("\n| grid | cell size (mm) | tip deflection (m) | error vs Timoshenko | order from errors |"
+          " order from differences |")
+    print("|---|---|---|---|---|---|")
+    for i, n in enumerate(ns):
+        oe = "%.2f" % math.log2(err[i - 1] / err[i]) if i > 0 else "–"
+        od = "%.2f" % math.log2((d[i - 1] - d[i - 2]) / (d[i] - d[i - 1])) if i > 1 else "–"
+        print("| %d×%d×%d | %.3f | %.6e | %+.3f %% | %s | %s |" % (
+            10 * n, n, n, 1e3 * h[i], d[i], 100 * (d[i] - beam) / beam, oe, od))
+    print("\nRichardson (last three grids): order %.3f, extrapolated %.6e m (%+.3f %% vs Timoshenko)"
+          % (p, extrap, 100 * (extrap - beam) / beam))
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.8))
+    ax.loglog(1e3 * h, err, "o-", label="needlehex, tip deflection error")
+    ref = err[-1] * (h / h[-1]) ** 2
+    ax.loglog(1e3 * h, ref, "k--", label="slope 2 reference")
+    for i, n in enumerate(ns):
+        ax.annotate("%d×%d×%d" % (10 * n, n, n), (1e3 * h[i], err[i]), textcoords="offset points",
+                    xytext=(6, -12), fontsize=8)
+    ax.set_xlabel("cell size h (mm)")
+    ax.set_ylabel("|δ − δ_Timoshenko| / δ_Timoshenko  (–)")
+    ax.set_title("cantilever: tip deflection vs Timoshenko beam theory (ν = 0)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(os.path.join(img, "cantilever_convergence.png"), dpi=120)
+    plt.close(fig)
+
+
+def phantom(binary, tmp, img):
+    out = os.path.join(tmp, "phantom")
+    run(binary, "phantom-tissue.yaml", out)
+    pr = read_probes(out)
+    names = [str(i) for i in range(1, 8)]
+    fig, ax = plt.subplots(figsize=(6.4, 4.8))
+    cmap = plt.get_cmap("viridis")
+    for i, nm in enumerate(names):
+        t, ux, uy, uz = pr[nm]
+        ax.plot(t, 1e6 * ux, "-", color=cmap(i / 6), label="probe %s (x = %d mm)" % (nm, 5 * (i + 1)))
+    ax.axvline(0.1, color="grey", ls=":", lw=1)
+    ax.text(0.102, 0.5, "end of load ramp", color="grey", fontsize=8, rotation=90,
+            transform=ax.get_xaxis_transform())
+    ax.set_xlabel("time t (s)")
+    ax.set_ylabel("displacement uₓ (µm)")
+    ax.set_title("phantom-tissue (8×4×4): probe displacement along the axis")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(os.path.join(img, "phantom_probes.png"), dpi=120)
+    plt.close(fig)
+
+    print("\n| probe | x (mm) | ux at t = 0.1 s (µm) | ux at t = 0.5 s (µm) |")
+    print("|---|---|---|---|")
+    for i, nm in enumerate(names):
+        t, ux, uy, uz = pr[nm]
+        k = int(np.argmin(np.abs(t - 0.1)))
+        print("| %s | %d | %.4f | %.4f |" % (nm, 5 * (i + 1), 1e6 * ux[k], 1e6 * ux[-1]))
+
+    # Final profile along the probe line on three grids.
+    grids = [(8, 4, 4), (16, 8, 8), (32, 16, 16)]
+    fig, ax = plt.subplots(figsize=(6.4, 4.8))
+    rows = []
+    for g, mk in zip(grids, "os^"):
+        o = os.path.join(tmp, "phantom_%d" % g[0])
+        run(binary, "phantom-tissue.yaml", o, ["tissue.grid=[%d,%d,%d]" % g, "output.every=0"])
+        p = read_probes(o)
+        x = np.array([5 * (i + 1) for i in range(7)])
+        ux = np.array([p[nm][1][-1] for nm in names])
+        rows.append(ux)
+        ax.plot(x, 1e6 * ux, mk + "-", label="%d×%d×%d" % g)
+    ax.set_xlabel("probe position x (mm), on the axis y = z = 10 mm")
+    ax.set_ylabel("displacement uₓ at t = 0.5 s (µm)")
+    ax.set_title("phantom-tissue: axial displacement profile by grid")
+    ax.grid(True, alpha=0.3)
+    ax.legend(title="grid")
+    fig.tight_layout()
+    fig.savefig(os.path.join(img, "phantom_profile.png"), dpi=120)
+    plt.close(fig)
+
+    print("\n| probe | x (mm) | " + " | ".join("ux %d×%d×%d (µm)" % g for g in grids) + " |")
+    print("|---|---|" + "---|" * len(grids))
+    for i, nm in enumerate(names):
+        print("| %s | %d | " % (nm, 5 * (i + 1)) + " | ".join("%.4f" % (1e6 * r[i]) for r in rows)
+              + " |")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--binary", default=os.path.join(ROOT, "build", "needlehex"))
+    ap.add_argument("--out", default=os.path.join(ROOT, "docs", "img"), help="folder for the PNGs")
+    a = ap.parse_args()
+    os.makedirs(a.out, exist_ok=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        cantilever(a.binary, tmp, a.out)
+        phantom(a.binary, tmp, a.out)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
