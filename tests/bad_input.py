@@ -48,10 +48,26 @@ CASES = [
     ("set_base.yaml", ["tissue.grid=[16,x,8]"], "--set:1", "tissue.grid.1"),
     # An override that makes the file's time.end conflict.
     ("set_base.yaml", ["time.end=1", "time.steps=3"], "--set:2", "time.steps"),
+    # adapt: a template name without a file, a theta outside (0, 1), theta
+    # with the dorfler strategy, a template path relative to the scene's
+    # folder that holds no such file; the same errors from overrides.
+    ("adapt_unknown_template.yaml", [], 11, "adapt.template"),
+    ("adapt_theta.yaml", [], 10, "adapt.marking.theta"),
+    ("adapt_theta_dorfler.yaml", [], 9, "adapt.marking.theta"),
+    ("adapt_template_path.yaml", [], 9, "adapt.template"),
+    ("set_base.yaml", ["adapt.template=hex9"], "--set:1", "adapt.template"),
+    ("set_base.yaml", ["adapt.every=2", "adapt.marking.theta=1.5"], "--set:2",
+     "adapt.marking.theta"),
+    ("set_base.yaml", ["adapt.hanging=both"], "--set:1", "adapt.hanging"),
 ]
 
 # Scenes that must pass `check`.
-VALID = [("set_base.yaml", []), ("set_base.yaml", ["tissue.damping.mass=0.5", "tissue.grid=[8,4,4]"])]
+# The adapt ones need the shipped templates (templates/hex2.tmpl, hex3.tmpl)
+# found through the compiled-in templates folder.
+VALID = [("set_base.yaml", []), ("set_base.yaml", ["tissue.damping.mass=0.5", "tissue.grid=[8,4,4]"]),
+         ("set_base.yaml", ["adapt.marking.theta=0.5"]),
+         ("set_base.yaml", ["adapt.template=hex3", "adapt.marking={strategy: dorfler, fraction: 0.4}",
+                            "adapt.hanging=lagrange"])]
 
 SANITIZER_WORDS = ("AddressSanitizer", "LeakSanitizer", "runtime error", "UndefinedBehaviorSanitizer")
 

@@ -1,6 +1,7 @@
 /* test_scene — the scene module: defaults, values, --set overrides, schedules,
  * steps from end/step, the scene-as-run text re-loading to the same struct,
- * and the exact form of input errors (FILE:LINE: KEY: ...).
+ * the adapt section (defaults, values, where adapt.template resolves), and
+ * the exact form of input errors (FILE:LINE: KEY: ...).
  *
  * The scenes are written by this program into a fresh temporary directory, so
  * the expected lines and values sit next to the text they come from. Silent
@@ -12,6 +13,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 static int failures = 0;
@@ -97,6 +99,16 @@ static void test_defaults(void) {
   EXPECT_STR(s->output.dir, "out/minimal");
   EXPECT(s->output.every == 1, "every %d", s->output.every);
   EXPECT(s->output.hdf5 == 0, "hdf5 %d", s->output.hdf5);
+  /* No adapt section: a fixed mesh; the settings keep their documented defaults. */
+  EXPECT(s->adapt.enabled == 0, "adapt.enabled: expected 0, got %d", s->adapt.enabled);
+  EXPECT(s->adapt.strategy == NH_MARK_MAX, "strategy %d", (int)s->adapt.strategy);
+  EXPECT_NUM(s->adapt.theta, 0.3);
+  EXPECT_NUM(s->adapt.fraction, 0.5);
+  EXPECT(s->adapt.max_level == 2 && s->adapt.max_dofs == 0 && s->adapt.every == 1,
+         "max_level %d max_dofs %d every %d", s->adapt.max_level, s->adapt.max_dofs,
+         s->adapt.every);
+  EXPECT_NUM(s->adapt.min_size, 0);
+  EXPECT(s->adapt.hanging == NH_HANGING_ELIMINATE, "hanging %d", (int)s->adapt.hanging);
   EXPECT(s->yaml && strstr(s->yaml, "minimal"), "yaml text: %s", s->yaml ? s->yaml : "(null)");
   char where[NH_WHERE_MAX];
   snprintf(where, sizeof where, "%s:2: tissue.fixed", path);
@@ -354,6 +366,165 @@ static void test_schedule(void) {
   }
 }
 
+/* ---- adapt ---- */
+
+static char templates_dir[300]; /* DIR/tmpl, where NH_TEMPLATES_DIR points */
+
+/* Create the file DIR/name (its contents do not matter to the scene module). */
+static void touch(const char *name) {
+  char path[600];
+  snprintf(path, sizeof path, "%s/%s", dir, name);
+  FILE *f = fopen(path, "w");
+  if (!f) {
+    fprintf(stderr, "cannot write %s\n", path);
+    exit(1);
+  }
+  fputs("# an empty file: the scene module only checks that it is readable\n", f);
+  fclose(f);
+}
+
+static void test_adapt(void) {
+  char text[2048], expected[1024];
+  /* An empty section enables adaptivity with every default. */
+  snprintf(text, sizeof text, "%sadapt:\n", minimal); /* line 6 */
+  const char *path = write_scene("adapt_empty.yaml", text);
+  nh_scene *s = load_ok(path, 0, NULL, __LINE__);
+  if (s) {
+    EXPECT(s->adapt.enabled == 1, "enabled: expected 1, got %d", s->adapt.enabled);
+    EXPECT(s->adapt.strategy == NH_MARK_MAX, "strategy %d", (int)s->adapt.strategy);
+    EXPECT_NUM(s->adapt.theta, 0.3);
+    EXPECT(s->adapt.max_level == 2 && s->adapt.every == 1 && s->adapt.max_dofs == 0,
+           "max_level %d every %d max_dofs %d", s->adapt.max_level, s->adapt.every,
+           s->adapt.max_dofs);
+    EXPECT(s->adapt.hanging == NH_HANGING_ELIMINATE, "hanging %d", (int)s->adapt.hanging);
+    snprintf(expected, sizeof expected, "%s/hex2.tmpl", templates_dir);
+    EXPECT_STR(s->adapt.template_path, expected);
+    snprintf(expected, sizeof expected, "%s:6: adapt", path);
+    EXPECT_STR(s->adapt.where, expected);
+    snprintf(expected, sizeof expected, "%s:6: adapt.template", path);
+    EXPECT_STR(s->adapt.where_template, expected);
+    nh_scene_destroy(&s);
+  }
+
+  /* Every key. */
+  snprintf(text, sizeof text,
+           "%s"
+           "adapt:\n"                                         /* 6 */
+           "  estimator: spr\n"                               /* 7 */
+           "  marking: {strategy: dorfler, fraction: 0.75}\n" /* 8 */
+           "  template: hex3\n"                               /* 9 */
+           "  max_level: 4\n"                                 /* 10 */
+           "  min_size: 1.5e-3\n"                             /* 11 */
+           "  max_dofs: 120000\n"                             /* 12 */
+           "  every: 5\n"                                     /* 13 */
+           "  hanging: lagrange\n",                           /* 14 */
+           minimal);
+  path = write_scene("adapt_full.yaml", text);
+  s = load_ok(path, 0, NULL, __LINE__);
+  if (s) {
+    EXPECT(s->adapt.enabled == 1, "enabled %d", s->adapt.enabled);
+    EXPECT(s->adapt.strategy == NH_MARK_DORFLER, "strategy %d", (int)s->adapt.strategy);
+    EXPECT_NUM(s->adapt.fraction, 0.75);
+    EXPECT_NUM(s->adapt.theta, 0.3); /* untouched */
+    snprintf(expected, sizeof expected, "%s/hex3.tmpl", templates_dir);
+    EXPECT_STR(s->adapt.template_path, expected);
+    snprintf(expected, sizeof expected, "%s:9: adapt.template", path);
+    EXPECT_STR(s->adapt.where_template, expected);
+    EXPECT(s->adapt.max_level == 4, "max_level %d", s->adapt.max_level);
+    EXPECT_NUM(s->adapt.min_size, 1.5e-3);
+    EXPECT(s->adapt.max_dofs == 120000, "max_dofs %d", s->adapt.max_dofs);
+    EXPECT(s->adapt.every == 5, "every %d", s->adapt.every);
+    EXPECT(s->adapt.hanging == NH_HANGING_LAGRANGE, "hanging %d", (int)s->adapt.hanging);
+    /* The scene as run reads back to the same settings. */
+    const char *again = write_scene("adapt_full_as_run.yaml", s->yaml);
+    nh_scene *t = load_ok(again, 0, NULL, __LINE__);
+    if (t) {
+      EXPECT(t->adapt.enabled && t->adapt.strategy == NH_MARK_DORFLER &&
+                 t->adapt.fraction == 0.75 && t->adapt.max_level == 4 &&
+                 t->adapt.min_size == 1.5e-3 && t->adapt.max_dofs == 120000 &&
+                 t->adapt.every == 5 && t->adapt.hanging == NH_HANGING_LAGRANGE &&
+                 !strcmp(t->adapt.template_path, s->adapt.template_path),
+             "re-loaded scene as run differs:\n%s", s->yaml);
+      nh_scene_destroy(&t);
+    }
+    nh_scene_destroy(&s);
+  }
+
+  /* The max strategy with its theta. */
+  snprintf(text, sizeof text, "%sadapt:\n  marking:\n    strategy: max\n    theta: 0.6\n", minimal);
+  path = write_scene("adapt_max.yaml", text);
+  s = load_ok(path, 0, NULL, __LINE__);
+  if (s) {
+    EXPECT(s->adapt.strategy == NH_MARK_MAX, "strategy %d", (int)s->adapt.strategy);
+    EXPECT_NUM(s->adapt.theta, 0.6);
+    nh_scene_destroy(&s);
+  }
+
+  /* Template paths: relative to the scene file's folder, or absolute. A name
+   * is looked up in NH_TEMPLATES_DIR, never next to the scene. */
+  static const struct {
+    const char *value, *file; /* the value given; the file it must resolve to, in DIR */
+  } paths[] = {
+      {"own.tmpl", "own.tmpl"},             /* ends in .tmpl: a path */
+      {"sub/own", "sub/own"},               /* has a '/': a path, no suffix added */
+      {"./sub/own.tmpl", "./sub/own.tmpl"}, /* kept as written, after the folder */
+  };
+  char sub[400];
+  snprintf(sub, sizeof sub, "%s/sub", dir);
+  if (mkdir(sub, 0700) != 0) fprintf(stderr, "cannot create %s\n", sub);
+  touch("own.tmpl");
+  touch("sub/own");
+  touch("sub/own.tmpl");
+  for (size_t i = 0; i < sizeof paths / sizeof paths[0]; ++i) {
+    snprintf(text, sizeof text, "%sadapt: {template: %s}\n", minimal, paths[i].value);
+    path = write_scene("adapt_path.yaml", text);
+    s = load_ok(path, 0, NULL, __LINE__);
+    if (!s) continue;
+    snprintf(expected, sizeof expected, "%s/%s", dir, paths[i].file);
+    EXPECT_STR(s->adapt.template_path, expected);
+    nh_scene_destroy(&s);
+  }
+  snprintf(text, sizeof text, "%sadapt: {template: %s/sub/own.tmpl}\n", minimal, dir);
+  path = write_scene("adapt_abs.yaml", text);
+  s = load_ok(path, 0, NULL, __LINE__);
+  if (s) {
+    snprintf(expected, sizeof expected, "%s/sub/own.tmpl", dir);
+    EXPECT_STR(s->adapt.template_path, expected);
+    nh_scene_destroy(&s);
+  }
+
+  /* Overrides create the section (so a fixed-mesh scene can adapt from the
+   * command line) and report their own place. */
+  path = write_scene("minimal.yaml", minimal);
+  const char *sets[] = {"adapt.marking.theta=0.45", "adapt.template=hex3", "adapt.max_level=1"};
+  s = load_ok(path, 3, sets, __LINE__);
+  if (s) {
+    EXPECT(s->adapt.enabled == 1, "enabled %d", s->adapt.enabled);
+    EXPECT_NUM(s->adapt.theta, 0.45);
+    EXPECT(s->adapt.max_level == 1, "max_level %d", s->adapt.max_level);
+    snprintf(expected, sizeof expected, "%s/hex3.tmpl", templates_dir);
+    EXPECT_STR(s->adapt.template_path, expected);
+    EXPECT_STR(s->adapt.where_template, "--set:2: adapt.template");
+    nh_scene_destroy(&s);
+  }
+
+#ifdef NH_TEMPLATES_DIR
+  /* Without the environment variable, names resolve in the compiled-in
+   * folder, the source tree's templates/ (which ships hex2.tmpl). */
+  char saved[sizeof templates_dir];
+  snprintf(saved, sizeof saved, "%s", templates_dir);
+  unsetenv("NH_TEMPLATES_DIR");
+  snprintf(text, sizeof text, "%sadapt: {template: hex2}\n", minimal);
+  path = write_scene("adapt_builtin.yaml", text);
+  s = load_ok(path, 0, NULL, __LINE__);
+  if (s) {
+    EXPECT_STR(s->adapt.template_path, NH_TEMPLATES_DIR "/hex2.tmpl");
+    nh_scene_destroy(&s);
+  }
+  setenv("NH_TEMPLATES_DIR", saved, 1);
+#endif
+}
+
 /* Bad scenes: the message, exactly or by its start ("FILE:LINE: KEY: "). */
 static void test_errors(void) {
   static const struct {
@@ -431,6 +602,83 @@ static void test_errors(void) {
        "--set:1: tools: not supported in this version of needlehex (--set tools.0.length=1)"},
       {"set_scalar.yaml", NULL, "name.first=x",
        "--set:1: name.first: name is a single value, not a mapping or a list"},
+      {"adapt_strategy.yaml",
+       "name: w\ntissue:\n  domain: {box: {min: [0,0,0], max: [1,1,1]}}\n"
+       "  material: {young: 1, poisson: 0.3}\nadapt:\n  marking:\n    strategy: largest\n",
+       NULL, ":7: adapt.marking.strategy: expected max or dorfler, got 'largest'"},
+      {"adapt_theta.yaml",
+       "name: w\ntissue:\n  domain: {box: {min: [0,0,0], max: [1,1,1]}}\n"
+       "  material: {young: 1, poisson: 0.3}\nadapt:\n  marking: {strategy: max, theta: 1}\n",
+       NULL, ":6: adapt.marking.theta: must lie in (0, 1), got 1"},
+      {"adapt_theta0.yaml",
+       "name: w\ntissue:\n  domain: {box: {min: [0,0,0], max: [1,1,1]}}\n"
+       "  material: {young: 1, poisson: 0.3}\nadapt:\n  marking:\n    theta: 0\n",
+       NULL, ":7: adapt.marking.theta: must lie in (0, 1), got 0"},
+      {"adapt_theta_dorfler.yaml",
+       "name: w\ntissue:\n  domain: {box: {min: [0,0,0], max: [1,1,1]}}\n"
+       "  material: {young: 1, poisson: 0.3}\nadapt:\n  marking:\n    strategy: dorfler\n"
+       "    theta: 0.5\n",
+       NULL, ":8: adapt.marking.theta: applies to strategy max only"},
+      {"adapt_fraction_max.yaml",
+       "name: w\ntissue:\n  domain: {box: {min: [0,0,0], max: [1,1,1]}}\n"
+       "  material: {young: 1, poisson: 0.3}\nadapt:\n  marking:\n    fraction: 0.5\n",
+       NULL,
+       ":7: adapt.marking.fraction: applies to strategy dorfler only (the strategy is max, "
+       "the default"},
+      {"adapt_fraction.yaml",
+       "name: w\ntissue:\n  domain: {box: {min: [0,0,0], max: [1,1,1]}}\n"
+       "  material: {young: 1, poisson: 0.3}\nadapt:\n  marking:\n    strategy: dorfler\n"
+       "    fraction: 1.25\n",
+       NULL, ":8: adapt.marking.fraction: must lie in (0, 1], got 1.25"},
+      {"adapt_template.yaml",
+       "name: w\ntissue:\n  domain: {box: {min: [0,0,0], max: [1,1,1]}}\n"
+       "  material: {young: 1, poisson: 0.3}\nadapt:\n  max_level: 3\n  template: hex9\n",
+       NULL, ":7: adapt.template: no template named 'hex9' (cannot read "},
+      {"adapt_template_path.yaml",
+       "name: w\ntissue:\n  domain: {box: {min: [0,0,0], max: [1,1,1]}}\n"
+       "  material: {young: 1, poisson: 0.3}\nadapt:\n  template: nowhere/hex2.tmpl\n",
+       NULL, ":6: adapt.template: cannot read the template file "},
+      {"adapt_template_dir.yaml",
+       "name: w\ntissue:\n  domain: {box: {min: [0,0,0], max: [1,1,1]}}\n"
+       "  material: {young: 1, poisson: 0.3}\nadapt:\n  template: sub/\n",
+       NULL, ":6: adapt.template: cannot read the template file "},
+      {"adapt_estimator.yaml",
+       "name: w\ntissue:\n  domain: {box: {min: [0,0,0], max: [1,1,1]}}\n"
+       "  material: {young: 1, poisson: 0.3}\nadapt: {estimator: zz}\n",
+       NULL, ":5: adapt.estimator: expected spr, got 'zz'"},
+      {"adapt_hanging.yaml",
+       "name: w\ntissue:\n  domain: {box: {min: [0,0,0], max: [1,1,1]}}\n"
+       "  material: {young: 1, poisson: 0.3}\nadapt:\n  hanging: both\n",
+       NULL, ":6: adapt.hanging: expected eliminate or lagrange, got 'both'"},
+      {"adapt_level.yaml",
+       "name: w\ntissue:\n  domain: {box: {min: [0,0,0], max: [1,1,1]}}\n"
+       "  material: {young: 1, poisson: 0.3}\nadapt:\n  max_level: -1\n",
+       NULL, ":6: adapt.max_level: must be at least 0, got -1"},
+      {"adapt_every.yaml",
+       "name: w\ntissue:\n  domain: {box: {min: [0,0,0], max: [1,1,1]}}\n"
+       "  material: {young: 1, poisson: 0.3}\nadapt:\n  every: 0\n",
+       NULL, ":6: adapt.every: must be at least 1, got 0"},
+      {"adapt_size.yaml",
+       "name: w\ntissue:\n  domain: {box: {min: [0,0,0], max: [1,1,1]}}\n"
+       "  material: {young: 1, poisson: 0.3}\nadapt:\n  min_size: -0.001\n",
+       NULL, ":6: adapt.min_size: must be at least 0, got -0.001"},
+      {"adapt_dofs.yaml",
+       "name: w\ntissue:\n  domain: {box: {min: [0,0,0], max: [1,1,1]}}\n"
+       "  material: {young: 1, poisson: 0.3}\nadapt:\n  max_dofs: 1.5\n",
+       NULL, ":6: adapt.max_dofs: expected an integer, got '1.5'"},
+      {"adapt_key.yaml",
+       "name: w\ntissue:\n  domain: {box: {min: [0,0,0], max: [1,1,1]}}\n"
+       "  material: {young: 1, poisson: 0.3}\nadapt:\n  max_levels: 3\n",
+       NULL, ":6: adapt.max_levels: unknown key (did you mean 'max_level'?)"},
+      {"adapt_list.yaml",
+       "name: w\ntissue:\n  domain: {box: {min: [0,0,0], max: [1,1,1]}}\n"
+       "  material: {young: 1, poisson: 0.3}\nadapt: [spr]\n",
+       NULL, ":5: adapt: expected a mapping, got a list"},
+      {"set_adapt_theta.yaml", NULL, "adapt.marking.theta=1.5",
+       "--set:1: adapt.marking.theta: must lie in (0, 1), got 1.5 (--set "
+       "adapt.marking.theta=1.5)"},
+      {"set_adapt_template.yaml", NULL, "adapt.template=hex9",
+       "--set:1: adapt.template: no template named 'hex9'"},
   };
   const char *with_fixed = "name: w\n"
                            "tissue:\n"
@@ -472,12 +720,24 @@ int main(void) {
     perror("mkdtemp");
     return 1;
   }
+  /* adapt.template names resolve in NH_TEMPLATES_DIR: a folder of this test,
+   * holding empty hex2.tmpl and hex3.tmpl (the scene module only checks that
+   * the file is readable). */
+  snprintf(templates_dir, sizeof templates_dir, "%s/tmpl", dir);
+  if (mkdir(templates_dir, 0700) != 0) {
+    perror(templates_dir);
+    return 1;
+  }
+  touch("tmpl/hex2.tmpl");
+  touch("tmpl/hex3.tmpl");
+  setenv("NH_TEMPLATES_DIR", templates_dir, 1);
   test_defaults();
   test_values_and_where();
   test_steps_from_end();
   test_overrides();
   test_schedule();
-  test_errors();
+  test_adapt();
+  test_errors(); /* after test_adapt, which creates DIR/sub for adapt_template_dir.yaml */
   if (failures == 0) {
     /* Clean up only on success, so a failure leaves its scenes to look at. */
     char cmd[512];

@@ -16,7 +16,7 @@
  * missing required key — of the mapping that lacks it. Every mapping's keys
  * are checked before its values, so a misspelt key is reported as unknown
  * (with a "did you mean" hint for a near miss) rather than as a missing one.
- * Keys of later features (adapt, tools, targets, tissue.domain.brain/mask)
+ * Keys of later features (tools, targets, tissue.domain.brain/mask)
  * are recognised and refused as not supported in this version; an override
  * that starts with one of the top-level ones is refused before it is
  * applied, so that "--set tools.0.x=1" says so instead of "index beyond".
@@ -27,21 +27,40 @@
  * young: "1e6" is refused. A YAML null (`key:` with nothing after it) is an
  * empty section for mappings and lists and an error for values.
  *
+ * Files. adapt.template is resolved here, so that a scene naming a template
+ * that does not exist fails `check` at the key's line: a name (hex2) is the
+ * file NAME.tmpl in $NH_TEMPLATES_DIR, or in the compiled-in templates folder
+ * when that variable is unset or empty; a value with a '/' or ending in
+ * .tmpl is a path, relative to the scene file's folder unless absolute (so a
+ * scene and its own template travel together). Only readability is checked
+ * here; the template's contents are proved by nh_template_load.
+ *
  * Nothing here is global: the context of one load (file name, overrides)
  * travels in an nh_ctx. */
 #include "scene/scene.h"
 
 #include "scene/yaml_tree.h"
 
+#include <errno.h>
 #include <limits.h>
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #define NH_KEY_MAX   256
 #define NH_STEPS_MAX 1000000000.0
+
+/* Where adapt.template names are looked up when the environment variable
+ * NH_TEMPLATES_DIR is unset: the build sets it to the source tree's
+ * templates/ folder; "templates" (relative to the working directory) is the
+ * fallback for a build that does not. */
+#ifndef NH_TEMPLATES_DIR
+#define NH_TEMPLATES_DIR "templates"
+#endif
 
 /* What one load knows, for messages. */
 typedef struct {
@@ -569,6 +588,139 @@ static int read_tissue(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   return NH_OK;
 }
 
+/* One of the words `choices` (NULL-terminated); *out = its index. */
+static int as_choice(const nh_ctx *c, const nh_yaml_node *n, const char *key,
+                     const char *const *choices, int *out) {
+  char d[96], expected[256] = "";
+  if (n->kind == NH_YAML_SCALAR && !nh_yaml_is_null(n))
+    for (int i = 0; choices[i]; ++i)
+      if (!strcmp(n->text, choices[i])) return *out = i, NH_OK;
+  for (int i = 0; choices[i]; ++i) {
+    size_t len = strlen(expected);
+    snprintf(expected + len, sizeof expected - len, "%s%s",
+             i == 0 ? "" : (choices[i + 1] ? ", " : " or "), choices[i]);
+  }
+  return fail(c, n, key, "expected %s, got %s", expected, describe(n, d, sizeof d));
+}
+
+/* adapt.template (text `value`, at node `at`, NULL for the default) to a
+ * readable file: a name is NH_TEMPLATES_DIR/NAME.tmpl; a value with a '/' or
+ * ending in .tmpl is a path, relative to the scene file's folder unless
+ * absolute. The error is reported at `at`, or at `section` for the default. */
+static int resolve_template(const nh_ctx *c, const nh_yaml_node *at, const nh_yaml_node *section,
+                            const char *value, char out[NH_PATH_MAX]) {
+  const nh_yaml_node *where = at ? at : section;
+  size_t len = strlen(value);
+  int is_path = strchr(value, '/') || (len >= 5 && !strcmp(value + len - 5, ".tmpl"));
+  int n;
+  if (len == 0) return fail(c, where, "adapt.template", "expected a template name or path");
+  if (!is_path) {
+    const char *env = getenv("NH_TEMPLATES_DIR");
+    const char *dir = env && env[0] ? env : NH_TEMPLATES_DIR;
+    n = snprintf(out, NH_PATH_MAX, "%s/%s.tmpl", dir, value);
+  } else if (value[0] == '/') {
+    n = snprintf(out, NH_PATH_MAX, "%s", value);
+  } else {
+    const char *slash = strrchr(c->file, '/');
+    if (slash)
+      n = snprintf(out, NH_PATH_MAX, "%.*s/%s", (int)(slash - c->file), c->file, value);
+    else
+      n = snprintf(out, NH_PATH_MAX, "%s", value);
+  }
+  if (n < 0 || n >= NH_PATH_MAX)
+    return fail(c, where, "adapt.template", "the template's path is longer than %d characters",
+                NH_PATH_MAX - 1);
+  struct stat st;
+  int err = access(out, R_OK) != 0 ? errno : 0;
+  if (!err && stat(out, &st) == 0 && S_ISDIR(st.st_mode)) err = EISDIR;
+  if (!err) return NH_OK;
+  if (is_path)
+    return fail(c, where, "adapt.template", "cannot read the template file %s: %s", out,
+                strerror(err));
+  return fail(c, where, "adapt.template",
+              "no template named '%s' (cannot read %s: %s; set NH_TEMPLATES_DIR to the "
+              "templates folder, or give a path)",
+              value, out, strerror(err));
+}
+
+/* adapt: present (even empty) means the mesh adapts. */
+static int read_adapt(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
+  static const char *const keys[] = {"estimator", "marking",  "max_level", "min_size", "max_dofs",
+                                     "every",     "template", "hanging",   NULL};
+  static const char *const marking_keys[] = {"strategy", "theta", "fraction", NULL};
+  static const char *const estimators[] = {"spr", NULL};
+  static const char *const strategies[] = {"max", "dorfler", NULL};
+  static const char *const hangings[] = {"eliminate", "lagrange", NULL};
+  const nh_yaml_node *n, *key, *m, *at, *marking;
+  char name[NH_PATH_MAX] = "hex2";
+  s->adapt.enabled = 0;
+  s->adapt.strategy = NH_MARK_MAX;
+  s->adapt.theta = 0.3;
+  s->adapt.fraction = 0.5;
+  s->adapt.max_level = 2;
+  s->adapt.min_size = 0;
+  s->adapt.max_dofs = 0;
+  s->adapt.every = 1;
+  s->adapt.hanging = NH_HANGING_ELIMINATE;
+  n = nh_yaml_get(root, "adapt", &key);
+  if (!n) return NH_OK;
+  s->adapt.enabled = 1;
+  make_where(c, key, "adapt", s->adapt.where);
+  NH_TRY(section(c, root, "", "adapt", 0, &m));
+  if (m) NH_TRY(check_keys(c, m, "adapt", keys, NULL));
+
+  NH_TRY(field(c, m, "adapt", "estimator", 0, &at));
+  int choice = 0;
+  if (at) NH_TRY(as_choice(c, at, "adapt.estimator", estimators, &choice));
+
+  NH_TRY(section(c, m, "adapt", "marking", 0, &marking));
+  if (marking) {
+    const nh_yaml_node *at_theta, *at_fraction;
+    NH_TRY(check_keys(c, marking, "adapt.marking", marking_keys, NULL));
+    NH_TRY(field(c, marking, "adapt.marking", "strategy", 0, &at));
+    if (at) {
+      NH_TRY(as_choice(c, at, "adapt.marking.strategy", strategies, &choice));
+      s->adapt.strategy = choice ? NH_MARK_DORFLER : NH_MARK_MAX;
+    }
+    NH_TRY(get_number(c, marking, "adapt.marking", "theta", 0, &s->adapt.theta, &at_theta));
+    NH_TRY(
+        get_number(c, marking, "adapt.marking", "fraction", 0, &s->adapt.fraction, &at_fraction));
+    if (at_theta && s->adapt.strategy != NH_MARK_MAX)
+      return fail(c, at_theta, "adapt.marking.theta",
+                  "applies to strategy max only (the strategy is dorfler: give fraction)");
+    if (at_fraction && s->adapt.strategy != NH_MARK_DORFLER)
+      return fail(c, at_fraction, "adapt.marking.fraction",
+                  "applies to strategy dorfler only (the strategy is max%s: give theta, or "
+                  "strategy: dorfler)",
+                  at ? "" : ", the default");
+    if (at_theta && !(s->adapt.theta > 0 && s->adapt.theta < 1))
+      return fail(c, at_theta, "adapt.marking.theta", "must lie in (0, 1), got %g", s->adapt.theta);
+    if (at_fraction && !(s->adapt.fraction > 0 && s->adapt.fraction <= 1))
+      return fail(c, at_fraction, "adapt.marking.fraction", "must lie in (0, 1], got %g",
+                  s->adapt.fraction);
+  }
+
+  NH_TRY(field(c, m, "adapt", "template", 0, &at));
+  if (at) NH_TRY(as_string(c, at, "adapt.template", name, sizeof name));
+  NH_TRY(resolve_template(c, at, key, name, s->adapt.template_path));
+  make_where(c, at ? at : key, "adapt.template", s->adapt.where_template);
+
+  NH_TRY(get_int(c, m, "adapt", "max_level", &s->adapt.max_level, &at));
+  NH_TRY(at_least(c, at, "adapt", "max_level", s->adapt.max_level, 0, 0));
+  NH_TRY(get_number(c, m, "adapt", "min_size", 0, &s->adapt.min_size, &at));
+  NH_TRY(at_least(c, at, "adapt", "min_size", s->adapt.min_size, 0, 0));
+  NH_TRY(get_int(c, m, "adapt", "max_dofs", &s->adapt.max_dofs, &at));
+  NH_TRY(at_least(c, at, "adapt", "max_dofs", s->adapt.max_dofs, 0, 0));
+  NH_TRY(get_int(c, m, "adapt", "every", &s->adapt.every, &at));
+  NH_TRY(at_least(c, at, "adapt", "every", s->adapt.every, 1, 0));
+  NH_TRY(field(c, m, "adapt", "hanging", 0, &at));
+  if (at) {
+    NH_TRY(as_choice(c, at, "adapt.hanging", hangings, &choice));
+    s->adapt.hanging = choice ? NH_HANGING_LAGRANGE : NH_HANGING_ELIMINATE;
+  }
+  return NH_OK;
+}
+
 static int read_solver(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   static const char *const keys[] = {"tolerance", "max_iterations", "threads", NULL};
   const nh_yaml_node *m, *at;
@@ -660,14 +812,15 @@ static int read_name(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
 
 /* The whole schema, in the order of SCENE.md. */
 static int read_scene(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
-  static const char *const keys[] = {"name",   "time",   "gravity", "tissue",
+  static const char *const keys[] = {"name",   "time",   "gravity", "tissue", "adapt",
                                      "solver", "probes", "output",  NULL};
-  static const char *const later[] = {"adapt", "tools", "targets", NULL};
+  static const char *const later[] = {"tools", "targets", NULL};
   NH_TRY(check_keys(c, root, "", keys, later));
   NH_TRY(read_name(c, root, s));
   NH_TRY(read_time(c, root, s));
   NH_TRY(get_vec3(c, root, "", "gravity", 0, s->gravity, NULL));
   NH_TRY(read_tissue(c, root, s));
+  NH_TRY(read_adapt(c, root, s));
   NH_TRY(read_solver(c, root, s));
   NH_TRY(read_probes(c, root, s));
   NH_TRY(read_output(c, root, s));
@@ -676,7 +829,7 @@ static int read_scene(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
 
 /* Refuse an override of a later feature before it touches the tree. */
 static int check_override(const nh_ctx *c, int k) {
-  static const char *const later[] = {"adapt", "tools", "targets", NULL};
+  static const char *const later[] = {"tools", "targets", NULL};
   const char *text = c->overrides[k - 1];
   char one_line[512];
   if (!text) return NH_ERROR(NH_ERR_INPUT, "--set:%d: missing KEY=VALUE", k);
@@ -828,6 +981,28 @@ void nh_scene_print(const nh_scene *s, void *stdio_file) {
     if (l->schedule.n > 0)
       fprintf(f, ", schedule of %d point%s", l->schedule.n, l->schedule.n == 1 ? "" : "s");
     fprintf(f, "\n");
+  }
+  if (!s->adapt.enabled) {
+    fprintf(f, "adapt     no (the mesh stays fixed)\n");
+  } else {
+    fprintf(f, "adapt     estimator spr, every %d step%s; marking ", s->adapt.every,
+            s->adapt.every == 1 ? "" : "s");
+    if (s->adapt.strategy == NH_MARK_DORFLER)
+      fprintf(f, "dorfler, fraction %g of the total squared error\n", s->adapt.fraction);
+    else
+      fprintf(f, "max, theta %g of the largest error\n", s->adapt.theta);
+    fprintf(f, "          template %s\n", s->adapt.template_path);
+    fprintf(f, "          max_level %d, min_size ", s->adapt.max_level);
+    if (s->adapt.min_size > 0)
+      fprintf(f, "%g m", s->adapt.min_size);
+    else
+      fprintf(f, "none");
+    if (s->adapt.max_dofs > 0)
+      fprintf(f, ", max_dofs %d", s->adapt.max_dofs);
+    else
+      fprintf(f, ", max_dofs none");
+    fprintf(f, ", hanging nodes %s\n",
+            s->adapt.hanging == NH_HANGING_LAGRANGE ? "lagrange" : "eliminate");
   }
   fprintf(f, "solver    tolerance %g, at most %d iterations, ", s->solver.tolerance,
           s->solver.max_iterations);

@@ -17,6 +17,7 @@ int nh_system_factor(nh_system *s) {
     if (!s->L || s->cm.status < CHOLMOD_OK)
       return NH_ERROR(NH_ERR_NUMERIC, "CHOLMOD symbolic analysis failed (status %d)", s->cm.status);
   }
+  s->W_valid = 0; /* the compliance belongs to the previous A */
   int ok = cholmod_factorize(s->A, s->L, &s->cm);
   if (s->cm.status == CHOLMOD_NOT_POSDEF)
     return NH_ERROR(

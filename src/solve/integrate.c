@@ -43,6 +43,7 @@ int nh_step_dynamic(nh_system *s, const nh_integrator *in, const double *f_ext, 
   double *f_int = s->work[0], *Kv = s->work[1], *rhs = s->work[2];
   double *b = s->fwork[0], *dv = s->fwork[1];
   double t0 = nh_time_now();
+  s->t_constraints = 0.0;
   nh_system_assemble(s, u, v, 1.0 + h * in->alpha, h * in->beta + h * h, f_int, Kv, in->threads);
   for (int i = 0; i < n; i++) {
     double Mv = t->mass[i / 3] * v[i];
@@ -52,7 +53,7 @@ int nh_step_dynamic(nh_system *s, const nh_integrator *in, const double *f_ext, 
   double t1 = nh_time_now();
   NH_TRY(nh_system_factor(s));
   double t2 = nh_time_now();
-  NH_TRY(nh_system_solve(s, b, dv));
+  NH_TRY(nh_system_solve_constrained(s, b, dv));
   if (!nh_all_finite(dv, s->n_free))
     return NH_ERROR(NH_ERR_NUMERIC, "the velocity update is not finite");
   double *dv_full = s->work[3];
@@ -65,7 +66,8 @@ int nh_step_dynamic(nh_system *s, const nh_integrator *in, const double *f_ext, 
   if (stats) {
     stats->t_assemble = t1 - t0;
     stats->t_factor = t2 - t1;
-    stats->t_solve = t3 - t2;
+    stats->t_solve = t3 - t2 - s->t_constraints;
+    stats->t_constraints = s->t_constraints;
     stats->iterations = 1;
     stats->residual = 0.0;
   }
@@ -79,11 +81,14 @@ int nh_solve_static(nh_system *s, const nh_integrator *in, const double *f_ext, 
   double *b = s->fwork[0], *du = s->fwork[1];
   double t_asm = 0.0, t_fac = 0.0, t_sol = 0.0, rel = INFINITY;
   int it;
+  s->t_constraints = 0.0;
+  nh_system_reset_multipliers(s);
   for (it = 0; it <= in->max_iterations; it++) {
     double t0 = nh_time_now();
     nh_system_assemble(s, u, NULL, 0.0, 1.0, f_int, NULL, in->threads);
     for (int i = 0; i < n; i++) r[i] = f_ext[i] - f_int[i];
     nh_system_gather(s, r, b);
+    nh_system_add_reactions(s, b);
     double scale = fmax(fmax(nh_norm(f_ext, n), nh_norm(f_int, n)), 1e-300);
     rel = nh_norm(b, s->n_free) / scale;
     double t1 = nh_time_now();
@@ -93,7 +98,7 @@ int nh_solve_static(nh_system *s, const nh_integrator *in, const double *f_ext, 
     if (it == in->max_iterations) break;
     NH_TRY(nh_system_factor(s));
     double t2 = nh_time_now();
-    NH_TRY(nh_system_solve(s, b, du));
+    NH_TRY(nh_system_solve_constrained(s, b, du));
     nh_system_scatter(s, du, s->work[3]);
     for (int i = 0; i < n; i++) u[i] += s->work[3][i];
     double t3 = nh_time_now();
@@ -103,7 +108,8 @@ int nh_solve_static(nh_system *s, const nh_integrator *in, const double *f_ext, 
   if (stats) {
     stats->t_assemble = t_asm;
     stats->t_factor = t_fac;
-    stats->t_solve = t_sol;
+    stats->t_solve = t_sol - s->t_constraints;
+    stats->t_constraints = s->t_constraints;
     stats->iterations = it;
     stats->residual = rel;
   }

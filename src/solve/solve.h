@@ -44,6 +44,22 @@ int nh_system_factor(nh_system *sys);
 /* Solve A x = b for free-DOF vectors (length nh_system_free_dofs). */
 int nh_system_solve(nh_system *sys, const double *b, double *x);
 
+/* Constraint rows tying each hanging node to its masters, u_h = Σ w u_m,
+ * enforced by Lagrange multipliers through the compliance W = J A⁻¹ Jᵀ
+ * (Algorithms 1-3) instead of elimination: create the system with
+ * hanging = NULL, then set the rows. h = NULL removes them. */
+int nh_system_set_hanging_rows(nh_system *sys, const nh_hanging *h);
+/* Number of constraint rows. */
+int nh_system_constraint_rows(const nh_system *sys);
+/* Solve A x = b + Jᵀλ with J x = 0 (plain solve without rows); λ is added
+ * to the running total of multipliers. */
+int nh_system_solve_constrained(nh_system *sys, const double *b, double *x);
+/* Zero the running total of multipliers / add its reaction Jᵀ Σλ to a
+ * free-DOF vector (the constrained residual of a Newton iteration is
+ * r + Jᵀ Σλ). */
+void nh_system_reset_multipliers(nh_system *sys);
+void nh_system_add_reactions(const nh_system *sys, double *b);
+
 /* y = A x for free-DOF vectors, with the assembled A. */
 void nh_system_apply(const nh_system *sys, const double *x, double *y);
 
@@ -56,7 +72,8 @@ void nh_system_scatter(const nh_system *sys, const double *free_part, double *fu
 
 /* Timings and counts of one step. */
 typedef struct {
-  double t_assemble, t_factor, t_solve; /* s */
+  double t_assemble, t_factor, t_solve; /* s (t_solve excludes t_constraints) */
+  double t_constraints;                 /* s: compliance W and multipliers */
   int iterations;                       /* Newton iterations (static), 1 (dynamic) */
   double residual;                      /* relative residual reached (static) */
 } nh_step_stats;

@@ -40,6 +40,9 @@ void nh_system_destroy(nh_system **sys) {
   if (!sys || !*sys) return;
   nh_system *s = *sys;
   cholmod_free_sparse(&s->A, &s->cm);
+  cholmod_free_sparse(&s->Jt, &s->cm);
+  free(s->W);
+  free(s->lambda_total);
   cholmod_free_factor(&s->L, &s->cm);
   cholmod_free_dense(&s->B, &s->cm);
   cholmod_free_dense(&s->X, &s->cm);

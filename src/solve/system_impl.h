@@ -37,6 +37,16 @@ struct nh_system {
   int *colour_start; /* n_colours + 1 */
   int *colour_leaf;  /* leaf indices grouped by colour */
 
+  /* Constraint rows J (m x n_free, stored as Jᵀ: n_free x m) solved through
+   * the compliance W = J A⁻¹ Jᵀ (Algorithm 1); W and its Cholesky factor are
+   * rebuilt after each numeric factorisation. */
+  int n_rows;
+  cholmod_sparse *Jt;
+  double *W; /* m x m, column-major; after the build, its Cholesky factor */
+  int W_valid;
+  double t_constraints; /* seconds spent on W and λ since the last reset */
+  double *lambda_total; /* m: Σ λ since the last reset (the rows' reaction in Newton) */
+
   /* Work vectors for cholmod_solve2 and the integrators. */
   cholmod_dense *B, *X, *Y, *E;
   double *work[4];  /* 3 per node each */
