@@ -79,4 +79,27 @@ double nh_tissue_energy(const nh_tissue *tissue, const double *u);
 /* Centre stress of leaf c at displacements u (Voigt, Pa). */
 void nh_tissue_cell_stress(const nh_tissue *tissue, int c, const double *u, double s[6]);
 
+/* ---- stresses inside an element, compliance (fem/stress.c) ---- */
+
+/* Cauchy stress at n natural points xi[3n] of one element: s[6n] (Voigt),
+ * σ = R (λ tr ε I + 2 μ ε) Rᵀ with R the element's rotation (polar of F at
+ * the centre, as nh_hex_corot) and ε the symmetric gradient of the corotated
+ * displacements d = Rᵀu + (Rᵀ − I)(X − X̄) with the rest gradients at ξ.
+ * detJ[n] (may be NULL) receives the rest Jacobian determinant at each point.
+ * Cannot fail: a point where det J <= 0 (outside a valid cell) uses the
+ * centre gradients G0, so s is finite for finite input; callers that need
+ * det J > 0 check detJ. At ξ = 0 the result equals nh_hex_center_stress. */
+void nh_hex_stress_at(const double X[24], const double u[24], const double G0[24], double lambda,
+                      double mu, int n, const double *xi, double *s, double *detJ);
+
+/* Corotational Cauchy stress s[6] (Voigt, Pa) of leaf c at the natural point
+ * xi[3] for displacements u (3 per node). ξ = 0 gives nh_tissue_cell_stress. */
+void nh_tissue_gauss_stress(const nh_tissue *tissue, int c, const double *u, const double xi[3],
+                            double s[6]);
+
+/* Isotropic compliance e = D⁻¹ s: s[6] Voigt stresses (xx, yy, zz, yz, xz,
+ * xy), e[6] engineering strains (εxx, εyy, εzz, γyz, γxz, γxy with γ = 2ε),
+ * so that sᵀe = σ : ε and ½ sᵀe is the strain-energy density. */
+void nh_voigt_compliance(double lambda, double mu, const double s[6], double e[6]);
+
 #endif

@@ -107,6 +107,9 @@ typedef struct nh_template {
  * face's corners. Fails with NH_ERR_INPUT, message "FILE:LINE: reason" (the
  * line of the offending entry; line 0 for whole-file properties). */
 int nh_template_load(const char *path, nh_template **out);
+/* Smallest child edge over the parent's edge, in natural coordinates
+ * (1/2 for hex2, 1/4 for hex4 and for the graded template). */
+double nh_template_child_ratio(const nh_template *tmpl);
 void nh_template_destroy(nh_template **tmpl);
 
 /* ---- refinement (mesh/refine.c) ---- */

@@ -524,3 +524,17 @@ void nh_template_destroy(nh_template **tmpl) {
   free(*tmpl);
   *tmpl = NULL;
 }
+
+double nh_template_child_ratio(const nh_template *t) {
+  double ratio = 1.0;
+  for (int c = 0; c < t->n_children; c++)
+    for (int k = 0; k < 3; k++) {
+      double lo = INFINITY, hi = -INFINITY;
+      for (int a = 0; a < 8; a++) {
+        double x = t->xi[3 * t->children[8 * c + a] + k];
+        lo = fmin(lo, x), hi = fmax(hi, x);
+      }
+      ratio = fmin(ratio, 0.5 * (hi - lo));
+    }
+  return ratio;
+}

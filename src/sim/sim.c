@@ -2,11 +2,21 @@
  *
  * One step: external forces at the new time (loads by their schedules,
  * gravity), then either a backward-Euler step (dynamic) or a Newton solve to
- * equilibrium under the loads of that pseudo-time (static); then rows of
- * steps.csv and probes.csv, and a frame when due. Every phase is timed and
- * the times are kept per step for the summary. The initial state is frame 0,
- * so a time series always starts at rest. */
+ * equilibrium under the loads of that pseudo-time (static); with `adapt`,
+ * the error of that solution is estimated (SPR); then rows of steps.csv and
+ * probes.csv, and a frame when due, so a frame shows a solution on the mesh
+ * it was computed on, with its error indicators; last, marked cells are
+ * refined and the state is carried to the new nodes (Eq. 17), and the next
+ * step continues on the new mesh. Every phase is timed and the times are
+ * kept per step for the summary. The initial state is frame 0, so a time
+ * series always starts at rest.
+ *
+ * Everything that depends on the mesh (fixed nodes, element data, load
+ * vectors, probe cells, hanging nodes, the linear system) is built by
+ * nh_sim_setup_mesh, at creation and after every refinement. */
 #include "sim/sim_impl.h"
+
+#include "adapt/adapt.h"
 
 #include <math.h>
 #include <stdio.h>
@@ -35,6 +45,9 @@ void nh_sim_destroy(nh_sim **sim) {
   free(s->probe_cell);
   free(s->probe_xi);
   free(s->phase_times);
+  free(s->eta_cell);
+  nh_template_destroy(&s->tmpl);
+  nh_hanging_destroy(&s->hanging);
   nh_csv_destroy(&s->steps_csv);
   nh_csv_destroy(&s->probes_csv);
   nh_pvd_destroy(&s->tissue_pvd);
@@ -125,13 +138,14 @@ static int nh_write_frame(nh_sim *s) {
   int *conn = malloc(sizeof(int) * 8 * (size_t)(nc ? nc : 1));
   int *offsets = malloc(sizeof(int) * (size_t)(nc ? nc : 1));
   int *flags = malloc(sizeof(int) * (size_t)(np ? np : 1));
-  double *cell = malloc(sizeof(double) * 3 * (size_t)(nc ? nc : 1));
+  double *cell = malloc(sizeof(double) * 4 * (size_t)(nc ? nc : 1));
+  double *hang = calloc((size_t)(np ? np : 1), sizeof(double));
   int n_pr = sc->n_probes;
   double *pp = malloc(sizeof(double) * 3 * (size_t)(n_pr ? n_pr : 1));
   double *pu = malloc(sizeof(double) * 3 * (size_t)(n_pr ? n_pr : 1));
   int *pconn = malloc(sizeof(int) * (size_t)(n_pr ? n_pr : 1));
   int *poff = malloc(sizeof(int) * (size_t)(n_pr ? n_pr : 1));
-  if (!conn || !offsets || !flags || !cell || !pp || !pu || !pconn || !poff) {
+  if (!conn || !offsets || !flags || !cell || !hang || !pp || !pu || !pconn || !poff) {
     rc = NH_ERROR(NH_ERR_MEMORY, "out of memory writing a frame");
     goto done;
   }
@@ -144,22 +158,28 @@ static int nh_write_frame(nh_sim *s) {
     cell[l] = nh_von_mises(sig);
     cell[nc + l] = m->level[c];
     cell[2 * nc + l] = m->fill[c];
+    cell[3 * nc + l] = s->have_eta ? s->eta_cell[c] : 0.0;
   }
+  if (s->hanging)
+    for (int k = 0; k < s->hanging->n_hanging; k++) hang[s->hanging->node[k]] = 1.0;
   for (int i = 0; i < np; i++) {
     flags[i] = s->fixed[i];
     for (int k = 0; k < 3; k++) s->x[3 * i + k] = m->X[3 * i + k] + s->u[3 * i + k];
   }
-  nh_field pf[2] = {{"displacement", 3, s->u}, {"velocity", 3, s->v}};
-  nh_field cf[3] = {{"von_mises", 1, cell}, {"level", 1, cell + nc}, {"fill", 1, cell + 2 * nc}};
+  nh_field pf[3] = {{"displacement", 3, s->u}, {"velocity", 3, s->v}, {"hanging", 1, hang}};
+  nh_field cf[4] = {{"von_mises", 1, cell},
+                    {"level", 1, cell + nc},
+                    {"fill", 1, cell + 2 * nc},
+                    {"eta", 1, cell + 3 * nc}};
   nh_vtu_grid g = {.n_points = np,
                    .points = s->x,
                    .n_cells = nc,
                    .connectivity = conn,
                    .offsets = offsets,
                    .type = NH_VTK_HEXAHEDRON,
-                   .n_point_fields = 2,
+                   .n_point_fields = 3,
                    .point_fields = pf,
-                   .n_cell_fields = 3,
+                   .n_cell_fields = 4,
                    .cell_fields = cf,
                    .point_int_flags = flags,
                    .point_flag_name = "fixed"};
@@ -190,7 +210,7 @@ static int nh_write_frame(nh_sim *s) {
   }
   s->last_frame = s->step;
 done:
-  free(conn), free(offsets), free(flags), free(cell);
+  free(conn), free(offsets), free(flags), free(cell), free(hang);
   free(pp), free(pu), free(pconn), free(poff);
   return rc;
 }
@@ -232,31 +252,41 @@ static int nh_open_outputs(nh_sim *s) {
 
 /* ---- construction ---- */
 
-static int nh_sim_build(nh_sim *s) {
+/* Resize a per-node array of `comps` doubles to the mesh's node count. */
+static int nh_resize(double **a, int n_nodes, int comps) {
+  double *p = realloc(*a, sizeof(double) * (size_t)comps * (size_t)(n_nodes ? n_nodes : 1));
+  if (!p) return NH_ERROR(NH_ERR_MEMORY, "out of memory: %d nodes", n_nodes);
+  *a = p;
+  return NH_OK;
+}
+
+/* Everything that depends on the mesh, built at creation (first = 1, which
+ * also reports scene errors only the mesh reveals) and after refinement. */
+static int nh_sim_setup_mesh(nh_sim *s, int first) {
   const nh_scene *sc = s->scene;
-  NH_TRY(nh_mesh_create_box(sc->tissue.box_min, sc->tissue.box_max, sc->tissue.grid, &s->mesh));
   nh_mesh *m = s->mesh;
-  const int n = 3 * m->n_nodes;
-  s->fixed = calloc((size_t)m->n_nodes, 1);
-  s->x = malloc(sizeof(double) * (size_t)n);
-  s->u = calloc((size_t)n, sizeof(double));
-  s->v = calloc((size_t)n, sizeof(double));
-  s->f_ext = calloc((size_t)n, sizeof(double));
-  s->load_unit =
-      calloc((size_t)n * (size_t)(sc->tissue.n_loads ? sc->tissue.n_loads : 1), sizeof(double));
-  s->probe_cell = malloc(sizeof(int) * (size_t)(sc->n_probes ? sc->n_probes : 1));
-  s->probe_xi = malloc(sizeof(double) * 3 * (size_t)(sc->n_probes ? sc->n_probes : 1));
-  if (!s->fixed || !s->x || !s->u || !s->v || !s->f_ext || !s->load_unit || !s->probe_cell ||
-      !s->probe_xi)
-    return NH_ERROR(NH_ERR_MEMORY, "out of memory building the model (%d nodes)", m->n_nodes);
+  const int nn = m->n_nodes, n = 3 * nn;
+  unsigned char *fixed = realloc(s->fixed, (size_t)(nn ? nn : 1));
+  if (!fixed) return NH_ERROR(NH_ERR_MEMORY, "out of memory: %d nodes", nn);
+  s->fixed = fixed;
+  memset(s->fixed, 0, (size_t)nn);
+  NH_TRY(nh_resize(&s->x, nn, 3));
+  NH_TRY(nh_resize(&s->f_ext, nn, 3));
+  NH_TRY(nh_resize(&s->load_unit, nn, 3 * (sc->tissue.n_loads ? sc->tissue.n_loads : 1)));
   for (int r = 0; r < sc->tissue.n_fixed; r++) {
     const nh_region *reg = &sc->tissue.fixed[r];
-    NH_CHECK(nh_mesh_nodes_in_region(m, reg, s->fixed) > 0, NH_ERR_INPUT,
+    int count = nh_mesh_nodes_in_region(m, reg, s->fixed);
+    NH_CHECK(count > 0 || !first, NH_ERR_INPUT,
              "%s: the region [%g, %g, %g] - [%g, %g, %g] contains no node of the mesh", reg->where,
              reg->min[0], reg->min[1], reg->min[2], reg->max[0], reg->max[1], reg->max[2]);
   }
-  nh_material mat = {sc->tissue.young, sc->tissue.poisson, sc->tissue.density};
-  NH_TRY(nh_tissue_create(m, &mat, &s->tissue));
+  if (first) {
+    nh_material mat = {sc->tissue.young, sc->tissue.poisson, sc->tissue.density};
+    NH_TRY(nh_tissue_create(m, &mat, &s->tissue));
+  } else {
+    NH_TRY(nh_tissue_update(s->tissue));
+  }
+  memset(s->load_unit, 0, sizeof(double) * (size_t)n * (size_t)sc->tissue.n_loads);
   for (int l = 0; l < sc->tissue.n_loads; l++)
     NH_TRY(nh_mesh_region_load(m, &sc->tissue.loads[l].region, sc->tissue.loads[l].force,
                                s->load_unit + (size_t)l * n));
@@ -265,11 +295,31 @@ static int nh_sim_build(nh_sim *s) {
         nh_mesh_locate(m, sc->probes[i].point, &s->probe_cell[i], s->probe_xi + 3 * i) == NH_OK,
         NH_ERR_INPUT, "%s: the point [%g, %g, %g] lies outside the tissue", sc->probes[i].where,
         sc->probes[i].point[0], sc->probes[i].point[1], sc->probes[i].point[2]);
-  int rc = nh_system_create(s->tissue, s->fixed, NULL, &s->system);
+  nh_hanging_destroy(&s->hanging);
+  if (sc->adapt.enabled) NH_TRY(nh_hanging_detect(m, s->fixed, &s->hanging));
+  nh_system_destroy(&s->system);
+  int lagrange = sc->adapt.hanging == NH_HANGING_LAGRANGE;
+  int rc = nh_system_create(s->tissue, s->fixed, lagrange ? NULL : s->hanging, &s->system);
   if (rc == NH_ERR_INPUT)
     return NH_ERROR(NH_ERR_INPUT, "%s: every node of the tissue is fixed: nothing to simulate",
                     sc->tissue.where_fixed);
   NH_TRY(rc);
+  if (lagrange) NH_TRY(nh_system_set_hanging_rows(s->system, s->hanging));
+  return NH_OK;
+}
+
+static int nh_sim_build(nh_sim *s) {
+  const nh_scene *sc = s->scene;
+  NH_TRY(nh_mesh_create_box(sc->tissue.box_min, sc->tissue.box_max, sc->tissue.grid, &s->mesh));
+  const int nn = s->mesh->n_nodes;
+  s->u = calloc(3 * (size_t)nn, sizeof(double));
+  s->v = calloc(3 * (size_t)nn, sizeof(double));
+  s->probe_cell = malloc(sizeof(int) * (size_t)(sc->n_probes ? sc->n_probes : 1));
+  s->probe_xi = malloc(sizeof(double) * 3 * (size_t)(sc->n_probes ? sc->n_probes : 1));
+  if (!s->u || !s->v || !s->probe_cell || !s->probe_xi)
+    return NH_ERROR(NH_ERR_MEMORY, "out of memory building the model (%d nodes)", nn);
+  if (sc->adapt.enabled) NH_TRY(nh_template_load(sc->adapt.template_path, &s->tmpl));
+  NH_TRY(nh_sim_setup_mesh(s, 1));
   s->integrator = (nh_integrator){.dt = sc->time.step,
                                   .alpha = sc->tissue.damping_mass,
                                   .beta = sc->tissue.damping_stiffness,
@@ -281,7 +331,88 @@ static int nh_sim_build(nh_sim *s) {
       calloc((size_t)NH_PHASES * (size_t)(s->cap_steps ? s->cap_steps : 1), sizeof(double));
   if (!s->phase_times) return NH_ERROR(NH_ERR_MEMORY, "out of memory: timing table");
   s->last_frame = -1;
+  s->eta = s->eta_rel = NAN;
   return NH_OK;
+}
+
+/* ---- adaptivity ---- */
+
+/* SPR indicators of the current solution (s->eta_cell, s->eta, s->eta_rel). */
+static int nh_sim_estimate(nh_sim *s) {
+  const nh_mesh *m = s->mesh;
+  if (m->n_cells > s->cap_eta) {
+    double *e = realloc(s->eta_cell, sizeof(double) * (size_t)m->n_cells);
+    if (!e) return NH_ERROR(NH_ERR_MEMORY, "out of memory: error indicators");
+    s->eta_cell = e;
+    s->cap_eta = m->n_cells;
+  }
+  NH_TRY(nh_spr_estimate(m, s->tissue, s->u, s->hanging, s->eta_cell, &s->eta, &s->eta_rel));
+  s->have_eta = 1;
+  return NH_OK;
+}
+
+static const double *nh_sort_key;
+static int nh_by_eta_desc(const void *a, const void *b) {
+  double x = nh_sort_key[*(const int *)a], y = nh_sort_key[*(const int *)b];
+  if (x != y) return x > y ? -1 : 1;
+  return (*(const int *)a > *(const int *)b) - (*(const int *)a < *(const int *)b);
+}
+
+/* Mark, refine within the DOF budget, carry u and v to the new nodes and
+ * rebuild everything that depends on the mesh. */
+static int nh_sim_refine(nh_sim *s) {
+  const nh_scene *sc = s->scene;
+  nh_mesh *m = s->mesh;
+  int *marked = malloc(sizeof(int) * (size_t)(m->n_leaves ? m->n_leaves : 1)), n_marked = 0;
+  if (!marked) return NH_ERROR(NH_ERR_MEMORY, "out of memory: marking");
+  nh_mark_params mp = {.strategy = sc->adapt.strategy,
+                       .theta = sc->adapt.theta,
+                       .fraction = sc->adapt.fraction,
+                       .max_level = sc->adapt.max_level,
+                       .min_size = sc->adapt.min_size,
+                       .child_ratio = nh_template_child_ratio(s->tmpl)};
+  int rc = nh_mark_cells(m, s->eta_cell, &mp, marked, &n_marked);
+  if (!rc && sc->adapt.max_dofs > 0 && n_marked > 0) {
+    /* Keep the cells of largest η whose new nodes (counted as if none were
+     * shared, so the budget holds) fit in the budget. */
+    nh_sort_key = s->eta_cell;
+    qsort(marked, (size_t)n_marked, sizeof(int), nh_by_eta_desc);
+    long room = ((long)sc->adapt.max_dofs - 3L * m->n_nodes) / (3L * (s->tmpl->n_nodes - 8));
+    if (room < n_marked) n_marked = room > 0 ? (int)room : 0;
+  }
+  if (rc || n_marked == 0) {
+    free(marked);
+    return rc;
+  }
+  nh_refine_info info = {0};
+  int old_nodes = m->n_nodes;
+  rc = nh_mesh_refine(m, s->tmpl, marked, n_marked, &info);
+  free(marked);
+  if (!rc) rc = nh_resize(&s->u, m->n_nodes, 3);
+  if (!rc) rc = nh_resize(&s->v, m->n_nodes, 3);
+  if (!rc) /* Eq. 17 for the state: u and v of a new node from its parent's corners */
+    for (int k = 0; k < info.n_new; k++) {
+      int node = old_nodes + k;
+      double N[8];
+      nh_hex_shape(info.xi + 3 * k, N);
+      const int *e = m->cells + 8 * info.parent[k];
+      for (int i = 0; i < 3; i++) {
+        double u = 0.0, v = 0.0;
+        for (int a = 0; a < 8; a++) u += N[a] * s->u[3 * e[a] + i], v += N[a] * s->v[3 * e[a] + i];
+        s->u[3 * node + i] = u;
+        s->v[3 * node + i] = v;
+      }
+    }
+  nh_refine_info_free(&info);
+  if (!rc) rc = nh_sim_setup_mesh(s, 0);
+  s->have_eta = 0; /* the indicators belonged to the cells just replaced */
+  if (!rc) {       /* round-off: hanging values exactly their masters' interpolation */
+    nh_hanging_interpolate(s->hanging, s->u, 3);
+    nh_hanging_interpolate(s->hanging, s->v, 3);
+    for (int i = 0; i < 3 * m->n_nodes; i++)
+      if (s->fixed[i / 3]) s->v[i] = 0.0;
+  }
+  return rc;
 }
 
 int nh_sim_create(const nh_scene *scene, const nh_sim_options *options, nh_sim **out) {
@@ -318,6 +449,10 @@ int nh_sim_step(nh_sim *s) {
   int rc = sc->time.mode == NH_MODE_STATIC
                ? nh_solve_static(s->system, &s->integrator, s->f_ext, s->u, &st)
                : nh_step_dynamic(s->system, &s->integrator, s->f_ext, s->u, s->v, &st);
+  int adapt_now = !rc && sc->adapt.enabled && (s->step + 1) % sc->adapt.every == 0;
+  double ta = nh_time_now();
+  if (adapt_now) rc = nh_sim_estimate(s);
+  double t_estimate = nh_time_now() - ta;
   if (rc) {
     char reason[1024];
     snprintf(reason, sizeof reason, "%s", nh_error_message());
@@ -326,6 +461,11 @@ int nh_sim_step(nh_sim *s) {
   s->step++;
   s->time = t_new;
   s->last = st;
+  /* Counts of the mesh the step was solved on (before any refinement). */
+  const nh_mesh *m = s->mesh;
+  int dofs = 3 * m->n_nodes, free_dofs = nh_system_free_dofs(s->system), cells = m->n_leaves;
+  int hanging = s->hanging ? s->hanging->n_hanging : 0;
+  int rows = nh_system_constraint_rows(s->system);
   double t1 = nh_time_now();
   if (!s->options.dry_run) {
     int due =
@@ -334,22 +474,31 @@ int nh_sim_step(nh_sim *s) {
     if (due && s->last_frame != s->step) NH_TRY(nh_write_frame(s));
   }
   double t2 = nh_time_now();
+  if (adapt_now && s->step < sc->time.steps) {
+    rc = nh_sim_refine(s);
+    if (rc) {
+      char reason[1024];
+      snprintf(reason, sizeof reason, "%s", nh_error_message());
+      return NH_ERROR(rc, "step %d (t = %g s): refinement: %s", s->step, t_new, reason);
+    }
+  }
+  double t3 = nh_time_now();
+  s->t_adapt = t_estimate + (t3 - t2);
   double *pt = s->phase_times + NH_PHASES * (size_t)(s->step - 1);
   pt[NH_PHASE_ASSEMBLE] = st.t_assemble;
   pt[NH_PHASE_FACTOR] = st.t_factor;
   pt[NH_PHASE_SOLVE] = st.t_solve;
-  pt[NH_PHASE_CONSTRAINTS] = 0.0;
-  pt[NH_PHASE_ADAPT] = 0.0;
+  pt[NH_PHASE_CONSTRAINTS] = st.t_constraints;
+  pt[NH_PHASE_ADAPT] = s->t_adapt;
   pt[NH_PHASE_OUTPUT] = t2 - t1;
-  pt[NH_PHASE_STEP] = t2 - t0;
-  if (!s->options.dry_run) {
-    const nh_mesh *m = s->mesh;
-    NH_TRY(nh_csv_row(s->steps_csv,
-                      "%d,%.17g,%d,%d,%d,0,0,nan,nan,%d,%.6g,%.6e,%.6e,%.6e,0,0,%.6e,%.6e", s->step,
-                      s->time, 3 * m->n_nodes, nh_system_free_dofs(s->system), m->n_leaves,
-                      st.iterations, st.residual, st.t_assemble, st.t_factor, st.t_solve,
-                      pt[NH_PHASE_OUTPUT], pt[NH_PHASE_STEP]));
-  }
+  pt[NH_PHASE_STEP] = t3 - t0;
+  if (!s->options.dry_run)
+    NH_TRY(
+        nh_csv_row(s->steps_csv,
+                   "%d,%.17g,%d,%d,%d,%d,%d,%.6e,%.6e,%d,%.6g,%.6e,%.6e,%.6e,%.6e,%.6e,%.6e,%.6e",
+                   s->step, s->time, dofs, free_dofs, cells, hanging, rows, s->eta, s->eta_rel,
+                   st.iterations, st.residual, st.t_assemble, st.t_factor, st.t_solve,
+                   st.t_constraints, s->t_adapt, pt[NH_PHASE_OUTPUT], pt[NH_PHASE_STEP]));
   return NH_OK;
 }
 

@@ -41,6 +41,13 @@ struct nh_sim {
   double *phase_times; /* NH_PHASES per step */
   int cap_steps;
   nh_step_stats last;
+  /* adaptivity (absent: all NULL / 0) */
+  nh_template *tmpl;
+  nh_hanging *hanging;
+  double *eta_cell; /* per cell id (leaves meaningful), valid when have_eta */
+  int cap_eta, have_eta;
+  double eta, eta_rel;
+  double t_adapt; /* s, this step: estimate + mark + refine + rebuild */
   /* outputs */
   nh_csv *steps_csv, *probes_csv;
   nh_pvd *tissue_pvd, *points_pvd;

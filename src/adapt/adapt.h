@@ -1,0 +1,98 @@
+/* adapt — a posteriori error estimation by superconvergent patch recovery
+ * (SPR, the seed's §2.3, Eq. 15) and the marking of leaves for refinement
+ * (Eq. 16 and Dörfler's bulk criterion). The algorithms and their choices
+ * (boundary patches, hanging nodes) are described at the top of
+ * adapt/spr.c and adapt/mark.c.
+ *
+ * Conventions: stresses are Voigt (xx, yy, zz, yz, xz, xy), Pa; arrays
+ * "per node" have mesh->n_nodes entries, arrays "per cell" mesh->n_cells
+ * entries indexed by cell id (only the leaves are meaningful). The
+ * displacement u has 3 entries per node. `hanging` may be NULL (a conforming
+ * mesh) or hold n_hanging = 0. */
+#ifndef NH_ADAPT_H
+#define NH_ADAPT_H
+
+#include "core/core.h"
+#include "fem/fem.h"
+#include "mesh/mesh.h"
+#include "scene/scene.h"
+
+/* When a patch fit is refused (and the patch grown). With y the sample
+ * points centred at their centroid and scaled to unit radius, C = Σ yyᵀ and
+ * y0 the scaled evaluation point:
+ *  - rank: the smallest eigenvalue of C is below NH_SPR_RCOND times the
+ *    largest (coplanar or collinear points: the gradient is undetermined);
+ *  - conditioning at the node: the leverage 1/n + y0ᵀC⁻¹y0, the factor by
+ *    which the fit multiplies the variance of independent errors of the
+ *    samples at y0, exceeds NH_SPR_MAX_LEVERAGE (nearly coplanar centres and
+ *    a node off their plane: the extrapolation would amplify round-off and
+ *    discretisation noise). A full 8-cell patch of a box grid has leverage
+ *    1/8, a box corner node with its grown 2x2x2 patch 13/8. */
+#define NH_SPR_RCOND        1e-10
+#define NH_SPR_MAX_LEVERAGE 4.0
+
+/* Least-squares fit of the linear polynomial p(x) = a₀ + a·(x − x̄) to n
+ * samples values[6n] (6 components each, fitted independently) at points
+ * points[3n], evaluated at x0[3]: out[6] = p(x0). Coordinates are centred at
+ * the samples' centroid x̄ and scaled by their largest distance from it, so
+ * the constant term is the samples' mean and a linear field is reproduced to
+ * round-off.
+ * Returns NH_OK, or NH_ERR_NUMERIC without recording a message (the caller
+ * decides what to do; out is untouched) if n < 4, the points do not span
+ * 3-D, or the value at x0 is ill-conditioned (NH_SPR_RCOND,
+ * NH_SPR_MAX_LEVERAGE). */
+int nh_spr_fit_patch(int n, const double *points, const double *values, const double x0[3],
+                     double out[6]);
+
+/* Recovered nodal stresses σ*.
+ * In:  mesh and tissue (tissue->mesh == mesh, element data up to date for
+ *      every leaf), displacements u, hanging nodes (or NULL).
+ * Out: sigma_star[6 n_nodes]: the patch-recovered stress of every node that
+ *      is a corner of a leaf; hanging nodes get their masters' interpolation
+ *      Σ w σ*(master); nodes that belong to no leaf get 0.
+ * Fails with NH_ERR_INTERNAL (message) if the tissue does not belong to the
+ * mesh, a leaf has no element data or the hanging-node table is
+ * inconsistent (an index out of range, a master that is itself hanging),
+ * NH_ERR_MEMORY. Uses OpenMP; the result does not depend on the number of
+ * threads (bitwise). */
+int nh_spr_recover(const nh_mesh *mesh, const nh_tissue *tissue, const double *u,
+                   const nh_hanging *hanging, double *sigma_star);
+
+/* Element error indicators and the global estimate (seed Eq. 15, energy
+ * form): ηₑ² = φₑ ∫ₑ (σ* − σₕ)ᵀ D⁻¹ (σ* − σₕ) dΩ (2x2x2 Gauss, σ* the
+ * trilinear interpolation of the recovered nodal stresses, σₕ the element's
+ * corotational stress at the Gauss point).
+ * In:  as nh_spr_recover.
+ * Out: eta_cell[n_cells] (ηₑ ≥ 0 for every leaf, other entries untouched;
+ *      may be NULL), *eta = (Σ ηₑ²)^½, *eta_rel = η / (‖u‖²_E + η²)^½ with
+ *      ‖u‖²_E = Σₑ φₑ ∫ₑ σₕᵀ D⁻¹ σₕ dΩ (0 if both vanish); eta, eta_rel may
+ *      be NULL.
+ * Fails as nh_spr_recover, and with NH_ERR_NUMERIC (message) if η or ‖u‖_E
+ * is not finite (a NaN or Inf in u). Thread-count independent (bitwise). */
+int nh_spr_estimate(const nh_mesh *mesh, const nh_tissue *tissue, const double *u,
+                    const nh_hanging *hanging, double *eta_cell, double *eta, double *eta_rel);
+
+/* Marking parameters (the scene's adapt section). */
+typedef struct {
+  int strategy;    /* NH_MARK_MAX | NH_MARK_DORFLER (scene/scene.h) */
+  double theta;    /* max: mark ηₑ ≥ θ maxₑ ηₑ, θ ∈ (0, 1] */
+  double fraction; /* dorfler: smallest set with Σ ηₑ² ≥ fraction Σ_all ηₑ², in (0, 1] */
+  int max_level;   /* cells with level >= max_level are not refined */
+  double min_size;    /* if > 0: cells whose children would be smaller than this are not refined */
+  double child_ratio; /* smallest child edge / parent edge of the template (0: 1/2) */
+} nh_mark_params;
+
+/* Mark leaves for refinement.
+ * In:  mesh, eta_cell[n_cells] (indexed by cell id, read for leaves only,
+ *      each finite and >= 0), params.
+ * Out: marked[] (room for mesh->n_leaves ids) receives the marked cell ids in
+ *      ascending order, *n_marked their count (0 if every ηₑ is 0).
+ * The strategy selects candidates among all leaves; candidates at
+ * max_level or below the size limit are then dropped (mark.c).
+ * Fails with NH_ERR_INPUT (message) for an unknown strategy or θ / fraction
+ * outside (0, 1], NH_ERR_NUMERIC (message) for a negative or non-finite ηₑ,
+ * NH_ERR_MEMORY. */
+int nh_mark_cells(const nh_mesh *mesh, const double *eta_cell, const nh_mark_params *params,
+                  int *marked, int *n_marked);
+
+#endif

@@ -1,0 +1,90 @@
+/* stress.c — the corotational stress anywhere inside an element, and the
+ * isotropic compliance D⁻¹ in Voigt form (used by the SPR error estimator,
+ * adapt/spr.c, docs/theory.md §2 and the seed's Eq. 15).
+ *
+ * The element is the one of hex.c: one rotation R per element, the polar
+ * rotation of the deformation gradient at the centre
+ *   F = I + Σₐ uₐ ⊗ G0ₐ,   R = polar(F),
+ * and the corotated nodal displacements relative to the rest centroid X̄
+ *   dₐ = Rᵀuₐ + (Rᵀ − I)(Xₐ − X̄).
+ * The small strain at a natural point ξ is that of d with the rest gradients
+ * at ξ, gₐ(ξ) = J(ξ)⁻ᵀ ∇_ξ Nₐ(ξ):
+ *   ε(ξ) = sym(Σₐ dₐ ⊗ gₐ(ξ)),   σ(ξ) = R (λ tr ε I + 2 μ ε) Rᵀ.
+ * R stays the centre's (it is not re-evaluated at ξ): this is the stress
+ * field whose energy the element's K₀ integrates, so ∫ σᵀD⁻¹σ over the
+ * 2x2x2 Gauss points is twice the element's corotational strain energy. At
+ * ξ = 0, gₐ(0) = G0ₐ and σ equals nh_hex_center_stress.
+ *
+ * Compliance. With Voigt stresses s = (σxx, σyy, σzz, σyz, σxz, σxy) and
+ * engineering strains e = (εxx, εyy, εzz, γyz, γxz, γxy), γ = 2ε:
+ *   εᵢᵢ = (σᵢᵢ − λ / (3λ + 2μ) tr σ) / (2μ),   γᵢⱼ = σᵢⱼ / μ,
+ * so that sᵀe = σ : ε and ½ sᵀ D⁻¹ s is the strain-energy density. */
+#include "fem/fem.h"
+
+#include <math.h>
+#include <string.h>
+
+/* Rest gradients g[8][3] at ξ and det J; returns det J. If J is singular or
+ * not positive, g is left untouched (the caller keeps the centre's). */
+static double nh_stress_gradients(const double X[24], const double xi[3], double g[24]) {
+  double dN[8][3], J[9] = {0}, Jinv[9];
+  nh_hex_dshape(xi, dN);
+  for (int a = 0; a < 8; a++)
+    for (int i = 0; i < 3; i++)
+      for (int j = 0; j < 3; j++) J[3 * i + j] += X[3 * a + i] * dN[a][j];
+  double det = nh_mat3_det(J);
+  if (!(det > 0.0) || nh_mat3_inverse(J, Jinv)) return det;
+  for (int a = 0; a < 8; a++) nh_mat3_tvec(Jinv, dN[a], g + 3 * a);
+  return det;
+}
+
+void nh_hex_stress_at(const double X[24], const double u[24], const double G0[24], double lambda,
+                      double mu, int n, const double *xi, double *s, double *detJ) {
+  /* The rotation and corotated displacements of the element, as hex.c. */
+  double F[9], R[9], d[24], c[3] = {0, 0, 0};
+  nh_mat3_identity(F);
+  for (int a = 0; a < 8; a++)
+    for (int i = 0; i < 3; i++)
+      for (int j = 0; j < 3; j++) F[3 * i + j] += u[3 * a + i] * G0[3 * a + j];
+  nh_polar_rotation(F, R);
+  for (int a = 0; a < 8; a++)
+    for (int i = 0; i < 3; i++) c[i] += 0.125 * X[3 * a + i];
+  for (int a = 0; a < 8; a++) {
+    double rel[3] = {X[3 * a] - c[0], X[3 * a + 1] - c[1], X[3 * a + 2] - c[2]}, rr[3];
+    nh_mat3_tvec(R, u + 3 * a, d + 3 * a);
+    nh_mat3_tvec(R, rel, rr);
+    for (int i = 0; i < 3; i++) d[3 * a + i] += rr[i] - rel[i];
+  }
+  for (int p = 0; p < n; p++) {
+    double g[24], H[9] = {0}, S[9], T[9];
+    memcpy(g, G0, sizeof g);
+    double det = nh_stress_gradients(X, xi + 3 * p, g);
+    if (detJ) detJ[p] = det;
+    for (int a = 0; a < 8; a++)
+      for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++) H[3 * i + j] += d[3 * a + i] * g[3 * a + j];
+    double tr = H[0] + H[4] + H[8];
+    for (int i = 0; i < 3; i++)
+      for (int j = 0; j < 3; j++)
+        S[3 * i + j] = mu * (H[3 * i + j] + H[3 * j + i]) + (i == j ? lambda * tr : 0.0);
+    nh_mat3_mul(R, S, T);
+    nh_mat3_mul_nt(T, R, S);
+    double *sp = s + 6 * p;
+    sp[0] = S[0], sp[1] = S[4], sp[2] = S[8], sp[3] = S[5], sp[4] = S[2], sp[5] = S[1];
+  }
+}
+
+void nh_tissue_gauss_stress(const nh_tissue *t, int c, const double *u, const double xi[3],
+                            double s[6]) {
+  const nh_mesh *m = t->mesh;
+  double Xe[24], ue[24];
+  nh_mesh_cell_coords(m, m->X, c, Xe);
+  nh_mesh_cell_coords(m, u, c, ue);
+  nh_hex_stress_at(Xe, ue, t->G0 + 24 * t->cell_shape[c], t->lambda, t->mu, 1, xi, s, NULL);
+}
+
+void nh_voigt_compliance(double lambda, double mu, const double s[6], double e[6]) {
+  double tr = s[0] + s[1] + s[2], k = lambda / (3.0 * lambda + 2.0 * mu) * tr;
+  for (int i = 0; i < 3; i++) e[i] = (s[i] - k) / (2.0 * mu);
+  for (int i = 3; i < 6; i++) e[i] = s[i] / mu;
+}
