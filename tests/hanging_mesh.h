@@ -7,7 +7,7 @@
 #include "check.h"
 #include "mesh/mesh.h"
 
-static nh_template *regular_template(int n) {
+__attribute__((unused)) static nh_template *regular_template(int n) {
   nh_template *t = calloc(1, sizeof *t);
   int m = n + 1;
   t->n_nodes = m * m * m;
@@ -32,7 +32,7 @@ static nh_template *regular_template(int n) {
 }
 
 /* A child of cell c whose centre is nearest to the point p. */
-static int child_near(const nh_mesh *m, int c, const double p[3]) {
+__attribute__((unused)) static int child_near(const nh_mesh *m, int c, const double p[3]) {
   int best = -1;
   double bd = INFINITY;
   for (int ch = m->first_child[c]; ch < m->first_child[c] + m->n_children[c]; ch++) {
@@ -46,7 +46,7 @@ static int child_near(const nh_mesh *m, int c, const double p[3]) {
   return best;
 }
 
-static nh_mesh *build_mesh(int n, nh_template *t) {
+__attribute__((unused)) static nh_mesh *build_mesh(int n, nh_template *t) {
   const double lo[3] = {0, 0, 0}, hi[3] = {0.03, 0.03, 0.03};
   const int grid[3] = {3, 3, 3};
   nh_mesh *m;
