@@ -1,6 +1,6 @@
 /* main.c — the command-line front end (../shared/SCENE.md, docs/scene.md).
  *
- *   needlehex run SCENE.yaml [--out DIR] [--set KEY=VALUE ...] [--quiet]
+ *   needlehex run SCENE.yaml [--out DIR] [--set KEY=VALUE ...] [--restart DIR] [--quiet]
  *   needlehex check SCENE.yaml [--set KEY=VALUE ...]
  *   needlehex --help | --version
  *
@@ -19,13 +19,14 @@
 #include "scene/scene.h"
 #include "sim/sim.h"
 
+#include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
 
 static const char *nh_usage =
-    "usage: needlehex run SCENE.yaml [--out DIR] [--set KEY=VALUE ...] [--quiet]\n"
+    "usage: needlehex run SCENE.yaml [--out DIR] [--set KEY=VALUE ...] [--restart DIR] [--quiet]\n"
     "       needlehex check SCENE.yaml [--set KEY=VALUE ...]\n"
     "       needlehex --help | --version\n"
     "\n"
@@ -33,7 +34,10 @@ static const char *nh_usage =
     "  check    validate the scene (and the mesh it builds), print what will be modelled\n"
     "  --out DIR          write outputs to DIR (overrides output.dir)\n"
     "  --set KEY=VALUE    override a scene key by dotted path, e.g. --set tissue.grid=[16,8,8]\n"
+    "  --restart DIR      continue the run whose outputs (and checkpoint.nhc) are in DIR\n"
     "  --quiet            no progress line and no summary\n"
+    "\n"
+    "SIGINT / SIGTERM stop a run after the current step with a final frame and a checkpoint.\n"
     "\n"
     "exit status: 0 success, 1 simulation failed, 2 bad scene or arguments\n";
 
@@ -69,22 +73,24 @@ int main(int argc, char **argv) {
   if (!is_run && !is_check)
     return nh_fail(NH_ERROR(NH_ERR_INPUT, "unknown command '%s' (try --help)", command));
 
-  const char *scene_path = NULL, *out_dir = NULL;
+  const char *scene_path = NULL, *out_dir = NULL, *restart = NULL;
   int quiet = 0, n_set = 0;
   const char **sets = calloc((size_t)argc + 1, sizeof(char *));
   if (!sets) return nh_fail(NH_ERROR(NH_ERR_MEMORY, "out of memory"));
   int rc = NH_OK;
   for (int i = 2; i < argc && !rc; i++) {
     const char *a = argv[i];
-    if (!strcmp(a, "--set") || !strcmp(a, "--out")) {
+    if (!strcmp(a, "--set") || !strcmp(a, "--out") || !strcmp(a, "--restart")) {
       if (i + 1 >= argc) {
         rc = NH_ERROR(NH_ERR_INPUT, "%s needs a value", a);
         break;
       }
       if (a[2] == 's')
         sets[n_set++] = argv[++i];
-      else
+      else if (a[2] == 'o')
         out_dir = argv[++i];
+      else
+        restart = argv[++i];
     } else if (!strncmp(a, "--set=", 6)) {
       sets[n_set++] = a + 6;
     } else if (!strncmp(a, "--out=", 6)) {
@@ -114,9 +120,22 @@ int main(int argc, char **argv) {
   rc = nh_scene_load(scene_path, n_set, sets, &scene);
   free(sets);
   if (rc) return nh_fail(rc);
+  if (restart && !is_run) {
+    nh_scene_destroy(&scene);
+    return nh_fail(NH_ERROR(NH_ERR_INPUT, "--restart goes with run"));
+  }
+  if (restart) out_dir = restart; /* a continued run writes where it was written */
   if (out_dir) snprintf(scene->output.dir, sizeof scene->output.dir, "%s", out_dir);
+  if (is_run) {
+    struct sigaction sa;
+    memset(&sa, 0, sizeof sa);
+    sa.sa_handler = nh_sim_request_stop;
+    sigemptyset(&sa.sa_mask);
+    sigaction(SIGINT, &sa, NULL);
+    sigaction(SIGTERM, &sa, NULL);
+  }
 
-  nh_sim_options opt = {.dry_run = is_check, .progress = is_run && !quiet};
+  nh_sim_options opt = {.dry_run = is_check, .progress = is_run && !quiet, .restart_dir = restart};
   rc = nh_sim_create(scene, &opt, &sim);
   if (!rc && is_check) nh_scene_print(scene, stdout);
   if (!rc && is_check)

@@ -16,11 +16,12 @@
 
 typedef enum {
   NH_OK = 0,
-  NH_ERR_INPUT,   /* bad scene, argument or template: the user can fix it (exit 2) */
-  NH_ERR_NUMERIC, /* not positive definite, NaN, no convergence (exit 1) */
-  NH_ERR_IO,      /* a file could not be written or read (exit 1) */
-  NH_ERR_MEMORY,  /* allocation failed (exit 1) */
-  NH_ERR_INTERNAL /* a broken invariant: a bug (exit 1) */
+  NH_ERR_INPUT,      /* bad scene, argument or template: the user can fix it (exit 2) */
+  NH_ERR_NUMERIC,    /* not positive definite, NaN, no convergence (exit 1) */
+  NH_ERR_IO,         /* a file could not be written or read (exit 1) */
+  NH_ERR_MEMORY,     /* allocation failed (exit 1) */
+  NH_ERR_INTERNAL,   /* a broken invariant: a bug (exit 1) */
+  NH_ERR_INTERRUPTED /* stopped by a signal after a checkpoint (exit 1) */
 } nh_status;
 
 /* Record a message for status code `code` (printf format) and return `code`.

@@ -61,4 +61,49 @@ int nh_mkdir_p(const char *path);
 /* Copy text to a file atomically (tmp + rename). */
 int nh_write_text(const char *path, const char *text);
 
+/* ---- HDF5 results: results.h5 + results.xdmf (io/hdf5.c) ----
+ * One HDF5 file per run with the per-step table, time series of named items
+ * (probes, targets, tools) and hexahedral mesh snapshots, plus an XDMF file
+ * describing the snapshots as a time series (ParaView, meshio). Layout and
+ * guarantees: docs/outputs.md. Every failure returns NH_ERR_IO with one
+ * message naming the file, the HDF5 call and the object (HDF5's own error
+ * printing is switched off); misuse (sizes changing, a frame written twice,
+ * cells that are not 8-node hexahedra) returns NH_ERR_INTERNAL. */
+typedef struct nh_h5 nh_h5;
+
+/* Create (truncate) DIR/results.h5 with root attributes "format", "version"
+ * and "scene" (the scene text as run; NULL: omitted), the empty extendible
+ * table /steps with `n_step_columns` columns named by `step_columns`, and an
+ * empty DIR/results.xdmf. DIR must exist. *out is NULL on failure. */
+int nh_h5_create(const char *dir, const char *scene_text, const char *version, int n_step_columns,
+                 const char *const *step_columns, nh_h5 **out);
+
+/* Append one row of n_step_columns doubles to /steps. Reaches the disk at
+ * the next frame, nh_h5_flush or nh_h5_close. */
+int nh_h5_append_steps(nh_h5 *h, const double *row);
+
+/* Append one sample to the series group /<group> ("probes", "targets",
+ * "tools", ...): time[N], step[N] and values[N x n_items x n_components]
+ * (values row-major: item i, component k at values[i * n_components + k]).
+ * The first call creates the group and fixes the item and component names
+ * (attributes "names" and "components" of values); later calls must pass the
+ * same counts and names. n_items and n_components must be positive. */
+int nh_h5_append_series(nh_h5 *h, const char *group, int step, double time, int n_items,
+                        const char *const *items, int n_components, const char *const *components,
+                        const double *values);
+
+/* Write the snapshot /frames/NNNNNN (NNNNNN = step, zero padded to six
+ * digits; attributes step, time): points, connectivity [n_cells x 8] and the
+ * grid's point fields, Int32 point flag and cell fields. All cells must be
+ * 8-node hexahedra (VTK order). Then flush the file (everything appended so
+ * far is on disk) and rewrite results.xdmf atomically to list every frame. */
+int nh_h5_write_frame(nh_h5 *h, int step, double time, const nh_vtu_grid *grid);
+
+/* Flush everything written so far to the file (H5Fflush). */
+int nh_h5_flush(nh_h5 *h);
+
+/* Flush and close the file, free *h and set it to NULL; NULL-safe. Returns
+ * NH_ERR_IO if the final flush failed (the handle is freed regardless). */
+int nh_h5_close(nh_h5 **h);
+
 #endif

@@ -773,11 +773,12 @@ static int read_probes(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
 }
 
 static int read_output(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
-  static const char *const keys[] = {"dir", "every", "hdf5", NULL};
+  static const char *const keys[] = {"dir", "every", "hdf5", "checkpoint", NULL};
   const nh_yaml_node *m, *at;
   nh_yaml_join(s->output.dir, sizeof s->output.dir, "out", "/", s->name);
   s->output.every = 1;
   s->output.hdf5 = 0;
+  s->output.checkpoint = 0;
   NH_TRY(section(c, root, "", "output", 0, &m));
   if (!m) return NH_OK;
   NH_TRY(check_keys(c, m, "output", keys, NULL));
@@ -790,6 +791,8 @@ static int read_output(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   NH_TRY(at_least(c, at, "output", "every", s->output.every, 0, 0));
   NH_TRY(field(c, m, "output", "hdf5", 0, &at));
   if (at) NH_TRY(as_bool(c, at, "output.hdf5", &s->output.hdf5));
+  NH_TRY(get_int(c, m, "output", "checkpoint", &s->output.checkpoint, &at));
+  NH_TRY(at_least(c, at, "output", "checkpoint", s->output.checkpoint, 0, 0));
   return NH_OK;
 }
 

@@ -105,6 +105,7 @@ typedef struct nh_scene {
     char dir[NH_PATH_MAX]; /* output.dir (default "out/<name>") */
     int every;             /* output.every: frame every N steps, 0 = last step only (default 1) */
     int hdf5;              /* output.hdf5 (default false; accepted, not yet written) */
+    int checkpoint;        /* output.checkpoint: a restart file every N steps, 0 = none (default) */
   } output;
 
   char *yaml; /* the scene as run, overrides applied, as YAML text (owned) */

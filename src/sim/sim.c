@@ -18,10 +18,13 @@
 
 #include "adapt/adapt.h"
 
+#include <dirent.h>
 #include <math.h>
+#include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 static const char *const nh_step_columns[] = {
     "step",          "time",    "dofs",       "free_dofs", "cells",      "hanging",  "constraints",
@@ -228,7 +231,69 @@ static int nh_write_probe_rows(nh_sim *s) {
   return NH_OK;
 }
 
+/* Keep the rows of an existing CSV file whose first field (the step) is at
+ * most `step`: re-create the table and re-append them. */
+static int nh_csv_resume(const char *path, int n_columns, const char *const *columns, int step,
+                         nh_csv **out) {
+  FILE *f = fopen(path, "r");
+  char *text = NULL;
+  size_t len = 0;
+  if (f) {
+    fseek(f, 0, SEEK_END);
+    long size = ftell(f);
+    rewind(f);
+    text = malloc((size_t)(size > 0 ? size : 0) + 1);
+    if (!text) {
+      fclose(f);
+      return NH_ERROR(NH_ERR_MEMORY, "out of memory resuming %s", path);
+    }
+    len = fread(text, 1, (size_t)(size > 0 ? size : 0), f);
+    text[len] = '\0';
+    fclose(f);
+  }
+  int rc = nh_csv_create(path, n_columns, columns, out);
+  char *line = text ? strchr(text, '\n') : NULL; /* skip the header */
+  while (!rc && line && line[1]) {
+    char *start = line + 1, *end = strchr(start, '\n');
+    if (end) *end = '\0';
+    if (atoi(start) <= step && start[0] >= '0' && start[0] <= '9')
+      rc = nh_csv_row(*out, "%s", start);
+    line = end;
+  }
+  free(text);
+  return rc;
+}
+
+/* Re-list in a new PVD the frames PREFIX_NNNNNN.vtu on disk with NNNNNN <= step. */
+static int nh_pvd_resume(const char *dir, const char *prefix, double dt, int step, nh_pvd **out) {
+  char path[NH_PATH_MAX + 64];
+  snprintf(path, sizeof path, "%s/%s.pvd", dir, prefix);
+  NH_TRY(nh_pvd_create(path, out));
+  for (int k = 0; k <= step; k++) { /* in step order */
+    char name[64];
+    snprintf(name, sizeof name, "%s_%06d.vtu", prefix, k);
+    snprintf(path, sizeof path, "%s/%s", dir, name);
+    if (access(path, R_OK) == 0) NH_TRY(nh_pvd_add(*out, k * dt, name));
+  }
+  return NH_OK;
+}
+
 static int nh_open_outputs(nh_sim *s) {
+  if (s->options.restart_dir) {
+    const nh_scene *sc = s->scene;
+    const char *dir = sc->output.dir;
+    char path[NH_PATH_MAX + 64];
+    snprintf(path, sizeof path, "%s/steps.csv", dir);
+    NH_TRY(nh_csv_resume(path, (int)(sizeof nh_step_columns / sizeof *nh_step_columns),
+                         nh_step_columns, s->step, &s->steps_csv));
+    snprintf(path, sizeof path, "%s/probes.csv", dir);
+    NH_TRY(nh_csv_resume(path, 9, nh_probe_columns, s->step, &s->probes_csv));
+    NH_TRY(nh_pvd_resume(dir, "tissue", sc->time.step, s->step, &s->tissue_pvd));
+    if (sc->n_probes > 0)
+      NH_TRY(nh_pvd_resume(dir, "points", sc->time.step, s->step, &s->points_pvd));
+    s->last_frame = s->step; /* its frame, if due, was written by the first run */
+    return NH_OK;
+  }
   const nh_scene *sc = s->scene;
   char path[NH_PATH_MAX + 64];
   const char *dir = sc->output.dir;
@@ -310,10 +375,20 @@ static int nh_sim_setup_mesh(nh_sim *s, int first) {
 
 static int nh_sim_build(nh_sim *s) {
   const nh_scene *sc = s->scene;
-  NH_TRY(nh_mesh_create_box(sc->tissue.box_min, sc->tissue.box_max, sc->tissue.grid, &s->mesh));
+  if (s->options.restart_dir) {
+    nh_checkpoint ck;
+    NH_TRY(nh_checkpoint_read(s->options.restart_dir, sc, &ck));
+    s->mesh = ck.mesh;
+    s->u = ck.u;
+    s->v = ck.v;
+    s->step = ck.step;
+    s->time = ck.time;
+  } else {
+    NH_TRY(nh_mesh_create_box(sc->tissue.box_min, sc->tissue.box_max, sc->tissue.grid, &s->mesh));
+    s->u = calloc(3 * (size_t)s->mesh->n_nodes, sizeof(double));
+    s->v = calloc(3 * (size_t)s->mesh->n_nodes, sizeof(double));
+  }
   const int nn = s->mesh->n_nodes;
-  s->u = calloc(3 * (size_t)nn, sizeof(double));
-  s->v = calloc(3 * (size_t)nn, sizeof(double));
   s->probe_cell = malloc(sizeof(int) * (size_t)(sc->n_probes ? sc->n_probes : 1));
   s->probe_xi = malloc(sizeof(double) * 3 * (size_t)(sc->n_probes ? sc->n_probes : 1));
   if (!s->u || !s->v || !s->probe_cell || !s->probe_xi)
@@ -326,7 +401,7 @@ static int nh_sim_build(nh_sim *s) {
                                   .tolerance = sc->solver.tolerance,
                                   .max_iterations = sc->solver.max_iterations,
                                   .threads = sc->solver.threads};
-  s->cap_steps = sc->time.steps;
+  s->cap_steps = sc->time.steps > s->step ? sc->time.steps : s->step + 1;
   s->phase_times =
       calloc((size_t)NH_PHASES * (size_t)(s->cap_steps ? s->cap_steps : 1), sizeof(double));
   if (!s->phase_times) return NH_ERROR(NH_ERR_MEMORY, "out of memory: timing table");
@@ -489,13 +564,18 @@ int nh_sim_step(nh_sim *s) {
   }
   double t3 = nh_time_now();
   s->t_adapt = t_estimate + (t3 - t2);
+  /* A checkpoint holds the state the next step starts from: after refinement. */
+  if (!s->options.dry_run && sc->output.checkpoint > 0 && s->step % sc->output.checkpoint == 0)
+    NH_TRY(nh_checkpoint_write(s));
+  double t_checkpoint = nh_time_now() - t3; /* counted as output */
+  t3 += t_checkpoint;
   double *pt = s->phase_times + NH_PHASES * (size_t)(s->step - 1);
   pt[NH_PHASE_ASSEMBLE] = st.t_assemble;
   pt[NH_PHASE_FACTOR] = st.t_factor;
   pt[NH_PHASE_SOLVE] = st.t_solve;
   pt[NH_PHASE_CONSTRAINTS] = st.t_constraints;
   pt[NH_PHASE_ADAPT] = s->t_adapt;
-  pt[NH_PHASE_OUTPUT] = t2 - t1;
+  pt[NH_PHASE_OUTPUT] = t2 - t1 + t_checkpoint;
   pt[NH_PHASE_STEP] = t3 - t0;
   if (!s->options.dry_run)
     NH_TRY(nh_csv_row(
@@ -507,12 +587,30 @@ int nh_sim_step(nh_sim *s) {
   return NH_OK;
 }
 
+static volatile sig_atomic_t nh_stop_signal = 0;
+
+void nh_sim_request_stop(int signal_number) {
+  nh_stop_signal = signal_number ? signal_number : SIGTERM;
+}
+
 int nh_sim_run(nh_sim *s) {
   if (s->options.progress) nh_progress_start(s);
   int rc = NH_OK;
   while (s->step < s->scene->time.steps) {
     if ((rc = nh_sim_step(s))) break;
     if (s->options.progress) nh_progress_update(s);
+    if (nh_stop_signal && s->step < s->scene->time.steps) {
+      if (!s->options.dry_run) {
+        if (s->last_frame != s->step && (rc = nh_write_frame(s))) break;
+        if ((rc = nh_checkpoint_write(s))) break;
+      }
+      rc = NH_ERROR(NH_ERR_INTERRUPTED,
+                    "stopped by signal %d after step %d of %d (t = %g s); the last frame and a "
+                    "checkpoint are in %s; continue with: needlehex run %s --restart %s",
+                    (int)nh_stop_signal, s->step, s->scene->time.steps, s->time,
+                    s->scene->output.dir, s->scene->file, s->scene->output.dir);
+      break;
+    }
   }
   if (s->options.progress) nh_progress_finish(s);
   return rc;

@@ -12,8 +12,9 @@
 typedef struct nh_sim nh_sim;
 
 typedef struct {
-  int dry_run;  /* build and validate only: no output folder, no files (`check`) */
-  int progress; /* print a progress line and a summary on stderr */
+  int dry_run;             /* build and validate only: no output folder, no files (`check`) */
+  int progress;            /* print a progress line and a summary on stderr */
+  const char *restart_dir; /* continue from DIR/checkpoint.nhc (NULL: start at rest) */
 } nh_sim_options;
 
 /* Build mesh, tissue, loads, probes and the linear system for `scene`
@@ -28,8 +29,14 @@ void nh_sim_destroy(nh_sim **sim);
 /* Advance one step (and write its rows and, when due, its frame).
  * Fails with NH_ERR_NUMERIC / NH_ERR_IO; the message names the step. */
 int nh_sim_step(nh_sim *sim);
-/* Run every remaining step, with progress and a closing summary if asked. */
+/* Run every remaining step, with progress and a closing summary if asked.
+ * After nh_sim_request_stop (a signal handler may call it) the run stops
+ * after the current step, writes a final frame and a checkpoint, and
+ * returns NH_ERR_INTERRUPTED. */
 int nh_sim_run(nh_sim *sim);
+/* Ask running simulations to stop after their current step
+ * (async-signal-safe). */
+void nh_sim_request_stop(int signal_number);
 
 /* Inspection (tests, tools). */
 const nh_mesh *nh_sim_mesh(const nh_sim *sim);

@@ -55,6 +55,22 @@ struct nh_sim {
   nh_progress progress;
 };
 
+/* A checkpoint read back: the mesh (owned), u, v (owned), step and time. */
+typedef struct {
+  nh_mesh *mesh;
+  double *u, *v;
+  int step;
+  double time;
+} nh_checkpoint;
+
+/* DIR/checkpoint.nhc */
+void nh_checkpoint_path(const char *dir, char *path, size_t size);
+/* Write the run's state to <output.dir>/checkpoint.nhc, atomically. */
+int nh_checkpoint_write(const nh_sim *sim);
+/* Read DIR/checkpoint.nhc for `scene`; NH_ERR_INPUT for a foreign,
+ * corrupted or other-scene file. */
+int nh_checkpoint_read(const char *dir, const nh_scene *scene, nh_checkpoint *ck);
+
 void nh_progress_start(nh_sim *sim);
 void nh_progress_update(nh_sim *sim);
 void nh_progress_finish(nh_sim *sim);

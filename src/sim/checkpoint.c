@@ -1,0 +1,271 @@
+/* checkpoint.c — restart files: the whole state of a run at the end of a
+ * step, so that `needlehex run SCENE --restart DIR` continues exactly where
+ * it was written (docs/outputs.md, "Checkpoints").
+ *
+ * Format (little-endian, native doubles; a file from a machine of another
+ * byte order is refused, not converted):
+ *   "NHCKPT\0\1"   8-byte magic
+ *   u32 version    1
+ *   u32 0x01020304 byte-order marker
+ *   u64 size       bytes of payload
+ *   u64 checksum   FNV-1a 64 of the payload
+ *   payload:       u64 hash of the scene as run (its YAML text),
+ *                  i32 step, f64 time,
+ *                  the mesh: i32 grid[3], f64 origin[3], f64 spacing[3],
+ *                    i32 n_nodes, f64 X[3 n], i32 n_cells, i32 cells[8 n],
+ *                    i32 level[n], parent[n], first_child[n], n_children[n],
+ *                    f64 fill[n],
+ *                  f64 u[3 n_nodes], f64 v[3 n_nodes].
+ * Everything else (element data, hanging nodes, the linear system, load
+ * vectors, probe cells) is rebuilt from the mesh, deterministically, so the
+ * continued run is the uninterrupted one to round-off (it is in fact
+ * bitwise equal: tests/restart.py).
+ *
+ * The file is written to "<path>.tmp", flushed with fsync and renamed, so a
+ * kill at any instant leaves either the previous checkpoint or the new one.
+ * Reading checks magic, version, byte order, size, checksum and scene hash:
+ * a foreign, truncated, corrupted or other-scene file is an input error
+ * (exit 2) naming the file and what is wrong. */
+#include "sim/sim_impl.h"
+
+#include <errno.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+static const char nh_magic[8] = {'N', 'H', 'C', 'K', 'P', 'T', 0, 1};
+
+static uint64_t nh_fnv1a(const void *data, size_t n, uint64_t h) {
+  const unsigned char *p = data;
+  for (size_t i = 0; i < n; i++) h = (h ^ p[i]) * 1099511628211ull;
+  return h;
+}
+
+#define NH_FNV_SEED 14695981039346656037ull
+
+/* A growable byte buffer. */
+typedef struct {
+  unsigned char *data;
+  size_t len, cap;
+  int failed;
+} nh_buf;
+
+static void nh_put(nh_buf *b, const void *p, size_t n) {
+  if (b->failed) return;
+  if (b->len + n > b->cap) {
+    size_t cap = b->cap ? b->cap : 4096;
+    while (cap < b->len + n) cap *= 2;
+    unsigned char *d = realloc(b->data, cap);
+    if (!d) {
+      b->failed = 1;
+      return;
+    }
+    b->data = d, b->cap = cap;
+  }
+  memcpy(b->data + b->len, p, n);
+  b->len += n;
+}
+
+static void nh_put_i32(nh_buf *b, int v) {
+  int32_t x = v;
+  nh_put(b, &x, 4);
+}
+
+void nh_checkpoint_path(const char *dir, char *path, size_t size) {
+  snprintf(path, size, "%s/checkpoint.nhc", dir);
+}
+
+int nh_checkpoint_write(const nh_sim *s) {
+  const nh_mesh *m = s->mesh;
+  nh_buf b = {0};
+  uint64_t scene_hash = nh_fnv1a(s->scene->yaml ? s->scene->yaml : "",
+                                 strlen(s->scene->yaml ? s->scene->yaml : ""), NH_FNV_SEED);
+  nh_put(&b, &scene_hash, 8);
+  nh_put_i32(&b, s->step);
+  nh_put(&b, &s->time, 8);
+  for (int k = 0; k < 3; k++) nh_put_i32(&b, m->grid[k]);
+  nh_put(&b, m->origin, 24);
+  nh_put(&b, m->spacing, 24);
+  nh_put_i32(&b, m->n_nodes);
+  nh_put(&b, m->X, sizeof(double) * 3 * (size_t)m->n_nodes);
+  nh_put_i32(&b, m->n_cells);
+  for (int c = 0; c < 8 * m->n_cells; c++) nh_put_i32(&b, m->cells[c]);
+  for (int c = 0; c < m->n_cells; c++) nh_put_i32(&b, m->level[c]);
+  for (int c = 0; c < m->n_cells; c++) nh_put_i32(&b, m->parent[c]);
+  for (int c = 0; c < m->n_cells; c++) nh_put_i32(&b, m->first_child[c]);
+  for (int c = 0; c < m->n_cells; c++) nh_put_i32(&b, m->n_children[c]);
+  nh_put(&b, m->fill, sizeof(double) * (size_t)m->n_cells);
+  nh_put(&b, s->u, sizeof(double) * 3 * (size_t)m->n_nodes);
+  nh_put(&b, s->v, sizeof(double) * 3 * (size_t)m->n_nodes);
+  if (b.failed) {
+    free(b.data);
+    return NH_ERROR(NH_ERR_MEMORY, "out of memory writing a checkpoint");
+  }
+  char path[NH_PATH_MAX + 32], tmp[NH_PATH_MAX + 40];
+  nh_checkpoint_path(s->scene->output.dir, path, sizeof path);
+  snprintf(tmp, sizeof tmp, "%s.tmp", path);
+  uint32_t version = 1, order = 0x01020304;
+  uint64_t size = b.len, sum = nh_fnv1a(b.data, b.len, NH_FNV_SEED);
+  FILE *f = fopen(tmp, "wb");
+  int ok = f && fwrite(nh_magic, 8, 1, f) == 1 && fwrite(&version, 4, 1, f) == 1 &&
+           fwrite(&order, 4, 1, f) == 1 && fwrite(&size, 8, 1, f) == 1 &&
+           fwrite(&sum, 8, 1, f) == 1 && fwrite(b.data, 1, b.len, f) == b.len && fflush(f) == 0 &&
+           fsync(fileno(f)) == 0;
+  int err = errno;
+  if (f && fclose(f) != 0 && ok) ok = 0, err = errno;
+  free(b.data);
+  if (!ok || rename(tmp, path) != 0) {
+    if (ok) err = errno;
+    remove(tmp);
+    return NH_ERROR(NH_ERR_IO, "%s: cannot write the checkpoint: %s", path, strerror(err));
+  }
+  return NH_OK;
+}
+
+/* Reading: a cursor over the payload that refuses to run past its end. */
+typedef struct {
+  const unsigned char *p, *end;
+  int short_read;
+} nh_cur;
+
+static void nh_get(nh_cur *c, void *out, size_t n) {
+  if (c->short_read || (size_t)(c->end - c->p) < n) {
+    c->short_read = 1;
+    memset(out, 0, n);
+    return;
+  }
+  memcpy(out, c->p, n);
+  c->p += n;
+}
+
+static int nh_get_i32(nh_cur *c) {
+  int32_t x;
+  nh_get(c, &x, 4);
+  return x;
+}
+
+int nh_checkpoint_read(const char *dir, const nh_scene *scene, nh_checkpoint *ck) {
+  memset(ck, 0, sizeof *ck);
+  char path[NH_PATH_MAX + 32];
+  nh_checkpoint_path(dir, path, sizeof path);
+  FILE *f = fopen(path, "rb");
+  if (!f)
+    return NH_ERROR(NH_ERR_INPUT, "--restart: %s: cannot open the checkpoint: %s", path,
+                    strerror(errno));
+  char magic[8];
+  uint32_t version = 0, order = 0;
+  uint64_t size = 0, sum = 0;
+  int head = fread(magic, 8, 1, f) == 1 && fread(&version, 4, 1, f) == 1 &&
+             fread(&order, 4, 1, f) == 1 && fread(&size, 8, 1, f) == 1 && fread(&sum, 8, 1, f) == 1;
+  if (!head || memcmp(magic, nh_magic, 8) != 0) {
+    fclose(f);
+    return NH_ERROR(NH_ERR_INPUT, "--restart: %s: not a needlehex checkpoint", path);
+  }
+  if (version != 1 || order != 0x01020304) {
+    fclose(f);
+    return NH_ERROR(NH_ERR_INPUT,
+                    "--restart: %s: checkpoint format %u (byte order %#x) is not the one this "
+                    "needlehex reads (1, %#x)",
+                    path, version, order, 0x01020304u);
+  }
+  unsigned char *data = size < ((uint64_t)1 << 40) ? malloc(size ? size : 1) : NULL;
+  if (!data) {
+    fclose(f);
+    return NH_ERROR(NH_ERR_INPUT, "--restart: %s: implausible payload size %llu", path,
+                    (unsigned long long)size);
+  }
+  size_t got = fread(data, 1, size, f);
+  int extra = fgetc(f) != EOF;
+  fclose(f);
+  if (got != size || extra || nh_fnv1a(data, size, NH_FNV_SEED) != sum) {
+    free(data);
+    return NH_ERROR(NH_ERR_INPUT, "--restart: %s: the checkpoint is corrupted (%s)", path,
+                    got != size ? "truncated"
+                    : extra     ? "trailing bytes"
+                                : "checksum mismatch");
+  }
+  nh_cur c = {data, data + size, 0};
+  uint64_t scene_hash;
+  nh_get(&c, &scene_hash, 8);
+  uint64_t want =
+      nh_fnv1a(scene->yaml ? scene->yaml : "", strlen(scene->yaml ? scene->yaml : ""), NH_FNV_SEED);
+  if (scene_hash != want) {
+    free(data);
+    return NH_ERROR(
+        NH_ERR_INPUT,
+        "--restart: %s: the checkpoint was written for another scene (the scene as run, overrides "
+        "included, must be the same: compare %s/scene.yaml)",
+        path, dir);
+  }
+  ck->step = nh_get_i32(&c);
+  nh_get(&c, &ck->time, 8);
+  nh_mesh *m = calloc(1, sizeof *m);
+  int rc = NH_OK;
+  if (!m) {
+    free(data);
+    return NH_ERROR(NH_ERR_MEMORY, "out of memory reading a checkpoint");
+  }
+  for (int k = 0; k < 3; k++) m->grid[k] = nh_get_i32(&c);
+  nh_get(&c, m->origin, 24);
+  nh_get(&c, m->spacing, 24);
+  m->n_nodes = m->cap_nodes = nh_get_i32(&c);
+  if (c.short_read || m->n_nodes <= 0 || (size_t)m->n_nodes > size / 24) {
+    rc = NH_ERROR(NH_ERR_INPUT, "--restart: %s: the checkpoint's mesh is malformed", path);
+    goto done;
+  }
+  m->X = malloc(sizeof(double) * 3 * (size_t)m->n_nodes);
+  if (!m->X) goto oom;
+  nh_get(&c, m->X, sizeof(double) * 3 * (size_t)m->n_nodes);
+  m->n_cells = m->cap_cells = nh_get_i32(&c);
+  if (c.short_read || m->n_cells <= 0 || (size_t)m->n_cells > size / 32) {
+    rc = NH_ERROR(NH_ERR_INPUT, "--restart: %s: the checkpoint's mesh is malformed", path);
+    goto done;
+  }
+  size_t nc = (size_t)m->n_cells;
+  m->cells = malloc(sizeof(int) * 8 * nc);
+  m->level = malloc(sizeof(int) * nc);
+  m->parent = malloc(sizeof(int) * nc);
+  m->first_child = malloc(sizeof(int) * nc);
+  m->n_children = malloc(sizeof(int) * nc);
+  m->fill = malloc(sizeof(double) * nc);
+  ck->u = malloc(sizeof(double) * 3 * (size_t)m->n_nodes);
+  ck->v = malloc(sizeof(double) * 3 * (size_t)m->n_nodes);
+  if (!m->cells || !m->level || !m->parent || !m->first_child || !m->n_children || !m->fill ||
+      !ck->u || !ck->v)
+    goto oom;
+  for (size_t i = 0; i < 8 * nc; i++) m->cells[i] = nh_get_i32(&c);
+  for (size_t i = 0; i < nc; i++) m->level[i] = nh_get_i32(&c);
+  for (size_t i = 0; i < nc; i++) m->parent[i] = nh_get_i32(&c);
+  for (size_t i = 0; i < nc; i++) m->first_child[i] = nh_get_i32(&c);
+  for (size_t i = 0; i < nc; i++) m->n_children[i] = nh_get_i32(&c);
+  nh_get(&c, m->fill, sizeof(double) * nc);
+  nh_get(&c, ck->u, sizeof(double) * 3 * (size_t)m->n_nodes);
+  nh_get(&c, ck->v, sizeof(double) * 3 * (size_t)m->n_nodes);
+  /* Structural sanity: indices in range (a checksum-valid file of a buggy writer must not crash
+   * us). */
+  int bad = c.short_read || c.p != c.end;
+  for (size_t i = 0; i < 8 * nc && !bad; i++) bad = m->cells[i] < 0 || m->cells[i] >= m->n_nodes;
+  for (size_t i = 0; i < nc && !bad; i++)
+    bad = m->parent[i] < -1 || m->parent[i] >= m->n_cells || m->first_child[i] < -1 ||
+          m->first_child[i] + m->n_children[i] > m->n_cells || m->n_children[i] < 0;
+  if (bad) {
+    rc = NH_ERROR(NH_ERR_INPUT, "--restart: %s: the checkpoint's mesh is malformed", path);
+    goto done;
+  }
+  rc = nh_mesh_update_leaves(m);
+  goto done;
+oom:
+  rc = NH_ERROR(NH_ERR_MEMORY, "out of memory reading a checkpoint");
+done:
+  free(data);
+  if (rc) {
+    nh_mesh_destroy(&m);
+    free(ck->u), free(ck->v);
+    ck->u = ck->v = NULL;
+    return rc;
+  }
+  ck->mesh = m;
+  return NH_OK;
+}
