@@ -1,0 +1,507 @@
+/* test_beam — the corotational Euler–Bernoulli beam (src/beam, docs/beam.md).
+ *
+ *  0. Element derivatives: f = ∂U/∂p and K = ∂f/∂p against central
+ *     differences along the same increments (x += ε δx, T ← exp(ε δw) T), on
+ *     a randomly deformed element with rotations up to ~0.5 rad.
+ *  1. Cantilever, tip load P: nodal deflections P s²(3L − s)/(6EI) and
+ *     rotations P s(2L − s)/(2EI), tip PL³/3EI, PL²/2EI — exact at the nodes
+ *     for cubic elements at any n. The beam is geometrically nonlinear; with
+ *     tip rotation θ = 1e-5 the nonlinear terms are O(θ²) = 1e-10 relative
+ *     and round-off in the corotated frame O(eps/θ) = 2e-11, so the
+ *     tolerance 1e-8 (relative to the tip value) covers both with margin.
+ *  2. Own weight q = ρAg (θ ~ 1e-5 again): with consistent loads the nodal
+ *     deflections are the exact q s²(6L² − 4Ls + s²)/(24EI) (tip qL⁴/8EI);
+ *     with lumped loads (ρAl₀/2 g per node) they are the exact response to
+ *     those point loads, Σⱼ Fⱼ G(s, aⱼ) with the cantilever's influence
+ *     function G(s, a) = min(s,a)²(3 max(s,a) − min(s,a))/(6EI), which is
+ *     what the test expects (and it is not qL⁴/8EI: checked too).
+ *  3. Large deflection, (a) tip moment: the exact elastica is a circle of
+ *     radius R = EI/M; a chain of n elements under a pure moment has N = 0,
+ *     chord l = l₀ and nodal rotations advancing by φ = θ/n, so its nodes lie
+ *     exactly on a circle of radius R' = l₀ / (2 sin(φ/2)): the test asserts
+ *     this discrete solution (1e-9 L) and the exact one within
+ *     |R' − R| ≈ R φ²/24 (O(1/n²)), for θ = π/2 and π.
+ *     (b) tip force (Bisshopp–Drucker), PL²/EI = 2: against the elastica
+ *     θ'' = (P/EI) cos θ, θ(0) = 0, θ'(L) = 0, integrated by RK4 and shooting
+ *     (bisection on θ'(0)) in this file; observed order from n = 8, 16, 32 in
+ *     [1.8, 2.2] and the finest error below its Richardson bound.
+ *  4. Rigid motions: a rigidly moved rest beam has f = 0; a deformed state
+ *     moved rigidly gives f(Qx + t) = Q f(x), same energy, K → Q K Qᵀ.
+ *  5. A cantilever along a random direction under a tip load normal to it,
+ *     in the nonlinear range, deflects exactly as one along x rotated.
+ *  6. Hermite points: on the cantilever of 1 (n = 4), x(s) matches the
+ *     exact deflection curve between nodes (1e-8 of the tip deflection) while
+ *     the chord misses it by > 1e-3; J matches central differences of x(s);
+ *     nh_beam_add_point_force is the exact transpose: ⟨Jδ, F⟩ = ⟨δ, JᵀF⟩.
+ *  7. Dynamics: a damped cantilever released under gravity settles to the
+ *     static (lumped-gravity) solution; an undamped one never gains energy. */
+#include "beam/beam.h"
+#include "check.h"
+
+#include <string.h>
+
+static nh_beam_section section(void) {
+  nh_beam_section s = {
+      .young = 2e11, .poisson = 0.3, .radius = 5e-4, .inner_radius = 2e-4, .density = 8000};
+  return s;
+}
+
+static nh_beam *make(const double dir[3], double L, int n) {
+  nh_beam_spec sp = {.section = section(), .length = L, .elements = n};
+  memcpy(sp.direction, dir, sizeof sp.direction);
+  nh_beam *b;
+  CHECK_OK(nh_beam_create(&sp, &b));
+  return b;
+}
+
+/* tol: 1e-12 in the nonlinear range; 1e-9 for the tiny loads of the
+ * linear-regime tests, whose Newton corrections stall at ~2e-10 of the
+ * displacement (round-off eps·|x| against deflections 1e-5·|x|). */
+static nh_beam_static_options opts(int steps, double tol) {
+  nh_beam_static_options o = {.load_steps = steps, .max_iterations = 30, .tolerance = tol};
+  return o;
+}
+
+static double dot3(const double a[3], const double b[3]) {
+  return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+
+/* 0. Element derivatives by central differences. */
+static void test_derivatives(void) {
+  const double x_dir[3] = {1, 0, 0};
+  nh_beam *b = make(x_dir, 0.02, 1);
+  double d[12];
+  for (int trial = 0; trial < 5; trial++) {
+    nh_beam_reset(b);
+    for (int i = 0; i < 12; i++) d[i] = (i % 6 < 3 ? 0.002 : 0.4) * nh_rand();
+    nh_beam_increment(b, d);
+    double Q[9], r[3] = {nh_rand(), nh_rand(), nh_rand()};
+    nh_mat3_rotation(r, Q);
+    nh_beam_move_rigid(b, Q, NULL, NULL);
+    double *x = nh_beam_positions(b), *T = nh_beam_directors(b);
+    double x0[6], T0[18], f[12], K[144];
+    memcpy(x0, x, sizeof x0), memcpy(T0, T, sizeof T0);
+    nh_beam_element_force(b, 0, f, K);
+    double fmx = 0;
+    for (int i = 0; i < 12; i++) fmx = fmax(fmx, fabs(f[i]) * (i % 6 < 3 ? 0.02 : 1.0));
+    for (int k = 0; k < 12; k++) {
+      const double eps = k % 6 < 3 ? 1e-7 : 1e-6;
+      double fp[12], fm[12], Up, Um, inc[12] = {0};
+      inc[k] = eps;
+      nh_beam_increment(b, inc);
+      Up = nh_beam_element_force(b, 0, fp, NULL);
+      memcpy(x, x0, sizeof x0), memcpy(T, T0, sizeof T0);
+      inc[k] = -eps;
+      nh_beam_increment(b, inc);
+      Um = nh_beam_element_force(b, 0, fm, NULL);
+      memcpy(x, x0, sizeof x0), memcpy(T, T0, sizeof T0);
+      const double scale = k % 6 < 3 ? 1.0 / 0.02 : 1.0; /* fmax is a moment scale */
+      CHECK_CLOSE(f[k], (Up - Um) / (2 * eps), 1e-6 * fmx * scale, "f = dU/dp");
+      for (int i = 0; i < 12; i++)
+        CHECK_CLOSE(K[12 * i + k], (fp[i] - fm[i]) / (2 * eps),
+                    1e-6 * sqrt(fabs(K[13 * i]) * fabs(K[13 * k])), "K = df/dp");
+    }
+  }
+  nh_beam_destroy(&b);
+}
+
+/* 1. Tip load. */
+static void test_tip_load(void) {
+  const double L = 0.1, dir[3] = {1, 0, 0};
+  for (int n = 1; n <= 10; n += 3) {
+    nh_beam *b = make(dir, L, n);
+    const double EI = 2e11 * nh_beam_get_constants(b)->inertia;
+    const double P = 2e-5 * EI / (L * L); /* tip rotation 1e-5 */
+    double *f = calloc((size_t)nh_beam_dofs(b), sizeof(double));
+    f[6 * n + 1] = P;
+    nh_beam_static_options o = opts(1, 1e-9);
+    CHECK_OK(nh_beam_solve_static(b, &o, f, NULL));
+    const double wtip = P * L * L * L / (3 * EI), ttip = P * L * L / (2 * EI);
+    const double *x = nh_beam_positions(b), *X = nh_beam_rest_positions(b);
+    for (int a = 0; a <= n; a++) {
+      double s = a * L / n, th[3];
+      nh_beam_rotation_log(nh_beam_directors(b) + 9 * a, th);
+      CHECK_CLOSE(x[3 * a + 1] - X[3 * a + 1], P * s * s * (3 * L - s) / (6 * EI), 1e-8 * wtip,
+                  "tip load: nodal deflection");
+      CHECK_CLOSE(th[2], P * s * (2 * L - s) / (2 * EI), 1e-8 * ttip, "tip load: nodal rotation");
+    }
+    free(f);
+    nh_beam_destroy(&b);
+  }
+}
+
+/* 2. Own weight, consistent and lumped loads. */
+static void test_gravity(void) {
+  const double L = 0.1, dir[3] = {1, 0, 0};
+  const int n = 5;
+  for (int consistent = 0; consistent <= 1; consistent++) {
+    nh_beam *b = make(dir, L, n);
+    const nh_beam_constants *c = nh_beam_get_constants(b);
+    const double EI = 2e11 * c->inertia, rhoA = 8000 * c->area;
+    const double g = 6e-5 * EI / (rhoA * L * L * L); /* tip rotation qL³/6EI = 1e-5 */
+    const double q = rhoA * g, wtip = q * L * L * L * L / (8 * EI);
+    nh_beam_static_options o = opts(1, 1e-9);
+    o.gravity[2] = -g;
+    o.consistent_load = consistent;
+    CHECK_OK(nh_beam_solve_static(b, &o, NULL, NULL));
+    const double *x = nh_beam_positions(b), *X = nh_beam_rest_positions(b);
+    for (int a = 0; a <= n; a++) {
+      double s = a * L / n, w;
+      if (consistent) {
+        w = q * s * s * (6 * L * L - 4 * L * s + s * s) / (24 * EI);
+      } else {
+        w = 0.0;
+        for (int j = 1; j <= n; j++) {
+          double aj = j * L / n, F = q * L / n * (j == n ? 0.5 : 1.0);
+          double lo = fmin(s, aj), hi = fmax(s, aj);
+          w += F * lo * lo * (3 * hi - lo) / (6 * EI);
+        }
+      }
+      CHECK_CLOSE(X[3 * a + 2] - x[3 * a + 2], w, 1e-8 * wtip,
+                  consistent ? "gravity (consistent): nodal deflection"
+                             : "gravity (lumped): nodal deflection");
+    }
+    if (!consistent) /* lumped loads are not the distributed load at the tip */
+      CHECK(fabs(X[3 * n + 2] - x[3 * n + 2] - wtip) > 1e-3 * wtip,
+            "lumped gravity should differ from qL^4/8EI");
+    nh_beam_destroy(&b);
+  }
+}
+
+/* 3a. Tip moment: circle. */
+static void test_tip_moment(void) {
+  const double L = 0.1, dir[3] = {1, 0, 0};
+  const double angles[2] = {0.5 * M_PI, M_PI};
+  for (int ia = 0; ia < 2; ia++) {
+    double prev_err = 0;
+    for (int n = 8; n <= 32; n *= 2) {
+      nh_beam *b = make(dir, L, n);
+      const double EI = 2e11 * nh_beam_get_constants(b)->inertia, th = angles[ia];
+      const double M = th * EI / L, R = EI / M, phi = th / n, Rd = (L / n) / (2 * sin(phi / 2));
+      double *f = calloc((size_t)nh_beam_dofs(b), sizeof(double));
+      f[6 * n + 5] = M;
+      nh_beam_static_options o = opts(20, 1e-12);
+      nh_beam_stats st;
+      CHECK_OK(nh_beam_solve_static(b, &o, f, &st));
+      const double *x = nh_beam_positions(b);
+      double tip[2] = {x[3 * n], x[3 * n + 1]};
+      const double *Tt = nh_beam_directors(b) + 9 * n; /* d1 = (cos θ, sin θ, 0) */
+      CHECK_CLOSE(tip[0], Rd * sin(th), 1e-9 * L, "tip moment: discrete circle x");
+      CHECK_CLOSE(tip[1], Rd * (1 - cos(th)), 1e-9 * L, "tip moment: discrete circle y");
+      CHECK_CLOSE(Tt[0], cos(th), 1e-9, "tip moment: tip rotation (cos)");
+      CHECK_CLOSE(Tt[3], sin(th), 1e-9, "tip moment: tip rotation (sin)");
+      double err = hypot(tip[0] - R * sin(th), tip[1] - R * (1 - cos(th)));
+      double bound = 1.01 * (Rd - R) * hypot(sin(th), 1 - cos(th)) + 1e-9 * L;
+      CHECK(err <= bound, "tip moment θ=%g n=%d: |tip − elastica| %.3e > %.3e", th, n, err, bound);
+      if (prev_err > 0) {
+        double p = log2(prev_err / err);
+        CHECK(p > 1.9 && p < 2.1, "tip moment θ=%g: observed order %.3f not 2", th, p);
+      }
+      prev_err = err;
+      free(f);
+      nh_beam_destroy(&b);
+    }
+  }
+}
+
+/* 3b. Tip force elastica by RK4 shooting, in units of L, α = PL²/EI, load
+ * (0, −P). The FE beam is extensible (EA finite): its axial strain N/EA,
+ * N = −P sin θ, shifts the tip by ~P/EA · L = 1.5e-5 L here, more than the
+ * discretisation error at n = 32, so the reference is the extensible
+ * elastica: with λ = 1 + N/EA = 1 − β sin θ, β = P/EA,
+ *   (θ, κ, x, y)' = (κ, α λ cos θ, λ cos θ, λ sin θ),
+ * θ(0) = 0, κ(1) = 0 (EI θ' = M = −P (x_L − x), so θ'' = (P/EI) x').
+ * Returns κ(1) and the tip. */
+static double elastica_shoot(double alpha, double beta, double k0, double tip[2]) {
+  double y[4] = {0, k0, 0, 0};
+  const int steps = 4000;
+  const double h = 1.0 / steps;
+  for (int s = 0; s < steps; s++) {
+    double k[4][4], z[4];
+    for (int st = 0; st < 4; st++) {
+      double c = st == 0 ? 0 : (st == 3 ? 1.0 : 0.5);
+      for (int i = 0; i < 4; i++) z[i] = y[i] + (st ? c * h * k[st - 1][i] : 0.0);
+      const double lam = 1 - beta * sin(z[0]);
+      k[st][0] = z[1], k[st][1] = alpha * lam * cos(z[0]);
+      k[st][2] = lam * cos(z[0]), k[st][3] = lam * sin(z[0]);
+    }
+    for (int i = 0; i < 4; i++) y[i] += h / 6 * (k[0][i] + 2 * k[1][i] + 2 * k[2][i] + k[3][i]);
+  }
+  tip[0] = y[2], tip[1] = y[3];
+  return y[1];
+}
+
+static void test_tip_force(void) {
+  const double L = 0.1, dir[3] = {1, 0, 0}, alpha = 2.0;
+  nh_beam_constants c;
+  nh_beam_section sec = section();
+  CHECK_OK(nh_beam_section_constants(&sec, &c));
+  const double beta = alpha * c.inertia / (c.area * L * L);
+  double lo = -2 * alpha, hi = 0.0, ref[2];
+  for (int it = 0; it < 100; it++) {
+    double mid = 0.5 * (lo + hi);
+    if (elastica_shoot(alpha, beta, mid, ref) > 0)
+      hi = mid;
+    else
+      lo = mid;
+  }
+  elastica_shoot(alpha, beta, 0.5 * (lo + hi), ref);
+  double err[3];
+  int k = 0;
+  for (int n = 8; n <= 32; n *= 2, k++) {
+    nh_beam *b = make(dir, L, n);
+    const double EI = 2e11 * nh_beam_get_constants(b)->inertia;
+    double *f = calloc((size_t)nh_beam_dofs(b), sizeof(double));
+    f[6 * n + 1] = -alpha * EI / (L * L);
+    nh_beam_static_options o = opts(4, 1e-12);
+    CHECK_OK(nh_beam_solve_static(b, &o, f, NULL));
+    const double *x = nh_beam_positions(b);
+    err[k] = hypot(x[3 * n] - L * ref[0], x[3 * n + 1] - L * ref[1]);
+    free(f);
+    nh_beam_destroy(&b);
+  }
+  double p = log2((err[0]) / (err[1])), p2 = log2(err[1] / err[2]);
+  CHECK(p > 1.8 && p < 2.2 && p2 > 1.8 && p2 < 2.2,
+        "tip force elastica: observed orders %.3f, %.3f not 2 (errors %.3e %.3e %.3e)", p, p2,
+        err[0], err[1], err[2]);
+  /* Richardson: the n = 32 error is about err16 / 3 ... /5 for order 2. */
+  CHECK(err[2] < 0.4 * err[1] && err[2] < 1e-3 * L, "tip force elastica: n=32 error %.3e", err[2]);
+}
+
+/* 4. Rigid motions. */
+static void test_rigid(void) {
+  const double dir[3] = {0.3, -0.2, 0.9}, L = 0.05;
+  const int n = 6, N = 6 * (n + 1);
+  nh_beam *b = make(dir, L, n);
+  double *f1 = calloc(N, sizeof(double)), *f2 = calloc(N, sizeof(double));
+  double *K1 = calloc((size_t)N * N, sizeof(double)), *K2 = calloc((size_t)N * N, sizeof(double));
+  const nh_beam_constants *c = nh_beam_get_constants(b);
+  const double l0 = L / n, EI = 2e11 * c->inertia, EA = 2e11 * c->area;
+  /* Round-off: positions up to |x| ~ 2 m carry errors δ = eps |x|; the frame
+   * turns by δ/l0, stretches by δ: forces EA δ/l0, moments EI δ/l0². */
+  const double delta = 2.0 * 2.2e-16 * 2.0;
+  const double ftol = 10 * EA * delta / l0, mtol = 10 * EI * delta / (l0 * l0);
+  for (int trial = 0; trial < 10; trial++) {
+    double r[3] = {nh_rand(), nh_rand(), nh_rand()}, t[3] = {nh_rand(), nh_rand(), nh_rand()};
+    double nr = sqrt(dot3(r, r)), ang = trial == 0 ? M_PI : M_PI * trial / 10.0, Q[9];
+    for (int i = 0; i < 3; i++) r[i] *= ang / nr;
+    nh_mat3_rotation(r, Q);
+    nh_beam_reset(b);
+    nh_beam_move_rigid(b, Q, nh_beam_rest_positions(b) + 3 * n, t);
+    double U = nh_beam_internal_force(b, f1, NULL, 0);
+    for (int i = 0; i < N; i++)
+      CHECK_CLOSE(f1[i], 0.0, i % 6 < 3 ? ftol : mtol, "rigid motion: f = 0");
+    CHECK_CLOSE(U, 0.0, ftol * delta, "rigid motion: U = 0");
+    /* deformed, then moved */
+    nh_beam_reset(b);
+    double *d = calloc(N, sizeof(double));
+    for (int i = 6; i < N; i++) d[i] = (i % 6 < 3 ? 1e-3 * L : 0.3) * nh_rand();
+    nh_beam_increment(b, d);
+    free(d);
+    double U1 = nh_beam_internal_force(b, f1, K1, 0);
+    nh_beam_move_rigid(b, Q, NULL, t);
+    double U2 = nh_beam_internal_force(b, f2, K2, 0);
+    CHECK_CLOSE(U2, U1, 1e-10 * U1, "rigid motion: energy");
+    double fm = 0, km = 0;
+    for (int i = 0; i < N; i++) fm = fmax(fm, fabs(f1[i]));
+    for (int i = 0; i < N * N; i++) km = fmax(km, fabs(K1[i]));
+    for (int a = 0; a < 2 * (n + 1); a++) {
+      double qf[3];
+      nh_mat3_vec(Q, f1 + 3 * a, qf);
+      for (int i = 0; i < 3; i++) CHECK_CLOSE(f2[3 * a + i], qf[i], 1e-10 * fm, "f(Qx) = Q f(x)");
+    }
+    for (int a = 0; a < 2 * (n + 1); a++)
+      for (int c = 0; c < 2 * (n + 1); c++) {
+        double B[9], QB[9];
+        for (int i = 0; i < 3; i++)
+          for (int j = 0; j < 3; j++) B[3 * i + j] = K1[(size_t)(3 * a + i) * N + 3 * c + j];
+        nh_mat3_mul(Q, B, QB);
+        nh_mat3_mul_nt(QB, Q, QB);
+        for (int i = 0; i < 9; i++)
+          CHECK_CLOSE(K2[(size_t)(3 * a + i / 3) * N + 3 * c + i % 3], QB[i], 1e-10 * km,
+                      "K(Qx) = Q K Qᵀ");
+      }
+  }
+  free(f1), free(f2), free(K1), free(K2);
+  nh_beam_destroy(&b);
+}
+
+/* 5. Any direction behaves as x. */
+static void test_direction(void) {
+  const double L = 0.1, ex[3] = {1, 0, 0};
+  const int n = 10;
+  nh_beam *bx = make(ex, L, n);
+  const double EI = 2e11 * nh_beam_get_constants(bx)->inertia, P = 1.5 * EI / (L * L);
+  for (int trial = 0; trial < 3; trial++) {
+    double r[3] = {nh_rand(), nh_rand(), nh_rand()}, Q[9];
+    if (trial == 0) r[0] = r[1] = 0, r[2] = 0.5 * M_PI; /* x → y */
+    nh_mat3_rotation(r, Q);
+    const double dir[3] = {Q[0], Q[3], Q[6]};
+    nh_beam_spec sp = {.section = section(), .length = L, .elements = n};
+    memcpy(sp.direction, dir, sizeof dir);
+    sp.normal[0] = Q[1], sp.normal[1] = Q[4], sp.normal[2] = Q[7];
+    nh_beam *b;
+    CHECK_OK(nh_beam_create(&sp, &b));
+    double *f = calloc(6 * (n + 1), sizeof(double)), *fx = calloc(6 * (n + 1), sizeof(double));
+    double load[3] = {0, P * 0.6, P * 0.8}; /* in the x-beam's frame */
+    memcpy(fx + 6 * n, load, sizeof load);
+    nh_mat3_vec(Q, load, f + 6 * n);
+    nh_beam_reset(bx);
+    nh_beam_static_options o = opts(3, 1e-12);
+    CHECK_OK(nh_beam_solve_static(bx, &o, fx, NULL));
+    CHECK_OK(nh_beam_solve_static(b, &o, f, NULL));
+    const double *x = nh_beam_positions(b), *xx = nh_beam_positions(bx);
+    double ux[3], qu[3], u[3];
+    for (int i = 0; i < 3; i++) ux[i] = xx[3 * n + i] - (i == 0) * L, u[i] = x[3 * n + i];
+    nh_mat3_vec(Q, ux, qu);
+    CHECK(sqrt(dot3(ux, ux)) > 0.2 * L, "direction: deflection %g is not large",
+          sqrt(dot3(ux, ux)));
+    double Lq[3] = {Q[0] * L, Q[3] * L, Q[6] * L};
+    for (int i = 0; i < 3; i++)
+      CHECK_CLOSE(u[i] - Lq[i], qu[i], 1e-9 * L, "direction: tip displacement rotated");
+    free(f), free(fx);
+    nh_beam_destroy(&b);
+  }
+  nh_beam_destroy(&bx);
+}
+
+/* 6. Hermite points and the transpose. */
+static void test_hermite(void) {
+  const double L = 0.1, dir[3] = {1, 0, 0};
+  const int n = 4;
+  nh_beam *b = make(dir, L, n);
+  const double EI = 2e11 * nh_beam_get_constants(b)->inertia, P = 2e-5 * EI / (L * L);
+  double *f = calloc(6 * (n + 1), sizeof(double));
+  f[6 * n + 1] = P;
+  nh_beam_static_options o = opts(1, 1e-9);
+  CHECK_OK(nh_beam_solve_static(b, &o, f, NULL));
+  const double wtip = P * L * L * L / (3 * EI);
+  const double *xn = nh_beam_positions(b);
+  double worst = 0, chord_worst = 0;
+  for (int k = 0; k <= 40; k++) {
+    double s = L * k / 40.0, x[3], t[3];
+    nh_beam_point(b, s, x, t, NULL, NULL, NULL);
+    double w = P * s * s * (3 * L - s) / (6 * EI), slope = P * s * (2 * L - s) / (2 * EI);
+    worst = fmax(worst, fabs(x[1] - w));
+    /* the axial shortening ½∫w'² <= θ_tip² s / 2 is a real O(θ²) effect */
+    CHECK_CLOSE(x[0], s, 1e-10 * s + 1e-17, "Hermite point: axial position");
+    CHECK_CLOSE(x[1], w, 1e-8 * wtip, "Hermite point: deflection w(s)");
+    CHECK_CLOSE(t[1], slope, 1e-8 * slope + 1e-15, "Hermite point: tangent");
+    int e = k * n / 40 < n ? k * n / 40 : n - 1;
+    double xi = s / (L / n) - e;
+    double yc = (1 - xi) * xn[3 * e + 1] + xi * xn[3 * e + 4];
+    chord_worst = fmax(chord_worst, fabs(yc - w));
+  }
+  CHECK(chord_worst > 1e-3 * wtip, "chord error %.3e should be visible", chord_worst);
+  /* J against differences; ⟨Jδ, F⟩ = ⟨δ, JᵀF⟩ (nonlinear state). */
+  double *d = calloc(6 * (n + 1), sizeof(double)), *g = calloc(6 * (n + 1), sizeof(double));
+  for (int i = 6; i < 6 * (n + 1); i++) d[i] = (i % 6 < 3 ? 0.02 * L : 0.3) * nh_rand();
+  nh_beam_increment(b, d);
+  for (int trial = 0; trial < 20; trial++) {
+    double s = L * (0.5 + 0.5 * nh_rand()), J[36], x[3], F[3], dl[12], jd[3] = {0, 0, 0};
+    int e;
+    nh_beam_point(b, s, x, NULL, &e, NULL, J);
+    for (int i = 0; i < 3; i++) F[i] = nh_rand();
+    for (int i = 0; i < 12; i++) dl[i] = nh_rand();
+    for (int i = 0; i < 3; i++)
+      for (int j = 0; j < 12; j++) jd[i] += J[12 * i + j] * dl[j];
+    memset(g, 0, 6 * (n + 1) * sizeof(double));
+    nh_beam_add_point_force(b, s, F, g);
+    double lhs = dot3(jd, F), rhs = 0.0;
+    for (int j = 0; j < 12; j++) rhs += dl[j] * g[6 * e + j];
+    CHECK_CLOSE(rhs, lhs, 1e-14 * (fabs(lhs) + L), "<J d, F> = <d, J^T F>");
+    /* central difference of x(s) along dl */
+    const double eps = 1e-7;
+    double *pos = nh_beam_positions(b), *T = nh_beam_directors(b), save_x[6], save_T[18], xp[3],
+           xm[3];
+    memcpy(save_x, pos + 3 * e, sizeof save_x), memcpy(save_T, T + 9 * e, sizeof save_T);
+    memset(d, 0, 6 * (n + 1) * sizeof(double));
+    for (int j = 0; j < 12; j++) d[6 * e + j] = eps * dl[j];
+    nh_beam_increment(b, d);
+    nh_beam_point(b, s, xp, NULL, NULL, NULL, NULL);
+    memcpy(pos + 3 * e, save_x, sizeof save_x), memcpy(T + 9 * e, save_T, sizeof save_T);
+    for (int j = 0; j < 12; j++) d[6 * e + j] = -eps * dl[j];
+    nh_beam_increment(b, d);
+    nh_beam_point(b, s, xm, NULL, NULL, NULL, NULL);
+    memcpy(pos + 3 * e, save_x, sizeof save_x), memcpy(T + 9 * e, save_T, sizeof save_T);
+    for (int i = 0; i < 3; i++)
+      CHECK_CLOSE(jd[i], (xp[i] - xm[i]) / (2 * eps), 1e-7 * L, "J = dx(s)/dp");
+  }
+  free(d), free(g), free(f);
+  nh_beam_destroy(&b);
+}
+
+/* 7. Dynamics. */
+static void test_dynamic(void) {
+  const double L = 0.1, dir[3] = {1, 0, 0};
+  const int n = 8, N = 6 * (n + 1);
+  nh_beam *ref = make(dir, L, n), *b = make(dir, L, n);
+  const nh_beam_constants *c = nh_beam_get_constants(b);
+  const double EI = 2e11 * c->inertia, rhoA = 8000 * c->area;
+  const double g = 0.3 * EI / (rhoA * L * L * L); /* tip rotation ~0.05: mildly nonlinear */
+  nh_beam_static_options o = opts(1, 1e-12);
+  o.gravity[2] = -g;
+  CHECK_OK(nh_beam_solve_static(ref, &o, NULL, NULL));
+  /* first bending frequency ω₁ = 3.516 sqrt(EI/(ρA L⁴)); damp it critically-ish */
+  const double w1 = 3.516 * sqrt(EI / (rhoA * L * L * L * L));
+  nh_beam_dynamic_options dyn = {.dt = 0.2 / w1, .alpha = 2 * w1, .beta = 0};
+  dyn.gravity[2] = -g;
+  for (int k = 0; k < 600; k++) CHECK_OK(nh_beam_step_dynamic(b, &dyn, NULL));
+  const double *x = nh_beam_positions(b), *xr = nh_beam_positions(ref);
+  const double wtip = nh_beam_rest_positions(ref)[3 * n + 2] - xr[3 * n + 2];
+  for (int i = 0; i < 3 * (n + 1); i++)
+    CHECK_CLOSE(x[i], xr[i], 1e-6 * wtip, "dynamic: settles to the static solution");
+  /* undamped: E_kin + U − W_gravity never grows */
+  nh_beam_reset(b);
+  dyn.alpha = 0;
+  double *m = calloc(N, sizeof(double)), *fi = calloc(N, sizeof(double));
+  nh_beam_mass(b, m);
+  double Emax = -INFINITY, Emin = INFINITY; /* the rest state has energy 0 */
+  for (int k = 0; k < 200; k++) {
+    CHECK_OK(nh_beam_step_dynamic(b, &dyn, NULL));
+    const double *v = nh_beam_velocities(b), *xx = nh_beam_positions(b);
+    double Ek = 0, U = nh_beam_internal_force(b, fi, NULL, 0), W = 0;
+    for (int i = 0; i < N; i++) Ek += 0.5 * m[i] * v[i] * v[i];
+    for (int a = 0; a <= n; a++) W += m[6 * a] * g * (xx[3 * a + 2] - 0);
+    double Etot = Ek + U + W;
+    Emax = fmax(Emax, Etot), Emin = fmin(Emin, Etot);
+  }
+  CHECK(Emax <= 1e-9 * fabs(Emin), "undamped dynamics gained energy: %.6e > 0", Emax);
+  free(m), free(fi);
+  nh_beam_destroy(&ref);
+  nh_beam_destroy(&b);
+}
+
+/* Section constants and bad input. */
+static void test_section(void) {
+  nh_beam_section s = section();
+  nh_beam_constants c;
+  CHECK_OK(nh_beam_section_constants(&s, &c));
+  const double r = 5e-4, ri = 2e-4;
+  CHECK_CLOSE(c.area, M_PI * (r * r - ri * ri), 1e-15 * c.area, "area");
+  CHECK_CLOSE(c.inertia, M_PI * (pow(r, 4) - pow(ri, 4)) / 4, 1e-15 * c.inertia, "inertia");
+  CHECK_CLOSE(c.polar, 2 * c.inertia, 0, "polar");
+  CHECK_CLOSE(c.shear, 2e11 / 2.6, 1e-15 * c.shear, "shear modulus");
+  s.inner_radius = s.radius;
+  CHECK(nh_beam_section_constants(&s, &c) == NH_ERR_INPUT, "inner radius = radius accepted");
+  nh_beam_spec sp = {.section = section(), .length = 0.1, .elements = 0, .direction = {1, 0, 0}};
+  nh_beam *b = NULL;
+  CHECK(nh_beam_create(&sp, &b) == NH_ERR_INPUT && !b, "0 elements accepted");
+  sp.elements = 2, sp.direction[0] = 0;
+  CHECK(nh_beam_create(&sp, &b) == NH_ERR_INPUT && !b, "zero direction accepted");
+  nh_error_clear();
+}
+
+int main(void) {
+  test_section();
+  test_derivatives();
+  test_tip_load();
+  test_gravity();
+  test_tip_moment();
+  test_tip_force();
+  test_rigid();
+  test_direction();
+  test_hermite();
+  test_dynamic();
+  TEST_END();
+}
