@@ -185,7 +185,7 @@ static void test_linear_displacement(const int grid[3], double distort, const do
   CHECK_CLOSE(eta / norm, 0.0, tol, what);
   CHECK_CLOSE(eta_rel, 0.0, tol, what);
   CHECK_CLOSE(cell_err, 0.0, tol, what);
-  if (getenv("NH_TEST_VERBOSE"))
+  if (getenv("NH_VERBOSE"))
     printf("%-48s centre |s_h - s|/|s| %.2e  nodes |s* - s|/|s| %.2e  eta/|u|_E %.2e  max "
            "eta_e/|u|_E %.2e  eta_rel %.2e\n",
            what, centre_err, node_err, eta / norm, cell_err, eta_rel);
@@ -292,7 +292,7 @@ static void test_linear_stress(void) {
   double sum = 0.0;
   for (int l = 0; l < m->n_leaves; l++) sum += eta_cell[m->leaves[l]] * eta_cell[m->leaves[l]];
   CHECK_CLOSE(sqrt(sum), eta, 1e-13 * eta, "eta = (sum eta_e^2)^1/2");
-  if (getenv("NH_TEST_VERBOSE"))
+  if (getenv("NH_VERBOSE"))
     printf("linear stress field: |s* - s|/max|s| interior %.2e, boundary %.2e; eta_rel %.3g; "
            "|u|_E^2 vs 2 energy: rel diff %.2e\n",
            err[1], err[0], eta_rel, fabs(norm2 - 2 * energy) / (2 * energy));
@@ -423,7 +423,7 @@ static void test_nonconforming(int n) {
       CHECK_CLOSE(ss[6 * i + k], ex[k], 1e-10 * scale, what);
     }
   }
-  if (getenv("NH_TEST_VERBOSE"))
+  if (getenv("NH_VERBOSE"))
     printf("nonconforming, template %d (%d leaves, %d hanging): linear u: eta/|u|_E %.2e; "
            "linear stress: |s* - s|/max|s| %.2e (non-hanging), %.2e (hanging)\n",
            n, m->n_leaves, h->n_hanging, lin_eta, err[0], err[1]);
