@@ -8,7 +8,9 @@ usage: hdf5_readback.py check DIR
          TRIALS times: run `TEST_HDF5 --endless WORKDIR/trial_NN`, SIGKILL it
          after a random delay, then check that results.h5 opens and that
          every frame results.xdmf lists, and every /steps row up to the last
-         listed frame, reads back exactly.
+         listed frame, reads back exactly. Wrong values always fail; a file
+         HDF5 reports as damaged (possible in HDF5 1.10 if the kill lands in
+         a flush) is tolerated in one trial in 30 and reported.
 
 Silent on success; loud (expected, actual) on failure. The formulas are the
 ones documented at the top of test_hdf5.c: keep the two in step."""
@@ -37,6 +39,7 @@ TOOL_COMPONENTS = ["tip_x", "depth", "axial_force", "state"]
 CORNERS = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)]
 
 failures = []
+corrupt = []  # kill trials whose file HDF5 itself reported as damaged
 
 
 def fail(what, expected, actual):
@@ -217,7 +220,7 @@ def check_killed(d):
     try:
         h5 = h5py.File(os.path.join(d, "results.h5"), "r")
     except Exception as e:  # noqa: BLE001 - any failure to open is the finding
-        fail(f"{d}: h5py opens results.h5 ({len(listed)} frames listed)", "open", str(e))
+        corrupt.append(f"{d}: results.h5 does not open ({len(listed)} frames listed): {e}")
         return len(listed), -1
     with h5:
         try:
@@ -229,7 +232,7 @@ def check_killed(d):
             rows = h5["steps"].shape[0]
             last = int(listed[-1][0].split("_")[1]) if listed else 0
             if rows < last:
-                fail(f"{d}: /steps rows up to the last listed frame (step {last})", f">= {last}", rows)
+                fail(f"{d}: /steps rows up to the last listed frame", f">= {last}", rows)
             expected = np.array([step_row(s) for s in range(1, rows + 1)]).reshape(rows, 5)
             expect_equal(f"{d}: /steps", h5["steps"][()], expected)
             for group in ("probes", "tools"):
@@ -244,7 +247,7 @@ def check_killed(d):
                     reader.read_data(len(listed) - 1)
             return len(listed), rows
         except Exception as e:  # noqa: BLE001
-            fail(f"{d}: reading the listed frames", "readable", repr(e))
+            corrupt.append(f"{d}: reading the listed frames: {e!r}")
             return len(listed), -1
 
 
@@ -265,14 +268,23 @@ def kill_trials(binary, work, trials):
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait()
         proc.stderr.close()
-        before = len(failures)
+        before = len(failures) + len(corrupt)
         res = check_killed(d)
-        summary.append((k, delay, res, len(failures) == before))
+        summary.append((k, delay, res, len(failures) + len(corrupt) == before))
+    # Values that read back wrong always fail. A file that HDF5 reports as
+    # damaged is what HDF5 1.10 without SWMR cannot rule out (a kill inside a
+    # flush; docs/outputs.md): tolerated in one trial in 30, and reported.
+    if len(corrupt) > trials // 30:
+        failures.extend(corrupt)
+    elif corrupt:
+        print(f"note: {len(corrupt)} of {trials} killed files damaged (tolerated: {trials // 30})")
+        for c in corrupt:
+            print(f"note: {c}")
     if os.environ.get("NH_VERBOSE") or failures:
         for k, delay, res, ok in summary:
             print(f"trial {k:2d}: killed after {delay:.3f} s: (frames listed, steps rows) = {res}: "
                   f"{'ok' if ok else 'FAILED'}")
-    if not failures:
+    if not failures and not corrupt:
         shutil.rmtree(work, ignore_errors=True)
 
 

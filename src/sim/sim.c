@@ -55,6 +55,7 @@ void nh_sim_destroy(nh_sim **sim) {
   nh_csv_destroy(&s->probes_csv);
   nh_pvd_destroy(&s->tissue_pvd);
   nh_pvd_destroy(&s->points_pvd);
+  nh_h5_close(&s->h5);
   free(s);
   *sim = NULL;
 }
@@ -189,6 +190,7 @@ static int nh_write_frame(nh_sim *s) {
   snprintf(name, sizeof name, "tissue_%06d.vtu", s->step);
   snprintf(path, sizeof path, "%s/%s", sc->output.dir, name);
   if ((rc = nh_vtu_write(path, &g)) || (rc = nh_pvd_add(s->tissue_pvd, s->time, name))) goto done;
+  if (s->h5 && (rc = nh_h5_write_frame(s->h5, s->step, s->time, &g))) goto done;
 
   if (n_pr > 0) {
     for (int i = 0; i < n_pr; i++) {
@@ -220,6 +222,23 @@ done:
 
 static int nh_write_probe_rows(nh_sim *s) {
   const nh_scene *sc = s->scene;
+  if (s->h5 && sc->n_probes > 0) {
+    static const char *const comps[] = {"x", "y", "z", "ux", "uy", "uz"};
+    const char **names = malloc(sizeof(char *) * (size_t)sc->n_probes);
+    double *vals = malloc(sizeof(double) * 6 * (size_t)sc->n_probes);
+    int rc = names && vals ? NH_OK : NH_ERROR(NH_ERR_MEMORY, "out of memory: probe series");
+    for (int i = 0; i < sc->n_probes && !rc; i++) {
+      names[i] = sc->probes[i].name;
+      nh_sim_probe_displacement(s, i, vals + 6 * i + 3);
+      for (int k = 0; k < 3; k++) vals[6 * i + k] = sc->probes[i].point[k] + vals[6 * i + 3 + k];
+    }
+    if (!rc)
+      rc = nh_h5_append_series(s->h5, "probes", s->step, s->time, sc->n_probes, names, 6, comps,
+                               vals);
+    free(names);
+    free(vals);
+    NH_TRY(rc);
+  }
   for (int i = 0; i < sc->n_probes; i++) {
     double u[3];
     nh_sim_probe_displacement(s, i, u);
@@ -279,6 +298,11 @@ static int nh_pvd_resume(const char *dir, const char *prefix, double dt, int ste
 }
 
 static int nh_open_outputs(nh_sim *s) {
+  NH_TRY(nh_mkdir_p(s->scene->output.dir));
+  if (s->scene->output.hdf5)
+    NH_TRY(nh_h5_create(s->scene->output.dir, s->scene->yaml ? s->scene->yaml : "", NH_VERSION,
+                        (int)(sizeof nh_step_columns / sizeof *nh_step_columns), nh_step_columns,
+                        &s->h5));
   if (s->options.restart_dir) {
     const nh_scene *sc = s->scene;
     const char *dir = sc->output.dir;
@@ -584,6 +608,28 @@ int nh_sim_step(nh_sim *s) {
         s->step, s->time, dofs, free_dofs, cells, hanging, rows, s->eta, s->eta_rel, st.iterations,
         st.residual, st.t_assemble, st.t_factor, st.t_solve, st.t_constraints, s->t_adapt,
         pt[NH_PHASE_OUTPUT], pt[NH_PHASE_STEP], work));
+  if (s->h5) {
+    const double row[] = {s->step,
+                          s->time,
+                          dofs,
+                          free_dofs,
+                          cells,
+                          hanging,
+                          rows,
+                          s->eta,
+                          s->eta_rel,
+                          st.iterations,
+                          st.residual,
+                          st.t_assemble,
+                          st.t_factor,
+                          st.t_solve,
+                          st.t_constraints,
+                          s->t_adapt,
+                          pt[NH_PHASE_OUTPUT],
+                          pt[NH_PHASE_STEP],
+                          work};
+    NH_TRY(nh_h5_append_steps(s->h5, row));
+  }
   return NH_OK;
 }
 

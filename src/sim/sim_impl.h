@@ -51,6 +51,7 @@ struct nh_sim {
   /* outputs */
   nh_csv *steps_csv, *probes_csv;
   nh_pvd *tissue_pvd, *points_pvd;
+  nh_h5 *h5; /* results.h5 when output.hdf5 */
   int last_frame;
   nh_progress progress;
 };
