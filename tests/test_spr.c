@@ -328,30 +328,7 @@ static void test_linear_stress(void) {
   nh_mesh_destroy(&m);
 }
 
-/* Regular n x n x n template, built from its definition. */
-static nh_template *regular_template(int n) {
-  nh_template *t = calloc(1, sizeof *t);
-  int m = n + 1;
-  t->n_nodes = m * m * m;
-  t->xi = malloc(sizeof(double) * 3 * t->n_nodes);
-  for (int k = 0; k < m; k++)
-    for (int j = 0; j < m; j++)
-      for (int i = 0; i < m; i++) {
-        double *x = t->xi + 3 * (i + m * (j + m * k));
-        x[0] = -1 + 2.0 * i / n, x[1] = -1 + 2.0 * j / n, x[2] = -1 + 2.0 * k / n;
-      }
-  t->n_children = n * n * n;
-  t->children = malloc(sizeof(int) * 8 * t->n_children);
-  for (int k = 0; k < n; k++)
-    for (int j = 0; j < n; j++)
-      for (int i = 0; i < n; i++)
-        for (int a = 0; a < 8; a++) {
-          int di = nh_hex_corner[a][0] > 0, dj = nh_hex_corner[a][1] > 0,
-              dk = nh_hex_corner[a][2] > 0;
-          t->children[8 * (i + n * (j + n * k)) + a] = (i + di) + m * ((j + dj) + m * (k + dk));
-        }
-  return t;
-}
+#include "hanging_mesh.h" /* regular_template */
 
 /* Test 5: a nonconforming mesh (hanging nodes from the refinement code).
  * A 3x3x3 box grid, its centre cell and a boundary cell refined by the

@@ -26,6 +26,11 @@ typedef struct {
 int nh_hex_stiffness(const double X[24], double lambda, double mu, double K0[576], double G0[24],
                      double *volume);
 
+/* Rest shape-function gradients g[8][3] = ∇_X Nₐ at ξ; returns det J.
+ * g is written only when det J > 0 and J is invertible; otherwise g is left
+ * untouched and the return value is <= 0. */
+double nh_hex_gradients(const double X[24], const double xi[3], double g[24]);
+
 /* Corotational internal force f[24] and (if Kt != NULL) tangent R K0 Rᵀ, and
  * the rotation R[9] of the element, at nodal displacements u[24]. */
 void nh_hex_corot(const double X[24], const double u[24], const double K0[576], const double G0[24],

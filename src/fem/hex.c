@@ -27,8 +27,7 @@ void nh_lame(double E, double nu, double *lambda, double *mu) {
   *mu = E / (2 * (1 + nu));
 }
 
-/* ∇_X N at ξ: g[8][3] and det J. Returns the determinant. */
-static double nh_hex_gradients(const double X[24], const double xi[3], double g[24]) {
+double nh_hex_gradients(const double X[24], const double xi[3], double g[24]) {
   double dN[8][3], J[9] = {0}, Jinv[9];
   nh_hex_dshape(xi, dN);
   for (int a = 0; a < 8; a++)

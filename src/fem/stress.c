@@ -24,20 +24,6 @@
 #include <math.h>
 #include <string.h>
 
-/* Rest gradients g[8][3] at ξ and det J; returns det J. If J is singular or
- * not positive, g is left untouched (the caller keeps the centre's). */
-static double nh_stress_gradients(const double X[24], const double xi[3], double g[24]) {
-  double dN[8][3], J[9] = {0}, Jinv[9];
-  nh_hex_dshape(xi, dN);
-  for (int a = 0; a < 8; a++)
-    for (int i = 0; i < 3; i++)
-      for (int j = 0; j < 3; j++) J[3 * i + j] += X[3 * a + i] * dN[a][j];
-  double det = nh_mat3_det(J);
-  if (!(det > 0.0) || nh_mat3_inverse(J, Jinv)) return det;
-  for (int a = 0; a < 8; a++) nh_mat3_tvec(Jinv, dN[a], g + 3 * a);
-  return det;
-}
-
 void nh_hex_stress_at(const double X[24], const double u[24], const double G0[24], double lambda,
                       double mu, int n, const double *xi, double *s, double *detJ) {
   /* The rotation and corotated displacements of the element, as hex.c. */
@@ -58,7 +44,7 @@ void nh_hex_stress_at(const double X[24], const double u[24], const double G0[24
   for (int p = 0; p < n; p++) {
     double g[24], H[9] = {0}, S[9], T[9];
     memcpy(g, G0, sizeof g);
-    double det = nh_stress_gradients(X, xi + 3 * p, g);
+    double det = nh_hex_gradients(X, xi + 3 * p, g);
     if (detJ) detJ[p] = det;
     for (int a = 0; a < 8; a++)
       for (int i = 0; i < 3; i++)
