@@ -3,7 +3,11 @@
 usage: hdf5_readback.py check DIR
          every dataset, attribute and length of DIR/results.h5 against the
          formulas of test_hdf5.c, and DIR/results.xdmf with meshio's
-         TimeSeriesReader (points, cells and fields of every frame).
+         TimeSeriesReader (points, cells and fields of every frame); then
+         the resumed file DIR/resume (steps 1..10, the values of the second
+         run after step 6, its frames <= 6 and the new ones, the XDMF series
+         with meshio) and the fresh files of DIR/resume_* (a damaged file
+         moved to results.h5.damaged, unchanged).
        hdf5_readback.py kill TEST_HDF5 WORKDIR TRIALS
          TRIALS times: run `TEST_HDF5 --endless WORKDIR/trial_NN`, SIGKILL it
          after a random delay, then check that results.h5 opens and that
@@ -210,6 +214,75 @@ def check_known(d):
                 expect_equal(f"meshio frame {k} cell_data {name}", got[0] if got else None, v)
 
 
+def check_meshio_series(xdmf, frames):
+    """meshio reads every frame (f, step, grid) of the XDMF series exactly."""
+    with meshio.xdmf.TimeSeriesReader(xdmf) as reader:
+        reader.read_points_cells()
+        if reader.num_steps != len(frames):
+            fail(f"{xdmf}: meshio num_steps", len(frames), reader.num_steps)
+            return
+        for k, (f, s, grid) in enumerate(frames):
+            reader.mesh_grid = reader.collection[k]
+            points, cells = reader.read_points_cells()
+            t, point_data, cell_data = reader.read_data(k)
+            e_points, e_conn, e_point, e_cell = frame_expected(f, *grid)
+            expect_equal(f"{xdmf}: meshio frame {k} time", t, 0.01 * s)
+            expect_equal(f"{xdmf}: meshio frame {k} points", points, e_points)
+            expect_equal(f"{xdmf}: meshio frame {k} connectivity", cells[0].data, e_conn)
+            for name, v in e_point.items():
+                expect_equal(f"{xdmf}: meshio frame {k} point_data {name}", point_data.get(name), v)
+            for name, v in e_cell.items():
+                got = cell_data.get(name)
+                expect_equal(f"{xdmf}: meshio frame {k} cell_data {name}", got[0] if got else None, v)
+
+
+def check_resumed(d):
+    """DIR/resume: 10 steps and frames at even steps, resumed at step 6 and
+    continued to 10 with values shifted by 1000 (test_hdf5.c)."""
+    shift = lambda s: 1000.0 if s > 6 else 0.0  # noqa: E731
+    frames = [(f, 2 * f, (NX[f], 1, 1)) for f in range(4)]  # steps 0, 2, 4, 6
+    frames += [(104, 8, (3, 1, 1)), (105, 10, (2, 1, 1))]
+    with h5py.File(os.path.join(d, "results.h5"), "r") as h5:
+        expect_equal(f"{d}: attribute scene", h5.attrs["scene"], SCENE_TEXT)
+        rows = np.array([step_row(s) for s in range(1, 11)])
+        rows[:, 2] += [shift(s) for s in range(1, 11)]
+        expect_equal(f"{d}: /steps", h5["steps"][()], rows)
+        for group, first, values in (("probes", 0, probe_values), ("tools", 1, tool_values)):
+            g = h5[group]
+            s = np.arange(first, 11)
+            expect_equal(f"{d}: /{group}/step", g["step"][()], s.astype(np.int32))
+            expect_equal(f"{d}: /{group}/time", g["time"][()], 0.01 * s)
+            expect_equal(f"{d}: /{group}/values", g["values"][()],
+                         np.array([np.array(values(k)) + shift(k) for k in s]))
+        expect_equal(f"{d}: /frames members", sorted(h5["frames"]),
+                     [f"{s:06d}" for _, s, _ in frames])
+        for f, s, grid in frames:
+            check_frame(h5, f"{s:06d}", f, s, grid)
+        # The frame at 8 is on the mesh of the kept frame at 6: a hard link.
+        if h5["frames/000008/connectivity"].id != h5["frames/000006/connectivity"].id:
+            fail(f"{d}: /frames/000008/connectivity linked to 000006's", True, False)
+    xdmf = os.path.join(d, "results.xdmf")
+    expect_equal(f"{d}: XDMF frames", xdmf_frames(xdmf),
+                 [(f"frame_{s:06d}", 0.01 * s) for _, s, _ in frames])
+    check_meshio_series(xdmf, frames)
+
+    # Files that cannot be resumed: a fresh file with the rows of steps 4, 5.
+    for kind in ("missing", "damaged", "foreign", "columns"):
+        sub = f"{d}_{kind}"
+        with h5py.File(os.path.join(sub, "results.h5"), "r") as h5:
+            expect_equal(f"{sub}: format", h5.attrs["format"], "needlehex-results 1")
+            expect_equal(f"{sub}: /steps", h5["steps"][()], np.array([step_row(4), step_row(5)]))
+            expect_equal(f"{sub}: frames", list(h5["frames"]), [])
+        expect_equal(f"{sub}: XDMF frames", xdmf_frames(os.path.join(sub, "results.xdmf")), [])
+        aside = os.path.join(sub, "results.h5.damaged")
+        if kind == "damaged":
+            with open(aside, "rb") as f:
+                expect_equal(f"{aside} (kept as it was)", f.read(),
+                             b"not an HDF5 file: the bytes a kill left\n")
+        elif os.path.exists(aside):
+            fail(f"{aside} exists", False, True)
+
+
 def check_killed(d):
     """After a SIGKILL: what the XDMF lists must read back exactly.
     Returns (frames listed, steps rows) or None if nothing was promised yet."""
@@ -291,6 +364,7 @@ def kill_trials(binary, work, trials):
 def main():
     if len(sys.argv) == 3 and sys.argv[1] == "check":
         check_known(sys.argv[2])
+        check_resumed(os.path.join(sys.argv[2], "resume"))
     elif len(sys.argv) == 5 and sys.argv[1] == "kill":
         kill_trials(sys.argv[2], sys.argv[3], int(sys.argv[4]))
     else:

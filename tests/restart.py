@@ -10,6 +10,10 @@
    with the same result.
 4. A corrupted, a foreign and another scene's checkpoint are refused with
    exit status 2 and one message.
+5. HDF5 (output.hdf5 on in every run of cases 1-3, the reference included,
+   since it is part of the scene): after each restart results.h5 has exactly
+   one /steps row per step 1..30, equal to steps.csv, and its probe series
+   equals the reference run's to 1e-12 relative.
 """
 import csv
 import os
@@ -21,6 +25,7 @@ import tempfile
 import time
 import xml.etree.ElementTree as ET
 
+import h5py
 import numpy as np
 import vtk
 from vtk.util.numpy_support import vtk_to_numpy
@@ -58,6 +63,9 @@ def last_probes(d):
     return last, np.array([[float(r[k]) for k in ("ux", "uy", "uz")] for r in rows if int(r["step"]) == last])
 
 
+HDF5 = ("--set", "output.hdf5=true")
+
+
 def run(out, *extra, check=True):
     p = subprocess.run([BIN, "run", SCENE, "--quiet", "--out", out, *extra], capture_output=True, text=True)
     if check and p.returncode != 0:
@@ -83,15 +91,62 @@ def compare(ref, got, what):
         fail("%s: last frame displacements differ" % what)
 
 
+def compare_h5(ref, got, what):
+    """results.h5 of a restarted run: one /steps row per step, equal to its
+    steps.csv; probe series equal to the reference run's; the frames of its
+    tissue.pvd."""
+    with open(os.path.join(got, "steps.csv")) as f:
+        reader = csv.reader(f)
+        header = next(reader)
+        csv_rows = np.array([[float(x) for x in r] for r in reader])
+    try:
+        h_got = h5py.File(os.path.join(got, "results.h5"), "r")
+        h_ref = h5py.File(os.path.join(ref, "results.h5"), "r")
+    except OSError as e:
+        fail("%s: results.h5 does not open: %s" % (what, e))
+        return
+    with h_got, h_ref:
+        steps = h_got["steps"]
+        if list(steps.attrs["columns"]) != header:
+            fail("%s: /steps columns %s, steps.csv has %s" % (what, list(steps.attrs["columns"]), header))
+            return
+        got_steps = steps[:, 0].astype(int).tolist()
+        if got_steps != list(range(1, 31)):
+            fail("%s: /steps has the steps %s, expected 1..30 once each" % (what, got_steps))
+            return
+        # Counts and solver values to the digits steps.csv prints; the
+        # timings (columns t_*), eta and eta_rel with 7 digits, residual with 6.
+        if csv_rows.shape != steps.shape or not np.allclose(steps[()], csv_rows, rtol=1e-5, atol=0, equal_nan=True):
+            fail("%s: /steps differs from steps.csv" % what)
+        exact = [j for j, c in enumerate(header) if not c.startswith("t_") and c not in ("eta", "eta_rel", "residual")]
+        if not np.array_equal(steps[:, exact], csv_rows[:, exact], equal_nan=True):
+            fail("%s: /steps columns %s differ from steps.csv" % (what, [header[j] for j in exact]))
+        p_got, p_ref = h_got["probes"], h_ref["probes"]
+        for name in ("step", "time"):
+            if not np.array_equal(p_got[name][()], p_ref[name][()]):
+                fail("%s: /probes/%s differs from the reference run's" % (what, name))
+        v_got, v_ref = p_got["values"][()], p_ref["values"][()]
+        if v_got.shape != v_ref.shape:
+            fail("%s: /probes/values has shape %s, reference %s" % (what, v_got.shape, v_ref.shape))
+            return
+        scale = np.abs(v_ref).max()
+        if not np.allclose(v_got, v_ref, rtol=0, atol=1e-12 * scale):
+            fail("%s: /probes/values differ by %g (scale %g)" % (what, np.abs(v_got - v_ref).max(), scale))
+        # The frames of the run's own tissue.pvd (SIGTERM adds one at the stop).
+        pvd = sorted(name[len("tissue_"):-len(".vtu")] for _, name in frames(got))
+        if sorted(h_got["frames"]) != pvd:
+            fail("%s: /frames %s, tissue.pvd has %s" % (what, sorted(h_got["frames"]), pvd))
+
+
 def main():
     tmp = tempfile.mkdtemp(prefix="nh-restart-")
     try:
         ref = os.path.join(tmp, "ref")
-        run(ref)
+        run(ref, *HDF5)
 
         # 1-2: SIGKILL mid-way, then restart.
         killed = os.path.join(tmp, "killed")
-        p = subprocess.Popen([BIN, "run", SCENE, "--quiet", "--out", killed], stderr=subprocess.PIPE)
+        p = subprocess.Popen([BIN, "run", SCENE, "--quiet", "--out", killed, *HDF5], stderr=subprocess.PIPE)
         steps = os.path.join(killed, "steps.csv")
         deadline = time.time() + 600
         while time.time() < deadline and p.poll() is None:
@@ -114,12 +169,13 @@ def main():
                 fail("after SIGKILL, frame %s of the PVD is unreadable: %s" % (name, e))
         if not os.path.exists(os.path.join(killed, "checkpoint.nhc")):
             fail("no checkpoint after 13 steps with output.checkpoint = 5")
-        run(killed, "--restart", killed)
+        run(killed, "--restart", killed, *HDF5)
         compare(ref, killed, "kill + restart")
+        compare_h5(ref, killed, "kill + restart")
 
         # 3: SIGTERM.
         term = os.path.join(tmp, "term")
-        p = subprocess.Popen([BIN, "run", SCENE, "--quiet", "--out", term], stderr=subprocess.PIPE, text=True)
+        p = subprocess.Popen([BIN, "run", SCENE, "--quiet", "--out", term, *HDF5], stderr=subprocess.PIPE, text=True)
         steps = os.path.join(term, "steps.csv")
         while p.poll() is None:
             try:
@@ -137,8 +193,9 @@ def main():
             done = sum(1 for _ in f) - 1
         if not any(name == "tissue_%06d.vtu" % done for _, name in frames(term)):
             fail("SIGTERM: no final frame for step %d" % done)
-        run(term, "--restart", term)
+        run(term, "--restart", term, *HDF5)
         compare(ref, term, "SIGTERM + restart")
+        compare_h5(ref, term, "SIGTERM + restart")
 
         # 4: bad checkpoints.
         bad = os.path.join(tmp, "bad")
@@ -154,12 +211,12 @@ def main():
         for what, content, phrase in cases:
             with open(ck, "wb") as f:
                 f.write(content)
-            p = run(bad, "--restart", bad, check=False)
+            p = run(bad, "--restart", bad, *HDF5, check=False)
             if p.returncode != 2 or phrase not in p.stderr or p.stderr.count("\n") != 1:
                 fail("%s checkpoint: expected exit 2 and '%s', got %d: %r" % (what, phrase, p.returncode, p.stderr))
         with open(ck, "wb") as f:
             f.write(data)
-        p = run(bad, "--restart", bad, "--set", "tissue.material.young=2e7", check=False)
+        p = run(bad, "--restart", bad, *HDF5, "--set", "tissue.material.young=2e7", check=False)
         if p.returncode != 2 or "another scene" not in p.stderr:
             fail("other scene: expected exit 2 and 'another scene', got %d: %r" % (p.returncode, p.stderr))
     finally:

@@ -13,7 +13,8 @@
  *    outside the face, in the leaf located on the other side (tolerance
  *    1e-8 of the largest displacement: the offset alone moves u by ~1e-9).
  * 3. Structure: no two nodes share a position; every hanging node's weights
- *    sum to 1 and its masters are not hanging.
+ *    sum to 1 and its masters are not hanging; every node is found by point
+ *    location (a probe may sit on a node of a deep hex4 mesh).
  * The templates are built here from their definition (regular n x n x n),
  * independently of the files in templates/. */
 #include "check.h"
@@ -58,6 +59,22 @@ static void patch_test(int n) {
   nh_hanging *h;
   CHECK_OK(nh_hanging_detect(m, fixed, &h));
   check_structure(m, h, n);
+  /* Every node is found by point location (probes may sit on nodes), in a
+   * leaf whose map reproduces its position. */
+  for (int i = 0; i < m->n_nodes; i++) {
+    int cell;
+    double xi[3], N[8];
+    int found = nh_mesh_locate(m, m->X + 3 * i, &cell, xi) == NH_OK;
+    CHECK(found, "template %d: node %d at [%g, %g, %g] not located", n, i, m->X[3 * i],
+          m->X[3 * i + 1], m->X[3 * i + 2]);
+    if (!found) continue;
+    nh_hex_shape(xi, N);
+    double Xe[24], x[3] = {0, 0, 0};
+    nh_mesh_cell_coords(m, m->X, cell, Xe);
+    for (int a = 0; a < 8; a++)
+      for (int k = 0; k < 3; k++) x[k] += N[a] * Xe[3 * a + k];
+    for (int k = 0; k < 3; k++) CHECK_CLOSE(x[k], m->X[3 * i + k], 1e-12, "located node position");
+  }
   nh_material mat = {1e5, 0.35, 1000};
   nh_tissue *ts;
   CHECK_OK(nh_tissue_create(m, &mat, &ts));
@@ -137,7 +154,34 @@ static void patch_test(int n) {
   nh_template_destroy(&t);
 }
 
+/* Point location on small cells far from the origin: a 1 cm box at 1 m,
+ * refined twice with hex4 (cells of 0.6 mm): the coordinates' round-off
+ * (eps |x| = 2e-16 m) exceeds 1e-14 of the cell size, the residual Newton
+ * tolerance of nh_hex_invert alone; every node must still be located. */
+static void locate_far(void) {
+  const double lo[3] = {1.0, 1.0, 1.0}, hi[3] = {1.01, 1.01, 1.01};
+  const int grid[3] = {2, 2, 2};
+  nh_mesh *m;
+  CHECK_OK(nh_mesh_create_box(lo, hi, grid, &m));
+  nh_template *t = regular_template(4);
+  int first = 0;
+  CHECK_OK(nh_mesh_refine(m, t, &first, 1, NULL));
+  const double p[3] = {1.005, 1.005, 1.005};
+  int ch = child_near(m, 0, p);
+  CHECK_OK(nh_mesh_refine(m, t, &ch, 1, NULL));
+  int missed = 0;
+  for (int i = 0; i < m->n_nodes; i++) {
+    int cell;
+    double xi[3];
+    missed += nh_mesh_locate(m, m->X + 3 * i, &cell, xi) != NH_OK;
+  }
+  CHECK(missed == 0, "%d of %d nodes of a far-away hex4 mesh not located", missed, m->n_nodes);
+  nh_template_destroy(&t);
+  nh_mesh_destroy(&m);
+}
+
 int main(void) {
+  locate_far();
   for (int n = 2; n <= 4; n++) patch_test(n);
   TEST_END();
 }

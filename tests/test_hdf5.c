@@ -31,10 +31,24 @@
  *     stress[c][k] = 10 c + k + f (6 components).
  *   In the normal run, frames 2 and 5 have the mesh of frames 1 and 4 (NX),
  *   so their connectivity is a hard link; frames 0, 3 and 4 change the
- *   number of points and cells. N = 25 steps. */
+ *   number of points and cells. N = 25 steps.
+ *
+ * DIR/resume: a run interrupted and resumed (nh_h5_resume):
+ *   first run: the known series for steps 1..10 (probes from 0), frames
+ *     f = 0..5 at step 2 f on the grid NX[f] x 1 x 1;
+ *   resumed at step 6 (the frames at 8 and 10 and the rows past 6 go), then
+ *     steps 7..10 again with every value shifted: /steps dofs + 1000, probe
+ *     and tool values + 1000, frames at 8 and 10 built with f = 100 + step / 2
+ *     on nx = 3 (the mesh of the frame at 6: a hard link) and nx = 2.
+ * DIR/resume_missing, _damaged, _foreign, _columns: nh_h5_resume at step 3
+ *   of no file, a file of garbage bytes (moved to results.h5.damaged), an
+ *   HDF5 file without the format attribute and a results file with other
+ *   step columns: each becomes a fresh file with steps 4..5 (the known rows)
+ *   and no frame. */
 #include "io/io.h"
 
 #include <dirent.h>
+#include <hdf5.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -155,16 +169,19 @@ static void step_row(int s, double row[5]) {
   row[4] = 1e-3 * s * s;
 }
 
+/* Added to the values written after a resume (0 before). */
+static double shift = 0.0;
+
 static void append_probes(nh_h5 *h, int s) {
   double v[2 * 6];
   for (int i = 0; i < 2; ++i)
-    for (int k = 0; k < 6; ++k) v[6 * i + k] = 0.001 * s + 0.1 * i + k;
+    for (int k = 0; k < 6; ++k) v[6 * i + k] = 0.001 * s + 0.1 * i + k + shift;
   REQUIRE_OK(nh_h5_append_series(h, "probes", s, 0.01 * s, 2, PROBES, 6, PROBE_COMPONENTS, v));
 }
 
 static void append_tools(nh_h5 *h, int s) {
   double v[4];
-  for (int k = 0; k < 4; ++k) v[k] = s * (k + 1.0) + 0.5;
+  for (int k = 0; k < 4; ++k) v[k] = s * (k + 1.0) + 0.5 + shift;
   REQUIRE_OK(nh_h5_append_series(h, "tools", s, 0.01 * s, 1, TOOLS, 4, TOOL_COMPONENTS, v));
 }
 
@@ -216,6 +233,83 @@ static void write_endless(const char *dir) {
   }
 }
 
+static void append_row(nh_h5 *h, int s) {
+  double row[5];
+  step_row(s, row);
+  row[2] += shift;
+  REQUIRE_OK(nh_h5_append_steps(h, row));
+}
+
+/* Interrupted at step 10, resumed at step 6, continued to 10 (see above). */
+static void write_resumed(const char *dir) {
+  REQUIRE_OK(nh_mkdir_p(dir));
+  nh_h5 *h = create(dir);
+  append_probes(h, 0);
+  write_frame(h, 0, 0, NX[0], 1, 1);
+  for (int s = 1; s <= 10; ++s) {
+    append_row(h, s);
+    append_probes(h, s);
+    append_tools(h, s);
+    if (s % 2 == 0) write_frame(h, s / 2, s, NX[s / 2], 1, 1);
+  }
+  REQUIRE_OK(nh_h5_close(&h));
+  REQUIRE_OK(nh_h5_resume(dir, SCENE_TEXT, "9.8.7", 5, STEP_COLUMNS, 6, &h));
+  EXPECT(h != NULL, "nh_h5_resume must return a handle");
+  if (!h) return;
+  shift = 1000.0;
+  for (int s = 7; s <= 10; ++s) {
+    append_row(h, s);
+    append_probes(h, s);
+    append_tools(h, s);
+    if (s % 2 == 0) write_frame(h, 100 + s / 2, s, s == 8 ? 3 : 2, 1, 1);
+  }
+  shift = 0.0;
+  /* The frame at 6 is kept: writing it again is refused. */
+  frame_data d;
+  frame_build(&d, 0, 1, 1, 1);
+  int rc = nh_h5_write_frame(h, 6, 0.06, &d.grid);
+  EXPECT(rc == NH_ERR_INTERNAL, "a kept frame written again returned %d", rc);
+  frame_free(&d);
+  REQUIRE_OK(nh_h5_close(&h));
+}
+
+static void write_bytes(const char *path, const char *bytes) {
+  FILE *f = fopen(path, "wb");
+  EXPECT(f != NULL, "cannot write %s", path);
+  if (!f) return;
+  fputs(bytes, f);
+  fclose(f);
+}
+
+/* nh_h5_resume of a folder whose results.h5 cannot be resumed. */
+static void check_resume_fallback(const char *dir, const char *kind) {
+  char sub[4200], path[4300];
+  snprintf(sub, sizeof sub, "%s/resume_%s", dir, kind);
+  REQUIRE_OK(nh_mkdir_p(sub));
+  snprintf(path, sizeof path, "%s/results.h5", sub);
+  remove(path);
+  char aside[4400];
+  snprintf(aside, sizeof aside, "%s.damaged", path);
+  remove(aside); /* from an earlier test run */
+  if (!strcmp(kind, "damaged")) {
+    write_bytes(path, "not an HDF5 file: the bytes a kill left\n");
+  } else if (!strcmp(kind, "foreign")) {
+    hid_t f = H5Fcreate(path, H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+    EXPECT(f >= 0, "cannot create %s", path);
+    if (f >= 0) H5Fclose(f);
+  } else if (!strcmp(kind, "columns")) {
+    nh_h5 *h = NULL;
+    REQUIRE_OK(nh_h5_create(sub, NULL, NULL, 4, STEP_COLUMNS, &h));
+    REQUIRE_OK(nh_h5_close(&h));
+  }
+  nh_h5 *h = NULL;
+  int rc = nh_h5_resume(sub, SCENE_TEXT, "9.8.7", 5, STEP_COLUMNS, 3, &h);
+  EXPECT(rc == NH_OK && h != NULL, "resume of a %s file returned %d", kind, rc);
+  if (!h) return;
+  for (int s = 4; s <= 5; ++s) append_row(h, s);
+  REQUIRE_OK(nh_h5_close(&h));
+}
+
 static int message_has(const char *needle) {
   return strstr(nh_error_message(), needle) != NULL;
 }
@@ -263,6 +357,10 @@ static void check_failures(const char *dir) {
   EXPECT(rc == NH_ERR_INTERNAL, "a series named 'frames' returned %d", rc);
   rc = nh_h5_append_series(h, "a/b", 1, 0.01, 2, PROBES, 6, PROBE_COMPONENTS, v);
   EXPECT(rc == NH_ERR_INTERNAL, "a series named 'a/b' returned %d", rc);
+  nh_h5 *other = (nh_h5 *)&failures;
+  rc = nh_h5_resume(sub, NULL, NULL, 4, STEP_COLUMNS + 1, 0, &other);
+  EXPECT(rc == NH_ERR_INTERNAL && other == NULL, "a resume without a 'step' column returned %d",
+         rc);
   append_probes(h, 1); /* still usable after refused calls */
   REQUIRE_OK(nh_h5_flush(h));
   REQUIRE_OK(nh_h5_close(&h));
@@ -296,5 +394,12 @@ int main(int argc, char **argv) {
   REQUIRE_OK(nh_mkdir_p(argv[1]));
   write_known(argv[1]);
   check_failures(argv[1]);
+  char sub[4200];
+  snprintf(sub, sizeof sub, "%s/resume", argv[1]);
+  write_resumed(sub);
+  check_resume_fallback(argv[1], "missing");
+  check_resume_fallback(argv[1], "damaged");
+  check_resume_fallback(argv[1], "foreign");
+  check_resume_fallback(argv[1], "columns");
   return failures ? 1 : 0;
 }

@@ -78,6 +78,25 @@ typedef struct nh_h5 nh_h5;
 int nh_h5_create(const char *dir, const char *scene_text, const char *version, int n_step_columns,
                  const char *const *step_columns, nh_h5 **out);
 
+/* Continue the results file of an interrupted run at step `step` (the
+ * checkpoint's): open DIR/results.h5 read-write, cut /steps and every series
+ * back to the rows and samples whose step is <= `step` (the column named
+ * "step", which step_columns must have; the series' step datasets), delete
+ * the frames /frames/NNNNNN with NNNNNN > step, rewrite DIR/results.xdmf for
+ * the frames kept, and return a handle that appends after them (a frame on
+ * the mesh of the last kept one links its connectivity, as in an
+ * uninterrupted run). If /steps then ends before `step` (rows not flushed
+ * before a kill), a warning says which rows are missing.
+ * A fresh file (nh_h5_create) is started instead, as the first run would
+ * have written it, when DIR/results.h5 does not exist, or is an HDF5 file
+ * without the needlehex format attribute or with other step columns (a
+ * warning says so). A file that cannot be read (not HDF5, damaged by a kill)
+ * is renamed to DIR/results.h5.damaged (.damaged.2, ... if taken) and a
+ * fresh file started, with a warning naming both files; NH_ERR_IO if it
+ * cannot be renamed. Space of deleted frames is not reclaimed (h5repack). */
+int nh_h5_resume(const char *dir, const char *scene_text, const char *version, int n_step_columns,
+                 const char *const *step_columns, int step, nh_h5 **out);
+
 /* Append one row of n_step_columns doubles to /steps. Reaches the disk at
  * the next frame, nh_h5_flush or nh_h5_close. */
 int nh_h5_append_steps(nh_h5 *h, const double *row);

@@ -11,6 +11,7 @@
  * one step. */
 #include "mesh/mesh.h"
 
+#include <float.h>
 #include <math.h>
 
 void nh_hex_shape(const double xi[3], double N[8]) {
@@ -31,8 +32,13 @@ void nh_hex_dshape(const double xi[3], double dN[8][3]) {
 
 int nh_hex_invert(const double Xe[24], const double x[3], double xi[3]) {
   xi[0] = xi[1] = xi[2] = 0.0;
-  double size = 0.0;
+  /* Converged when the residual is at round-off: 1e-14 of the cell's size
+   * plus the round-off of the coordinates themselves (8 eps |X|), which
+   * dominates for small cells far from the origin. */
+  double size = 0.0, xmax = 0.0;
   for (int k = 0; k < 3; k++) size = fmax(size, fabs(Xe[3 * 6 + k] - Xe[k]));
+  for (int i = 0; i < 24; i++) xmax = fmax(xmax, fabs(Xe[i]));
+  const double tol = 1e-14 * size + 8 * DBL_EPSILON * xmax;
   for (int it = 0; it < 30; it++) {
     double N[8], dN[8][3], r[3] = {-x[0], -x[1], -x[2]}, J[9] = {0}, Jinv[9], d[3];
     nh_hex_shape(xi, N);
@@ -45,7 +51,7 @@ int nh_hex_invert(const double Xe[24], const double x[3], double xi[3]) {
     if (nh_mat3_inverse(J, Jinv)) return NH_ERR_NUMERIC;
     nh_mat3_vec(Jinv, r, d);
     for (int k = 0; k < 3; k++) xi[k] -= d[k];
-    if (fabs(r[0]) + fabs(r[1]) + fabs(r[2]) <= 1e-14 * size) return NH_OK;
+    if (fabs(r[0]) + fabs(r[1]) + fabs(r[2]) <= tol) return NH_OK;
     if (fabs(xi[0]) + fabs(xi[1]) + fabs(xi[2]) > 1e6) return NH_ERR_NUMERIC;
   }
   return NH_ERR_NUMERIC;

@@ -299,10 +299,15 @@ static int nh_pvd_resume(const char *dir, const char *prefix, double dt, int ste
 
 static int nh_open_outputs(nh_sim *s) {
   NH_TRY(nh_mkdir_p(s->scene->output.dir));
-  if (s->scene->output.hdf5)
-    NH_TRY(nh_h5_create(s->scene->output.dir, s->scene->yaml ? s->scene->yaml : "", NH_VERSION,
-                        (int)(sizeof nh_step_columns / sizeof *nh_step_columns), nh_step_columns,
-                        &s->h5));
+  if (s->scene->output.hdf5) {
+    const char *yaml = s->scene->yaml ? s->scene->yaml : "";
+    const int n_columns = (int)(sizeof nh_step_columns / sizeof *nh_step_columns);
+    const char *dir = s->scene->output.dir;
+    if (s->options.restart_dir)
+      NH_TRY(nh_h5_resume(dir, yaml, NH_VERSION, n_columns, nh_step_columns, s->step, &s->h5));
+    else
+      NH_TRY(nh_h5_create(dir, yaml, NH_VERSION, n_columns, nh_step_columns, &s->h5));
+  }
   if (s->options.restart_dir) {
     const nh_scene *sc = s->scene;
     const char *dir = sc->output.dir;
@@ -379,11 +384,13 @@ static int nh_sim_setup_mesh(nh_sim *s, int first) {
   for (int l = 0; l < sc->tissue.n_loads; l++)
     NH_TRY(nh_mesh_region_load(m, &sc->tissue.loads[l].region, sc->tissue.loads[l].force,
                                s->load_unit + (size_t)l * n));
-  for (int i = 0; i < sc->n_probes; i++)
-    NH_CHECK(
-        nh_mesh_locate(m, sc->probes[i].point, &s->probe_cell[i], s->probe_xi + 3 * i) == NH_OK,
-        NH_ERR_INPUT, "%s: the point [%g, %g, %g] lies outside the tissue", sc->probes[i].where,
-        sc->probes[i].point[0], sc->probes[i].point[1], sc->probes[i].point[2]);
+  for (int i = 0; i < sc->n_probes; i++) /* outside at creation: the scene's fault; later: ours */
+    NH_CHECK(nh_mesh_locate(m, sc->probes[i].point, &s->probe_cell[i], s->probe_xi + 3 * i) ==
+                 NH_OK,
+             first ? NH_ERR_INPUT : NH_ERR_INTERNAL,
+             "%s: the point [%g, %g, %g] lies outside the tissue%s", sc->probes[i].where,
+             sc->probes[i].point[0], sc->probes[i].point[1], sc->probes[i].point[2],
+             first ? "" : " of the refined mesh");
   nh_hanging_destroy(&s->hanging);
   if (sc->adapt.enabled) NH_TRY(nh_hanging_detect(m, s->fixed, &s->hanging));
   nh_system_destroy(&s->system);
@@ -550,6 +557,7 @@ int nh_sim_step(nh_sim *s) {
                : nh_step_dynamic(s->system, &s->integrator, s->f_ext, s->u, s->v, &st);
   int adapt_now = !rc && sc->adapt.enabled && (s->step + 1) % sc->adapt.every == 0;
   double ta = nh_time_now();
+  s->eta = s->eta_rel = NAN; /* nan in steps.csv: not estimated at this step */
   if (adapt_now) rc = nh_sim_estimate(s);
   double t_estimate = nh_time_now() - ta;
   if (rc) {
@@ -578,18 +586,15 @@ int nh_sim_step(nh_sim *s) {
     if (due && s->last_frame != s->step) NH_TRY(nh_write_frame(s));
   }
   double t2 = nh_time_now();
-  if (adapt_now && s->step < sc->time.steps) {
-    rc = nh_sim_refine(s);
-    if (rc) {
-      char reason[1024];
-      snprintf(reason, sizeof reason, "%s", nh_error_message());
-      return NH_ERROR(rc, "step %d (t = %g s): refinement: %s", s->step, t_new, reason);
-    }
-  }
+  /* A failed refinement still leaves this step's row (written below). */
+  int refine_rc = adapt_now && s->step < sc->time.steps ? nh_sim_refine(s) : NH_OK;
+  char refine_reason[1024] = "";
+  if (refine_rc) snprintf(refine_reason, sizeof refine_reason, "%s", nh_error_message());
   double t3 = nh_time_now();
   s->t_adapt = t_estimate + (t3 - t2);
   /* A checkpoint holds the state the next step starts from: after refinement. */
-  if (!s->options.dry_run && sc->output.checkpoint > 0 && s->step % sc->output.checkpoint == 0)
+  if (!refine_rc && !s->options.dry_run && sc->output.checkpoint > 0 &&
+      s->step % sc->output.checkpoint == 0)
     NH_TRY(nh_checkpoint_write(s));
   double t_checkpoint = nh_time_now() - t3; /* counted as output */
   t3 += t_checkpoint;
@@ -629,7 +634,14 @@ int nh_sim_step(nh_sim *s) {
                           pt[NH_PHASE_STEP],
                           work};
     NH_TRY(nh_h5_append_steps(s->h5, row));
+    /* The checkpoint of this step is on disk: so must be its rows. */
+    if (!refine_rc && !s->options.dry_run && sc->output.checkpoint > 0 &&
+        s->step % sc->output.checkpoint == 0)
+      NH_TRY(nh_h5_flush(s->h5));
   }
+  if (refine_rc)
+    return NH_ERROR(refine_rc == NH_ERR_INPUT ? NH_ERR_INTERNAL : refine_rc,
+                    "step %d (t = %g s): refinement: %s", s->step, t_new, refine_reason);
   return NH_OK;
 }
 
