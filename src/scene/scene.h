@@ -104,7 +104,7 @@ typedef struct nh_scene {
   struct {
     char dir[NH_PATH_MAX]; /* output.dir (default "out/<name>") */
     int every;             /* output.every: frame every N steps, 0 = last step only (default 1) */
-    int hdf5;              /* output.hdf5 (default false; accepted, not yet written) */
+    int hdf5;              /* output.hdf5: results.h5 + results.xdmf (default false) */
     int checkpoint;        /* output.checkpoint: a restart file every N steps, 0 = none (default) */
   } output;
 
