@@ -72,7 +72,7 @@
  * - HDF5 frees its global state in its own atexit handler: LeakSanitizer
  *   reports nothing without an explicit H5close, which would also close any
  *   other HDF5 object of the process. */
-#include "io/io.h"
+#include "io/io_impl.h"
 
 #include <errno.h>
 #include <hdf5.h>
@@ -88,12 +88,6 @@
 #define FORMAT_NAME       "needlehex-results 1"
 #define CHUNK_BYTES       16384
 #define FRAMES_HEAP_BYTES 65536
-
-/* A growing text buffer (the XDMF grids of every frame written so far). */
-typedef struct {
-  char *s;
-  size_t len, cap;
-} text_buf;
 
 /* One time series group (/probes, /targets, /tools, ...). */
 typedef struct {
@@ -113,7 +107,7 @@ struct nh_h5 {
   hsize_t n_steps;
   int n_series, cap_series;
   h5_series *series;
-  text_buf grids; /* XDMF <Grid> elements of the frames written so far */
+  nh_text grids; /* XDMF <Grid> elements of the frames written so far */
   int n_frames;
   int prev_cells; /* cells of the previous frame (-1: none) */
   int *prev_conn; /* its connectivity, 8 * prev_cells ints */
@@ -133,50 +127,6 @@ static char *join_path(const char *dir, const char *name) {
   char *p = nh_calloc(n, 1);
   if (p) snprintf(p, n, "%s/%s", dir, name);
   return p;
-}
-
-static int buf_printf(text_buf *b, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
-static int buf_printf(text_buf *b, const char *fmt, ...) {
-  va_list ap;
-  va_start(ap, fmt);
-  int n = vsnprintf(NULL, 0, fmt, ap);
-  va_end(ap);
-  if (n < 0) return NH_ERROR(NH_ERR_INTERNAL, "XDMF: formatting failed");
-  if (b->len + (size_t)n + 1 > b->cap) {
-    size_t cap = b->cap ? b->cap : 4096;
-    while (cap < b->len + (size_t)n + 1) cap *= 2;
-    char *p = realloc(b->s, cap);
-    if (!p) return NH_ERROR(NH_ERR_MEMORY, "out of memory writing results.xdmf");
-    b->s = p;
-    b->cap = cap;
-  }
-  va_start(ap, fmt);
-  vsnprintf(b->s + b->len, (size_t)n + 1, fmt, ap);
-  va_end(ap);
-  b->len += (size_t)n;
-  return NH_OK;
-}
-
-static int buf_put_xml(text_buf *b, const char *s) {
-  for (; *s; ++s) {
-    switch (*s) {
-    case '&':
-      NH_TRY(buf_printf(b, "&amp;"));
-      break;
-    case '<':
-      NH_TRY(buf_printf(b, "&lt;"));
-      break;
-    case '>':
-      NH_TRY(buf_printf(b, "&gt;"));
-      break;
-    case '"':
-      NH_TRY(buf_printf(b, "&quot;"));
-      break;
-    default:
-      NH_TRY(buf_printf(b, "%c", *s));
-    }
-  }
-  return NH_OK;
 }
 
 /* HDF5's innermost error description (where the error was detected). */
@@ -326,19 +276,19 @@ static int write_array(const nh_h5 *h, hid_t loc, const char *name, hid_t ftype,
 /* ---- XDMF ---- */
 
 static int xdmf_write(const nh_h5 *h) {
-  text_buf b = {0};
-  int rc = buf_printf(&b,
-                      "<?xml version=\"1.0\" ?>\n"
-                      "<!DOCTYPE Xdmf SYSTEM \"Xdmf.dtd\" []>\n"
-                      "<Xdmf Version=\"3.0\" xmlns:xi=\"http://www.w3.org/2001/XInclude\">\n"
-                      "  <Domain>\n"
-                      "    <Grid Name=\"tissue\" GridType=\"Collection\" "
-                      "CollectionType=\"Temporal\">\n"
-                      "%s"
-                      "    </Grid>\n"
-                      "  </Domain>\n"
-                      "</Xdmf>\n",
-                      h->grids.s ? h->grids.s : "");
+  nh_text b = {0};
+  int rc = nh_text_printf(&b,
+                          "<?xml version=\"1.0\" ?>\n"
+                          "<!DOCTYPE Xdmf SYSTEM \"Xdmf.dtd\" []>\n"
+                          "<Xdmf Version=\"3.0\" xmlns:xi=\"http://www.w3.org/2001/XInclude\">\n"
+                          "  <Domain>\n"
+                          "    <Grid Name=\"tissue\" GridType=\"Collection\" "
+                          "CollectionType=\"Temporal\">\n"
+                          "%s"
+                          "    </Grid>\n"
+                          "  </Domain>\n"
+                          "</Xdmf>\n",
+                          h->grids.s ? h->grids.s : "");
   if (rc == NH_OK) rc = nh_write_text(h->xdmf_path, b.s);
   free(b.s);
   return rc;
@@ -360,42 +310,43 @@ static const char *attribute_type(int components) {
 }
 
 /* A <DataItem> referencing results.h5:/frames/<frame>/[<group>/]<name>. */
-static int xdmf_item(text_buf *b, const char *frame, const char *group, const char *name, int n,
+static int xdmf_item(nh_text *b, const char *frame, const char *group, const char *name, int n,
                      int components, int is_int) {
-  NH_TRY(buf_printf(b, "          <DataItem Dimensions=\"%d", n));
-  if (components > 1) NH_TRY(buf_printf(b, " %d", components));
-  NH_TRY(buf_printf(
+  NH_TRY(nh_text_printf(b, "          <DataItem Dimensions=\"%d", n));
+  if (components > 1) NH_TRY(nh_text_printf(b, " %d", components));
+  NH_TRY(nh_text_printf(
       b, "\" NumberType=\"%s\" Precision=\"%d\" Format=\"HDF\">" H5_FILE_NAME ":/frames/%s/%s%s",
       is_int ? "Int" : "Float", is_int ? 4 : 8, frame, group ? group : "", group ? "/" : ""));
-  NH_TRY(buf_put_xml(b, name));
-  return buf_printf(b, "</DataItem>\n");
+  NH_TRY(nh_text_put_xml(b, name));
+  return nh_text_printf(b, "</DataItem>\n");
 }
 
-static int xdmf_attribute(text_buf *b, const char *frame, const char *group, const char *name,
+static int xdmf_attribute(nh_text *b, const char *frame, const char *group, const char *name,
                           const char *center, int n, int components, int is_int) {
-  NH_TRY(buf_printf(b, "        <Attribute Name=\""));
-  NH_TRY(buf_put_xml(b, name));
-  NH_TRY(buf_printf(b, "\" AttributeType=\"%s\" Center=\"%s\">\n", attribute_type(components),
-                    center));
+  NH_TRY(nh_text_printf(b, "        <Attribute Name=\""));
+  NH_TRY(nh_text_put_xml(b, name));
+  NH_TRY(nh_text_printf(b, "\" AttributeType=\"%s\" Center=\"%s\">\n", attribute_type(components),
+                        center));
   NH_TRY(xdmf_item(b, frame, group, name, n, components, is_int));
-  return buf_printf(b, "        </Attribute>\n");
+  return nh_text_printf(b, "        </Attribute>\n");
 }
 
 /* Append the <Grid> of one frame to h->grids; on failure h->grids is
  * restored to its previous length. */
 static int xdmf_add_frame(nh_h5 *h, const char *frame, double time, const nh_vtu_grid *g) {
   size_t keep = h->grids.len;
-  text_buf *b = &h->grids;
-  int rc = buf_printf(b,
-                      "      <Grid Name=\"frame_%s\" GridType=\"Uniform\">\n"
-                      "        <Time Value=\"%.17g\"/>\n"
-                      "        <Topology TopologyType=\"Hexahedron\" NumberOfElements=\"%d\">\n",
-                      frame, time, g->n_cells);
+  nh_text *b = &h->grids;
+  int rc =
+      nh_text_printf(b,
+                     "      <Grid Name=\"frame_%s\" GridType=\"Uniform\">\n"
+                     "        <Time Value=\"%.17g\"/>\n"
+                     "        <Topology TopologyType=\"Hexahedron\" NumberOfElements=\"%d\">\n",
+                     frame, time, g->n_cells);
   if (rc == NH_OK) rc = xdmf_item(b, frame, NULL, "connectivity", g->n_cells, 8, 1);
   if (rc == NH_OK)
-    rc = buf_printf(b, "        </Topology>\n        <Geometry GeometryType=\"XYZ\">\n");
+    rc = nh_text_printf(b, "        </Topology>\n        <Geometry GeometryType=\"XYZ\">\n");
   if (rc == NH_OK) rc = xdmf_item(b, frame, NULL, "points", g->n_points, 3, 0);
-  if (rc == NH_OK) rc = buf_printf(b, "        </Geometry>\n");
+  if (rc == NH_OK) rc = nh_text_printf(b, "        </Geometry>\n");
   for (int i = 0; rc == NH_OK && i < g->n_point_fields; ++i)
     rc = xdmf_attribute(b, frame, "point_data", g->point_fields[i].name, "Node", g->n_points,
                         g->point_fields[i].components, 0);
@@ -405,7 +356,7 @@ static int xdmf_add_frame(nh_h5 *h, const char *frame, double time, const nh_vtu
   for (int i = 0; rc == NH_OK && i < g->n_cell_fields; ++i)
     rc = xdmf_attribute(b, frame, "cell_data", g->cell_fields[i].name, "Cell", g->n_cells,
                         g->cell_fields[i].components, 0);
-  if (rc == NH_OK) rc = buf_printf(b, "      </Grid>\n");
+  if (rc == NH_OK) rc = nh_text_printf(b, "      </Grid>\n");
   if (rc) {
     h->grids.len = keep;
     if (h->grids.s) h->grids.s[keep] = '\0';

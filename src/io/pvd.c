@@ -24,7 +24,7 @@
  * - Times are printed with %.17g, which reproduces the double exactly, so a
  *   script can match PVD times against the CSV times bit for bit.
  * - File names are XML-escaped (a tool may be named "a&b"). */
-#include "io/io.h"
+#include "io/io_impl.h"
 
 #include <stdarg.h>
 #include <stdio.h>
@@ -38,76 +38,22 @@ struct nh_pvd {
   char **files;
 };
 
-/* A growing text buffer. */
-typedef struct {
-  char *s;
-  size_t len, cap;
-} text_buf;
-
-static int buf_reserve(text_buf *b, size_t extra) {
-  if (b->len + extra + 1 <= b->cap) return NH_OK;
-  size_t cap = b->cap ? b->cap : 1024;
-  while (cap < b->len + extra + 1) cap *= 2;
-  char *p = realloc(b->s, cap);
-  if (!p) return NH_ERROR(NH_ERR_MEMORY, "out of memory writing a PVD collection");
-  b->s = p;
-  b->cap = cap;
-  return NH_OK;
-}
-
-static int buf_printf(text_buf *b, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
-static int buf_printf(text_buf *b, const char *fmt, ...) {
-  va_list ap;
-  va_start(ap, fmt);
-  int n = vsnprintf(NULL, 0, fmt, ap);
-  va_end(ap);
-  if (n < 0) return NH_ERROR(NH_ERR_INTERNAL, "PVD: formatting failed");
-  NH_TRY(buf_reserve(b, (size_t)n));
-  va_start(ap, fmt);
-  vsnprintf(b->s + b->len, (size_t)n + 1, fmt, ap);
-  va_end(ap);
-  b->len += (size_t)n;
-  return NH_OK;
-}
-
-static int buf_put_xml_attr(text_buf *b, const char *s) {
-  for (; *s; ++s) {
-    switch (*s) {
-    case '&':
-      NH_TRY(buf_printf(b, "&amp;"));
-      break;
-    case '<':
-      NH_TRY(buf_printf(b, "&lt;"));
-      break;
-    case '>':
-      NH_TRY(buf_printf(b, "&gt;"));
-      break;
-    case '"':
-      NH_TRY(buf_printf(b, "&quot;"));
-      break;
-    default:
-      NH_TRY(buf_printf(b, "%c", *s));
-    }
-  }
-  return NH_OK;
-}
-
-static int pvd_render(const nh_pvd *pvd, text_buf *b) {
-  NH_TRY(buf_printf(b, "<?xml version=\"1.0\"?>\n"
-                       "<VTKFile type=\"Collection\" version=\"0.1\" "
-                       "byte_order=\"LittleEndian\">\n"
-                       "  <Collection>\n"));
+static int pvd_render(const nh_pvd *pvd, nh_text *b) {
+  NH_TRY(nh_text_printf(b, "<?xml version=\"1.0\"?>\n"
+                           "<VTKFile type=\"Collection\" version=\"0.1\" "
+                           "byte_order=\"LittleEndian\">\n"
+                           "  <Collection>\n"));
   for (int i = 0; i < pvd->n_frames; ++i) {
-    NH_TRY(buf_printf(b, "    <DataSet timestep=\"%.17g\" group=\"\" part=\"0\" file=\"",
-                      pvd->times[i]));
-    NH_TRY(buf_put_xml_attr(b, pvd->files[i]));
-    NH_TRY(buf_printf(b, "\"/>\n"));
+    NH_TRY(nh_text_printf(b, "    <DataSet timestep=\"%.17g\" group=\"\" part=\"0\" file=\"",
+                          pvd->times[i]));
+    NH_TRY(nh_text_put_xml(b, pvd->files[i]));
+    NH_TRY(nh_text_printf(b, "\"/>\n"));
   }
-  return buf_printf(b, "  </Collection>\n</VTKFile>\n");
+  return nh_text_printf(b, "  </Collection>\n</VTKFile>\n");
 }
 
 static int pvd_write(const nh_pvd *pvd) {
-  text_buf b = {0};
+  nh_text b = {0};
   int rc = pvd_render(pvd, &b);
   if (rc == NH_OK) rc = nh_write_text(pvd->path, b.s);
   free(b.s);

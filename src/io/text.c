@@ -1,0 +1,50 @@
+/* text.c — a growing text buffer for the XML files of the io module. The
+ * buffer doubles; one vsnprintf sizes each append. */
+#include "io/io_impl.h"
+
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+
+int nh_text_printf(nh_text *b, const char *fmt, ...) {
+  va_list ap;
+  va_start(ap, fmt);
+  int n = vsnprintf(NULL, 0, fmt, ap);
+  va_end(ap);
+  if (n < 0) return NH_ERROR(NH_ERR_INTERNAL, "text formatting failed");
+  if (b->len + (size_t)n + 1 > b->cap) {
+    size_t cap = b->cap ? b->cap : 4096;
+    while (cap < b->len + (size_t)n + 1) cap *= 2;
+    char *p = realloc(b->s, cap);
+    if (!p) return NH_ERROR(NH_ERR_MEMORY, "out of memory rendering a %zu-byte file", cap);
+    b->s = p;
+    b->cap = cap;
+  }
+  va_start(ap, fmt);
+  vsnprintf(b->s + b->len, (size_t)n + 1, fmt, ap);
+  va_end(ap);
+  b->len += (size_t)n;
+  return NH_OK;
+}
+
+int nh_text_put_xml(nh_text *b, const char *s) {
+  for (; *s; ++s) {
+    switch (*s) {
+    case '&':
+      NH_TRY(nh_text_printf(b, "&amp;"));
+      break;
+    case '<':
+      NH_TRY(nh_text_printf(b, "&lt;"));
+      break;
+    case '>':
+      NH_TRY(nh_text_printf(b, "&gt;"));
+      break;
+    case '"':
+      NH_TRY(nh_text_printf(b, "&quot;"));
+      break;
+    default:
+      NH_TRY(nh_text_printf(b, "%c", *s));
+    }
+  }
+  return NH_OK;
+}
