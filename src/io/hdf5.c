@@ -77,7 +77,6 @@
 #include <errno.h>
 #include <hdf5.h>
 #include <limits.h>
-#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>

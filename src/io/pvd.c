@@ -26,7 +26,6 @@
  * - File names are XML-escaped (a tool may be named "a&b"). */
 #include "io/io_impl.h"
 
-#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
