@@ -106,4 +106,56 @@ int nh_step_dynamic(nh_system *sys, const nh_integrator *in, const double *f_ext
 int nh_solve_static(nh_system *sys, const nh_integrator *in, const double *f_ext, double *u,
                     nh_step_stats *stats);
 
+/* ---- constraint forces: the mixed complementarity solve on W (mcp.c) ----
+ * docs/interaction.md "Constraint solver"; the seed's Eqs. 5-9. */
+
+/* The law of one constraint row i, with w = W λ + r:
+ *   BILATERAL   w_i = 0, λ_i free;
+ *   UNILATERAL  w_i ≥ 0, λ_i ≥ 0, w_i λ_i = 0 (contact normal, Eq. 5);
+ *   FRICTION    |λ_i| ≤ mu |λ_normal| + threshold; stick (w_i = 0) inside the
+ *               bound, slide (λ_i = ±bound, w_i λ_i ≤ 0) on it (Eqs. 7-9).
+ * normal: index of a non-friction row whose force sets the Coulomb bound, or
+ * -1 (bound = threshold). threshold ≥ 0: cutting force or friction per length ×
+ * spacing. group: -1 for a one-dimensional friction row; for a disc pair (two
+ * tangent rows g, g+1 sharing a normal, same mu and threshold) both rows have
+ * group = g and the bound applies to |(λ_g, λ_g+1)|, with w = −ν λ, ν ≥ 0, on it.
+ * Fields other than kind are ignored for non-friction rows. */
+typedef enum { NH_ROW_BILATERAL = 0, NH_ROW_UNILATERAL = 1, NH_ROW_FRICTION = 2 } nh_row_kind;
+typedef struct {
+  nh_row_kind kind;
+  int normal;
+  double mu;
+  double threshold;
+  int group;
+} nh_row_law;
+
+/* What one constraint solve did. */
+typedef struct {
+  int iterations;  /* Gauss-Seidel sweeps (0: the warm start was already converged) */
+  double residual; /* dimensionless law violation of the returned λ (see nh_mcp_solve) */
+  int n_stick;     /* friction rows strictly inside their bound */
+  int n_slide;     /* friction rows on their bound (a zero bound counts as sliding) */
+  int n_open;      /* unilateral rows with λ = 0 */
+} nh_mcp_stats;
+
+/* Solve for the constraint forces λ of m rows: w = W λ + r obeys laws[i] for
+ * every row (a mixed complementarity problem), by projected block Gauss-Seidel
+ * on the diagonally scaled problem D W D (D = diag(W)^{-1/2}), the bilateral
+ * rows as one exactly solved block.
+ *   W: m×m compliance, symmetric positive semi-definite, dense, column-major;
+ *   r: free violation J x_free (length m); laws: one per row;
+ *   tolerance: on the residual max_i |λ̃_i − P_i(λ̃_i − w̃_i)| (scaled variables,
+ *     P_i the projection onto row i's admissible set) divided by
+ *     max|r̃| + max|W̃λ̃|; e.g. 1e-10;
+ *   max_iterations: sweeps (0 only checks the warm start);
+ *   lambda: in, the warm start (previous step, or zeros); out, the solution;
+ *   stats (may be NULL): sweeps, residual, stick/slide/open counts.
+ * Fails with NH_ERR_INPUT (bad laws: a normal index out of range or pointing to
+ * a friction row, negative mu/threshold, an inconsistent disc pair; m < 0,
+ * tolerance <= 0), NH_ERR_NUMERIC (non-finite W, r or warm start, a negative
+ * diagonal of W, or not converged in max_iterations: λ then holds the best
+ * iterate and stats says how far it got), NH_ERR_MEMORY. m = 0 succeeds. */
+int nh_mcp_solve(int m, const double *W, const double *r, const nh_row_law *laws, double tolerance,
+                 int max_iterations, double *lambda, nh_mcp_stats *stats);
+
 #endif

@@ -1,0 +1,497 @@
+/* mcp.c — the constraint forces λ of one step: a mixed complementarity
+ * problem on the compliance W = J A⁻¹ Jᵀ (the seed's Algorithm 1, line 3,
+ * with the laws of its Eqs. 5-9; docs/interaction.md "Constraint solver").
+ *
+ * Given W (m×m, symmetric positive semi-definite, dense, column-major), the
+ * free violation r = J x_free and one law per row, find λ such that
+ * w = W λ + r obeys
+ *   bilateral   w_i = 0, λ_i free;
+ *   unilateral  w_i ≥ 0, λ_i ≥ 0, w_i λ_i = 0                 (Eq. 5);
+ *   friction    |λ_i| ≤ b_i = μ_i |λ_n(i)| + c_i, and w_i = 0 inside the
+ *               bound (stick), w_i λ_i ≤ 0 on it (slide)       (Eqs. 7-9);
+ *   disc pair   rows g, g+1 share one bound on |(λ_g, λ_g+1)|; inside it
+ *               w = 0, on it w = −ν λ with ν ≥ 0 (slip opposite to force).
+ * Every law is the variational inequality "λ_i is the projection of
+ * λ_i − w_i onto its set K_i" (ℝ, ℝ₊, [−b, b], the disc), so one residual
+ * serves all rows: the natural map |λ − P_K(λ − w)|.
+ *
+ * Scaling. Stiff-needle rows have tiny W_ii next to soft-tissue rows, so W's
+ * diagonal spans 1e-6..1e6. With D = diag(W)^{-1/2} the solver works on
+ * W̃ = D W D (unit diagonal), r̃ = D r, λ̃ = D⁻¹ λ, w̃ = D w; λ̃ and w̃ then
+ * carry the same unit (√energy), which is what makes min(w̃, λ̃) and the
+ * relative residual meaningful. Bounds scale as b̃_i = b_i / d_i. A disc
+ * pair is projected in unscaled coordinates, where the disc is round.
+ *
+ * Algorithm: projected block Gauss-Seidel, warm-started from the given λ.
+ * One sweep solves, in order,
+ *   1. the bilateral block exactly with the other rows frozen,
+ *      λ̃_B ← λ̃_B − W̃_BB⁻¹ w̃_B (W̃_BB factorised once by dense Cholesky);
+ *   2. each unilateral row, λ̃_i ← max(0, λ̃_i − w̃_i);
+ *   3. each friction row, λ̃_i ← clamp(λ̃_i − w̃_i, ±b̃_i) with b̃ from the
+ *      current normal force, and each disc pair exactly: the 2×2
+ *      trust-region problem min ½xᵀBx + qᵀx, |x| ≤ b, solved by the
+ *      stick candidate −B⁻¹q or, outside the disc, by bisection on the
+ *      multiplier ν of (B + νI) x = −q, |x| = b;
+ *   4. if the sweep reduced the residual by less than a factor 2, a subspace
+ *      step: the rows strictly inside their sets (bilateral, unilateral with
+ *      λ > 0, friction inside the bound) form F, λ̃_F ← λ̃_F − W̃_FF⁻¹ w̃_F,
+ *      then every row is projected; kept only if the residual drops. Plain
+ *      sweeps on coupled shaft rows took 500-1600 sweeps where this takes
+ *      7-12 (measured, docs/interaction.md).
+ * w̃ is updated after each change (a column of W̃ per row) and recomputed
+ * from scratch before each residual, so round-off does not accumulate. The
+ * exact bilateral block (versus treating bilateral rows as unbounded GS
+ * rows) was chosen by measurement, docs/interaction.md: with coupled
+ * bilateral rows plain GS needs tens to hundreds of sweeps where the block
+ * solve needs one (all-bilateral) or a few. If W̃_BB is singular (dependent
+ * bilateral rows) the bilateral rows fall back to GS rows (which converge
+ * for a consistent positive semi-definite system, slowly).
+ *
+ * Stopping: residual = max_i |λ̃_i − P_K(λ̃_i − w̃_i)| (the disc pair's in
+ * its isotropically scaled unscaled coordinates) divided by
+ * max|r̃| + max|W̃λ̃| (0 if every e_i is 0), checked before the first sweep
+ * (so a warm start at the solution costs 0 sweeps) and after every sweep. The best
+ * iterate is kept and returned if max_iterations is reached.
+ *
+ * Workspace: O(m²) doubles (W̃, the bilateral and the subspace factors),
+ * freed on return.
+ * Failures: NH_ERR_INPUT (inconsistent laws or arguments), NH_ERR_NUMERIC
+ * (non-finite data, a negative diagonal, no convergence), NH_ERR_MEMORY. */
+#include "solve/solve.h"
+
+#include <float.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* 1: bilateral rows as one exact block per sweep (default, measured in
+ * docs/interaction.md); 0: as unbounded Gauss-Seidel rows (for comparison). */
+#ifndef NH_MCP_BILATERAL_BLOCK
+#define NH_MCP_BILATERAL_BLOCK 1
+#endif
+/* 1: after each sweep, try an exact solve on the rows the sweep left free
+ * (subspace minimisation, kept only if it lowers the residual); 0: plain sweeps. */
+#ifndef NH_MCP_SUBSPACE
+#define NH_MCP_SUBSPACE 1
+#endif
+
+typedef struct {
+  int m, nb, block_ok;
+  double *Wt;   /* W̃, column-major */
+  double *d;    /* D = diag(W)^{-1/2} (1 for a zero diagonal) */
+  double *rt;   /* r̃ */
+  double *lt;   /* λ̃ */
+  double *wt;   /* w̃ = W̃ λ̃ + r̃ */
+  double *best; /* λ̃ of the smallest residual so far */
+  double *L;    /* Cholesky factor of W̃_BB (lower, column-major, nb×nb) */
+  double *tmp;  /* m */
+  int *bil;     /* indices of bilateral rows */
+  double *Lf;   /* subspace step: factor of W̃_FF (m×m), saved λ̃ and w̃ */
+  double *save_l, *save_w;
+  int *free_rows;
+} nh_mcp_work;
+
+static void nh_mcp_work_free(nh_mcp_work *ws) {
+  free(ws->Wt), free(ws->d), free(ws->rt), free(ws->lt), free(ws->wt), free(ws->best);
+  free(ws->L), free(ws->tmp), free(ws->bil), free(ws->Lf), free(ws->save_l), free(ws->save_w);
+  free(ws->free_rows);
+}
+
+static int nh_mcp_check_laws(int m, const nh_row_law *laws) {
+  for (int i = 0; i < m; i++) {
+    const nh_row_law *l = &laws[i];
+    NH_CHECK(l->kind == NH_ROW_BILATERAL || l->kind == NH_ROW_UNILATERAL ||
+                 l->kind == NH_ROW_FRICTION,
+             NH_ERR_INPUT, "constraint row %d: unknown law kind %d", i, (int)l->kind);
+    if (l->kind != NH_ROW_FRICTION) continue;
+    NH_CHECK(l->normal >= -1 && l->normal < m, NH_ERR_INPUT,
+             "friction row %d: normal row %d is not in [-1, %d)", i, l->normal, m);
+    NH_CHECK(l->normal < 0 || laws[l->normal].kind != NH_ROW_FRICTION, NH_ERR_INPUT,
+             "friction row %d: its normal row %d is itself a friction row", i, l->normal);
+    NH_CHECK(l->mu >= 0.0 && l->threshold >= 0.0 && isfinite(l->mu) && isfinite(l->threshold),
+             NH_ERR_INPUT, "friction row %d: mu = %g and threshold = %g must be finite and >= 0", i,
+             l->mu, l->threshold);
+    if (l->group < 0) continue;
+    int g = l->group;
+    NH_CHECK(g == i || g == i - 1, NH_ERR_INPUT,
+             "friction row %d: group %d must be the row itself or the row before", i, g);
+    NH_CHECK(g + 1 < m, NH_ERR_INPUT, "friction row %d: disc pair (%d, %d) runs past row %d", i, g,
+             g + 1, m - 1);
+    const nh_row_law *a = &laws[g], *b = &laws[g + 1];
+    NH_CHECK(a->kind == NH_ROW_FRICTION && b->kind == NH_ROW_FRICTION && a->group == g &&
+                 b->group == g && a->normal == b->normal && a->mu == b->mu &&
+                 a->threshold == b->threshold,
+             NH_ERR_INPUT,
+             "friction rows %d and %d: a disc pair needs two friction rows with group %d and the "
+             "same normal, mu and threshold",
+             g, g + 1, g);
+  }
+  return NH_OK;
+}
+
+/* Unscaled Coulomb bound of a friction row from the current normal force. */
+static double nh_mcp_bound(const nh_mcp_work *ws, const nh_row_law *l) {
+  double n = l->normal >= 0 ? fabs(ws->d[l->normal] * ws->lt[l->normal]) : 0.0;
+  return l->mu * n + l->threshold;
+}
+
+static double nh_clamp(double x, double b) {
+  return x > b ? b : (x < -b ? -b : x);
+}
+
+/* λ̃_i += delta, and w̃ += delta W̃(:, i). */
+static void nh_mcp_move(nh_mcp_work *ws, int i, double delta) {
+  if (delta == 0.0) return;
+  const double *c = ws->Wt + (size_t)i * ws->m;
+  ws->lt[i] += delta;
+  for (int k = 0; k < ws->m; k++) ws->wt[k] += delta * c[k];
+}
+
+static void nh_mcp_recompute_w(nh_mcp_work *ws) {
+  int m = ws->m;
+  memcpy(ws->wt, ws->rt, sizeof(double) * (size_t)m);
+  for (int j = 0; j < m; j++) {
+    double l = ws->lt[j];
+    if (l == 0.0) continue;
+    const double *c = ws->Wt + (size_t)j * m;
+    for (int k = 0; k < m; k++) ws->wt[k] += l * c[k];
+  }
+}
+
+/* Disc pair (g, g+1) in unscaled coordinates: B the 2×2 block of W, x the
+ * current forces, w the current violations. Returns the new forces in x:
+ * argmin ½ yᵀBy + qᵀy over |y| ≤ b with q = w − Bx. */
+static void nh_mcp_disc(const double B[3], double q0, double q1, double b, double x[2]) {
+  if (!(b > 0.0)) {
+    x[0] = x[1] = 0.0;
+    return;
+  }
+  double det = B[0] * B[2] - B[1] * B[1];
+  if (det > 1e-14 * (B[0] * B[2] + DBL_MIN)) { /* the stick candidate */
+    double y0 = -(B[2] * q0 - B[1] * q1) / det, y1 = -(-B[1] * q0 + B[0] * q1) / det;
+    if (y0 * y0 + y1 * y1 <= b * b) {
+      x[0] = y0, x[1] = y1;
+      return;
+    }
+  }
+  double qn = sqrt(q0 * q0 + q1 * q1);
+  if (qn == 0.0) { /* singular B, q = 0: any point of the null space; keep none */
+    x[0] = x[1] = 0.0;
+    return;
+  }
+  /* |(B + νI)⁻¹ q| decreases in ν ≥ 0 and is ≤ |q|/ν (B ⪰ 0): bracket [0, |q|/b]. */
+  double lo = 0.0, hi = qn / b, y0 = 0.0, y1 = 0.0;
+  for (int it = 0; it < 200 && hi - lo > 1e-15 * hi; it++) {
+    double nu = 0.5 * (lo + hi);
+    double a = B[0] + nu, c = B[2] + nu, dt = a * c - B[1] * B[1];
+    y0 = -(c * q0 - B[1] * q1) / dt, y1 = -(-B[1] * q0 + a * q1) / dt;
+    if (y0 * y0 + y1 * y1 > b * b)
+      lo = nu;
+    else
+      hi = nu;
+  }
+  double a = B[0] + hi, c = B[2] + hi, dt = a * c - B[1] * B[1];
+  y0 = -(c * q0 - B[1] * q1) / dt, y1 = -(-B[1] * q0 + a * q1) / dt;
+  double n = sqrt(y0 * y0 + y1 * y1);
+  if (n > 0.0) y0 *= b / n, y1 *= b / n; /* onto the circle exactly */
+  x[0] = y0, x[1] = y1;
+}
+
+/* The pair's isotropic scale: 1/√(mean of the two diagonals). */
+static double nh_mcp_pair_scale(const double *W, int m, int g) {
+  double s = 0.5 * (W[(size_t)g * m + g] + W[(size_t)(g + 1) * m + g + 1]);
+  return s > 0.0 ? 1.0 / sqrt(s) : 1.0;
+}
+
+/* Dimensionless natural-map residual of the current iterate (w̃ must be current). */
+static double nh_mcp_residual(const nh_mcp_work *ws, const double *W, const nh_row_law *laws) {
+  int m = ws->m;
+  double res = 0.0, rmax = 0.0, wlmax = 0.0;
+  for (int i = 0; i < m; i++) {
+    rmax = fmax(rmax, fabs(ws->rt[i]));
+    wlmax = fmax(wlmax, fabs(ws->wt[i] - ws->rt[i]));
+  }
+  for (int i = 0; i < m; i++) {
+    const nh_row_law *l = &laws[i];
+    double lam = ws->lt[i], w = ws->wt[i], e;
+    if (l->kind == NH_ROW_BILATERAL) {
+      e = fabs(w);
+    } else if (l->kind == NH_ROW_UNILATERAL) {
+      e = fabs(fmin(w, lam));
+    } else if (l->group < 0) {
+      double b = nh_mcp_bound(ws, l) / ws->d[i];
+      e = fabs(lam - nh_clamp(lam - w, b));
+    } else {
+      if (l->group != i) continue; /* the pair is measured at its first row */
+      /* Unscaled x, w, then the isotropic scale s: x/s, w·s. */
+      double s = nh_mcp_pair_scale(W, m, i);
+      double x0 = ws->d[i] * lam / s, x1 = ws->d[i + 1] * ws->lt[i + 1] / s;
+      double w0 = w / ws->d[i] * s, w1 = ws->wt[i + 1] / ws->d[i + 1] * s;
+      double b = nh_mcp_bound(ws, l) / s;
+      double y0 = x0 - w0, y1 = x1 - w1, n = sqrt(y0 * y0 + y1 * y1);
+      if (n > b) y0 *= b / n, y1 *= b / n;
+      e = hypot(x0 - y0, x1 - y1);
+    }
+    res = fmax(res, e);
+  }
+  double scale = rmax + wlmax;
+  if (!(scale > 0.0)) return res > 0.0 ? HUGE_VAL : 0.0;
+  return res / scale;
+}
+
+/* Dense Cholesky of W̃(idx, idx) into L (nb×nb); 0 if it is not numerically positive definite. */
+static int nh_mcp_factor(const nh_mcp_work *ws, int nb, const int *idx, double *L) {
+  int m = ws->m;
+  for (int j = 0; j < nb; j++)
+    for (int i = 0; i < nb; i++) L[(size_t)j * nb + i] = ws->Wt[(size_t)idx[j] * m + idx[i]];
+  for (int j = 0; j < nb; j++) {
+    double dj = L[(size_t)j * nb + j];
+    for (int k = 0; k < j; k++) dj -= L[(size_t)k * nb + j] * L[(size_t)k * nb + j];
+    /* W̃ has unit diagonal: a pivot below 1e-12 means dependent rows. */
+    if (!(dj > 1e-12)) return 0;
+    dj = sqrt(dj);
+    L[(size_t)j * nb + j] = dj;
+    for (int i = j + 1; i < nb; i++) {
+      double v = L[(size_t)j * nb + i];
+      for (int k = 0; k < j; k++) v -= L[(size_t)k * nb + i] * L[(size_t)k * nb + j];
+      L[(size_t)j * nb + i] = v / dj;
+    }
+  }
+  return 1;
+}
+
+/* λ̃_idx ← λ̃_idx − W̃(idx, idx)⁻¹ w̃_idx with the factor L (step 1 of a sweep for the
+ * bilateral rows; the subspace step for the free rows). */
+static void nh_mcp_solve_block(nh_mcp_work *ws, int nb, const int *idx, const double *L) {
+  double *z = ws->tmp;
+  for (int j = 0; j < nb; j++) { /* L z = w̃_B */
+    double v = ws->wt[idx[j]];
+    for (int k = 0; k < j; k++) v -= L[(size_t)k * nb + j] * z[k];
+    z[j] = v / L[(size_t)j * nb + j];
+  }
+  for (int j = nb - 1; j >= 0; j--) { /* Lᵀ δ = z */
+    double v = z[j];
+    for (int k = j + 1; k < nb; k++) v -= L[(size_t)j * nb + k] * z[k];
+    z[j] = v / L[(size_t)j * nb + j];
+  }
+  for (int j = 0; j < nb; j++) nh_mcp_move(ws, idx[j], -z[j]);
+}
+
+static void nh_mcp_sweep(nh_mcp_work *ws, const double *W, const nh_row_law *laws) {
+  int m = ws->m;
+  if (ws->nb > 0 && ws->block_ok) nh_mcp_solve_block(ws, ws->nb, ws->bil, ws->L);
+  for (int i = 0; i < m; i++) {
+    const nh_row_law *l = &laws[i];
+    double diag = ws->Wt[(size_t)i * m + i];
+    if (!(diag > 0.0)) continue; /* a row W does not see: nothing to move */
+    if (l->kind == NH_ROW_BILATERAL && !(ws->nb > 0 && ws->block_ok))
+      nh_mcp_move(ws, i, -ws->wt[i] / diag);
+    else if (l->kind == NH_ROW_UNILATERAL)
+      nh_mcp_move(ws, i, fmax(0.0, ws->lt[i] - ws->wt[i] / diag) - ws->lt[i]);
+  }
+  for (int i = 0; i < m; i++) {
+    const nh_row_law *l = &laws[i];
+    if (l->kind != NH_ROW_FRICTION) continue;
+    if (l->group < 0) {
+      double diag = ws->Wt[(size_t)i * m + i];
+      if (!(diag > 0.0)) continue;
+      double b = nh_mcp_bound(ws, l) / ws->d[i];
+      nh_mcp_move(ws, i, nh_clamp(ws->lt[i] - ws->wt[i] / diag, b) - ws->lt[i]);
+    } else if (l->group == i) {
+      int j = i + 1;
+      double di = ws->d[i], dj = ws->d[j];
+      double B[3] = {W[(size_t)i * m + i], W[(size_t)i * m + j], W[(size_t)j * m + j]};
+      double x[2] = {di * ws->lt[i], dj * ws->lt[j]};
+      double w0 = ws->wt[i] / di, w1 = ws->wt[j] / dj;
+      double q0 = w0 - B[0] * x[0] - B[1] * x[1], q1 = w1 - B[1] * x[0] - B[2] * x[1];
+      nh_mcp_disc(B, q0, q1, nh_mcp_bound(ws, l), x);
+      nh_mcp_move(ws, i, x[0] / di - ws->lt[i]);
+      nh_mcp_move(ws, j, x[1] / dj - ws->lt[j]);
+    }
+  }
+}
+
+/* Project λ̃ onto every row's set (normals first, so the bounds are current). */
+static void nh_mcp_project(nh_mcp_work *ws, const double *W, const nh_row_law *laws) {
+  int m = ws->m;
+  for (int i = 0; i < m; i++)
+    if (laws[i].kind == NH_ROW_UNILATERAL && ws->lt[i] < 0.0) ws->lt[i] = 0.0;
+  for (int i = 0; i < m; i++) {
+    const nh_row_law *l = &laws[i];
+    if (l->kind != NH_ROW_FRICTION) continue;
+    if (l->group < 0) {
+      ws->lt[i] = nh_clamp(ws->lt[i], nh_mcp_bound(ws, l) / ws->d[i]);
+    } else if (l->group == i) { /* radially, in unscaled coordinates */
+      double x0 = ws->d[i] * ws->lt[i], x1 = ws->d[i + 1] * ws->lt[i + 1];
+      double b = nh_mcp_bound(ws, l), n = hypot(x0, x1);
+      if (n > b) {
+        double f = n > 0.0 ? b / n : 0.0;
+        ws->lt[i] *= f, ws->lt[i + 1] *= f;
+      }
+    }
+  }
+  (void)W;
+}
+
+/* Subspace step: the rows the sweep left strictly inside their sets (bilateral,
+ * unilateral with λ > 0, friction inside the bound) form F; solve W̃_FF δ = −w̃_F
+ * exactly, project, and keep the result only if the residual drops below
+ * `res` (the residual after the sweep). Returns the residual of the kept iterate. */
+static double nh_mcp_subspace(nh_mcp_work *ws, const double *W, const nh_row_law *laws,
+                              double res) {
+  int m = ws->m, nf = 0;
+  for (int i = 0; i < m; i++) {
+    const nh_row_law *l = &laws[i];
+    int in;
+    if (l->kind == NH_ROW_BILATERAL) {
+      in = 1;
+    } else if (l->kind == NH_ROW_UNILATERAL) {
+      in = ws->lt[i] > 0.0;
+    } else {
+      double b = nh_mcp_bound(ws, l), f;
+      if (l->group < 0) {
+        f = fabs(ws->d[i] * ws->lt[i]);
+      } else {
+        int g = l->group;
+        f = hypot(ws->d[g] * ws->lt[g], ws->d[g + 1] * ws->lt[g + 1]);
+      }
+      in = f < b * (1.0 - 1e-12);
+    }
+    if (in && ws->Wt[(size_t)i * m + i] > 0.0) ws->free_rows[nf++] = i;
+  }
+  if (nf == 0 || !nh_mcp_factor(ws, nf, ws->free_rows, ws->Lf)) return res;
+  memcpy(ws->save_l, ws->lt, sizeof(double) * (size_t)m);
+  memcpy(ws->save_w, ws->wt, sizeof(double) * (size_t)m);
+  nh_mcp_solve_block(ws, nf, ws->free_rows, ws->Lf);
+  nh_mcp_project(ws, W, laws);
+  nh_mcp_recompute_w(ws);
+  double r2 = nh_mcp_residual(ws, W, laws);
+  if (r2 < res) return r2;
+  memcpy(ws->lt, ws->save_l, sizeof(double) * (size_t)m);
+  memcpy(ws->wt, ws->save_w, sizeof(double) * (size_t)m);
+  return res;
+}
+
+static void nh_mcp_count(const nh_mcp_work *ws, const nh_row_law *laws, nh_mcp_stats *st) {
+  st->n_stick = st->n_slide = st->n_open = 0;
+  for (int i = 0; i < ws->m; i++) {
+    const nh_row_law *l = &laws[i];
+    if (l->kind == NH_ROW_UNILATERAL) {
+      st->n_open += ws->lt[i] <= 0.0;
+    } else if (l->kind == NH_ROW_FRICTION) {
+      double b = nh_mcp_bound(ws, l), f;
+      if (l->group < 0) {
+        f = fabs(ws->d[i] * ws->lt[i]);
+      } else {
+        int g = l->group;
+        f = hypot(ws->d[g] * ws->lt[g], ws->d[g + 1] * ws->lt[g + 1]);
+      }
+      /* On the bound (to round-off) is sliding; a zero bound slides freely. */
+      if (f >= b * (1.0 - 1e-9))
+        st->n_slide++;
+      else
+        st->n_stick++;
+    }
+  }
+}
+
+int nh_mcp_solve(int m, const double *W, const double *r, const nh_row_law *laws, double tolerance,
+                 int max_iterations, double *lambda, nh_mcp_stats *stats) {
+  nh_mcp_stats dummy;
+  if (!stats) stats = &dummy;
+  memset(stats, 0, sizeof *stats);
+  NH_CHECK(m >= 0, NH_ERR_INPUT, "constraint solve: %d rows", m);
+  NH_CHECK(tolerance > 0.0 && max_iterations >= 0, NH_ERR_INPUT,
+           "constraint solve: tolerance %g must be > 0 and max_iterations %d >= 0", tolerance,
+           max_iterations);
+  if (m == 0) return NH_OK;
+  NH_CHECK(W && r && laws && lambda, NH_ERR_INPUT, "constraint solve: a NULL argument");
+  NH_TRY(nh_mcp_check_laws(m, laws));
+  for (size_t k = 0; k < (size_t)m * m; k++)
+    NH_CHECK(isfinite(W[k]), NH_ERR_NUMERIC, "constraint solve: W(%d, %d) = %g",
+             (int)(k % (size_t)m), (int)(k / (size_t)m), W[k]);
+  for (int i = 0; i < m; i++) {
+    NH_CHECK(isfinite(r[i]) && isfinite(lambda[i]), NH_ERR_NUMERIC,
+             "constraint solve: row %d has r = %g, warm-start lambda = %g", i, r[i], lambda[i]);
+    NH_CHECK(W[(size_t)i * m + i] >= 0.0, NH_ERR_NUMERIC,
+             "constraint solve: W(%d, %d) = %g < 0: the compliance is not positive semi-definite",
+             i, i, W[(size_t)i * m + i]);
+  }
+
+  nh_mcp_work ws = {.m = m};
+  size_t mm = (size_t)m * m;
+  int nb = 0;
+  for (int i = 0; i < m; i++) nb += laws[i].kind == NH_ROW_BILATERAL;
+  ws.nb = nb;
+  ws.Wt = malloc(sizeof(double) * mm);
+  ws.d = malloc(sizeof(double) * (size_t)m);
+  ws.rt = malloc(sizeof(double) * (size_t)m);
+  ws.lt = malloc(sizeof(double) * (size_t)m);
+  ws.wt = malloc(sizeof(double) * (size_t)m);
+  ws.best = malloc(sizeof(double) * (size_t)m);
+  ws.L = malloc(sizeof(double) * ((size_t)nb * nb + 1));
+  ws.tmp = malloc(sizeof(double) * (size_t)m);
+  if (NH_MCP_SUBSPACE) {
+    ws.Lf = malloc(sizeof(double) * mm);
+    ws.save_l = malloc(sizeof(double) * (size_t)m);
+    ws.save_w = malloc(sizeof(double) * (size_t)m);
+    ws.free_rows = malloc(sizeof(int) * (size_t)m);
+  }
+  ws.bil = malloc(sizeof(int) * ((size_t)nb + 1));
+  if (!ws.Wt || !ws.d || !ws.rt || !ws.lt || !ws.wt || !ws.best || !ws.L || !ws.tmp || !ws.bil ||
+      (NH_MCP_SUBSPACE && (!ws.Lf || !ws.save_l || !ws.save_w || !ws.free_rows))) {
+    nh_mcp_work_free(&ws);
+    return NH_ERROR(NH_ERR_MEMORY, "out of memory: constraint solve (%d rows)", m);
+  }
+  for (int i = 0; i < m; i++) {
+    double wii = W[(size_t)i * m + i];
+    ws.d[i] = wii > 0.0 ? 1.0 / sqrt(wii) : 1.0;
+  }
+  for (int j = 0; j < m; j++)
+    for (int i = 0; i < m; i++) ws.Wt[(size_t)j * m + i] = ws.d[i] * W[(size_t)j * m + i] * ws.d[j];
+  for (int i = 0; i < m; i++) {
+    ws.rt[i] = ws.d[i] * r[i];
+    ws.lt[i] = lambda[i] / ws.d[i];
+  }
+  /* A warm start outside its set (e.g. the bound shrank since the last step) is
+   * left to the first sweep, which projects it. */
+  nb = 0;
+  for (int i = 0; i < m; i++)
+    if (laws[i].kind == NH_ROW_BILATERAL) ws.bil[nb++] = i;
+  ws.block_ok = NH_MCP_BILATERAL_BLOCK && nb > 0 ? nh_mcp_factor(&ws, nb, ws.bil, ws.L) : 0;
+
+  nh_mcp_recompute_w(&ws);
+  double res = nh_mcp_residual(&ws, W, laws), best_res = res;
+  memcpy(ws.best, ws.lt, sizeof(double) * (size_t)m);
+  int it = 0;
+  while (!(best_res <= tolerance) && it < max_iterations) {
+    double prev = res;
+    nh_mcp_sweep(&ws, W, laws);
+    it++;
+    nh_mcp_recompute_w(&ws);
+    res = nh_mcp_residual(&ws, W, laws);
+    /* The subspace step costs O(|F|³): only when the sweeps contract slowly. */
+    if (NH_MCP_SUBSPACE && !(res <= tolerance) && !(res < 0.5 * prev))
+      res = nh_mcp_subspace(&ws, W, laws, res);
+    if (!isfinite(res)) break;
+    if (res <= best_res || !(best_res <= HUGE_VAL)) {
+      best_res = res;
+      memcpy(ws.best, ws.lt, sizeof(double) * (size_t)m);
+    }
+  }
+  memcpy(ws.lt, ws.best, sizeof(double) * (size_t)m);
+  for (int i = 0; i < m; i++) lambda[i] = ws.d[i] * ws.lt[i];
+  stats->iterations = it;
+  stats->residual = best_res;
+  nh_mcp_count(&ws, laws, stats);
+  int block_ok = ws.block_ok;
+  nh_mcp_work_free(&ws);
+  if (!(best_res <= tolerance))
+    return NH_ERROR(NH_ERR_NUMERIC,
+                    "constraint solve: residual %.3g > tolerance %.3g after %d sweeps (%d rows, "
+                    "%d bilateral%s)",
+                    best_res, tolerance, it, m, nb,
+                    NH_MCP_BILATERAL_BLOCK && nb > 0 && !block_ok ? ", dependent: solved row by row"
+                                                                  : "");
+  return NH_OK;
+}

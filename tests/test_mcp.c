@@ -1,0 +1,334 @@
+/* test_mcp — the constraint-force solver nh_mcp_solve (src/solve/mcp.c):
+ *  1. all-bilateral rows equal a dense Cholesky solve λ = −W⁻¹ r;
+ *  2. unilateral LCPs (m = 1..6, random SPD W) equal the solution found by
+ *     enumerating the active sets;
+ *  3. one normal + one tangential row: stick → slide exactly at the Coulomb
+ *     bound, continuous there (diagonal and coupled W);
+ *  4. a stiff needle block (×1e6) coupled to soft tissue (×1e-6) converges in
+ *     the same sweeps and to the same relative accuracy as the unscaled one;
+ *  5. a warm start at the solution costs 0-1 sweeps;
+ *  6. disc friction: the pair sticks inside the disc, and on it lies on the
+ *     circle with the slip opposite to the force;
+ *  plus bad laws rejected and non-convergence reported. Silent on success. */
+#include "solve/solve.h"
+
+#include "check.h"
+
+#include <string.h>
+
+#define MAXM 64
+
+static nh_row_law law(nh_row_kind kind) {
+  nh_row_law l = {kind, -1, 0.0, 0.0, -1};
+  return l;
+}
+
+/* Random SPD m×m (column-major): G Gᵀ + 0.1 I. */
+static void random_spd(int m, double *W) {
+  double G[MAXM * MAXM];
+  for (int k = 0; k < m * m; k++) G[k] = nh_rand();
+  for (int i = 0; i < m; i++)
+    for (int j = 0; j < m; j++) {
+      double v = i == j ? 0.1 : 0.0;
+      for (int k = 0; k < m; k++) v += G[k * m + i] * G[k * m + j];
+      W[j * m + i] = v;
+    }
+}
+
+/* Solve the n×n sub-system W(idx, idx) x = b by dense Cholesky; 0 if not SPD. */
+static int chol_solve(int m, const double *W, int n, const int *idx, const double *b, double *x) {
+  double L[MAXM * MAXM];
+  for (int j = 0; j < n; j++)
+    for (int i = 0; i < n; i++) L[j * n + i] = W[idx[j] * m + idx[i]];
+  for (int j = 0; j < n; j++) {
+    double d = L[j * n + j];
+    for (int k = 0; k < j; k++) d -= L[k * n + j] * L[k * n + j];
+    if (!(d > 0.0)) return 0;
+    d = sqrt(d);
+    L[j * n + j] = d;
+    for (int i = j + 1; i < n; i++) {
+      double v = L[j * n + i];
+      for (int k = 0; k < j; k++) v -= L[k * n + i] * L[k * n + j];
+      L[j * n + i] = v / d;
+    }
+  }
+  for (int j = 0; j < n; j++) {
+    double v = b[j];
+    for (int k = 0; k < j; k++) v -= L[k * n + j] * x[k];
+    x[j] = v / L[j * n + j];
+  }
+  for (int j = n - 1; j >= 0; j--) {
+    double v = x[j];
+    for (int k = j + 1; k < n; k++) v -= L[j * n + k] * x[k];
+    x[j] = v / L[j * n + j];
+  }
+  return 1;
+}
+
+static void apply(int m, const double *W, const double *x, const double *r, double *w) {
+  for (int i = 0; i < m; i++) {
+    double v = r[i];
+    for (int j = 0; j < m; j++) v += W[j * m + i] * x[j];
+    w[i] = v;
+  }
+}
+
+static void test_bilateral(void) {
+  for (int m = 1; m <= 12; m++) {
+    double W[MAXM * MAXM], r[MAXM], lam[MAXM], ref[MAXM], mr[MAXM];
+    nh_row_law laws[MAXM];
+    int idx[MAXM];
+    random_spd(m, W);
+    for (int i = 0; i < m; i++) {
+      r[i] = nh_rand(), lam[i] = 0.0, mr[i] = -r[i], idx[i] = i;
+      laws[i] = law(NH_ROW_BILATERAL);
+    }
+    CHECK(chol_solve(m, W, m, idx, mr, ref), "random SPD W not SPD (m = %d)", m);
+    nh_mcp_stats st;
+    CHECK_OK(nh_mcp_solve(m, W, r, laws, 1e-14, 100, lam, &st));
+    for (int i = 0; i < m; i++) CHECK_CLOSE(lam[i], ref[i], 1e-10, "bilateral lambda = -W^-1 r");
+    CHECK(st.iterations <= 2, "all-bilateral took %d sweeps (m = %d), expected 1-2", st.iterations,
+          m);
+  }
+}
+
+static void test_unilateral(void) {
+  for (int m = 1; m <= 6; m++)
+    for (int trial = 0; trial < 20; trial++) {
+      double W[MAXM * MAXM], r[MAXM], lam[MAXM], w[MAXM], ref[MAXM];
+      nh_row_law laws[MAXM];
+      random_spd(m, W);
+      for (int i = 0; i < m; i++) r[i] = nh_rand(), lam[i] = 0.0, laws[i] = law(NH_ROW_UNILATERAL);
+      /* Enumerate active sets: λ_S = −W_SS⁻¹ r_S ≥ 0, w_rest ≥ 0. */
+      int found = 0;
+      for (int mask = 0; mask < (1 << m) && !found; mask++) {
+        int idx[MAXM], n = 0;
+        double b[MAXM], x[MAXM], cand[MAXM] = {0};
+        for (int i = 0; i < m; i++)
+          if (mask >> i & 1) b[n] = -r[i], idx[n++] = i;
+        if (n > 0 && !chol_solve(m, W, n, idx, b, x)) continue;
+        int ok = 1;
+        for (int k = 0; k < n; k++) ok &= x[k] >= 0.0, cand[idx[k]] = x[k];
+        double wc[MAXM];
+        apply(m, W, cand, r, wc);
+        for (int i = 0; i < m; i++)
+          if (!(mask >> i & 1)) ok &= wc[i] >= 0.0;
+        if (ok) found = 1, memcpy(ref, cand, sizeof(double) * (size_t)m);
+      }
+      CHECK(found, "no active set solves the LCP (m = %d, trial %d)", m, trial);
+      nh_mcp_stats st;
+      CHECK_OK(nh_mcp_solve(m, W, r, laws, 1e-14, 100000, lam, &st));
+      apply(m, W, lam, r, w);
+      for (int i = 0; i < m; i++) {
+        CHECK(lam[i] >= 0.0 && w[i] >= -1e-10 && fabs(lam[i] * w[i]) <= 1e-10,
+              "complementarity row %d (m = %d): lambda %g, w %g", i, m, lam[i], w[i]);
+        CHECK_CLOSE(lam[i], ref[i], 1e-10, "LCP lambda vs enumeration");
+      }
+    }
+}
+
+/* One normal row (0, unilateral) and one tangential row (1, friction on 0):
+ * sweep r_t through the stick-slide switch. */
+static void friction_case(double Wnn, double Wnt, double Wtt, double mu, double c) {
+  double W[4] = {Wnn, Wnt, Wnt, Wtt}, det = Wnn * Wtt - Wnt * Wnt;
+  double rn = -1.0;
+  nh_row_law laws[2] = {law(NH_ROW_UNILATERAL), law(NH_ROW_FRICTION)};
+  laws[1].normal = 0, laws[1].mu = mu, laws[1].threshold = c;
+  /* Stick: λ = −W⁻¹ r = a + b r_t. */
+  double an = -(Wtt * rn) / det, at = -(-Wnt * rn) / det;
+  double bn = -(-Wnt) / det, bt = -(Wnn) / det;
+  for (int s = -1; s <= 1; s += 2) {
+    /* The switch: a_t + b_t r_t = s (μ (a_n + b_n r_t) + c). */
+    double rstar = (s * c + s * mu * an - at) / (bt - s * mu * bn);
+    for (int k = -40; k <= 40; k++) {
+      double rt = rstar * (1.0 + k / 21.0); /* avoids −r*, the other switch of a diagonal W */
+      if (k == 0) rt = rstar;
+      double r[2] = {rn, rt}, lam[2] = {0.0, 0.0}, w[2];
+      nh_mcp_stats st;
+      CHECK_OK(nh_mcp_solve(2, W, r, laws, 1e-14, 10000, lam, &st));
+      apply(2, W, lam, r, w);
+      double stick_n = an + bn * rt, stick_t = at + bt * rt;
+      int stick = fabs(stick_t) <= mu * stick_n + c;
+      double en, et;
+      if (stick) {
+        en = stick_n, et = stick_t;
+      } else {
+        double sg = stick_t > 0 ? 1.0 : -1.0;
+        en = (-rn - sg * Wnt * c) / (Wnn + sg * Wnt * mu);
+        et = sg * (mu * en + c);
+        CHECK(w[1] * lam[1] <= 1e-12, "slide: w_t lambda_t = %g > 0 (r_t = %g)", w[1] * lam[1], rt);
+      }
+      CHECK_CLOSE(lam[0], en, 1e-10, "friction: normal force");
+      CHECK_CLOSE(lam[1], et, 1e-10, "friction: tangential force");
+      if (k != 0) {
+        CHECK(st.n_stick == stick && st.n_slide == !stick,
+              "r_t = %g (switch at %g): stick %d slide %d, expected stick %d", rt, rstar,
+              st.n_stick, st.n_slide, stick);
+      } else {
+        /* At the bound both laws hold: continuity of λ. */
+        double sg = stick_t > 0 ? 1.0 : -1.0;
+        double sn = (-rn - sg * Wnt * c) / (Wnn + sg * Wnt * mu);
+        CHECK_CLOSE(stick_n, sn, 1e-10, "continuity of the normal force at the bound");
+        CHECK_CLOSE(stick_t, sg * (mu * sn + c), 1e-10, "continuity of the friction at the bound");
+        CHECK(st.n_stick + st.n_slide == 1, "one friction row expected");
+      }
+    }
+  }
+}
+
+static void test_friction(void) {
+  friction_case(2.0, 0.0, 0.5, 0.3, 0.0);
+  friction_case(2.0, 0.0, 0.5, 0.3, 0.2);
+  friction_case(2.0, 0.4, 0.5, 0.3, 0.1);
+  friction_case(1.0, -0.3, 3.0, 0.5, 0.05);
+}
+
+/* A needle block (rows 0..nn-1) and a tissue block, bilateral, unilateral and
+ * friction rows, coupled; returns sweeps and the relative error. */
+static void stiffness_problem(int m, double *W, double *r, nh_row_law *laws) {
+  random_spd(m, W);
+  for (int i = 0; i < m; i++) r[i] = nh_rand();
+  for (int i = 0; i < m; i++) laws[i] = law(NH_ROW_BILATERAL);
+  /* Needle rows 0..5: 0 unilateral + 1 friction, 2..5 bilateral; tissue rows
+   * 6..: 6 unilateral + 7,8 disc pair, 9 unilateral + 10 friction, rest bilateral. */
+  laws[0] = law(NH_ROW_UNILATERAL);
+  laws[1] = law(NH_ROW_FRICTION), laws[1].normal = 0, laws[1].mu = 0.3, laws[1].threshold = 0.1;
+  laws[6] = law(NH_ROW_UNILATERAL);
+  for (int k = 7; k <= 8; k++)
+    laws[k] = law(NH_ROW_FRICTION), laws[k].normal = 6, laws[k].mu = 0.4, laws[k].group = 7;
+  laws[9] = law(NH_ROW_UNILATERAL);
+  laws[10] = law(NH_ROW_FRICTION), laws[10].normal = 9, laws[10].mu = 0.2;
+  laws[10].threshold = 0.05;
+  r[0] = -fabs(r[0]), r[6] = -2.0, r[9] = -fabs(r[9]);
+}
+
+static void test_stiffness_ratio(void) {
+  enum { M = 16, NN = 6 };
+  double W[M * M], r[M], Ws[M * M], rs[M], s[M];
+  nh_row_law laws[M], lawss[M];
+  stiffness_problem(M, W, r, laws);
+  /* W' = S W S, S = 1e3 on the needle rows, 1e-3 on the tissue: diagonal blocks
+   * ×1e6 and ×1e-6; λ' = S⁻¹ λ, and thresholds c' = c / s_i. */
+  for (int i = 0; i < M; i++) s[i] = i < NN ? 1e3 : 1e-3;
+  for (int j = 0; j < M; j++)
+    for (int i = 0; i < M; i++) Ws[j * M + i] = s[i] * W[j * M + i] * s[j];
+  for (int i = 0; i < M; i++) {
+    rs[i] = s[i] * r[i];
+    lawss[i] = laws[i];
+    lawss[i].threshold = laws[i].threshold / s[i];
+  }
+  double lam[M] = {0}, lams[M] = {0}, w[M], ws[M];
+  nh_mcp_stats st, sts;
+  double tol = 1e-12;
+  CHECK_OK(nh_mcp_solve(M, W, r, laws, tol, 100000, lam, &st));
+  CHECK_OK(nh_mcp_solve(M, Ws, rs, lawss, tol, 100000, lams, &sts));
+  CHECK(abs(st.iterations - sts.iterations) <= (st.iterations + 9) / 10,
+        "sweeps unscaled %d vs stiffness ratio 1e12 %d (more than 10%% apart)", st.iterations,
+        sts.iterations);
+  CHECK(st.residual <= tol && sts.residual <= tol, "residuals %g, %g", st.residual, sts.residual);
+  double lmax = 0.0;
+  for (int i = 0; i < M; i++) lmax = fmax(lmax, fabs(lam[i]));
+  for (int i = 0; i < M; i++)
+    CHECK_CLOSE(s[i] * lams[i], lam[i], 1e-9 * lmax, "stiff/soft lambda, rescaled");
+  apply(M, W, lam, r, w);
+  apply(M, Ws, lams, rs, ws);
+  for (int i = 0; i < M; i++)
+    if (laws[i].kind == NH_ROW_BILATERAL)
+      CHECK_CLOSE(ws[i] / s[i], w[i], 1e-9, "stiff/soft bilateral violation");
+  CHECK(st.iterations > 1, "the mixed problem should need several sweeps (took %d)", st.iterations);
+}
+
+static void test_warm_start(void) {
+  enum { M = 16 };
+  double W[M * M], r[M], lam[M] = {0};
+  nh_row_law laws[M];
+  stiffness_problem(M, W, r, laws);
+  nh_mcp_stats st;
+  CHECK_OK(nh_mcp_solve(M, W, r, laws, 1e-12, 100000, lam, &st));
+  double lam0[M];
+  memcpy(lam0, lam, sizeof lam);
+  CHECK_OK(nh_mcp_solve(M, W, r, laws, 1e-12, 100000, lam, &st));
+  CHECK(st.iterations <= 1, "warm start at the solution took %d sweeps", st.iterations);
+  for (int i = 0; i < M; i++) CHECK_CLOSE(lam[i], lam0[i], 1e-12, "warm start moved lambda");
+}
+
+/* Normal row 0, tangent pair (1, 2) on a disc. */
+static void test_disc(void) {
+  double mu = 0.5;
+  for (int coupled = 0; coupled <= 1; coupled++)
+    for (int k = 0; k < 40; k++) {
+      double W[9] = {2.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0};
+      if (coupled) { /* anisotropic tangents, coupled to the normal */
+        double G[9];
+        for (int q = 0; q < 9; q++) G[q] = nh_rand();
+        for (int i = 0; i < 3; i++)
+          for (int j = 0; j < 3; j++) {
+            double v = i == j ? 0.3 : 0.0;
+            for (int q = 0; q < 3; q++) v += G[q * 3 + i] * G[q * 3 + j];
+            W[j * 3 + i] = v;
+          }
+      }
+      nh_row_law laws[3] = {law(NH_ROW_UNILATERAL), law(NH_ROW_FRICTION), law(NH_ROW_FRICTION)};
+      for (int q = 1; q <= 2; q++) laws[q].normal = 0, laws[q].mu = mu, laws[q].group = 1;
+      double ang = 0.3 + 0.7 * k, mag = 0.05 * k;
+      double r[3] = {-2.0, mag * cos(ang), mag * sin(ang)}, lam[3] = {0}, w[3];
+      nh_mcp_stats st;
+      CHECK_OK(nh_mcp_solve(3, W, r, laws, 1e-14, 100000, lam, &st));
+      apply(3, W, lam, r, w);
+      double b = mu * lam[0], f = hypot(lam[1], lam[2]), v = hypot(w[1], w[2]);
+      CHECK(lam[0] >= 0.0 && fabs(w[0]) <= 1e-10, "disc: normal w %g, lambda %g", w[0], lam[0]);
+      CHECK(f <= b * (1.0 + 1e-12), "disc: |lambda_t| = %.17g > bound %.17g", f, b);
+      if (st.n_stick == 2) {
+        CHECK(v <= 1e-10, "disc stick: |w_t| = %g", v);
+      } else {
+        CHECK(st.n_slide == 2, "disc: stick %d slide %d", st.n_stick, st.n_slide);
+        CHECK_CLOSE(f, b, 1e-10, "disc slide: |lambda_t| on the circle");
+        /* w_t = −ν λ_t, ν ≥ 0: slip opposite to the force. */
+        CHECK_CLOSE(w[1] * lam[1] + w[2] * lam[2], -v * f, 1e-10, "disc slide: w_t antiparallel");
+      }
+      if (!coupled) { /* closed form: stick −r_t/1 if |r_t| ≤ μ λ_n = μ, else −μ r_t/|r_t| */
+        double rt = hypot(r[1], r[2]), e = rt <= mu ? 1.0 : mu / rt;
+        CHECK_CLOSE(lam[0], 1.0, 1e-12, "disc: diagonal normal force");
+        CHECK_CLOSE(lam[1], -e * r[1], 1e-10, "disc: closed form t1");
+        CHECK_CLOSE(lam[2], -e * r[2], 1e-10, "disc: closed form t2");
+      }
+    }
+}
+
+static void test_failures(void) {
+  double W[4] = {1.0, 0.5, 0.5, 1.0}, r[2] = {-1.0, 1.0}, lam[2] = {0};
+  nh_row_law laws[2] = {law(NH_ROW_UNILATERAL), law(NH_ROW_FRICTION)};
+  laws[1].normal = 5;
+  CHECK(nh_mcp_solve(2, W, r, laws, 1e-10, 100, lam, NULL) == NH_ERR_INPUT, "normal out of range");
+  laws[1].normal = 1;
+  CHECK(nh_mcp_solve(2, W, r, laws, 1e-10, 100, lam, NULL) == NH_ERR_INPUT, "normal is friction");
+  laws[1].normal = 0, laws[1].group = 1;
+  CHECK(nh_mcp_solve(2, W, r, laws, 1e-10, 100, lam, NULL) == NH_ERR_INPUT, "pair past the end");
+  laws[1].group = -1, laws[1].mu = -1.0;
+  CHECK(nh_mcp_solve(2, W, r, laws, 1e-10, 100, lam, NULL) == NH_ERR_INPUT, "negative mu");
+  laws[1].mu = 0.3;
+  double Wneg[4] = {-1.0, 0.0, 0.0, 1.0};
+  CHECK(nh_mcp_solve(2, Wneg, r, laws, 1e-10, 100, lam, NULL) == NH_ERR_NUMERIC, "negative W_ii");
+  /* Not converged in 1 sweep on a coupled unilateral problem: best iterate kept. */
+  enum { M = 16 };
+  double Wb[M * M], rb[M], lb[M] = {0};
+  nh_row_law lw[M];
+  stiffness_problem(M, Wb, rb, lw);
+  nh_mcp_stats st;
+  CHECK(nh_mcp_solve(M, Wb, rb, lw, 1e-14, 1, lb, &st) == NH_ERR_NUMERIC, "1 sweep converged?");
+  CHECK(st.iterations == 1 && st.residual > 1e-14 && isfinite(st.residual),
+        "non-converged stats: %d sweeps, residual %g", st.iterations, st.residual);
+  for (int i = 0; i < M; i++) CHECK(isfinite(lb[i]), "best iterate not finite");
+  CHECK_OK(nh_mcp_solve(0, NULL, NULL, NULL, 1e-10, 10, NULL, &st));
+}
+
+int main(void) {
+  test_bilateral();
+  test_unilateral();
+  test_friction();
+  test_stiffness_ratio();
+  test_warm_start();
+  test_disc();
+  test_failures();
+  TEST_END();
+}
