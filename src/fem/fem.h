@@ -31,6 +31,12 @@ int nh_hex_stiffness(const double X[24], double lambda, double mu, double K0[576
  * untouched and the return value is <= 0. */
 double nh_hex_gradients(const double X[24], const double xi[3], double g[24]);
 
+/* F = I + Σ uₐ ⊗ G0ₐ, its polar rotation R[9], and the corotated nodal
+ * displacements d[24] = Rᵀ uₐ + (Rᵀ − I)(Xₐ − X̄) (= Rᵀxₐ − Xₐ up to a
+ * translation, which K0 annihilates). */
+void nh_hex_corotated(const double X[24], const double u[24], const double G0[24], double R[9],
+                      double d[24]);
+
 /* Corotational internal force f[24] and (if Kt != NULL) tangent R K0 Rᵀ, and
  * the rotation R[9] of the element, at nodal displacements u[24]. */
 void nh_hex_corot(const double X[24], const double u[24], const double K0[576], const double G0[24],

@@ -69,8 +69,8 @@ int nh_hex_stiffness(const double X[24], double lambda, double mu, double K0[576
 
 /* F = I + Σ uₐ ⊗ gₐ, its polar rotation R, and the corotated displacement
  * d = Rᵀ uₐ + (Rᵀ − I)(Xₐ − X̄) of every node. */
-static void nh_hex_corotated(const double X[24], const double u[24], const double G0[24],
-                             double R[9], double d[24]) {
+void nh_hex_corotated(const double X[24], const double u[24], const double G0[24], double R[9],
+                      double d[24]) {
   double F[9];
   nh_mat3_identity(F);
   for (int a = 0; a < 8; a++)

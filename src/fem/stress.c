@@ -27,20 +27,8 @@
 void nh_hex_stress_at(const double X[24], const double u[24], const double G0[24], double lambda,
                       double mu, int n, const double *xi, double *s, double *detJ) {
   /* The rotation and corotated displacements of the element, as hex.c. */
-  double F[9], R[9], d[24], c[3] = {0, 0, 0};
-  nh_mat3_identity(F);
-  for (int a = 0; a < 8; a++)
-    for (int i = 0; i < 3; i++)
-      for (int j = 0; j < 3; j++) F[3 * i + j] += u[3 * a + i] * G0[3 * a + j];
-  nh_polar_rotation(F, R);
-  for (int a = 0; a < 8; a++)
-    for (int i = 0; i < 3; i++) c[i] += 0.125 * X[3 * a + i];
-  for (int a = 0; a < 8; a++) {
-    double rel[3] = {X[3 * a] - c[0], X[3 * a + 1] - c[1], X[3 * a + 2] - c[2]}, rr[3];
-    nh_mat3_tvec(R, u + 3 * a, d + 3 * a);
-    nh_mat3_tvec(R, rel, rr);
-    for (int i = 0; i < 3; i++) d[3 * a + i] += rr[i] - rel[i];
-  }
+  double R[9], d[24];
+  nh_hex_corotated(X, u, G0, R, d);
   for (int p = 0; p < n; p++) {
     double g[24], H[9] = {0}, S[9], T[9];
     memcpy(g, G0, sizeof g);
