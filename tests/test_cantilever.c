@@ -20,7 +20,7 @@
 static double tip_deflection(int n) {
   char grid[64];
   snprintf(grid, sizeof grid, "tissue.grid=[%d,%d,%d]", 10 * n, n, n);
-  const char *sets[] = {grid, "tissue.material.poisson=0", "solver.tolerance=1e-11", NULL};
+  const char *sets[] = {grid, "tissue.material.poisson=0", "solver.tolerance=1e-10", NULL};
   nh_scene *scene;
   nh_sim *sim;
   nh_case_open("cantilever.yaml", sets, &scene, &sim);

@@ -164,20 +164,20 @@ double nh_tissue_energy(const nh_tissue *t, const double *u) {
   double energy = 0.0;
   for (int l = 0; l < m->n_leaves; l++) {
     int c = m->leaves[l], s = t->cell_shape[c];
-    double Xe[24], ue[24], R[9], f[24];
+    double Xe[24], ue[24], R[9], d[24];
     nh_mesh_cell_coords(m, m->X, c, Xe);
     nh_mesh_cell_coords(m, u, c, ue);
-    nh_hex_corot(Xe, ue, t->K0 + 576 * s, t->G0 + 24 * s, R, f, NULL);
-    /* Rᵀf = K0 d and d = Rᵀx − X, so ½ dᵀK0 d = ½ Σₐ (Rᵀxₐ − Xₐ)·(Rᵀfₐ); the
-     * translation part of d drops out because Σₐ fₐ = 0. */
-    for (int a = 0; a < 8; a++) {
-      double d[3], fl[3];
-      nh_mat3_tvec(R, ue + 3 * a, d);
-      nh_mat3_tvec(R, f + 3 * a, fl);
-      double Xa[3] = {Xe[3 * a], Xe[3 * a + 1], Xe[3 * a + 2]}, rX[3];
-      nh_mat3_tvec(R, Xa, rX);
-      for (int i = 0; i < 3; i++) energy += 0.5 * m->fill[c] * (d[i] + rX[i] - Xa[i]) * fl[i];
+    /* ½ dᵀ K0 d with d computed as the force is (centroid-relative, no
+     * cancellation of the coordinates' magnitude). */
+    nh_hex_corotated(Xe, ue, t->G0 + 24 * s, R, d);
+    const double *K0 = t->K0 + 576 * s;
+    double e = 0.0;
+    for (int r = 0; r < 24; r++) {
+      double kd = 0.0;
+      for (int q = 0; q < 24; q++) kd += K0[24 * r + q] * d[q];
+      e += d[r] * kd;
     }
+    energy += 0.5 * m->fill[c] * e;
   }
   return energy;
 }
