@@ -7,6 +7,8 @@
 #include <stdio.h>
 #include <stdlib.h>
 
+#include "core/core.h"
+
 #ifndef M_PI
 #define M_PI 3.14159265358979323846
 #endif
@@ -43,6 +45,25 @@ static int nh_test_failures = 0;
               nh_error_message());                                                                 \
       exit(1);                                                                                     \
     }                                                                                              \
+  } while (0)
+
+/* A soft check that also prints the library's last error message (for
+ * tests of functions that report through nh_error_message). */
+#define EXPECT(cond, ...)                                                                          \
+  do {                                                                                             \
+    if (!(cond)) {                                                                                 \
+      fprintf(stderr, "%s:%d: FAILED %s: ", __FILE__, __LINE__, #cond);                            \
+      fprintf(stderr, __VA_ARGS__);                                                                \
+      fprintf(stderr, " [last error: %s]\n", nh_error_message());                                  \
+      nh_test_failures++;                                                                          \
+    }                                                                                              \
+  } while (0)
+
+/* A call returning a status that should be 0 (soft: counted, not fatal). */
+#define EXPECT_OK(expr)                                                                            \
+  do {                                                                                             \
+    int rc_ = (expr);                                                                              \
+    EXPECT(rc_ == NH_OK, "%s returned %d, expected 0", #expr, rc_);                                \
   } while (0)
 
 #define TEST_END() return nh_test_failures ? 1 : 0

@@ -1,5 +1,5 @@
 /* test_hdf5 — writes results.h5 / results.xdmf with known contents through
- * the nh_h5 writer and checks its return codes and failures; the files are
+ * the nh_h5 writer and checks its return codes and nh_test_failures; the files are
  * then read back by tests/hdf5_readback.py (h5py and meshio).
  *
  * usage: test_hdf5 DIR            write the known series and frames into DIR
@@ -45,6 +45,7 @@
  *   HDF5 file without the format attribute and a results file with other
  *   step columns: each becomes a fresh file with steps 4..5 (the known rows)
  *   and no frame. */
+#include "check.h"
 #include "io/io.h"
 
 #include <dirent.h>
@@ -53,28 +54,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-
-static int failures = 0;
-
-#define EXPECT(cond, ...)                                                                          \
-  do {                                                                                             \
-    if (!(cond)) {                                                                                 \
-      fprintf(stderr, "%s:%d: FAILED %s: ", __FILE__, __LINE__, #cond);                            \
-      fprintf(stderr, __VA_ARGS__);                                                                \
-      fprintf(stderr, " [last error: %s]\n", nh_error_message());                                  \
-      ++failures;                                                                                  \
-    }                                                                                              \
-  } while (0)
-
-#define REQUIRE_OK(expr)                                                                           \
-  do {                                                                                             \
-    int rc_ = (expr);                                                                              \
-    if (rc_ != NH_OK) {                                                                            \
-      fprintf(stderr, "%s:%d: %s returned %d: %s\n", __FILE__, __LINE__, #expr, rc_,               \
-              nh_error_message());                                                                 \
-      exit(1);                                                                                     \
-    }                                                                                              \
-  } while (0)
 
 #define N_STEPS 25
 static const int NX[] = {1, 2, 2, 3, 1, 1};
@@ -176,25 +155,25 @@ static void append_probes(nh_h5 *h, int s) {
   double v[2 * 6];
   for (int i = 0; i < 2; ++i)
     for (int k = 0; k < 6; ++k) v[6 * i + k] = 0.001 * s + 0.1 * i + k + shift;
-  REQUIRE_OK(nh_h5_append_series(h, "probes", s, 0.01 * s, 2, PROBES, 6, PROBE_COMPONENTS, v));
+  CHECK_OK(nh_h5_append_series(h, "probes", s, 0.01 * s, 2, PROBES, 6, PROBE_COMPONENTS, v));
 }
 
 static void append_tools(nh_h5 *h, int s) {
   double v[4];
   for (int k = 0; k < 4; ++k) v[k] = s * (k + 1.0) + 0.5 + shift;
-  REQUIRE_OK(nh_h5_append_series(h, "tools", s, 0.01 * s, 1, TOOLS, 4, TOOL_COMPONENTS, v));
+  CHECK_OK(nh_h5_append_series(h, "tools", s, 0.01 * s, 1, TOOLS, 4, TOOL_COMPONENTS, v));
 }
 
 static void write_frame(nh_h5 *h, int f, int step, int nx, int ny, int nz) {
   frame_data d;
   frame_build(&d, f, nx, ny, nz);
-  REQUIRE_OK(nh_h5_write_frame(h, step, 0.01 * step, &d.grid));
+  CHECK_OK(nh_h5_write_frame(h, step, 0.01 * step, &d.grid));
   frame_free(&d);
 }
 
 static nh_h5 *create(const char *dir) {
   nh_h5 *h = NULL;
-  REQUIRE_OK(nh_h5_create(dir, SCENE_TEXT, "9.8.7", 5, STEP_COLUMNS, &h));
+  CHECK_OK(nh_h5_create(dir, SCENE_TEXT, "9.8.7", 5, STEP_COLUMNS, &h));
   return h;
 }
 
@@ -206,12 +185,12 @@ static void write_known(const char *dir) {
   write_frame(h, 0, 0, NX[0], 1, 1);
   for (int s = 1; s <= N_STEPS; ++s) {
     step_row(s, row);
-    REQUIRE_OK(nh_h5_append_steps(h, row));
+    CHECK_OK(nh_h5_append_steps(h, row));
     append_probes(h, s);
     append_tools(h, s);
     if (s % 5 == 0) write_frame(h, s / 5, s, NX[s / 5], 1, 1);
   }
-  REQUIRE_OK(nh_h5_close(&h));
+  CHECK_OK(nh_h5_close(&h));
   EXPECT(h == NULL, "nh_h5_close must set the handle to NULL");
 }
 
@@ -223,7 +202,7 @@ static void write_endless(const char *dir) {
   write_frame(h, 0, 0, 4, 8, 8);
   for (int s = 1;; ++s) {
     step_row(s, row);
-    REQUIRE_OK(nh_h5_append_steps(h, row));
+    CHECK_OK(nh_h5_append_steps(h, row));
     append_probes(h, s);
     append_tools(h, s);
     if (s % 3 == 0) {
@@ -237,12 +216,12 @@ static void append_row(nh_h5 *h, int s) {
   double row[5];
   step_row(s, row);
   row[2] += shift;
-  REQUIRE_OK(nh_h5_append_steps(h, row));
+  CHECK_OK(nh_h5_append_steps(h, row));
 }
 
 /* Interrupted at step 10, resumed at step 6, continued to 10 (see above). */
 static void write_resumed(const char *dir) {
-  REQUIRE_OK(nh_mkdir_p(dir));
+  CHECK_OK(nh_mkdir_p(dir));
   nh_h5 *h = create(dir);
   append_probes(h, 0);
   write_frame(h, 0, 0, NX[0], 1, 1);
@@ -252,8 +231,8 @@ static void write_resumed(const char *dir) {
     append_tools(h, s);
     if (s % 2 == 0) write_frame(h, s / 2, s, NX[s / 2], 1, 1);
   }
-  REQUIRE_OK(nh_h5_close(&h));
-  REQUIRE_OK(nh_h5_resume(dir, SCENE_TEXT, "9.8.7", 5, STEP_COLUMNS, 6, &h));
+  CHECK_OK(nh_h5_close(&h));
+  CHECK_OK(nh_h5_resume(dir, SCENE_TEXT, "9.8.7", 5, STEP_COLUMNS, 6, &h));
   EXPECT(h != NULL, "nh_h5_resume must return a handle");
   if (!h) return;
   shift = 1000.0;
@@ -270,7 +249,7 @@ static void write_resumed(const char *dir) {
   int rc = nh_h5_write_frame(h, 6, 0.06, &d.grid);
   EXPECT(rc == NH_ERR_INTERNAL, "a kept frame written again returned %d", rc);
   frame_free(&d);
-  REQUIRE_OK(nh_h5_close(&h));
+  CHECK_OK(nh_h5_close(&h));
 }
 
 static void write_bytes(const char *path, const char *bytes) {
@@ -285,7 +264,7 @@ static void write_bytes(const char *path, const char *bytes) {
 static void check_resume_fallback(const char *dir, const char *kind) {
   char sub[4200], path[4300];
   snprintf(sub, sizeof sub, "%s/resume_%s", dir, kind);
-  REQUIRE_OK(nh_mkdir_p(sub));
+  CHECK_OK(nh_mkdir_p(sub));
   snprintf(path, sizeof path, "%s/results.h5", sub);
   remove(path);
   char aside[4400];
@@ -299,15 +278,15 @@ static void check_resume_fallback(const char *dir, const char *kind) {
     if (f >= 0) H5Fclose(f);
   } else if (!strcmp(kind, "columns")) {
     nh_h5 *h = NULL;
-    REQUIRE_OK(nh_h5_create(sub, NULL, NULL, 4, STEP_COLUMNS, &h));
-    REQUIRE_OK(nh_h5_close(&h));
+    CHECK_OK(nh_h5_create(sub, NULL, NULL, 4, STEP_COLUMNS, &h));
+    CHECK_OK(nh_h5_close(&h));
   }
   nh_h5 *h = NULL;
   int rc = nh_h5_resume(sub, SCENE_TEXT, "9.8.7", 5, STEP_COLUMNS, 3, &h);
   EXPECT(rc == NH_OK && h != NULL, "resume of a %s file returned %d", kind, rc);
   if (!h) return;
   for (int s = 4; s <= 5; ++s) append_row(h, s);
-  REQUIRE_OK(nh_h5_close(&h));
+  CHECK_OK(nh_h5_close(&h));
 }
 
 static int message_has(const char *needle) {
@@ -319,9 +298,9 @@ static void check_failures(const char *dir) {
   char sub[4200], missing[4200];
   snprintf(sub, sizeof sub, "%s/failures", dir);
   snprintf(missing, sizeof missing, "%s/no/such/folder", dir);
-  REQUIRE_OK(nh_mkdir_p(sub));
+  CHECK_OK(nh_mkdir_p(sub));
 
-  nh_h5 *h = (nh_h5 *)&failures; /* must be reset to NULL on failure */
+  nh_h5 *h = (nh_h5 *)&nh_test_failures; /* must be reset to NULL on failure */
   int rc = nh_h5_create(missing, NULL, NULL, 5, STEP_COLUMNS, &h);
   EXPECT(rc == NH_ERR_IO, "create in a missing folder returned %d, expected NH_ERR_IO", rc);
   EXPECT(h == NULL, "the handle must be NULL after a failed create");
@@ -332,7 +311,7 @@ static void check_failures(const char *dir) {
   h = create(sub);
   frame_data d;
   frame_build(&d, 0, 2, 1, 1);
-  REQUIRE_OK(nh_h5_write_frame(h, 7, 0.07, &d.grid));
+  CHECK_OK(nh_h5_write_frame(h, 7, 0.07, &d.grid));
   rc = nh_h5_write_frame(h, 7, 0.07, &d.grid);
   EXPECT(rc == NH_ERR_INTERNAL && message_has("000007"),
          "a frame written twice returned %d, expected NH_ERR_INTERNAL", rc);
@@ -357,15 +336,15 @@ static void check_failures(const char *dir) {
   EXPECT(rc == NH_ERR_INTERNAL, "a series named 'frames' returned %d", rc);
   rc = nh_h5_append_series(h, "a/b", 1, 0.01, 2, PROBES, 6, PROBE_COMPONENTS, v);
   EXPECT(rc == NH_ERR_INTERNAL, "a series named 'a/b' returned %d", rc);
-  nh_h5 *other = (nh_h5 *)&failures;
+  nh_h5 *other = (nh_h5 *)&nh_test_failures;
   rc = nh_h5_resume(sub, NULL, NULL, 4, STEP_COLUMNS + 1, 0, &other);
   EXPECT(rc == NH_ERR_INTERNAL && other == NULL, "a resume without a 'step' column returned %d",
          rc);
   append_probes(h, 1); /* still usable after refused calls */
-  REQUIRE_OK(nh_h5_flush(h));
-  REQUIRE_OK(nh_h5_close(&h));
-  REQUIRE_OK(nh_h5_close(&h)); /* NULL-safe */
-  REQUIRE_OK(nh_h5_close(NULL));
+  CHECK_OK(nh_h5_flush(h));
+  CHECK_OK(nh_h5_close(&h));
+  CHECK_OK(nh_h5_close(&h)); /* NULL-safe */
+  CHECK_OK(nh_h5_close(NULL));
 
   /* Nothing temporary is left behind. */
   for (int pass = 0; pass < 2; ++pass) {
@@ -383,7 +362,7 @@ static void check_failures(const char *dir) {
 
 int main(int argc, char **argv) {
   if (argc == 3 && strcmp(argv[1], "--endless") == 0) {
-    REQUIRE_OK(nh_mkdir_p(argv[2]));
+    CHECK_OK(nh_mkdir_p(argv[2]));
     write_endless(argv[2]);
     return 0;
   }
@@ -391,7 +370,7 @@ int main(int argc, char **argv) {
     fprintf(stderr, "usage: test_hdf5 DIR | test_hdf5 --endless DIR\n");
     return 2;
   }
-  REQUIRE_OK(nh_mkdir_p(argv[1]));
+  CHECK_OK(nh_mkdir_p(argv[1]));
   write_known(argv[1]);
   check_failures(argv[1]);
   char sub[4200];
@@ -401,5 +380,5 @@ int main(int argc, char **argv) {
   check_resume_fallback(argv[1], "damaged");
   check_resume_fallback(argv[1], "foreign");
   check_resume_fallback(argv[1], "columns");
-  return failures ? 1 : 0;
+  return nh_test_failures ? 1 : 0;
 }

@@ -1,6 +1,6 @@
 /* test_io — writes VTU, PVD and CSV files with known contents and checks the
  * writers' return codes, their atomicity (no "*.tmp" left behind) and their
- * failures (a missing folder gives NH_ERR_IO naming the path).
+ * nh_test_failures (a missing folder gives NH_ERR_IO naming the path).
  *
  * usage: test_io [DIR]
  *   DIR given: the files are written there (created if needed) and kept, for
@@ -36,6 +36,7 @@
  *     i, 0.01 i, p<i>, 1 / (i + 3), n<i>  (doubles with %.17g).
  *   long.csv: header "long"; one row of 3000 'x'.
  *   hello.txt: "hello\nworld\n". */
+#include "check.h"
 #include "io/io.h"
 
 #include <dirent.h>
@@ -45,24 +46,6 @@
 #include <string.h>
 #include <sys/stat.h>
 #include <unistd.h>
-
-static int failures = 0;
-
-#define EXPECT(cond, ...)                                                                          \
-  do {                                                                                             \
-    if (!(cond)) {                                                                                 \
-      fprintf(stderr, "%s:%d: FAILED %s: ", __FILE__, __LINE__, #cond);                            \
-      fprintf(stderr, __VA_ARGS__);                                                                \
-      fprintf(stderr, " [last error: %s]\n", nh_error_message());                                  \
-      ++failures;                                                                                  \
-    }                                                                                              \
-  } while (0)
-
-#define EXPECT_OK(expr)                                                                            \
-  do {                                                                                             \
-    int rc_ = (expr);                                                                              \
-    EXPECT(rc_ == NH_OK, "%s returned %d, expected 0", #expr, rc_);                                \
-  } while (0)
 
 static char dir[4096];
 
@@ -423,8 +406,8 @@ int main(int argc, char **argv) {
   check_failures();
   check_no_tmp();
 
-  if (failures) {
-    fprintf(stderr, "test_io: %d failure(s); files kept in %s\n", failures, dir);
+  if (nh_test_failures) {
+    fprintf(stderr, "test_io: %d failure(s); files kept in %s\n", nh_test_failures, dir);
     return 1;
   }
   if (!keep) {

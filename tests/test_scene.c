@@ -7,6 +7,7 @@
  * the expected lines and values sit next to the text they come from. Silent
  * on success; on failure prints what was expected and what came out and
  * returns 1. */
+#include "check.h"
 #include "scene/scene.h"
 
 #include <math.h>
@@ -16,18 +17,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-static int failures = 0;
 static char dir[256];
-
-#define EXPECT(cond, ...)                                                                          \
-  do {                                                                                             \
-    if (!(cond)) {                                                                                 \
-      fprintf(stderr, "%s:%d: FAILED %s: ", __FILE__, __LINE__, #cond);                            \
-      fprintf(stderr, __VA_ARGS__);                                                                \
-      fprintf(stderr, "\n");                                                                       \
-      ++failures;                                                                                  \
-    }                                                                                              \
-  } while (0)
 
 #define EXPECT_NUM(actual, expected)                                                               \
   EXPECT(fabs((double)(actual) - (double)(expected)) <= 1e-12 * (1 + fabs((double)(expected))),    \
@@ -59,7 +49,7 @@ static nh_scene *load_ok(const char *path, int n, const char *const *overrides, 
   if (rc || !s) {
     fprintf(stderr, "%s:%d: FAILED: loading %s: expected success, got %d: %s\n", __FILE__, line,
             path, rc, nh_error_message());
-    ++failures;
+    ++nh_test_failures;
     return NULL;
   }
   return s;
@@ -738,14 +728,14 @@ int main(void) {
   test_schedule();
   test_adapt();
   test_errors(); /* after test_adapt, which creates DIR/sub for adapt_template_dir.yaml */
-  if (failures == 0) {
+  if (nh_test_failures == 0) {
     /* Clean up only on success, so a failure leaves its scenes to look at. */
     char cmd[512];
     snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
     if (system(cmd) != 0) fprintf(stderr, "could not remove %s\n", dir);
   } else {
-    fprintf(stderr, "test_scene: %d failure%s (scenes kept in %s)\n", failures,
-            failures == 1 ? "" : "s", dir);
+    fprintf(stderr, "test_scene: %d failure%s (scenes kept in %s)\n", nh_test_failures,
+            nh_test_failures == 1 ? "" : "s", dir);
   }
-  return failures ? 1 : 0;
+  return nh_test_failures ? 1 : 0;
 }

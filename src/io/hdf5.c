@@ -777,12 +777,11 @@ static int read_column(const nh_h5 *h, hid_t ds, const char *what, hsize_t n, in
   if (!v) return NH_ERR_MEMORY;
   *out = v;
   if (n == 0) return NH_OK;
-  int rank = col < 0 ? 1 : 2;
   hsize_t start[2] = {0, (hsize_t)(col < 0 ? 0 : col)}, count[2] = {n, 1};
   hid_t mspace = H5Screate_simple(1, count, NULL), fspace = H5Dget_space(ds);
   int rc = NH_OK;
   if (mspace < 0 || fspace < 0 ||
-      H5Sselect_hyperslab(fspace, H5S_SELECT_SET, start, NULL, count, NULL) < 0 || rank < 1)
+      H5Sselect_hyperslab(fspace, H5S_SELECT_SET, start, NULL, count, NULL) < 0)
     rc = h5_fail(h->path, "H5Sselect_hyperslab", what);
   else if (H5Dread(ds, H5T_NATIVE_DOUBLE, mspace, fspace, H5P_DEFAULT, v) < 0)
     rc = h5_fail(h->path, "H5Dread", what);

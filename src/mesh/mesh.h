@@ -121,15 +121,14 @@ typedef struct {
   int first_new, n_new;
   int *parent;
   double *xi;
-  int cap;
 } nh_refine_info;
 
 /* Replace each leaf cells[0..n) by the children of `tmpl`. Rest positions of
  * new nodes by Eq. 17 from the parent's corners; a node at a position where
  * a node already exists (a neighbour refined earlier, or a sibling) is that
  * node: nodes are never duplicated. Leaves are rebuilt. `info` (may be NULL)
- * receives where the new nodes lie. Fails with NH_ERR_INPUT if a cell is not
- * a leaf, NH_ERR_MEMORY. */
+ * receives where the new nodes lie. Fails with NH_ERR_INTERNAL if a cell is
+ * not a leaf (a caller's bug), NH_ERR_MEMORY. */
 int nh_mesh_refine(nh_mesh *mesh, const nh_template *tmpl, const int *cells, int n,
                    nh_refine_info *info);
 void nh_refine_info_free(nh_refine_info *info);

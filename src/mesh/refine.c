@@ -129,7 +129,7 @@ int nh_mesh_refine(nh_mesh *m, const nh_template *t, const int *cells, int n,
   for (int i = 0; i < n; i++) {
     int c = cells[i];
     if (c < 0 || c >= m->n_cells || m->first_child[c] >= 0)
-      return NH_ERROR(NH_ERR_INPUT, "cell %d cannot be refined: it is not a leaf", c);
+      return NH_ERROR(NH_ERR_INTERNAL, "cell %d cannot be refined: it is not a leaf", c);
     min_size = fmin(min_size, nh_mesh_cell_size(m, c));
   }
   nh_node_hash h = {.mesh = m};

@@ -567,7 +567,6 @@ int nh_sim_step(nh_sim *s) {
   }
   s->step++;
   s->time = t_new;
-  s->last = st;
   /* Counts of the mesh the step was solved on (before any refinement). */
   const nh_mesh *m = s->mesh;
   int dofs = 3 * m->n_nodes, free_dofs = nh_system_free_dofs(s->system), cells = m->n_leaves;
@@ -639,6 +638,8 @@ int nh_sim_step(nh_sim *s) {
         s->step % sc->output.checkpoint == 0)
       NH_TRY(nh_h5_flush(s->h5));
   }
+  /* The scene was validated at creation: nothing refinement meets later is
+   * the scene's fault (exit 1, not 2). */
   if (refine_rc)
     return NH_ERROR(refine_rc == NH_ERR_INPUT ? NH_ERR_INTERNAL : refine_rc,
                     "step %d (t = %g s): refinement: %s", s->step, t_new, refine_reason);

@@ -40,7 +40,6 @@ struct nh_sim {
   double time;
   double *phase_times; /* NH_PHASES per step */
   int cap_steps;
-  nh_step_stats last;
   /* adaptivity (absent: all NULL / 0) */
   nh_template *tmpl;
   nh_hanging *hanging;

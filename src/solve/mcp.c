@@ -337,6 +337,14 @@ static void nh_mcp_project(nh_mcp_work *ws, const double *W, const nh_row_law *l
  * unilateral with λ > 0, friction inside the bound) form F; solve W̃_FF δ = −w̃_F
  * exactly, project, and keep the result only if the residual drops below
  * `res` (the residual after the sweep). Returns the residual of the kept iterate. */
+/* Size of friction row i's force in unscaled units: |λᵢ|, or |(λ_g, λ_g+1)|
+ * for a disc pair starting at row g. */
+static double nh_mcp_friction_size(const nh_mcp_work *ws, const nh_row_law *l, int i) {
+  if (l->group < 0) return fabs(ws->d[i] * ws->lt[i]);
+  int g = l->group;
+  return hypot(ws->d[g] * ws->lt[g], ws->d[g + 1] * ws->lt[g + 1]);
+}
+
 static double nh_mcp_subspace(nh_mcp_work *ws, const double *W, const nh_row_law *laws,
                               double res) {
   int m = ws->m, nf = 0;
@@ -348,13 +356,7 @@ static double nh_mcp_subspace(nh_mcp_work *ws, const double *W, const nh_row_law
     } else if (l->kind == NH_ROW_UNILATERAL) {
       in = ws->lt[i] > 0.0;
     } else {
-      double b = nh_mcp_bound(ws, l), f;
-      if (l->group < 0) {
-        f = fabs(ws->d[i] * ws->lt[i]);
-      } else {
-        int g = l->group;
-        f = hypot(ws->d[g] * ws->lt[g], ws->d[g + 1] * ws->lt[g + 1]);
-      }
+      double b = nh_mcp_bound(ws, l), f = nh_mcp_friction_size(ws, l, i);
       in = f < b * (1.0 - 1e-12);
     }
     if (in && ws->Wt[(size_t)i * m + i] > 0.0) ws->free_rows[nf++] = i;
@@ -379,13 +381,7 @@ static void nh_mcp_count(const nh_mcp_work *ws, const nh_row_law *laws, nh_mcp_s
     if (l->kind == NH_ROW_UNILATERAL) {
       st->n_open += ws->lt[i] <= 0.0;
     } else if (l->kind == NH_ROW_FRICTION) {
-      double b = nh_mcp_bound(ws, l), f;
-      if (l->group < 0) {
-        f = fabs(ws->d[i] * ws->lt[i]);
-      } else {
-        int g = l->group;
-        f = hypot(ws->d[g] * ws->lt[g], ws->d[g + 1] * ws->lt[g + 1]);
-      }
+      double b = nh_mcp_bound(ws, l), f = nh_mcp_friction_size(ws, l, i);
       /* On the bound (to round-off) is sliding; a zero bound slides freely. */
       if (f >= b * (1.0 - 1e-9))
         st->n_slide++;
