@@ -19,7 +19,7 @@
 #define MAXM 64
 
 static nh_row_law law(nh_row_kind kind) {
-  nh_row_law l = {kind, -1, 0.0, 0.0, -1};
+  nh_row_law l = {kind, -1, -1, 0.0, 0.0, -1};
   return l;
 }
 
@@ -322,6 +322,36 @@ static void test_failures(void) {
   CHECK_OK(nh_mcp_solve(0, NULL, NULL, NULL, 1e-10, 10, NULL, &st));
 }
 
+/* A friction row bounded by two bilateral normal rows (a needle point's two
+ * lateral rows): the bound is mu |(λ0, λ1)| + c. The bilateral forces are
+ * fixed by their own rows (W block-diagonal, the friction row coupled to
+ * them so the solve is not trivially separable); sweep the friction row's
+ * free violation across the switch. */
+static void test_two_normals(void) {
+  const double mu = 0.4, c = 0.05;
+  double W[9] = {2.0, 0.3, 0.2, 0.3, 1.5, -0.1, 0.2, -0.1, 1.0};
+  nh_row_law laws[3] = {law(NH_ROW_BILATERAL), law(NH_ROW_BILATERAL), law(NH_ROW_FRICTION)};
+  laws[2].normal = 0, laws[2].normal2 = 1, laws[2].mu = mu, laws[2].threshold = c;
+  int switched = 0;
+  for (int k = -40; k <= 40; k++) {
+    double r[3] = {-1.0, 0.7, 0.05 * k}, lam[3] = {0, 0, 0};
+    nh_mcp_stats st;
+    CHECK_OK(nh_mcp_solve(3, W, r, laws, 1e-12, 500, lam, &st));
+    double w[3];
+    for (int i = 0; i < 3; i++) w[i] = r[i] + W[i] * lam[0] + W[3 + i] * lam[1] + W[6 + i] * lam[2];
+    double bound = mu * hypot(lam[0], lam[1]) + c;
+    CHECK_CLOSE(w[0], 0.0, 1e-10, "two normals: bilateral row 0 holds");
+    CHECK_CLOSE(w[1], 0.0, 1e-10, "two normals: bilateral row 1 holds");
+    CHECK(fabs(lam[2]) <= bound * (1 + 1e-10), "two normals: |λt| within mu |λn| + c");
+    if (fabs(w[2]) > 1e-10) { /* sliding: on the bound, opposing the slip */
+      CHECK_CLOSE(fabs(lam[2]), bound, 1e-9 * bound, "two normals: slide on the bound");
+      CHECK(lam[2] * w[2] <= 0.0, "two normals: slide opposes the slip");
+      switched++;
+    }
+  }
+  CHECK(switched > 0 && switched < 81, "two normals: both stick and slide occur in the sweep");
+}
+
 int main(void) {
   test_bilateral();
   test_unilateral();
@@ -329,6 +359,7 @@ int main(void) {
   test_stiffness_ratio();
   test_warm_start();
   test_disc();
+  test_two_normals();
   test_failures();
   TEST_END();
 }

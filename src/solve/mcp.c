@@ -108,6 +108,13 @@ static int nh_mcp_check_laws(int m, const nh_row_law *laws) {
              "friction row %d: normal row %d is not in [-1, %d)", i, l->normal, m);
     NH_CHECK(l->normal < 0 || laws[l->normal].kind != NH_ROW_FRICTION, NH_ERR_INPUT,
              "friction row %d: its normal row %d is itself a friction row", i, l->normal);
+    NH_CHECK(l->normal2 == -1 ||
+                 (l->normal >= 0 && l->normal2 >= 0 && l->normal2 < m && l->normal2 != l->normal &&
+                  laws[l->normal2].kind != NH_ROW_FRICTION),
+             NH_ERR_INPUT,
+             "friction row %d: second normal row %d must be -1 or a non-friction row other than "
+             "the first normal row %d",
+             i, l->normal2, l->normal);
     NH_CHECK(l->mu >= 0.0 && l->threshold >= 0.0 && isfinite(l->mu) && isfinite(l->threshold),
              NH_ERR_INPUT, "friction row %d: mu = %g and threshold = %g must be finite and >= 0", i,
              l->mu, l->threshold);
@@ -119,8 +126,8 @@ static int nh_mcp_check_laws(int m, const nh_row_law *laws) {
              g + 1, m - 1);
     const nh_row_law *a = &laws[g], *b = &laws[g + 1];
     NH_CHECK(a->kind == NH_ROW_FRICTION && b->kind == NH_ROW_FRICTION && a->group == g &&
-                 b->group == g && a->normal == b->normal && a->mu == b->mu &&
-                 a->threshold == b->threshold,
+                 b->group == g && a->normal == b->normal && a->normal2 == b->normal2 &&
+                 a->mu == b->mu && a->threshold == b->threshold,
              NH_ERR_INPUT,
              "friction rows %d and %d: a disc pair needs two friction rows with group %d and the "
              "same normal, mu and threshold",
@@ -132,6 +139,7 @@ static int nh_mcp_check_laws(int m, const nh_row_law *laws) {
 /* Unscaled Coulomb bound of a friction row from the current normal force. */
 static double nh_mcp_bound(const nh_mcp_work *ws, const nh_row_law *l) {
   double n = l->normal >= 0 ? fabs(ws->d[l->normal] * ws->lt[l->normal]) : 0.0;
+  if (l->normal2 >= 0) n = hypot(n, ws->d[l->normal2] * ws->lt[l->normal2]);
   return l->mu * n + l->threshold;
 }
 

@@ -115,15 +115,17 @@ int nh_solve_static(nh_system *sys, const nh_integrator *in, const double *f_ext
  *   FRICTION    |λ_i| ≤ mu |λ_normal| + threshold; stick (w_i = 0) inside the
  *               bound, slide (λ_i = ±bound, w_i λ_i ≤ 0) on it (Eqs. 7-9).
  * normal: index of a non-friction row whose force sets the Coulomb bound, or
- * -1 (bound = threshold). threshold ≥ 0: cutting force or friction per length ×
- * spacing. group: -1 for a one-dimensional friction row; for a disc pair (two
- * tangent rows g, g+1 sharing a normal, same mu and threshold) both rows have
- * group = g and the bound applies to |(λ_g, λ_g+1)|, with w = −ν λ, ν ≥ 0, on it.
- * Fields other than kind are ignored for non-friction rows. */
+ * -1 (bound = threshold); normal2: a second one (or -1), the bound then uses
+ * the size |(λ_normal, λ_normal2)| of the two (a needle point's lateral
+ * force: the tip and shaft rows of docs/interaction.md). threshold ≥ 0: cutting force or friction
+ * per length × spacing. group: -1 for a one-dimensional friction row; for a disc pair (two tangent
+ * rows g, g+1 sharing a normal, same mu and threshold) both rows have group = g and the bound
+ * applies to |(λ_g, λ_g+1)|, with w = −ν λ, ν ≥ 0, on it. Fields other than kind are ignored for
+ * non-friction rows. */
 typedef enum { NH_ROW_BILATERAL = 0, NH_ROW_UNILATERAL = 1, NH_ROW_FRICTION = 2 } nh_row_kind;
 typedef struct {
   nh_row_kind kind;
-  int normal;
+  int normal, normal2;
   double mu;
   double threshold;
   int group;
