@@ -34,7 +34,7 @@ CASES = [
     ("box_min_max.yaml", [], 7, "tissue.domain.box.max"),
     ("duplicate_key.yaml", [], 8, "tissue.material"),
     ("alias.yaml", [], 5, "tissue.domain.box.min"),
-    ("not_supported.yaml", [], 7, "tools"),
+    ("not_supported.yaml", [], 5, "tissue.domain.brain"),
     ("two_documents.yaml", [], 7, None),
     # Detected by the simulator (no node in the region), not by the scene
     # module: it reports the region's `where`, "FILE:11: tissue.fixed.0".
@@ -59,6 +59,28 @@ CASES = [
     ("set_base.yaml", ["adapt.every=2", "adapt.marking.theta=1.5"], "--set:2",
      "adapt.marking.theta"),
     ("set_base.yaml", ["adapt.hanging=both"], "--set:1", "adapt.hanging"),
+    # tools and targets: an unknown key, a missing length, a negative radius,
+    # a wall of no thickness, a zero direction, motion times not increasing, a
+    # host that does not exist, release without a host, a name given twice,
+    # a target naming no tool, an incompressible tool; then the same kind of
+    # errors from overrides of the valid tools_base.yaml.
+    ("tool_unknown_key.yaml", [], 10, "tools.0.lenght"),
+    ("tool_missing_length.yaml", [], 8, "tools.0.length"),
+    ("tool_negative_radius.yaml", [], 10, "tools.0.radius"),
+    ("tool_inner_radius.yaml", [], 11, "tools.0.inner_radius"),
+    ("tool_zero_direction.yaml", [], 13, "tools.0.direction"),
+    ("tool_motion_order.yaml", [], 16, "tools.0.motion.1.until"),
+    ("tool_inside_unknown.yaml", [], 20, "tools.1.inside"),
+    ("tool_release_without_inside.yaml", [], 14, "tools.0.release"),
+    ("tool_duplicate_name.yaml", [], 14, "tools.1.name"),
+    ("target_unknown_tool.yaml", [], 17, "targets.0.tool"),
+    ("tool_poisson.yaml", [], 13, "tools.0.material.poisson"),
+    ("tools_base.yaml", ["tools.0.interaction.friction=-0.1"], "--set:1",
+     "tools.0.interaction.friction"),
+    ("tools_base.yaml", ["tools.0.radius=0.001", "tools.1.inside=electrode"], "--set:2",
+     "tools.1.inside"),
+    ("tools_base.yaml", ["tools.2.length=1"], "--set:1", "tools.2"),
+    ("set_base.yaml", ["tools.0.length=1"], "--set:1", "tools.0"),
 ]
 
 # Scenes that must pass `check`.
@@ -67,7 +89,10 @@ CASES = [
 VALID = [("set_base.yaml", []), ("set_base.yaml", ["tissue.damping.mass=0.5", "tissue.grid=[8,4,4]"]),
          ("set_base.yaml", ["adapt.marking.theta=0.5"]),
          ("set_base.yaml", ["adapt.template=hex3", "adapt.marking={strategy: dorfler, fraction: 0.4}",
-                            "adapt.hanging=lagrange"])]
+                            "adapt.hanging=lagrange"]),
+         ("tools_base.yaml", []),
+         ("tools_base.yaml", ["tools.0.interaction.friction=0.1", "tools.1.release=0.75",
+                              "targets.0.tool=cannula"])]
 
 SANITIZER_WORDS = ("AddressSanitizer", "LeakSanitizer", "runtime error", "UndefinedBehaviorSanitizer")
 

@@ -1,6 +1,7 @@
 /* test_scene — the scene module: defaults, values, --set overrides, schedules,
  * steps from end/step, the scene-as-run text re-loading to the same struct,
- * the adapt section (defaults, values, where adapt.template resolves), and
+ * the adapt section (defaults, values, where adapt.template resolves), tools
+ * and targets (values, defaults, a nested tool, overrides into them), and
  * the exact form of input errors (FILE:LINE: KEY: ...).
  *
  * The scenes are written by this program into a fresh temporary directory, so
@@ -83,6 +84,9 @@ static void test_defaults(void) {
   EXPECT_NUM(s->tissue.damping_stiffness, 0);
   EXPECT(s->tissue.n_fixed == 0 && s->tissue.n_loads == 0 && s->n_probes == 0,
          "fixed %d loads %d probes %d", s->tissue.n_fixed, s->tissue.n_loads, s->n_probes);
+  EXPECT(s->n_tools == 0 && !s->tools && s->n_targets == 0 && !s->targets,
+         "no tools section: expected no tools and no targets, got %d and %d", s->n_tools,
+         s->n_targets);
   EXPECT_NUM(s->solver.tolerance, 1e-8);
   EXPECT(s->solver.max_iterations == 30, "max_iterations %d", s->solver.max_iterations);
   EXPECT(s->solver.threads == 0, "threads %d", s->solver.threads);
@@ -515,6 +519,221 @@ static void test_adapt(void) {
 #endif
 }
 
+/* ---- tools and targets ---- */
+
+/* `minimal` (lines 1-5) followed by two tools, the second inside the first,
+ * and two targets. The cannula sets every key; the electrode leaves every
+ * optional key at its default. */
+static const char *tools_text =
+    "tools:\n"                                                          /* 6 */
+    "  - name: cannula\n"                                               /* 7 */
+    "    length: 0.032\n"                                               /* 8 */
+    "    radius: 0.001\n"                                               /* 9 */
+    "    inner_radius: 0.0005\n"                                        /* 10 */
+    "    elements: 8\n"                                                 /* 11 */
+    "    material: {young: 5.0e7, poisson: 0.25, density: 7900}\n"      /* 12 */
+    "    damping: {mass: 0.5, stiffness: 0.002}\n"                      /* 13 */
+    "    base: [-0.001, 0.01, 0.01]\n"                                  /* 14 */
+    "    direction: [0, 3, -4]\n"                                       /* 15 */
+    "    motion:\n"                                                     /* 16 */
+    "      - {until: 1.5, speed: 0.02}\n"                               /* 17 */
+    "      - {until: 2.0, speed: -0.01}\n"                              /* 18 */
+    "    interaction:\n"                                                /* 19 */
+    "      puncture_force: 0.01\n"                                      /* 20 */
+    "      cutting_force: 0.02\n"                                       /* 21 */
+    "      friction: 0.05\n"                                            /* 22 */
+    "      friction_per_length: 0.3\n"                                  /* 23 */
+    "      spacing: 0.0005\n"                                           /* 24 */
+    "  - name: electrode-1_A\n"                                         /* 25 */
+    "    length: 0.04\n"                                                /* 26 */
+    "    radius: 0.0004\n"                                              /* 27 */
+    "    material: {young: 2.0e11}\n"                                   /* 28 */
+    "    base: [0, 0, 0]\n"                                             /* 29 */
+    "    direction: [1.0e-200, 0, 0]\n"                                 /* 30 */
+    "    inside: cannula\n"                                             /* 31 */
+    "    release: 1.66\n"                                               /* 32 */
+    "targets:\n"                                                        /* 33 */
+    "  - {name: STN, point: [0.02, 0.01, 0.01], tool: electrode-1_A}\n" /* 34 */
+    "  - {name: \"2\", point: [0, 0, -1], tool: cannula}\n";            /* 35 */
+
+/* Every value of tools_text, compared field by field (where strings excluded). */
+static void check_tools(const nh_scene *s, const char *what) {
+  EXPECT(s->n_tools == 2 && s->n_targets == 2, "%s: n_tools %d n_targets %d", what, s->n_tools,
+         s->n_targets);
+  if (s->n_tools != 2 || s->n_targets != 2) return;
+  const nh_tool_spec *c = &s->tools[0], *e = &s->tools[1];
+  EXPECT_STR(c->name, "cannula");
+  EXPECT_NUM(c->length, 0.032);
+  EXPECT_NUM(c->radius, 0.001);
+  EXPECT_NUM(c->inner_radius, 0.0005);
+  EXPECT(c->elements == 8, "%s: elements %d", what, c->elements);
+  EXPECT_NUM(c->young, 5.0e7);
+  EXPECT_NUM(c->poisson, 0.25);
+  EXPECT_NUM(c->density, 7900);
+  EXPECT_NUM(c->damping_mass, 0.5);
+  EXPECT_NUM(c->damping_stiffness, 0.002);
+  EXPECT_NUM(c->base[0], -0.001);
+  EXPECT_NUM(c->base[2], 0.01);
+  /* [0, 3, -4] has length 5. */
+  EXPECT_NUM(c->direction[0], 0);
+  EXPECT_NUM(c->direction[1], 0.6);
+  EXPECT_NUM(c->direction[2], -0.8);
+  EXPECT(c->n_motion == 2, "%s: n_motion %d", what, c->n_motion);
+  if (c->n_motion == 2) {
+    EXPECT_NUM(c->motion[0].until, 1.5);
+    EXPECT_NUM(c->motion[0].speed, 0.02);
+    EXPECT_NUM(c->motion[1].until, 2.0);
+    EXPECT_NUM(c->motion[1].speed, -0.01);
+  }
+  EXPECT_NUM(c->puncture_force, 0.01);
+  EXPECT_NUM(c->cutting_force, 0.02);
+  EXPECT_NUM(c->friction, 0.05);
+  EXPECT_NUM(c->friction_per_length, 0.3);
+  EXPECT_NUM(c->spacing, 0.0005);
+  EXPECT(c->inside == -1, "%s: cannula inside %d, expected -1", what, c->inside);
+  EXPECT(isinf(c->release) && c->release > 0, "%s: cannula release %g, expected +inf", what,
+         c->release);
+
+  /* The electrode: given values, and the documented defaults for the rest. */
+  EXPECT_STR(e->name, "electrode-1_A");
+  EXPECT_NUM(e->length, 0.04);
+  EXPECT_NUM(e->radius, 0.0004);
+  EXPECT_NUM(e->inner_radius, 0);
+  EXPECT(e->elements == 16, "%s: default elements: expected 16, got %d", what, e->elements);
+  EXPECT_NUM(e->young, 2.0e11);
+  EXPECT_NUM(e->poisson, 0.3);
+  EXPECT_NUM(e->density, 7800);
+  EXPECT_NUM(e->damping_mass, 0);
+  EXPECT_NUM(e->damping_stiffness, 0);
+  for (int k = 0; k < 3; ++k) EXPECT_NUM(e->base[k], 0);
+  /* [1e-200, 0, 0]: its squared length underflows, the unit vector does not. */
+  EXPECT_NUM(e->direction[0], 1);
+  EXPECT_NUM(e->direction[1], 0);
+  EXPECT_NUM(e->direction[2], 0);
+  EXPECT(e->n_motion == 0 && e->motion == NULL, "%s: electrode motion %d", what, e->n_motion);
+  EXPECT_NUM(e->puncture_force, 0);
+  EXPECT_NUM(e->cutting_force, 0);
+  EXPECT_NUM(e->friction, 0);
+  EXPECT_NUM(e->friction_per_length, 0);
+  EXPECT_NUM(e->spacing, 0);
+  EXPECT(e->inside == 0, "%s: electrode inside %d, expected 0 (cannula)", what, e->inside);
+  EXPECT_NUM(e->release, 1.66);
+
+  EXPECT_STR(s->targets[0].name, "STN");
+  EXPECT_NUM(s->targets[0].point[0], 0.02);
+  EXPECT_NUM(s->targets[0].point[1], 0.01);
+  EXPECT(s->targets[0].tool == 1, "%s: targets.0.tool %d, expected 1", what, s->targets[0].tool);
+  EXPECT_STR(s->targets[1].name, "2");
+  EXPECT_NUM(s->targets[1].point[2], -1);
+  EXPECT(s->targets[1].tool == 0, "%s: targets.1.tool %d, expected 0", what, s->targets[1].tool);
+}
+
+static void test_tools(void) {
+  char text[4096], where[NH_WHERE_MAX];
+  snprintf(text, sizeof text, "%s%s", minimal, tools_text);
+  const char *path = write_scene("tools.yaml", text);
+  nh_scene *s = load_ok(path, 0, NULL, __LINE__);
+  if (!s) return;
+  check_tools(s, "tools.yaml");
+  if (s->n_tools == 2 && s->n_targets == 2) {
+    snprintf(where, sizeof where, "%s:7: tools.0", path);
+    EXPECT_STR(s->tools[0].where, where);
+    snprintf(where, sizeof where, "%s:25: tools.1", path);
+    EXPECT_STR(s->tools[1].where, where);
+    snprintf(where, sizeof where, "%s:35: targets.1", path);
+    EXPECT_STR(s->targets[1].where, where);
+  }
+
+  /* `check` prints every tool and target (the summary is for people: only
+   * its key facts are checked). */
+  FILE *f = tmpfile();
+  if (f) {
+    char printed[8192] = "";
+    nh_scene_print(s, f);
+    rewind(f);
+    size_t n = fread(printed, 1, sizeof printed - 1, f);
+    printed[n] = '\0';
+    fclose(f);
+    static const char *const expected[] = {
+        "tools     2\n",
+        "cannula: length 0.032 m, radius 0.001 m, inner radius 0.0005 m",
+        "direction [0, 0.6, -0.8]",
+        "motion 0.02 m/s until 1.5 s\n",
+        "-0.01 m/s until 2 s, then at rest\n",
+        "electrode-1_A: length 0.04 m, radius 0.0004 m (solid), 16 beam elements\n",
+        "inside cannula, released at 1.66 s\n",
+        "targets   2\n",
+        "STN at [0.02, 0.01, 0.01] m, distance to the tip of electrode-1_A\n",
+    };
+    for (size_t i = 0; i < sizeof expected / sizeof expected[0]; ++i)
+      EXPECT(strstr(printed, expected[i]), "print: expected '%s' in:\n%s", expected[i], printed);
+  }
+
+  /* The scene as run reads back to the same tools and targets. */
+  const char *again = write_scene("tools_as_run.yaml", s->yaml);
+  nh_scene *t = load_ok(again, 0, NULL, __LINE__);
+  if (t) {
+    check_tools(t, "tools_as_run.yaml");
+    nh_scene_destroy(&t);
+  }
+  nh_scene_destroy(&s);
+
+  /* Overrides reach into tools and targets by index, like any list. */
+  path = write_scene("tools.yaml", text);
+  const char *sets[] = {
+      "tools.0.interaction.friction=0.1",        /* a value in the file */
+      "tools.1.elements=4",                      /* a key the file leaves out */
+      "tools.1.release=2.5",                     /* the nested tool's release */
+      "tools.1.motion=[{until: 1, speed: 0.5}]", /* a list of mappings, absent from the file */
+      "tools.0.direction=[1e300, -1e300, 0]",    /* huge, but not too long to normalise */
+      "targets.0.tool=cannula",                  /* a target moved to the other tool */
+      "targets.1={name: T2, point: [1, 2, 3], tool: electrode-1_A}", /* a whole entry */
+  };
+  int n = (int)(sizeof sets / sizeof sets[0]);
+  s = load_ok(path, n, sets, __LINE__);
+  if (!s) return;
+  if (s->n_tools == 2 && s->n_targets == 2) {
+    EXPECT_NUM(s->tools[0].friction, 0.1);
+    EXPECT_NUM(s->tools[0].puncture_force, 0.01); /* the rest of the section is kept */
+    EXPECT(s->tools[1].elements == 4, "elements: expected 4, got %d", s->tools[1].elements);
+    EXPECT_NUM(s->tools[1].release, 2.5);
+    EXPECT(s->tools[1].n_motion == 1, "n_motion: expected 1, got %d", s->tools[1].n_motion);
+    if (s->tools[1].n_motion == 1) {
+      EXPECT_NUM(s->tools[1].motion[0].until, 1);
+      EXPECT_NUM(s->tools[1].motion[0].speed, 0.5);
+    }
+    EXPECT_NUM(s->tools[0].direction[0], sqrt(0.5));
+    EXPECT_NUM(s->tools[0].direction[1], -sqrt(0.5));
+    EXPECT_NUM(s->tools[0].direction[2], 0);
+    EXPECT(s->targets[0].tool == 0, "targets.0.tool: expected 0, got %d", s->targets[0].tool);
+    EXPECT_STR(s->targets[1].name, "T2");
+    EXPECT(s->targets[1].tool == 1, "targets.1.tool: expected 1, got %d", s->targets[1].tool);
+    EXPECT_STR(s->targets[1].where, "--set:7: targets.1");
+    snprintf(where, sizeof where, "%s:7: tools.0", path);
+    EXPECT_STR(s->tools[0].where, where); /* an override of one key keeps the file's place */
+  }
+  nh_scene_destroy(&s);
+
+  /* An override is checked like the file: a nested host by --set. */
+  const char *bad[] = {"tools.0.inside=electrode-1_A"};
+  nh_error_clear();
+  int rc = nh_scene_load(path, 1, bad, &s);
+  EXPECT(rc == NH_ERR_INPUT && s == NULL, "host listed after: rc %d", rc);
+  EXPECT_STR(nh_error_message(), "--set:1: tools.0.inside: 'electrode-1_A' is tools.1, listed "
+                                 "after this tool: list the host first (--set "
+                                 "tools.0.inside=electrode-1_A)");
+  nh_scene_destroy(&s);
+}
+
+/* The head of the small bad scenes below (4 lines), and one valid tool as an
+ * unclosed flow mapping, so that a case can add keys before its '}'. */
+#define W_HEAD                                                                                     \
+  "name: w\ntissue:\n  domain: {box: {min: [0,0,0], max: [1,1,1]}}\n"                              \
+  "  material: {young: 1, poisson: 0.3}\n"
+#define W_TOOL(name)                                                                               \
+  "  - {name: " name ", length: 1, radius: 0.1, material: {young: 1}, base: [0,0,0], "             \
+  "direction: [1,0,0]"
+
 /* Bad scenes: the message, exactly or by its start ("FILE:LINE: KEY: "). */
 static void test_errors(void) {
   static const struct {
@@ -559,8 +778,6 @@ static void test_errors(void) {
        "min 0)"},
       {"brain.yaml", "name: w\ntissue:\n  domain:\n    brain: {size: [1, 1, 1]}\n", NULL,
        ":4: tissue.domain.brain: not supported in this version of needlehex"},
-      {"tools.yaml", "name: w\ntools: []\n", NULL,
-       ":2: tools: not supported in this version of needlehex"},
       {"dup.yaml", "name: w\nname: v\n", NULL, ":2: name: duplicate key (first given at line 1)"},
       {"alias.yaml", "name: &n w\n", NULL, ":1: name: anchors (&n) and aliases are not supported"},
       {"docs.yaml", "name: w\n---\nname: v\n", NULL,
@@ -589,7 +806,67 @@ static void test_errors(void) {
        "--set:1: expected KEY=VALUE (e.g. tissue.grid=[16,8,8]), got 'tissue.grid'"},
       {"set_malformed.yaml", NULL, "tissue.grid=[1,2", "--set:1: tissue.grid: malformed YAML: "},
       {"set_tools.yaml", NULL, "tools.0.length=1",
-       "--set:1: tools: not supported in this version of needlehex (--set tools.0.length=1)"},
+       "--set:1: tools.0: index 0 beyond the list of 0 (tools is absent) (--set "
+       "tools.0.length=1)"},
+      /* tools and targets (W_HEAD is 4 lines: `tools:` is line 5, the first tool line 6) */
+      {"tools_map.yaml", W_HEAD "tools: {name: a}\n", NULL,
+       ":5: tools: expected a list, got a mapping"},
+      {"tool_map.yaml", W_HEAD "tools:\n  - needle\n", NULL,
+       ":6: tools.0: expected a tool {name: ..., length: ..., radius: ..., material: ..., base: "
+       "[x, y, z], direction: [x, y, z]}, got 'needle'"},
+      {"tool_name.yaml", W_HEAD "tools:\n" W_TOOL("a.b") "}\n", NULL,
+       ":6: tools.0.name: 'a.b' must be non-empty and contain only letters, digits, '_' and '-' "
+       "(it names the output file NAME.pvd)"},
+      {"tool_reserved.yaml", W_HEAD "tools:\n" W_TOOL("Points") "}\n", NULL,
+       ":6: tools.0.name: 'Points' is taken: the output folder already holds points.pvd"},
+      {"tool_case.yaml", W_HEAD "tools:\n" W_TOOL("a") "}\n" W_TOOL("A") "}\n", NULL,
+       ":7: tools.1.name: 'A' differs from the name of tools.0 ('a') only in case"},
+      {"tool_missing_material.yaml",
+       W_HEAD "tools:\n  - {name: a, length: 1, radius: 0.1, base: [0,0,0], direction: [1,0,0]}\n",
+       NULL, ":6: tools.0.material: required key missing"},
+      {"tool_density.yaml",
+       W_HEAD "tools:\n  - {name: a, length: 1, radius: 0.1, material: {young: 1, density: -1}, "
+              "base: [0,0,0], direction: [1,0,0]}\n",
+       NULL, ":6: tools.0.material.density: must be at least 0, got -1"},
+      {"tool_elements.yaml", W_HEAD "tools:\n" W_TOOL("a") ", elements: 0}\n", NULL,
+       ":6: tools.0.elements: must be at least 1, got 0"},
+      {"tool_interaction.yaml", W_HEAD "tools:\n" W_TOOL("a") ", interaction: {frictoin: 1}}\n",
+       NULL, ":6: tools.0.interaction.frictoin: unknown key (did you mean 'friction'?)"},
+      {"tool_spacing.yaml", W_HEAD "tools:\n" W_TOOL("a") ", interaction: {spacing: -1}}\n", NULL,
+       ":6: tools.0.interaction.spacing: must be at least 0, got -1"},
+      {"tool_motion_zero.yaml", W_HEAD "tools:\n" W_TOOL("a") ", motion: [{until: 0, speed: 1}]}\n",
+       NULL, ":6: tools.0.motion.0.until: must be greater than 0, got 0"},
+      {"tool_motion_item.yaml", W_HEAD "tools:\n" W_TOOL("a") ", motion: [[1, 2]]}\n", NULL,
+       ":6: tools.0.motion.0: expected a segment {until: TIME, speed: SPEED}, got a list"},
+      {"tool_motion_speed.yaml", W_HEAD "tools:\n" W_TOOL("a") ", motion: [{until: 1}]}\n", NULL,
+       ":6: tools.0.motion.0.speed: required key missing"},
+      {"tool_inside_self.yaml", W_HEAD "tools:\n" W_TOOL("a") ", inside: a}\n", NULL,
+       ":6: tools.0.inside: a tool cannot be inside itself"},
+      {"tool_inside_later.yaml", W_HEAD "tools:\n" W_TOOL("a") ", inside: b}\n" W_TOOL("b") "}\n",
+       NULL, ":6: tools.0.inside: 'b' is tools.1, listed after this tool: list the host first"},
+      {"tool_inside_nested.yaml",
+       W_HEAD
+       "tools:\n" W_TOOL("a") "}\n" W_TOOL("b") ", inside: a}\n" W_TOOL("c") ", inside: b}\n",
+       NULL,
+       ":8: tools.2.inside: 'b' (tools.1) is itself inside 'a': tools nest one level deep only"},
+      {"tool_release.yaml",
+       W_HEAD "tools:\n" W_TOOL("a") "}\n" W_TOOL("b") ", inside: a, release: -1}\n", NULL,
+       ":7: tools.1.release: must be at least 0, got -1"},
+      {"target_name.yaml",
+       W_HEAD "tools:\n" W_TOOL("a") "}\ntargets:\n  - {name: t, point: [0,0,0], tool: a}\n"
+                                     "  - {name: t, point: [1,0,0], tool: a}\n",
+       NULL, ":9: targets.1.name: 't' is already the name of targets.0"},
+      {"target_comma.yaml",
+       W_HEAD "tools:\n" W_TOOL("a") "}\ntargets:\n  - {name: \"t,1\", point: [0,0,0], tool: a}\n",
+       NULL, ":8: targets.0.name: 't,1' must be non-empty, without commas, quotes or tabs"},
+      {"target_no_tools.yaml", W_HEAD "targets:\n  - {name: t, point: [0,0,0], tool: a}\n", NULL,
+       ":6: targets.0.tool: no tool named 'a' (the scene has no tools)"},
+      {"target_no_tool.yaml",
+       W_HEAD "tools:\n" W_TOOL("a") "}\ntargets:\n  - {name: t, point: [0,0,0]}\n", NULL,
+       ":8: targets.0.tool: required key missing"},
+      {"target_key.yaml",
+       W_HEAD "tools:\n" W_TOOL("a") "}\ntargets:\n  - {name: t, point: [0,0,0], tools: a}\n", NULL,
+       ":8: targets.0.tools: unknown key (did you mean 'tool'?)"},
       {"set_scalar.yaml", NULL, "name.first=x",
        "--set:1: name.first: name is a single value, not a mapping or a list"},
       {"adapt_strategy.yaml",
@@ -727,6 +1004,7 @@ int main(void) {
   test_overrides();
   test_schedule();
   test_adapt();
+  test_tools();
   test_errors(); /* after test_adapt, which creates DIR/sub for adapt_template_dir.yaml */
   if (nh_test_failures == 0) {
     /* Clean up only on success, so a failure leaves its scenes to look at. */

@@ -7,7 +7,8 @@
  * ranges. The schema is written out as code, one function per section, rather
  * than as a table: the sections have cross-checks (end vs steps, min < max,
  * unique probe names, a domain that is exactly one of box/brain/mask) that a
- * table would hide.
+ * table would hide; tools add a host that must be listed before the tool
+ * inside it, and targets name a tool, so tools are read before targets.
  *
  * Messages. Every error is one NH_ERR_INPUT message
  *     FILE:LINE: KEY: reason          (a value from the file)
@@ -16,10 +17,8 @@
  * missing required key — of the mapping that lacks it. Every mapping's keys
  * are checked before its values, so a misspelt key is reported as unknown
  * (with a "did you mean" hint for a near miss) rather than as a missing one.
- * Keys of later features (tools, targets, tissue.domain.brain/mask)
- * are recognised and refused as not supported in this version; an override
- * that starts with one of the top-level ones is refused before it is
- * applied, so that "--set tools.0.x=1" says so instead of "index beyond".
+ * Keys of later features (tissue.domain.brain/mask) are recognised and
+ * refused as not supported in this version.
  *
  * Types. A number is a plain scalar that strtod consumes entirely and that is
  * finite; an integer is a number that is integral and fits in an int (8.0 is
@@ -48,6 +47,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -157,17 +157,14 @@ static int in_list(const char *key, const char *const *list) {
   return 0;
 }
 
-/* Refuse keys of `map` that are not in `allowed` (NULL-terminated); keys in
- * `later` (NULL-terminated, may be NULL) are refused as not supported yet. */
+/* Refuse keys of `map` that are not in `allowed` (NULL-terminated). */
 static int check_keys(const nh_ctx *c, const nh_yaml_node *map, const char *path,
-                      const char *const *allowed, const char *const *later) {
+                      const char *const *allowed) {
   char key[NH_KEY_MAX];
   for (int i = 0; i < map->n; ++i) {
     const nh_yaml_node *k = map->keys[i];
     if (in_list(k->text, allowed)) continue;
     join(key, path, k->text);
-    if (in_list(k->text, later))
-      return fail(c, k, key, "not supported in this version of needlehex");
     const char *best = NULL;
     int best_d = 3;
     for (const char *const *a = allowed; *a; ++a) {
@@ -357,7 +354,7 @@ static int read_box(const nh_ctx *c, const nh_yaml_node *box, const char *path, 
   if (box->kind != NH_YAML_MAP)
     return fail(c, box, path, "expected a mapping {min: [x, y, z], max: [x, y, z]}, got %s",
                 describe(box, d, sizeof d));
-  NH_TRY(check_keys(c, box, path, keys, NULL));
+  NH_TRY(check_keys(c, box, path, keys));
   const nh_yaml_node *at_max;
   NH_TRY(get_vec3(c, box, path, "min", 1, min, NULL));
   NH_TRY(get_vec3(c, box, path, "max", 1, max, &at_max));
@@ -377,7 +374,7 @@ static int read_region(const nh_ctx *c, const nh_yaml_node *node, const char *pa
   if (node->kind != NH_YAML_MAP)
     return fail(c, node, path, "expected a region {box: {min: [...], max: [...]}}, got %s",
                 describe(node, d, sizeof d));
-  NH_TRY(check_keys(c, node, path, keys, NULL));
+  NH_TRY(check_keys(c, node, path, keys));
   const nh_yaml_node *box;
   NH_TRY(field(c, node, path, "box", 1, &box));
   region->kind = NH_REGION_BOX;
@@ -422,7 +419,7 @@ static int read_load(const nh_ctx *c, const nh_yaml_node *node, const char *path
   if (node->kind != NH_YAML_MAP)
     return fail(c, node, path, "expected a load {box: {min, max}, force: [fx, fy, fz]}, got %s",
                 describe(node, d, sizeof d));
-  NH_TRY(check_keys(c, node, path, keys, NULL));
+  NH_TRY(check_keys(c, node, path, keys));
   const nh_yaml_node *box, *schedule;
   NH_TRY(field(c, node, path, "box", 1, &box));
   load->region.kind = NH_REGION_BOX;
@@ -444,7 +441,7 @@ static int read_time(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   s->time.steps = 100;
   NH_TRY(section(c, root, "", "time", 0, &t));
   if (!t) return NH_OK;
-  NH_TRY(check_keys(c, t, "time", keys, NULL));
+  NH_TRY(check_keys(c, t, "time", keys));
   NH_TRY(field(c, t, "time", "mode", 0, &at_mode));
   if (at_mode) {
     const char *m = at_mode->kind == NH_YAML_SCALAR ? at_mode->text : "";
@@ -481,27 +478,48 @@ static int read_time(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   return NH_OK;
 }
 
-static int read_material(const nh_ctx *c, const nh_yaml_node *tissue, nh_scene *s) {
+/* PARENT.material {young, poisson, density} (required): young > 0 is
+ * required; poisson must lie in (-1, 0.5) and is required if
+ * `poisson_required`; density is > 0 (`density_strict`) or >= 0. An absent
+ * optional key leaves its target (the caller's default) untouched. */
+static int read_material(const nh_ctx *c, const nh_yaml_node *parent, const char *parent_path,
+                         int poisson_required, int density_strict, double *young, double *poisson,
+                         double *density) {
   static const char *const keys[] = {"young", "poisson", "density", NULL};
-  const char *path = "tissue.material";
+  char path[NH_KEY_MAX], key[NH_KEY_MAX];
   const nh_yaml_node *m, *at;
-  NH_TRY(section(c, tissue, "tissue", "material", 1, &m));
-  NH_TRY(check_keys(c, m, path, keys, NULL));
-  NH_TRY(get_number(c, m, path, "young", 1, &s->tissue.young, &at));
-  NH_TRY(at_least(c, at, path, "young", s->tissue.young, 0, 1));
-  double nu = 0;
-  NH_TRY(get_number(c, m, path, "poisson", 1, &nu, &at));
-  if (nu >= 0.5)
-    return fail(c, at, "tissue.material.poisson",
+  join(path, parent_path, "material");
+  NH_TRY(section(c, parent, parent_path, "material", 1, &m));
+  NH_TRY(check_keys(c, m, path, keys));
+  NH_TRY(get_number(c, m, path, "young", 1, young, &at));
+  NH_TRY(at_least(c, at, path, "young", *young, 0, 1));
+  NH_TRY(get_number(c, m, path, "poisson", poisson_required, poisson, &at));
+  if (at && *poisson >= 0.5)
+    return fail(c, at, join(key, path, "poisson"),
                 "%g is not below 0.5: incompressible (or beyond) materials are not supported; "
                 "use a value below 0.5, e.g. 0.49",
-                nu);
-  if (nu <= -1)
-    return fail(c, at, "tissue.material.poisson", "must be greater than -1, got %g", nu);
-  s->tissue.poisson = nu;
-  s->tissue.density = 1000;
-  NH_TRY(get_number(c, m, path, "density", 0, &s->tissue.density, &at));
-  NH_TRY(at_least(c, at, path, "density", s->tissue.density, 0, 1));
+                *poisson);
+  if (at && *poisson <= -1)
+    return fail(c, at, join(key, path, "poisson"), "must be greater than -1, got %g", *poisson);
+  NH_TRY(get_number(c, m, path, "density", 0, density, &at));
+  NH_TRY(at_least(c, at, path, "density", *density, 0, density_strict));
+  return NH_OK;
+}
+
+/* PARENT.damping {mass, stiffness} (optional): Rayleigh alpha, beta >= 0. */
+static int read_damping(const nh_ctx *c, const nh_yaml_node *parent, const char *parent_path,
+                        double *mass, double *stiffness) {
+  static const char *const keys[] = {"mass", "stiffness", NULL};
+  char path[NH_KEY_MAX];
+  const nh_yaml_node *m, *at;
+  join(path, parent_path, "damping");
+  NH_TRY(section(c, parent, parent_path, "damping", 0, &m));
+  if (!m) return NH_OK;
+  NH_TRY(check_keys(c, m, path, keys));
+  NH_TRY(get_number(c, m, path, "mass", 0, mass, &at));
+  NH_TRY(at_least(c, at, path, "mass", *mass, 0, 0));
+  NH_TRY(get_number(c, m, path, "stiffness", 0, stiffness, &at));
+  NH_TRY(at_least(c, at, path, "stiffness", *stiffness, 0, 0));
   return NH_OK;
 }
 
@@ -509,15 +527,14 @@ static int read_tissue(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   static const char *const keys[] = {"domain", "grid",  "material", "damping",
                                      "fixed",  "loads", NULL};
   static const char *const domain_keys[] = {"box", "brain", "mask", NULL};
-  static const char *const damping_keys[] = {"mass", "stiffness", NULL};
   char key[NH_KEY_MAX];
   const nh_yaml_node *t, *domain, *n;
   NH_TRY(section(c, root, "", "tissue", 1, &t));
-  NH_TRY(check_keys(c, t, "tissue", keys, NULL));
+  NH_TRY(check_keys(c, t, "tissue", keys));
 
   /* domain: exactly one of box, brain, mask; only box exists for now. */
   NH_TRY(section(c, t, "tissue", "domain", 1, &domain));
-  NH_TRY(check_keys(c, domain, "tissue.domain", domain_keys, NULL));
+  NH_TRY(check_keys(c, domain, "tissue.domain", domain_keys));
   if (domain->n == 0) return fail(c, domain, "tissue.domain", "give one of box, brain, mask");
   if (domain->n > 1)
     return fail(c, domain->keys[1], join(key, "tissue.domain", domain->keys[1]->text),
@@ -544,18 +561,10 @@ static int read_tissue(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
     if (3 * nodes > INT_MAX) return fail(c, n, "tissue.grid", "%g nodes are too many", nodes);
   }
 
-  NH_TRY(read_material(c, t, s));
-
-  const nh_yaml_node *damping, *at;
-  NH_TRY(section(c, t, "tissue", "damping", 0, &damping));
-  if (damping) {
-    NH_TRY(check_keys(c, damping, "tissue.damping", damping_keys, NULL));
-    NH_TRY(get_number(c, damping, "tissue.damping", "mass", 0, &s->tissue.damping_mass, &at));
-    NH_TRY(at_least(c, at, "tissue.damping", "mass", s->tissue.damping_mass, 0, 0));
-    NH_TRY(get_number(c, damping, "tissue.damping", "stiffness", 0, &s->tissue.damping_stiffness,
-                      &at));
-    NH_TRY(at_least(c, at, "tissue.damping", "stiffness", s->tissue.damping_stiffness, 0, 0));
-  }
+  s->tissue.density = 1000;
+  NH_TRY(read_material(c, t, "tissue", 1, 1, &s->tissue.young, &s->tissue.poisson,
+                       &s->tissue.density));
+  NH_TRY(read_damping(c, t, "tissue", &s->tissue.damping_mass, &s->tissue.damping_stiffness));
 
   /* fixed: where_fixed points at the key `fixed:`, or at `tissue:` without it. */
   const nh_yaml_node *fixed, *fixed_key, *tissue_key;
@@ -667,7 +676,7 @@ static int read_adapt(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   s->adapt.enabled = 1;
   make_where(c, key, "adapt", s->adapt.where);
   NH_TRY(section(c, root, "", "adapt", 0, &m));
-  if (m) NH_TRY(check_keys(c, m, "adapt", keys, NULL));
+  if (m) NH_TRY(check_keys(c, m, "adapt", keys));
 
   NH_TRY(field(c, m, "adapt", "estimator", 0, &at));
   int choice = 0;
@@ -676,7 +685,7 @@ static int read_adapt(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   NH_TRY(section(c, m, "adapt", "marking", 0, &marking));
   if (marking) {
     const nh_yaml_node *at_theta, *at_fraction;
-    NH_TRY(check_keys(c, marking, "adapt.marking", marking_keys, NULL));
+    NH_TRY(check_keys(c, marking, "adapt.marking", marking_keys));
     NH_TRY(field(c, marking, "adapt.marking", "strategy", 0, &at));
     if (at) {
       NH_TRY(as_choice(c, at, "adapt.marking.strategy", strategies, &choice));
@@ -729,13 +738,26 @@ static int read_solver(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   s->solver.threads = 0;
   NH_TRY(section(c, root, "", "solver", 0, &m));
   if (!m) return NH_OK;
-  NH_TRY(check_keys(c, m, "solver", keys, NULL));
+  NH_TRY(check_keys(c, m, "solver", keys));
   NH_TRY(get_number(c, m, "solver", "tolerance", 0, &s->solver.tolerance, &at));
   NH_TRY(at_least(c, at, "solver", "tolerance", s->solver.tolerance, 0, 1));
   NH_TRY(get_int(c, m, "solver", "max_iterations", &s->solver.max_iterations, &at));
   NH_TRY(at_least(c, at, "solver", "max_iterations", s->solver.max_iterations, 1, 0));
   NH_TRY(get_int(c, m, "solver", "threads", &s->solver.threads, &at));
   NH_TRY(at_least(c, at, "solver", "threads", s->solver.threads, 0, 0));
+  return NH_OK;
+}
+
+/* ITEM.name of a probe or target (required): it goes into probes.csv or
+ * targets.csv and the VTU point data, so it must be one plain CSV field. */
+static int read_point_name(const nh_ctx *c, const nh_yaml_node *item, const char *path,
+                           char name[NH_NAME_MAX], const nh_yaml_node **at) {
+  char key[NH_KEY_MAX], d[96];
+  NH_TRY(field(c, item, path, "name", 1, at));
+  NH_TRY(as_string(c, *at, join(key, path, "name"), name, NH_NAME_MAX));
+  if (!name[0] || strpbrk(name, ",\"\n\r\t"))
+    return fail(c, *at, key, "%s must be non-empty, without commas, quotes or tabs",
+                describe(*at, d, sizeof d));
   return NH_OK;
 }
 
@@ -754,13 +776,9 @@ static int read_probes(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
     if (p->kind != NH_YAML_MAP)
       return fail(c, p, path, "expected a probe {name: ..., point: [x, y, z]}, got %s",
                   describe(p, d, sizeof d));
-    NH_TRY(check_keys(c, p, path, keys, NULL));
-    NH_TRY(field(c, p, path, "name", 1, &at));
-    NH_TRY(as_string(c, at, join(key, path, "name"), probe->name, sizeof probe->name));
-    /* The name goes into probes.csv and the VTU point data: keep it one plain field. */
-    if (!probe->name[0] || strpbrk(probe->name, ",\"\n\r\t"))
-      return fail(c, at, key, "%s must be non-empty, without commas, quotes or tabs",
-                  describe(at, d, sizeof d));
+    NH_TRY(check_keys(c, p, path, keys));
+    NH_TRY(read_point_name(c, p, path, probe->name, &at));
+    join(key, path, "name");
     for (int j = 0; j < i; ++j)
       if (!strcmp(s->probes[j].name, probe->name))
         return fail(c, at, key, "%s is already the name of probes.%d", describe(at, d, sizeof d),
@@ -768,6 +786,239 @@ static int read_probes(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
     NH_TRY(get_vec3(c, p, path, "point", 1, probe->point, NULL));
     make_where(c, p, path, probe->where);
     s->n_probes = i + 1;
+  }
+  return NH_OK;
+}
+
+/* The names of the tools, "'a', 'b'" (for messages), cut to fit `cap`. */
+static const char *tool_names(const nh_scene *s, char *buf, size_t cap) {
+  size_t len = 0;
+  buf[0] = '\0';
+  for (int j = 0; j < s->n_tools && len < cap; ++j) {
+    int n = snprintf(buf + len, cap - len, "%s'%s'", j ? ", " : "", s->tools[j].name);
+    if (n < 0) break;
+    len += (size_t)n;
+  }
+  return buf;
+}
+
+/* PATH.motion: [{until, speed}, ...] with `until` > 0 and strictly
+ * increasing; absent or empty: the tool stays at rest. */
+static int read_motion(const nh_ctx *c, const nh_yaml_node *tool, const char *path,
+                       nh_tool_spec *t) {
+  static const char *const keys[] = {"until", "speed", NULL};
+  char motion[NH_KEY_MAX], item[NH_KEY_MAX], key[NH_KEY_MAX], d[96];
+  const nh_yaml_node *list;
+  NH_TRY(list_section(c, tool, path, "motion", &list));
+  if (!list || list->n == 0) return NH_OK;
+  join(motion, path, "motion");
+  t->motion = nh_calloc((size_t)list->n, sizeof *t->motion);
+  if (!t->motion) return NH_ERR_MEMORY;
+  for (int i = 0; i < list->n; ++i) {
+    const nh_yaml_node *m = list->items[i], *at;
+    nh_motion *segment = &t->motion[i];
+    join_index(item, motion, i);
+    if (m->kind != NH_YAML_MAP)
+      return fail(c, m, item, "expected a segment {until: TIME, speed: SPEED}, got %s",
+                  describe(m, d, sizeof d));
+    NH_TRY(check_keys(c, m, item, keys));
+    NH_TRY(get_number(c, m, item, "until", 1, &segment->until, &at));
+    if (i == 0) NH_TRY(at_least(c, at, item, "until", segment->until, 0, 1));
+    if (i > 0 && !(segment->until > t->motion[i - 1].until))
+      return fail(c, at, join(key, item, "until"), "times must increase strictly (%g after %g)",
+                  segment->until, t->motion[i - 1].until);
+    NH_TRY(get_number(c, m, item, "speed", 1, &segment->speed, NULL));
+    t->n_motion = i + 1;
+  }
+  return NH_OK;
+}
+
+/* PATH.direction (required, non-zero), stored with unit length. */
+static int read_direction(const nh_ctx *c, const nh_yaml_node *tool, const char *path,
+                          double direction[3]) {
+  char key[NH_KEY_MAX];
+  const nh_yaml_node *at;
+  NH_TRY(get_vec3(c, tool, path, "direction", 1, direction, &at));
+  /* Scale by the largest component first, so that squaring neither
+   * overflows (1e200) nor underflows (1e-200). */
+  double scale = 0, norm = 0;
+  for (int k = 0; k < 3; ++k) scale = fmax(scale, fabs(direction[k]));
+  if (!(scale > 0)) return fail(c, at, join(key, path, "direction"), "must not be the zero vector");
+  for (int k = 0; k < 3; ++k) norm += (direction[k] / scale) * (direction[k] / scale);
+  norm = sqrt(norm);
+  for (int k = 0; k < 3; ++k) direction[k] = direction[k] / scale / norm;
+  return NH_OK;
+}
+
+/* PATH.inside (optional): the name of a tool listed before this one that is
+ * not itself nested; t->inside = its index. */
+static int read_host(const nh_ctx *c, const nh_yaml_node *list, int i, const char *path,
+                     nh_scene *s) {
+  char key[NH_KEY_MAX], host[NH_NAME_MAX], d[96];
+  nh_tool_spec *t = &s->tools[i];
+  const nh_yaml_node *at;
+  NH_TRY(field(c, list->items[i], path, "inside", 0, &at));
+  if (!at) return NH_OK;
+  NH_TRY(as_string(c, at, join(key, path, "inside"), host, sizeof host));
+  for (int j = 0; j < i; ++j) {
+    if (strcmp(s->tools[j].name, host) != 0) continue;
+    if (s->tools[j].inside >= 0)
+      return fail(c, at, key, "%s (tools.%d) is itself inside '%s': tools nest one level deep only",
+                  describe(at, d, sizeof d), j, s->tools[s->tools[j].inside].name);
+    t->inside = j;
+    return NH_OK;
+  }
+  if (!strcmp(host, t->name)) return fail(c, at, key, "a tool cannot be inside itself");
+  for (int j = i + 1; j < list->n; ++j) {
+    const nh_yaml_node *name = nh_yaml_get(list->items[j], "name", NULL);
+    if (name && name->kind == NH_YAML_SCALAR && !strcmp(name->text, host))
+      return fail(c, at, key, "%s is tools.%d, listed after this tool: list the host first",
+                  describe(at, d, sizeof d), j);
+  }
+  return fail(c, at, key, "no tool named %s is listed before this one", describe(at, d, sizeof d));
+}
+
+/* tools[i]: one tool, its defaults and its checks (tools before it are read). */
+static int read_tool(const nh_ctx *c, const nh_yaml_node *list, int i, nh_scene *s) {
+  static const char *const keys[] = {
+      "name", "length",    "radius", "inner_radius", "elements", "material", "damping",
+      "base", "direction", "motion", "interaction",  "inside",   "release",  NULL};
+  static const char *const interaction_keys[] = {"puncture_force",      "cutting_force", "friction",
+                                                 "friction_per_length", "spacing",       NULL};
+  /* Files the output folder holds besides the tools' own. */
+  static const char *const reserved[] = {"tissue", "points", NULL};
+  char path[NH_KEY_MAX], sub[NH_KEY_MAX], key[NH_KEY_MAX], d[96];
+  const nh_yaml_node *node = list->items[i], *at, *m;
+  nh_tool_spec *t = &s->tools[i];
+  join_index(path, "tools", i);
+  t->inner_radius = 0;
+  t->elements = 16;
+  t->poisson = 0.3;
+  t->density = 7800;
+  t->inside = -1;
+  t->release = INFINITY;
+  if (node->kind != NH_YAML_MAP)
+    return fail(c, node, path,
+                "expected a tool {name: ..., length: ..., radius: ..., material: ..., base: "
+                "[x, y, z], direction: [x, y, z]}, got %s",
+                describe(node, d, sizeof d));
+  NH_TRY(check_keys(c, node, path, keys));
+
+  /* The name names the files <name>.pvd and <name>_NNNNNN.vtu: a plain file
+   * name, distinct from the other tools' even on a file system that ignores
+   * case, and from the folder's other .pvd files. */
+  NH_TRY(field(c, node, path, "name", 1, &at));
+  NH_TRY(as_string(c, at, join(key, path, "name"), t->name, sizeof t->name));
+  size_t len = strlen(t->name);
+  if (len == 0 || strspn(t->name, "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz"
+                                  "0123456789_-") != len)
+    return fail(c, at, key,
+                "%s must be non-empty and contain only letters, digits, '_' and '-' (it names "
+                "the output file NAME.pvd)",
+                describe(at, d, sizeof d));
+  for (const char *const *r = reserved; *r; ++r)
+    if (!strcasecmp(t->name, *r))
+      return fail(c, at, key, "%s is taken: the output folder already holds %s.pvd",
+                  describe(at, d, sizeof d), *r);
+  for (int j = 0; j < i; ++j) {
+    if (!strcmp(s->tools[j].name, t->name))
+      return fail(c, at, key, "%s is already the name of tools.%d", describe(at, d, sizeof d), j);
+    if (!strcasecmp(s->tools[j].name, t->name))
+      return fail(c, at, key,
+                  "%s differs from the name of tools.%d ('%s') only in case (tool names name "
+                  "files, and some file systems ignore case)",
+                  describe(at, d, sizeof d), j, s->tools[j].name);
+  }
+
+  NH_TRY(get_number(c, node, path, "length", 1, &t->length, &at));
+  NH_TRY(at_least(c, at, path, "length", t->length, 0, 1));
+  NH_TRY(get_number(c, node, path, "radius", 1, &t->radius, &at));
+  NH_TRY(at_least(c, at, path, "radius", t->radius, 0, 1));
+  NH_TRY(get_number(c, node, path, "inner_radius", 0, &t->inner_radius, &at));
+  NH_TRY(at_least(c, at, path, "inner_radius", t->inner_radius, 0, 0));
+  if (at && !(t->inner_radius < t->radius))
+    return fail(c, at, join(key, path, "inner_radius"), "must be less than the radius (%g), got %g",
+                t->radius, t->inner_radius);
+  NH_TRY(get_int(c, node, path, "elements", &t->elements, &at));
+  NH_TRY(at_least(c, at, path, "elements", t->elements, 1, 0));
+  NH_TRY(read_material(c, node, path, 0, 0, &t->young, &t->poisson, &t->density));
+  NH_TRY(read_damping(c, node, path, &t->damping_mass, &t->damping_stiffness));
+  NH_TRY(get_vec3(c, node, path, "base", 1, t->base, NULL));
+  NH_TRY(read_direction(c, node, path, t->direction));
+  NH_TRY(read_motion(c, node, path, t));
+
+  join(sub, path, "interaction");
+  NH_TRY(section(c, node, path, "interaction", 0, &m));
+  if (m) {
+    double *value[] = {&t->puncture_force, &t->cutting_force, &t->friction, &t->friction_per_length,
+                       &t->spacing};
+    NH_TRY(check_keys(c, m, sub, interaction_keys));
+    for (int k = 0; interaction_keys[k]; ++k) {
+      NH_TRY(get_number(c, m, sub, interaction_keys[k], 0, value[k], &at));
+      NH_TRY(at_least(c, at, sub, interaction_keys[k], *value[k], 0, 0));
+    }
+  }
+
+  NH_TRY(read_host(c, list, i, path, s));
+  NH_TRY(get_number(c, node, path, "release", 0, &t->release, &at));
+  if (at && t->inside < 0)
+    return fail(c, at, join(key, path, "release"),
+                "applies to a nested tool only (give inside: HOST, the tool it starts in)");
+  NH_TRY(at_least(c, at, path, "release", t->release, 0, 0));
+  make_where(c, node, path, t->where);
+  return NH_OK;
+}
+
+static int read_tools(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
+  const nh_yaml_node *list;
+  NH_TRY(list_section(c, root, "", "tools", &list));
+  if (!list || list->n == 0) return NH_OK;
+  s->tools = nh_calloc((size_t)list->n, sizeof *s->tools);
+  if (!s->tools) return NH_ERR_MEMORY;
+  for (int i = 0; i < list->n; ++i) {
+    /* Count the tool first so that destroy frees a half-read motion. */
+    s->n_tools = i + 1;
+    NH_TRY(read_tool(c, list, i, s));
+  }
+  return NH_OK;
+}
+
+static int read_targets(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
+  static const char *const keys[] = {"name", "point", "tool", NULL};
+  char path[NH_KEY_MAX], key[NH_KEY_MAX], tool[NH_NAME_MAX], names[256], d[96];
+  const nh_yaml_node *list;
+  NH_TRY(list_section(c, root, "", "targets", &list));
+  if (!list || list->n == 0) return NH_OK;
+  s->targets = nh_calloc((size_t)list->n, sizeof *s->targets);
+  if (!s->targets) return NH_ERR_MEMORY;
+  for (int i = 0; i < list->n; ++i) {
+    const nh_yaml_node *p = list->items[i], *at;
+    nh_target *target = &s->targets[i];
+    join_index(path, "targets", i);
+    if (p->kind != NH_YAML_MAP)
+      return fail(c, p, path, "expected a target {name: ..., point: [x, y, z], tool: ...}, got %s",
+                  describe(p, d, sizeof d));
+    NH_TRY(check_keys(c, p, path, keys));
+    NH_TRY(read_point_name(c, p, path, target->name, &at));
+    join(key, path, "name");
+    for (int j = 0; j < i; ++j)
+      if (!strcmp(s->targets[j].name, target->name))
+        return fail(c, at, key, "%s is already the name of targets.%d", describe(at, d, sizeof d),
+                    j);
+    NH_TRY(get_vec3(c, p, path, "point", 1, target->point, NULL));
+    NH_TRY(field(c, p, path, "tool", 1, &at));
+    NH_TRY(as_string(c, at, join(key, path, "tool"), tool, sizeof tool));
+    target->tool = -1;
+    for (int j = 0; j < s->n_tools && target->tool < 0; ++j)
+      if (!strcmp(s->tools[j].name, tool)) target->tool = j;
+    if (target->tool < 0 && s->n_tools == 0)
+      return fail(c, at, key, "no tool named %s (the scene has no tools)",
+                  describe(at, d, sizeof d));
+    if (target->tool < 0)
+      return fail(c, at, key, "no tool named %s (the tools are %s)", describe(at, d, sizeof d),
+                  tool_names(s, names, sizeof names));
+    make_where(c, p, path, target->where);
+    s->n_targets = i + 1;
   }
   return NH_OK;
 }
@@ -781,7 +1032,7 @@ static int read_output(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   s->output.checkpoint = 0;
   NH_TRY(section(c, root, "", "output", 0, &m));
   if (!m) return NH_OK;
-  NH_TRY(check_keys(c, m, "output", keys, NULL));
+  NH_TRY(check_keys(c, m, "output", keys));
   NH_TRY(field(c, m, "output", "dir", 0, &at));
   if (at) {
     NH_TRY(as_string(c, at, "output.dir", s->output.dir, sizeof s->output.dir));
@@ -815,35 +1066,19 @@ static int read_name(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
 
 /* The whole schema, in the order of SCENE.md. */
 static int read_scene(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
-  static const char *const keys[] = {"name",   "time",   "gravity", "tissue", "adapt",
-                                     "solver", "probes", "output",  NULL};
-  static const char *const later[] = {"tools", "targets", NULL};
-  NH_TRY(check_keys(c, root, "", keys, later));
+  static const char *const keys[] = {"name",  "time",   "gravity", "tissue", "adapt", "solver",
+                                     "tools", "probes", "targets", "output", NULL};
+  NH_TRY(check_keys(c, root, "", keys));
   NH_TRY(read_name(c, root, s));
   NH_TRY(read_time(c, root, s));
   NH_TRY(get_vec3(c, root, "", "gravity", 0, s->gravity, NULL));
   NH_TRY(read_tissue(c, root, s));
   NH_TRY(read_adapt(c, root, s));
   NH_TRY(read_solver(c, root, s));
+  NH_TRY(read_tools(c, root, s));
   NH_TRY(read_probes(c, root, s));
+  NH_TRY(read_targets(c, root, s)); /* after tools: a target names its tool */
   NH_TRY(read_output(c, root, s));
-  return NH_OK;
-}
-
-/* Refuse an override of a later feature before it touches the tree. */
-static int check_override(const nh_ctx *c, int k) {
-  static const char *const later[] = {"tools", "targets", NULL};
-  const char *text = c->overrides[k - 1];
-  char one_line[512];
-  if (!text) return NH_ERROR(NH_ERR_INPUT, "--set:%d: missing KEY=VALUE", k);
-  nh_yaml_one_line(one_line, sizeof one_line, text);
-  size_t n = strcspn(text, ".=");
-  for (const char *const *l = later; *l; ++l)
-    if (strlen(*l) == n && !strncmp(text, *l, n))
-      return NH_ERROR(NH_ERR_INPUT,
-                      "--set:%d: %s: not supported in this version of needlehex "
-                      "(--set %s)",
-                      k, *l, one_line);
   return NH_OK;
 }
 
@@ -886,7 +1121,7 @@ static int load(const nh_ctx *c, nh_scene *s, nh_yaml_node **root) {
                     "%s:%d: the scene must be a mapping (name: ..., tissue: ...), got %s", c->file,
                     (*root)->line, describe(*root, d, sizeof d));
   for (int k = 1; k <= c->n_overrides; ++k) {
-    NH_TRY(check_override(c, k));
+    if (!c->overrides[k - 1]) return NH_ERROR(NH_ERR_INPUT, "--set:%d: missing KEY=VALUE", k);
     NH_TRY(nh_yaml_apply_override(*root, k, c->overrides[k - 1]));
   }
   resolve_time_length(*root);
@@ -927,6 +1162,9 @@ void nh_scene_destroy(nh_scene **scene) {
   free(s->tissue.loads);
   free(s->tissue.fixed);
   free(s->probes);
+  for (int i = 0; i < s->n_tools; ++i) free(s->tools[i].motion);
+  free(s->tools);
+  free(s->targets);
   free(s->yaml);
   free(s);
   *scene = NULL;
@@ -951,6 +1189,40 @@ double nh_schedule_eval(const nh_schedule *s, double t) {
 
 static void print_box(FILE *f, const double min[3], const double max[3]) {
   fprintf(f, "[%g, %g, %g] .. [%g, %g, %g] m", min[0], min[1], min[2], max[0], max[1], max[2]);
+}
+
+/* One tool, over a few lines indented under "tools". */
+static void print_tool(FILE *f, const nh_scene *s, int i) {
+  const nh_tool_spec *t = &s->tools[i];
+  fprintf(f, "          %s: length %g m, radius %g m", t->name, t->length, t->radius);
+  if (t->inner_radius > 0)
+    fprintf(f, ", inner radius %g m (tube)", t->inner_radius);
+  else
+    fprintf(f, " (solid)");
+  fprintf(f, ", %d beam element%s\n", t->elements, t->elements == 1 ? "" : "s");
+  fprintf(
+      f, "            E = %g Pa, nu = %g, density %g kg/m^3; damping mass %g 1/s, stiffness %g s\n",
+      t->young, t->poisson, t->density, t->damping_mass, t->damping_stiffness);
+  fprintf(f, "            base [%g, %g, %g] m, direction [%g, %g, %g]\n", t->base[0], t->base[1],
+          t->base[2], t->direction[0], t->direction[1], t->direction[2]);
+  if (t->n_motion == 0) fprintf(f, "            motion none (at rest)\n");
+  for (int k = 0; k < t->n_motion; ++k)
+    fprintf(f, "            %s %g m/s until %g s%s\n", k == 0 ? "motion" : "      ",
+            t->motion[k].speed, t->motion[k].until, k + 1 == t->n_motion ? ", then at rest" : "");
+  fprintf(f,
+          "            puncture %g N, cutting %g N, friction mu %g plus %g N/m, path points every ",
+          t->puncture_force, t->cutting_force, t->friction, t->friction_per_length);
+  if (t->spacing > 0)
+    fprintf(f, "%g m\n", t->spacing);
+  else
+    fprintf(f, "half a cell edge\n");
+  if (t->inside >= 0) {
+    fprintf(f, "            inside %s, ", s->tools[t->inside].name);
+    if (isfinite(t->release))
+      fprintf(f, "released at %g s\n", t->release);
+    else
+      fprintf(f, "never released\n");
+  }
 }
 
 void nh_scene_print(const nh_scene *s, void *stdio_file) {
@@ -1013,10 +1285,18 @@ void nh_scene_print(const nh_scene *s, void *stdio_file) {
     fprintf(f, "%d thread%s\n", s->solver.threads, s->solver.threads == 1 ? "" : "s");
   else
     fprintf(f, "all cores\n");
+  fprintf(f, "tools     %d\n", s->n_tools);
+  for (int i = 0; i < s->n_tools; ++i) print_tool(f, s, i);
   fprintf(f, "probes    %d\n", s->n_probes);
   for (int i = 0; i < s->n_probes; ++i)
     fprintf(f, "          %s at [%g, %g, %g] m\n", s->probes[i].name, s->probes[i].point[0],
             s->probes[i].point[1], s->probes[i].point[2]);
+  fprintf(f, "targets   %d\n", s->n_targets);
+  for (int i = 0; i < s->n_targets; ++i) {
+    const nh_target *t = &s->targets[i];
+    fprintf(f, "          %s at [%g, %g, %g] m, distance to the tip of %s\n", t->name, t->point[0],
+            t->point[1], t->point[2], s->tools[t->tool].name);
+  }
   if (s->output.every > 0)
     fprintf(f, "output    %s, a frame every %d step%s, hdf5 %s\n", s->output.dir, s->output.every,
             s->output.every == 1 ? "" : "s", s->output.hdf5 ? "yes" : "no");

@@ -47,6 +47,53 @@ typedef struct {
   char where[NH_WHERE_MAX];
 } nh_probe;
 
+/* One segment of a tool's motion: insertion speed (m/s along `direction`;
+ * negative: retraction; any finite value) until time `until` (s). The first
+ * `until` is > 0 and the following ones increase strictly, so segment k holds
+ * from the previous `until` (0 for k = 0) to its own; after the last one the
+ * speed is 0. */
+typedef struct {
+  double until, speed;
+} nh_motion;
+
+/* tools[i]: a needle, cannula or electrode (a corotational beam). */
+typedef struct {
+  /* tools[i].name (required, [A-Za-z0-9_-]): it names the output files <name>.pvd, so it is
+     unique even ignoring case and is not tissue or points (any case) */
+  char name[NH_NAME_MAX];
+  double length;            /* tools[i].length, m (required, > 0) */
+  double radius;            /* tools[i].radius, m (required, > 0) */
+  double inner_radius;      /* tools[i].inner_radius, m (default 0: solid; in [0, radius)) */
+  int elements;             /* tools[i].elements (default 16, >= 1) */
+  double young;             /* tools[i].material.young, Pa (required, > 0) */
+  double poisson;           /* tools[i].material.poisson (default 0.3, in (-1, 0.5)) */
+  double density;           /* tools[i].material.density, kg/m³ (default 7800, >= 0) */
+  double damping_mass;      /* tools[i].damping.mass (Rayleigh α, default 0, >= 0) */
+  double damping_stiffness; /* tools[i].damping.stiffness (Rayleigh β, default 0, >= 0) */
+  double base[3];           /* tools[i].base, m (required): base position at t = 0 */
+  double direction[3];      /* tools[i].direction (required, non-zero; stored unit length) */
+  int n_motion;             /* tools[i].motion: list of {until, speed} (default: none, at rest) */
+  nh_motion *motion;
+  double puncture_force;      /* tools[i].interaction.puncture_force, N (default 0, >= 0) */
+  double cutting_force;       /* tools[i].interaction.cutting_force, N (default 0, >= 0) */
+  double friction;            /* tools[i].interaction.friction, Coulomb μ (default 0, >= 0) */
+  double friction_per_length; /* tools[i].interaction.friction_per_length, N/m (default 0, >= 0) */
+  double spacing; /* tools[i].interaction.spacing: path-point spacing, m (default 0: half the
+                     local cell edge; >= 0) */
+  int inside;     /* tools[i].inside: index of the host tool (-1: none); the host
+                     must be another tool listed before this one, not itself nested */
+  double release; /* tools[i].release, s (>= 0; default +inf: never; only with inside) */
+  char where[NH_WHERE_MAX]; /* "FILE:LINE: tools.i" */
+} nh_tool_spec;
+
+/* targets[i]: a material point whose distance to a tool's tip is recorded. */
+typedef struct {
+  char name[NH_NAME_MAX]; /* targets[i].name (required, unique; no commas, quotes or tabs) */
+  double point[3];        /* targets[i].point, m (required) */
+  int tool;               /* index of targets[i].tool in tools (required, must name a tool) */
+  char where[NH_WHERE_MAX];
+} nh_target;
+
 typedef enum { NH_MARK_MAX = 0, NH_MARK_DORFLER = 1 } nh_mark_strategy;
 typedef enum { NH_HANGING_ELIMINATE = 0, NH_HANGING_LAGRANGE = 1 } nh_hanging_method;
 
@@ -100,6 +147,11 @@ typedef struct nh_scene {
 
   int n_probes;
   nh_probe *probes; /* probes: list of {name, point} */
+
+  int n_tools;
+  nh_tool_spec *tools; /* tools: list (absent: tissue only) */
+  int n_targets;
+  nh_target *targets; /* targets: list of {name, point, tool} */
 
   struct {
     char dir[NH_PATH_MAX]; /* output.dir (default "out/<name>") */
