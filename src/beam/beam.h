@@ -194,6 +194,28 @@ typedef struct {
 int nh_beam_step_dynamic(nh_beam *beam, const nh_beam_dynamic_options *options,
                          const double *f_ext);
 
+/* The same step in three parts, for a tool coupled to the tissue by
+ * constraint rows (Algorithm 1, solve/coupled.c), with a prescribed base
+ * velocity (the tool's motion):
+ *   prepare: assemble and factorise A (free DOFs: nodes 1 … n, m = 6n) and
+ *            the right-hand side rhs[m] of the free DOFs for the base
+ *            velocity base_velocity[6] (linear, angular) at the end of the step:
+ *              rhs = h (f_ext + M g − f_int − α M v − β K v) − h² K v
+ *                    − (hβ + h²) K_fb (v_base,new − v_base);
+ *   solve:   y ← A⁻¹ y in place (length m), any number of times;
+ *   finish:  v ← v + dv (free DOFs), v_base ← base_velocity, then
+ *            x ← x + h v, T ← exp(h ω) T for every node, the base included.
+ * nh_beam_step_dynamic is prepare + solve + finish with the base at rest. */
+typedef struct nh_beam_system nh_beam_system;
+int nh_beam_system_create(const nh_beam *beam, nh_beam_system **out);
+void nh_beam_system_destroy(nh_beam_system **system);
+int nh_beam_dynamic_prepare(nh_beam *beam, const nh_beam_dynamic_options *options,
+                            const double *f_ext, const double base_velocity[6],
+                            nh_beam_system *system, double *rhs);
+void nh_beam_system_solve(const nh_beam_system *system, double *y);
+int nh_beam_dynamic_finish(nh_beam *beam, double dt, const double base_velocity[6],
+                           const double *dv);
+
 /* ---- rotations (exposed for tests and the contact module) ---- */
 
 /* Rotation vector of a rotation matrix (angle in [0, π]), via the

@@ -185,52 +185,102 @@ int nh_beam_solve_static(nh_beam *b, const nh_beam_static_options *o, const doub
   return rc;
 }
 
-int nh_beam_step_dynamic(nh_beam *b, const nh_beam_dynamic_options *o, const double *f_ext) {
+struct nh_beam_system {
+  int N, m;               /* all DOFs, free DOFs (N − 6) */
+  double *K, *A, *M, *Kv; /* N x N tangent, m x m LU of A, N mass, N work */
+  int *piv;
+};
+
+int nh_beam_system_create(const nh_beam *b, nh_beam_system **out) {
+  *out = NULL;
+  nh_beam_system *s = nh_calloc(1, sizeof *s);
+  if (!s) return NH_ERR_MEMORY;
+  s->N = 6 * (b->n + 1), s->m = s->N - 6;
+  s->K = nh_calloc((size_t)s->N * s->N, sizeof(double));
+  s->A = nh_calloc((size_t)s->m * s->m, sizeof(double));
+  s->M = nh_calloc((size_t)s->N, sizeof(double));
+  s->Kv = nh_calloc((size_t)s->N, sizeof(double));
+  s->piv = nh_calloc((size_t)s->m, sizeof(int));
+  if (!s->K || !s->A || !s->M || !s->Kv || !s->piv) {
+    nh_beam_system_destroy(&s);
+    return NH_ERR_MEMORY;
+  }
+  *out = s;
+  return NH_OK;
+}
+
+void nh_beam_system_destroy(nh_beam_system **ps) {
+  nh_beam_system *s = *ps;
+  if (!s) return;
+  free(s->K), free(s->A), free(s->M), free(s->Kv), free(s->piv);
+  free(s);
+  *ps = NULL;
+}
+
+int nh_beam_dynamic_prepare(nh_beam *b, const nh_beam_dynamic_options *o, const double *f_ext,
+                            const double base_velocity[6], nh_beam_system *s, double *rhs) {
   NH_CHECK(o->dt > 0 && o->alpha >= 0 && o->beta >= 0, NH_ERR_INPUT,
            "beam dynamic step: dt %g must be positive, alpha %g and beta %g >= 0", o->dt, o->alpha,
            o->beta);
-  const int N = 6 * (b->n + 1), m = N - 6;
-  const double h = o->dt;
-  nh_beam_work w = {0};
-  NH_TRY(nh_beam_work_alloc(&w, N));
-  double *M = nh_calloc((size_t)N, sizeof(double)), *Kv = nh_calloc((size_t)N, sizeof(double));
-  int rc = NH_OK;
-  if (!M || !Kv) {
-    rc = NH_ERR_MEMORY;
-    goto done;
-  }
-  nh_beam_mass(b, M);
-  memset(b->v, 0, 6 * sizeof(double)); /* the base is prescribed */
-  nh_beam_internal_force(b, w.f_int, w.K, 1);
+  const int N = s->N, m = s->m;
+  const double h = o->dt, cK = h * o->beta + h * h;
+  double *fi = nh_calloc((size_t)N, sizeof(double));
+  if (!fi) return NH_ERR_MEMORY;
+  nh_beam_mass(b, s->M);
+  nh_beam_internal_force(b, fi, s->K, 1);
   for (int i = 0; i < N; i++) {
-    double s = 0.0;
-    for (int j = 0; j < N; j++) s += w.K[(size_t)i * N + j] * b->v[j];
-    Kv[i] = s;
+    double v = 0.0;
+    for (int j = 0; j < N; j++) v += s->K[(size_t)i * N + j] * b->v[j];
+    s->Kv[i] = v;
   }
-  for (int i = 0; i < N; i++) {
-    double fe = (f_ext ? f_ext[i] : 0.0) + (i % 6 < 3 ? M[i] * o->gravity[i % 6] : 0.0);
-    w.r[i] = h * (fe - w.f_int[i] - o->alpha * M[i] * b->v[i] - o->beta * Kv[i]) - h * h * Kv[i];
+  for (int i = 6; i < N; i++) {
+    double fe = (f_ext ? f_ext[i] : 0.0) + (i % 6 < 3 ? s->M[i] * o->gravity[i % 6] : 0.0);
+    double r =
+        h * (fe - fi[i] - o->alpha * s->M[i] * b->v[i] - o->beta * s->Kv[i]) - h * h * s->Kv[i];
+    /* the base's prescribed velocity change moves to the right-hand side */
+    for (int j = 0; j < 6; j++) r -= cK * s->K[(size_t)i * N + j] * (base_velocity[j] - b->v[j]);
+    rhs[i - 6] = r;
   }
-  nh_beam_free_block(w.K, N, w.A);
+  free(fi);
+  nh_beam_free_block(s->K, N, s->A);
   for (int i = 0; i < m; i++) {
-    double *row = w.A + (size_t)i * m;
-    for (int j = 0; j < m; j++) row[j] *= h * o->beta + h * h;
-    row[i] += (1.0 + h * o->alpha) * M[i + 6];
+    double *row = s->A + (size_t)i * m;
+    for (int j = 0; j < m; j++) row[j] *= cK;
+    row[i] += (1.0 + h * o->alpha) * s->M[i + 6];
   }
-  if ((rc = nh_beam_lu(w.A, m, w.piv))) goto done;
-  memcpy(w.du, w.r + 6, (size_t)m * sizeof(double));
-  nh_beam_lu_solve(w.A, m, w.piv, w.du);
-  for (int i = 0; i < m; i++) {
-    if (!isfinite(w.du[i])) {
-      rc = NH_ERROR(NH_ERR_NUMERIC, "beam dynamic step: non-finite velocity update");
-      goto done;
-    }
-    b->v[i + 6] += w.du[i];
-  }
-  for (int i = 0; i < N; i++) w.r[i] = h * b->v[i];
-  nh_beam_increment(b, w.r);
-done:
-  free(M), free(Kv);
-  nh_beam_work_free(&w);
+  return nh_beam_lu(s->A, m, s->piv);
+}
+
+void nh_beam_system_solve(const nh_beam_system *s, double *y) {
+  nh_beam_lu_solve(s->A, s->m, s->piv, y);
+}
+
+int nh_beam_dynamic_finish(nh_beam *b, double dt, const double base_velocity[6], const double *dv) {
+  const int N = 6 * (b->n + 1);
+  for (int i = 0; i < N - 6; i++)
+    if (!isfinite(dv[i]))
+      return NH_ERROR(NH_ERR_NUMERIC, "beam dynamic step: non-finite velocity update");
+  double *d = nh_calloc((size_t)N, sizeof(double));
+  if (!d) return NH_ERR_MEMORY;
+  memcpy(b->v, base_velocity, 6 * sizeof(double));
+  for (int i = 6; i < N; i++) b->v[i] += dv[i - 6];
+  for (int i = 0; i < N; i++) d[i] = dt * b->v[i];
+  nh_beam_increment(b, d);
+  free(d);
+  return NH_OK;
+}
+
+int nh_beam_step_dynamic(nh_beam *b, const nh_beam_dynamic_options *o, const double *f_ext) {
+  const double still[6] = {0, 0, 0, 0, 0, 0};
+  nh_beam_system *s = NULL;
+  NH_TRY(nh_beam_system_create(b, &s));
+  double *dv = nh_calloc((size_t)s->m, sizeof(double));
+  int rc = dv ? NH_OK : NH_ERR_MEMORY;
+  memset(b->v, 0, 6 * sizeof(double)); /* the base is prescribed and at rest */
+  if (!rc) rc = nh_beam_dynamic_prepare(b, o, f_ext, still, s, dv);
+  if (!rc) nh_beam_system_solve(s, dv);
+  if (!rc) rc = nh_beam_dynamic_finish(b, o->dt, still, dv);
+  free(dv);
+  nh_beam_system_destroy(&s);
   return rc;
 }

@@ -78,11 +78,12 @@ int nh_system_constraint_rows(const nh_system *s) {
   return s->n_rows;
 }
 
-/* W = J A⁻¹ Jᵀ (Algorithm 3) and its dense Cholesky factor, in place. */
-static int nh_compliance_build(nh_system *s) {
+/* W = J A⁻¹ Jᵀ (Algorithm 3) for the rows Jᵀ (n_free x m, CSC), added to the
+ * dense column-major W (m x m): S = L⁻¹ P Jᵀ by sparse solves, W += Sᵀ D⁻¹ S. */
+int nh_system_compliance_add(nh_system *s, cholmod_sparse *Jt, double *W) {
   cholmod_common *cm = &s->cm;
-  int m = s->n_rows;
-  cholmod_sparse *PJt = cholmod_spsolve(CHOLMOD_P, s->L, s->Jt, cm);
+  const int m = (int)Jt->ncol;
+  cholmod_sparse *PJt = cholmod_spsolve(CHOLMOD_P, s->L, Jt, cm);
   cholmod_sparse *S = PJt ? cholmod_spsolve(CHOLMOD_L, s->L, PJt, cm) : NULL;
   cholmod_sparse *DS = S ? cholmod_spsolve(CHOLMOD_D, s->L, S, cm) : NULL;
   cholmod_sparse *St = S ? cholmod_transpose(S, 1, cm) : NULL;
@@ -92,37 +93,44 @@ static int nh_compliance_build(nh_system *s) {
     rc = NH_ERROR(NH_ERR_NUMERIC, "computing the compliance W failed (CHOLMOD status %d)",
                   cm->status);
   } else {
-    memset(s->W, 0, sizeof(double) * (size_t)m * (size_t)m);
     const int *Wp = Wsp->p, *Wi = Wsp->i;
     const double *Wx = Wsp->x;
     for (int j = 0; j < m; j++)
-      for (int p = Wp[j]; p < Wp[j + 1]; p++) s->W[(size_t)j * m + Wi[p]] = Wx[p];
-    /* Dense Cholesky W = G Gᵀ, lower triangle in place (column-major). */
-    for (int j = 0; j < m && !rc; j++) {
-      double *cj = s->W + (size_t)j * m;
-      double d = cj[j];
-      for (int k = 0; k < j; k++) d -= s->W[(size_t)k * m + j] * s->W[(size_t)k * m + j];
-      if (!(d > 1e-14 * fabs(cj[j]))) {
-        rc = NH_ERROR(NH_ERR_NUMERIC, "the constraint rows are linearly dependent (row %d of %d)",
-                      j, m);
-        break;
-      }
-      d = sqrt(d);
-      cj[j] = d;
-      for (int i = j + 1; i < m; i++) {
-        double v = cj[i];
-        for (int k = 0; k < j; k++) v -= s->W[(size_t)k * m + i] * s->W[(size_t)k * m + j];
-        cj[i] = v / d;
-      }
-      /* Mirror into the upper triangle for the row access above. */
-      for (int i = j + 1; i < m; i++) s->W[(size_t)i * m + j] = cj[i];
-    }
+      for (int p = Wp[j]; p < Wp[j + 1]; p++) W[(size_t)j * m + Wi[p]] += Wx[p];
   }
   cholmod_free_sparse(&PJt, cm);
   cholmod_free_sparse(&S, cm);
   cholmod_free_sparse(&DS, cm);
   cholmod_free_sparse(&St, cm);
   cholmod_free_sparse(&Wsp, cm);
+  return rc;
+}
+
+/* W = J A⁻¹ Jᵀ of the hanging rows and its dense Cholesky factor, in place. */
+static int nh_compliance_build(nh_system *s) {
+  int m = s->n_rows;
+  memset(s->W, 0, sizeof(double) * (size_t)m * (size_t)m);
+  int rc = nh_system_compliance_add(s, s->Jt, s->W);
+  /* Dense Cholesky W = G Gᵀ, lower triangle in place (column-major). */
+  for (int j = 0; j < m && !rc; j++) {
+    double *cj = s->W + (size_t)j * m;
+    double d = cj[j];
+    for (int k = 0; k < j; k++) d -= s->W[(size_t)k * m + j] * s->W[(size_t)k * m + j];
+    if (!(d > 1e-14 * fabs(cj[j]))) {
+      rc = NH_ERROR(NH_ERR_NUMERIC, "the constraint rows are linearly dependent (row %d of %d)",
+                    j, m);
+      break;
+    }
+    d = sqrt(d);
+    cj[j] = d;
+    for (int i = j + 1; i < m; i++) {
+      double v = cj[i];
+      for (int k = 0; k < j; k++) v -= s->W[(size_t)k * m + i] * s->W[(size_t)k * m + j];
+      cj[i] = v / d;
+    }
+    /* Mirror into the upper triangle for the row access above. */
+    for (int i = j + 1; i < m; i++) s->W[(size_t)i * m + j] = cj[i];
+  }
   if (!rc) s->W_valid = 1;
   return rc;
 }

@@ -30,49 +30,12 @@ static double nh_norm(const double *a, int n) {
   return sqrt(s);
 }
 
-static int nh_all_finite(const double *a, int n) {
-  for (int i = 0; i < n; i++)
-    if (!isfinite(a[i])) return 0;
-  return 1;
-}
-
 int nh_step_dynamic(nh_system *s, const nh_integrator *in, const double *f_ext, double *u,
                     double *v, nh_step_stats *stats) {
-  const nh_tissue *t = s->tissue;
-  const int n = 3 * s->n_nodes;
-  const double h = in->dt;
-  double *f_int = s->work[0], *Kv = s->work[1], *rhs = s->work[2];
-  double *b = s->fwork[0], *dv = s->fwork[1];
-  double t0 = nh_time_now();
-  s->t_constraints = 0.0;
-  nh_system_assemble(s, u, v, 1.0 + h * in->alpha, h * in->beta + h * h, f_int, Kv, in->threads);
-  for (int i = 0; i < n; i++) {
-    double Mv = t->mass[i / 3] * v[i];
-    rhs[i] = h * (f_ext[i] - f_int[i] - in->alpha * Mv - in->beta * Kv[i]) - h * h * Kv[i];
-  }
-  nh_system_gather(s, rhs, b);
-  double t1 = nh_time_now();
-  NH_TRY(nh_system_factor(s));
-  double t2 = nh_time_now();
-  NH_TRY(nh_system_solve_constrained(s, b, dv));
-  if (!nh_all_finite(dv, s->n_free))
-    return NH_ERROR(NH_ERR_NUMERIC, "the velocity update is not finite");
-  double *dv_full = s->work[3];
-  nh_system_scatter(s, dv, dv_full);
-  for (int i = 0; i < n; i++) {
-    v[i] += dv_full[i];
-    u[i] += h * v[i];
-  }
-  double t3 = nh_time_now();
-  if (stats) {
-    stats->t_assemble = t1 - t0;
-    stats->t_factor = t2 - t1;
-    stats->t_solve = t3 - t2 - s->t_constraints;
-    stats->t_constraints = s->t_constraints;
-    stats->iterations = 1;
-    stats->residual = 0.0;
-  }
-  return NH_OK;
+  nh_coupled_stats st;
+  int rc = nh_step_coupled(s, in, f_ext, u, v, 0, NULL, NULL, 1.0, 0, &st);
+  if (stats) *stats = st.step;
+  return rc;
 }
 
 int nh_solve_static(nh_system *s, const nh_integrator *in, const double *f_ext, double *u,

@@ -10,6 +10,7 @@
 #ifndef NH_SOLVE_H
 #define NH_SOLVE_H
 
+#include "beam/beam.h"
 #include "core/core.h"
 #include "fem/fem.h"
 #include "mesh/mesh.h"
@@ -159,5 +160,66 @@ typedef struct {
  * iterate and stats says how far it got), NH_ERR_MEMORY. m = 0 succeeds. */
 int nh_mcp_solve(int m, const double *W, const double *r, const nh_row_law *laws, double tolerance,
                  int max_iterations, double *lambda, nh_mcp_stats *stats);
+
+/* ---- tissue and tools in one step: Algorithm 1 across blocks (coupled.c) ----
+ * docs/interaction.md "Solver". */
+
+/* Constraint rows between tissue points and tool points. Row i reads
+ *   g_i = n_i · (x_tissue(P_i) − x_tool(s_i)),
+ * P_i a point of a tissue cell (its 8 nodes and shape values N), s_i a point
+ * of a tool element (the 3x12 Hermite Jacobian of nh_beam_point), n_i a unit
+ * direction. Its force λ_i acts on the tissue point along +n_i and on the
+ * tool point along −n_i. A row without a tool part (tool = −1) ties the
+ * tissue point to a fixed position. The step enforces each row's law on the
+ * end-of-step rate w_i = n_i · (v_tissue − v_tool) + g_i / h (w = 0 for
+ * bilateral rows and sticking friction, w ≥ 0 for contact), i.e. the
+ * position-level violation g is removed within the step. */
+typedef struct {
+  int m, cap;
+  int *node;         /* 8 per row: tissue nodes (−1: unused) */
+  double *N;         /* 8 per row: shape values at the point */
+  double *dir;       /* 3 per row: n */
+  int *tool, *elem;  /* tool index (−1: none) and element */
+  double *J;         /* 36 per row: d x_tool / d (element DOFs), row-major 3 x 12 */
+  double *gap;       /* g */
+  nh_row_law *law;   /* law; normal indices refer to rows of this set */
+  double *lambda;    /* in: warm start; out: the forces of the step */
+} nh_rows;
+
+void nh_rows_clear(nh_rows *rows);
+void nh_rows_free(nh_rows *rows);
+/* Append a row (law BILATERAL, λ = 0, no tool part); returns its index, or
+ * −1 when out of memory. The caller fills the fields of row i. */
+int nh_rows_add(nh_rows *rows);
+
+/* A tool in the coupled step: its beam and the prescribed base velocity at
+ * the end of the step (linear, angular). */
+typedef struct {
+  nh_beam *beam;
+  nh_beam_dynamic_options options; /* dt (must equal the tissue's), damping, gravity */
+  double base_velocity[6];
+  const double *f_ext; /* 6 per node, may be NULL */
+} nh_coupled_tool;
+
+typedef struct {
+  nh_step_stats step;    /* assemble, factor, solve (tissue and tools), t_constraints = all below */
+  double t_compliance;   /* s: W = J A⁻¹ Jᵀ, tissue (Algorithm 3) and tools */
+  double t_mcp;          /* s: the mixed complementarity solve */
+  nh_mcp_stats mcp;      /* sweeps, residual, stick/slide/open counts */
+} nh_coupled_stats;
+
+/* One backward-Euler step of the tissue (nh_step_dynamic's form) and the
+ * tools (nh_beam_dynamic_prepare's form) coupled by `rows` (Algorithm 1):
+ * factorise each block, solve the free problems, W = Σ_blocks J A⁻¹ Jᵀ
+ * (the tissue's by CHOLMOD sparse solves), λ from nh_mcp_solve warm-started
+ * from rows->lambda (tolerance, max_iterations as there), correct each block
+ * by A⁻¹ Jᵀ λ and update tissue and tools. With no rows, the blocks step
+ * independently. The system must not carry hanging-node rows
+ * (nh_system_set_hanging_rows): use elimination. Fails with NH_ERR_NUMERIC
+ * (a block not positive definite / singular, a non-finite update, the
+ * constraint solve not converged: the message names which), NH_ERR_MEMORY. */
+int nh_step_coupled(nh_system *sys, const nh_integrator *in, const double *f_ext, double *u,
+                    double *v, int n_tools, nh_coupled_tool *tools, nh_rows *rows,
+                    double tolerance, int max_iterations, nh_coupled_stats *stats);
 
 #endif

@@ -53,4 +53,8 @@ struct nh_system {
   double *fwork[2]; /* n_free each */
 };
 
+/* W += J A⁻¹ Jᵀ (Algorithm 3) for rows given as Jᵀ (n_free x m, CSC, sorted);
+ * W dense column-major m x m. A must be factorised. */
+int nh_system_compliance_add(nh_system *s, cholmod_sparse *Jt, double *W);
+
 #endif

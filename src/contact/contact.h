@@ -1,0 +1,89 @@
+/* contact — the tools (needle, cannula, electrode) and their constraints
+ * with the tissue: surface puncture, needle tip, needle shaft (the seed's
+ * Eqs. 5-9; docs/interaction.md).
+ *
+ * The module owns the tools' beams, their prescribed motion and, per tool
+ * group (an outer tool and the tools nested inside it), the state machine
+ *
+ *   outside → contact → punctured → cutting ↔ punctured → retracting
+ *
+ * and the cut channel: material points of the tissue laid behind the tip
+ * as it cuts. Each step it writes the constraint rows of the current state
+ * (nh_rows, solved by nh_step_coupled) and afterwards reads their forces to
+ * move the state on. Forces in nh_rows are impulses (N s, the step's
+ * velocity form); the thresholds of the laws are set as force × h and
+ * reported forces are λ / h. Embedded points are kept in material
+ * coordinates, so a refined mesh only relocates them. */
+#ifndef NH_CONTACT_H
+#define NH_CONTACT_H
+
+#include "beam/beam.h"
+#include "core/core.h"
+#include "mesh/mesh.h"
+#include "scene/scene.h"
+#include "solve/solve.h"
+
+typedef enum {
+  NH_TOOL_OUTSIDE = 0,
+  NH_TOOL_CONTACT = 1,
+  NH_TOOL_PUNCTURED = 2,
+  NH_TOOL_CUTTING = 3,
+  NH_TOOL_RETRACTING = 4
+} nh_tool_state;
+
+/* "outside", "contact", ... */
+const char *nh_tool_state_name(nh_tool_state state);
+
+typedef struct nh_contact nh_contact;
+
+/* Create the tools of `scene` at rest at t = 0 on `mesh`. Fails with
+ * NH_ERR_INPUT (FILE:LINE: tools.i: ...) for a tool whose tip never comes
+ * within one cell of the tissue over its motion, NH_ERR_MEMORY. */
+int nh_contact_create(const nh_scene *scene, const nh_mesh *mesh, nh_contact **out);
+void nh_contact_destroy(nh_contact **contact);
+
+int nh_contact_tools(const nh_contact *c);
+nh_beam *nh_contact_beam(nh_contact *c, int tool);
+
+/* Before the step t → t + h on the tissue state (mesh, u, v): fill rows
+ * (cleared first) and the dynamic tools' step data (*n_dynamic of them,
+ * tools[] sized nh_contact_tools; row tool indices refer to this list). */
+int nh_contact_begin_step(nh_contact *c, const nh_mesh *mesh, const double *u, double t, double h,
+                          nh_rows *rows, nh_coupled_tool *tools, int *n_dynamic);
+
+/* After the solved step (u at t + h): read the rows' forces, update the
+ * states (puncture, cut, lay path points, release), move nested tools
+ * that follow their host. Fails with NH_ERR_NUMERIC only on a tool
+ * state that is not finite. */
+int nh_contact_end_step(nh_contact *c, const nh_mesh *mesh, const double *u, const nh_rows *rows,
+                        double t_new, double h);
+
+/* After the mesh changed (refinement): relocate every embedded point by its
+ * material coordinates. NH_ERR_INTERNAL if one is no longer in the mesh. */
+int nh_contact_relocate(nh_contact *c, const nh_mesh *mesh);
+
+/* What a tool does now (tools.csv). Forces are the tissue's on the tool in
+ * N: axial = −F·t (t the tip tangent: positive resists insertion),
+ * lateral = |F − (F·t) t|; depth = arc length from the entry point to the
+ * tip (0 outside). */
+typedef struct {
+  double tip[3];
+  double depth;
+  double axial_force, lateral_force;
+  nh_tool_state state;
+} nh_tool_report;
+void nh_contact_report(const nh_contact *c, int tool, nh_tool_report *r);
+
+/* Counts of the last step's rows: friction rows sticking and sliding, tip
+ * rows cutting (sliding forward). */
+typedef struct {
+  int stick, slide, cut, rows, path_points;
+} nh_contact_counts;
+void nh_contact_counts_get(const nh_contact *c, nh_contact_counts *counts);
+
+/* Force per row of a tool's points for output: for each node of tool k,
+ * the sum of the constraint forces (N, on the tool) distributed to its
+ * nearest node; f: 3 per node. */
+void nh_contact_node_forces(const nh_contact *c, int tool, double *f);
+
+#endif
