@@ -197,7 +197,8 @@ int nh_beam_step_dynamic(nh_beam *beam, const nh_beam_dynamic_options *options,
 /* The same step in three parts, for a tool coupled to the tissue by
  * constraint rows (Algorithm 1, solve/coupled.c), with a prescribed base
  * velocity (the tool's motion):
- *   prepare: assemble and factorise A (free DOFs: nodes 1 … n, m = 6n) and
+ *   prepare: assemble and factorise A (free DOFs: nodes 1 … n, m = 6n; by
+ *            Cholesky: A is symmetric, see nh_beam_system_projected) and
  *            the right-hand side rhs[m] of the free DOFs for the base
  *            velocity base_velocity[6] (linear, angular) at the end of the step:
  *              rhs = h (f_ext + M g − f_int − α M v − β K v) − h² K v
@@ -213,6 +214,11 @@ int nh_beam_dynamic_prepare(nh_beam *beam, const nh_beam_dynamic_options *option
                             const double *f_ext, const double base_velocity[6],
                             nh_beam_system *system, double *rhs);
 void nh_beam_system_solve(const nh_beam_system *system, double *y);
+/* 1 if the last prepare found A = (1 + hα) M + (hβ + h²) K indefinite (the
+ * tool compressed beyond a buckling load of the step) and used K's positive
+ * part (eigenvalues clipped at 0) instead; A is then positive definite and
+ * the residual still exact. */
+int nh_beam_system_projected(const nh_beam_system *system);
 int nh_beam_dynamic_finish(nh_beam *beam, double dt, const double base_velocity[6],
                            const double *dv);
 

@@ -33,6 +33,7 @@
  * vanishes because the lumped rotary inertia is isotropic, see beam.c). */
 #include "beam/beam_impl.h"
 
+#include <lapacke.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -189,6 +190,7 @@ struct nh_beam_system {
   int N, m;               /* all DOFs, free DOFs (N − 6) */
   double *K, *A, *M, *Kv; /* N x N tangent, m x m LU of A, N mass, N work */
   int *piv;
+  int projected; /* the last prepare clipped negative tangent eigenvalues */
 };
 
 int nh_beam_system_create(const nh_beam *b, nh_beam_system **out) {
@@ -217,6 +219,18 @@ void nh_beam_system_destroy(nh_beam_system **ps) {
   *ps = NULL;
 }
 
+/* A = (1 + hα) M + cK K over the free DOFs into s->A; Cholesky in place
+ * (lower, row-major = upper column-major for LAPACK). Returns 0 on success. */
+static int nh_beam_form_factor(nh_beam_system *s, const double *K, double cM, double cK) {
+  const int m = s->m;
+  for (int i = 0; i < m; i++) {
+    double *row = s->A + (size_t)i * m;
+    for (int j = 0; j < m; j++) row[j] = cK * K[(size_t)i * m + j];
+    row[i] += cM * s->M[i + 6];
+  }
+  return LAPACKE_dpotrf(LAPACK_ROW_MAJOR, 'L', m, s->A, m);
+}
+
 int nh_beam_dynamic_prepare(nh_beam *b, const nh_beam_dynamic_options *o, const double *f_ext,
                             const double base_velocity[6], nh_beam_system *s, double *rhs) {
   NH_CHECK(o->dt > 0 && o->alpha >= 0 && o->beta >= 0, NH_ERR_INPUT,
@@ -225,7 +239,11 @@ int nh_beam_dynamic_prepare(nh_beam *b, const nh_beam_dynamic_options *o, const 
   const int N = s->N, m = s->m;
   const double h = o->dt, cK = h * o->beta + h * h;
   double *fi = nh_calloc((size_t)N, sizeof(double));
-  if (!fi) return NH_ERR_MEMORY;
+  double *Kf = nh_calloc((size_t)m * m, sizeof(double));
+  if (!fi || !Kf) {
+    free(fi), free(Kf);
+    return NH_ERR_MEMORY;
+  }
   nh_beam_mass(b, s->M);
   nh_beam_internal_force(b, fi, s->K, 1);
   for (int i = 0; i < N; i++) {
@@ -241,18 +259,45 @@ int nh_beam_dynamic_prepare(nh_beam *b, const nh_beam_dynamic_options *o, const 
     for (int j = 0; j < 6; j++) r -= cK * s->K[(size_t)i * N + j] * (base_velocity[j] - b->v[j]);
     rhs[i - 6] = r;
   }
-  free(fi);
-  nh_beam_free_block(s->K, N, s->A);
-  for (int i = 0; i < m; i++) {
-    double *row = s->A + (size_t)i * m;
-    for (int j = 0; j < m; j++) row[j] *= cK;
-    row[i] += (1.0 + h * o->alpha) * s->M[i + 6];
+  nh_beam_free_block(s->K, N, Kf);
+  int rc = NH_OK;
+  s->projected = 0;
+  if (nh_beam_form_factor(s, Kf, 1.0 + h * o->alpha, cK)) {
+    /* A is indefinite: the tool is compressed beyond a buckling load of
+     * the step operator. Use the tangent's positive part (eigenvalues
+     * clipped at 0): the residual stays exact, A stays positive definite. */
+    double *w = nh_calloc((size_t)m, sizeof(double));
+    if (!w) rc = NH_ERR_MEMORY;
+    if (!rc && LAPACKE_dsyev(LAPACK_ROW_MAJOR, 'V', 'U', m, Kf, m, w))
+      rc = NH_ERROR(NH_ERR_NUMERIC, "beam dynamic step: eigen-decomposition of the tangent failed");
+    if (!rc) {
+      double *P = nh_calloc((size_t)m * m, sizeof(double));
+      if (!P) rc = NH_ERR_MEMORY;
+      for (int i = 0; i < m && !rc; i++)
+        for (int j = 0; j < m; j++) {
+          double v = 0.0;
+          for (int k = 0; k < m; k++)
+            if (w[k] > 0) v += Kf[(size_t)i * m + k] * w[k] * Kf[(size_t)j * m + k];
+          P[(size_t)i * m + j] = v;
+        }
+      if (!rc && nh_beam_form_factor(s, P, 1.0 + h * o->alpha, cK))
+        rc =
+            NH_ERROR(NH_ERR_NUMERIC, "beam dynamic step: the step matrix is not positive definite");
+      s->projected = 1;
+      free(P);
+    }
+    free(w);
   }
-  return nh_beam_lu(s->A, m, s->piv);
+  free(fi), free(Kf);
+  return rc;
 }
 
 void nh_beam_system_solve(const nh_beam_system *s, double *y) {
-  nh_beam_lu_solve(s->A, s->m, s->piv, y);
+  LAPACKE_dpotrs(LAPACK_ROW_MAJOR, 'L', s->m, 1, s->A, s->m, y, 1);
+}
+
+int nh_beam_system_projected(const nh_beam_system *s) {
+  return s->projected;
 }
 
 int nh_beam_dynamic_finish(nh_beam *b, double dt, const double base_velocity[6], const double *dv) {

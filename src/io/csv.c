@@ -184,3 +184,12 @@ int nh_write_text(const char *path, const char *text) {
   free(tmp);
   return rc;
 }
+
+int nh_csv_values(nh_csv *csv, int n, const double *values) {
+  char line[64 * 64];
+  NH_CHECK(n > 0 && n <= 64, NH_ERR_INTERNAL, "nh_csv_values: %d columns", n);
+  size_t len = 0;
+  for (int i = 0; i < n; i++)
+    len += (size_t)snprintf(line + len, sizeof line - len, i ? ",%.17g" : "%.17g", values[i]);
+  return nh_csv_row(csv, "%s", line);
+}

@@ -54,6 +54,8 @@ typedef struct nh_csv nh_csv;
 int nh_csv_create(const char *path, int n_columns, const char *const *columns, nh_csv **out);
 /* Append one row from a printf-style format (no trailing newline needed). */
 int nh_csv_row(nh_csv *csv, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+/* Append one row of n (<= 64) numbers, each printed exactly (%.17g). */
+int nh_csv_values(nh_csv *csv, int n, const double *values);
 void nh_csv_destroy(nh_csv **csv);
 
 /* Create directory `path` and its parents (like mkdir -p). NH_ERR_IO on failure. */

@@ -26,16 +26,40 @@
 #include <string.h>
 #include <unistd.h>
 
-static const char *const nh_step_columns[] = {
-    "step",          "time",    "dofs",       "free_dofs", "cells",      "hanging",  "constraints",
-    "eta",           "eta_rel", "iterations", "residual",  "t_assemble", "t_factor", "t_solve",
-    "t_constraints", "t_adapt", "t_output",   "t_step",    "work"};
+static const char *const nh_step_columns[] = {"step",
+                                              "time",
+                                              "dofs",
+                                              "free_dofs",
+                                              "cells",
+                                              "hanging",
+                                              "constraints",
+                                              "eta",
+                                              "eta_rel",
+                                              "iterations",
+                                              "residual",
+                                              "t_assemble",
+                                              "t_factor",
+                                              "t_solve",
+                                              "t_constraints",
+                                              "t_adapt",
+                                              "t_output",
+                                              "t_step",
+                                              "work",
+                                              "constraint_iterations",
+                                              "constraint_residual",
+                                              "stick",
+                                              "slide",
+                                              "cut",
+                                              "path_points",
+                                              "t_compliance",
+                                              "t_mcp"};
 static const char *const nh_probe_columns[] = {"step", "time", "name", "x", "y",
                                                "z",    "ux",   "uy",   "uz"};
 
 void nh_sim_destroy(nh_sim **sim) {
   if (!sim || !*sim) return;
   nh_sim *s = *sim;
+  nh_sim_tools_destroy(s);
   nh_system_destroy(&s->system);
   nh_tissue_destroy(&s->tissue);
   nh_mesh_destroy(&s->mesh);
@@ -144,7 +168,7 @@ static int nh_write_frame(nh_sim *s) {
   int *flags = malloc(sizeof(int) * (size_t)(np ? np : 1));
   double *cell = malloc(sizeof(double) * 4 * (size_t)(nc ? nc : 1));
   double *hang = calloc((size_t)(np ? np : 1), sizeof(double));
-  int n_pr = sc->n_probes;
+  int n_pr = sc->n_probes + sc->n_targets;
   double *pp = malloc(sizeof(double) * 3 * (size_t)(n_pr ? n_pr : 1));
   double *pu = malloc(sizeof(double) * 3 * (size_t)(n_pr ? n_pr : 1));
   int *pconn = malloc(sizeof(int) * (size_t)(n_pr ? n_pr : 1));
@@ -194,8 +218,10 @@ static int nh_write_frame(nh_sim *s) {
 
   if (n_pr > 0) {
     for (int i = 0; i < n_pr; i++) {
+      const double *X =
+          i < sc->n_probes ? sc->probes[i].point : sc->targets[i - sc->n_probes].point;
       nh_sim_probe_displacement(s, i, pu + 3 * i);
-      for (int k = 0; k < 3; k++) pp[3 * i + k] = sc->probes[i].point[k] + pu[3 * i + k];
+      for (int k = 0; k < 3; k++) pp[3 * i + k] = X[k] + pu[3 * i + k];
       pconn[i] = i;
       poff[i] = i + 1;
     }
@@ -213,6 +239,7 @@ static int nh_write_frame(nh_sim *s) {
     if ((rc = nh_vtu_write(path, &pg)) || (rc = nh_pvd_add(s->points_pvd, s->time, name)))
       goto done;
   }
+  if (s->contact && (rc = nh_sim_tools_frame(s))) goto done;
   s->last_frame = s->step;
 done:
   free(conn), free(offsets), free(flags), free(cell), free(hang);
@@ -247,7 +274,7 @@ static int nh_write_probe_rows(nh_sim *s) {
                       s->time, sc->probes[i].name, p[0] + u[0], p[1] + u[1], p[2] + u[2], u[0],
                       u[1], u[2]));
   }
-  return NH_OK;
+  return s->contact ? nh_sim_tools_rows(s) : NH_OK;
 }
 
 /* Keep the rows of an existing CSV file whose first field (the step) is at
@@ -336,10 +363,11 @@ static int nh_open_outputs(nh_sim *s) {
   NH_TRY(nh_csv_create(path, 9, nh_probe_columns, &s->probes_csv));
   snprintf(path, sizeof path, "%s/tissue.pvd", dir);
   NH_TRY(nh_pvd_create(path, &s->tissue_pvd));
-  if (sc->n_probes > 0) {
+  if (sc->n_probes + sc->n_targets > 0) {
     snprintf(path, sizeof path, "%s/points.pvd", dir);
     NH_TRY(nh_pvd_create(path, &s->points_pvd));
   }
+  NH_TRY(nh_sim_tools_open(s));
   NH_TRY(nh_write_probe_rows(s));
   return nh_write_frame(s);
 }
@@ -384,13 +412,17 @@ static int nh_sim_setup_mesh(nh_sim *s, int first) {
   for (int l = 0; l < sc->tissue.n_loads; l++)
     NH_TRY(nh_mesh_region_load(m, &sc->tissue.loads[l].region, sc->tissue.loads[l].force,
                                s->load_unit + (size_t)l * n));
-  for (int i = 0; i < sc->n_probes; i++) /* outside at creation: the scene's fault; later: ours */
-    NH_CHECK(nh_mesh_locate(m, sc->probes[i].point, &s->probe_cell[i], s->probe_xi + 3 * i) ==
-                 NH_OK,
+  for (int i = 0; i < sc->n_probes + sc->n_targets; i++) {
+    /* outside at creation: the scene's fault; later: ours */
+    const int pr = i < sc->n_probes;
+    const double *X = pr ? sc->probes[i].point : sc->targets[i - sc->n_probes].point;
+    NH_CHECK(nh_mesh_locate(m, X, &s->probe_cell[i], s->probe_xi + 3 * i) == NH_OK,
              first ? NH_ERR_INPUT : NH_ERR_INTERNAL,
-             "%s: the point [%g, %g, %g] lies outside the tissue%s", sc->probes[i].where,
-             sc->probes[i].point[0], sc->probes[i].point[1], sc->probes[i].point[2],
+             "%s: the point [%g, %g, %g] lies outside the tissue%s",
+             pr ? sc->probes[i].where : sc->targets[i - sc->n_probes].where, X[0], X[1], X[2],
              first ? "" : " of the refined mesh");
+  }
+  if (!first && s->contact) NH_TRY(nh_contact_relocate(s->contact, m));
   nh_hanging_destroy(&s->hanging);
   if (sc->adapt.enabled) NH_TRY(nh_hanging_detect(m, s->fixed, &s->hanging));
   nh_system_destroy(&s->system);
@@ -420,12 +452,14 @@ static int nh_sim_build(nh_sim *s) {
     s->v = calloc(3 * (size_t)s->mesh->n_nodes, sizeof(double));
   }
   const int nn = s->mesh->n_nodes;
-  s->probe_cell = malloc(sizeof(int) * (size_t)(sc->n_probes ? sc->n_probes : 1));
-  s->probe_xi = malloc(sizeof(double) * 3 * (size_t)(sc->n_probes ? sc->n_probes : 1));
+  const int n_points = sc->n_probes + sc->n_targets;
+  s->probe_cell = malloc(sizeof(int) * (size_t)(n_points ? n_points : 1));
+  s->probe_xi = malloc(sizeof(double) * 3 * (size_t)(n_points ? n_points : 1));
   if (!s->u || !s->v || !s->probe_cell || !s->probe_xi)
     return NH_ERROR(NH_ERR_MEMORY, "out of memory building the model (%d nodes)", nn);
   if (sc->adapt.enabled) NH_TRY(nh_template_load(sc->adapt.template_path, &s->tmpl));
   NH_TRY(nh_sim_setup_mesh(s, 1));
+  NH_TRY(nh_sim_tools_build(s));
   s->integrator = (nh_integrator){.dt = sc->time.step,
                                   .alpha = sc->tissue.damping_mass,
                                   .beta = sc->tissue.damping_stiffness,
@@ -552,7 +586,8 @@ int nh_sim_step(nh_sim *s) {
   double t_new = (s->step + 1) * sc->time.step;
   nh_sim_external_force(s, t_new, s->f_ext);
   nh_step_stats st = {0};
-  int rc = sc->time.mode == NH_MODE_STATIC
+  int rc = s->contact ? nh_sim_tools_step(s, t_new, &st)
+           : sc->time.mode == NH_MODE_STATIC
                ? nh_solve_static(s->system, &s->integrator, s->f_ext, s->u, &st)
                : nh_step_dynamic(s->system, &s->integrator, s->f_ext, s->u, s->v, &st);
   int adapt_now = !rc && sc->adapt.enabled && (s->step + 1) % sc->adapt.every == 0;
@@ -571,7 +606,10 @@ int nh_sim_step(nh_sim *s) {
   const nh_mesh *m = s->mesh;
   int dofs = 3 * m->n_nodes, free_dofs = nh_system_free_dofs(s->system), cells = m->n_leaves;
   int hanging = s->hanging ? s->hanging->n_hanging : 0;
-  int rows = nh_system_constraint_rows(s->system);
+  int rows = nh_system_constraint_rows(s->system) + (s->contact ? s->rows.m : 0);
+  nh_contact_counts cc = {0};
+  if (s->contact) nh_contact_counts_get(s->contact, &cc);
+  const nh_coupled_stats *cs = &s->cstats;
   /* f_ext · u: at a static equilibrium of a linear problem, the energy norm
    * squared of the solution (‖u_h‖²_E = f·u_h), which the adaptivity study
    * uses: for conforming Galerkin solutions ‖u − u_h‖²_E = ‖u‖²_E − ‖u_h‖²_E. */
@@ -605,33 +643,37 @@ int nh_sim_step(nh_sim *s) {
   pt[NH_PHASE_ADAPT] = s->t_adapt;
   pt[NH_PHASE_OUTPUT] = t2 - t1 + t_checkpoint;
   pt[NH_PHASE_STEP] = t3 - t0;
-  if (!s->options.dry_run)
-    NH_TRY(nh_csv_row(
-        s->steps_csv,
-        "%d,%.17g,%d,%d,%d,%d,%d,%.6e,%.6e,%d,%.6g,%.6e,%.6e,%.6e,%.6e,%.6e,%.6e,%.6e,%.17g",
-        s->step, s->time, dofs, free_dofs, cells, hanging, rows, s->eta, s->eta_rel, st.iterations,
-        st.residual, st.t_assemble, st.t_factor, st.t_solve, st.t_constraints, s->t_adapt,
-        pt[NH_PHASE_OUTPUT], pt[NH_PHASE_STEP], work));
+  const double row[] = {s->step,
+                        s->time,
+                        dofs,
+                        free_dofs,
+                        cells,
+                        hanging,
+                        rows,
+                        s->eta,
+                        s->eta_rel,
+                        st.iterations,
+                        st.residual,
+                        st.t_assemble,
+                        st.t_factor,
+                        st.t_solve,
+                        st.t_constraints,
+                        s->t_adapt,
+                        pt[NH_PHASE_OUTPUT],
+                        pt[NH_PHASE_STEP],
+                        work,
+                        s->contact ? cs->mcp.iterations : 0,
+                        s->contact ? cs->mcp.residual : 0.0,
+                        cc.stick,
+                        cc.slide,
+                        cc.cut,
+                        cc.path_points,
+                        s->contact ? cs->t_compliance : 0.0,
+                        s->contact ? cs->t_mcp : 0.0};
+  enum { NH_STEP_COLUMNS = sizeof nh_step_columns / sizeof *nh_step_columns };
+  _Static_assert(sizeof row / sizeof *row == NH_STEP_COLUMNS, "one value per steps.csv column");
+  if (!s->options.dry_run) NH_TRY(nh_csv_values(s->steps_csv, NH_STEP_COLUMNS, row));
   if (s->h5) {
-    const double row[] = {s->step,
-                          s->time,
-                          dofs,
-                          free_dofs,
-                          cells,
-                          hanging,
-                          rows,
-                          s->eta,
-                          s->eta_rel,
-                          st.iterations,
-                          st.residual,
-                          st.t_assemble,
-                          st.t_factor,
-                          st.t_solve,
-                          st.t_constraints,
-                          s->t_adapt,
-                          pt[NH_PHASE_OUTPUT],
-                          pt[NH_PHASE_STEP],
-                          work};
     NH_TRY(nh_h5_append_steps(s->h5, row));
     /* The checkpoint of this step is on disk: so must be its rows. */
     if (!refine_rc && !s->options.dry_run && sc->output.checkpoint > 0 &&

@@ -3,6 +3,7 @@
 #ifndef NH_SIM_IMPL_H
 #define NH_SIM_IMPL_H
 
+#include "contact/contact.h"
 #include "io/io.h"
 #include "sim/sim.h"
 
@@ -34,9 +35,9 @@ struct nh_sim {
   double *x;         /* current positions X + u, for output */
   double *f_ext;     /* 3 per node, work */
   double *load_unit; /* n_loads x 3 n: nodal forces of each load at factor 1 */
-  int *probe_cell;
-  double *probe_xi; /* 3 per probe */
-  int step;         /* steps done */
+  int *probe_cell;   /* embedded points: the probes, then the targets */
+  double *probe_xi;  /* 3 per point */
+  int step;          /* steps done */
   double time;
   double *phase_times; /* NH_PHASES per step */
   int cap_steps;
@@ -47,6 +48,13 @@ struct nh_sim {
   int cap_eta, have_eta;
   double eta, eta_rel;
   double t_adapt; /* s, this step: estimate + mark + refine + rebuild */
+  /* tools (absent: contact NULL) */
+  nh_contact *contact;
+  nh_rows rows;
+  nh_coupled_tool *ctools;
+  nh_coupled_stats cstats; /* the last step's */
+  nh_csv *tools_csv, *targets_csv;
+  nh_pvd **tool_pvd;
   /* outputs */
   nh_csv *steps_csv, *probes_csv;
   nh_pvd *tissue_pvd, *points_pvd;
@@ -70,6 +78,20 @@ int nh_checkpoint_write(const nh_sim *sim);
 /* Read DIR/checkpoint.nhc for `scene`; NH_ERR_INPUT for a foreign,
  * corrupted or other-scene file. */
 int nh_checkpoint_read(const char *dir, const nh_scene *scene, nh_checkpoint *ck);
+
+/* ---- tools (sim/tools.c) ---- */
+/* Create the tools and their step data (NULL contact without tools). */
+int nh_sim_tools_build(nh_sim *sim);
+void nh_sim_tools_destroy(nh_sim *sim);
+/* One coupled step of tissue and tools at the end time t_new. */
+int nh_sim_tools_step(nh_sim *sim, double t_new, nh_step_stats *stats);
+/* Outputs: open tools.csv, targets.csv and the tool PVDs; rows of this step;
+ * the tool frames of this step. */
+int nh_sim_tools_open(nh_sim *sim);
+int nh_sim_tools_rows(nh_sim *sim);
+int nh_sim_tools_frame(nh_sim *sim);
+/* Current position of embedded point i (probes, then targets). */
+void nh_sim_point_position(const nh_sim *sim, int i, double x[3]);
 
 void nh_progress_start(nh_sim *sim);
 void nh_progress_update(nh_sim *sim);

@@ -1,0 +1,182 @@
+/* tools.c — the sim module's side of the tools: building them, the coupled
+ * step, and their outputs (tools.csv, targets.csv, <tool>.pvd frames, the
+ * HDF5 series "tools" and "targets"; SCENE.md, docs/outputs.md). */
+#include "sim/sim_impl.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static const char *const nh_tool_columns[] = {"step",          "time",  "name",  "tip_x",
+                                              "tip_y",         "tip_z", "depth", "axial_force",
+                                              "lateral_force", "state"};
+static const char *const nh_target_columns[] = {"step", "time", "name", "x", "y", "z", "distance"};
+
+/* Constraint solve: tolerance and sweeps of nh_mcp_solve. */
+#define NH_MCP_TOLERANCE 1e-10
+#define NH_MCP_SWEEPS    2000
+
+int nh_sim_tools_build(nh_sim *s) {
+  const nh_scene *sc = s->scene;
+  if (sc->n_tools == 0) return NH_OK;
+  NH_CHECK(sc->time.mode == NH_MODE_DYNAMIC, NH_ERR_INPUT,
+           "%s: tools need time.mode: dynamic (the quasi-static mode has no tools yet)",
+           sc->tools[0].where);
+  NH_CHECK(!sc->adapt.enabled || sc->adapt.hanging == NH_HANGING_ELIMINATE, NH_ERR_INPUT,
+           "%s: adapt.hanging: lagrange cannot be combined with tools (use eliminate)",
+           sc->adapt.where);
+  NH_CHECK(!s->options.restart_dir, NH_ERR_INPUT,
+           "%s: restarting a run with tools is not supported yet (the checkpoint holds no tool "
+           "state): run it again from the start",
+           sc->tools[0].where);
+  NH_TRY(nh_contact_create(sc, s->mesh, &s->contact));
+  s->ctools = nh_calloc((size_t)sc->n_tools, sizeof *s->ctools);
+  s->tool_pvd = nh_calloc((size_t)sc->n_tools, sizeof *s->tool_pvd);
+  if (!s->ctools || !s->tool_pvd) return NH_ERROR(NH_ERR_MEMORY, "out of memory: tools");
+  return NH_OK;
+}
+
+void nh_sim_tools_destroy(nh_sim *s) {
+  for (int k = 0; s->tool_pvd && k < s->scene->n_tools; k++) nh_pvd_destroy(&s->tool_pvd[k]);
+  free(s->tool_pvd);
+  free(s->ctools);
+  nh_rows_free(&s->rows);
+  nh_contact_destroy(&s->contact);
+  nh_csv_destroy(&s->tools_csv);
+  nh_csv_destroy(&s->targets_csv);
+}
+
+int nh_sim_tools_step(nh_sim *s, double t_new, nh_step_stats *stats) {
+  const double h = s->scene->time.step, t = t_new - h;
+  int nd = 0;
+  NH_TRY(nh_contact_begin_step(s->contact, s->mesh, s->u, t, h, &s->rows, s->ctools, &nd));
+  int rc = nh_step_coupled(s->system, &s->integrator, s->f_ext, s->u, s->v, nd, s->ctools, &s->rows,
+                           NH_MCP_TOLERANCE, NH_MCP_SWEEPS, &s->cstats);
+  *stats = s->cstats.step;
+  if (rc) {
+    if (s->rows.m > 0 && s->cstats.mcp.iterations >= NH_MCP_SWEEPS) {
+      char why[512];
+      snprintf(why, sizeof why, "%s", nh_error_message());
+      return NH_ERROR(rc, "constraint solve (%d rows): %s", s->rows.m, why);
+    }
+    return rc;
+  }
+  return nh_contact_end_step(s->contact, s->mesh, s->u, &s->rows, t_new, h);
+}
+
+void nh_sim_point_position(const nh_sim *s, int i, double x[3]) {
+  const nh_scene *sc = s->scene;
+  const double *X = i < sc->n_probes ? sc->probes[i].point : sc->targets[i - sc->n_probes].point;
+  nh_sim_probe_displacement(s, i, x);
+  for (int k = 0; k < 3; k++) x[k] += X[k];
+}
+
+int nh_sim_tools_open(nh_sim *s) {
+  const nh_scene *sc = s->scene;
+  char path[NH_PATH_MAX + 2 * NH_NAME_MAX];
+  if (sc->n_tools > 0) {
+    snprintf(path, sizeof path, "%s/tools.csv", sc->output.dir);
+    NH_TRY(nh_csv_create(path, 10, nh_tool_columns, &s->tools_csv));
+    for (int k = 0; k < sc->n_tools; k++) {
+      snprintf(path, sizeof path, "%s/%s.pvd", sc->output.dir, sc->tools[k].name);
+      NH_TRY(nh_pvd_create(path, &s->tool_pvd[k]));
+    }
+  }
+  if (sc->n_targets > 0) {
+    snprintf(path, sizeof path, "%s/targets.csv", sc->output.dir);
+    NH_TRY(nh_csv_create(path, 7, nh_target_columns, &s->targets_csv));
+  }
+  return NH_OK;
+}
+
+int nh_sim_tools_rows(nh_sim *s) {
+  const nh_scene *sc = s->scene;
+  int rc = NH_OK;
+  if (sc->n_tools > 0) {
+    double *vals = malloc(sizeof(double) * 7 * (size_t)sc->n_tools);
+    const char **names = malloc(sizeof(char *) * (size_t)sc->n_tools);
+    if (!vals || !names) rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: tool rows");
+    for (int k = 0; k < sc->n_tools && !rc; k++) {
+      nh_tool_report r;
+      nh_contact_report(s->contact, k, &r);
+      rc = nh_csv_row(s->tools_csv, "%d,%.17g,%s,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%s", s->step,
+                      s->time, sc->tools[k].name, r.tip[0], r.tip[1], r.tip[2], r.depth,
+                      r.axial_force, r.lateral_force, nh_tool_state_name(r.state));
+      double *v = vals + 7 * k;
+      v[0] = r.tip[0], v[1] = r.tip[1], v[2] = r.tip[2], v[3] = r.depth;
+      v[4] = r.axial_force, v[5] = r.lateral_force, v[6] = r.state;
+      names[k] = sc->tools[k].name;
+    }
+    static const char *const comps[] = {"tip_x",       "tip_y",         "tip_z", "depth",
+                                        "axial_force", "lateral_force", "state"};
+    if (!rc && s->h5)
+      rc =
+          nh_h5_append_series(s->h5, "tools", s->step, s->time, sc->n_tools, names, 7, comps, vals);
+    free(vals);
+    free(names);
+  }
+  if (!rc && sc->n_targets > 0) {
+    double *vals = malloc(sizeof(double) * 4 * (size_t)sc->n_targets);
+    const char **names = malloc(sizeof(char *) * (size_t)sc->n_targets);
+    if (!vals || !names) rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: target rows");
+    for (int i = 0; i < sc->n_targets && !rc; i++) {
+      const nh_target *tg = &sc->targets[i];
+      double x[3], d[3];
+      nh_tool_report r;
+      nh_sim_point_position(s, sc->n_probes + i, x);
+      nh_contact_report(s->contact, tg->tool, &r);
+      for (int k = 0; k < 3; k++) d[k] = r.tip[k] - x[k];
+      double dist = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+      rc = nh_csv_row(s->targets_csv, "%d,%.17g,%s,%.17g,%.17g,%.17g,%.17g", s->step, s->time,
+                      tg->name, x[0], x[1], x[2], dist);
+      vals[4 * i] = x[0], vals[4 * i + 1] = x[1], vals[4 * i + 2] = x[2], vals[4 * i + 3] = dist;
+      names[i] = tg->name;
+    }
+    static const char *const comps[] = {"x", "y", "z", "distance"};
+    if (!rc && s->h5)
+      rc = nh_h5_append_series(s->h5, "targets", s->step, s->time, sc->n_targets, names, 4, comps,
+                               vals);
+    free(vals);
+    free(names);
+  }
+  return rc;
+}
+
+int nh_sim_tools_frame(nh_sim *s) {
+  const nh_scene *sc = s->scene;
+  int rc = NH_OK;
+  for (int k = 0; k < sc->n_tools && !rc; k++) {
+    nh_beam *b = nh_contact_beam(s->contact, k);
+    const int nn = nh_beam_nodes(b);
+    int *conn = malloc(sizeof(int) * (size_t)nn), off = nn;
+    double *f = malloc(sizeof(double) * 3 * (size_t)nn), *vel = malloc(sizeof(double) * 3 * nn);
+    double *arc = malloc(sizeof(double) * (size_t)nn);
+    if (!conn || !f || !vel || !arc) rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: tool frame");
+    if (!rc) {
+      const double *v = nh_beam_velocities(b);
+      nh_contact_node_forces(s->contact, k, f);
+      for (int i = 0; i < nn; i++) {
+        conn[i] = i;
+        arc[i] = nh_beam_length(b) * i / (nn - 1);
+        for (int c = 0; c < 3; c++) vel[3 * i + c] = v[6 * i + c];
+      }
+      nh_field pf[3] = {{"constraint_force", 3, f}, {"velocity", 3, vel}, {"arc_length", 1, arc}};
+      nh_vtu_grid g = {.n_points = nn,
+                       .points = nh_beam_positions(b),
+                       .n_cells = 1,
+                       .connectivity = conn,
+                       .offsets = &off,
+                       .type = NH_VTK_POLY_LINE,
+                       .n_point_fields = 3,
+                       .point_fields = pf};
+      char name[NH_NAME_MAX + 16], path[NH_PATH_MAX + NH_NAME_MAX + 32];
+      snprintf(name, sizeof name, "%s_%06d.vtu", sc->tools[k].name, s->step);
+      snprintf(path, sizeof path, "%s/%s", sc->output.dir, name);
+      rc = nh_vtu_write(path, &g);
+      if (!rc) rc = nh_pvd_add(s->tool_pvd[k], s->time, name);
+    }
+    free(conn), free(f), free(vel), free(arc);
+  }
+  return rc;
+}
