@@ -249,8 +249,8 @@ static void nh_follow_host(nh_tool *in, const nh_tool *host, double h) {
   for (int k = 0; k < nn; k++) {
     double a = in->offset + k * l0, p[3], t[3], old[3], Q[9], Tn[9], w[3], R[9];
     nh_beam_point(host->beam, fmin(fmax(a, 0.0), L), p, t, NULL, NULL, NULL);
-    if (a > L)
-      for (int i = 0; i < 3; i++) p[i] += (a - L) * t[i];
+    if (a > L || a < 0) /* beyond the host's ends: straight on along its end tangent */
+      for (int i = 0; i < 3; i++) p[i] += (a > L ? a - L : a) * t[i];
     /* the rotation taking the rest axis to t, applied to the rest directors */
     double ax[3], c = dot3(dir, t);
     cross3(dir, t, ax);
@@ -649,10 +649,13 @@ int nh_contact_end_step(nh_contact *c, const nh_mesh *m, const double *u, const 
         nh_beam_point(tl->beam, nh_beam_length(tl->beam), xt, NULL, NULL, NULL, NULL);
         nh_cpoint p = G->front;
         if (!nh_material_point(m, u, xt, G->front.X, &p)) {
+          double d[3] = {p.X[0] - G->front.X[0], p.X[1] - G->front.X[1], p.X[2] - G->front.X[2]};
+          if (sqrt(dot3(d, d)) > 1e-9 * nh_spacing(G->spec, m, &G->front)) { /* it advanced */
+            G->cut = 1;
+            cnt.cut++;
+          }
           G->front = p;
           NH_TRY(nh_lay_channel(G, m, &G->front));
-          G->cut = 1;
-          cnt.cut++;
         }
       }
     }
@@ -676,9 +679,11 @@ int nh_contact_end_step(nh_contact *c, const nh_mesh *m, const double *u, const 
       int has = 0;
       for (int i = 0; i < H->n_chan; i++) has |= H->chan[i].tool == k;
       has |= H->tip_tool == k;
-      tl->state = has ? (nh_motion_speed(tl->spec, t_new - h, h) < 0 ? NH_TOOL_RETRACTING
-                                                                     : NH_TOOL_PUNCTURED)
-                      : NH_TOOL_OUTSIDE;
+      /* in the tissue: tied to it, or inside its host where the host is */
+      int in = has || (H->punctured && H->state != NH_TOOL_OUTSIDE);
+      tl->state = !in                                           ? NH_TOOL_OUTSIDE
+                  : nh_motion_speed(tl->spec, t_new - h, h) < 0 ? NH_TOOL_RETRACTING
+                                                                : NH_TOOL_PUNCTURED;
     }
   }
   cnt.path_points = 0;
