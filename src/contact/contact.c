@@ -719,8 +719,7 @@ void nh_contact_report(const nh_contact *c, int k, nh_tool_report *r) {
   if (G->punctured && G->n_chan > 0 && tl->state != NH_TOOL_OUTSIDE) {
     /* the entry point's arc length on this tool */
     const nh_cpoint *e = &G->chan[0];
-    double s = e->tool == k ? e->s : -1.0;
-    if (s < 0) s = nh_project(tl->beam, G->entry_x, 0.0); /* not tied now */
+    double s = nh_project(tl->beam, G->entry_x, e->tool == k ? e->s : 0.0);
     r->depth = fmax(0.0, L - fmax(s, 0.0));
   }
 }

@@ -3,7 +3,7 @@
  * (docs/interaction.md "Solver").
  *
  * The blocks are the tissue (A_t, sparse, CHOLMOD) and each tool (A_k, dense
- * LU: its tangent is small and banded). With the right-hand sides of the
+ * Cholesky: its tangent is small; see nh_beam_dynamic_prepare). With the right-hand sides of the
  * two integrators,
  *   A_t dv_t = b_t + J_tᵀ λ,   A_k dv_k = b_k + J_kᵀ λ,
  * and the rows' end-of-step rates w = J v_new + g/h:
@@ -153,7 +153,7 @@ static int nh_finite(const double *a, int n) {
 
 int nh_step_coupled(nh_system *s, const nh_integrator *in, const double *f_ext, double *u,
                     double *v, int n_tools, nh_coupled_tool *tools, nh_rows *rows, double tolerance,
-                    int max_iterations, nh_coupled_stats *stats) {
+                    double accept, int max_iterations, nh_coupled_stats *stats) {
   const nh_tissue *t = s->tissue;
   const int n = 3 * s->n_nodes, nf = s->n_free, m = rows ? rows->m : 0;
   const double h = in->dt;
@@ -282,6 +282,14 @@ int nh_step_coupled(nh_system *s, const nh_integrator *in, const double *f_ext, 
         r[w->rows[a]] += nh_row_tool_rate(rows, w->rows[a], w->vnew);
     }
     rc = nh_mcp_solve(m, W, r, rows->law, tolerance, max_iterations, rows->lambda, &st.mcp);
+    /* Projected Gauss-Seidel can stall short of a tight tolerance on nearly
+     * dependent friction rows (a stiff needle's shaft points share the
+     * axial load in many ways): its best iterate is accepted up to
+     * `accept` and its residual reported (steps.csv). */
+    if (rc == NH_ERR_NUMERIC && isfinite(st.mcp.residual) && st.mcp.residual <= accept) {
+      nh_error_clear();
+      rc = NH_OK;
+    }
     double tc2 = nh_time_now();
     st.t_mcp = tc2 - tc1;
     if (rc) goto done;

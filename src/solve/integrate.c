@@ -33,7 +33,7 @@ static double nh_norm(const double *a, int n) {
 int nh_step_dynamic(nh_system *s, const nh_integrator *in, const double *f_ext, double *u,
                     double *v, nh_step_stats *stats) {
   nh_coupled_stats st;
-  int rc = nh_step_coupled(s, in, f_ext, u, v, 0, NULL, NULL, 1.0, 0, &st);
+  int rc = nh_step_coupled(s, in, f_ext, u, v, 0, NULL, NULL, 1.0, 1.0, 0, &st);
   if (stats) *stats = st.step;
   return rc;
 }

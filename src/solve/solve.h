@@ -176,14 +176,14 @@ int nh_mcp_solve(int m, const double *W, const double *r, const nh_row_law *laws
  * position-level violation g is removed within the step. */
 typedef struct {
   int m, cap;
-  int *node;         /* 8 per row: tissue nodes (−1: unused) */
-  double *N;         /* 8 per row: shape values at the point */
-  double *dir;       /* 3 per row: n */
-  int *tool, *elem;  /* tool index (−1: none) and element */
-  double *J;         /* 36 per row: d x_tool / d (element DOFs), row-major 3 x 12 */
-  double *gap;       /* g */
-  nh_row_law *law;   /* law; normal indices refer to rows of this set */
-  double *lambda;    /* in: warm start; out: the forces of the step */
+  int *node;        /* 8 per row: tissue nodes (−1: unused) */
+  double *N;        /* 8 per row: shape values at the point */
+  double *dir;      /* 3 per row: n */
+  int *tool, *elem; /* tool index (−1: none) and element */
+  double *J;        /* 36 per row: d x_tool / d (element DOFs), row-major 3 x 12 */
+  double *gap;      /* g */
+  nh_row_law *law;  /* law; normal indices refer to rows of this set */
+  double *lambda;   /* in: warm start; out: the forces of the step */
 } nh_rows;
 
 void nh_rows_clear(nh_rows *rows);
@@ -202,24 +202,25 @@ typedef struct {
 } nh_coupled_tool;
 
 typedef struct {
-  nh_step_stats step;    /* assemble, factor, solve (tissue and tools), t_constraints = all below */
-  double t_compliance;   /* s: W = J A⁻¹ Jᵀ, tissue (Algorithm 3) and tools */
-  double t_mcp;          /* s: the mixed complementarity solve */
-  nh_mcp_stats mcp;      /* sweeps, residual, stick/slide/open counts */
+  nh_step_stats step;  /* assemble, factor, solve (tissue and tools), t_constraints = all below */
+  double t_compliance; /* s: W = J A⁻¹ Jᵀ, tissue (Algorithm 3) and tools */
+  double t_mcp;        /* s: the mixed complementarity solve */
+  nh_mcp_stats mcp;    /* sweeps, residual, stick/slide/open counts */
 } nh_coupled_stats;
 
 /* One backward-Euler step of the tissue (nh_step_dynamic's form) and the
  * tools (nh_beam_dynamic_prepare's form) coupled by `rows` (Algorithm 1):
  * factorise each block, solve the free problems, W = Σ_blocks J A⁻¹ Jᵀ
  * (the tissue's by CHOLMOD sparse solves), λ from nh_mcp_solve warm-started
- * from rows->lambda (tolerance, max_iterations as there), correct each block
+ * from rows->lambda (tolerance, max_iterations as there; a solve that stops
+ * short of tolerance is accepted if its residual is <= accept), correct each block
  * by A⁻¹ Jᵀ λ and update tissue and tools. With no rows, the blocks step
  * independently. The system must not carry hanging-node rows
  * (nh_system_set_hanging_rows): use elimination. Fails with NH_ERR_NUMERIC
  * (a block not positive definite / singular, a non-finite update, the
  * constraint solve not converged: the message names which), NH_ERR_MEMORY. */
 int nh_step_coupled(nh_system *sys, const nh_integrator *in, const double *f_ext, double *u,
-                    double *v, int n_tools, nh_coupled_tool *tools, nh_rows *rows,
-                    double tolerance, int max_iterations, nh_coupled_stats *stats);
+                    double *v, int n_tools, nh_coupled_tool *tools, nh_rows *rows, double tolerance,
+                    double accept, int max_iterations, nh_coupled_stats *stats);
 
 #endif
