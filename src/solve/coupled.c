@@ -225,9 +225,12 @@ int nh_step_coupled(nh_system *s, const nh_integrator *in, const double *f_ext, 
     for (int i = 0; i < m; i++) {
       int k = rows->tool[i];
       if (k < 0) continue;
-      NH_CHECK(k < n_tools && rows->elem[i] >= 0 && rows->elem[i] < nh_beam_elements(tools[k].beam),
-               NH_ERR_INTERNAL, "constraint row %d: tool %d element %d out of range", i, k,
-               rows->elem[i]);
+      if (!(k < n_tools && rows->elem[i] >= 0 && rows->elem[i] < nh_beam_elements(tools[k].beam))) {
+        /* not NH_CHECK: its early return would leak the work of step 1 */
+        rc = NH_ERROR(NH_ERR_INTERNAL, "constraint row %d: tool %d element %d out of range", i, k,
+                      rows->elem[i]);
+        goto done;
+      }
       tw[k].rows[tw[k].nrows++] = i;
     }
     for (int k = 0; k < n_tools; k++) {
