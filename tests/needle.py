@@ -434,6 +434,76 @@ def test_hard():
                     fail("%s: never punctured (states %s)" % (name, sorted(states)))
 
 
+NESTED = """name: nest
+time: {mode: dynamic, step: 0.01, end: 2.0}
+tissue:
+  domain:
+    box: {min: [0, 0, 0], max: [0.04, 0.02, 0.02]}
+  grid: [8, 4, 4]
+  material: {young: 6000, poisson: 0.45, density: 1000}
+  damping: {mass: 5.0, stiffness: 0.01}
+  fixed:
+    - {box: {min: [0.0399, -1, -1], max: [1, 1, 1]}}
+tools:
+  - name: cannula
+    length: 0.032
+    radius: 0.0015
+    inner_radius: 0.001
+    elements: 16
+    material: {young: 10.0e9, poisson: 0.3, density: 7800}
+    base: [-0.0325, 0.01, 0.01]
+    direction: [1, 0, 0]
+    motion:
+      - {until: 1.0, speed: 0.02}
+      - {until: 1.1, speed: 0.0}
+      - {until: 2.0, speed: -0.02}
+    interaction: {puncture_force: 0.01, cutting_force: 0.01, friction: 0.05, friction_per_length: 0.5}
+  - name: electrode
+    length: 0.034
+    radius: 0.0007
+    elements: 16
+    material: {young: 10.0e9, poisson: 0.3, density: 7800}
+    base: [-0.0345, 0.01, 0.01]
+    direction: [1, 0, 0]
+    inside: cannula
+    release: 1.05
+targets:
+  - {name: STN, point: [0.02, 0.01, 0.01], tool: electrode}
+output: {every: 0}
+"""
+
+
+def test_nested():
+    """An electrode inside a cannula (both 10 GPa, in 6 kPa tissue) follows it
+    until released at 1.05 s; the cannula is then withdrawn 1.8 cm and the
+    electrode, whose own motion is none, stays where it was released."""
+    res = ran("nested", NESTED)
+    if res is None:
+        return
+    rows = [r for r in res["tools"] if int(r["step"]) > 0]
+    can = {int(r["step"]): r for r in rows if r["name"] == "cannula"}
+    ele = {int(r["step"]): r for r in rows if r["name"] == "electrode"}
+    tip = lambda r: np.array([float(r[k]) for k in ("tip_x", "tip_y", "tip_z")])
+    for k in range(1, 105):  # before release: the same tip (same rest tip, kinematic follow)
+        d = np.linalg.norm(tip(can[k]) - tip(ele[k]))
+        if not d <= 1e-9:
+            fail("nested: step %d electrode tip %.3g m from the cannula's before release" % (k, d))
+            break
+    x_rel = tip(ele[106])[0]
+    for k in range(106, 201):
+        if not abs(tip(ele[k])[0] - x_rel) <= 1e-6:
+            fail("nested: step %d electrode tip moved %.3g m after release"
+                 % (k, tip(ele[k])[0] - x_rel))
+            break
+    # the cannula's base travelled 0.02 m in, then 0.018 m out: its tip is at
+    # -0.0005 + 0.002 = 0.0015 m (a 10 GPa tube: shortening far below 1e-6 m)
+    if not abs(tip(can[200])[0] - 0.0015) <= 1e-6:
+        fail("nested: cannula tip at %.9g m at the end, expected 0.0015" % tip(can[200])[0])
+    if can[200]["state"] != "retracting" or ele[200]["state"] != "punctured":
+        fail("nested: final states %s / %s, expected retracting / punctured"
+             % (can[200]["state"], ele[200]["state"]))
+
+
 def main():
     if "--hard" in sys.argv[1:]:
         test_hard()
@@ -443,6 +513,7 @@ def main():
         test_retract()
         test_reinsert()
         test_stick_slide()
+        test_nested()
     if failures:
         print("%d failure(s)" % len(failures), file=sys.stderr)
         sys.exit(1)
