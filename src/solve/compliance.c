@@ -117,8 +117,8 @@ static int nh_compliance_build(nh_system *s) {
     double d = cj[j];
     for (int k = 0; k < j; k++) d -= s->W[(size_t)k * m + j] * s->W[(size_t)k * m + j];
     if (!(d > 1e-14 * fabs(cj[j]))) {
-      rc = NH_ERROR(NH_ERR_NUMERIC, "the constraint rows are linearly dependent (row %d of %d)",
-                    j, m);
+      rc = NH_ERROR(NH_ERR_NUMERIC, "the constraint rows are linearly dependent (row %d of %d)", j,
+                    m);
       break;
     }
     d = sqrt(d);
