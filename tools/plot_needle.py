@@ -219,6 +219,15 @@ def report(run, tl, m):
     print()
 
 
+def save(fig, out, filename):
+    """Write the figure to out/filename, close it, return the path."""
+    fig.tight_layout()
+    path = os.path.join(out, filename)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
 def plot_run(run, tl, probes, m, out, name, states):
     files = []
     f, d, t = tl["axial_force"], tl["depth"], tl["time"]
@@ -241,11 +250,7 @@ def plot_run(run, tl, probes, m, out, name, states):
     ax.set_title("%s: insertion force versus depth" % os.path.basename(run))
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    path = os.path.join(out, "%s_force_depth.png" % name)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    files.append(path)
+    files.append(save(fig, out, "%s_force_depth.png" % name))
 
     # force and depth versus time, states shaded
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
@@ -260,11 +265,7 @@ def plot_run(run, tl, probes, m, out, name, states):
     ax.set_title("%s: insertion force and depth versus time" % os.path.basename(run))
     ax.legend(handles=[l1, l2] + handles, fontsize=8, loc="lower left" if f.min() < 0 else "upper left")
     ax.set_xlim(t[0], t[-1])
-    fig.tight_layout()
-    path = os.path.join(out, "%s_force_time.png" % name)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    files.append(path)
+    files.append(save(fig, out, "%s_force_time.png" % name))
 
     # probes
     if probes:
@@ -283,11 +284,7 @@ def plot_run(run, tl, probes, m, out, name, states):
             a.grid(alpha=0.3)
             a.set_xlim(t[0], t[-1])
         a1.legend(fontsize=8)
-        fig.tight_layout()
-        path = os.path.join(out, "%s_probes.png" % name)
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
-        files.append(path)
+        files.append(save(fig, out, "%s_probes.png" % name))
     return files
 
 
@@ -321,11 +318,7 @@ def main():
         ax.set_ylabel("axial force on the tool (N)")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
-        fig.tight_layout()
-        path = os.path.join(a.out, "needle_force_compare.png")
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
-        written.append(path)
+        written.append(save(fig, a.out, "needle_force_compare.png"))
     for p in written:
         print("wrote", os.path.relpath(p))
 

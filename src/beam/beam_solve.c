@@ -2,12 +2,12 @@
  * one backward-Euler step (docs/beam.md §7).
  *
  * Unknowns: the 6n DOFs of nodes 1 … n (the base node 0 is prescribed).
- * The tangent is assembled dense and factorised by LU with partial pivoting
- * (the consistent tangent is not symmetric; near a buckling load the
- * symmetrised one is indefinite, so Cholesky/LDLᵀ without pivoting is not
- * safe). Cost (6n)³/3 flops: 0.07 GFlop for n = 100, milliseconds; the
- * coupled simulator factorises the tool's banded block with the tissue's
- * solver instead.
+ * Static: the consistent tangent is not symmetric (and near a buckling load
+ * indefinite), so it is factorised dense by LU with partial pivoting.
+ * Dynamic: A = (1 + hα) M + (hβ + h²) K with the symmetrised K is
+ * factorised by dense Cholesky (LAPACK), the tangent's positive part
+ * replacing K when A is indefinite (nh_beam_dynamic_prepare). Cost (6n)³/3
+ * flops: 0.07 GFlop for n = 100, milliseconds.
  *
  * Static: Newton on K du = λ_k (f_ext + f_g(x)) − f_int(x), λ_k = k/S for
  * load steps k = 1 … S, each to convergence. The tangent is the exact
@@ -188,9 +188,8 @@ int nh_beam_solve_static(nh_beam *b, const nh_beam_static_options *o, const doub
 
 struct nh_beam_system {
   int N, m;               /* all DOFs, free DOFs (N − 6) */
-  double *K, *A, *M, *Kv; /* N x N tangent, m x m LU of A, N mass, N work */
-  int *piv;
-  int projected; /* the last prepare clipped negative tangent eigenvalues */
+  double *K, *A, *M, *Kv; /* N x N tangent, m x m Cholesky factor of A, N mass, N work */
+  int projected;          /* the last prepare clipped negative tangent eigenvalues */
 };
 
 int nh_beam_system_create(const nh_beam *b, nh_beam_system **out) {
@@ -202,8 +201,7 @@ int nh_beam_system_create(const nh_beam *b, nh_beam_system **out) {
   s->A = nh_calloc((size_t)s->m * s->m, sizeof(double));
   s->M = nh_calloc((size_t)s->N, sizeof(double));
   s->Kv = nh_calloc((size_t)s->N, sizeof(double));
-  s->piv = nh_calloc((size_t)s->m, sizeof(int));
-  if (!s->K || !s->A || !s->M || !s->Kv || !s->piv) {
+  if (!s->K || !s->A || !s->M || !s->Kv) {
     nh_beam_system_destroy(&s);
     return NH_ERR_MEMORY;
   }
@@ -214,7 +212,7 @@ int nh_beam_system_create(const nh_beam *b, nh_beam_system **out) {
 void nh_beam_system_destroy(nh_beam_system **ps) {
   nh_beam_system *s = *ps;
   if (!s) return;
-  free(s->K), free(s->A), free(s->M), free(s->Kv), free(s->piv);
+  free(s->K), free(s->A), free(s->M), free(s->Kv);
   free(s);
   *ps = NULL;
 }

@@ -44,7 +44,6 @@ typedef struct {
   double F[3];    /* the tissue's force on the tool in the last step, N */
   double *f_node; /* 3 per node: F distributed to the nearest nodes */
   nh_tool_state state;
-  double depth;
   /* group data (outer tools only) */
   int has_entry;
   double n_out[3];
@@ -581,14 +580,6 @@ static int nh_on_bound(const nh_rows *rows, int r) {
 int nh_contact_end_step(nh_contact *c, const nh_mesh *m, const double *u, const nh_rows *rows,
                         double t_new, double h) {
   nh_contact_counts cnt = {0};
-  cnt.rows = rows->m;
-  for (int r = 0; r < rows->m; r++)
-    if (rows->law[r].kind == NH_ROW_FRICTION) {
-      if (nh_on_bound(rows, r))
-        cnt.slide++;
-      else
-        cnt.stick++;
-    }
   for (int k = 0; k < c->n; k++) {
     nh_tool *tl = &c->tools[k];
     memset(tl->F, 0, sizeof tl->F);

@@ -74,10 +74,11 @@ typedef struct {
 } nh_tool_report;
 void nh_contact_report(const nh_contact *c, int tool, nh_tool_report *r);
 
-/* Counts of the last step's rows: friction rows sticking and sliding, tip
- * rows cutting (sliding forward). */
+/* Of the last step: tip rows that cut (slid forward and moved the front),
+ * and the channel points laid so far. (Friction rows sticking and sliding
+ * are counted by the constraint solve: nh_mcp_stats.) */
 typedef struct {
-  int stick, slide, cut, rows, path_points;
+  int cut, path_points;
 } nh_contact_counts;
 void nh_contact_counts_get(const nh_contact *c, nh_contact_counts *counts);
 

@@ -662,14 +662,14 @@ int nh_sim_step(nh_sim *s) {
                         pt[NH_PHASE_OUTPUT],
                         pt[NH_PHASE_STEP],
                         work,
-                        s->contact ? cs->mcp.iterations : 0,
-                        s->contact ? cs->mcp.residual : 0.0,
-                        cc.stick,
-                        cc.slide,
+                        cs->mcp.iterations, /* all zero without tools */
+                        cs->mcp.residual,
+                        cs->mcp.n_stick,
+                        cs->mcp.n_slide,
                         cc.cut,
                         cc.path_points,
-                        s->contact ? cs->t_compliance : 0.0,
-                        s->contact ? cs->t_mcp : 0.0};
+                        cs->t_compliance,
+                        cs->t_mcp};
   enum { NH_STEP_COLUMNS = sizeof nh_step_columns / sizeof *nh_step_columns };
   _Static_assert(sizeof row / sizeof *row == NH_STEP_COLUMNS, "one value per steps.csv column");
   if (!s->options.dry_run) NH_TRY(nh_csv_values(s->steps_csv, NH_STEP_COLUMNS, row));

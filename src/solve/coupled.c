@@ -246,18 +246,17 @@ int nh_step_coupled(nh_system *s, const nh_integrator *in, const double *f_ext, 
         nh_row_tool_column(rows, w->rows[a], x);
         nh_beam_system_solve(w->sys, x);
       }
-      for (int a = 0; a < w->nrows; a++)
+      for (int a = 0; a < w->nrows; a++) { /* W_ij += J_i (A⁻¹ J_jᵀ) */
+        const int i = w->rows[a], d0 = 6 * rows->elem[i] - 6;
+        double coef[12];
+        nh_row_tool_coef(rows, i, coef);
         for (int c = 0; c < w->nrows; c++) {
-          double coef[12], sum = 0.0;
-          const int i = w->rows[a], j = w->rows[c];
-          nh_row_tool_coef(rows, i, coef);
           const double *x = w->X + (size_t)c * w->mfree;
-          for (int q = 0; q < 12; q++) {
-            int d = 6 * rows->elem[i] + q - 6;
-            if (d >= 0) sum += coef[q] * x[d];
-          }
-          W[(size_t)j * m + i] += sum;
+          double sum = 0.0;
+          for (int q = d0 < 0 ? -d0 : 0; q < 12; q++) sum += coef[q] * x[d0 + q];
+          W[(size_t)w->rows[c] * m + i] += sum;
         }
+      }
     }
     double tc1 = nh_time_now();
     st.t_compliance = tc1 - tc0;
