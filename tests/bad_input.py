@@ -81,6 +81,33 @@ CASES = [
      "tools.1.inside"),
     ("tools_base.yaml", ["tools.2.length=1"], "--set:1", "tools.2"),
     ("set_base.yaml", ["tools.0.length=1"], "--set:1", "tools.0"),
+    # gravity with a schedule, tissue buoyancy, planned trajectories: a schedule
+    # whose times go back, a fraction above 1, a target name that is not a
+    # target, a target at the entry, base given with a trajectory, until:
+    # target with speed 0 and past the planned depth, until: start without a
+    # trajectory, release: target when the host has no until: target; then
+    # the same kind of errors from overrides of the valid trajectory_base.yaml.
+    ("gravity_schedule.yaml", [], 5, "gravity.schedule.1.0"),
+    ("buoyancy_fraction.yaml", [], 7, "tissue.buoyancy.before"),
+    ("trajectory_unknown_target.yaml", [], 12, "tools.0.trajectory.target"),
+    ("trajectory_target_at_entry.yaml", [], 12, "tools.0.trajectory.target"),
+    ("trajectory_with_base.yaml", [], 13, "tools.0.base"),
+    ("until_target_speed.yaml", [], 14, "tools.0.motion.0.speed"),
+    ("until_target_past.yaml", [], 15, "tools.0.motion.1.until"),
+    ("until_without_trajectory.yaml", [], 16, "tools.0.motion.1.until"),
+    ("release_target_no_plan.yaml", [], 21, "tools.1.release"),
+    ("trajectory_base.yaml", ["tools.0.trajectory.target=GPi"], "--set:1",
+     "tools.0.trajectory.target"),
+    ("trajectory_base.yaml", ["tools.0.trajectory.standoff=0"], "--set:1",
+     "tools.0.trajectory.standoff"),
+    ("trajectory_base.yaml", ["tools.0.direction=[1,0,0]"], "--set:1", "tools.0.direction"),
+    # until: target resolves to 2.018 s, so a following until of 2 s is out of order
+    ("trajectory_base.yaml", ["tools.0.motion.1.until=2"], "--set:1", "tools.0.motion.1.until"),
+    ("trajectory_base.yaml", ["tools.0.motion.2.speed=0.01"], "--set:1", "tools.0.motion.2.speed"),
+    ("trajectory_base.yaml", ["tools.1.release=later"], "--set:1", "tools.1.release"),
+    ("trajectory_base.yaml", ["tissue.buoyancy={before: 0.5}"], "--set:1", "tissue.buoyancy.after"),
+    ("trajectory_base.yaml", ["gravity={vector: [0, 0, -9.81], ramp: 1}"], "--set:1",
+     "gravity.ramp"),
 ]
 
 # Scenes that must pass `check`.
@@ -91,6 +118,9 @@ VALID = [("set_base.yaml", []), ("set_base.yaml", ["tissue.damping.mass=0.5", "t
          ("set_base.yaml", ["adapt.template=hex3", "adapt.marking={strategy: dorfler, fraction: 0.4}",
                             "adapt.hanging=lagrange"]),
          ("tools_base.yaml", []),
+         ("trajectory_base.yaml", []),
+         ("trajectory_base.yaml", ["gravity=[0, 0, -9.81]", "tools.0.trajectory.standoff=0.001",
+                                   "tools.1.release=1.5", "tissue.buoyancy.schedule=[]"]),
          ("tools_base.yaml", ["tools.0.interaction.friction=0.1", "tools.1.release=0.75",
                               "targets.0.tool=cannula"])]
 

@@ -1,7 +1,9 @@
 /* test_scene — the scene module: defaults, values, --set overrides, schedules,
  * steps from end/step, the scene-as-run text re-loading to the same struct,
  * the adapt section (defaults, values, where adapt.template resolves), tools
- * and targets (values, defaults, a nested tool, overrides into them), and
+ * and targets (values, defaults, a nested tool, overrides into them),
+ * gravity schedules, buoyancy and planned trajectories (the times that
+ * until: target / start and release: target resolve to, by hand), and
  * the exact form of input errors (FILE:LINE: KEY: ...).
  *
  * The scenes are written by this program into a fresh temporary directory, so
@@ -725,6 +727,170 @@ static void test_tools(void) {
   nh_scene_destroy(&s);
 }
 
+/* ---- gravity schedule, buoyancy, planned trajectories ---- */
+
+/* `minimal` (lines 1-5) followed by a scheduled gravity, buoyancy and two
+ * planned tools. The numbers are picked so that every resolved time is
+ * plain arithmetic: target − entry = [0.004, 0.006, 0.012], of length 0.014
+ * (2² + 3² + 6² = 7²), direction [2, 3, 6] / 7. */
+static const char *plans_text =
+    "gravity: {vector: [0, 0, -10], schedule: [[0, 0], [1, 1]]}\n"
+    "tools:\n"
+    "  - name: cannula\n"
+    "    length: 0.03\n"
+    "    radius: 0.001\n"
+    "    material: {young: 5.0e7}\n"
+    "    trajectory: {entry: [0.01, 0, 0], target: T, standoff: 0.001}\n"
+    "    motion:\n"
+    "      - {until: 0.5, speed: 0.002}\n"
+    "      - {until: target, speed: 0.01}\n"
+    "      - {until: 2.5, speed: 0}\n"
+    "      - {until: start, speed: -0.02}\n"
+    "  - name: electrode\n"
+    "    length: 0.04\n"
+    "    radius: 0.0004\n"
+    "    material: {young: 2.0e11}\n"
+    "    trajectory: {entry: [0.01, 0, 0], target: T, standoff: 0.003}\n"
+    "    inside: cannula\n"
+    "    release: target\n"
+    "    motion:\n"
+    "      - {until: 1, speed: 0.05}\n"
+    "      - {until: target, speed: 0.004}\n"
+    "      - {until: start, speed: -0.01}\n"
+    "targets:\n"
+    "  - {name: T, point: [0.014, 0.006, 0.012], tool: electrode}\n";
+
+static void check_plans(const nh_scene *s, const char *what) {
+  EXPECT(s->n_tools == 2 && s->n_targets == 1, "%s: n_tools %d n_targets %d", what, s->n_tools,
+         s->n_targets);
+  if (s->n_tools != 2 || s->n_targets != 1) return;
+  const nh_tool_spec *c = &s->tools[0], *e = &s->tools[1];
+  static const double dir[3] = {2.0 / 7, 3.0 / 7, 6.0 / 7}, entry[3] = {0.01, 0, 0};
+  EXPECT(c->planned && e->planned && c->target == 0 && e->target == 0,
+         "%s: planned %d %d, target %d %d", what, c->planned, e->planned, c->target, e->target);
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_NUM(c->direction[k], dir[k]);
+    EXPECT_NUM(e->direction[k], dir[k]);
+    /* the tip (base + length · direction) at entry − standoff · direction */
+    EXPECT_NUM(c->base[k], entry[k] - (0.001 + 0.03) * dir[k]);
+    EXPECT_NUM(e->base[k], entry[k] - (0.003 + 0.04) * dir[k]);
+  }
+  EXPECT_NUM(c->standoff, 0.001);
+  EXPECT_NUM(c->depth, 0.001 + 0.014);
+  EXPECT_NUM(e->depth, 0.003 + 0.014);
+  EXPECT(c->n_motion == 4 && e->n_motion == 3, "%s: n_motion %d %d", what, c->n_motion,
+         e->n_motion);
+  if (c->n_motion != 4 || e->n_motion != 3) return;
+  /* cannula: 0.5 s at 2 mm/s is 1 mm; the other 14 mm of D = 15 mm at 10 mm/s
+   * take 1.4 s; held until 2.5 s; back over 15 mm at 20 mm/s: 0.75 s. */
+  EXPECT_NUM(c->motion[0].until, 0.5);
+  EXPECT_NUM(c->motion[1].until, 0.5 + 0.014 / 0.01);
+  EXPECT_NUM(c->motion[2].until, 2.5);
+  EXPECT_NUM(c->motion[3].until, 2.5 + 0.015 / 0.02);
+  EXPECT(c->motion[0].kind == NH_UNTIL_TIME && c->motion[1].kind == NH_UNTIL_TARGET &&
+             c->motion[3].kind == NH_UNTIL_START,
+         "%s: kinds %d %d %d", what, c->motion[0].kind, c->motion[1].kind, c->motion[3].kind);
+  /* electrode: released when the cannula's until: target ends (1.9 s); its
+   * first segment ends before that, so it moves with the cannula's 15 mm;
+   * the other 2 mm of D = 17 mm at 4 mm/s take 0.5 s; back over 17 mm at
+   * 10 mm/s: 1.7 s. */
+  EXPECT(e->release_target, "%s: release_target %d", what, e->release_target);
+  EXPECT_NUM(e->release, 1.9);
+  EXPECT_NUM(e->motion[0].until, 1);
+  EXPECT_NUM(e->motion[1].until, 1.9 + 0.002 / 0.004);
+  EXPECT_NUM(e->motion[2].until, 2.4 + 0.017 / 0.01);
+
+  /* gravity by its schedule (tools), and the tissue's without buoyancy */
+  static const double g_at[][2] = {{-1, 0}, {0, 0}, {0.25, -2.5}, {1, -10}, {5, -10}};
+  for (size_t i = 0; i < sizeof g_at / sizeof g_at[0]; ++i) {
+    double g[3], gt[3];
+    nh_scene_gravity(s, g_at[i][0], g);
+    nh_scene_tissue_gravity(s, g_at[i][0], gt);
+    EXPECT(g[0] == 0 && g[1] == 0 && fabs(g[2] - g_at[i][1]) <= 1e-15,
+           "%s: gravity at %g s: expected [0, 0, %g], got [%g, %g, %.17g]", what, g_at[i][0],
+           g_at[i][1], g[0], g[1], g[2]);
+    EXPECT(gt[2] == g[2], "%s: tissue gravity without buoyancy at %g s: %.17g, expected %.17g",
+           what, g_at[i][0], gt[2], g[2]);
+  }
+}
+
+static void test_plans(void) {
+  char text[4096];
+  snprintf(text, sizeof text, "%s%s", minimal, plans_text);
+  const char *path = write_scene("plans.yaml", text);
+  nh_scene *s = load_ok(path, 0, NULL, __LINE__);
+  if (!s) return;
+  check_plans(s, "plans.yaml");
+
+  FILE *f = tmpfile();
+  if (f) {
+    char printed[8192] = "";
+    nh_scene_print(s, f);
+    rewind(f);
+    size_t n = fread(printed, 1, sizeof printed - 1, f);
+    printed[n] = '\0';
+    fclose(f);
+    static const char *const expected[] = {
+        "gravity   [0, 0, -10] m/s^2, schedule [[0, 0], [1, 1]]\n",
+        "to target T [0.014, 0.006, 0.012] m, standoff 0.001 m: planned depth 0.015 m\n",
+        "0.01 m/s until 1.9 s (until: target)\n",
+        "-0.02 m/s until 3.25 s (until: start), then at rest\n",
+        "0.004 m/s until 2.4 s (until: target)\n",
+        "-0.01 m/s until 4.1 s (until: start), then at rest\n",
+        "released at 1.9 s (release: target",
+    };
+    for (size_t i = 0; i < sizeof expected / sizeof expected[0]; ++i)
+      EXPECT(strstr(printed, expected[i]), "print: expected '%s' in:\n%s", expected[i], printed);
+  }
+
+  /* The scene as run (symbolic words kept) reads back to the same plans. */
+  const char *again = write_scene("plans_as_run.yaml", s->yaml);
+  nh_scene *t = load_ok(again, 0, NULL, __LINE__);
+  if (t) {
+    check_plans(t, "plans_as_run.yaml");
+    nh_scene_destroy(&t);
+  }
+  nh_scene_destroy(&s);
+
+  /* Buoyancy: the tissue carries (b0 − b(t)) g(t), b(t) = b0 + (b1 − b0) s(t).
+   * With s stepping from 0 at 1 s to 1 at 2 s and b0 − b1 = 0.5: */
+  path = write_scene("plans.yaml", text);
+  const char *sets[] = {"tissue.buoyancy={before: 0.75, after: 0.25, schedule: [[1, 0], [2, 1]]}"};
+  s = load_ok(path, 1, sets, __LINE__);
+  if (s) {
+    EXPECT(s->tissue.buoyant, "buoyant: expected 1");
+    static const double at[][2] = {
+        {0.5, 0}, {1, 0}, {1.5, -10 * 0.5 * 0.5}, {2, -10 * 0.5}, {3, -10 * 0.5}};
+    for (size_t i = 0; i < sizeof at / sizeof at[0]; ++i) {
+      double g[3], gt[3];
+      nh_scene_tissue_gravity(s, at[i][0], gt);
+      nh_scene_gravity(s, at[i][0], g);
+      EXPECT(fabs(gt[2] - at[i][1]) <= 1e-15 && gt[0] == 0 && gt[1] == 0,
+             "tissue gravity at %g s: expected %g, got %.17g", at[i][0], at[i][1], gt[2]);
+      EXPECT(g[2] == (at[i][0] >= 1 ? -10 : -5), "tools' gravity at %g s: %g (not buoyed)",
+             at[i][0], g[2]);
+    }
+    nh_scene_destroy(&s);
+  }
+  /* Without a schedule the change is a step at t = 0; before = after: none. */
+  const char *step[] = {"tissue.buoyancy={before: 1, after: 0.25}", "gravity=[0, 0, -10]"};
+  s = load_ok(path, 2, step, __LINE__);
+  if (s) {
+    double g[3];
+    nh_scene_tissue_gravity(s, 0.01, g);
+    EXPECT(g[2] == -7.5, "step buoyancy at 0.01 s: expected -7.5, got %.17g", g[2]);
+    nh_scene_destroy(&s);
+  }
+  const char *same[] = {"tissue.buoyancy={before: 0.3, after: 0.3}"};
+  s = load_ok(path, 1, same, __LINE__);
+  if (s) {
+    double g[3];
+    nh_scene_tissue_gravity(s, 2.0, g);
+    EXPECT(g[0] == 0 && g[1] == 0 && g[2] == 0, "before = after: expected 0, got %g", g[2]);
+    nh_scene_destroy(&s);
+  }
+}
+
 /* The head of the small bad scenes below (4 lines), and one valid tool as an
  * unclosed flow mapping, so that a case can add keys before its '}'. */
 #define W_HEAD                                                                                     \
@@ -1005,6 +1171,7 @@ int main(void) {
   test_schedule();
   test_adapt();
   test_tools();
+  test_plans();
   test_errors(); /* after test_adapt, which creates DIR/sub for adapt_template_dir.yaml */
   if (nh_test_failures == 0) {
     /* Clean up only on success, so a failure leaves its scenes to look at. */

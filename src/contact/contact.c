@@ -530,6 +530,8 @@ int nh_contact_begin_step(nh_contact *c, const nh_mesh *m, const double *u, doub
   nh_rows_clear(rows);
   c->h = h;
   int nd = 0;
+  double g[3]; /* at the end of the step, as the tissue's loads; tools are not buoyed */
+  nh_scene_gravity(c->scene, t + h, g);
   for (int k = 0; k < c->n; k++) {
     nh_tool *tl = &c->tools[k];
     const nh_tool_spec *sp = tl->spec;
@@ -538,13 +540,12 @@ int nh_contact_begin_step(nh_contact *c, const nh_mesh *m, const double *u, doub
     double speed = nh_motion_speed(sp, t, h);
     for (int i = 0; i < 3; i++) tl->base_v[i] = speed * sp->direction[i], tl->base_v[3 + i] = 0.0;
     tl->dyn = nd;
-    tools[nd] = (nh_coupled_tool){
-        .beam = tl->beam,
-        .options = {.dt = h,
-                    .alpha = sp->damping_mass,
-                    .beta = sp->damping_stiffness,
-                    .gravity = {c->scene->gravity[0], c->scene->gravity[1], c->scene->gravity[2]}},
-        .f_ext = NULL};
+    tools[nd] = (nh_coupled_tool){.beam = tl->beam,
+                                  .options = {.dt = h,
+                                              .alpha = sp->damping_mass,
+                                              .beta = sp->damping_stiffness,
+                                              .gravity = {g[0], g[1], g[2]}},
+                                  .f_ext = NULL};
     memcpy(tools[nd].base_velocity, tl->base_v, sizeof tl->base_v);
     nd++;
   }

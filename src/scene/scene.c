@@ -40,6 +40,7 @@
 
 #include "scene/yaml_tree.h"
 
+#include <ctype.h>
 #include <errno.h>
 #include <limits.h>
 #include <math.h>
@@ -432,6 +433,49 @@ static int read_load(const nh_ctx *c, const nh_yaml_node *node, const char *path
   return NH_OK;
 }
 
+/* gravity: [gx, gy, gz], or {vector: [gx, gy, gz], schedule: [[t, s], ...]}. */
+static int read_gravity(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
+  static const char *const keys[] = {"vector", "schedule", NULL};
+  const nh_yaml_node *n, *schedule;
+  NH_TRY(field(c, root, "", "gravity", 0, &n));
+  if (!n) return NH_OK;
+  if (n->kind != NH_YAML_MAP) return as_vec3(c, n, "gravity", s->gravity);
+  NH_TRY(check_keys(c, n, "gravity", keys));
+  NH_TRY(get_vec3(c, n, "gravity", "vector", 1, s->gravity, NULL));
+  NH_TRY(field(c, n, "gravity", "schedule", 0, &schedule));
+  if (schedule) NH_TRY(read_schedule(c, schedule, "gravity.schedule", &s->gravity_schedule));
+  return NH_OK;
+}
+
+/* A fraction in [0, 1] (required). */
+static int get_fraction(const nh_ctx *c, const nh_yaml_node *map, const char *path,
+                        const char *name, double *out) {
+  char key[NH_KEY_MAX];
+  const nh_yaml_node *at;
+  NH_TRY(get_number(c, map, path, name, 1, out, &at));
+  if (!(*out >= 0 && *out <= 1))
+    return fail(c, at, join(key, path, name), "a fraction must lie in [0, 1], got %g", *out);
+  return NH_OK;
+}
+
+/* tissue.buoyancy: {before: b0, after: b1, schedule: [[t, s], ...]}. Without
+ * a schedule the change is a step at t = 0: s = 1 from the first step on. */
+static int read_buoyancy(const nh_ctx *c, const nh_yaml_node *tissue, nh_scene *s) {
+  static const char *const keys[] = {"before", "after", "schedule", NULL};
+  const char *path = "tissue.buoyancy";
+  const nh_yaml_node *m, *schedule;
+  NH_TRY(section(c, tissue, "tissue", "buoyancy", 0, &m));
+  if (!m) return NH_OK;
+  NH_TRY(check_keys(c, m, path, keys));
+  s->tissue.buoyant = 1;
+  NH_TRY(get_fraction(c, m, path, "before", &s->tissue.buoyancy_before));
+  NH_TRY(get_fraction(c, m, path, "after", &s->tissue.buoyancy_after));
+  NH_TRY(field(c, m, path, "schedule", 0, &schedule));
+  if (schedule)
+    NH_TRY(read_schedule(c, schedule, "tissue.buoyancy.schedule", &s->tissue.buoyancy_schedule));
+  return NH_OK;
+}
+
 static int read_time(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   static const char *const keys[] = {"mode", "step", "end", "steps", NULL};
   const nh_yaml_node *t, *at_step, *at_end, *at_steps, *at_mode;
@@ -525,7 +569,7 @@ static int read_damping(const nh_ctx *c, const nh_yaml_node *parent, const char 
 
 static int read_tissue(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   static const char *const keys[] = {"domain", "grid",  "material", "damping",
-                                     "fixed",  "loads", NULL};
+                                     "fixed",  "loads", "buoyancy", NULL};
   static const char *const domain_keys[] = {"box", "brain", "mask", NULL};
   char key[NH_KEY_MAX];
   const nh_yaml_node *t, *domain, *n;
@@ -565,6 +609,7 @@ static int read_tissue(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   NH_TRY(read_material(c, t, "tissue", 1, 1, &s->tissue.young, &s->tissue.poisson,
                        &s->tissue.density));
   NH_TRY(read_damping(c, t, "tissue", &s->tissue.damping_mass, &s->tissue.damping_stiffness));
+  NH_TRY(read_buoyancy(c, t, s));
 
   /* fixed: where_fixed points at the key `fixed:`, or at `tissue:` without it. */
   const nh_yaml_node *fixed, *fixed_key, *tissue_key;
@@ -802,8 +847,19 @@ static const char *tool_names(const nh_scene *s, char *buf, size_t cap) {
   return buf;
 }
 
+/* The word of a symbolic `until` (NH_UNTIL_TIME if `n` is not one). */
+static nh_until_kind until_word(const nh_yaml_node *n) {
+  if (n->kind != NH_YAML_SCALAR || nh_yaml_is_null(n)) return NH_UNTIL_TIME;
+  if (!strcmp(n->text, "target")) return NH_UNTIL_TARGET;
+  if (!strcmp(n->text, "start")) return NH_UNTIL_START;
+  return NH_UNTIL_TIME;
+}
+
 /* PATH.motion: [{until, speed}, ...] with `until` > 0 and strictly
- * increasing; absent or empty: the tool stays at rest. */
+ * increasing; absent or empty: the tool stays at rest. `until` may also be
+ * the word target (speed > 0) or start (speed < 0) on a tool with a
+ * trajectory: read_plans turns it into a time, and checks the order of the
+ * times around it then. */
 static int read_motion(const nh_ctx *c, const nh_yaml_node *tool, const char *path,
                        nh_tool_spec *t) {
   static const char *const keys[] = {"until", "speed", NULL};
@@ -822,9 +878,32 @@ static int read_motion(const nh_ctx *c, const nh_yaml_node *tool, const char *pa
       return fail(c, m, item, "expected a segment {until: TIME, speed: SPEED}, got %s",
                   describe(m, d, sizeof d));
     NH_TRY(check_keys(c, m, item, keys));
-    NH_TRY(get_number(c, m, item, "until", 1, &segment->until, &at));
+    NH_TRY(field(c, m, item, "until", 1, &at));
+    segment->kind = until_word(at);
+    if (segment->kind != NH_UNTIL_TIME) {
+      if (!t->planned)
+        return fail(c, at, join(key, item, "until"),
+                    "%s needs a trajectory (give %s.trajectory: {entry, target}): it is a "
+                    "position on the planned path",
+                    describe(at, d, sizeof d), path);
+      NH_TRY(get_number(c, m, item, "speed", 1, &segment->speed, &at));
+      if (segment->kind == NH_UNTIL_TARGET && !(segment->speed > 0))
+        return fail(c, at, join(key, item, "speed"),
+                    "must be greater than 0 with until: target (the tip advances to the "
+                    "target), got %g",
+                    segment->speed);
+      if (segment->kind == NH_UNTIL_START && !(segment->speed < 0))
+        return fail(c, at, join(key, item, "speed"),
+                    "must be less than 0 with until: start (the tip withdraws to its start), "
+                    "got %g",
+                    segment->speed);
+      t->n_motion = i + 1;
+      continue;
+    }
+    NH_TRY(as_number(c, at, join(key, item, "until"), &segment->until));
     if (i == 0) NH_TRY(at_least(c, at, item, "until", segment->until, 0, 1));
-    if (i > 0 && !(segment->until > t->motion[i - 1].until))
+    if (i > 0 && t->motion[i - 1].kind == NH_UNTIL_TIME &&
+        !(segment->until > t->motion[i - 1].until))
       return fail(c, at, join(key, item, "until"), "times must increase strictly (%g after %g)",
                   segment->until, t->motion[i - 1].until);
     NH_TRY(get_number(c, m, item, "speed", 1, &segment->speed, NULL));
@@ -878,11 +957,41 @@ static int read_host(const nh_ctx *c, const nh_yaml_node *list, int i, const cha
   return fail(c, at, key, "no tool named %s is listed before this one", describe(at, d, sizeof d));
 }
 
+/* PATH.trajectory {entry, target, standoff} (optional): sets t->planned, the
+ * entry and the standoff; the target's name is looked up by read_plans, once
+ * the targets are read. base and direction must then not be given. */
+static int read_trajectory(const nh_ctx *c, const nh_yaml_node *tool, const char *path,
+                           nh_tool_spec *t) {
+  static const char *const keys[] = {"entry", "target", "standoff", NULL};
+  static const char *const computed[] = {"base", "direction", NULL};
+  char sub[NH_KEY_MAX], key[NH_KEY_MAX];
+  const nh_yaml_node *m, *at;
+  t->target = -1;
+  t->standoff = 0.005;
+  NH_TRY(section(c, tool, path, "trajectory", 0, &m));
+  if (!m) return NH_OK;
+  for (const char *const *k = computed; *k; ++k) {
+    const nh_yaml_node *name;
+    if (nh_yaml_get(tool, *k, &name))
+      return fail(c, name, join(key, path, *k),
+                  "not with trajectory: the trajectory sets the base and the direction");
+  }
+  join(sub, path, "trajectory");
+  NH_TRY(check_keys(c, m, sub, keys));
+  t->planned = 1;
+  NH_TRY(get_vec3(c, m, sub, "entry", 1, t->entry, NULL));
+  NH_TRY(field(c, m, sub, "target", 1, &at));
+  NH_TRY(get_number(c, m, sub, "standoff", 0, &t->standoff, &at));
+  NH_TRY(at_least(c, at, sub, "standoff", t->standoff, 0, 1));
+  return NH_OK;
+}
+
 /* tools[i]: one tool, its defaults and its checks (tools before it are read). */
 static int read_tool(const nh_ctx *c, const nh_yaml_node *list, int i, nh_scene *s) {
-  static const char *const keys[] = {
-      "name", "length",    "radius", "inner_radius", "elements", "material", "damping",
-      "base", "direction", "motion", "interaction",  "inside",   "release",  NULL};
+  static const char *const keys[] = {"name",      "length",     "radius",  "inner_radius",
+                                     "elements",  "material",   "damping", "base",
+                                     "direction", "trajectory", "motion",  "interaction",
+                                     "inside",    "release",    NULL};
   static const char *const interaction_keys[] = {"puncture_force",      "cutting_force", "friction",
                                                  "friction_per_length", "spacing",       NULL};
   /* Files the output folder holds besides the tools' own. */
@@ -943,8 +1052,11 @@ static int read_tool(const nh_ctx *c, const nh_yaml_node *list, int i, nh_scene 
   NH_TRY(at_least(c, at, path, "elements", t->elements, 1, 0));
   NH_TRY(read_material(c, node, path, 0, 0, &t->young, &t->poisson, &t->density));
   NH_TRY(read_damping(c, node, path, &t->damping_mass, &t->damping_stiffness));
-  NH_TRY(get_vec3(c, node, path, "base", 1, t->base, NULL));
-  NH_TRY(read_direction(c, node, path, t->direction));
+  NH_TRY(read_trajectory(c, node, path, t));
+  if (!t->planned) {
+    NH_TRY(get_vec3(c, node, path, "base", 1, t->base, NULL));
+    NH_TRY(read_direction(c, node, path, t->direction));
+  }
   NH_TRY(read_motion(c, node, path, t));
 
   join(sub, path, "interaction");
@@ -960,11 +1072,20 @@ static int read_tool(const nh_ctx *c, const nh_yaml_node *list, int i, nh_scene 
   }
 
   NH_TRY(read_host(c, list, i, path, s));
-  NH_TRY(get_number(c, node, path, "release", 0, &t->release, &at));
+  NH_TRY(field(c, node, path, "release", 0, &at));
   if (at && t->inside < 0)
     return fail(c, at, join(key, path, "release"),
                 "applies to a nested tool only (give inside: HOST, the tool it starts in)");
-  NH_TRY(at_least(c, at, path, "release", t->release, 0, 0));
+  if (at && until_word(at) == NH_UNTIL_TARGET) {
+    t->release_target = 1; /* read_plans: the end of the host's until: target */
+  } else if (at) {
+    if (at->kind == NH_YAML_SCALAR && !nh_yaml_is_null(at) && !at->quoted &&
+        (isalpha((unsigned char)at->text[0]) || at->text[0] == '_'))
+      return fail(c, at, join(key, path, "release"), "expected a time or the word target, got %s",
+                  describe(at, d, sizeof d));
+    NH_TRY(as_number(c, at, join(key, path, "release"), &t->release));
+    NH_TRY(at_least(c, at, path, "release", t->release, 0, 0));
+  }
   make_where(c, node, path, t->where);
   return NH_OK;
 }
@@ -1023,6 +1144,155 @@ static int read_targets(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) 
   return NH_OK;
 }
 
+/* Distance along its direction that tools[i]'s tip has travelled by time t,
+ * counting the segments [a, b) of `sp` within [from, t] (a = the previous
+ * segment's end, 0 for the first) up to segment n (excluded), as the contact
+ * module integrates them. */
+static double segment_travel(const nh_tool_spec *sp, int n, double from, double t) {
+  double d = 0, a = 0;
+  for (int k = 0; k < n; ++k) {
+    double t0 = fmax(a, from), t1 = fmin(sp->motion[k].until, t);
+    if (t1 > t0) d += sp->motion[k].speed * (t1 - t0);
+    a = sp->motion[k].until;
+  }
+  return d;
+}
+
+/* The tip travel of tools[i] by time t from its first n segments: a nested
+ * tool moves with its host until its release and by its own segments after
+ * (as the contact module moves it), an outer tool by its own segments. */
+static double tip_travel(const nh_scene *s, int i, int n, double t) {
+  const nh_tool_spec *sp = &s->tools[i];
+  if (sp->inside < 0) return segment_travel(sp, n, 0, t);
+  const nh_tool_spec *host = &s->tools[sp->inside];
+  double release = fmin(sp->release, t);
+  return segment_travel(host, host->n_motion, 0, release) + segment_travel(sp, n, release, t);
+}
+
+/* tools.i.trajectory (the target's name, now that targets are read): base,
+ * direction and planned depth. */
+static int resolve_trajectory(const nh_ctx *c, const nh_yaml_node *tool, const char *path,
+                              nh_scene *s, int i) {
+  nh_tool_spec *t = &s->tools[i];
+  char key[NH_KEY_MAX], sub[NH_KEY_MAX], name[NH_NAME_MAX], d[96], names[256];
+  const nh_yaml_node *traj = nh_yaml_get(tool, "trajectory", NULL), *at;
+  join(sub, path, "trajectory");
+  NH_TRY(field(c, traj, sub, "target", 1, &at));
+  NH_TRY(as_string(c, at, join(key, sub, "target"), name, sizeof name));
+  for (int j = 0; j < s->n_targets && t->target < 0; ++j)
+    if (!strcmp(s->targets[j].name, name)) t->target = j;
+  if (t->target < 0 && s->n_targets == 0)
+    return fail(c, at, key, "no target named %s (the scene has no targets)",
+                describe(at, d, sizeof d));
+  if (t->target < 0) {
+    size_t len = 0;
+    names[0] = '\0';
+    for (int j = 0; j < s->n_targets && len < sizeof names; ++j) {
+      int n =
+          snprintf(names + len, sizeof names - len, "%s'%s'", j ? ", " : "", s->targets[j].name);
+      if (n < 0) break;
+      len += (size_t)n;
+    }
+    return fail(c, at, key, "no target named %s (the targets are %s)", describe(at, d, sizeof d),
+                names);
+  }
+  /* The distance scaled by its largest component, so that squaring neither
+   * overflows nor underflows (as read_direction). */
+  const double *target = s->targets[t->target].point;
+  double v[3], scale = 0, norm = 0;
+  for (int k = 0; k < 3; ++k) v[k] = target[k] - t->entry[k], scale = fmax(scale, fabs(v[k]));
+  if (!(scale > 0))
+    return fail(c, at, key, "target %s is at the entry point [%g, %g, %g]: no direction",
+                describe(at, d, sizeof d), t->entry[0], t->entry[1], t->entry[2]);
+  for (int k = 0; k < 3; ++k) norm += (v[k] / scale) * (v[k] / scale);
+  norm = sqrt(norm);
+  for (int k = 0; k < 3; ++k) t->direction[k] = v[k] / scale / norm;
+  double distance = scale * norm;
+  t->depth = t->standoff + distance;
+  /* The tip (base + length · direction) at entry − standoff · direction. */
+  for (int k = 0; k < 3; ++k)
+    t->base[k] = t->entry[k] - (t->standoff + t->length) * t->direction[k];
+  return NH_OK;
+}
+
+/* tools.i.release: target — the end of the host's until: target segment
+ * (the host is listed before, so its times are resolved). */
+static int resolve_release(const nh_ctx *c, const nh_yaml_node *tool, const char *path, nh_scene *s,
+                           int i) {
+  nh_tool_spec *t = &s->tools[i];
+  const nh_tool_spec *host = &s->tools[t->inside];
+  char key[NH_KEY_MAX];
+  const nh_yaml_node *at = nh_yaml_get(tool, "release", NULL);
+  for (int k = 0; k < host->n_motion; ++k)
+    if (host->motion[k].kind == NH_UNTIL_TARGET) {
+      t->release = host->motion[k].until;
+      return NH_OK;
+    }
+  return fail(c, at, join(key, path, "release"),
+              "target: the host '%s' has no motion segment with until: target", host->name);
+}
+
+/* tools.i.motion: every symbolic until to a time, then the order of all. */
+static int resolve_motion(const nh_ctx *c, const nh_yaml_node *tool, const char *path, nh_scene *s,
+                          int i) {
+  nh_tool_spec *t = &s->tools[i];
+  char motion[NH_KEY_MAX], item[NH_KEY_MAX], key[NH_KEY_MAX];
+  const nh_yaml_node *list = nh_yaml_get(tool, "motion", NULL);
+  join(motion, path, "motion");
+  for (int k = 0; k < t->n_motion; ++k) {
+    nh_motion *m = &t->motion[k];
+    const nh_yaml_node *at = nh_yaml_get(list->items[k], "until", NULL);
+    join(key, join_index(item, motion, k), "until");
+    double t0 = k > 0 ? t->motion[k - 1].until : 0.0;
+    if (m->kind != NH_UNTIL_TIME) {
+      /* A nested tool follows its host until its release: its own motion
+       * starts then. */
+      if (t->inside >= 0 && !isfinite(t->release))
+        return fail(c, at, key,
+                    "%s: the tool follows its host '%s' and is never released (give release)",
+                    m->kind == NH_UNTIL_TARGET ? "target" : "start", s->tools[t->inside].name);
+      double start = t->inside >= 0 ? fmax(t0, t->release) : t0;
+      double travelled = tip_travel(s, i, k, start);
+      if (m->kind == NH_UNTIL_TARGET) {
+        if (!(travelled < t->depth))
+          return fail(c, at, key,
+                      "target: by %g s the tip has already travelled %g m, the planned depth is "
+                      "%g m",
+                      start, travelled, t->depth);
+        m->until = start + (t->depth - travelled) / m->speed;
+      } else {
+        if (!(travelled > 0))
+          return fail(c, at, key,
+                      "start: by %g s the tip is not ahead of its start (it has travelled %g m)",
+                      start, travelled);
+        m->until = start + travelled / -m->speed;
+      }
+    }
+    if (!(m->until > t0))
+      return fail(c, at, key, "times must increase strictly (%.17g after %.17g%s)", m->until, t0,
+                  k > 0 && t->motion[k - 1].kind != NH_UNTIL_TIME
+                      ? ", the time the previous segment's until resolves to"
+                      : "");
+  }
+  return NH_OK;
+}
+
+/* Trajectories, release: target and symbolic untils, tool by tool (a host
+ * before the tools inside it). */
+static int read_plans(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
+  char path[NH_KEY_MAX];
+  const nh_yaml_node *list = nh_yaml_get(root, "tools", NULL);
+  for (int i = 0; i < s->n_tools; ++i) {
+    nh_tool_spec *t = &s->tools[i];
+    const nh_yaml_node *tool = list->items[i];
+    join_index(path, "tools", i);
+    if (t->planned) NH_TRY(resolve_trajectory(c, tool, path, s, i));
+    if (t->release_target) NH_TRY(resolve_release(c, tool, path, s, i));
+    NH_TRY(resolve_motion(c, tool, path, s, i));
+  }
+  return NH_OK;
+}
+
 static int read_output(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   static const char *const keys[] = {"dir", "every", "hdf5", "checkpoint", NULL};
   const nh_yaml_node *m, *at;
@@ -1071,13 +1341,14 @@ static int read_scene(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   NH_TRY(check_keys(c, root, "", keys));
   NH_TRY(read_name(c, root, s));
   NH_TRY(read_time(c, root, s));
-  NH_TRY(get_vec3(c, root, "", "gravity", 0, s->gravity, NULL));
+  NH_TRY(read_gravity(c, root, s));
   NH_TRY(read_tissue(c, root, s));
   NH_TRY(read_adapt(c, root, s));
   NH_TRY(read_solver(c, root, s));
   NH_TRY(read_tools(c, root, s));
   NH_TRY(read_probes(c, root, s));
   NH_TRY(read_targets(c, root, s)); /* after tools: a target names its tool */
+  NH_TRY(read_plans(c, root, s));   /* after targets: a trajectory names its target */
   NH_TRY(read_output(c, root, s));
   return NH_OK;
 }
@@ -1161,6 +1432,10 @@ void nh_scene_destroy(nh_scene **scene) {
   }
   free(s->tissue.loads);
   free(s->tissue.fixed);
+  free(s->gravity_schedule.t);
+  free(s->gravity_schedule.value);
+  free(s->tissue.buoyancy_schedule.t);
+  free(s->tissue.buoyancy_schedule.value);
   free(s->probes);
   for (int i = 0; i < s->n_tools; ++i) free(s->tools[i].motion);
   free(s->tools);
@@ -1187,8 +1462,31 @@ double nh_schedule_eval(const nh_schedule *s, double t) {
   return (1 - w) * s->value[lo] + w * s->value[hi];
 }
 
+void nh_scene_gravity(const nh_scene *s, double t, double g[3]) {
+  double factor = nh_schedule_eval(&s->gravity_schedule, t);
+  for (int k = 0; k < 3; ++k) g[k] = factor * s->gravity[k];
+}
+
+void nh_scene_tissue_gravity(const nh_scene *s, double t, double g[3]) {
+  nh_scene_gravity(s, t, g);
+  if (!s->tissue.buoyant) return;
+  /* b0 − b(t) = (b0 − b1) s(t): only the change of the buoyed fraction loads the tissue. */
+  double b0 = s->tissue.buoyancy_before, b1 = s->tissue.buoyancy_after;
+  double change = (b0 - b1) * nh_schedule_eval(&s->tissue.buoyancy_schedule, t);
+  for (int k = 0; k < 3; ++k) g[k] *= change;
+}
+
 static void print_box(FILE *f, const double min[3], const double max[3]) {
   fprintf(f, "[%g, %g, %g] .. [%g, %g, %g] m", min[0], min[1], min[2], max[0], max[1], max[2]);
+}
+
+/* ", schedule [[t, s], ...]" (nothing for the constant 1). */
+static void print_schedule(FILE *f, const nh_schedule *sch) {
+  if (sch->n == 0) return;
+  fprintf(f, ", schedule [");
+  for (int i = 0; i < sch->n; ++i)
+    fprintf(f, "%s[%g, %g]", i ? ", " : "", sch->t[i], sch->value[i]);
+  fprintf(f, "]");
 }
 
 /* One tool, over a few lines indented under "tools". */
@@ -1203,12 +1501,24 @@ static void print_tool(FILE *f, const nh_scene *s, int i) {
   fprintf(
       f, "            E = %g Pa, nu = %g, density %g kg/m^3; damping mass %g 1/s, stiffness %g s\n",
       t->young, t->poisson, t->density, t->damping_mass, t->damping_stiffness);
+  if (t->planned) {
+    const nh_target *g = &s->targets[t->target];
+    fprintf(f,
+            "            trajectory from entry [%g, %g, %g] m to target %s [%g, %g, %g] m, "
+            "standoff %g m: planned depth %.9g m\n",
+            t->entry[0], t->entry[1], t->entry[2], g->name, g->point[0], g->point[1], g->point[2],
+            t->standoff, t->depth);
+  }
   fprintf(f, "            base [%g, %g, %g] m, direction [%g, %g, %g]\n", t->base[0], t->base[1],
           t->base[2], t->direction[0], t->direction[1], t->direction[2]);
   if (t->n_motion == 0) fprintf(f, "            motion none (at rest)\n");
-  for (int k = 0; k < t->n_motion; ++k)
-    fprintf(f, "            %s %g m/s until %g s%s\n", k == 0 ? "motion" : "      ",
-            t->motion[k].speed, t->motion[k].until, k + 1 == t->n_motion ? ", then at rest" : "");
+  for (int k = 0; k < t->n_motion; ++k) {
+    static const char *const word[] = {"", " (until: target)", " (until: start)"};
+    const nh_motion *m = &t->motion[k];
+    fprintf(f, "            %s %g m/s until %.*g s%s%s\n", k == 0 ? "motion" : "      ", m->speed,
+            m->kind == NH_UNTIL_TIME ? 6 : 9, m->until, word[m->kind],
+            k + 1 == t->n_motion ? ", then at rest" : "");
+  }
   fprintf(f,
           "            puncture %g N, cutting %g N, friction mu %g plus %g N/m, path points every ",
           t->puncture_force, t->cutting_force, t->friction, t->friction_per_length);
@@ -1219,7 +1529,8 @@ static void print_tool(FILE *f, const nh_scene *s, int i) {
   if (t->inside >= 0) {
     fprintf(f, "            inside %s, ", s->tools[t->inside].name);
     if (isfinite(t->release))
-      fprintf(f, "released at %g s\n", t->release);
+      fprintf(f, "released at %.*g s%s\n", t->release_target ? 9 : 6, t->release,
+              t->release_target ? " (release: target, the end of its host's until: target)" : "");
     else
       fprintf(f, "never released\n");
   }
@@ -1231,7 +1542,9 @@ void nh_scene_print(const nh_scene *s, void *stdio_file) {
   fprintf(f, "time      %s, %d steps of %g s (end %g s)\n",
           s->time.mode == NH_MODE_STATIC ? "static" : "dynamic", s->time.steps, s->time.step,
           s->time.steps * s->time.step);
-  fprintf(f, "gravity   [%g, %g, %g] m/s^2\n", s->gravity[0], s->gravity[1], s->gravity[2]);
+  fprintf(f, "gravity   [%g, %g, %g] m/s^2", s->gravity[0], s->gravity[1], s->gravity[2]);
+  print_schedule(f, &s->gravity_schedule);
+  fprintf(f, "\n");
   fprintf(f, "tissue    box ");
   print_box(f, s->tissue.box_min, s->tissue.box_max);
   fprintf(f, ", grid %d x %d x %d cells (%d nodes)\n", s->tissue.grid[0], s->tissue.grid[1],
@@ -1241,6 +1554,15 @@ void nh_scene_print(const nh_scene *s, void *stdio_file) {
           s->tissue.poisson, s->tissue.density);
   fprintf(f, "damping   mass %g 1/s, stiffness %g s\n", s->tissue.damping_mass,
           s->tissue.damping_stiffness);
+  if (s->tissue.buoyant) {
+    fprintf(f, "buoyancy  before %g, after %g of the weight", s->tissue.buoyancy_before,
+            s->tissue.buoyancy_after);
+    if (s->tissue.buoyancy_schedule.n > 0)
+      print_schedule(f, &s->tissue.buoyancy_schedule);
+    else
+      fprintf(f, ", changed at t = 0");
+    fprintf(f, "; the tissue carries (before - b(t)) of its weight\n");
+  }
   fprintf(f, "fixed     %d region%s\n", s->tissue.n_fixed, s->tissue.n_fixed == 1 ? "" : "s");
   for (int i = 0; i < s->tissue.n_fixed; ++i) {
     fprintf(f, "          tissue.fixed.%d: box ", i);

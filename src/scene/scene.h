@@ -47,13 +47,22 @@ typedef struct {
   char where[NH_WHERE_MAX];
 } nh_probe;
 
+/* How a motion segment's `until` was written (tools[i].motion[k].until). */
+typedef enum {
+  NH_UNTIL_TIME = 0,   /* a number, as written */
+  NH_UNTIL_TARGET = 1, /* `until: target`: the tip has travelled the planned depth */
+  NH_UNTIL_START = 2   /* `until: start`: the tip is back at its t = 0 position */
+} nh_until_kind;
+
 /* One segment of a tool's motion: insertion speed (m/s along `direction`;
  * negative: retraction; any finite value) until time `until` (s). The first
  * `until` is > 0 and the following ones increase strictly, so segment k holds
  * from the previous `until` (0 for k = 0) to its own; after the last one the
- * speed is 0. */
+ * speed is 0. A symbolic `until` (target, start) is a time here, resolved
+ * when the scene is read. */
 typedef struct {
   double until, speed;
+  nh_until_kind kind; /* how `until` was given; a symbolic one is resolved to a time at load */
 } nh_motion;
 
 /* tools[i]: a needle, cannula or electrode (a corotational beam). */
@@ -70,19 +79,28 @@ typedef struct {
   double density;           /* tools[i].material.density, kg/m³ (default 7800, >= 0) */
   double damping_mass;      /* tools[i].damping.mass (Rayleigh α, default 0, >= 0) */
   double damping_stiffness; /* tools[i].damping.stiffness (Rayleigh β, default 0, >= 0) */
-  double base[3];           /* tools[i].base, m (required): base position at t = 0 */
-  double direction[3];      /* tools[i].direction (required, non-zero; stored unit length) */
-  int n_motion;             /* tools[i].motion: list of {until, speed} (default: none, at rest) */
+  double base[3];           /* tools[i].base, m (required unless trajectory): base at t = 0 */
+  double direction[3]; /* tools[i].direction (required unless trajectory, non-zero; unit length) */
+  /* tools[i].trajectory {entry, target, standoff} (optional; then base and direction are
+     computed from it, and must not be given): direction = unit(target − entry), the tip at
+     t = 0 at entry − standoff · direction */
+  int planned;     /* the tool has a trajectory */
+  double entry[3]; /* trajectory.entry, m */
+  int target;      /* trajectory.target: index in targets (-1: no trajectory) */
+  double standoff; /* trajectory.standoff, m (default 0.005, > 0) */
+  double depth;    /* the planned depth D = standoff + |target − entry|, m */
+  int n_motion;    /* tools[i].motion: list of {until, speed} (default: none, at rest) */
   nh_motion *motion;
   double puncture_force;      /* tools[i].interaction.puncture_force, N (default 0, >= 0) */
   double cutting_force;       /* tools[i].interaction.cutting_force, N (default 0, >= 0) */
   double friction;            /* tools[i].interaction.friction, Coulomb μ (default 0, >= 0) */
   double friction_per_length; /* tools[i].interaction.friction_per_length, N/m (default 0, >= 0) */
-  double spacing; /* tools[i].interaction.spacing: path-point spacing, m (default 0: half the
-                     local cell edge; >= 0) */
-  int inside;     /* tools[i].inside: index of the host tool (-1: none); the host
-                     must be another tool listed before this one, not itself nested */
-  double release; /* tools[i].release, s (>= 0; default +inf: never; only with inside) */
+  double spacing;     /* tools[i].interaction.spacing: path-point spacing, m (default 0: half the
+                         local cell edge; >= 0) */
+  int inside;         /* tools[i].inside: index of the host tool (-1: none); the host
+                         must be another tool listed before this one, not itself nested */
+  double release;     /* tools[i].release, s (>= 0; default +inf: never; only with inside) */
+  int release_target; /* release: target, resolved to the end of the host's until: target */
   char where[NH_WHERE_MAX]; /* "FILE:LINE: tools.i" */
 } nh_tool_spec;
 
@@ -107,7 +125,8 @@ typedef struct nh_scene {
     int steps; /* number of steps: time.steps, or round(time.end / time.step); default 100 */
   } time;
 
-  double gravity[3]; /* gravity, m/s² (default 0) */
+  double gravity[3];            /* gravity (or gravity.vector), m/s² (default 0) */
+  nh_schedule gravity_schedule; /* gravity.schedule: its factor of time (default: 1) */
 
   struct {
     double box_min[3], box_max[3]; /* tissue.domain.box (required) */
@@ -117,6 +136,14 @@ typedef struct nh_scene {
     double density;                /* tissue.material.density, kg/m³ (default 1000, > 0) */
     double damping_mass;           /* tissue.damping.mass (Rayleigh α, 1/s, default 0, >= 0) */
     double damping_stiffness;      /* tissue.damping.stiffness (Rayleigh β, s, default 0, >= 0) */
+    /* tissue.buoyancy {before, after, schedule} (optional): the rest shape is the equilibrium
+       under gravity with the fraction `before` of the weight carried by buoyancy, so the
+       tissue's body force is ρ g (before − b(t)), b(t) = before + (after − before) s(t)
+       (docs/theory.md, "Buoyancy and brain shift") */
+    int buoyant;                   /* the scene has tissue.buoyancy */
+    double buoyancy_before;        /* tissue.buoyancy.before, in [0, 1] (required) */
+    double buoyancy_after;         /* tissue.buoyancy.after, in [0, 1] (required) */
+    nh_schedule buoyancy_schedule; /* tissue.buoyancy.schedule (default: 1 from t = 0 on) */
     int n_fixed;
     nh_region *fixed; /* tissue.fixed: list of {box: {min, max}} */
     int n_loads;
@@ -180,6 +207,16 @@ void nh_scene_destroy(nh_scene **scene);
 
 /* Value of a schedule at time t (1 if the schedule is empty). */
 double nh_schedule_eval(const nh_schedule *s, double t);
+
+/* Gravity at time t: the vector `gravity` times its schedule (m/s²). This is
+ * what the tools carry (their full weight: they are not buoyed). */
+void nh_scene_gravity(const nh_scene *scene, double t, double g[3]);
+
+/* The body acceleration of the tissue at time t (m/s²; the body force per
+ * unit volume is ρ φ times it): nh_scene_gravity without tissue.buoyancy,
+ * else nh_scene_gravity × (before − b(t)), b(t) = before + (after − before)
+ * s(t), the change of the buoyed fraction since the rest shape. */
+void nh_scene_tissue_gravity(const nh_scene *scene, double t, double g[3]);
 
 /* Print a human-readable summary of what will be modelled (for `check`). */
 void nh_scene_print(const nh_scene *scene, void *stdio_file);

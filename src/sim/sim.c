@@ -112,7 +112,9 @@ double nh_sim_time(const nh_sim *s) {
 void nh_sim_external_force(const nh_sim *s, double t, double *f) {
   const int n = 3 * s->mesh->n_nodes;
   const nh_scene *sc = s->scene;
-  for (int i = 0; i < n; i++) f[i] = s->tissue->mass[i / 3] * sc->gravity[i % 3];
+  double g[3]; /* gravity by its schedule, less the tissue's buoyed part */
+  nh_scene_tissue_gravity(sc, t, g);
+  for (int i = 0; i < n; i++) f[i] = s->tissue->mass[i / 3] * g[i % 3];
   for (int l = 0; l < sc->tissue.n_loads; l++) {
     double factor = nh_schedule_eval(&sc->tissue.loads[l].schedule, t);
     if (factor == 0.0) continue;

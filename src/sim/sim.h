@@ -45,7 +45,9 @@ nh_system *nh_sim_system(nh_sim *sim);
 double *nh_sim_displacements(nh_sim *sim); /* u = x − X, 3 per node (writable: tests set states) */
 double *nh_sim_velocities(nh_sim *sim);    /* v, 3 per node */
 const unsigned char *nh_sim_fixed(const nh_sim *sim);
-/* External force at time t (3 per node): loads by their schedules + M g. */
+/* External force at time t (3 per node): loads by their schedules + M g(t),
+ * g(t) the tissue's body acceleration (gravity by its schedule, less the
+ * buoyed part: nh_scene_tissue_gravity). */
 void nh_sim_external_force(const nh_sim *sim, double t, double *f);
 int nh_sim_step_index(const nh_sim *sim);
 double nh_sim_time(const nh_sim *sim);
