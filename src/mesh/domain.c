@@ -223,10 +223,22 @@ double nh_domain_segment_distance(const nh_domain *d, const double a[3], const d
   double ab[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]}, tau, p[3], n[3];
   if (nh_domain_level(d, a) <= 0.0) return 0.0;
   if (nh_domain_ray_entry(d, a, ab, &tau, p, n) && tau <= 1.0) return 0.0;
+  /* F alone underestimates the distance where F is flatter than a distance
+   * (|∇F| < 1, along the ellipsoids' long axes); F / |∇F| is the first-order
+   * estimate, never below F itself. */
+  const double e = 1e-6 * nh_largest_edge(d);
   for (int k = 0; k <= 200; k++) {
-    double x[3];
+    double x[3], g2 = 0.0;
     for (int i = 0; i < 3; i++) x[i] = a[i] + ab[i] * k / 200.0;
-    best = fmin(best, fmax(nh_domain_level(d, x), 0.0));
+    double f = nh_domain_level(d, x);
+    for (int i = 0; i < 3; i++) {
+      double p[3] = {x[0], x[1], x[2]}, m[3] = {x[0], x[1], x[2]};
+      p[i] += e, m[i] -= e;
+      double g = (nh_domain_level(d, p) - nh_domain_level(d, m)) / (2 * e);
+      g2 += g * g;
+    }
+    double g = sqrt(g2);
+    best = fmin(best, fmax(f, 0.0) / (g > 0 && g < 1 ? g : 1.0));
   }
   return best;
 }

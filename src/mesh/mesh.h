@@ -67,7 +67,7 @@ int nh_domain_ray_entry(const nh_domain *domain, const double base[3], const dou
 
 /* Distance from the segment [a, b] to the shape, sampled at 201 points (box:
  * the exact distance of each sample; other shapes: 0 if the segment meets
- * the shape, else the least F, a lower bound of the distance). */
+ * the shape, else the least F / |∇F|, a first-order estimate). */
 double nh_domain_segment_distance(const nh_domain *domain, const double a[3], const double b[3]);
 
 /* Volume of the shape: exact for the box; for the brain the reference
