@@ -142,6 +142,16 @@ int main(int argc, char **argv) {
     printf("mesh: %d nodes (%d dofs, %d free), %d cells\n", nh_sim_mesh(sim)->n_nodes,
            3 * nh_sim_mesh(sim)->n_nodes, nh_system_free_dofs(nh_sim_system(sim)),
            nh_sim_mesh(sim)->n_leaves);
+  if (!rc && is_check) {
+    const nh_mesh *m = nh_sim_mesh(sim);
+    const nh_domain *d = &m->domain;
+    int lattice = m->grid[0] * m->grid[1] * m->grid[2], kept = 0;
+    for (int c = 0; c < m->n_cells; c++) kept += m->parent[c] < 0;
+    printf("domain: %s of size [%g, %g, %g] m, %d of %d grid cells kept (fill floor %g), "
+           "volume %.6g m^3 (sum of fill x cell volume) vs %.6g m^3 (the shape's)\n",
+           nh_domain_name(d), d->max[0] - d->min[0], d->max[1] - d->min[1], d->max[2] - d->min[2],
+           kept, lattice, NH_FILL_MIN, nh_mesh_fill_volume(m), nh_domain_volume(d));
+  }
   if (!rc && is_run) rc = nh_sim_run(sim);
   int status = rc ? nh_fail(rc) : 0;
   nh_sim_destroy(&sim);

@@ -34,11 +34,23 @@ CASES = [
     ("box_min_max.yaml", [], 7, "tissue.domain.box.max"),
     ("duplicate_key.yaml", [], 8, "tissue.material"),
     ("alias.yaml", [], 5, "tissue.domain.box.min"),
-    ("not_supported.yaml", [], 5, "tissue.domain.brain"),
+    ("not_supported.yaml", [], 5, "tissue.domain.mask"),
     ("two_documents.yaml", [], 7, None),
     # Detected by the simulator (no node in the region), not by the scene
     # module: it reports the region's `where`, "FILE:11: tissue.fixed.0".
     ("region_no_node.yaml", [], 11, "tissue.fixed.0"),
+    # Regions: no shape, two shapes, a negative sphere radius, a cylinder
+    # without an axis; a brain of zero height; a probe in the brain's
+    # bounding box but outside the brain (reported by the simulator).
+    ("region_no_shape.yaml", [], 10, "tissue.fixed.0"),
+    ("region_two_shapes.yaml", [], 12, "tissue.loads.0.cylinder"),
+    ("region_sphere_radius.yaml", [], 12, "tissue.fixed.0.sphere.radius"),
+    ("region_cylinder_axis.yaml", [], 11, "tissue.fixed.0.cylinder.end"),
+    ("brain_size.yaml", [], 6, "tissue.domain.brain.size.2"),
+    ("brain_probe_outside.yaml", [], 11, "probes.0"),
+    # A tool whose tip starts inside the brain; one that passes in front of it.
+    ("brain_tool_inside.yaml", [], 11, "tools.0"),
+    ("brain_tool_misses.yaml", [], 12, "tools.0"),
     # A key the schema does not have, given by the second override.
     ("set_base.yaml", ["tissue.grid=[8,4,4]", "tissue.material.stiffnes=3"], "--set:2",
      "tissue.material.stiffnes"),

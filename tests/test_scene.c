@@ -942,8 +942,23 @@ static void test_errors(void) {
        NULL,
        ":6: tissue.domain.box.max: must be greater than min in every component (z: max 0, "
        "min 0)"},
-      {"brain.yaml", "name: w\ntissue:\n  domain:\n    brain: {size: [1, 1, 1]}\n", NULL,
-       ":4: tissue.domain.brain: not supported in this version of needlehex"},
+      {"mask.yaml", "name: w\ntissue:\n  domain:\n    mask: {file: b.nii}\n", NULL,
+       ":4: tissue.domain.mask: not supported in this version of needlehex"},
+      {"brain.yaml", "name: w\ntissue:\n  domain:\n    brain: {size: [1, 0, 1]}\n", NULL,
+       ":4: tissue.domain.brain.size.1: must be greater than 0, got 0"},
+      {"sphere.yaml",
+       "name: w\ntissue:\n  domain: {box: {min: [0,0,0], max: [1,1,1]}}\n"
+       "  material: {young: 1, poisson: 0.3}\n  fixed:\n    - sphere: {center: [0,0,0], radius: "
+       "0}\n",
+       NULL, ":6: tissue.fixed.0.sphere.radius: must be greater than 0, got 0"},
+      {"two_shapes.yaml",
+       "name: w\ntissue:\n  domain: {box: {min: [0,0,0], max: [1,1,1]}}\n"
+       "  material: {young: 1, poisson: 0.3}\n  loads:\n    - sphere: {center: [0,0,0], radius: "
+       "1}\n"
+       "      box: {min: [0,0,0], max: [1,1,1]}\n      force: [0, 0, 1]\n",
+       NULL,
+       ":7: tissue.loads.0.box: give exactly one of box, sphere, cylinder (sphere is already "
+       "given)"},
       {"dup.yaml", "name: w\nname: v\n", NULL, ":2: name: duplicate key (first given at line 1)"},
       {"alias.yaml", "name: &n w\n", NULL, ":1: name: anchors (&n) and aliases are not supported"},
       {"docs.yaml", "name: w\n---\nname: v\n", NULL,

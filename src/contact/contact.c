@@ -13,6 +13,10 @@
  *   puncture     −n_out unilateral (g = n_out · (x_tip − x_P) ≥ 0, P the
  *                entry point on the surface, n_out its outward normal) and
  *                a Coulomb disc pair on two tangents, bound μ λn.
+ * The entry point is where the tool's axis ray (base + τ direction) first
+ * enters the domain's shape, with n_out the shape's outward normal there
+ * (nh_domain_ray_entry: a face of a box, ∇F / |∇F| on the implicit surface
+ * of an immersed domain).
  * Thresholds are impulses (force × h), see contact.h. */
 #include "contact/contact.h"
 
@@ -171,51 +175,8 @@ static double nh_project(const nh_beam *b, const double x[3], double s0) {
 
 /* ---- creation ---- */
 
-/* Entry of the ray base + τ dir into the box: τ, point and outward normal. */
-static int nh_box_entry(const double lo[3], const double hi[3], const double base[3],
-                        const double dir[3], double X[3], double n_out[3]) {
-  double tmin = -INFINITY, tmax = INFINITY;
-  int axis = -1, side = 0;
-  for (int i = 0; i < 3; i++) {
-    if (fabs(dir[i]) < 1e-300) {
-      if (base[i] < lo[i] || base[i] > hi[i]) return 0;
-      continue;
-    }
-    double a = (lo[i] - base[i]) / dir[i], b = (hi[i] - base[i]) / dir[i];
-    int s = dir[i] > 0 ? -1 : 1;
-    if (a > b) {
-      double t = a;
-      a = b, b = t;
-    }
-    if (a > tmin) tmin = a, axis = i, side = s;
-    tmax = fmin(tmax, b);
-  }
-  if (tmin > tmax || tmin < 0 || axis < 0) return 0;
-  for (int i = 0; i < 3; i++) X[i] = base[i] + tmin * dir[i], n_out[i] = 0.0;
-  X[axis] = side < 0 ? lo[axis] : hi[axis];
-  n_out[axis] = side;
-  return 1;
-}
-
-/* Distance from the segment [a, b] to the box (sampled: 200 points). */
-static double nh_segment_box_distance(const double lo[3], const double hi[3], const double a[3],
-                                      const double b[3]) {
-  double best = INFINITY;
-  for (int k = 0; k <= 200; k++) {
-    double d2 = 0.0;
-    for (int i = 0; i < 3; i++) {
-      double x = a[i] + (b[i] - a[i]) * k / 200.0;
-      double e = x < lo[i] ? lo[i] - x : (x > hi[i] ? x - hi[i] : 0.0);
-      d2 += e * e;
-    }
-    best = fmin(best, sqrt(d2));
-  }
-  return best;
-}
-
 static int nh_contact_check_reach(const nh_scene *sc, const nh_mesh *m, const nh_tool *tl) {
   const nh_tool_spec *sp = tl->spec;
-  const double *lo = sc->tissue.box_min, *hi = sc->tissue.box_max;
   double dmax = 0.0, T = sc->time.steps * sc->time.step;
   for (int i = 0; i < sp->n_motion; i++)
     dmax = fmax(dmax, nh_motion_distance(sp, fmin(sp->motion[i].until, T)));
@@ -224,13 +185,11 @@ static int nh_contact_check_reach(const nh_scene *sc, const nh_mesh *m, const nh
     tip0[i] = sp->base[i] + sp->length * sp->direction[i];
     tip1[i] = tip0[i] + dmax * sp->direction[i];
   }
-  int inside = 1;
-  for (int i = 0; i < 3; i++) inside &= tip0[i] > lo[i] && tip0[i] < hi[i];
-  NH_CHECK(!inside, NH_ERR_INPUT,
+  NH_CHECK(!nh_domain_inside(&m->domain, tip0), NH_ERR_INPUT,
            "%s: the tip starts inside the tissue at [%g, %g, %g]: place the base so the tool "
            "starts outside",
            sp->where, tip0[0], tip0[1], tip0[2]);
-  double d = nh_segment_box_distance(lo, hi, tip0, tip1);
+  double d = nh_domain_segment_distance(&m->domain, tip0, tip1);
   NH_CHECK(d <= cell, NH_ERR_INPUT,
            "%s: the tool never meets the tissue: its tip travels from [%g, %g, %g] to "
            "[%g, %g, %g] and stays %g m away from it (check base, direction and motion)",
@@ -300,8 +259,9 @@ int nh_contact_create(const nh_scene *sc, const nh_mesh *m, nh_contact **out) {
     if (!tl->f_node) rc = NH_ERR_MEMORY;
     if (!rc && tl->host < 0) {
       rc = nh_contact_check_reach(sc, m, tl);
-      tl->has_entry = !rc && nh_box_entry(sc->tissue.box_min, sc->tissue.box_max, sp->base,
-                                          sp->direction, tl->entry.X, tl->n_out);
+      double tau;
+      tl->has_entry = !rc && nh_domain_ray_entry(&m->domain, sp->base, sp->direction, &tau,
+                                                 tl->entry.X, tl->n_out);
       if (tl->has_entry && nh_point_set(m, &tl->entry, tl->entry.X)) tl->has_entry = 0;
     }
     if (!rc && tl->host >= 0) {

@@ -1,11 +1,20 @@
-/* grid.c — the initial hexahedral grid over a box, storage growth and the
- * list of leaves.
+/* grid.c — the initial hexahedral grid over a domain's bounding box, storage
+ * growth and the list of leaves.
  *
- * Nodes are numbered lexicographically (x fastest) so that a grid's node
- * index is computable from (i, j, k); cells likewise. Every array grows by
- * doubling, since refinement appends nodes and cells. */
+ * Nodes and cells of the lattice are numbered lexicographically (x fastest).
+ * For a box domain every cell is kept, so node (i, j, k) has index
+ * i + (g0+1) (j + (g1+1) k) and cell (i, j, k) index i + g0 (j + g1 k). For an
+ * immersed domain (docs/theory.md, "Immersed domain") only the cells that may
+ * meet the shape are kept, each with its fill fraction φ (NH_FILL_SAMPLES³
+ * midpoints, floored at NH_FILL_MIN); the nodes no kept cell uses are
+ * removed, and the survivors keep the lattice's order. Nothing may then
+ * compute an index from (i, j, k): point location goes through mesh->root,
+ * the lattice-to-cell map, which nh_mesh_index_roots rebuilds for a mesh read
+ * back from a checkpoint. Every array grows by doubling, since refinement
+ * appends nodes and cells. */
 #include "mesh/mesh.h"
 
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -23,6 +32,7 @@ void nh_mesh_destroy(nh_mesh **mesh) {
   free(m->n_children);
   free(m->fill);
   free(m->leaves);
+  free(m->root);
   free(m);
   *mesh = NULL;
 }
@@ -56,8 +66,9 @@ int nh_mesh_create_box(const double min[3], const double max[3], const int grid[
   m->first_child = malloc(sizeof(int) * (size_t)m->n_cells);
   m->n_children = calloc((size_t)m->n_cells, sizeof(int));
   m->fill = malloc(sizeof(double) * (size_t)m->n_cells);
+  m->root = malloc(sizeof(int) * (size_t)m->n_cells);
   if (!m->X || !m->cells || !m->level || !m->parent || !m->first_child || !m->n_children ||
-      !m->fill) {
+      !m->fill || !m->root) {
     nh_mesh_destroy(&m);
     return NH_ERROR(NH_ERR_MEMORY, "out of memory building a %d x %d x %d grid", grid[0], grid[1],
                     grid[2]);
@@ -89,7 +100,9 @@ int nh_mesh_create_box(const double min[3], const double max[3], const int grid[
         m->parent[c] = -1;
         m->first_child[c] = -1;
         m->fill[c] = 1.0;
+        m->root[c] = c;
       }
+  nh_domain_box(min, max, &m->domain);
   int rc = nh_mesh_update_leaves(m);
   if (rc) {
     nh_mesh_destroy(&m);
@@ -102,4 +115,113 @@ int nh_mesh_create_box(const double min[3], const double max[3], const int grid[
 void nh_mesh_cell_coords(const nh_mesh *m, const double *positions, int c, double Xe[24]) {
   const int *e = m->cells + 8 * c;
   for (int a = 0; a < 8; a++) memcpy(Xe + 3 * a, positions + 3 * e[a], 3 * sizeof(double));
+}
+
+/* Keep the cells with keep[c] (ascending), drop the nodes none of them uses;
+ * both keep their order. */
+static void nh_mesh_compact(nh_mesh *m, const unsigned char *keep, int *node_map) {
+  int nc = 0, nn = 0;
+  for (int i = 0; i < m->n_nodes; i++) node_map[i] = -1;
+  for (int c = 0; c < m->n_cells; c++)
+    if (keep[c])
+      for (int a = 0; a < 8; a++) node_map[m->cells[8 * c + a]] = 0;
+  for (int i = 0; i < m->n_nodes; i++)
+    if (node_map[i] == 0) {
+      memmove(m->X + 3 * nn, m->X + 3 * i, 3 * sizeof(double));
+      node_map[i] = nn++;
+    }
+  for (int c = 0; c < m->n_cells; c++) {
+    m->root[c] = -1;
+    if (!keep[c]) continue;
+    for (int a = 0; a < 8; a++) m->cells[8 * nc + a] = node_map[m->cells[8 * c + a]];
+    m->fill[nc] = m->fill[c];
+    m->root[c] = nc++;
+  }
+  m->n_nodes = nn;
+  m->n_cells = nc;
+}
+
+int nh_mesh_create(const nh_domain *d, const int grid[3], nh_mesh **out) {
+  *out = NULL;
+  NH_TRY(nh_mesh_create_box(d->min, d->max, grid, out));
+  nh_mesh *m = *out;
+  m->domain = *d;
+  if (d->kind == NH_DOMAIN_BOX) return NH_OK;
+  unsigned char *keep = malloc((size_t)m->n_cells);
+  int *node_map = malloc(sizeof(int) * (size_t)m->n_nodes);
+  int rc = NH_OK, kept = 0;
+  if (!keep || !node_map) {
+    rc = NH_ERROR(NH_ERR_MEMORY, "out of memory building a %d x %d x %d grid", grid[0], grid[1],
+                  grid[2]);
+    goto done;
+  }
+  for (int k = 0; k < grid[2]; k++)
+    for (int j = 0; j < grid[1]; j++)
+      for (int i = 0; i < grid[0]; i++) {
+        int c = i + grid[0] * (j + grid[1] * k), ijk[3] = {i, j, k}, meets;
+        double phi = nh_domain_lattice_fill(d, grid, ijk, &meets);
+        keep[c] = (unsigned char)meets;
+        m->fill[c] = fmax(phi, NH_FILL_MIN);
+        kept += meets;
+      }
+  if (kept == 0) {
+    rc = NH_ERROR(NH_ERR_INPUT, "the %s domain meets no cell of the %d x %d x %d grid",
+                  nh_domain_name(d), grid[0], grid[1], grid[2]);
+    goto done;
+  }
+  nh_mesh_compact(m, keep, node_map);
+  rc = nh_mesh_update_leaves(m);
+done:
+  free(keep);
+  free(node_map);
+  if (rc) nh_mesh_destroy(out);
+  return rc;
+}
+
+int nh_mesh_index_roots(nh_mesh *m) {
+  const int n = m->grid[0] * m->grid[1] * m->grid[2];
+  NH_CHECK(n > 0, NH_ERR_INPUT, "the mesh has an empty grid %d x %d x %d", m->grid[0], m->grid[1],
+           m->grid[2]);
+  int *root = realloc(m->root, sizeof(int) * (size_t)n);
+  if (!root) return NH_ERROR(NH_ERR_MEMORY, "out of memory indexing %d grid cells", n);
+  m->root = root;
+  for (int i = 0; i < n; i++) root[i] = -1;
+  for (int c = 0; c < m->n_cells; c++) {
+    if (m->parent[c] >= 0) continue;
+    const double *X = m->X + 3 * m->cells[8 * c]; /* corner 0: the lattice point (i, j, k) */
+    int ijk[3];
+    for (int k = 0; k < 3; k++) {
+      double s = (X[k] - m->origin[k]) / m->spacing[k];
+      ijk[k] = (int)floor(s + 0.5);
+      NH_CHECK(fabs(s - ijk[k]) < 1e-6 && ijk[k] >= 0 && ijk[k] < m->grid[k], NH_ERR_INPUT,
+               "level-0 cell %d is not a cell of the %d x %d x %d grid", c, m->grid[0], m->grid[1],
+               m->grid[2]);
+    }
+    int q = ijk[0] + m->grid[0] * (ijk[1] + m->grid[1] * ijk[2]);
+    NH_CHECK(root[q] < 0, NH_ERR_INPUT, "level-0 cells %d and %d are the same grid cell", root[q],
+             c);
+    root[q] = c;
+  }
+  return NH_OK;
+}
+
+double nh_mesh_fill_volume(const nh_mesh *m) {
+  const double g = 1.0 / sqrt(3.0);
+  double volume = 0.0, Xe[24];
+  for (int l = 0; l < m->n_leaves; l++) {
+    int c = m->leaves[l];
+    nh_mesh_cell_coords(m, m->X, c, Xe);
+    double v = 0.0;
+    for (int q = 0; q < 8; q++) {
+      double xi[3] = {g * nh_hex_corner[q][0], g * nh_hex_corner[q][1], g * nh_hex_corner[q][2]};
+      double dN[8][3], J[9] = {0};
+      nh_hex_dshape(xi, dN);
+      for (int a = 0; a < 8; a++)
+        for (int p = 0; p < 3; p++)
+          for (int r = 0; r < 3; r++) J[3 * p + r] += Xe[3 * a + p] * dN[a][r];
+      v += nh_mat3_det(J);
+    }
+    volume += m->fill[c] * v;
+  }
+  return volume;
 }

@@ -1,9 +1,11 @@
 /* locate.c — trilinear shape functions and point location.
  *
  * A material point is located in two stages: the initial grid is regular, so
- * its level-0 cell follows from the point's grid coordinates (when the grid's
- * nodes have been moved, the 26 neighbours of that cell are tried too, and
- * the cell whose inverse map puts the point inside is taken); below it the
+ * its level-0 cell follows from the point's grid coordinates, through
+ * mesh->root (an immersed domain drops the lattice cells that do not meet
+ * it; a point there is outside the mesh); when the grid's nodes have been
+ * moved, the 26 neighbours of that cell are tried too, and the cell whose
+ * inverse map puts the point inside is taken. Below it the
  * point descends through the refinement hierarchy, choosing the child whose
  * inverse map puts it inside [-1, 1]³ (with a small tolerance, so points on
  * faces are found). The inverse map is Newton's method on the trilinear map,
@@ -80,6 +82,8 @@ int nh_mesh_locate(const nh_mesh *m, const double x[3], int *cell, double xi[3])
         q[2] >= m->grid[2])
       continue;
     int cand = q[0] + m->grid[0] * (q[1] + m->grid[1] * q[2]);
+    if (m->root) cand = m->root[cand];
+    if (cand < 0) continue; /* a cell of the lattice that does not meet the domain */
     nh_mesh_cell_coords(m, m->X, cand, Xe);
     if (nh_hex_invert(Xe, x, xi) == NH_OK && nh_inside(xi, tol)) c = cand;
   }

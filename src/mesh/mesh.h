@@ -23,6 +23,71 @@
 #include "core/core.h"
 #include "scene/scene.h"
 
+/* ---- the tissue's domain (mesh/domain.c) ----
+ * The shape the tissue fills, as an implicit function F (F < 0 inside,
+ * docs/theory.md "Immersed domain"): a box, or the analytic brain (two
+ * ellipsoidal hemispheres split by a longitudinal fissure, and a brainstem),
+ * which the grid over its bounding box resolves by cell fill fractions φ.
+ * F is 1-Lipschitz: F(x) > 0 is a lower bound of the distance to the shape. */
+typedef struct nh_domain {
+  nh_domain_kind kind;
+  double min[3], max[3];     /* bounding box (exactly the shape's extent) */
+  double center[3], half[3]; /* its centre and half sizes */
+} nh_domain;
+
+/* Floor of the fill fraction: a cell that barely meets the shape keeps
+ * φ = NH_FILL_MIN so that the stiffness stays positive definite. */
+#define NH_FILL_MIN 0.05
+/* Sub-cell midpoints per axis that measure a cell's fill fraction. */
+#define NH_FILL_SAMPLES 8
+
+/* The box [min, max] (max > min in every component). */
+void nh_domain_box(const double min[3], const double max[3], nh_domain *domain);
+/* The brain of bounding box center ± size / 2 (size > 0). */
+void nh_domain_brain(const double center[3], const double size[3], nh_domain *domain);
+/* The scene's tissue.domain. */
+void nh_domain_from_scene(const nh_scene *scene, nh_domain *domain);
+/* "box" or "brain". */
+const char *nh_domain_name(const nh_domain *domain);
+
+/* F(x): negative inside, positive outside, 1-Lipschitz. */
+double nh_domain_level(const nh_domain *domain, const double x[3]);
+/* True if x lies strictly inside (box: min < x < max componentwise; else F < 0). */
+int nh_domain_inside(const nh_domain *domain, const double x[3]);
+
+/* First entry of the ray base + τ dir (τ > 0, dir need not be unit) into
+ * the shape: τ, the point and the unit outward normal there. Box: exact
+ * ray–box intersection, normal the face's. Other shapes: marching along the
+ * ray in steps of 1e-3 of the bounding box's largest edge, then bisection to
+ * 1e-13 of that edge; normal ∇F / |∇F| by central differences.
+ * Returns 1 if the ray enters the shape, 0 if it misses it or base is not
+ * outside (the outputs are then untouched). */
+int nh_domain_ray_entry(const nh_domain *domain, const double base[3], const double dir[3],
+                        double *tau, double point[3], double normal[3]);
+
+/* Distance from the segment [a, b] to the shape, sampled at 201 points (box:
+ * the exact distance of each sample; other shapes: 0 if the segment meets
+ * the shape, else the least F / |∇F|, a first-order estimate). */
+double nh_domain_segment_distance(const nh_domain *domain, const double a[3], const double b[3]);
+
+/* Volume of the shape: exact for the box; for the brain the reference
+ * integral of docs/theory.md (lines along x through a 256 x 256 midpoint grid
+ * in y, z, each line's inside intervals found by sign changes at 256 points
+ * and bisection), independent of the cell sampling. */
+double nh_domain_volume(const nh_domain *domain);
+
+/* Fill fraction of the hexahedron with rest corners Xe: the fraction of
+ * NH_FILL_SAMPLES³ sub-cell midpoints (of the trilinear map, weighted by
+ * det J) inside the shape. *meets (may be NULL) is set to 1 if the cell may
+ * meet the shape: some midpoint has F no larger than its sub-cell's
+ * circumradius (never 0 for a cell that meets it, F being 1-Lipschitz). */
+double nh_domain_cell_fill(const nh_domain *domain, const double Xe[24], int *meets);
+/* The same for cell ijk of the grid[3] lattice over the domain's bounding
+ * box, with the midpoints' offsets from the centre computed exactly, so that
+ * mirror cells about x = cx get bitwise equal fractions. */
+double nh_domain_lattice_fill(const nh_domain *domain, const int grid[3], const int ijk[3],
+                              int *meets);
+
 typedef struct nh_mesh {
   int n_nodes, cap_nodes;
   double *X; /* rest (material) positions, 3 per node */
@@ -33,22 +98,39 @@ typedef struct nh_mesh {
   int *parent;      /* parent cell, -1 at level 0 */
   int *first_child; /* -1 for a leaf */
   int *n_children;
-  double *fill; /* fill fraction φ ∈ (0, 1] */
+  double *fill; /* fill fraction φ ∈ [NH_FILL_MIN, 1] (1 for a box domain) */
 
   int n_leaves;
   int *leaves; /* the active cells, ascending */
 
   int grid[3]; /* the initial grid over [origin, origin + grid * spacing] */
   double origin[3], spacing[3];
+  int *root;        /* grid[0] grid[1] grid[2]: the level-0 cell at lattice (i, j, k), index
+                       i + grid[0] (j + grid[1] k), or -1 where the cell was dropped */
+  nh_domain domain; /* the shape the cells resolve (refinement measures φ on it) */
 } nh_mesh;
 
 /* Natural-coordinate signs of the 8 nodes (table above). */
 extern const double nh_hex_corner[8][3];
 
 /* Build a (grid[0] x grid[1] x grid[2]) grid of level-0 cells over the box
- * [min, max]. Node (i, j, k) has index i + (g0+1) (j + (g1+1) k).
+ * [min, max]. Node (i, j, k) has index i + (g0+1) (j + (g1+1) k), cell
+ * (i, j, k) index i + g0 (j + g1 k), every φ = 1.
  * Fails with NH_ERR_INPUT for a non-positive count or an empty box. */
 int nh_mesh_create_box(const double min[3], const double max[3], const int grid[3], nh_mesh **out);
+/* Build the grid over the domain's bounding box and keep the cells that may
+ * meet the shape (nh_domain_cell_fill), each with its fill fraction floored
+ * at NH_FILL_MIN; unused nodes are removed and both nodes and cells keep the
+ * lattice's lexicographic order (mesh->root maps lattice cells to cells).
+ * A box domain gives exactly nh_mesh_create_box. Fails as nh_mesh_create_box,
+ * and with NH_ERR_INPUT if no cell meets the shape. */
+int nh_mesh_create(const nh_domain *domain, const int grid[3], nh_mesh **out);
+/* Rebuild mesh->root from the level-0 cells (parent -1) and their first
+ * corner's lattice position (after reading a mesh back). NH_ERR_INPUT if a
+ * level-0 cell is not on the lattice, NH_ERR_MEMORY. */
+int nh_mesh_index_roots(nh_mesh *mesh);
+/* Σ φ_c V_c over the leaves (V_c by 2x2x2 Gauss points): the tissue volume. */
+double nh_mesh_fill_volume(const nh_mesh *mesh);
 void nh_mesh_destroy(nh_mesh **mesh);
 
 /* Rebuild mesh->leaves from first_child (after refinement). */
@@ -71,19 +153,23 @@ int nh_hex_invert(const double Xe[24], const double x[3], double xi[3]);
  * Returns NH_OK, or NH_ERR_INPUT (no message) if x is outside the mesh. */
 int nh_mesh_locate(const nh_mesh *mesh, const double x[3], int *cell, double xi[3]);
 
-/* True if x lies in the region (closed box, tolerance tol). */
+/* True if x lies in the region (closed, enlarged by tol). */
 int nh_region_contains(const nh_region *region, const double x[3], double tol);
+/* "box [..] - [..]", "sphere centre [..] radius r", "cylinder [..] - [..] radius r". */
+void nh_region_describe(const nh_region *region, char *buf, size_t cap);
 
 /* Mark (flags[i] = 1) the nodes inside the region; returns how many nodes it
  * holds, flags may be NULL. */
 int nh_mesh_nodes_in_region(const nh_mesh *mesh, const nh_region *region, unsigned char *flags);
 
 /* Consistent nodal forces of a total force `force` spread as a uniform force
- * density over the tissue inside `region` (weighted by φ): adds to f[3 n] the
- * integrals ∫ ρ_f N_a dV over each leaf ∩ region, ρ_f = force / V, where V is
- * the tissue volume inside the region. The integral is exact for cells whose
- * rest shape is an axis-aligned box (every cell of a box grid and of its
- * templates); other cells are sampled by 6³ sub-cell midpoints.
+ * density over the tissue inside `region`: adds to f[3 n] the integrals
+ * ∫ ρ_f N_a dV over each leaf ∩ region ∩ tissue, ρ_f = force / V, where V is
+ * the tissue volume inside the region. Tissue is the cell weighted by φ for a
+ * box domain, and the points inside the shape (F < 0) for an immersed one.
+ * The integral is exact for a box region over cells whose rest shape is an
+ * axis-aligned box on a box domain (every cell of a box grid and of its
+ * templates); otherwise each cell is sampled by 6³ sub-cell midpoints.
  * Returns NH_ERR_INPUT (message at region->where) if V = 0. */
 int nh_mesh_region_load(const nh_mesh *mesh, const nh_region *region, const double force[3],
                         double *f);

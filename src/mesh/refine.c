@@ -5,7 +5,10 @@
  * corners (Eq. 17; the same map carries current positions, velocities and
  * any nodal field, which sim does with `nh_refine_info`). The parent stays in
  * the cell array as an inactive cell, so the hierarchy (level, parent,
- * children) is kept.
+ * children) is kept. A child's fill fraction is its parent's on a box domain
+ * (1); on an immersed domain it is measured again by sampling the shape
+ * (nh_domain_cell_fill), floored at NH_FILL_MIN: a child outside the shape
+ * stays, with the floor, since cells are never deleted.
  *
  * Nodes are never duplicated: a template node may coincide with a corner of
  * the parent, with a node of a neighbour refined earlier, or with a node of a
@@ -190,6 +193,11 @@ int nh_mesh_refine(nh_mesh *m, const nh_template *t, const int *cells, int n,
       m->first_child[ch] = -1;
       m->n_children[ch] = 0;
       m->fill[ch] = m->fill[c];
+      if (m->domain.kind != NH_DOMAIN_BOX) { /* the child's own share of the shape */
+        double Xc[24];
+        nh_mesh_cell_coords(m, m->X, ch, Xc);
+        m->fill[ch] = fmax(nh_domain_cell_fill(&m->domain, Xc, NULL), NH_FILL_MIN);
+      }
     }
   }
   rc = nh_mesh_update_leaves(m);

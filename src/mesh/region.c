@@ -1,24 +1,68 @@
 /* region.c — regions of the scene on the mesh: nodes inside a region
  * (Dirichlet sets) and consistent nodal forces of a load region.
  *
+ * A region is a closed box, a ball (sphere: centre, radius) or a finite
+ * cylinder (the points within `radius` of the segment [start, end] whose
+ * projection falls on it: flat ends).
+ *
  * A load is a total force F spread as a uniform force density over the
  * tissue inside its region (docs/theory.md §5), so the nodal forces are
- *     f_a = (F / V) ∫_{Ω ∩ region} φ N_a dV,   V = ∫_{Ω ∩ region} φ dV,
- * and refining the mesh does not change the load. For a cell whose rest
- * shape is an axis-aligned box (every cell of a box grid and of its regular
- * templates) the intersection with a box region is a box in natural
- * coordinates, and since N_a is a product of 1D linear factors the integral
- * factorises into three exact 1D integrals. Other cells (distorted meshes of
- * the tests) are sampled by 6³ sub-cell midpoints. */
+ *     f_a = (F / V) ∫_{Ω ∩ region} χ N_a dV,   V = ∫_{Ω ∩ region} χ dV,
+ * and refining the mesh does not change the load. The tissue weight χ is the
+ * cell's fill fraction φ on a box domain (φ = 1 there), and on an immersed
+ * domain the indicator of the shape (F < 0) at the integration point: the
+ * load acts on the tissue only, and weighting by φ as well would count a cut
+ * cell's emptiness twice. For a cell whose rest shape is an axis-aligned box
+ * (every cell of a box grid and of its regular templates) the intersection
+ * with a box region is a box in natural coordinates, and since N_a is a
+ * product of 1D linear factors the integral factorises into three exact 1D
+ * integrals; that path serves box regions on box domains. Everything else
+ * (sphere and cylinder regions, immersed domains, the distorted meshes of the
+ * tests) is sampled by 6³ sub-cell midpoints. */
 #include "mesh/mesh.h"
 
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 
 int nh_region_contains(const nh_region *r, const double x[3], double tol) {
+  if (r->kind == NH_REGION_SPHERE) {
+    double d2 = 0.0;
+    for (int k = 0; k < 3; k++) d2 += (x[k] - r->center[k]) * (x[k] - r->center[k]);
+    return sqrt(d2) <= r->radius + tol;
+  }
+  if (r->kind == NH_REGION_CYLINDER) {
+    double axis[3], rel[3], len2 = 0.0, t = 0.0;
+    for (int k = 0; k < 3; k++) {
+      axis[k] = r->end[k] - r->start[k];
+      rel[k] = x[k] - r->start[k];
+      len2 += axis[k] * axis[k];
+      t += rel[k] * axis[k];
+    }
+    double len = sqrt(len2), s = t / len; /* distance along the axis from start */
+    if (s < -tol || s > len + tol) return 0;
+    double d2 = 0.0;
+    for (int k = 0; k < 3; k++) {
+      double e = rel[k] - t / len2 * axis[k];
+      d2 += e * e;
+    }
+    return sqrt(d2) <= r->radius + tol;
+  }
   for (int k = 0; k < 3; k++)
     if (x[k] < r->min[k] - tol || x[k] > r->max[k] + tol) return 0;
   return 1;
+}
+
+void nh_region_describe(const nh_region *r, char *buf, size_t cap) {
+  if (r->kind == NH_REGION_SPHERE)
+    snprintf(buf, cap, "sphere centre [%g, %g, %g] radius %g", r->center[0], r->center[1],
+             r->center[2], r->radius);
+  else if (r->kind == NH_REGION_CYLINDER)
+    snprintf(buf, cap, "cylinder [%g, %g, %g] - [%g, %g, %g] radius %g", r->start[0], r->start[1],
+             r->start[2], r->end[0], r->end[1], r->end[2], r->radius);
+  else
+    snprintf(buf, cap, "region [%g, %g, %g] - [%g, %g, %g]", r->min[0], r->min[1], r->min[2],
+             r->max[0], r->max[1], r->max[2]);
 }
 
 static double nh_mesh_tol(const nh_mesh *m) {
@@ -48,11 +92,15 @@ static int nh_cell_is_box(const double Xe[24], double lo[3], double hi[3]) {
   return hi[0] > lo[0] && hi[1] > lo[1] && hi[2] > lo[2];
 }
 
-/* ∫ N_a dV over cell ∩ region for the 8 nodes; returns the volume. */
-static double nh_cell_region_integrals(const double Xe[24], const nh_region *r, double w[8]) {
+/* ∫ χ N_a dV over cell ∩ region for the 8 nodes; returns ∫ χ dV. χ is 1 on
+ * a box domain (the caller multiplies by φ) and the shape's indicator
+ * otherwise. */
+static double nh_cell_region_integrals(const nh_domain *d, const double Xe[24], const nh_region *r,
+                                       double w[8]) {
   double lo[3], hi[3];
+  const int immersed = d->kind != NH_DOMAIN_BOX;
   for (int a = 0; a < 8; a++) w[a] = 0.0;
-  if (nh_cell_is_box(Xe, lo, hi)) {
+  if (!immersed && r->kind == NH_REGION_BOX && nh_cell_is_box(Xe, lo, hi)) {
     double I[3][2]; /* I[k][0]: ∫ ½(1-ξ) dξ, I[k][1]: ∫ ½(1+ξ) dξ over the clipped interval */
     double jac = 1.0;
     for (int k = 0; k < 3; k++) {
@@ -88,6 +136,7 @@ static double nh_cell_region_integrals(const double Xe[24], const nh_region *r, 
             for (int q = 0; q < 3; q++) J[3 * p + q] += Xe[3 * a + p] * dN[a][q];
           }
         if (!nh_region_contains(r, x, 0.0)) continue;
+        if (immersed && !(nh_domain_level(d, x) < 0.0)) continue;
         double dv = fabs(nh_mat3_det(J)) * 8.0 / (n * n * n);
         for (int a = 0; a < 8; a++) w[a] += N[a] * dv;
         vol += dv;
@@ -96,20 +145,21 @@ static double nh_cell_region_integrals(const double Xe[24], const nh_region *r, 
 }
 
 int nh_mesh_region_load(const nh_mesh *m, const nh_region *r, const double force[3], double *f) {
+  const int immersed = m->domain.kind != NH_DOMAIN_BOX;
   double volume = 0.0, Xe[24], w[8];
   for (int l = 0; l < m->n_leaves; l++) {
     int c = m->leaves[l];
     nh_mesh_cell_coords(m, m->X, c, Xe);
-    volume += m->fill[c] * nh_cell_region_integrals(Xe, r, w);
+    volume += (immersed ? 1.0 : m->fill[c]) * nh_cell_region_integrals(&m->domain, Xe, r, w);
   }
   NH_CHECK(volume > 0.0, NH_ERR_INPUT, "%s: the load region holds no tissue", r->where);
   for (int l = 0; l < m->n_leaves; l++) {
     int c = m->leaves[l];
+    double chi = immersed ? 1.0 : m->fill[c];
     nh_mesh_cell_coords(m, m->X, c, Xe);
-    if (nh_cell_region_integrals(Xe, r, w) == 0.0) continue;
+    if (nh_cell_region_integrals(&m->domain, Xe, r, w) == 0.0) continue;
     for (int a = 0; a < 8; a++)
-      for (int k = 0; k < 3; k++)
-        f[3 * m->cells[8 * c + a] + k] += force[k] * m->fill[c] * w[a] / volume;
+      for (int k = 0; k < 3; k++) f[3 * m->cells[8 * c + a] + k] += force[k] * chi * w[a] / volume;
   }
   return NH_OK;
 }

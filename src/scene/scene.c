@@ -17,8 +17,8 @@
  * missing required key — of the mapping that lacks it. Every mapping's keys
  * are checked before its values, so a misspelt key is reported as unknown
  * (with a "did you mean" hint for a near miss) rather than as a missing one.
- * Keys of later features (tissue.domain.brain/mask) are recognised and
- * refused as not supported in this version.
+ * Keys of later features (tissue.domain.mask) are recognised and refused as
+ * not supported in this version.
  *
  * Types. A number is a plain scalar that strtod consumes entirely and that is
  * finite; an integer is a number that is integral and fits in an int (8.0 is
@@ -367,19 +367,75 @@ static int read_box(const nh_ctx *c, const nh_yaml_node *box, const char *path, 
   return NH_OK;
 }
 
-/* A region {box: {min, max}} at `node` (for tissue.fixed items). */
+/* A positive radius `name` of the mapping `map` (required). */
+static int read_radius(const nh_ctx *c, const nh_yaml_node *map, const char *path, double *radius) {
+  const nh_yaml_node *at;
+  NH_TRY(get_number(c, map, path, "radius", 1, radius, &at));
+  return at_least(c, at, path, "radius", *radius, 0, 1);
+}
+
+/* The shape of a region: exactly one of the keys box {min, max},
+ * sphere {center, radius}, cylinder {start, end, radius} in the mapping
+ * `node` (whose keys the caller has checked). */
+static int read_region_shape(const nh_ctx *c, const nh_yaml_node *node, const char *path,
+                             nh_region *region) {
+  static const char *const shapes[] = {"box", "sphere", "cylinder", NULL};
+  static const char *const sphere_keys[] = {"center", "radius", NULL};
+  static const char *const cylinder_keys[] = {"start", "end", "radius", NULL};
+  char key[NH_KEY_MAX], d[96];
+  const nh_yaml_node *shape = NULL, *shape_key = NULL;
+  for (int i = 0; i < node->n; ++i) {
+    if (!in_list(node->keys[i]->text, shapes)) continue;
+    if (shape)
+      return fail(c, node->keys[i], join(key, path, node->keys[i]->text),
+                  "give exactly one of box, sphere, cylinder (%s is already given)",
+                  shape_key->text);
+    shape = node->items[i], shape_key = node->keys[i];
+  }
+  if (!shape) return fail(c, node, path, "give one of box, sphere, cylinder");
+  join(key, path, shape_key->text);
+  if (!strcmp(shape_key->text, "box")) {
+    region->kind = NH_REGION_BOX;
+    return read_box(c, shape, key, 0, region->min, region->max);
+  }
+  int sphere = !strcmp(shape_key->text, "sphere");
+  if (shape->kind != NH_YAML_MAP)
+    return fail(c, shape, key, "expected a mapping %s, got %s",
+                sphere ? "{center: [x, y, z], radius: r}"
+                       : "{start: [x, y, z], end: [x, y, z], radius: r}",
+                describe(shape, d, sizeof d));
+  NH_TRY(check_keys(c, shape, key, sphere ? sphere_keys : cylinder_keys));
+  if (sphere) {
+    region->kind = NH_REGION_SPHERE;
+    NH_TRY(get_vec3(c, shape, key, "center", 1, region->center, NULL));
+    return read_radius(c, shape, key, &region->radius);
+  }
+  const nh_yaml_node *at_end;
+  region->kind = NH_REGION_CYLINDER;
+  NH_TRY(get_vec3(c, shape, key, "start", 1, region->start, NULL));
+  NH_TRY(get_vec3(c, shape, key, "end", 1, region->end, &at_end));
+  double len2 = 0;
+  for (int i = 0; i < 3; ++i)
+    len2 += (region->end[i] - region->start[i]) * (region->end[i] - region->start[i]);
+  if (!(len2 > 0)) {
+    char sub[NH_KEY_MAX];
+    return fail(c, at_end, join(sub, key, "end"), "must differ from start (the cylinder's axis)");
+  }
+  return read_radius(c, shape, key, &region->radius);
+}
+
+/* A region {box | sphere | cylinder} at `node` (for tissue.fixed items). */
 static int read_region(const nh_ctx *c, const nh_yaml_node *node, const char *path,
                        nh_region *region) {
-  static const char *const keys[] = {"box", NULL};
-  char key[NH_KEY_MAX], d[96];
+  static const char *const keys[] = {"box", "sphere", "cylinder", NULL};
+  char d[96];
   if (node->kind != NH_YAML_MAP)
-    return fail(c, node, path, "expected a region {box: {min: [...], max: [...]}}, got %s",
+    return fail(c, node, path,
+                "expected a region {box: {min, max}}, {sphere: {center, radius}} or "
+                "{cylinder: {start, end, radius}}, got %s",
                 describe(node, d, sizeof d));
   NH_TRY(check_keys(c, node, path, keys));
-  const nh_yaml_node *box;
-  NH_TRY(field(c, node, path, "box", 1, &box));
-  region->kind = NH_REGION_BOX;
-  NH_TRY(read_box(c, box, join(key, path, "box"), 0, region->min, region->max));
+  NH_TRY(read_region_shape(c, node, path, region));
   make_where(c, node, path, region->where);
   return NH_OK;
 }
@@ -413,18 +469,16 @@ static int read_schedule(const nh_ctx *c, const nh_yaml_node *node, const char *
   return NH_OK;
 }
 
-/* {box: {min, max}, force: [3], schedule: [[t, s], ...]} */
+/* {box | sphere | cylinder, force: [3], schedule: [[t, s], ...]} */
 static int read_load(const nh_ctx *c, const nh_yaml_node *node, const char *path, nh_load *load) {
-  static const char *const keys[] = {"box", "force", "schedule", NULL};
+  static const char *const keys[] = {"box", "sphere", "cylinder", "force", "schedule", NULL};
   char key[NH_KEY_MAX], d[96];
   if (node->kind != NH_YAML_MAP)
     return fail(c, node, path, "expected a load {box: {min, max}, force: [fx, fy, fz]}, got %s",
                 describe(node, d, sizeof d));
   NH_TRY(check_keys(c, node, path, keys));
-  const nh_yaml_node *box, *schedule;
-  NH_TRY(field(c, node, path, "box", 1, &box));
-  load->region.kind = NH_REGION_BOX;
-  NH_TRY(read_box(c, box, join(key, path, "box"), 0, load->region.min, load->region.max));
+  const nh_yaml_node *schedule;
+  NH_TRY(read_region_shape(c, node, path, &load->region));
   NH_TRY(get_vec3(c, node, path, "force", 1, load->force, NULL));
   NH_TRY(field(c, node, path, "schedule", 0, &schedule));
   if (schedule) NH_TRY(read_schedule(c, schedule, join(key, path, "schedule"), &load->schedule));
@@ -567,6 +621,31 @@ static int read_damping(const nh_ctx *c, const nh_yaml_node *parent, const char 
   return NH_OK;
 }
 
+/* tissue.domain.brain {size: [3] > 0 (required), center: [3] (default 0)}. */
+static int read_brain(const nh_ctx *c, const nh_yaml_node *brain, nh_scene *s) {
+  static const char *const keys[] = {"size", "center", NULL};
+  const char *path = "tissue.domain.brain";
+  char key[NH_KEY_MAX], d[96];
+  const nh_yaml_node *at_size;
+  if (brain->kind != NH_YAML_MAP)
+    return fail(c, brain, path,
+                "expected a mapping {size: [sx, sy, sz], center: [x, y, z]}, got %s",
+                describe(brain, d, sizeof d));
+  NH_TRY(check_keys(c, brain, path, keys));
+  s->tissue.domain = NH_DOMAIN_BRAIN;
+  NH_TRY(get_vec3(c, brain, path, "size", 1, s->tissue.brain_size, &at_size));
+  for (int i = 0; i < 3; ++i)
+    if (!(s->tissue.brain_size[i] > 0))
+      return fail(c, at_size->items[i], join_index(key, "tissue.domain.brain.size", i),
+                  "must be greater than 0, got %g", s->tissue.brain_size[i]);
+  NH_TRY(get_vec3(c, brain, path, "center", 0, s->tissue.brain_center, NULL));
+  for (int i = 0; i < 3; ++i) {
+    s->tissue.box_min[i] = s->tissue.brain_center[i] - 0.5 * s->tissue.brain_size[i];
+    s->tissue.box_max[i] = s->tissue.brain_center[i] + 0.5 * s->tissue.brain_size[i];
+  }
+  return NH_OK;
+}
+
 static int read_tissue(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   static const char *const keys[] = {"domain", "grid",  "material", "damping",
                                      "fixed",  "loads", "buoyancy", NULL};
@@ -576,7 +655,7 @@ static int read_tissue(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   NH_TRY(section(c, root, "", "tissue", 1, &t));
   NH_TRY(check_keys(c, t, "tissue", keys));
 
-  /* domain: exactly one of box, brain, mask; only box exists for now. */
+  /* domain: exactly one of box, brain, mask; mask does not exist yet. */
   NH_TRY(section(c, t, "tissue", "domain", 1, &domain));
   NH_TRY(check_keys(c, domain, "tissue.domain", domain_keys));
   if (domain->n == 0) return fail(c, domain, "tissue.domain", "give one of box, brain, mask");
@@ -584,11 +663,16 @@ static int read_tissue(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
     return fail(c, domain->keys[1], join(key, "tissue.domain", domain->keys[1]->text),
                 "give exactly one of box, brain, mask (%s is already given)",
                 domain->keys[0]->text);
-  if (strcmp(domain->keys[0]->text, "box") != 0)
+  if (!strcmp(domain->keys[0]->text, "brain")) {
+    NH_TRY(read_brain(c, domain->items[0], s));
+  } else if (!strcmp(domain->keys[0]->text, "box")) {
+    s->tissue.domain = NH_DOMAIN_BOX;
+    NH_TRY(read_box(c, domain->items[0], "tissue.domain.box", 1, s->tissue.box_min,
+                    s->tissue.box_max));
+  } else {
     return fail(c, domain->keys[0], join(key, "tissue.domain", domain->keys[0]->text),
-                "not supported in this version of needlehex (use box)");
-  NH_TRY(
-      read_box(c, domain->items[0], "tissue.domain.box", 1, s->tissue.box_min, s->tissue.box_max));
+                "not supported in this version of needlehex (use box or brain)");
+  }
 
   /* grid */
   s->tissue.grid[0] = 8, s->tissue.grid[1] = 4, s->tissue.grid[2] = 4;
@@ -1489,6 +1573,20 @@ static void print_schedule(FILE *f, const nh_schedule *sch) {
   fprintf(f, "]");
 }
 
+/* "box [..] .. [..] m", "sphere centre [..] m, radius r m", "cylinder ...". */
+static void print_region(FILE *f, const nh_region *r) {
+  if (r->kind == NH_REGION_SPHERE) {
+    fprintf(f, "sphere centre [%g, %g, %g] m, radius %g m", r->center[0], r->center[1],
+            r->center[2], r->radius);
+  } else if (r->kind == NH_REGION_CYLINDER) {
+    fprintf(f, "cylinder [%g, %g, %g] .. [%g, %g, %g] m, radius %g m", r->start[0], r->start[1],
+            r->start[2], r->end[0], r->end[1], r->end[2], r->radius);
+  } else {
+    fprintf(f, "box ");
+    print_box(f, r->min, r->max);
+  }
+}
+
 /* One tool, over a few lines indented under "tools". */
 static void print_tool(FILE *f, const nh_scene *s, int i) {
   const nh_tool_spec *t = &s->tools[i];
@@ -1545,11 +1643,21 @@ void nh_scene_print(const nh_scene *s, void *stdio_file) {
   fprintf(f, "gravity   [%g, %g, %g] m/s^2", s->gravity[0], s->gravity[1], s->gravity[2]);
   print_schedule(f, &s->gravity_schedule);
   fprintf(f, "\n");
-  fprintf(f, "tissue    box ");
-  print_box(f, s->tissue.box_min, s->tissue.box_max);
-  fprintf(f, ", grid %d x %d x %d cells (%d nodes)\n", s->tissue.grid[0], s->tissue.grid[1],
-          s->tissue.grid[2],
-          (s->tissue.grid[0] + 1) * (s->tissue.grid[1] + 1) * (s->tissue.grid[2] + 1));
+  if (s->tissue.domain == NH_DOMAIN_BRAIN) {
+    const double *z = s->tissue.brain_size, *c = s->tissue.brain_center;
+    fprintf(f, "tissue    brain of size [%g, %g, %g] m centred at [%g, %g, %g] m\n", z[0], z[1],
+            z[2], c[0], c[1], c[2]);
+    fprintf(f, "          grid %d x %d x %d cells over its bounding box ", s->tissue.grid[0],
+            s->tissue.grid[1], s->tissue.grid[2]);
+    print_box(f, s->tissue.box_min, s->tissue.box_max);
+    fprintf(f, " (the cells that meet the brain are kept)\n");
+  } else {
+    fprintf(f, "tissue    box ");
+    print_box(f, s->tissue.box_min, s->tissue.box_max);
+    fprintf(f, ", grid %d x %d x %d cells (%d nodes)\n", s->tissue.grid[0], s->tissue.grid[1],
+            s->tissue.grid[2],
+            (s->tissue.grid[0] + 1) * (s->tissue.grid[1] + 1) * (s->tissue.grid[2] + 1));
+  }
   fprintf(f, "material  E = %g Pa, nu = %g, density %g kg/m^3\n", s->tissue.young,
           s->tissue.poisson, s->tissue.density);
   fprintf(f, "damping   mass %g 1/s, stiffness %g s\n", s->tissue.damping_mass,
@@ -1565,16 +1673,16 @@ void nh_scene_print(const nh_scene *s, void *stdio_file) {
   }
   fprintf(f, "fixed     %d region%s\n", s->tissue.n_fixed, s->tissue.n_fixed == 1 ? "" : "s");
   for (int i = 0; i < s->tissue.n_fixed; ++i) {
-    fprintf(f, "          tissue.fixed.%d: box ", i);
-    print_box(f, s->tissue.fixed[i].min, s->tissue.fixed[i].max);
+    fprintf(f, "          tissue.fixed.%d: ", i);
+    print_region(f, &s->tissue.fixed[i]);
     fprintf(f, "\n");
   }
   fprintf(f, "loads     %d\n", s->tissue.n_loads);
   for (int i = 0; i < s->tissue.n_loads; ++i) {
     const nh_load *l = &s->tissue.loads[i];
-    fprintf(f, "          tissue.loads.%d: force [%g, %g, %g] N over box ", i, l->force[0],
-            l->force[1], l->force[2]);
-    print_box(f, l->region.min, l->region.max);
+    fprintf(f, "          tissue.loads.%d: force [%g, %g, %g] N over ", i, l->force[0], l->force[1],
+            l->force[2]);
+    print_region(f, &l->region);
     if (l->schedule.n > 0)
       fprintf(f, ", schedule of %d point%s", l->schedule.n, l->schedule.n == 1 ? "" : "s");
     fprintf(f, "\n");

@@ -19,11 +19,16 @@
 #define NH_PATH_MAX  1024
 
 typedef enum { NH_MODE_DYNAMIC = 0, NH_MODE_STATIC = 1 } nh_time_mode;
-typedef enum { NH_REGION_BOX = 0 } nh_region_kind;
+typedef enum { NH_REGION_BOX = 0, NH_REGION_SPHERE = 1, NH_REGION_CYLINDER = 2 } nh_region_kind;
+typedef enum { NH_DOMAIN_BOX = 0, NH_DOMAIN_BRAIN = 1 } nh_domain_kind;
 
+/* A region of space (closed): exactly one of box, sphere, cylinder. */
 typedef struct {
   nh_region_kind kind;
-  double min[3], max[3]; /* box: closed, inclusive bounds */
+  double min[3], max[3];   /* box: inclusive bounds */
+  double center[3];        /* sphere: centre */
+  double start[3], end[3]; /* cylinder: the two ends of its axis (distinct) */
+  double radius;           /* sphere, cylinder: > 0 */
   char where[NH_WHERE_MAX];
 } nh_region;
 
@@ -129,13 +134,16 @@ typedef struct nh_scene {
   nh_schedule gravity_schedule; /* gravity.schedule: its factor of time (default: 1) */
 
   struct {
-    double box_min[3], box_max[3]; /* tissue.domain.box (required) */
-    int grid[3];                   /* tissue.grid (default [8, 4, 4]); each >= 1 */
-    double young;                  /* tissue.material.young, Pa (required, > 0) */
-    double poisson;                /* tissue.material.poisson (required, in (-1, 0.5)) */
-    double density;                /* tissue.material.density, kg/m³ (default 1000, > 0) */
-    double damping_mass;           /* tissue.damping.mass (Rayleigh α, 1/s, default 0, >= 0) */
-    double damping_stiffness;      /* tissue.damping.stiffness (Rayleigh β, s, default 0, >= 0) */
+    nh_domain_kind domain;                 /* tissue.domain: box | brain (exactly one, required) */
+    double box_min[3], box_max[3];         /* the domain's bounding box: tissue.domain.box, or
+                                              brain.center ± brain.size / 2 */
+    double brain_center[3], brain_size[3]; /* tissue.domain.brain: center (default 0), size */
+    int grid[3];                           /* tissue.grid (default [8, 4, 4]); each >= 1 */
+    double young;                          /* tissue.material.young, Pa (required, > 0) */
+    double poisson;                        /* tissue.material.poisson (required, in (-1, 0.5)) */
+    double density;                        /* tissue.material.density, kg/m³ (default 1000, > 0) */
+    double damping_mass;      /* tissue.damping.mass (Rayleigh α, 1/s, default 0, >= 0) */
+    double damping_stiffness; /* tissue.damping.stiffness (Rayleigh β, s, default 0, >= 0) */
     /* tissue.buoyancy {before, after, schedule} (optional): the rest shape is the equilibrium
        under gravity with the fraction `before` of the weight carried by buoyancy, so the
        tissue's body force is ρ g (before − b(t)), b(t) = before + (after − before) s(t)
@@ -145,9 +153,9 @@ typedef struct nh_scene {
     double buoyancy_after;         /* tissue.buoyancy.after, in [0, 1] (required) */
     nh_schedule buoyancy_schedule; /* tissue.buoyancy.schedule (default: 1 from t = 0 on) */
     int n_fixed;
-    nh_region *fixed; /* tissue.fixed: list of {box: {min, max}} */
+    nh_region *fixed; /* tissue.fixed: list of {box | sphere | cylinder} */
     int n_loads;
-    nh_load *loads; /* tissue.loads: list of {box, force, schedule?} */
+    nh_load *loads; /* tissue.loads: list of {box | sphere | cylinder, force, schedule?} */
     char where_fixed[NH_WHERE_MAX];
   } tissue;
 

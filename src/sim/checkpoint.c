@@ -17,7 +17,8 @@
  *                    f64 fill[n],
  *                  f64 u[3 n_nodes], f64 v[3 n_nodes].
  * Everything else (element data, hanging nodes, the linear system, load
- * vectors, probe cells) is rebuilt from the mesh, deterministically, so the
+ * vectors, probe cells, the lattice-to-cell map mesh->root, the domain, which
+ * the scene gives) is rebuilt from the mesh, deterministically, so the
  * continued run is the uninterrupted one to round-off (it is in fact
  * bitwise equal: tests/restart.py).
  *
@@ -255,6 +256,9 @@ int nh_checkpoint_read(const char *dir, const nh_scene *scene, nh_checkpoint *ck
     goto done;
   }
   rc = nh_mesh_update_leaves(m);
+  nh_domain_from_scene(scene, &m->domain);
+  if (!rc && (rc = nh_mesh_index_roots(m)) == NH_ERR_INPUT)
+    rc = NH_ERROR(NH_ERR_INPUT, "--restart: %s: the checkpoint's mesh is malformed", path);
   goto done;
 oom:
   rc = NH_ERROR(NH_ERR_MEMORY, "out of memory reading a checkpoint");

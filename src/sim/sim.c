@@ -400,9 +400,10 @@ static int nh_sim_setup_mesh(nh_sim *s, int first) {
   for (int r = 0; r < sc->tissue.n_fixed; r++) {
     const nh_region *reg = &sc->tissue.fixed[r];
     int count = nh_mesh_nodes_in_region(m, reg, s->fixed);
-    NH_CHECK(count > 0 || !first, NH_ERR_INPUT,
-             "%s: the region [%g, %g, %g] - [%g, %g, %g] contains no node of the mesh", reg->where,
-             reg->min[0], reg->min[1], reg->min[2], reg->max[0], reg->max[1], reg->max[2]);
+    char what[256];
+    nh_region_describe(reg, what, sizeof what);
+    NH_CHECK(count > 0 || !first, NH_ERR_INPUT, "%s: the %s contains no node of the mesh",
+             reg->where, what);
   }
   if (first) {
     nh_material mat = {sc->tissue.young, sc->tissue.poisson, sc->tissue.density};
@@ -449,7 +450,9 @@ static int nh_sim_build(nh_sim *s) {
     s->step = ck.step;
     s->time = ck.time;
   } else {
-    NH_TRY(nh_mesh_create_box(sc->tissue.box_min, sc->tissue.box_max, sc->tissue.grid, &s->mesh));
+    nh_domain domain;
+    nh_domain_from_scene(sc, &domain);
+    NH_TRY(nh_mesh_create(&domain, sc->tissue.grid, &s->mesh));
     s->u = calloc(3 * (size_t)s->mesh->n_nodes, sizeof(double));
     s->v = calloc(3 * (size_t)s->mesh->n_nodes, sizeof(double));
   }
