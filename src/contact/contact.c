@@ -399,6 +399,32 @@ static int nh_leader(const nh_contact *c, int g, double t, double h) {
   return -1;
 }
 
+/* The entry point of a tool that has not touched the tissue yet, on the
+ * tissue as it is now: the material point X on the domain's surface whose
+ * current position X + u(X) lies on the tool's line. The tissue may have
+ * moved since the entry was found (brain shift before the insertion), so
+ * the ray is pulled back by u at the last estimate and intersected with the
+ * rest surface again, until X stops moving (a fixed point of
+ * X = entry(line − u(X)); u varies slowly over a cell, so a few iterations
+ * suffice). With u = 0 at the entry, X is unchanged. */
+static void nh_refresh_entry(nh_tool *G, const nh_mesh *m, const double *u) {
+  const nh_tool_spec *sp = G->spec;
+  for (int it = 0; it < 20; it++) {
+    double x[3], o[3], X[3], n[3], tau;
+    nh_point_position(m, u, &G->entry, x);
+    for (int i = 0; i < 3; i++) o[i] = sp->base[i] - (x[i] - G->entry.X[i]);
+    if (!nh_domain_ray_entry(&m->domain, o, sp->direction, &tau, X, n)) return;
+    double moved = sqrt((X[0] - G->entry.X[0]) * (X[0] - G->entry.X[0]) +
+                        (X[1] - G->entry.X[1]) * (X[1] - G->entry.X[1]) +
+                        (X[2] - G->entry.X[2]) * (X[2] - G->entry.X[2]));
+    nh_cpoint p = G->entry;
+    if (nh_point_set(m, &p, X)) return;
+    G->entry = p;
+    memcpy(G->n_out, n, sizeof n);
+    if (moved <= 1e-9 * nh_mesh_cell_size(m, G->entry.cell)) return;
+  }
+}
+
 static int nh_group_rows(nh_contact *c, int g, const nh_mesh *m, const double *u, double t,
                          double h, nh_rows *rows) {
   nh_tool *G = &c->tools[g];
@@ -406,6 +432,7 @@ static int nh_group_rows(nh_contact *c, int g, const nh_mesh *m, const double *u
   G->entry_row = -1;
   if (!G->punctured) {
     if (!G->has_entry) return NH_OK;
+    if (G->entry.lam[0] == 0.0) nh_refresh_entry(G, m, u); /* not touching yet */
     double xt[3], tt[3], J[36], xi, xp[3];
     int e;
     nh_beam *b = G->beam;
