@@ -226,14 +226,17 @@ def test_puncture():
                 print("  F/delta = %.6g .. %.6g N/m, point stiffness (static load) = %.6g N/m"
                   % (ratio.min(), ratio.max(), K))
     # (b) F_p at half the reachable force: punctures at the first step whose
-    # contact force exceeds F_p (the force grows by K V dt ~ 1 % of F_p per step).
+    # contact force reaches F_p (the force grows by K V dt ~ 1 % of F_p per step).
     fp = 0.5 * f_max
     res = push("push-punct", fp)
     if res:
         tr = tool_rows(res)
         states = [r["state"] for r in tr]
         F = col(tr, "axial_force")
-        over = np.nonzero(F > fp)[0]
+        # The puncture normal yields at F_p (capped at it within the step,
+        # docs/interaction.md "Puncture"): the puncturing step is the first
+        # whose force reaches F_p, to round-off; none exceeds it before.
+        over = np.nonzero(F >= fp * (1.0 - 1e-6))[0]
         first_p = next((i for i, s in enumerate(states) if s in ("punctured", "cutting")), None)
         if first_p is None:
             fail("push-punct: never punctured (puncture_force %.4g, max force %.4g)" % (fp, F.max()))

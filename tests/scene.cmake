@@ -5,7 +5,7 @@ nh_add_py_test(bad_input bad-input bad_input.py)
 # Planned trajectories, gravity schedules and buoyancy through the binary
 # (tests/plan.py): the tip on the target and back at its start in a rigid
 # block along a line of nodes, buoyancy against plain gravity, a scheduled
-# gravity on a tool. The oblique path's tip-on-target check (label hard)
-# fails today: the tip drifts sideways as it cuts (docs/interaction.md, Limits).
+# gravity on a tool. The oblique path's tip-on-target check (label hard): the
+# puncture must not bend the needle sideways (docs/interaction.md, Puncture).
 nh_add_py_test(plan verify plan.py)
 nh_add_py_test(plan_oblique hard plan.py --oblique)

@@ -448,13 +448,19 @@ static int nh_group_rows(nh_contact *c, int g, const nh_mesh *m, const double *u
       memset(G->entry.lam, 0, sizeof G->entry.lam);
       return NH_OK;
     }
-    double tan1[3] = {1, 0, 0}, tan2[3], nin[3] = {-G->n_out[0], -G->n_out[1], -G->n_out[2]};
-    if (fabs(G->n_out[0]) > 0.9) tan1[0] = 0, tan1[1] = 1;
-    double d = dot3(tan1, G->n_out);
-    for (int i = 0; i < 3; i++) tan1[i] -= d * G->n_out[i];
+    /* The rows act along the tip's axis t and across it, not along the
+     * face normal: on an oblique tool a normal row's force has a part
+     * across the axis that bends the tool while the surface holds (a whole
+     * step, however short the contact) and the tip then cuts on, off its
+     * line (docs/interaction.md, Puncture). */
+    double tan1[3] = {1, 0, 0}, tan2[3], d[3] = {xp[0] - xt[0], xp[1] - xt[1], xp[2] - xt[2]};
+    gap = dot3(tt, d);
+    if (fabs(tt[0]) > 0.9) tan1[0] = 0, tan1[1] = 1;
+    double c = dot3(tan1, tt);
+    for (int i = 0; i < 3; i++) tan1[i] -= c * tt[i];
     normalize3(tan1);
-    cross3(G->n_out, tan1, tan2);
-    const double *dirs[3] = {nin, tan1, tan2};
+    cross3(tan1, tt, tan2);
+    const double *dirs[3] = {tt, tan1, tan2};
     for (int q = 0; q < 3; q++) {
       int r = nh_rows_add(rows);
       if (r < 0) return NH_ERR_MEMORY;
@@ -465,9 +471,11 @@ static int nh_group_rows(nh_contact *c, int g, const nh_mesh *m, const double *u
       memcpy(rows->J + 36 * r, J, sizeof J);
       rows->gap[r] = q == 0 ? gap : 0.0;
       rows->lambda[r] = G->entry.lam[q];
-      rows->law[r] = q == 0 ? (nh_row_law){NH_ROW_UNILATERAL, -1, -1, 0.0, 0.0, -1}
-                            : (nh_row_law){NH_ROW_FRICTION, G->entry_row, -1,
-                                           sp->friction,    0.0,          G->entry_row + 1};
+      /* The normal yields at the puncture force (Eq. 6 within the step). */
+      rows->law[r] = q == 0
+                         ? (nh_row_law){NH_ROW_UNILATERAL, -1, -1, 0.0, sp->puncture_force * h, -1}
+                         : (nh_row_law){NH_ROW_FRICTION, G->entry_row, -1,
+                                        sp->friction,    0.0,          G->entry_row + 1};
     }
     return NH_OK;
   }
@@ -586,9 +594,11 @@ int nh_contact_end_step(nh_contact *c, const nh_mesh *m, const double *u, const 
         G->entry.lam[q] = rows->lambda[G->entry_row + q];
         nh_add_force(G, rows, G->entry_row + q, h, nh_beam_length(G->beam));
       }
-      double fn = G->entry.lam[0] / h;
+      double fn = G->entry.lam[0] / h, fp = G->spec->puncture_force;
       G->state = fn > 0 ? NH_TOOL_CONTACT : NH_TOOL_OUTSIDE;
-      if (fn > G->spec->puncture_force) { /* punctured (Eq. 6) */
+      /* punctured (Eq. 6): the normal reached its cap, the puncture force
+       * (a zero puncture force: no cap, any contact punctures) */
+      if (fp > 0 ? fn >= fp * (1.0 - 1e-7) : fn > 0.0) {
         G->punctured = 1;
         G->state = NH_TOOL_PUNCTURED;
         if (nh_grow((void **)&G->chan, &G->cap_chan, 1, sizeof *G->chan)) return NH_ERR_MEMORY;

@@ -7,12 +7,14 @@
  * w = W λ + r obeys
  *   bilateral   w_i = 0, λ_i free;
  *   unilateral  w_i ≥ 0, λ_i ≥ 0, w_i λ_i = 0                 (Eq. 5);
+ *               with a cap c_i > 0 the set is [0, c_i]: at λ_i = c_i the
+ *               row yields, w_i ≤ 0 (the puncture normal, Eq. 6);
  *   friction    |λ_i| ≤ b_i = μ_i |λ_n(i)| + c_i, and w_i = 0 inside the
  *               bound (stick), w_i λ_i ≤ 0 on it (slide)       (Eqs. 7-9);
  *   disc pair   rows g, g+1 share one bound on |(λ_g, λ_g+1)|; inside it
  *               w = 0, on it w = −ν λ with ν ≥ 0 (slip opposite to force).
  * Every law is the variational inequality "λ_i is the projection of
- * λ_i − w_i onto its set K_i" (ℝ, ℝ₊, [−b, b], the disc), so one residual
+ * λ_i − w_i onto its set K_i" (ℝ, ℝ₊ or [0, c], [−b, b], the disc), so one residual
  * serves all rows: the natural map |λ − P_K(λ − w)|.
  *
  * Scaling. Stiff-needle rows have tiny W_ii next to soft-tissue rows, so W's
@@ -26,7 +28,7 @@
  * One sweep solves, in order,
  *   1. the bilateral block exactly with the other rows frozen,
  *      λ̃_B ← λ̃_B − W̃_BB⁻¹ w̃_B (W̃_BB factorised once by dense Cholesky);
- *   2. each unilateral row, λ̃_i ← max(0, λ̃_i − w̃_i);
+ *   2. each unilateral row, λ̃_i ← clamp(λ̃_i − w̃_i, 0, c̃_i) (c̃ = ∞ without a cap);
  *   3. each friction row, λ̃_i ← clamp(λ̃_i − w̃_i, ±b̃_i) with b̃ from the
  *      current normal force, and each disc pair exactly: the 2×2
  *      trust-region problem min ½xᵀBx + qᵀx, |x| ≤ b, solved by the
@@ -34,7 +36,7 @@
  *      multiplier ν of (B + νI) x = −q, |x| = b;
  *   4. if the sweep reduced the residual by less than a factor 2, a subspace
  *      step: the rows strictly inside their sets (bilateral, unilateral with
- *      λ > 0, friction inside the bound) form F, λ̃_F ← λ̃_F − W̃_FF⁻¹ w̃_F,
+ *      0 < λ < c, friction inside the bound) form F, λ̃_F ← λ̃_F − W̃_FF⁻¹ w̃_F,
  *      then every row is projected; kept only if the residual drops. Plain
  *      sweeps on coupled shaft rows took 500-1600 sweeps where this takes
  *      7-12 (measured, docs/interaction.md).
@@ -103,6 +105,9 @@ static int nh_mcp_check_laws(int m, const nh_row_law *laws) {
     NH_CHECK(l->kind == NH_ROW_BILATERAL || l->kind == NH_ROW_UNILATERAL ||
                  l->kind == NH_ROW_FRICTION,
              NH_ERR_INPUT, "constraint row %d: unknown law kind %d", i, (int)l->kind);
+    if (l->kind == NH_ROW_UNILATERAL)
+      NH_CHECK(l->threshold >= 0.0 && isfinite(l->threshold), NH_ERR_INPUT,
+               "unilateral row %d: cap threshold = %g must be finite and >= 0", i, l->threshold);
     if (l->kind != NH_ROW_FRICTION) continue;
     NH_CHECK(l->normal >= -1 && l->normal < m, NH_ERR_INPUT,
              "friction row %d: normal row %d is not in [-1, %d)", i, l->normal, m);
@@ -145,6 +150,17 @@ static double nh_mcp_bound(const nh_mcp_work *ws, const nh_row_law *l) {
 
 static double nh_clamp(double x, double b) {
   return x > b ? b : (x < -b ? -b : x);
+}
+
+/* Scaled upper bound of a unilateral row: threshold / d_i, or none (∞) for
+ * threshold 0. */
+static double nh_mcp_cap(const nh_mcp_work *ws, const nh_row_law *l, int i) {
+  return l->threshold > 0.0 ? l->threshold / ws->d[i] : INFINITY;
+}
+
+/* Projection onto a unilateral row's set [0, cap]. */
+static double nh_mcp_unilateral(double x, double cap) {
+  return x < 0.0 ? 0.0 : (x > cap ? cap : x);
 }
 
 /* λ̃_i += delta, and w̃ += delta W̃(:, i). */
@@ -225,7 +241,8 @@ static double nh_mcp_residual(const nh_mcp_work *ws, const double *W, const nh_r
     if (l->kind == NH_ROW_BILATERAL) {
       e = fabs(w);
     } else if (l->kind == NH_ROW_UNILATERAL) {
-      e = fabs(fmin(w, lam));
+      /* |min(w, λ)| without a cap */
+      e = fabs(lam - nh_mcp_unilateral(lam - w, nh_mcp_cap(ws, l, i)));
     } else if (l->group < 0) {
       double b = nh_mcp_bound(ws, l) / ws->d[i];
       e = fabs(lam - nh_clamp(lam - w, b));
@@ -295,7 +312,8 @@ static void nh_mcp_sweep(nh_mcp_work *ws, const double *W, const nh_row_law *law
     if (l->kind == NH_ROW_BILATERAL && !(ws->nb > 0 && ws->block_ok))
       nh_mcp_move(ws, i, -ws->wt[i] / diag);
     else if (l->kind == NH_ROW_UNILATERAL)
-      nh_mcp_move(ws, i, fmax(0.0, ws->lt[i] - ws->wt[i] / diag) - ws->lt[i]);
+      nh_mcp_move(
+          ws, i, nh_mcp_unilateral(ws->lt[i] - ws->wt[i] / diag, nh_mcp_cap(ws, l, i)) - ws->lt[i]);
   }
   for (int i = 0; i < m; i++) {
     const nh_row_law *l = &laws[i];
@@ -323,7 +341,8 @@ static void nh_mcp_sweep(nh_mcp_work *ws, const double *W, const nh_row_law *law
 static void nh_mcp_project(nh_mcp_work *ws, const double *W, const nh_row_law *laws) {
   int m = ws->m;
   for (int i = 0; i < m; i++)
-    if (laws[i].kind == NH_ROW_UNILATERAL && ws->lt[i] < 0.0) ws->lt[i] = 0.0;
+    if (laws[i].kind == NH_ROW_UNILATERAL)
+      ws->lt[i] = nh_mcp_unilateral(ws->lt[i], nh_mcp_cap(ws, &laws[i], i));
   for (int i = 0; i < m; i++) {
     const nh_row_law *l = &laws[i];
     if (l->kind != NH_ROW_FRICTION) continue;
@@ -362,7 +381,7 @@ static double nh_mcp_subspace(nh_mcp_work *ws, const double *W, const nh_row_law
     if (l->kind == NH_ROW_BILATERAL) {
       in = 1;
     } else if (l->kind == NH_ROW_UNILATERAL) {
-      in = ws->lt[i] > 0.0;
+      in = ws->lt[i] > 0.0 && ws->lt[i] < nh_mcp_cap(ws, l, i) * (1.0 - 1e-12);
     } else {
       double b = nh_mcp_bound(ws, l), f = nh_mcp_friction_size(ws, l, i);
       in = f < b * (1.0 - 1e-12);

@@ -112,7 +112,10 @@ int nh_solve_static(nh_system *sys, const nh_integrator *in, const double *f_ext
 
 /* The law of one constraint row i, with w = W λ + r:
  *   BILATERAL   w_i = 0, λ_i free;
- *   UNILATERAL  w_i ≥ 0, λ_i ≥ 0, w_i λ_i = 0 (contact normal, Eq. 5);
+ *   UNILATERAL  w_i ≥ 0, λ_i ≥ 0, w_i λ_i = 0 (contact normal, Eq. 5); with
+ *               threshold > 0 also λ_i ≤ threshold, and w_i ≤ 0 once λ_i
+ *               reaches it: the row yields (puncture normal, Eq. 6);
+ *               threshold 0: no cap;
  *   FRICTION    |λ_i| ≤ mu |λ_normal| + threshold; stick (w_i = 0) inside the
  *               bound, slide (λ_i = ±bound, w_i λ_i ≤ 0) on it (Eqs. 7-9).
  * normal: index of a non-friction row whose force sets the Coulomb bound, or
@@ -121,8 +124,8 @@ int nh_solve_static(nh_system *sys, const nh_integrator *in, const double *f_ext
  * force: the tip and shaft rows of docs/interaction.md). threshold ≥ 0: cutting force or friction
  * per length × spacing. group: -1 for a one-dimensional friction row; for a disc pair (two tangent
  * rows g, g+1 sharing a normal, same mu and threshold) both rows have group = g and the bound
- * applies to |(λ_g, λ_g+1)|, with w = −ν λ, ν ≥ 0, on it. Fields other than kind are ignored for
- * non-friction rows. */
+ * applies to |(λ_g, λ_g+1)|, with w = −ν λ, ν ≥ 0, on it. Fields other than kind (and threshold,
+ * for a unilateral row) are ignored for non-friction rows. */
 typedef enum { NH_ROW_BILATERAL = 0, NH_ROW_UNILATERAL = 1, NH_ROW_FRICTION = 2 } nh_row_kind;
 typedef struct {
   nh_row_kind kind;
@@ -154,7 +157,7 @@ typedef struct {
  *   lambda: in, the warm start (previous step, or zeros); out, the solution;
  *   stats (may be NULL): sweeps, residual, stick/slide/open counts.
  * Fails with NH_ERR_INPUT (bad laws: a normal index out of range or pointing to
- * a friction row, negative mu/threshold, an inconsistent disc pair; m < 0,
+ * a friction row, negative or non-finite mu/threshold, an inconsistent disc pair; m < 0,
  * tolerance <= 0), NH_ERR_NUMERIC (non-finite W, r or warm start, a negative
  * diagonal of W, or not converged in max_iterations: λ then holds the best
  * iterate and stats says how far it got), NH_ERR_MEMORY. m = 0 succeeds. */
