@@ -17,7 +17,7 @@ static const char *const nh_target_columns[] = {"step", "time", "name", "x", "y"
  * residual accepted when the sweeps stall short of the target (the
  * dimensionless law violation, see solve.h; reported per step). */
 #define NH_MCP_TOLERANCE 1e-10
-#define NH_MCP_ACCEPT    1e-6
+#define NH_MCP_ACCEPT    1e-5
 #define NH_MCP_SWEEPS    2000
 
 int nh_sim_tools_build(nh_sim *s) {
