@@ -105,6 +105,23 @@ def run(binary, scene, out, sets, steps=None):
     return info
 
 
+def run_or_reuse(a, binary, scene, out, sets):
+    """The run in OUT if --reuse and it finished (run.json), else a new run."""
+    stamp = os.path.join(out, "run.json")
+    if a.reuse and os.path.exists(stamp):
+        with open(stamp) as f:
+            return json.load(f)
+    return run(binary, scene, out, sets, a.steps)
+
+
+def write_report(out, lines):
+    """Prints the report and writes it to OUT/report.md."""
+    report = "\n".join(lines)
+    print(report)
+    with open(os.path.join(out, "report.md"), "w") as f:
+        f.write(report + "\n")
+
+
 def read_csv(path):
     with open(path) as f:
         return list(csv.DictReader(f))
@@ -136,8 +153,7 @@ def speed(st):
             "p95": float(np.percentile(t, 95)), "total": float(st["t_step"].sum()),
             "t_factor": 1e3 * float(np.median(st["t_factor"][1:])),
             "t_constraints": 1e3 * float(np.median(st["t_constraints"][1:])),
-            "t_adapt": 1e3 * float(np.median(st["t_adapt"][1:])),
-            "t_assemble": 1e3 * float(np.median(st["t_assemble"][1:]))}
+            "t_adapt": 1e3 * float(np.median(st["t_adapt"][1:]))}
 
 
 def probe_error(u, ref, names):
@@ -202,11 +218,7 @@ def phantom(a, binary):
         if a.only and name not in a.only:
             continue
         d = os.path.join(out, name)
-        if a.reuse and os.path.exists(os.path.join(d, "run.json")):
-            with open(os.path.join(d, "run.json")) as f:
-                info = json.load(f)
-        else:
-            info = run(binary, st["scene"], d, sets, a.steps)
+        info = run_or_reuse(a, binary, st["scene"], d, sets)
         u, steps = read_points(d)
         if len(steps) != len(ref_steps):
             raise SystemExit("%s has %d steps, the reference %d: run the reference with the "
@@ -262,10 +274,7 @@ def phantom(a, binary):
             beaten.append("%s (by %s)" % (r["label"], ", ".join(by)))
     p("- Adaptive runs beaten by a uniform run that is both faster and more accurate: %s." % (
         "; ".join(beaten) if beaten else "none"))
-    report = "\n".join(lines)
-    print(report)
-    with open(os.path.join(out, "report.md"), "w") as f:
-        f.write(report + "\n")
+    write_report(out, lines)
 
     allruns = runs + [ref]
     plot_probes(img, [r for r in allruns if r["name"] in
@@ -313,10 +322,6 @@ def phantom(a, binary):
     fig.savefig(os.path.join(img, "phantom_speed_error.png"), dpi=110)
     plt.close(fig)
     log("wrote %s" % os.path.join(img, "phantom_speed_error.png"))
-    with open(os.path.join(out, "summary.json"), "w") as f:
-        json.dump({r["name"]: {"speed": r["speed"], "err_max": r["err_max"],
-                               "err_rms": r["err_rms"], "wall": r["wall"]} for r in runs}, f,
-                  indent=1)
     return 0
 
 
@@ -363,11 +368,7 @@ def dbs(a, binary):
             continue
         sets = [s % ("[%d,%d,%d]" % tuple(2 * v for v in g)) if "%s" in s else s for s in sets]
         d = os.path.join(out, name)
-        if a.reuse and os.path.exists(os.path.join(d, "run.json")):
-            with open(os.path.join(d, "run.json")) as f:
-                info = json.load(f)
-        else:
-            info = run(binary, st["scene"], d, sets, a.steps)
+        info = run_or_reuse(a, binary, st["scene"], d, sets)
         pos, steps = read_points(d, "targets.csv")
         tgt = pos[st["target"]]
         tools = read_tools(d, st["cannula"])
@@ -409,20 +410,21 @@ def dbs(a, binary):
     if A:
         p("- adaptive whole procedure: %.1f s of steps (%.1f s wall; goal < 30 s)." % (
             A["speed"]["total"], A["wall"]))
-    report = "\n".join(lines)
-    print(report)
-    with open(os.path.join(out, "report.md"), "w") as f:
-        f.write(report + "\n")
+    write_report(out, lines)
 
-    def lines_plot(fname, ylabel, key, title, scale=1e3, vlines=True, from_shift=False):
+    def lines_plot(fname, ylabel, key, title, scale=1e3, vlines=True, from_shift=False,
+                   logy=False):
+        """One curve per run of r[key], or of steps.csv's column `key`."""
         fig, ax = plt.subplots(figsize=(6.4, 3.8))
         for r in runs:
-            y = r["st"][key] if key in ("dofs",) else r[key]
-            x = r["st"]["step"] if key in ("dofs",) else r["steps"]
+            y = r["st"][key] if key in r["st"] else r[key]
+            x = r["st"]["step"] if key in r["st"] else r["steps"]
             if from_shift:
                 x, y = x[r["i_shift"]:], y[r["i_shift"]:]
             ax.plot(x, scale * np.asarray(y), r["style"], lw=1.3,
                     label="%s (max %d dofs)" % (r["label"], r["speed"]["max_dofs"]))
+        if logy:
+            ax.set_yscale("log")
         if vlines and runs:
             ax.axvline(runs[0]["i_top"], color="0.5", ls=":", lw=1)
             ax.axvline(runs[0]["i_shift"], color="0.5", ls="--", lw=1)
@@ -441,16 +443,8 @@ def dbs(a, binary):
     lines_plot("dbs_stn.png", "STN displacement since the shift (mm)", "stn",
                "STN displacement relative to its post-shift position", from_shift=True)
     lines_plot("dbs_dofs.png", "dofs", "dofs", "degrees of freedom", scale=1, vlines=False)
-    fig, ax = plt.subplots(figsize=(6.4, 3.8))
-    for r in runs:
-        ax.semilogy(r["st"]["step"], 1e3 * r["st"]["t_step"], r["style"], lw=1, label=r["label"])
-    ax.set_xlabel("step")
-    ax.set_ylabel("ms per step")
-    ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(os.path.join(img, "dbs_ms_step.png"), dpi=110)
-    plt.close(fig)
+    lines_plot("dbs_ms_step.png", "ms per step", "t_step", "time per step", vlines=False,
+               logy=True)
     return 0
 
 

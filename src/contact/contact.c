@@ -10,13 +10,16 @@
  *                bound μ |(λ1, λ2)| + friction_per_length × spacing (g = 0);
  *   tip          the same with bound μ |(λ1, λ2)| + cutting_force and
  *                g = t · (x_P − x_tip), P the channel's front;
- *   puncture     −n_out unilateral (g = n_out · (x_tip − x_P) ≥ 0, P the
- *                entry point on the surface, n_out its outward normal) and
- *                a Coulomb disc pair on two tangents, bound μ λn.
+ *   puncture     t unilateral capped at the puncture force (g = t · (x_P −
+ *                x_tip) ≥ 0, P the entry point on the surface; the row
+ *                yields at the cap and the tool punctures) and a Coulomb
+ *                disc pair across t, bound μ λn.
  * The entry point is where the tool's axis ray (base + τ direction) first
  * enters the domain's shape, with n_out the shape's outward normal there
  * (nh_domain_ray_entry: a face of a box, ∇F / |∇F| on the implicit surface
- * of an immersed domain).
+ * of an immersed domain); n_out only decides when the tip is near enough
+ * for the rows. Until the tool touches, the entry follows the tissue's
+ * motion (nh_refresh_entry).
  * Thresholds are impulses (force × h), see contact.h. */
 #include "contact/contact.h"
 
@@ -414,9 +417,8 @@ static void nh_refresh_entry(nh_tool *G, const nh_mesh *m, const double *u) {
     nh_point_position(m, u, &G->entry, x);
     for (int i = 0; i < 3; i++) o[i] = sp->base[i] - (x[i] - G->entry.X[i]);
     if (!nh_domain_ray_entry(&m->domain, o, sp->direction, &tau, X, n)) return;
-    double moved = sqrt((X[0] - G->entry.X[0]) * (X[0] - G->entry.X[0]) +
-                        (X[1] - G->entry.X[1]) * (X[1] - G->entry.X[1]) +
-                        (X[2] - G->entry.X[2]) * (X[2] - G->entry.X[2]));
+    double dX[3] = {X[0] - G->entry.X[0], X[1] - G->entry.X[1], X[2] - G->entry.X[2]};
+    double moved = sqrt(dot3(dX, dX));
     nh_cpoint p = G->entry;
     if (nh_point_set(m, &p, X)) return;
     G->entry = p;
