@@ -1,5 +1,5 @@
 /* channel.c — the tip and shaft constraints in the cut channel (the seed's
- * Eqs. 7-9; docs/interaction.md, "Tip" and "Shaft").
+ * Eqs. 8-9; docs/interaction.md, "Tip" and "Shaft").
  *
  * Once a group has punctured, the channel is a list of tissue material
  * points laid behind the tip one spacing apart, the entry point first, and

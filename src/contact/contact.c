@@ -55,42 +55,16 @@ int nh_contact_create(const nh_scene *sc, const nh_mesh *m, nh_contact **out) {
   int rc = c->tools && c->groups && c->blocks ? NH_OK : NH_ERR_MEMORY;
   for (int k = 0; k < c->n && !rc; k++) {
     nh_tool *tl = &c->tools[k];
-    const nh_tool_spec *sp = &sc->tools[k];
-    tl->spec = sp;
-    tl->host = sp->inside; /* a tool listed before this one */
-    if (tl->host < 0) {
+    if (sc->tools[k].inside < 0) { /* an outer tool: a new group */
       tl->group = c->n_groups++;
       nh_group *G = &c->groups[tl->group];
       G->outer = k;
       G->tip_tool = G->entry_row = -1;
-    } else {
-      tl->group = c->tools[tl->host].group;
+    } else { /* a tool listed before this one */
+      tl->group = c->tools[sc->tools[k].inside].group;
     }
-    nh_beam_spec bs = {
-        .section = {sp->young, sp->poisson, sp->radius, sp->inner_radius, sp->density},
-        .length = sp->length,
-        .elements = sp->elements};
-    memcpy(bs.base, sp->base, sizeof bs.base);
-    memcpy(bs.direction, sp->direction, sizeof bs.direction);
-    if ((rc = nh_beam_create(&bs, &tl->beam))) {
-      char why[256];
-      snprintf(why, sizeof why, "%s", nh_error_message());
-      rc = NH_ERROR(rc, "%s: %s", sp->where, why);
-      break;
-    }
-    tl->f_node = nh_calloc(3 * (size_t)nh_beam_nodes(tl->beam), sizeof(double));
-    if (!tl->f_node) rc = NH_ERR_MEMORY;
-    if (!rc && tl->host < 0) {
-      rc = nh_tool_check_reach(sc, m, sp);
-      if (!rc) nh_puncture_init(&c->groups[tl->group], sp, m);
-    }
-    if (!rc && tl->host >= 0) {
-      const nh_tool_spec *hs = &sc->tools[tl->host];
-      double d[3] = {sp->base[0] - hs->base[0], sp->base[1] - hs->base[1],
-                     sp->base[2] - hs->base[2]};
-      tl->offset = dot3(d, hs->direction);
-      nh_tool_follow(tl, &c->tools[tl->host], 0.0);
-    }
+    rc = nh_tool_init(c, k, m);
+    if (!rc && tl->host < 0) nh_puncture_init(&c->groups[tl->group], tl->spec, m);
   }
   if (rc) {
     nh_contact_destroy(&c);

@@ -107,9 +107,12 @@ static inline void normalize3(double a[3]) {
 /* ---- tools.c ---- */
 /* Speed of the prescribed insertion over the step t → t + h (m/s, < 0 retracting). */
 double nh_tool_speed(const nh_tool_spec *spec, double t, double h);
-/* NH_ERR_INPUT if the tool starts inside the tissue or its tip never comes
- * within one cell of it over its motion. */
-int nh_tool_check_reach(const nh_scene *scene, const nh_mesh *mesh, const nh_tool_spec *spec);
+/* Set up tool k of the scene (its group already set): its beam at rest,
+ * an outer tool checked to reach the tissue, a nested tool placed on its
+ * host (created before it). NH_ERR_INPUT (the scene's tools.k: the beam's
+ * reason, the tool starts inside the tissue or its tip never comes within
+ * one cell of it over its motion), NH_ERR_MEMORY. */
+int nh_tool_init(nh_contact *c, int k, const nh_mesh *mesh);
 /* Place a nested tool on its host's deformed axis (velocities over h; h = 0: at rest). */
 void nh_tool_follow(nh_tool *in, const nh_tool *host, double h);
 /* Nested tools not yet released follow their host and are released at

@@ -1,4 +1,4 @@
-/* puncture.c — the puncture constraint (the seed's Eqs. 5-6;
+/* puncture.c — the puncture constraint (the seed's Eqs. 5-7;
  * docs/interaction.md, "Puncture").
  *
  * The entry point P is where the tool's axis ray (base + τ direction)
@@ -52,6 +52,21 @@ static void nh_puncture_refresh(nh_group *G, const nh_tool_spec *sp, const nh_me
   }
 }
 
+/* Rows for this step? The tip (xt) is within reach of the entry point (xp)
+ * along the surface normal: two steps of the tool's base and tip speeds,
+ * plus 1e-3 of the entry cell. */
+static int nh_puncture_near(const nh_group *G, const nh_tool *tl, const nh_mesh *m,
+                            const double xt[3], const double xp[3], double h) {
+  nh_beam *b = tl->beam;
+  double gap = dot3(G->n_out, xt) - dot3(G->n_out, xp);
+  const double *vb = nh_beam_velocities(b) + 6 * (nh_beam_nodes(b) - 1);
+  double reach =
+      2.0 * h *
+          (fabs(tl->base_v[0]) + fabs(tl->base_v[1]) + fabs(tl->base_v[2]) + sqrt(dot3(vb, vb))) +
+      1e-3 * nh_mesh_cell_size(m, G->entry.cell);
+  return !(gap > reach);
+}
+
 int nh_puncture_rows(nh_contact *c, nh_group *G, const nh_mesh *m, const double *u, double h) {
   nh_tool *tl = &c->tools[G->outer];
   const nh_tool_spec *sp = tl->spec;
@@ -63,13 +78,7 @@ int nh_puncture_rows(nh_contact *c, nh_group *G, const nh_mesh *m, const double 
   nh_beam *b = tl->beam;
   nh_beam_point(b, nh_beam_length(b), xt, tt, &e, &xi, J);
   nh_point_position(m, u, &G->entry, xp);
-  double gap = dot3(G->n_out, xt) - dot3(G->n_out, xp);
-  const double *vb = nh_beam_velocities(b) + 6 * (nh_beam_nodes(b) - 1);
-  double reach =
-      2.0 * h *
-          (fabs(tl->base_v[0]) + fabs(tl->base_v[1]) + fabs(tl->base_v[2]) + sqrt(dot3(vb, vb))) +
-      1e-3 * nh_mesh_cell_size(m, G->entry.cell);
-  if (gap > reach) {
+  if (!nh_puncture_near(G, tl, m, xt, xp, h)) {
     memset(G->entry.lam, 0, sizeof G->entry.lam);
     return NH_OK;
   }
@@ -79,7 +88,7 @@ int nh_puncture_rows(nh_contact *c, nh_group *G, const nh_mesh *m, const double 
    * step, however short the contact) and the tip then cuts on, off its
    * line (docs/interaction.md, Puncture). */
   double tan1[3] = {1, 0, 0}, tan2[3], d[3] = {xp[0] - xt[0], xp[1] - xt[1], xp[2] - xt[2]};
-  gap = dot3(tt, d);
+  double gap = dot3(tt, d);
   if (fabs(tt[0]) > 0.9) tan1[0] = 0, tan1[1] = 1;
   double ct = dot3(tan1, tt);
   for (int i = 0; i < 3; i++) tan1[i] -= ct * tt[i];

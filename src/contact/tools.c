@@ -1,7 +1,7 @@
 /* tools.c — tool kinematics: the prescribed motion of each tool's base,
  * nesting (a tool inside its host follows the host's deformed axis until
  * its release), the forces of the last step per tool and the per-tool
- * report (docs/interaction.md, "Tools").
+ * report (docs/interaction.md, "Nested tools" and "Retraction").
  *
  * A tool's base moves along its direction with the speed of its motion
  * list (m/s per segment, 0 after the last); over a step the base velocity
@@ -14,6 +14,7 @@
  * its own in the coupled step. */
 #include "contact/contact_impl.h"
 
+#include <stdio.h>
 #include <string.h>
 
 /* Insertion distance d(t) = ∫₀ᵗ speed of a motion list (speed 0 after the last segment). */
@@ -31,7 +32,9 @@ double nh_tool_speed(const nh_tool_spec *sp, double t, double h) {
   return (nh_motion_distance(sp, t + h) - nh_motion_distance(sp, t)) / h;
 }
 
-int nh_tool_check_reach(const nh_scene *sc, const nh_mesh *m, const nh_tool_spec *sp) {
+/* NH_ERR_INPUT if the tool starts inside the tissue or its tip never comes
+ * within one cell of it over its motion. */
+static int nh_tool_check_reach(const nh_scene *sc, const nh_mesh *m, const nh_tool_spec *sp) {
   double dmax = 0.0, T = sc->time.steps * sc->time.step;
   for (int i = 0; i < sp->n_motion; i++)
     dmax = fmax(dmax, nh_motion_distance(sp, fmin(sp->motion[i].until, T)));
@@ -81,6 +84,32 @@ void nh_tool_follow(nh_tool *in, const nh_tool *host, double h) {
     }
     memcpy(T + 9 * k, Tn, sizeof Tn);
   }
+}
+
+int nh_tool_init(nh_contact *c, int k, const nh_mesh *m) {
+  nh_tool *tl = &c->tools[k];
+  const nh_tool_spec *sp = &c->scene->tools[k];
+  tl->spec = sp;
+  tl->host = sp->inside;
+  nh_beam_spec bs = {.section = {sp->young, sp->poisson, sp->radius, sp->inner_radius, sp->density},
+                     .length = sp->length,
+                     .elements = sp->elements};
+  memcpy(bs.base, sp->base, sizeof bs.base);
+  memcpy(bs.direction, sp->direction, sizeof bs.direction);
+  int rc = nh_beam_create(&bs, &tl->beam);
+  if (rc) {
+    char why[256];
+    snprintf(why, sizeof why, "%s", nh_error_message());
+    return NH_ERROR(rc, "%s: %s", sp->where, why);
+  }
+  tl->f_node = nh_calloc(3 * (size_t)nh_beam_nodes(tl->beam), sizeof(double));
+  if (!tl->f_node) return NH_ERR_MEMORY;
+  if (tl->host < 0) return nh_tool_check_reach(c->scene, m, sp);
+  const nh_tool_spec *hs = &c->scene->tools[tl->host];
+  double d[3] = {sp->base[0] - hs->base[0], sp->base[1] - hs->base[1], sp->base[2] - hs->base[2]};
+  tl->offset = dot3(d, hs->direction);
+  nh_tool_follow(tl, &c->tools[tl->host], 0.0);
+  return NH_OK;
 }
 
 void nh_tools_follow(nh_contact *c, double t_new, double h) {
