@@ -8,9 +8,11 @@
  *   outside → contact → punctured → cutting ↔ punctured → retracting
  *
  * and the cut channel: material points of the tissue laid behind the tip
- * as it cuts. Each step it writes the constraint rows of the current state
- * (nh_rows, solved by nh_step_coupled) and afterwards reads their forces to
- * move the state on. Forces in nh_rows are impulses (N s, the step's
+ * as it cuts. Each step (nh_contact_step) it writes the constraint rows of
+ * the current states in the solver's row format (nh_rows), solves tissue
+ * and tools together (nh_step_coupled) and reads the rows' forces to move
+ * the states on. Contact sits above solve: the solver knows rows, laws and
+ * beams, not needles. Forces in nh_rows are impulses (N s, the step's
  * velocity form); the thresholds of the laws are set as force × h and
  * reported forces are λ / h. Embedded points are kept in material
  * coordinates, so a refined mesh only relocates them. */
@@ -42,21 +44,18 @@ typedef struct nh_contact nh_contact;
 int nh_contact_create(const nh_scene *scene, const nh_mesh *mesh, nh_contact **out);
 void nh_contact_destroy(nh_contact **contact);
 
-int nh_contact_tools(const nh_contact *c);
 nh_beam *nh_contact_beam(nh_contact *c, int tool);
 
-/* Before the step t → t + h on the tissue state (mesh, u, v): fill rows
- * (cleared first) and the dynamic tools' step data (*n_dynamic of them,
- * tools[] sized nh_contact_tools; row tool indices refer to this list). */
-int nh_contact_begin_step(nh_contact *c, const nh_mesh *mesh, const double *u, double t, double h,
-                          nh_rows *rows, nh_coupled_tool *tools, int *n_dynamic);
-
-/* After the solved step (u at t + h): read the rows' forces, update the
- * states (puncture, cut, lay path points, release), move nested tools
- * that follow their host. Fails with NH_ERR_NUMERIC only on a tool
- * state that is not finite. */
-int nh_contact_end_step(nh_contact *c, const nh_mesh *mesh, const double *u, const nh_rows *rows,
-                        double t_new, double h);
+/* One step t_new − h → t_new of tissue and tools, h = in->dt: the rows of
+ * every constraint in its current state on the tissue state (mesh, u, v),
+ * the coupled solve (nh_step_coupled: u, v advanced, the tools' beams
+ * too), then the constraints' forces move the states on (puncture, cut,
+ * channel points laid, nested tools released and following their host).
+ * stats: the step's timings. Fails with NH_ERR_NUMERIC (the coupled step;
+ * the constraint solve not converged, message with the row count; a tool
+ * state not finite), NH_ERR_MEMORY. */
+int nh_contact_step(nh_contact *c, nh_system *sys, const nh_integrator *in, const nh_mesh *mesh,
+                    const double *f_ext, double *u, double *v, double t_new, nh_step_stats *stats);
 
 /* After the mesh changed (refinement): relocate every embedded point by its
  * material coordinates. NH_ERR_INTERNAL if one is no longer in the mesh. */
@@ -74,13 +73,15 @@ typedef struct {
 } nh_tool_report;
 void nh_contact_report(const nh_contact *c, int tool, nh_tool_report *r);
 
-/* Of the last step: tip rows that cut (slid forward and moved the front),
- * and the channel points laid so far. (Friction rows sticking and sliding
- * are counted by the constraint solve: nh_mcp_stats.) */
+/* Of the last step: the constraint rows, the groups whose tip cut (slid
+ * forward and moved the front), the channel points laid so far, and what
+ * the coupled solve did (timings; sweeps, residual, friction rows sticking
+ * and sliding: nh_mcp_stats). */
 typedef struct {
-  int cut, path_points;
-} nh_contact_counts;
-void nh_contact_counts_get(const nh_contact *c, nh_contact_counts *counts);
+  int rows, cut, path_points;
+  nh_coupled_stats solve;
+} nh_contact_stats;
+void nh_contact_stats_get(const nh_contact *c, nh_contact_stats *stats);
 
 /* Force per row of a tool's points for output: for each node of tool k,
  * the sum of the constraint forces (N, on the tool) distributed to its

@@ -1,4 +1,4 @@
-/* sim.c — the step loop (DESIGN.md, "Data flow of one run").
+/* sim.c — the step loop (docs/theory.md; docs/interaction.md for the tools).
  *
  * One step: external forces at the new time (loads by their schedules,
  * gravity), then either a backward-Euler step (dynamic) or a Newton solve to
@@ -591,7 +591,8 @@ int nh_sim_step(nh_sim *s) {
   double t_new = (s->step + 1) * sc->time.step;
   nh_sim_external_force(s, t_new, s->f_ext);
   nh_step_stats st = {0};
-  int rc = s->contact ? nh_sim_tools_step(s, t_new, &st)
+  int rc = s->contact ? nh_contact_step(s->contact, s->system, &s->integrator, s->mesh, s->f_ext,
+                                        s->u, s->v, t_new, &st)
            : sc->time.mode == NH_MODE_STATIC
                ? nh_solve_static(s->system, &s->integrator, s->f_ext, s->u, &st)
                : nh_step_dynamic(s->system, &s->integrator, s->f_ext, s->u, s->v, &st);
@@ -611,10 +612,10 @@ int nh_sim_step(nh_sim *s) {
   const nh_mesh *m = s->mesh;
   int dofs = 3 * m->n_nodes, free_dofs = nh_system_free_dofs(s->system), cells = m->n_leaves;
   int hanging = s->hanging ? s->hanging->n_hanging : 0;
-  int rows = nh_system_constraint_rows(s->system) + (s->contact ? s->rows.m : 0);
-  nh_contact_counts cc = {0};
-  if (s->contact) nh_contact_counts_get(s->contact, &cc);
-  const nh_coupled_stats *cs = &s->cstats;
+  nh_contact_stats cc = {0}; /* all zero without tools */
+  if (s->contact) nh_contact_stats_get(s->contact, &cc);
+  const nh_coupled_stats *cs = &cc.solve;
+  int rows = nh_system_constraint_rows(s->system) + cc.rows;
   /* f_ext · u: at a static equilibrium of a linear problem, the energy norm
    * squared of the solution (‖u_h‖²_E = f·u_h), which the adaptivity study
    * uses: for conforming Galerkin solutions ‖u − u_h‖²_E = ‖u‖²_E − ‖u_h‖²_E. */
@@ -667,7 +668,7 @@ int nh_sim_step(nh_sim *s) {
                         pt[NH_PHASE_OUTPUT],
                         pt[NH_PHASE_STEP],
                         work,
-                        cs->mcp.iterations, /* all zero without tools */
+                        cs->mcp.iterations,
                         cs->mcp.residual,
                         cs->mcp.n_stick,
                         cs->mcp.n_slide,

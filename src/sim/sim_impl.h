@@ -50,9 +50,6 @@ struct nh_sim {
   double t_adapt; /* s, this step: estimate + mark + refine + rebuild */
   /* tools (absent: contact NULL) */
   nh_contact *contact;
-  nh_rows rows;
-  nh_coupled_tool *ctools;
-  nh_coupled_stats cstats; /* the last step's */
   nh_csv *tools_csv, *targets_csv;
   nh_pvd **tool_pvd;
   /* outputs */
@@ -80,11 +77,9 @@ int nh_checkpoint_write(const nh_sim *sim);
 int nh_checkpoint_read(const char *dir, const nh_scene *scene, nh_checkpoint *ck);
 
 /* ---- tools (sim/tools.c) ---- */
-/* Create the tools and their step data (NULL contact without tools). */
+/* Create the tools (NULL contact without tools) and their outputs' handles. */
 int nh_sim_tools_build(nh_sim *sim);
 void nh_sim_tools_destroy(nh_sim *sim);
-/* One coupled step of tissue and tools at the end time t_new. */
-int nh_sim_tools_step(nh_sim *sim, double t_new, nh_step_stats *stats);
 /* Outputs: open tools.csv, targets.csv and the tool PVDs; rows of this step;
  * the tool frames of this step. */
 int nh_sim_tools_open(nh_sim *sim);

@@ -1,6 +1,7 @@
-/* tools.c — the sim module's side of the tools: building them, the coupled
- * step, and their outputs (tools.csv, targets.csv, <tool>.pvd frames, the
- * HDF5 series "tools" and "targets"; SCENE.md, docs/outputs.md). */
+/* tools.c — the sim module's side of the tools: the scene settings they
+ * need, building them, and their outputs (tools.csv, targets.csv,
+ * <tool>.pvd frames, the HDF5 series "tools" and "targets";
+ * docs/outputs.md). Their step is the contact module's (nh_contact_step). */
 #include "sim/sim_impl.h"
 
 #include <math.h>
@@ -12,13 +13,6 @@ static const char *const nh_tool_columns[] = {"step",          "time",  "name", 
                                               "tip_y",         "tip_z", "depth", "axial_force",
                                               "lateral_force", "state"};
 static const char *const nh_target_columns[] = {"step", "time", "name", "x", "y", "z", "distance"};
-
-/* Constraint solve: target tolerance and sweeps of nh_mcp_solve, and the
- * residual accepted when the sweeps stall short of the target (the
- * dimensionless law violation, see solve.h; reported per step). */
-#define NH_MCP_TOLERANCE 1e-10
-#define NH_MCP_ACCEPT    1e-5
-#define NH_MCP_SWEEPS    2000
 
 int nh_sim_tools_build(nh_sim *s) {
   const nh_scene *sc = s->scene;
@@ -34,38 +28,17 @@ int nh_sim_tools_build(nh_sim *s) {
            "state): run it again from the start",
            sc->tools[0].where);
   NH_TRY(nh_contact_create(sc, s->mesh, &s->contact));
-  s->ctools = nh_calloc((size_t)sc->n_tools, sizeof *s->ctools);
   s->tool_pvd = nh_calloc((size_t)sc->n_tools, sizeof *s->tool_pvd);
-  if (!s->ctools || !s->tool_pvd) return NH_ERROR(NH_ERR_MEMORY, "out of memory: tools");
+  if (!s->tool_pvd) return NH_ERROR(NH_ERR_MEMORY, "out of memory: tools");
   return NH_OK;
 }
 
 void nh_sim_tools_destroy(nh_sim *s) {
   for (int k = 0; s->tool_pvd && k < s->scene->n_tools; k++) nh_pvd_destroy(&s->tool_pvd[k]);
   free(s->tool_pvd);
-  free(s->ctools);
-  nh_rows_free(&s->rows);
   nh_contact_destroy(&s->contact);
   nh_csv_destroy(&s->tools_csv);
   nh_csv_destroy(&s->targets_csv);
-}
-
-int nh_sim_tools_step(nh_sim *s, double t_new, nh_step_stats *stats) {
-  const double h = s->scene->time.step, t = t_new - h;
-  int nd = 0;
-  NH_TRY(nh_contact_begin_step(s->contact, s->mesh, s->u, t, h, &s->rows, s->ctools, &nd));
-  int rc = nh_step_coupled(s->system, &s->integrator, s->f_ext, s->u, s->v, nd, s->ctools, &s->rows,
-                           NH_MCP_TOLERANCE, NH_MCP_ACCEPT, NH_MCP_SWEEPS, &s->cstats);
-  *stats = s->cstats.step;
-  if (rc) {
-    if (s->rows.m > 0 && s->cstats.mcp.iterations >= NH_MCP_SWEEPS) { /* above NH_MCP_ACCEPT */
-      char why[512];
-      snprintf(why, sizeof why, "%s", nh_error_message());
-      return NH_ERROR(rc, "constraint solve (%d rows): %s", s->rows.m, why);
-    }
-    return rc;
-  }
-  return nh_contact_end_step(s->contact, s->mesh, s->u, &s->rows, t_new, h);
 }
 
 void nh_sim_point_position(const nh_sim *s, int i, double x[3]) {

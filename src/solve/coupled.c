@@ -1,6 +1,6 @@
 /* coupled.c — one backward-Euler step of the tissue and the tools coupled by
  * constraint rows: Algorithm 1 of the seed across diagonal blocks
- * (docs/interaction.md "Solver").
+ * (docs/interaction.md "The coupled step").
  *
  * The blocks are the tissue (A_t, sparse, CHOLMOD) and each tool (A_k, dense
  * Cholesky: its tangent is small; see nh_beam_dynamic_prepare). With the right-hand sides of the

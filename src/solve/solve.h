@@ -165,7 +165,10 @@ int nh_mcp_solve(int m, const double *W, const double *r, const nh_row_law *laws
                  int max_iterations, double *lambda, nh_mcp_stats *stats);
 
 /* ---- tissue and tools in one step: Algorithm 1 across blocks (coupled.c) ----
- * docs/interaction.md "Solver". */
+ * docs/interaction.md "The coupled step". The rows below are this module's
+ * interface to constraints: the contact module (above solve) writes the
+ * needle's rows in this format; nothing here knows needles, only tissue
+ * points, beam points, directions and laws. */
 
 /* Constraint rows between tissue points and tool points. Row i reads
  *   g_i = n_i · (x_tissue(P_i) − x_tool(s_i)),

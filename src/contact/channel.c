@@ -1,0 +1,215 @@
+/* channel.c — the tip and shaft constraints in the cut channel (the seed's
+ * Eqs. 8-9; docs/interaction.md, "Tip" and "Shaft").
+ *
+ * Once a group has punctured, the channel is a list of tissue material
+ * points laid behind the tip one spacing apart, the entry point first, and
+ * its front is the material point the tip is anchored to. Every tie between
+ * such a point P and a tool point at arc length s uses a frame at the tool
+ * point: t the Hermite tangent, n1 the node's second director made
+ * orthogonal to t, n2 = t × n1. Rows (nh_rows, solve/solve.h:
+ * g = n · (x_P − x_tool), force on the tissue along +n):
+ *   shaft point  n1, n2 bilateral (g the lateral offset); t friction with
+ *                bound μ |(λ1, λ2)| + friction_per_length × spacing (g = 0):
+ *                it sticks, or slides as the tool moves in or out;
+ *   tip          the same at the front with bound μ |(λ1, λ2)| + cutting
+ *                force × h and g = t · (x_P − x_tip).
+ * The tip rows belong to the group's leading tool (the outer tool unless it
+ * retracts, else a released nested tool that does not): when their axial
+ * row slides forward on its bound the tip cuts (Eq. 8) and the front moves
+ * to the material point at the tip, laying channel points on the way. A
+ * channel point is tied to the outermost tool of the group whose axis
+ * passes it within the tool's length; a retracting tool uncovers the
+ * points it leaves, which then have no rows. */
+#include "contact/contact_impl.h"
+
+#include <string.h>
+
+int nh_channel_open(nh_group *G, const nh_tool_spec *sp, const nh_mesh *m) {
+  if (nh_grow((void **)&G->chan, &G->cap_chan, 1, sizeof *G->chan)) return NH_ERR_MEMORY;
+  G->entry.len = nh_point_spacing(sp, m, &G->entry);
+  G->entry.tool = -1, G->entry.row = -1;
+  memset(G->entry.lam, 0, sizeof G->entry.lam);
+  G->chan[0] = G->entry;
+  G->n_chan = 1;
+  G->front = G->entry;
+  return NH_OK;
+}
+
+/* Lay channel points from the last one towards `to`, one per spacing. */
+static int nh_channel_lay(nh_group *G, const nh_tool_spec *spec, const nh_mesh *m,
+                          const nh_cpoint *to) {
+  for (;;) {
+    const nh_cpoint *last = &G->chan[G->n_chan - 1];
+    double d[3] = {to->X[0] - last->X[0], to->X[1] - last->X[1], to->X[2] - last->X[2]};
+    double dist = sqrt(dot3(d, d)), sp = nh_point_spacing(spec, m, last);
+    if (dist < sp) return NH_OK;
+    if (nh_grow((void **)&G->chan, &G->cap_chan, G->n_chan + 1, sizeof *G->chan))
+      return NH_ERR_MEMORY;
+    nh_cpoint p = {0};
+    double X[3];
+    for (int i = 0; i < 3; i++) X[i] = last->X[i] + d[i] * sp / dist;
+    if (nh_point_set(m, &p, X)) return NH_OK; /* left the tissue */
+    p.len = sp, p.tool = -1, p.row = -1;
+    G->chan[G->n_chan++] = p;
+  }
+}
+
+/* Three rows tying P to tool k's point at s (shaft or tip); returns the
+ * first row or −1 (memory). */
+static int nh_tie_rows(nh_contact *c, const nh_mesh *m, const double *u, nh_cpoint *p, int k,
+                       double s, double threshold, int tip) {
+  nh_tool *tl = &c->tools[k];
+  nh_rows *rows = &c->rows;
+  double xb[3], t[3], J[36], xi, xp[3];
+  int e;
+  nh_beam_point(tl->beam, s, xb, t, &e, &xi, J);
+  nh_point_position(m, u, p, xp);
+  const double *T = nh_beam_directors(tl->beam) + 9 * (xi < 0.5 ? e : e + 1);
+  double n1[3] = {T[1], T[4], T[7]}, n2[3], d = dot3(n1, t);
+  for (int i = 0; i < 3; i++) n1[i] -= d * t[i];
+  normalize3(n1);
+  cross3(t, n1, n2);
+  const double *dirs[3] = {n1, n2, t};
+  int first = -1;
+  for (int q = 0; q < 3; q++) {
+    int r = nh_rows_add(rows);
+    if (r < 0) return -1;
+    if (q == 0) first = r;
+    nh_row_tissue(rows, r, m, p);
+    memcpy(rows->dir + 3 * r, dirs[q], 3 * sizeof(double));
+    rows->tool[r] = tl->dyn, rows->elem[r] = e;
+    memcpy(rows->J + 36 * r, J, sizeof J);
+    double g[3] = {xp[0] - xb[0], xp[1] - xb[1], xp[2] - xb[2]};
+    rows->gap[r] = (q < 2 || tip) ? dot3(dirs[q], g) : 0.0;
+    rows->lambda[r] = p->lam[q];
+    if (q == 2)
+      rows->law[r] =
+          (nh_row_law){NH_ROW_FRICTION, first, first + 1, tl->spec->friction, threshold, -1};
+  }
+  p->row = first, p->tool = k, p->s = s;
+  return first;
+}
+
+/* Tool k in group G's order: the outer tool, then its released nested tools. */
+static int nh_in_group(const nh_contact *c, const nh_group *G, int k) {
+  const nh_tool *tl = &c->tools[k];
+  return k == G->outer || (tl->host == G->outer && tl->released);
+}
+
+/* Which tool of group G covers P, and where: the outermost one whose axis
+ * passes P at an arc length in [0, L − clearance]. Returns the tool or −1. */
+static int nh_cover(const nh_contact *c, const nh_group *G, const double xp[3], double s0,
+                    double clear_tip, double *s_out) {
+  for (int k = 0; k < c->n; k++) {
+    if (!nh_in_group(c, G, k)) continue;
+    const nh_tool *tl = &c->tools[k];
+    double L = nh_beam_length(tl->beam);
+    double s = nh_tool_project(tl->beam, xp, k == G->outer ? s0 : s0 - tl->offset);
+    double clear = k == G->tip_tool ? clear_tip : 0.0;
+    if (s >= 0.0 && s <= L - clear) {
+      *s_out = s;
+      return k;
+    }
+  }
+  return -1;
+}
+
+/* The leading tool of group G for the tip rows: the outer tool unless it
+ * retracts, else a released nested tool that does not; −1 if none. */
+static int nh_leader(const nh_contact *c, const nh_group *G, double t, double h) {
+  for (int k = 0; k < c->n; k++)
+    if (nh_in_group(c, G, k) && nh_tool_speed(c->tools[k].spec, t, h) >= 0.0) return k;
+  return -1;
+}
+
+int nh_tip_rows(nh_contact *c, nh_group *G, const nh_mesh *m, const double *u, double t, double h) {
+  if (!G->punctured) return NH_OK;
+  const nh_tool_spec *sp = c->tools[G->outer].spec;
+  G->tip_tool = -1;
+  int lead = nh_leader(c, G, t, h);
+  if (lead < 0 || c->tools[lead].dyn < 0) return NH_OK;
+  nh_tool *tl = &c->tools[lead];
+  double xt[3], tt[3], xf[3];
+  nh_beam_point(tl->beam, nh_beam_length(tl->beam), xt, tt, NULL, NULL, NULL);
+  nh_point_position(m, u, &G->front, xf);
+  double ahead = dot3(tt, xf) - dot3(tt, xt), sp_f = nh_point_spacing(sp, m, &G->front);
+  if (ahead < 0.0) { /* the tip passed the front inside the channel: the front moves to it */
+    nh_cpoint p = G->front;
+    if (!nh_material_point(m, u, xt, G->front.X, &p)) {
+      G->front = p, ahead = 0.0;
+      NH_TRY(nh_channel_lay(G, sp, m, &G->front));
+    }
+  }
+  if (ahead <= 0.05 * sp_f) {
+    G->tip_tool = lead;
+    if (nh_tie_rows(c, m, u, &G->front, lead, nh_beam_length(tl->beam), tl->spec->cutting_force * h,
+                    1) < 0)
+      return NH_ERR_MEMORY;
+  }
+  return NH_OK;
+}
+
+/* Friction row r: on its bound? */
+static int nh_on_bound(const nh_rows *rows, int r) {
+  const nh_row_law *l = &rows->law[r];
+  double n = l->normal >= 0 ? fabs(rows->lambda[l->normal]) : 0.0;
+  if (l->normal2 >= 0) n = hypot(n, rows->lambda[l->normal2]);
+  double b = l->mu * n + l->threshold;
+  return fabs(rows->lambda[r]) >= b * (1.0 - 1e-7);
+}
+
+int nh_tip_update(nh_contact *c, nh_group *G, const nh_mesh *m, const double *u, double h,
+                  nh_group_events *ev) {
+  if (G->tip_tool < 0) return NH_OK;
+  const nh_rows *rows = &c->rows;
+  const nh_tool_spec *sp = c->tools[G->outer].spec;
+  nh_tool *tl = &c->tools[G->tip_tool];
+  int r = G->front.row;
+  ev->covered = 1;
+  for (int q = 0; q < 3; q++) {
+    G->front.lam[q] = rows->lambda[r + q];
+    nh_tool_add_force(tl, rows, r + q, h, nh_beam_length(tl->beam));
+  }
+  if (!nh_on_bound(rows, r + 2) || rows->lambda[r + 2] < 0.0) return NH_OK; /* it sticks */
+  /* cut and advance (Eq. 8): the front moves to the material point at the tip */
+  double xt[3];
+  nh_beam_point(tl->beam, nh_beam_length(tl->beam), xt, NULL, NULL, NULL, NULL);
+  nh_cpoint p = G->front;
+  if (nh_material_point(m, u, xt, G->front.X, &p)) return NH_OK;
+  double d[3] = {p.X[0] - G->front.X[0], p.X[1] - G->front.X[1], p.X[2] - G->front.X[2]};
+  if (sqrt(dot3(d, d)) > 1e-9 * nh_point_spacing(sp, m, &G->front)) ev->cut = 1; /* it advanced */
+  G->front = p;
+  return nh_channel_lay(G, sp, m, &G->front);
+}
+
+int nh_shaft_rows(nh_contact *c, nh_group *G, const nh_mesh *m, const double *u, double h) {
+  if (!G->punctured) return NH_OK;
+  const double L = nh_beam_length(c->tools[G->outer].beam);
+  for (int i = 0; i < G->n_chan; i++) {
+    nh_cpoint *p = &G->chan[i];
+    double xp[3], s;
+    nh_point_position(m, u, p, xp);
+    p->row = -1;
+    int k = nh_cover(c, G, xp, p->tool >= 0 ? p->s : L, 0.5 * p->len, &s);
+    if (k < 0 || c->tools[k].dyn < 0) { /* uncovered: no rows */
+      p->tool = -1;
+      memset(p->lam, 0, sizeof p->lam);
+      continue;
+    }
+    if (nh_tie_rows(c, m, u, p, k, s, c->tools[k].spec->friction_per_length * p->len * h, 0) < 0)
+      return NH_ERR_MEMORY;
+  }
+  return NH_OK;
+}
+
+void nh_shaft_update(nh_contact *c, nh_group *G, double h, nh_group_events *ev) {
+  for (int i = 0; i < G->n_chan; i++) {
+    nh_cpoint *p = &G->chan[i];
+    if (p->row < 0) continue;
+    ev->covered = 1;
+    for (int q = 0; q < 3; q++) {
+      p->lam[q] = c->rows.lambda[p->row + q];
+      nh_tool_add_force(&c->tools[p->tool], &c->rows, p->row + q, h, p->s);
+    }
+  }
+}

@@ -1,0 +1,164 @@
+/* contact_impl.h — private to the contact module: the tools, their groups,
+ * the embedded tissue points, and the functions the files share.
+ *
+ *   contact.c   the step: begin (rows of every constraint), the coupled
+ *               solve, end (forces, the state machine); creation, relocation
+ *   tools.c     tool kinematics: prescribed motion, nesting (a tool following
+ *               its host), release, forces per tool and the per-tool report
+ *   points.c    tissue material points tied to the tools: where they are now,
+ *               the material point at a current position, a row's tissue part
+ *   puncture.c  the puncture constraint: entry point on the current surface,
+ *               its rows, its force against the puncture force
+ *   channel.c   the tip constraint (stick or cut and advance) and the shaft
+ *               constraint (channel points, stick/slide ties, retraction)
+ *
+ * Each constraint has a rows/update pair: nh_X_rows writes its rows for the
+ * step (nothing in a state where it does not act), nh_X_update reads their
+ * forces after the solve into the group's events. */
+#ifndef NH_CONTACT_IMPL_H
+#define NH_CONTACT_IMPL_H
+
+#include "contact/contact.h"
+
+#include <math.h>
+
+/* A tissue material point tied to a tool. */
+typedef struct {
+  double X[3];  /* material position */
+  int cell;     /* leaf containing X */
+  double xi[3]; /* natural coordinates in it */
+  double len;   /* channel length it stands for (spacing), m */
+  double s;     /* arc length of its tool point (last projection) */
+  int tool;     /* the tool it was tied to in the last step (−1: none) */
+  int row;      /* its first row in the last step (−1: none) */
+  double lam[3];
+} nh_cpoint;
+
+/* One tool: a beam, its motion and the forces of the last step. */
+typedef struct {
+  const nh_tool_spec *spec;
+  nh_beam *beam;
+  int group;     /* its group */
+  int host;      /* nested: the host tool (its group's outer tool); −1 for an outer tool */
+  int released;  /* nested: no longer follows its host */
+  double offset; /* nested: arc length of its base along the host */
+  int dyn;       /* its block in this step's coupled solve (−1: kinematic) */
+  double base_v[6];
+  double F[3];         /* the tissue's force on the tool in the last step, N */
+  double *f_node;      /* 3 per node: F distributed to the nearest nodes */
+  nh_tool_state state; /* an outer tool's: its group's */
+} nh_tool;
+
+/* A tool group: an outer tool and the tools nested in it, one hole in the
+ * tissue. The constraints live here: the entry point (puncture), the
+ * channel's front (tip) and the channel points (shaft). */
+typedef struct {
+  int outer; /* the outer tool */
+  int has_entry;
+  double n_out[3];
+  nh_cpoint entry; /* the puncture point; channel point 0 once punctured */
+  int entry_row;   /* first puncture row in the last step (−1) */
+  int punctured;
+  nh_cpoint *chan; /* channel points laid behind the tip (entry first) */
+  int n_chan, cap_chan;
+  nh_cpoint front;   /* the channel's front: the tip's anchor */
+  int tip_tool;      /* the tool with the tip rows in the last step (−1) */
+  double entry_x[3]; /* current position of the entry point (after the last step) */
+} nh_group;
+
+/* What a group's constraints saw in the step just solved: the input of the
+ * state machine (contact.c). */
+typedef struct {
+  int puncture_rows; /* the puncture rows were active */
+  int touching;      /* their normal force was positive */
+  int yielded;       /* it reached the puncture force: the tool punctures */
+  int covered;       /* a tip or shaft row was active */
+  int cut;           /* the tip cut forward */
+} nh_group_events;
+
+struct nh_contact {
+  const nh_scene *scene;
+  int n, n_groups;
+  nh_tool *tools;
+  nh_group *groups;
+  /* the step's constraint rows and dynamic tools (the coupled solve's blocks) */
+  nh_rows rows;
+  nh_coupled_tool *blocks;
+  int n_blocks;
+  nh_coupled_stats solve; /* the last step's */
+  int cut;                /* groups whose tip cut in the last step */
+};
+
+static inline double dot3(const double a[3], const double b[3]) {
+  return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+
+static inline void cross3(const double a[3], const double b[3], double c[3]) {
+  c[0] = a[1] * b[2] - a[2] * b[1];
+  c[1] = a[2] * b[0] - a[0] * b[2];
+  c[2] = a[0] * b[1] - a[1] * b[0];
+}
+
+static inline void normalize3(double a[3]) {
+  double n = sqrt(dot3(a, a));
+  if (n > 0) a[0] /= n, a[1] /= n, a[2] /= n;
+}
+
+/* ---- tools.c ---- */
+/* Speed of the prescribed insertion over the step t → t + h (m/s, < 0 retracting). */
+double nh_tool_speed(const nh_tool_spec *spec, double t, double h);
+/* Set up tool k of the scene (its group already set): its beam at rest,
+ * an outer tool checked to reach the tissue, a nested tool placed on its
+ * host (created before it). NH_ERR_INPUT (the scene's tools.k: the beam's
+ * reason, the tool starts inside the tissue or its tip never comes within
+ * one cell of it over its motion), NH_ERR_MEMORY. */
+int nh_tool_init(nh_contact *c, int k, const nh_mesh *mesh);
+/* Place a nested tool on its host's deformed axis (velocities over h; h = 0: at rest). */
+void nh_tool_follow(nh_tool *in, const nh_tool *host, double h);
+/* Nested tools not yet released follow their host and are released at
+ * their release time t_new. */
+void nh_tools_follow(nh_contact *c, double t_new, double h);
+/* The coupled solve's block of every tool that moves by its own dynamics
+ * (not a nested tool following its host) over t → t + h, under gravity g. */
+void nh_tools_blocks(nh_contact *c, double t, double h, const double g[3]);
+/* Zero the forces of the last step; NH_ERR_NUMERIC on a tool position that
+ * is not finite. */
+int nh_tools_clear_forces(nh_contact *c);
+/* Add row r's force on the tool (−n λ / h) at arc length s to its totals. */
+void nh_tool_add_force(nh_tool *tool, const nh_rows *rows, int r, double h, double s);
+/* Closest point of a tool to x: arc length by Newton from s0 (unclamped:
+ * the caller decides what lies beyond the ends). */
+double nh_tool_project(const nh_beam *beam, const double x[3], double s0);
+
+/* ---- points.c ---- */
+/* Current position of an embedded tissue point. */
+void nh_point_position(const nh_mesh *mesh, const double *u, const nh_cpoint *p, double x[3]);
+/* Set a point's material position and locate it (nonzero: outside the mesh). */
+int nh_point_set(const nh_mesh *mesh, nh_cpoint *p, const double X[3]);
+/* The material point whose current position is x (Newton on X + u(X) = x,
+ * starting from X0). NH_ERR_INPUT if it leaves the tissue. */
+int nh_material_point(const nh_mesh *mesh, const double *u, const double x[3], const double X0[3],
+                      nh_cpoint *p);
+/* Channel point spacing at p: the scene's, or half the local cell edge. */
+double nh_point_spacing(const nh_tool_spec *spec, const nh_mesh *mesh, const nh_cpoint *p);
+/* The tissue part of row r: p's cell nodes and shape values. */
+void nh_row_tissue(nh_rows *rows, int r, const nh_mesh *mesh, const nh_cpoint *p);
+
+/* ---- puncture.c ---- */
+/* The entry point of an outer tool on the rest surface (has_entry = 0: its
+ * axis misses the tissue). */
+void nh_puncture_init(nh_group *G, const nh_tool_spec *spec, const nh_mesh *mesh);
+int nh_puncture_rows(nh_contact *c, nh_group *G, const nh_mesh *mesh, const double *u, double h);
+void nh_puncture_update(nh_contact *c, nh_group *G, double h, nh_group_events *ev);
+
+/* ---- channel.c ---- */
+/* Open the channel at the entry point (the transition to punctured). */
+int nh_channel_open(nh_group *G, const nh_tool_spec *spec, const nh_mesh *mesh);
+int nh_tip_rows(nh_contact *c, nh_group *G, const nh_mesh *mesh, const double *u, double t,
+                double h);
+int nh_tip_update(nh_contact *c, nh_group *G, const nh_mesh *mesh, const double *u, double h,
+                  nh_group_events *ev);
+int nh_shaft_rows(nh_contact *c, nh_group *G, const nh_mesh *mesh, const double *u, double h);
+void nh_shaft_update(nh_contact *c, nh_group *G, double h, nh_group_events *ev);
+
+#endif
