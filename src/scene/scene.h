@@ -120,6 +120,22 @@ typedef struct {
 typedef enum { NH_MARK_MAX = 0, NH_MARK_DORFLER = 1 } nh_mark_strategy;
 typedef enum { NH_HANGING_ELIMINATE = 0, NH_HANGING_LAGRANGE = 1 } nh_hanging_method;
 
+/* The adapt section: estimation, marking, template, limits (adapt/refine.c). */
+typedef struct {
+  int enabled;                       /* the scene has an `adapt` section */
+  nh_mark_strategy strategy;         /* adapt.marking.strategy: max (default) | dorfler */
+  double theta;                      /* adapt.marking.theta (max): in (0, 1), default 0.3 */
+  double fraction;                   /* adapt.marking.fraction (dorfler): in (0, 1], default 0.5 */
+  char template_path[NH_PATH_MAX];   /* adapt.template resolved to a file (default hex2) */
+  int max_level;                     /* adapt.max_level: >= 0, default 2 */
+  double min_size;                   /* adapt.min_size: m, >= 0, default 0 (no limit) */
+  int max_dofs;                      /* adapt.max_dofs: >= 0, default 0 (no budget) */
+  int every;                         /* adapt.every: >= 1, default 1 */
+  nh_hanging_method hanging;         /* adapt.hanging: eliminate (default) | lagrange */
+  char where[NH_WHERE_MAX];          /* "FILE:LINE: adapt" */
+  char where_template[NH_WHERE_MAX]; /* "FILE:LINE: adapt.template" */
+} nh_adapt_spec;
+
 typedef struct nh_scene {
   char file[NH_PATH_MAX]; /* the scene file as given */
   char name[NH_NAME_MAX]; /* name (required) */
@@ -165,20 +181,7 @@ typedef struct nh_scene {
     int threads;        /* solver.threads: OpenMP threads, 0 = all cores (default 0) */
   } solver;
 
-  struct {
-    int enabled;                     /* the scene has an `adapt` section */
-    nh_mark_strategy strategy;       /* adapt.marking.strategy: max (default) | dorfler */
-    double theta;                    /* adapt.marking.theta (max): in (0, 1), default 0.3 */
-    double fraction;                 /* adapt.marking.fraction (dorfler): in (0, 1], default 0.5 */
-    char template_path[NH_PATH_MAX]; /* adapt.template resolved to a file (default hex2) */
-    int max_level;                   /* adapt.max_level: >= 0, default 2 */
-    double min_size;                 /* adapt.min_size: m, >= 0, default 0 (no limit) */
-    int max_dofs;                    /* adapt.max_dofs: >= 0, default 0 (no budget) */
-    int every;                       /* adapt.every: >= 1, default 1 */
-    nh_hanging_method hanging;       /* adapt.hanging: eliminate (default) | lagrange */
-    char where[NH_WHERE_MAX];        /* "FILE:LINE: adapt" */
-    char where_template[NH_WHERE_MAX]; /* "FILE:LINE: adapt.template" */
-  } adapt;
+  nh_adapt_spec adapt;
 
   int n_probes;
   nh_probe *probes; /* probes: list of {name, point} */
