@@ -16,13 +16,11 @@
  * nh_sim_setup_mesh, at creation and after every refinement. */
 #include "sim/sim_impl.h"
 
-#include <dirent.h>
 #include <math.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <unistd.h>
 
 static const char *const nh_step_columns[] = {"step",
                                               "time",
@@ -275,53 +273,6 @@ static int nh_write_probe_rows(nh_sim *s) {
                       u[1], u[2]));
   }
   return s->contact ? nh_sim_tools_rows(s) : NH_OK;
-}
-
-/* Keep the rows of an existing CSV file whose first field (the step) is at
- * most `step`: re-create the table and re-append them. */
-static int nh_csv_resume(const char *path, int n_columns, const char *const *columns, int step,
-                         nh_csv **out) {
-  FILE *f = fopen(path, "r");
-  char *text = NULL;
-  size_t len = 0;
-  if (f) {
-    fseek(f, 0, SEEK_END);
-    long size = ftell(f);
-    rewind(f);
-    text = malloc((size_t)(size > 0 ? size : 0) + 1);
-    if (!text) {
-      fclose(f);
-      return NH_ERROR(NH_ERR_MEMORY, "out of memory resuming %s", path);
-    }
-    len = fread(text, 1, (size_t)(size > 0 ? size : 0), f);
-    text[len] = '\0';
-    fclose(f);
-  }
-  int rc = nh_csv_create(path, n_columns, columns, out);
-  char *line = text ? strchr(text, '\n') : NULL; /* skip the header */
-  while (!rc && line && line[1]) {
-    char *start = line + 1, *end = strchr(start, '\n');
-    if (end) *end = '\0';
-    if (atoi(start) <= step && start[0] >= '0' && start[0] <= '9')
-      rc = nh_csv_row(*out, "%s", start);
-    line = end;
-  }
-  free(text);
-  return rc;
-}
-
-/* Re-list in a new PVD the frames PREFIX_NNNNNN.vtu on disk with NNNNNN <= step. */
-static int nh_pvd_resume(const char *dir, const char *prefix, double dt, int step, nh_pvd **out) {
-  char path[NH_PATH_MAX + 64];
-  snprintf(path, sizeof path, "%s/%s.pvd", dir, prefix);
-  NH_TRY(nh_pvd_create(path, out));
-  for (int k = 0; k <= step; k++) { /* in step order */
-    char name[64];
-    snprintf(name, sizeof name, "%s_%06d.vtu", prefix, k);
-    snprintf(path, sizeof path, "%s/%s", dir, name);
-    if (access(path, R_OK) == 0) NH_TRY(nh_pvd_add(*out, k * dt, name));
-  }
-  return NH_OK;
 }
 
 static int nh_open_outputs(nh_sim *s) {
