@@ -1,7 +1,7 @@
 /* scene — reading a YAML scene (libyaml) into validated plain structs in SI
  * units, with defaults and `--set KEY=VALUE` overrides by dotted path.
  *
- * The contract is ../shared/SCENE.md; docs/scene.md lists every key. Every
+ * docs/scene.md lists every key, its type, default and unit. Every
  * error is NH_ERR_INPUT with one message of the form
  *     FILE:LINE: KEY: what is wrong
  * where KEY is the dotted path (e.g. tissue.material.poisson) and, for an

@@ -5,9 +5,10 @@
  * equilibrium under the loads of that pseudo-time (static); with `adapt`,
  * the error of that solution is estimated (SPR); then rows of steps.csv and
  * probes.csv, and a frame when due, so a frame shows a solution on the mesh
- * it was computed on, with its error indicators; last, marked cells are
- * refined and the state is carried to the new nodes (Eq. 17), and the next
- * step continues on the new mesh. Every phase is timed and the times are
+ * it was computed on, with its error indicators; last, adapt marks and
+ * refines cells and carries the state to the new nodes (nh_adapt_step,
+ * Eq. 17), sim rebuilds what depends on the mesh, and the next step
+ * continues on the new mesh. Every phase is timed and the times are
  * kept per step for the summary. The initial state is frame 0, so a time
  * series always starts at rest.
  *
