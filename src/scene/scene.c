@@ -35,13 +35,15 @@
  * here; the template's contents are proved by nh_template_load.
  *
  * Nothing here is global: the context of one load (file name, overrides)
- * travels in an nh_scene_ctx.
+ * travels in an nh_ctx.
  *
- * The module's other files: plan.c resolves what depends on other keys once
- * tools and targets are read (planned trajectories, release: target,
- * symbolic untils); schedule.c evaluates schedules and gravity at a time,
- * once per step; print.c prints the summary of `check`. */
-#include "scene/scene_impl.h"
+ * The module's other files: plan.c computes the planned trajectories and
+ * the tip travel that symbolic untils resolve against; schedule.c evaluates
+ * schedules and gravity at a time, once per step; print.c prints the
+ * summary of `check`. */
+#include "scene/scene.h"
+
+#include "scene/yaml_tree.h"
 
 #include <ctype.h>
 #include <errno.h>
@@ -55,6 +57,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#define NH_KEY_MAX   256
 #define NH_STEPS_MAX 1000000000.0
 
 /* Where adapt.template names are looked up when the environment variable
@@ -65,16 +68,25 @@
 #define NH_TEMPLATES_DIR "templates"
 #endif
 
+/* What one load knows, for messages. */
+typedef struct {
+  const char *file;
+  const char *const *overrides;
+  int n_overrides;
+} nh_ctx;
+
 /* "FILE:LINE" or "--set:K" of a node (the top of the file when NULL). */
-static void location(const nh_scene_ctx *c, const nh_yaml_node *at, char *buf, size_t cap) {
+static void location(const nh_ctx *c, const nh_yaml_node *at, char *buf, size_t cap) {
   if (at && at->source > 0)
     snprintf(buf, cap, "--set:%d", at->source);
   else
     snprintf(buf, cap, "%s:%d", c->file, at && at->line > 0 ? at->line : 1);
 }
 
-int nh_scene_fail(const nh_scene_ctx *c, const nh_yaml_node *at, const char *key, const char *fmt,
-                  ...) {
+/* Record the one input error of this load: "LOC: KEY: reason". */
+static int fail(const nh_ctx *c, const nh_yaml_node *at, const char *key, const char *fmt, ...)
+    __attribute__((format(printf, 4, 5)));
+static int fail(const nh_ctx *c, const nh_yaml_node *at, const char *key, const char *fmt, ...) {
   char loc[NH_PATH_MAX + 32], msg[1024], text[512];
   va_list ap;
   va_start(ap, fmt);
@@ -89,21 +101,20 @@ int nh_scene_fail(const nh_scene_ctx *c, const nh_yaml_node *at, const char *key
 }
 
 /* "LOC: KEY" for the `where` fields. */
-static void make_where(const nh_scene_ctx *c, const nh_yaml_node *at, const char *key,
-                       char *where) {
+static void make_where(const nh_ctx *c, const nh_yaml_node *at, const char *key, char *where) {
   char loc[NH_PATH_MAX + 32];
   location(c, at, loc, sizeof loc);
   nh_yaml_join(where, NH_WHERE_MAX, loc, ": ", key); /* a very long file name is cut */
 }
 
 /* "parent.key" (or "key" at the top) into buf[NH_KEY_MAX]. */
-const char *nh_scene_join(char *buf, const char *parent, const char *key) {
+static const char *join(char *buf, const char *parent, const char *key) {
   nh_yaml_join(buf, NH_KEY_MAX, parent, parent[0] ? "." : "", key);
   return buf;
 }
 
 /* "parent.i" into buf[NH_KEY_MAX]. */
-const char *nh_scene_join_index(char *buf, const char *parent, int i) {
+static const char *join_index(char *buf, const char *parent, int i) {
   char index[16];
   snprintf(index, sizeof index, "%d", i);
   nh_yaml_join(buf, NH_KEY_MAX, parent, ".", index);
@@ -111,7 +122,7 @@ const char *nh_scene_join_index(char *buf, const char *parent, int i) {
 }
 
 /* A short, one-line rendering of a node for messages: 'text', a list, ... */
-const char *nh_scene_describe(const nh_yaml_node *n, char *buf, size_t cap) {
+static const char *describe(const nh_yaml_node *n, char *buf, size_t cap) {
   if (n->kind == NH_YAML_MAP) return "a mapping";
   if (n->kind == NH_YAML_SEQ) return "a list";
   if (nh_yaml_is_null(n)) return "nothing";
@@ -153,99 +164,91 @@ static int in_list(const char *key, const char *const *list) {
 }
 
 /* Refuse keys of `map` that are not in `allowed` (NULL-terminated). */
-static int check_keys(const nh_scene_ctx *c, const nh_yaml_node *map, const char *path,
+static int check_keys(const nh_ctx *c, const nh_yaml_node *map, const char *path,
                       const char *const *allowed) {
   char key[NH_KEY_MAX];
   for (int i = 0; i < map->n; ++i) {
     const nh_yaml_node *k = map->keys[i];
     if (in_list(k->text, allowed)) continue;
-    nh_scene_join(key, path, k->text);
+    join(key, path, k->text);
     const char *best = NULL;
     int best_d = 3;
     for (const char *const *a = allowed; *a; ++a) {
       int d = edit_distance(k->text, *a);
       if (d < best_d) best_d = d, best = *a;
     }
-    if (best) return nh_scene_fail(c, k, key, "unknown key (did you mean '%s'?)", best);
-    return nh_scene_fail(c, k, key, "unknown key");
+    if (best) return fail(c, k, key, "unknown key (did you mean '%s'?)", best);
+    return fail(c, k, key, "unknown key");
   }
   return NH_OK;
 }
 
 /* ---- typed values ---- */
 
-static int as_number(const nh_scene_ctx *c, const nh_yaml_node *n, const char *key, double *out) {
+static int as_number(const nh_ctx *c, const nh_yaml_node *n, const char *key, double *out) {
   char d[96];
   if (n->kind != NH_YAML_SCALAR || nh_yaml_is_null(n))
-    return nh_scene_fail(c, n, key, "expected a number, got %s", nh_scene_describe(n, d, sizeof d));
+    return fail(c, n, key, "expected a number, got %s", describe(n, d, sizeof d));
   if (n->quoted)
-    return nh_scene_fail(c, n, key, "expected a number, got the quoted string %s",
-                         nh_scene_describe(n, d, sizeof d));
+    return fail(c, n, key, "expected a number, got the quoted string %s", describe(n, d, sizeof d));
   char *end = NULL;
   double v = strtod(n->text, &end);
   if (end == n->text || *end || n->text[0] == ' ' || n->text[0] == '\t')
-    return nh_scene_fail(c, n, key, "expected a number, got %s", nh_scene_describe(n, d, sizeof d));
+    return fail(c, n, key, "expected a number, got %s", describe(n, d, sizeof d));
   if (!isfinite(v))
-    return nh_scene_fail(c, n, key, "expected a finite number, got %s",
-                         nh_scene_describe(n, d, sizeof d));
+    return fail(c, n, key, "expected a finite number, got %s", describe(n, d, sizeof d));
   *out = v;
   return NH_OK;
 }
 
-static int as_int(const nh_scene_ctx *c, const nh_yaml_node *n, const char *key, int *out) {
+static int as_int(const nh_ctx *c, const nh_yaml_node *n, const char *key, int *out) {
   char d[96];
   double v = 0;
   if (n->kind != NH_YAML_SCALAR || nh_yaml_is_null(n) || n->quoted)
-    return nh_scene_fail(c, n, key, "expected an integer, got %s",
-                         nh_scene_describe(n, d, sizeof d));
+    return fail(c, n, key, "expected an integer, got %s", describe(n, d, sizeof d));
   char *end = NULL;
   v = strtod(n->text, &end);
   if (end == n->text || *end || !isfinite(v) || v != floor(v))
-    return nh_scene_fail(c, n, key, "expected an integer, got %s",
-                         nh_scene_describe(n, d, sizeof d));
+    return fail(c, n, key, "expected an integer, got %s", describe(n, d, sizeof d));
   if (v > INT_MAX || v < INT_MIN)
-    return nh_scene_fail(c, n, key, "%s is too large for an integer",
-                         nh_scene_describe(n, d, sizeof d));
+    return fail(c, n, key, "%s is too large for an integer", describe(n, d, sizeof d));
   *out = (int)v;
   return NH_OK;
 }
 
-static int as_bool(const nh_scene_ctx *c, const nh_yaml_node *n, const char *key, int *out) {
+static int as_bool(const nh_ctx *c, const nh_yaml_node *n, const char *key, int *out) {
   char d[96];
   if (n->kind == NH_YAML_SCALAR && !n->quoted) {
     const char *t = n->text;
     if (!strcmp(t, "true") || !strcmp(t, "True") || !strcmp(t, "TRUE")) return *out = 1, NH_OK;
     if (!strcmp(t, "false") || !strcmp(t, "False") || !strcmp(t, "FALSE")) return *out = 0, NH_OK;
   }
-  return nh_scene_fail(c, n, key, "expected true or false, got %s",
-                       nh_scene_describe(n, d, sizeof d));
+  return fail(c, n, key, "expected true or false, got %s", describe(n, d, sizeof d));
 }
 
-int nh_scene_as_string(const nh_scene_ctx *c, const nh_yaml_node *n, const char *key, char *out,
-                       size_t cap) {
+static int as_string(const nh_ctx *c, const nh_yaml_node *n, const char *key, char *out,
+                     size_t cap) {
   char d[96];
   if (n->kind != NH_YAML_SCALAR || nh_yaml_is_null(n))
-    return nh_scene_fail(c, n, key, "expected a string, got %s", nh_scene_describe(n, d, sizeof d));
+    return fail(c, n, key, "expected a string, got %s", describe(n, d, sizeof d));
   if (strlen(n->text) >= cap)
-    return nh_scene_fail(c, n, key, "%s is longer than %zu characters",
-                         nh_scene_describe(n, d, sizeof d), cap - 1);
+    return fail(c, n, key, "%s is longer than %zu characters", describe(n, d, sizeof d), cap - 1);
   memcpy(out, n->text, strlen(n->text) + 1);
   return NH_OK;
 }
 
 /* A list of exactly 3 numbers (integers if `ints`). */
-static int as_triple(const nh_scene_ctx *c, const nh_yaml_node *n, const char *key, int ints,
-                     double *out, int *iout) {
+static int as_triple(const nh_ctx *c, const nh_yaml_node *n, const char *key, int ints, double *out,
+                     int *iout) {
   char d[96], item[NH_KEY_MAX];
   const char *what = ints ? "integers" : "numbers";
   if (n->kind != NH_YAML_SEQ)
-    return nh_scene_fail(c, n, key, "expected a list of 3 %s, got %s", what,
-                         nh_scene_describe(n, d, sizeof d));
+    return fail(c, n, key, "expected a list of 3 %s, got %s", what, describe(n, d, sizeof d));
   if (n->n != 3)
-    return nh_scene_fail(c, n, key, "expected a list of 3 %s, got %d entr%s", what, n->n,
-                         n->n == 1 ? "y" : "ies");
+    return fail(c, n, key, "expected a list of 3 %s, got %d entr%s", what, n->n,
+                n->n == 1 ? "y" : "ies");
   for (int i = 0; i < 3; ++i) {
-    nh_scene_join_index(item, key, i);
+    join_index(item, key, i);
     if (ints)
       NH_TRY(as_int(c, n->items[i], item, &iout[i]));
     else
@@ -254,11 +257,11 @@ static int as_triple(const nh_scene_ctx *c, const nh_yaml_node *n, const char *k
   return NH_OK;
 }
 
-static int as_vec3(const nh_scene_ctx *c, const nh_yaml_node *n, const char *key, double out[3]) {
+static int as_vec3(const nh_ctx *c, const nh_yaml_node *n, const char *key, double out[3]) {
   return as_triple(c, n, key, 0, out, NULL);
 }
 
-static int as_ivec3(const nh_scene_ctx *c, const nh_yaml_node *n, const char *key, int out[3]) {
+static int as_ivec3(const nh_ctx *c, const nh_yaml_node *n, const char *key, int out[3]) {
   return as_triple(c, n, key, 1, NULL, out);
 }
 
@@ -266,84 +269,81 @@ static int as_ivec3(const nh_scene_ctx *c, const nh_yaml_node *n, const char *ke
 
 /* The value of `name` in `map` (NULL if absent); a required key that is absent
  * is an error at the line of `map`. */
-int nh_scene_field(const nh_scene_ctx *c, const nh_yaml_node *map, const char *path,
-                   const char *name, int required, const nh_yaml_node **out) {
+static int field(const nh_ctx *c, const nh_yaml_node *map, const char *path, const char *name,
+                 int required, const nh_yaml_node **out) {
   char key[NH_KEY_MAX];
   *out = nh_yaml_get(map, name, NULL);
-  if (!*out && required)
-    return nh_scene_fail(c, map, nh_scene_join(key, path, name), "required key missing");
+  if (!*out && required) return fail(c, map, join(key, path, name), "required key missing");
   return NH_OK;
 }
 
 /* A mapping section: NULL when absent or null; an error if it is something
  * else (or absent while required). */
-static int section(const nh_scene_ctx *c, const nh_yaml_node *map, const char *path,
-                   const char *name, int required, const nh_yaml_node **out) {
+static int section(const nh_ctx *c, const nh_yaml_node *map, const char *path, const char *name,
+                   int required, const nh_yaml_node **out) {
   char key[NH_KEY_MAX], d[96];
-  NH_TRY(nh_scene_field(c, map, path, name, required, out));
+  NH_TRY(field(c, map, path, name, required, out));
   if (!*out) return NH_OK;
   if ((*out)->kind == NH_YAML_MAP) return NH_OK;
   if (nh_yaml_is_null(*out) && !required) {
     *out = NULL;
     return NH_OK;
   }
-  return nh_scene_fail(c, *out, nh_scene_join(key, path, name), "expected a mapping, got %s",
-                       nh_scene_describe(*out, d, sizeof d));
+  return fail(c, *out, join(key, path, name), "expected a mapping, got %s",
+              describe(*out, d, sizeof d));
 }
 
 /* A list section: NULL when absent or null. */
-static int list_section(const nh_scene_ctx *c, const nh_yaml_node *map, const char *path,
+static int list_section(const nh_ctx *c, const nh_yaml_node *map, const char *path,
                         const char *name, const nh_yaml_node **out) {
   char key[NH_KEY_MAX], d[96];
-  NH_TRY(nh_scene_field(c, map, path, name, 0, out));
+  NH_TRY(field(c, map, path, name, 0, out));
   if (!*out || (*out)->kind == NH_YAML_SEQ) return NH_OK;
   if (nh_yaml_is_null(*out)) {
     *out = NULL;
     return NH_OK;
   }
-  return nh_scene_fail(c, *out, nh_scene_join(key, path, name), "expected a list, got %s",
-                       nh_scene_describe(*out, d, sizeof d));
+  return fail(c, *out, join(key, path, name), "expected a list, got %s",
+              describe(*out, d, sizeof d));
 }
 
 /* Typed optional/required fields: the target is left untouched when absent. */
-static int get_number(const nh_scene_ctx *c, const nh_yaml_node *map, const char *path,
-                      const char *name, int required, double *out, const nh_yaml_node **at) {
+static int get_number(const nh_ctx *c, const nh_yaml_node *map, const char *path, const char *name,
+                      int required, double *out, const nh_yaml_node **at) {
   char key[NH_KEY_MAX];
   const nh_yaml_node *n;
-  NH_TRY(nh_scene_field(c, map, path, name, required, &n));
+  NH_TRY(field(c, map, path, name, required, &n));
   if (at) *at = n;
-  return n ? as_number(c, n, nh_scene_join(key, path, name), out) : NH_OK;
+  return n ? as_number(c, n, join(key, path, name), out) : NH_OK;
 }
 
-static int get_int(const nh_scene_ctx *c, const nh_yaml_node *map, const char *path,
-                   const char *name, int *out, const nh_yaml_node **at) {
+static int get_int(const nh_ctx *c, const nh_yaml_node *map, const char *path, const char *name,
+                   int *out, const nh_yaml_node **at) {
   char key[NH_KEY_MAX];
   const nh_yaml_node *n;
-  NH_TRY(nh_scene_field(c, map, path, name, 0, &n));
+  NH_TRY(field(c, map, path, name, 0, &n));
   if (at) *at = n;
-  return n ? as_int(c, n, nh_scene_join(key, path, name), out) : NH_OK;
+  return n ? as_int(c, n, join(key, path, name), out) : NH_OK;
 }
 
-static int get_vec3(const nh_scene_ctx *c, const nh_yaml_node *map, const char *path,
-                    const char *name, int required, double out[3], const nh_yaml_node **at) {
+static int get_vec3(const nh_ctx *c, const nh_yaml_node *map, const char *path, const char *name,
+                    int required, double out[3], const nh_yaml_node **at) {
   char key[NH_KEY_MAX];
   const nh_yaml_node *n;
-  NH_TRY(nh_scene_field(c, map, path, name, required, &n));
+  NH_TRY(field(c, map, path, name, required, &n));
   if (at) *at = n;
-  return n ? as_vec3(c, n, nh_scene_join(key, path, name), out) : NH_OK;
+  return n ? as_vec3(c, n, join(key, path, name), out) : NH_OK;
 }
 
 /* Refuse a value below (or at, if strict) a bound. */
-static int at_least(const nh_scene_ctx *c, const nh_yaml_node *at, const char *path,
-                    const char *name, double v, double bound, int strict) {
+static int at_least(const nh_ctx *c, const nh_yaml_node *at, const char *path, const char *name,
+                    double v, double bound, int strict) {
   char key[NH_KEY_MAX];
   if (!at) return NH_OK;
   if (strict && !(v > bound))
-    return nh_scene_fail(c, at, nh_scene_join(key, path, name), "must be greater than %g, got %g",
-                         bound, v);
+    return fail(c, at, join(key, path, name), "must be greater than %g, got %g", bound, v);
   if (!strict && !(v >= bound))
-    return nh_scene_fail(c, at, nh_scene_join(key, path, name), "must be at least %g, got %g",
-                         bound, v);
+    return fail(c, at, join(key, path, name), "must be at least %g, got %g", bound, v);
   return NH_OK;
 }
 
@@ -353,29 +353,27 @@ static const char *const axis_name[3] = {"x", "y", "z"};
 
 /* {min: [3], max: [3]} with max > min (strict) or max >= min in every
  * component. */
-static int read_box(const nh_scene_ctx *c, const nh_yaml_node *box, const char *path, int strict,
+static int read_box(const nh_ctx *c, const nh_yaml_node *box, const char *path, int strict,
                     double min[3], double max[3]) {
   static const char *const keys[] = {"min", "max", NULL};
   char key[NH_KEY_MAX], d[96];
   if (box->kind != NH_YAML_MAP)
-    return nh_scene_fail(c, box, path,
-                         "expected a mapping {min: [x, y, z], max: [x, y, z]}, got %s",
-                         nh_scene_describe(box, d, sizeof d));
+    return fail(c, box, path, "expected a mapping {min: [x, y, z], max: [x, y, z]}, got %s",
+                describe(box, d, sizeof d));
   NH_TRY(check_keys(c, box, path, keys));
   const nh_yaml_node *at_max;
   NH_TRY(get_vec3(c, box, path, "min", 1, min, NULL));
   NH_TRY(get_vec3(c, box, path, "max", 1, max, &at_max));
   for (int i = 0; i < 3; ++i)
     if (strict ? !(max[i] > min[i]) : !(max[i] >= min[i]))
-      return nh_scene_fail(c, at_max, nh_scene_join(key, path, "max"),
-                           "must be %s min in every component (%s: max %g, min %g)",
-                           strict ? "greater than" : "at least", axis_name[i], max[i], min[i]);
+      return fail(c, at_max, join(key, path, "max"),
+                  "must be %s min in every component (%s: max %g, min %g)",
+                  strict ? "greater than" : "at least", axis_name[i], max[i], min[i]);
   return NH_OK;
 }
 
 /* A positive radius `name` of the mapping `map` (required). */
-static int read_radius(const nh_scene_ctx *c, const nh_yaml_node *map, const char *path,
-                       double *radius) {
+static int read_radius(const nh_ctx *c, const nh_yaml_node *map, const char *path, double *radius) {
   const nh_yaml_node *at;
   NH_TRY(get_number(c, map, path, "radius", 1, radius, &at));
   return at_least(c, at, path, "radius", *radius, 0, 1);
@@ -384,7 +382,7 @@ static int read_radius(const nh_scene_ctx *c, const nh_yaml_node *map, const cha
 /* The shape of a region: exactly one of the keys box {min, max},
  * sphere {center, radius}, cylinder {start, end, radius} in the mapping
  * `node` (whose keys the caller has checked). */
-static int read_region_shape(const nh_scene_ctx *c, const nh_yaml_node *node, const char *path,
+static int read_region_shape(const nh_ctx *c, const nh_yaml_node *node, const char *path,
                              nh_region *region) {
   static const char *const shapes[] = {"box", "sphere", "cylinder", NULL};
   static const char *const sphere_keys[] = {"center", "radius", NULL};
@@ -394,23 +392,23 @@ static int read_region_shape(const nh_scene_ctx *c, const nh_yaml_node *node, co
   for (int i = 0; i < node->n; ++i) {
     if (!in_list(node->keys[i]->text, shapes)) continue;
     if (shape)
-      return nh_scene_fail(c, node->keys[i], nh_scene_join(key, path, node->keys[i]->text),
-                           "give exactly one of box, sphere, cylinder (%s is already given)",
-                           shape_key->text);
+      return fail(c, node->keys[i], join(key, path, node->keys[i]->text),
+                  "give exactly one of box, sphere, cylinder (%s is already given)",
+                  shape_key->text);
     shape = node->items[i], shape_key = node->keys[i];
   }
-  if (!shape) return nh_scene_fail(c, node, path, "give one of box, sphere, cylinder");
-  nh_scene_join(key, path, shape_key->text);
+  if (!shape) return fail(c, node, path, "give one of box, sphere, cylinder");
+  join(key, path, shape_key->text);
   if (!strcmp(shape_key->text, "box")) {
     region->kind = NH_REGION_BOX;
     return read_box(c, shape, key, 0, region->min, region->max);
   }
   int sphere = !strcmp(shape_key->text, "sphere");
   if (shape->kind != NH_YAML_MAP)
-    return nh_scene_fail(c, shape, key, "expected a mapping %s, got %s",
-                         sphere ? "{center: [x, y, z], radius: r}"
-                                : "{start: [x, y, z], end: [x, y, z], radius: r}",
-                         nh_scene_describe(shape, d, sizeof d));
+    return fail(c, shape, key, "expected a mapping %s, got %s",
+                sphere ? "{center: [x, y, z], radius: r}"
+                       : "{start: [x, y, z], end: [x, y, z], radius: r}",
+                describe(shape, d, sizeof d));
   NH_TRY(check_keys(c, shape, key, sphere ? sphere_keys : cylinder_keys));
   if (sphere) {
     region->kind = NH_REGION_SPHERE;
@@ -426,22 +424,21 @@ static int read_region_shape(const nh_scene_ctx *c, const nh_yaml_node *node, co
     len2 += (region->end[i] - region->start[i]) * (region->end[i] - region->start[i]);
   if (!(len2 > 0)) {
     char sub[NH_KEY_MAX];
-    return nh_scene_fail(c, at_end, nh_scene_join(sub, key, "end"),
-                         "must differ from start (the cylinder's axis)");
+    return fail(c, at_end, join(sub, key, "end"), "must differ from start (the cylinder's axis)");
   }
   return read_radius(c, shape, key, &region->radius);
 }
 
 /* A region {box | sphere | cylinder} at `node` (for tissue.fixed items). */
-static int read_region(const nh_scene_ctx *c, const nh_yaml_node *node, const char *path,
+static int read_region(const nh_ctx *c, const nh_yaml_node *node, const char *path,
                        nh_region *region) {
   static const char *const keys[] = {"box", "sphere", "cylinder", NULL};
   char d[96];
   if (node->kind != NH_YAML_MAP)
-    return nh_scene_fail(c, node, path,
-                         "expected a region {box: {min, max}}, {sphere: {center, radius}} or "
-                         "{cylinder: {start, end, radius}}, got %s",
-                         nh_scene_describe(node, d, sizeof d));
+    return fail(c, node, path,
+                "expected a region {box: {min, max}}, {sphere: {center, radius}} or "
+                "{cylinder: {start, end, radius}}, got %s",
+                describe(node, d, sizeof d));
   NH_TRY(check_keys(c, node, path, keys));
   NH_TRY(read_region_shape(c, node, path, region));
   make_where(c, node, path, region->where);
@@ -449,85 +446,80 @@ static int read_region(const nh_scene_ctx *c, const nh_yaml_node *node, const ch
 }
 
 /* [[t0, s0], [t1, s1], ...] with strictly increasing times. */
-static int read_schedule(const nh_scene_ctx *c, const nh_yaml_node *node, const char *path,
+static int read_schedule(const nh_ctx *c, const nh_yaml_node *node, const char *path,
                          nh_schedule *s) {
   char d[96], item[NH_KEY_MAX], sub[NH_KEY_MAX];
   if (nh_yaml_is_null(node)) return NH_OK;
   if (node->kind != NH_YAML_SEQ)
-    return nh_scene_fail(c, node, path, "expected a list of [time, factor] pairs, got %s",
-                         nh_scene_describe(node, d, sizeof d));
+    return fail(c, node, path, "expected a list of [time, factor] pairs, got %s",
+                describe(node, d, sizeof d));
   if (node->n == 0) return NH_OK;
   s->t = nh_calloc((size_t)node->n, sizeof *s->t);
   s->value = nh_calloc((size_t)node->n, sizeof *s->value);
   if (!s->t || !s->value) return NH_ERR_MEMORY;
   for (int i = 0; i < node->n; ++i) {
     const nh_yaml_node *p = node->items[i];
-    nh_scene_join_index(item, path, i);
+    join_index(item, path, i);
     if (p->kind != NH_YAML_SEQ || p->n != 2)
-      return nh_scene_fail(c, p, item, "expected a pair [time, factor], got %s",
-                           p->kind == NH_YAML_SEQ
-                               ? (p->n == 1 ? "1 entry" : "a list of another length")
-                               : nh_scene_describe(p, d, sizeof d));
-    NH_TRY(as_number(c, p->items[0], nh_scene_join_index(sub, item, 0), &s->t[i]));
-    NH_TRY(as_number(c, p->items[1], nh_scene_join_index(sub, item, 1), &s->value[i]));
+      return fail(c, p, item, "expected a pair [time, factor], got %s",
+                  p->kind == NH_YAML_SEQ ? (p->n == 1 ? "1 entry" : "a list of another length")
+                                         : describe(p, d, sizeof d));
+    NH_TRY(as_number(c, p->items[0], join_index(sub, item, 0), &s->t[i]));
+    NH_TRY(as_number(c, p->items[1], join_index(sub, item, 1), &s->value[i]));
     if (i > 0 && !(s->t[i] > s->t[i - 1]))
-      return nh_scene_fail(c, p->items[0], nh_scene_join_index(sub, item, 0),
-                           "times must increase strictly (%g after %g)", s->t[i], s->t[i - 1]);
+      return fail(c, p->items[0], join_index(sub, item, 0),
+                  "times must increase strictly (%g after %g)", s->t[i], s->t[i - 1]);
     s->n = i + 1;
   }
   return NH_OK;
 }
 
 /* {box | sphere | cylinder, force: [3], schedule: [[t, s], ...]} */
-static int read_load(const nh_scene_ctx *c, const nh_yaml_node *node, const char *path,
-                     nh_load *load) {
+static int read_load(const nh_ctx *c, const nh_yaml_node *node, const char *path, nh_load *load) {
   static const char *const keys[] = {"box", "sphere", "cylinder", "force", "schedule", NULL};
   char key[NH_KEY_MAX], d[96];
   if (node->kind != NH_YAML_MAP)
-    return nh_scene_fail(c, node, path,
-                         "expected a load {box: {min, max}, force: [fx, fy, fz]}, got %s",
-                         nh_scene_describe(node, d, sizeof d));
+    return fail(c, node, path, "expected a load {box: {min, max}, force: [fx, fy, fz]}, got %s",
+                describe(node, d, sizeof d));
   NH_TRY(check_keys(c, node, path, keys));
   const nh_yaml_node *schedule;
   NH_TRY(read_region_shape(c, node, path, &load->region));
   NH_TRY(get_vec3(c, node, path, "force", 1, load->force, NULL));
-  NH_TRY(nh_scene_field(c, node, path, "schedule", 0, &schedule));
-  if (schedule)
-    NH_TRY(read_schedule(c, schedule, nh_scene_join(key, path, "schedule"), &load->schedule));
+  NH_TRY(field(c, node, path, "schedule", 0, &schedule));
+  if (schedule) NH_TRY(read_schedule(c, schedule, join(key, path, "schedule"), &load->schedule));
   make_where(c, node, path, load->where);
   make_where(c, node, path, load->region.where);
   return NH_OK;
 }
 
 /* gravity: [gx, gy, gz], or {vector: [gx, gy, gz], schedule: [[t, s], ...]}. */
-static int read_gravity(const nh_scene_ctx *c, const nh_yaml_node *root, nh_scene *s) {
+static int read_gravity(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   static const char *const keys[] = {"vector", "schedule", NULL};
   const nh_yaml_node *n, *schedule;
-  NH_TRY(nh_scene_field(c, root, "", "gravity", 0, &n));
+  NH_TRY(field(c, root, "", "gravity", 0, &n));
   if (!n) return NH_OK;
   if (n->kind != NH_YAML_MAP) return as_vec3(c, n, "gravity", s->gravity);
   NH_TRY(check_keys(c, n, "gravity", keys));
   NH_TRY(get_vec3(c, n, "gravity", "vector", 1, s->gravity, NULL));
-  NH_TRY(nh_scene_field(c, n, "gravity", "schedule", 0, &schedule));
+  NH_TRY(field(c, n, "gravity", "schedule", 0, &schedule));
   if (schedule) NH_TRY(read_schedule(c, schedule, "gravity.schedule", &s->gravity_schedule));
   return NH_OK;
 }
 
 /* A fraction in [0, 1] (required). */
-static int get_fraction(const nh_scene_ctx *c, const nh_yaml_node *map, const char *path,
+static int get_fraction(const nh_ctx *c, const nh_yaml_node *map, const char *path,
                         const char *name, double *out) {
   char key[NH_KEY_MAX];
   const nh_yaml_node *at;
   NH_TRY(get_number(c, map, path, name, 1, out, &at));
   if (!(*out >= 0 && *out <= 1))
-    return nh_scene_fail(c, at, nh_scene_join(key, path, name),
-                         "a fraction must lie in [0, 1], got %g", *out);
+    return fail(c, at, join(key, path, name), "a fraction must lie in [0, 1], got %g", *out);
   return NH_OK;
 }
 
 /* tissue.buoyancy: {before: b0, after: b1, schedule: [[t, s], ...]}. Without
  * a schedule the change is a step at t = 0: s = 1 from the first step on. */
-static int read_buoyancy(const nh_scene_ctx *c, const nh_yaml_node *tissue, nh_scene *s) {
+static int read_buoyancy(const nh_ctx *c, const nh_yaml_node *tissue, nh_scene *s) {
   static const char *const keys[] = {"before", "after", "schedule", NULL};
   const char *path = "tissue.buoyancy";
   const nh_yaml_node *m, *schedule;
@@ -537,13 +529,13 @@ static int read_buoyancy(const nh_scene_ctx *c, const nh_yaml_node *tissue, nh_s
   s->tissue.buoyant = 1;
   NH_TRY(get_fraction(c, m, path, "before", &s->tissue.buoyancy_before));
   NH_TRY(get_fraction(c, m, path, "after", &s->tissue.buoyancy_after));
-  NH_TRY(nh_scene_field(c, m, path, "schedule", 0, &schedule));
+  NH_TRY(field(c, m, path, "schedule", 0, &schedule));
   if (schedule)
     NH_TRY(read_schedule(c, schedule, "tissue.buoyancy.schedule", &s->tissue.buoyancy_schedule));
   return NH_OK;
 }
 
-static int read_time(const nh_scene_ctx *c, const nh_yaml_node *root, nh_scene *s) {
+static int read_time(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   static const char *const keys[] = {"mode", "step", "end", "steps", NULL};
   const nh_yaml_node *t, *at_step, *at_end, *at_steps, *at_mode;
   char d[96];
@@ -553,7 +545,7 @@ static int read_time(const nh_scene_ctx *c, const nh_yaml_node *root, nh_scene *
   NH_TRY(section(c, root, "", "time", 0, &t));
   if (!t) return NH_OK;
   NH_TRY(check_keys(c, t, "time", keys));
-  NH_TRY(nh_scene_field(c, t, "time", "mode", 0, &at_mode));
+  NH_TRY(field(c, t, "time", "mode", 0, &at_mode));
   if (at_mode) {
     const char *m = at_mode->kind == NH_YAML_SCALAR ? at_mode->text : "";
     if (!strcmp(m, "dynamic"))
@@ -561,8 +553,8 @@ static int read_time(const nh_scene_ctx *c, const nh_yaml_node *root, nh_scene *
     else if (!strcmp(m, "static"))
       s->time.mode = NH_MODE_STATIC;
     else
-      return nh_scene_fail(c, at_mode, "time.mode", "expected dynamic or static, got %s",
-                           nh_scene_describe(at_mode, d, sizeof d));
+      return fail(c, at_mode, "time.mode", "expected dynamic or static, got %s",
+                  describe(at_mode, d, sizeof d));
   }
   NH_TRY(get_number(c, t, "time", "step", 0, &s->time.step, &at_step));
   NH_TRY(at_least(c, at_step, "time", "step", s->time.step, 0, 1));
@@ -575,16 +567,15 @@ static int read_time(const nh_scene_ctx *c, const nh_yaml_node *root, nh_scene *
     /* Report at whichever of the two comes second. */
     int steps_later = at_steps->source > at_end->source ||
                       (at_steps->source == at_end->source && at_steps->line >= at_end->line);
-    return steps_later ? nh_scene_fail(c, at_steps, "time.steps",
-                                       "give either time.end or time.steps, not both")
-                       : nh_scene_fail(c, at_end, "time.end",
-                                       "give either time.end or time.steps, not both");
+    return steps_later
+               ? fail(c, at_steps, "time.steps", "give either time.end or time.steps, not both")
+               : fail(c, at_end, "time.end", "give either time.end or time.steps, not both");
   }
   if (at_end) {
     double steps = floor(end / s->time.step + 0.5);
     if (steps > NH_STEPS_MAX)
-      return nh_scene_fail(c, at_end, "time.end", "end / step = %g steps is more than %g", steps,
-                           NH_STEPS_MAX);
+      return fail(c, at_end, "time.end", "end / step = %g steps is more than %g", steps,
+                  NH_STEPS_MAX);
     s->time.steps = steps < 1 ? 1 : (int)steps;
   }
   return NH_OK;
@@ -594,39 +585,37 @@ static int read_time(const nh_scene_ctx *c, const nh_yaml_node *root, nh_scene *
  * required; poisson must lie in (-1, 0.5) and is required if
  * `poisson_required`; density is > 0 (`density_strict`) or >= 0. An absent
  * optional key leaves its target (the caller's default) untouched. */
-static int read_material(const nh_scene_ctx *c, const nh_yaml_node *parent, const char *parent_path,
+static int read_material(const nh_ctx *c, const nh_yaml_node *parent, const char *parent_path,
                          int poisson_required, int density_strict, double *young, double *poisson,
                          double *density) {
   static const char *const keys[] = {"young", "poisson", "density", NULL};
   char path[NH_KEY_MAX], key[NH_KEY_MAX];
   const nh_yaml_node *m, *at;
-  nh_scene_join(path, parent_path, "material");
+  join(path, parent_path, "material");
   NH_TRY(section(c, parent, parent_path, "material", 1, &m));
   NH_TRY(check_keys(c, m, path, keys));
   NH_TRY(get_number(c, m, path, "young", 1, young, &at));
   NH_TRY(at_least(c, at, path, "young", *young, 0, 1));
   NH_TRY(get_number(c, m, path, "poisson", poisson_required, poisson, &at));
   if (at && *poisson >= 0.5)
-    return nh_scene_fail(
-        c, at, nh_scene_join(key, path, "poisson"),
-        "%g is not below 0.5: incompressible (or beyond) materials are not supported; "
-        "use a value below 0.5, e.g. 0.49",
-        *poisson);
+    return fail(c, at, join(key, path, "poisson"),
+                "%g is not below 0.5: incompressible (or beyond) materials are not supported; "
+                "use a value below 0.5, e.g. 0.49",
+                *poisson);
   if (at && *poisson <= -1)
-    return nh_scene_fail(c, at, nh_scene_join(key, path, "poisson"),
-                         "must be greater than -1, got %g", *poisson);
+    return fail(c, at, join(key, path, "poisson"), "must be greater than -1, got %g", *poisson);
   NH_TRY(get_number(c, m, path, "density", 0, density, &at));
   NH_TRY(at_least(c, at, path, "density", *density, 0, density_strict));
   return NH_OK;
 }
 
 /* PARENT.damping {mass, stiffness} (optional): Rayleigh alpha, beta >= 0. */
-static int read_damping(const nh_scene_ctx *c, const nh_yaml_node *parent, const char *parent_path,
+static int read_damping(const nh_ctx *c, const nh_yaml_node *parent, const char *parent_path,
                         double *mass, double *stiffness) {
   static const char *const keys[] = {"mass", "stiffness", NULL};
   char path[NH_KEY_MAX];
   const nh_yaml_node *m, *at;
-  nh_scene_join(path, parent_path, "damping");
+  join(path, parent_path, "damping");
   NH_TRY(section(c, parent, parent_path, "damping", 0, &m));
   if (!m) return NH_OK;
   NH_TRY(check_keys(c, m, path, keys));
@@ -638,23 +627,22 @@ static int read_damping(const nh_scene_ctx *c, const nh_yaml_node *parent, const
 }
 
 /* tissue.domain.brain {size: [3] > 0 (required), center: [3] (default 0)}. */
-static int read_brain(const nh_scene_ctx *c, const nh_yaml_node *brain, nh_scene *s) {
+static int read_brain(const nh_ctx *c, const nh_yaml_node *brain, nh_scene *s) {
   static const char *const keys[] = {"size", "center", NULL};
   const char *path = "tissue.domain.brain";
   char key[NH_KEY_MAX], d[96];
   const nh_yaml_node *at_size;
   if (brain->kind != NH_YAML_MAP)
-    return nh_scene_fail(c, brain, path,
-                         "expected a mapping {size: [sx, sy, sz], center: [x, y, z]}, got %s",
-                         nh_scene_describe(brain, d, sizeof d));
+    return fail(c, brain, path,
+                "expected a mapping {size: [sx, sy, sz], center: [x, y, z]}, got %s",
+                describe(brain, d, sizeof d));
   NH_TRY(check_keys(c, brain, path, keys));
   s->tissue.domain = NH_DOMAIN_BRAIN;
   NH_TRY(get_vec3(c, brain, path, "size", 1, s->tissue.brain_size, &at_size));
   for (int i = 0; i < 3; ++i)
     if (!(s->tissue.brain_size[i] > 0))
-      return nh_scene_fail(c, at_size->items[i],
-                           nh_scene_join_index(key, "tissue.domain.brain.size", i),
-                           "must be greater than 0, got %g", s->tissue.brain_size[i]);
+      return fail(c, at_size->items[i], join_index(key, "tissue.domain.brain.size", i),
+                  "must be greater than 0, got %g", s->tissue.brain_size[i]);
   NH_TRY(get_vec3(c, brain, path, "center", 0, s->tissue.brain_center, NULL));
   for (int i = 0; i < 3; ++i) {
     s->tissue.box_min[i] = s->tissue.brain_center[i] - 0.5 * s->tissue.brain_size[i];
@@ -663,7 +651,7 @@ static int read_brain(const nh_scene_ctx *c, const nh_yaml_node *brain, nh_scene
   return NH_OK;
 }
 
-static int read_tissue(const nh_scene_ctx *c, const nh_yaml_node *root, nh_scene *s) {
+static int read_tissue(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   static const char *const keys[] = {"domain", "grid",  "material", "damping",
                                      "fixed",  "loads", "buoyancy", NULL};
   static const char *const domain_keys[] = {"box", "brain", "mask", NULL};
@@ -675,12 +663,11 @@ static int read_tissue(const nh_scene_ctx *c, const nh_yaml_node *root, nh_scene
   /* domain: exactly one of box, brain, mask; mask does not exist yet. */
   NH_TRY(section(c, t, "tissue", "domain", 1, &domain));
   NH_TRY(check_keys(c, domain, "tissue.domain", domain_keys));
-  if (domain->n == 0)
-    return nh_scene_fail(c, domain, "tissue.domain", "give one of box, brain, mask");
+  if (domain->n == 0) return fail(c, domain, "tissue.domain", "give one of box, brain, mask");
   if (domain->n > 1)
-    return nh_scene_fail(
-        c, domain->keys[1], nh_scene_join(key, "tissue.domain", domain->keys[1]->text),
-        "give exactly one of box, brain, mask (%s is already given)", domain->keys[0]->text);
+    return fail(c, domain->keys[1], join(key, "tissue.domain", domain->keys[1]->text),
+                "give exactly one of box, brain, mask (%s is already given)",
+                domain->keys[0]->text);
   if (!strcmp(domain->keys[0]->text, "brain")) {
     NH_TRY(read_brain(c, domain->items[0], s));
   } else if (!strcmp(domain->keys[0]->text, "box")) {
@@ -688,25 +675,23 @@ static int read_tissue(const nh_scene_ctx *c, const nh_yaml_node *root, nh_scene
     NH_TRY(read_box(c, domain->items[0], "tissue.domain.box", 1, s->tissue.box_min,
                     s->tissue.box_max));
   } else {
-    return nh_scene_fail(c, domain->keys[0],
-                         nh_scene_join(key, "tissue.domain", domain->keys[0]->text),
-                         "not supported in this version of needlehex (use box or brain)");
+    return fail(c, domain->keys[0], join(key, "tissue.domain", domain->keys[0]->text),
+                "not supported in this version of needlehex (use box or brain)");
   }
 
   /* grid */
   s->tissue.grid[0] = 8, s->tissue.grid[1] = 4, s->tissue.grid[2] = 4;
-  NH_TRY(nh_scene_field(c, t, "tissue", "grid", 0, &n));
+  NH_TRY(field(c, t, "tissue", "grid", 0, &n));
   if (n) {
     NH_TRY(as_ivec3(c, n, "tissue.grid", s->tissue.grid));
     double nodes = 1;
     for (int i = 0; i < 3; ++i) {
       if (s->tissue.grid[i] < 1)
-        return nh_scene_fail(c, n->items[i], nh_scene_join_index(key, "tissue.grid", i),
-                             "a cell count must be at least 1, got %d", s->tissue.grid[i]);
+        return fail(c, n->items[i], join_index(key, "tissue.grid", i),
+                    "a cell count must be at least 1, got %d", s->tissue.grid[i]);
       nodes *= s->tissue.grid[i] + 1.0;
     }
-    if (3 * nodes > INT_MAX)
-      return nh_scene_fail(c, n, "tissue.grid", "%g nodes are too many", nodes);
+    if (3 * nodes > INT_MAX) return fail(c, n, "tissue.grid", "%g nodes are too many", nodes);
   }
 
   s->tissue.density = 1000;
@@ -725,8 +710,8 @@ static int read_tissue(const nh_scene_ctx *c, const nh_yaml_node *root, nh_scene
     s->tissue.fixed = nh_calloc((size_t)fixed->n, sizeof *s->tissue.fixed);
     if (!s->tissue.fixed) return NH_ERR_MEMORY;
     for (int i = 0; i < fixed->n; ++i) {
-      NH_TRY(read_region(c, fixed->items[i], nh_scene_join_index(key, "tissue.fixed", i),
-                         &s->tissue.fixed[i]));
+      NH_TRY(
+          read_region(c, fixed->items[i], join_index(key, "tissue.fixed", i), &s->tissue.fixed[i]));
       s->tissue.n_fixed = i + 1;
     }
   }
@@ -739,15 +724,15 @@ static int read_tissue(const nh_scene_ctx *c, const nh_yaml_node *root, nh_scene
     for (int i = 0; i < loads->n; ++i) {
       /* Count the load first so that destroy frees a half-read schedule. */
       s->tissue.n_loads = i + 1;
-      NH_TRY(read_load(c, loads->items[i], nh_scene_join_index(key, "tissue.loads", i),
-                       &s->tissue.loads[i]));
+      NH_TRY(
+          read_load(c, loads->items[i], join_index(key, "tissue.loads", i), &s->tissue.loads[i]));
     }
   }
   return NH_OK;
 }
 
 /* One of the words `choices` (NULL-terminated); *out = its index. */
-static int as_choice(const nh_scene_ctx *c, const nh_yaml_node *n, const char *key,
+static int as_choice(const nh_ctx *c, const nh_yaml_node *n, const char *key,
                      const char *const *choices, int *out) {
   char d[96], expected[256] = "";
   if (n->kind == NH_YAML_SCALAR && !nh_yaml_is_null(n))
@@ -758,22 +743,20 @@ static int as_choice(const nh_scene_ctx *c, const nh_yaml_node *n, const char *k
     snprintf(expected + len, sizeof expected - len, "%s%s",
              i == 0 ? "" : (choices[i + 1] ? ", " : " or "), choices[i]);
   }
-  return nh_scene_fail(c, n, key, "expected %s, got %s", expected,
-                       nh_scene_describe(n, d, sizeof d));
+  return fail(c, n, key, "expected %s, got %s", expected, describe(n, d, sizeof d));
 }
 
 /* adapt.template (text `value`, at node `at`, NULL for the default) to a
  * readable file: a name is NH_TEMPLATES_DIR/NAME.tmpl; a value with a '/' or
  * ending in .tmpl is a path, relative to the scene file's folder unless
  * absolute. The error is reported at `at`, or at `section` for the default. */
-static int resolve_template(const nh_scene_ctx *c, const nh_yaml_node *at,
-                            const nh_yaml_node *section, const char *value, char out[NH_PATH_MAX]) {
+static int resolve_template(const nh_ctx *c, const nh_yaml_node *at, const nh_yaml_node *section,
+                            const char *value, char out[NH_PATH_MAX]) {
   const nh_yaml_node *where = at ? at : section;
   size_t len = strlen(value);
   int is_path = strchr(value, '/') || (len >= 5 && !strcmp(value + len - 5, ".tmpl"));
   int n;
-  if (len == 0)
-    return nh_scene_fail(c, where, "adapt.template", "expected a template name or path");
+  if (len == 0) return fail(c, where, "adapt.template", "expected a template name or path");
   if (!is_path) {
     const char *env = getenv("NH_TEMPLATES_DIR");
     const char *dir = env && env[0] ? env : NH_TEMPLATES_DIR;
@@ -788,23 +771,23 @@ static int resolve_template(const nh_scene_ctx *c, const nh_yaml_node *at,
       n = snprintf(out, NH_PATH_MAX, "%s", value);
   }
   if (n < 0 || n >= NH_PATH_MAX)
-    return nh_scene_fail(c, where, "adapt.template",
-                         "the template's path is longer than %d characters", NH_PATH_MAX - 1);
+    return fail(c, where, "adapt.template", "the template's path is longer than %d characters",
+                NH_PATH_MAX - 1);
   struct stat st;
   int err = access(out, R_OK) != 0 ? errno : 0;
   if (!err && stat(out, &st) == 0 && S_ISDIR(st.st_mode)) err = EISDIR;
   if (!err) return NH_OK;
   if (is_path)
-    return nh_scene_fail(c, where, "adapt.template", "cannot read the template file %s: %s", out,
-                         strerror(err));
-  return nh_scene_fail(c, where, "adapt.template",
-                       "no template named '%s' (cannot read %s: %s; set NH_TEMPLATES_DIR to the "
-                       "templates folder, or give a path)",
-                       value, out, strerror(err));
+    return fail(c, where, "adapt.template", "cannot read the template file %s: %s", out,
+                strerror(err));
+  return fail(c, where, "adapt.template",
+              "no template named '%s' (cannot read %s: %s; set NH_TEMPLATES_DIR to the "
+              "templates folder, or give a path)",
+              value, out, strerror(err));
 }
 
 /* adapt: present (even empty) means the mesh adapts. */
-static int read_adapt(const nh_scene_ctx *c, const nh_yaml_node *root, nh_scene *s) {
+static int read_adapt(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   static const char *const keys[] = {"estimator", "marking",  "max_level", "min_size", "max_dofs",
                                      "every",     "template", "hanging",   NULL};
   static const char *const marking_keys[] = {"strategy", "theta", "fraction", NULL};
@@ -829,7 +812,7 @@ static int read_adapt(const nh_scene_ctx *c, const nh_yaml_node *root, nh_scene 
   NH_TRY(section(c, root, "", "adapt", 0, &m));
   if (m) NH_TRY(check_keys(c, m, "adapt", keys));
 
-  NH_TRY(nh_scene_field(c, m, "adapt", "estimator", 0, &at));
+  NH_TRY(field(c, m, "adapt", "estimator", 0, &at));
   int choice = 0;
   if (at) NH_TRY(as_choice(c, at, "adapt.estimator", estimators, &choice));
 
@@ -837,7 +820,7 @@ static int read_adapt(const nh_scene_ctx *c, const nh_yaml_node *root, nh_scene 
   if (marking) {
     const nh_yaml_node *at_theta, *at_fraction;
     NH_TRY(check_keys(c, marking, "adapt.marking", marking_keys));
-    NH_TRY(nh_scene_field(c, marking, "adapt.marking", "strategy", 0, &at));
+    NH_TRY(field(c, marking, "adapt.marking", "strategy", 0, &at));
     if (at) {
       NH_TRY(as_choice(c, at, "adapt.marking.strategy", strategies, &choice));
       s->adapt.strategy = choice ? NH_MARK_DORFLER : NH_MARK_MAX;
@@ -846,24 +829,22 @@ static int read_adapt(const nh_scene_ctx *c, const nh_yaml_node *root, nh_scene 
     NH_TRY(
         get_number(c, marking, "adapt.marking", "fraction", 0, &s->adapt.fraction, &at_fraction));
     if (at_theta && s->adapt.strategy != NH_MARK_MAX)
-      return nh_scene_fail(c, at_theta, "adapt.marking.theta",
-                           "applies to strategy max only (the strategy is dorfler: give fraction)");
+      return fail(c, at_theta, "adapt.marking.theta",
+                  "applies to strategy max only (the strategy is dorfler: give fraction)");
     if (at_fraction && s->adapt.strategy != NH_MARK_DORFLER)
-      return nh_scene_fail(
-          c, at_fraction, "adapt.marking.fraction",
-          "applies to strategy dorfler only (the strategy is max%s: give theta, or "
-          "strategy: dorfler)",
-          at ? "" : ", the default");
+      return fail(c, at_fraction, "adapt.marking.fraction",
+                  "applies to strategy dorfler only (the strategy is max%s: give theta, or "
+                  "strategy: dorfler)",
+                  at ? "" : ", the default");
     if (at_theta && !(s->adapt.theta > 0 && s->adapt.theta < 1))
-      return nh_scene_fail(c, at_theta, "adapt.marking.theta", "must lie in (0, 1), got %g",
-                           s->adapt.theta);
+      return fail(c, at_theta, "adapt.marking.theta", "must lie in (0, 1), got %g", s->adapt.theta);
     if (at_fraction && !(s->adapt.fraction > 0 && s->adapt.fraction <= 1))
-      return nh_scene_fail(c, at_fraction, "adapt.marking.fraction", "must lie in (0, 1], got %g",
-                           s->adapt.fraction);
+      return fail(c, at_fraction, "adapt.marking.fraction", "must lie in (0, 1], got %g",
+                  s->adapt.fraction);
   }
 
-  NH_TRY(nh_scene_field(c, m, "adapt", "template", 0, &at));
-  if (at) NH_TRY(nh_scene_as_string(c, at, "adapt.template", name, sizeof name));
+  NH_TRY(field(c, m, "adapt", "template", 0, &at));
+  if (at) NH_TRY(as_string(c, at, "adapt.template", name, sizeof name));
   NH_TRY(resolve_template(c, at, key, name, s->adapt.template_path));
   make_where(c, at ? at : key, "adapt.template", s->adapt.where_template);
 
@@ -875,7 +856,7 @@ static int read_adapt(const nh_scene_ctx *c, const nh_yaml_node *root, nh_scene 
   NH_TRY(at_least(c, at, "adapt", "max_dofs", s->adapt.max_dofs, 0, 0));
   NH_TRY(get_int(c, m, "adapt", "every", &s->adapt.every, &at));
   NH_TRY(at_least(c, at, "adapt", "every", s->adapt.every, 1, 0));
-  NH_TRY(nh_scene_field(c, m, "adapt", "hanging", 0, &at));
+  NH_TRY(field(c, m, "adapt", "hanging", 0, &at));
   if (at) {
     NH_TRY(as_choice(c, at, "adapt.hanging", hangings, &choice));
     s->adapt.hanging = choice ? NH_HANGING_LAGRANGE : NH_HANGING_ELIMINATE;
@@ -883,7 +864,7 @@ static int read_adapt(const nh_scene_ctx *c, const nh_yaml_node *root, nh_scene 
   return NH_OK;
 }
 
-static int read_solver(const nh_scene_ctx *c, const nh_yaml_node *root, nh_scene *s) {
+static int read_solver(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   static const char *const keys[] = {"tolerance", "max_iterations", "threads", NULL};
   const nh_yaml_node *m, *at;
   s->solver.tolerance = 1e-8;
@@ -903,18 +884,18 @@ static int read_solver(const nh_scene_ctx *c, const nh_yaml_node *root, nh_scene
 
 /* ITEM.name of a probe or target (required): it goes into probes.csv or
  * targets.csv and the VTU point data, so it must be one plain CSV field. */
-static int read_point_name(const nh_scene_ctx *c, const nh_yaml_node *item, const char *path,
+static int read_point_name(const nh_ctx *c, const nh_yaml_node *item, const char *path,
                            char name[NH_NAME_MAX], const nh_yaml_node **at) {
   char key[NH_KEY_MAX], d[96];
-  NH_TRY(nh_scene_field(c, item, path, "name", 1, at));
-  NH_TRY(nh_scene_as_string(c, *at, nh_scene_join(key, path, "name"), name, NH_NAME_MAX));
+  NH_TRY(field(c, item, path, "name", 1, at));
+  NH_TRY(as_string(c, *at, join(key, path, "name"), name, NH_NAME_MAX));
   if (!name[0] || strpbrk(name, ",\"\n\r\t"))
-    return nh_scene_fail(c, *at, key, "%s must be non-empty, without commas, quotes or tabs",
-                         nh_scene_describe(*at, d, sizeof d));
+    return fail(c, *at, key, "%s must be non-empty, without commas, quotes or tabs",
+                describe(*at, d, sizeof d));
   return NH_OK;
 }
 
-static int read_probes(const nh_scene_ctx *c, const nh_yaml_node *root, nh_scene *s) {
+static int read_probes(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   static const char *const keys[] = {"name", "point", NULL};
   char path[NH_KEY_MAX], key[NH_KEY_MAX], d[96];
   const nh_yaml_node *list;
@@ -925,17 +906,17 @@ static int read_probes(const nh_scene_ctx *c, const nh_yaml_node *root, nh_scene
   for (int i = 0; i < list->n; ++i) {
     const nh_yaml_node *p = list->items[i], *at;
     nh_probe *probe = &s->probes[i];
-    nh_scene_join_index(path, "probes", i);
+    join_index(path, "probes", i);
     if (p->kind != NH_YAML_MAP)
-      return nh_scene_fail(c, p, path, "expected a probe {name: ..., point: [x, y, z]}, got %s",
-                           nh_scene_describe(p, d, sizeof d));
+      return fail(c, p, path, "expected a probe {name: ..., point: [x, y, z]}, got %s",
+                  describe(p, d, sizeof d));
     NH_TRY(check_keys(c, p, path, keys));
     NH_TRY(read_point_name(c, p, path, probe->name, &at));
-    nh_scene_join(key, path, "name");
+    join(key, path, "name");
     for (int j = 0; j < i; ++j)
       if (!strcmp(s->probes[j].name, probe->name))
-        return nh_scene_fail(c, at, key, "%s is already the name of probes.%d",
-                             nh_scene_describe(at, d, sizeof d), j);
+        return fail(c, at, key, "%s is already the name of probes.%d", describe(at, d, sizeof d),
+                    j);
     NH_TRY(get_vec3(c, p, path, "point", 1, probe->point, NULL));
     make_where(c, p, path, probe->where);
     s->n_probes = i + 1;
@@ -968,54 +949,52 @@ static nh_until_kind until_word(const nh_yaml_node *n) {
  * the word target (speed > 0) or start (speed < 0) on a tool with a
  * trajectory: read_plans turns it into a time, and checks the order of the
  * times around it then. */
-static int read_motion(const nh_scene_ctx *c, const nh_yaml_node *tool, const char *path,
+static int read_motion(const nh_ctx *c, const nh_yaml_node *tool, const char *path,
                        nh_tool_spec *t) {
   static const char *const keys[] = {"until", "speed", NULL};
   char motion[NH_KEY_MAX], item[NH_KEY_MAX], key[NH_KEY_MAX], d[96];
   const nh_yaml_node *list;
   NH_TRY(list_section(c, tool, path, "motion", &list));
   if (!list || list->n == 0) return NH_OK;
-  nh_scene_join(motion, path, "motion");
+  join(motion, path, "motion");
   t->motion = nh_calloc((size_t)list->n, sizeof *t->motion);
   if (!t->motion) return NH_ERR_MEMORY;
   for (int i = 0; i < list->n; ++i) {
     const nh_yaml_node *m = list->items[i], *at;
     nh_motion *segment = &t->motion[i];
-    nh_scene_join_index(item, motion, i);
+    join_index(item, motion, i);
     if (m->kind != NH_YAML_MAP)
-      return nh_scene_fail(c, m, item, "expected a segment {until: TIME, speed: SPEED}, got %s",
-                           nh_scene_describe(m, d, sizeof d));
+      return fail(c, m, item, "expected a segment {until: TIME, speed: SPEED}, got %s",
+                  describe(m, d, sizeof d));
     NH_TRY(check_keys(c, m, item, keys));
-    NH_TRY(nh_scene_field(c, m, item, "until", 1, &at));
+    NH_TRY(field(c, m, item, "until", 1, &at));
     segment->kind = until_word(at);
     if (segment->kind != NH_UNTIL_TIME) {
       if (!t->planned)
-        return nh_scene_fail(c, at, nh_scene_join(key, item, "until"),
-                             "%s needs a trajectory (give %s.trajectory: {entry, target}): it is a "
-                             "position on the planned path",
-                             nh_scene_describe(at, d, sizeof d), path);
+        return fail(c, at, join(key, item, "until"),
+                    "%s needs a trajectory (give %s.trajectory: {entry, target}): it is a "
+                    "position on the planned path",
+                    describe(at, d, sizeof d), path);
       NH_TRY(get_number(c, m, item, "speed", 1, &segment->speed, &at));
       if (segment->kind == NH_UNTIL_TARGET && !(segment->speed > 0))
-        return nh_scene_fail(c, at, nh_scene_join(key, item, "speed"),
-                             "must be greater than 0 with until: target (the tip advances to the "
-                             "target), got %g",
-                             segment->speed);
+        return fail(c, at, join(key, item, "speed"),
+                    "must be greater than 0 with until: target (the tip advances to the "
+                    "target), got %g",
+                    segment->speed);
       if (segment->kind == NH_UNTIL_START && !(segment->speed < 0))
-        return nh_scene_fail(
-            c, at, nh_scene_join(key, item, "speed"),
-            "must be less than 0 with until: start (the tip withdraws to its start), "
-            "got %g",
-            segment->speed);
+        return fail(c, at, join(key, item, "speed"),
+                    "must be less than 0 with until: start (the tip withdraws to its start), "
+                    "got %g",
+                    segment->speed);
       t->n_motion = i + 1;
       continue;
     }
-    NH_TRY(as_number(c, at, nh_scene_join(key, item, "until"), &segment->until));
+    NH_TRY(as_number(c, at, join(key, item, "until"), &segment->until));
     if (i == 0) NH_TRY(at_least(c, at, item, "until", segment->until, 0, 1));
     if (i > 0 && t->motion[i - 1].kind == NH_UNTIL_TIME &&
         !(segment->until > t->motion[i - 1].until))
-      return nh_scene_fail(c, at, nh_scene_join(key, item, "until"),
-                           "times must increase strictly (%g after %g)", segment->until,
-                           t->motion[i - 1].until);
+      return fail(c, at, join(key, item, "until"), "times must increase strictly (%g after %g)",
+                  segment->until, t->motion[i - 1].until);
     NH_TRY(get_number(c, m, item, "speed", 1, &segment->speed, NULL));
     t->n_motion = i + 1;
   }
@@ -1023,7 +1002,7 @@ static int read_motion(const nh_scene_ctx *c, const nh_yaml_node *tool, const ch
 }
 
 /* PATH.direction (required, non-zero), stored with unit length. */
-static int read_direction(const nh_scene_ctx *c, const nh_yaml_node *tool, const char *path,
+static int read_direction(const nh_ctx *c, const nh_yaml_node *tool, const char *path,
                           double direction[3]) {
   char key[NH_KEY_MAX];
   const nh_yaml_node *at;
@@ -1032,9 +1011,7 @@ static int read_direction(const nh_scene_ctx *c, const nh_yaml_node *tool, const
    * overflows (1e200) nor underflows (1e-200). */
   double scale = 0, norm = 0;
   for (int k = 0; k < 3; ++k) scale = fmax(scale, fabs(direction[k]));
-  if (!(scale > 0))
-    return nh_scene_fail(c, at, nh_scene_join(key, path, "direction"),
-                         "must not be the zero vector");
+  if (!(scale > 0)) return fail(c, at, join(key, path, "direction"), "must not be the zero vector");
   for (int k = 0; k < 3; ++k) norm += (direction[k] / scale) * (direction[k] / scale);
   norm = sqrt(norm);
   for (int k = 0; k < 3; ++k) direction[k] = direction[k] / scale / norm;
@@ -1043,39 +1020,36 @@ static int read_direction(const nh_scene_ctx *c, const nh_yaml_node *tool, const
 
 /* PATH.inside (optional): the name of a tool listed before this one that is
  * not itself nested; t->inside = its index. */
-static int read_host(const nh_scene_ctx *c, const nh_yaml_node *list, int i, const char *path,
+static int read_host(const nh_ctx *c, const nh_yaml_node *list, int i, const char *path,
                      nh_scene *s) {
   char key[NH_KEY_MAX], host[NH_NAME_MAX], d[96];
   nh_tool_spec *t = &s->tools[i];
   const nh_yaml_node *at;
-  NH_TRY(nh_scene_field(c, list->items[i], path, "inside", 0, &at));
+  NH_TRY(field(c, list->items[i], path, "inside", 0, &at));
   if (!at) return NH_OK;
-  NH_TRY(nh_scene_as_string(c, at, nh_scene_join(key, path, "inside"), host, sizeof host));
+  NH_TRY(as_string(c, at, join(key, path, "inside"), host, sizeof host));
   for (int j = 0; j < i; ++j) {
     if (strcmp(s->tools[j].name, host) != 0) continue;
     if (s->tools[j].inside >= 0)
-      return nh_scene_fail(
-          c, at, key, "%s (tools.%d) is itself inside '%s': tools nest one level deep only",
-          nh_scene_describe(at, d, sizeof d), j, s->tools[s->tools[j].inside].name);
+      return fail(c, at, key, "%s (tools.%d) is itself inside '%s': tools nest one level deep only",
+                  describe(at, d, sizeof d), j, s->tools[s->tools[j].inside].name);
     t->inside = j;
     return NH_OK;
   }
-  if (!strcmp(host, t->name)) return nh_scene_fail(c, at, key, "a tool cannot be inside itself");
+  if (!strcmp(host, t->name)) return fail(c, at, key, "a tool cannot be inside itself");
   for (int j = i + 1; j < list->n; ++j) {
     const nh_yaml_node *name = nh_yaml_get(list->items[j], "name", NULL);
     if (name && name->kind == NH_YAML_SCALAR && !strcmp(name->text, host))
-      return nh_scene_fail(c, at, key,
-                           "%s is tools.%d, listed after this tool: list the host first",
-                           nh_scene_describe(at, d, sizeof d), j);
+      return fail(c, at, key, "%s is tools.%d, listed after this tool: list the host first",
+                  describe(at, d, sizeof d), j);
   }
-  return nh_scene_fail(c, at, key, "no tool named %s is listed before this one",
-                       nh_scene_describe(at, d, sizeof d));
+  return fail(c, at, key, "no tool named %s is listed before this one", describe(at, d, sizeof d));
 }
 
 /* PATH.trajectory {entry, target, standoff} (optional): sets t->planned, the
  * entry and the standoff; the target's name is looked up by read_plans, once
  * the targets are read. base and direction must then not be given. */
-static int read_trajectory(const nh_scene_ctx *c, const nh_yaml_node *tool, const char *path,
+static int read_trajectory(const nh_ctx *c, const nh_yaml_node *tool, const char *path,
                            nh_tool_spec *t) {
   static const char *const keys[] = {"entry", "target", "standoff", NULL};
   static const char *const computed[] = {"base", "direction", NULL};
@@ -1088,21 +1062,21 @@ static int read_trajectory(const nh_scene_ctx *c, const nh_yaml_node *tool, cons
   for (const char *const *k = computed; *k; ++k) {
     const nh_yaml_node *name;
     if (nh_yaml_get(tool, *k, &name))
-      return nh_scene_fail(c, name, nh_scene_join(key, path, *k),
-                           "not with trajectory: the trajectory sets the base and the direction");
+      return fail(c, name, join(key, path, *k),
+                  "not with trajectory: the trajectory sets the base and the direction");
   }
-  nh_scene_join(sub, path, "trajectory");
+  join(sub, path, "trajectory");
   NH_TRY(check_keys(c, m, sub, keys));
   t->planned = 1;
   NH_TRY(get_vec3(c, m, sub, "entry", 1, t->entry, NULL));
-  NH_TRY(nh_scene_field(c, m, sub, "target", 1, &at));
+  NH_TRY(field(c, m, sub, "target", 1, &at));
   NH_TRY(get_number(c, m, sub, "standoff", 0, &t->standoff, &at));
   NH_TRY(at_least(c, at, sub, "standoff", t->standoff, 0, 1));
   return NH_OK;
 }
 
 /* tools[i]: one tool, its defaults and its checks (tools before it are read). */
-static int read_tool(const nh_scene_ctx *c, const nh_yaml_node *list, int i, nh_scene *s) {
+static int read_tool(const nh_ctx *c, const nh_yaml_node *list, int i, nh_scene *s) {
   static const char *const keys[] = {"name",      "length",     "radius",  "inner_radius",
                                      "elements",  "material",   "damping", "base",
                                      "direction", "trajectory", "motion",  "interaction",
@@ -1114,7 +1088,7 @@ static int read_tool(const nh_scene_ctx *c, const nh_yaml_node *list, int i, nh_
   char path[NH_KEY_MAX], sub[NH_KEY_MAX], key[NH_KEY_MAX], d[96];
   const nh_yaml_node *node = list->items[i], *at, *m;
   nh_tool_spec *t = &s->tools[i];
-  nh_scene_join_index(path, "tools", i);
+  join_index(path, "tools", i);
   t->inner_radius = 0;
   t->elements = 16;
   t->poisson = 0.3;
@@ -1122,40 +1096,36 @@ static int read_tool(const nh_scene_ctx *c, const nh_yaml_node *list, int i, nh_
   t->inside = -1;
   t->release = INFINITY;
   if (node->kind != NH_YAML_MAP)
-    return nh_scene_fail(
-        c, node, path,
-        "expected a tool {name: ..., length: ..., radius: ..., material: ..., base: "
-        "[x, y, z], direction: [x, y, z]}, got %s",
-        nh_scene_describe(node, d, sizeof d));
+    return fail(c, node, path,
+                "expected a tool {name: ..., length: ..., radius: ..., material: ..., base: "
+                "[x, y, z], direction: [x, y, z]}, got %s",
+                describe(node, d, sizeof d));
   NH_TRY(check_keys(c, node, path, keys));
 
   /* The name names the files <name>.pvd and <name>_NNNNNN.vtu: a plain file
    * name, distinct from the other tools' even on a file system that ignores
    * case, and from the folder's other .pvd files. */
-  NH_TRY(nh_scene_field(c, node, path, "name", 1, &at));
-  NH_TRY(nh_scene_as_string(c, at, nh_scene_join(key, path, "name"), t->name, sizeof t->name));
+  NH_TRY(field(c, node, path, "name", 1, &at));
+  NH_TRY(as_string(c, at, join(key, path, "name"), t->name, sizeof t->name));
   size_t len = strlen(t->name);
   if (len == 0 || strspn(t->name, "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz"
                                   "0123456789_-") != len)
-    return nh_scene_fail(
-        c, at, key,
-        "%s must be non-empty and contain only letters, digits, '_' and '-' (it names "
-        "the output file NAME.pvd)",
-        nh_scene_describe(at, d, sizeof d));
+    return fail(c, at, key,
+                "%s must be non-empty and contain only letters, digits, '_' and '-' (it names "
+                "the output file NAME.pvd)",
+                describe(at, d, sizeof d));
   for (const char *const *r = reserved; *r; ++r)
     if (!strcasecmp(t->name, *r))
-      return nh_scene_fail(c, at, key, "%s is taken: the output folder already holds %s.pvd",
-                           nh_scene_describe(at, d, sizeof d), *r);
+      return fail(c, at, key, "%s is taken: the output folder already holds %s.pvd",
+                  describe(at, d, sizeof d), *r);
   for (int j = 0; j < i; ++j) {
     if (!strcmp(s->tools[j].name, t->name))
-      return nh_scene_fail(c, at, key, "%s is already the name of tools.%d",
-                           nh_scene_describe(at, d, sizeof d), j);
+      return fail(c, at, key, "%s is already the name of tools.%d", describe(at, d, sizeof d), j);
     if (!strcasecmp(s->tools[j].name, t->name))
-      return nh_scene_fail(
-          c, at, key,
-          "%s differs from the name of tools.%d ('%s') only in case (tool names name "
-          "files, and some file systems ignore case)",
-          nh_scene_describe(at, d, sizeof d), j, s->tools[j].name);
+      return fail(c, at, key,
+                  "%s differs from the name of tools.%d ('%s') only in case (tool names name "
+                  "files, and some file systems ignore case)",
+                  describe(at, d, sizeof d), j, s->tools[j].name);
   }
 
   NH_TRY(get_number(c, node, path, "length", 1, &t->length, &at));
@@ -1165,8 +1135,8 @@ static int read_tool(const nh_scene_ctx *c, const nh_yaml_node *list, int i, nh_
   NH_TRY(get_number(c, node, path, "inner_radius", 0, &t->inner_radius, &at));
   NH_TRY(at_least(c, at, path, "inner_radius", t->inner_radius, 0, 0));
   if (at && !(t->inner_radius < t->radius))
-    return nh_scene_fail(c, at, nh_scene_join(key, path, "inner_radius"),
-                         "must be less than the radius (%g), got %g", t->radius, t->inner_radius);
+    return fail(c, at, join(key, path, "inner_radius"), "must be less than the radius (%g), got %g",
+                t->radius, t->inner_radius);
   NH_TRY(get_int(c, node, path, "elements", &t->elements, &at));
   NH_TRY(at_least(c, at, path, "elements", t->elements, 1, 0));
   NH_TRY(read_material(c, node, path, 0, 0, &t->young, &t->poisson, &t->density));
@@ -1178,7 +1148,7 @@ static int read_tool(const nh_scene_ctx *c, const nh_yaml_node *list, int i, nh_
   }
   NH_TRY(read_motion(c, node, path, t));
 
-  nh_scene_join(sub, path, "interaction");
+  join(sub, path, "interaction");
   NH_TRY(section(c, node, path, "interaction", 0, &m));
   if (m) {
     double *value[] = {&t->puncture_force, &t->cutting_force, &t->friction, &t->friction_per_length,
@@ -1191,27 +1161,25 @@ static int read_tool(const nh_scene_ctx *c, const nh_yaml_node *list, int i, nh_
   }
 
   NH_TRY(read_host(c, list, i, path, s));
-  NH_TRY(nh_scene_field(c, node, path, "release", 0, &at));
+  NH_TRY(field(c, node, path, "release", 0, &at));
   if (at && t->inside < 0)
-    return nh_scene_fail(
-        c, at, nh_scene_join(key, path, "release"),
-        "applies to a nested tool only (give inside: HOST, the tool it starts in)");
+    return fail(c, at, join(key, path, "release"),
+                "applies to a nested tool only (give inside: HOST, the tool it starts in)");
   if (at && until_word(at) == NH_UNTIL_TARGET) {
     t->release_target = 1; /* read_plans: the end of the host's until: target */
   } else if (at) {
     if (at->kind == NH_YAML_SCALAR && !nh_yaml_is_null(at) && !at->quoted &&
         (isalpha((unsigned char)at->text[0]) || at->text[0] == '_'))
-      return nh_scene_fail(c, at, nh_scene_join(key, path, "release"),
-                           "expected a time or the word target, got %s",
-                           nh_scene_describe(at, d, sizeof d));
-    NH_TRY(as_number(c, at, nh_scene_join(key, path, "release"), &t->release));
+      return fail(c, at, join(key, path, "release"), "expected a time or the word target, got %s",
+                  describe(at, d, sizeof d));
+    NH_TRY(as_number(c, at, join(key, path, "release"), &t->release));
     NH_TRY(at_least(c, at, path, "release", t->release, 0, 0));
   }
   make_where(c, node, path, t->where);
   return NH_OK;
 }
 
-static int read_tools(const nh_scene_ctx *c, const nh_yaml_node *root, nh_scene *s) {
+static int read_tools(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   const nh_yaml_node *list;
   NH_TRY(list_section(c, root, "", "tools", &list));
   if (!list || list->n == 0) return NH_OK;
@@ -1225,7 +1193,7 @@ static int read_tools(const nh_scene_ctx *c, const nh_yaml_node *root, nh_scene 
   return NH_OK;
 }
 
-static int read_targets(const nh_scene_ctx *c, const nh_yaml_node *root, nh_scene *s) {
+static int read_targets(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   static const char *const keys[] = {"name", "point", "tool", NULL};
   char path[NH_KEY_MAX], key[NH_KEY_MAX], tool[NH_NAME_MAX], names[256], d[96];
   const nh_yaml_node *list;
@@ -1236,37 +1204,147 @@ static int read_targets(const nh_scene_ctx *c, const nh_yaml_node *root, nh_scen
   for (int i = 0; i < list->n; ++i) {
     const nh_yaml_node *p = list->items[i], *at;
     nh_target *target = &s->targets[i];
-    nh_scene_join_index(path, "targets", i);
+    join_index(path, "targets", i);
     if (p->kind != NH_YAML_MAP)
-      return nh_scene_fail(c, p, path,
-                           "expected a target {name: ..., point: [x, y, z], tool: ...}, got %s",
-                           nh_scene_describe(p, d, sizeof d));
+      return fail(c, p, path, "expected a target {name: ..., point: [x, y, z], tool: ...}, got %s",
+                  describe(p, d, sizeof d));
     NH_TRY(check_keys(c, p, path, keys));
     NH_TRY(read_point_name(c, p, path, target->name, &at));
-    nh_scene_join(key, path, "name");
+    join(key, path, "name");
     for (int j = 0; j < i; ++j)
       if (!strcmp(s->targets[j].name, target->name))
-        return nh_scene_fail(c, at, key, "%s is already the name of targets.%d",
-                             nh_scene_describe(at, d, sizeof d), j);
+        return fail(c, at, key, "%s is already the name of targets.%d", describe(at, d, sizeof d),
+                    j);
     NH_TRY(get_vec3(c, p, path, "point", 1, target->point, NULL));
-    NH_TRY(nh_scene_field(c, p, path, "tool", 1, &at));
-    NH_TRY(nh_scene_as_string(c, at, nh_scene_join(key, path, "tool"), tool, sizeof tool));
+    NH_TRY(field(c, p, path, "tool", 1, &at));
+    NH_TRY(as_string(c, at, join(key, path, "tool"), tool, sizeof tool));
     target->tool = -1;
     for (int j = 0; j < s->n_tools && target->tool < 0; ++j)
       if (!strcmp(s->tools[j].name, tool)) target->tool = j;
     if (target->tool < 0 && s->n_tools == 0)
-      return nh_scene_fail(c, at, key, "no tool named %s (the scene has no tools)",
-                           nh_scene_describe(at, d, sizeof d));
+      return fail(c, at, key, "no tool named %s (the scene has no tools)",
+                  describe(at, d, sizeof d));
     if (target->tool < 0)
-      return nh_scene_fail(c, at, key, "no tool named %s (the tools are %s)",
-                           nh_scene_describe(at, d, sizeof d), tool_names(s, names, sizeof names));
+      return fail(c, at, key, "no tool named %s (the tools are %s)", describe(at, d, sizeof d),
+                  tool_names(s, names, sizeof names));
     make_where(c, p, path, target->where);
     s->n_targets = i + 1;
   }
   return NH_OK;
 }
 
-static int read_output(const nh_scene_ctx *c, const nh_yaml_node *root, nh_scene *s) {
+/* tools.i.trajectory (the target's name, now that targets are read): base,
+ * direction and planned depth. */
+static int resolve_trajectory(const nh_ctx *c, const nh_yaml_node *tool, const char *path,
+                              nh_scene *s, int i) {
+  nh_tool_spec *t = &s->tools[i];
+  char key[NH_KEY_MAX], sub[NH_KEY_MAX], name[NH_NAME_MAX], d[96], names[256];
+  const nh_yaml_node *traj = nh_yaml_get(tool, "trajectory", NULL), *at;
+  join(sub, path, "trajectory");
+  NH_TRY(field(c, traj, sub, "target", 1, &at));
+  NH_TRY(as_string(c, at, join(key, sub, "target"), name, sizeof name));
+  for (int j = 0; j < s->n_targets && t->target < 0; ++j)
+    if (!strcmp(s->targets[j].name, name)) t->target = j;
+  if (t->target < 0 && s->n_targets == 0)
+    return fail(c, at, key, "no target named %s (the scene has no targets)",
+                describe(at, d, sizeof d));
+  if (t->target < 0) {
+    size_t len = 0;
+    names[0] = '\0';
+    for (int j = 0; j < s->n_targets && len < sizeof names; ++j) {
+      int n =
+          snprintf(names + len, sizeof names - len, "%s'%s'", j ? ", " : "", s->targets[j].name);
+      if (n < 0) break;
+      len += (size_t)n;
+    }
+    return fail(c, at, key, "no target named %s (the targets are %s)", describe(at, d, sizeof d),
+                names);
+  }
+  if (nh_scene_plan_line(t, s->targets[t->target].point))
+    return fail(c, at, key, "target %s is at the entry point [%g, %g, %g]: no direction",
+                describe(at, d, sizeof d), t->entry[0], t->entry[1], t->entry[2]);
+  return NH_OK;
+}
+
+/* tools.i.release: target — the end of the host's until: target segment
+ * (the host is listed before, so its times are resolved). */
+static int resolve_release(const nh_ctx *c, const nh_yaml_node *tool, const char *path, nh_scene *s,
+                           int i) {
+  nh_tool_spec *t = &s->tools[i];
+  const nh_tool_spec *host = &s->tools[t->inside];
+  char key[NH_KEY_MAX];
+  const nh_yaml_node *at = nh_yaml_get(tool, "release", NULL);
+  for (int k = 0; k < host->n_motion; ++k)
+    if (host->motion[k].kind == NH_UNTIL_TARGET) {
+      t->release = host->motion[k].until;
+      return NH_OK;
+    }
+  return fail(c, at, join(key, path, "release"),
+              "target: the host '%s' has no motion segment with until: target", host->name);
+}
+
+/* tools.i.motion: every symbolic until to a time, then the order of all. */
+static int resolve_motion(const nh_ctx *c, const nh_yaml_node *tool, const char *path, nh_scene *s,
+                          int i) {
+  nh_tool_spec *t = &s->tools[i];
+  char motion[NH_KEY_MAX], item[NH_KEY_MAX], key[NH_KEY_MAX];
+  const nh_yaml_node *list = nh_yaml_get(tool, "motion", NULL);
+  join(motion, path, "motion");
+  for (int k = 0; k < t->n_motion; ++k) {
+    nh_motion *m = &t->motion[k];
+    const nh_yaml_node *at = nh_yaml_get(list->items[k], "until", NULL);
+    join(key, join_index(item, motion, k), "until");
+    double t0 = k > 0 ? t->motion[k - 1].until : 0.0;
+    if (m->kind != NH_UNTIL_TIME) {
+      /* A nested tool follows its host until its release: its own motion
+       * starts then. */
+      if (t->inside >= 0 && !isfinite(t->release))
+        return fail(c, at, key,
+                    "%s: the tool follows its host '%s' and is never released (give release)",
+                    m->kind == NH_UNTIL_TARGET ? "target" : "start", s->tools[t->inside].name);
+      double start = t->inside >= 0 ? fmax(t0, t->release) : t0;
+      double travelled = nh_scene_tip_travel(s, i, k, start);
+      if (m->kind == NH_UNTIL_TARGET) {
+        if (!(travelled < t->depth))
+          return fail(c, at, key,
+                      "target: by %g s the tip has already travelled %g m, the planned depth is "
+                      "%g m",
+                      start, travelled, t->depth);
+        m->until = start + (t->depth - travelled) / m->speed;
+      } else {
+        if (!(travelled > 0))
+          return fail(c, at, key,
+                      "start: by %g s the tip is not ahead of its start (it has travelled %g m)",
+                      start, travelled);
+        m->until = start + travelled / -m->speed;
+      }
+    }
+    if (!(m->until > t0))
+      return fail(c, at, key, "times must increase strictly (%.17g after %.17g%s)", m->until, t0,
+                  k > 0 && t->motion[k - 1].kind != NH_UNTIL_TIME
+                      ? ", the time the previous segment's until resolves to"
+                      : "");
+  }
+  return NH_OK;
+}
+
+/* Trajectories, release: target and symbolic untils, tool by tool (a host
+ * before the tools inside it). */
+static int read_plans(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
+  char path[NH_KEY_MAX];
+  const nh_yaml_node *list = nh_yaml_get(root, "tools", NULL);
+  for (int i = 0; i < s->n_tools; ++i) {
+    nh_tool_spec *t = &s->tools[i];
+    const nh_yaml_node *tool = list->items[i];
+    join_index(path, "tools", i);
+    if (t->planned) NH_TRY(resolve_trajectory(c, tool, path, s, i));
+    if (t->release_target) NH_TRY(resolve_release(c, tool, path, s, i));
+    NH_TRY(resolve_motion(c, tool, path, s, i));
+  }
+  return NH_OK;
+}
+
+static int read_output(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   static const char *const keys[] = {"dir", "every", "hdf5", "checkpoint", NULL};
   const nh_yaml_node *m, *at;
   nh_yaml_join(s->output.dir, sizeof s->output.dir, "out", "/", s->name);
@@ -1276,40 +1354,39 @@ static int read_output(const nh_scene_ctx *c, const nh_yaml_node *root, nh_scene
   NH_TRY(section(c, root, "", "output", 0, &m));
   if (!m) return NH_OK;
   NH_TRY(check_keys(c, m, "output", keys));
-  NH_TRY(nh_scene_field(c, m, "output", "dir", 0, &at));
+  NH_TRY(field(c, m, "output", "dir", 0, &at));
   if (at) {
-    NH_TRY(nh_scene_as_string(c, at, "output.dir", s->output.dir, sizeof s->output.dir));
-    if (!s->output.dir[0]) return nh_scene_fail(c, at, "output.dir", "must not be empty");
+    NH_TRY(as_string(c, at, "output.dir", s->output.dir, sizeof s->output.dir));
+    if (!s->output.dir[0]) return fail(c, at, "output.dir", "must not be empty");
   }
   NH_TRY(get_int(c, m, "output", "every", &s->output.every, &at));
   NH_TRY(at_least(c, at, "output", "every", s->output.every, 0, 0));
-  NH_TRY(nh_scene_field(c, m, "output", "hdf5", 0, &at));
+  NH_TRY(field(c, m, "output", "hdf5", 0, &at));
   if (at) NH_TRY(as_bool(c, at, "output.hdf5", &s->output.hdf5));
   NH_TRY(get_int(c, m, "output", "checkpoint", &s->output.checkpoint, &at));
   NH_TRY(at_least(c, at, "output", "checkpoint", s->output.checkpoint, 0, 0));
   return NH_OK;
 }
 
-static int read_name(const nh_scene_ctx *c, const nh_yaml_node *root, nh_scene *s) {
+static int read_name(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   const nh_yaml_node *at;
   char d[96];
-  NH_TRY(nh_scene_field(c, root, "", "name", 1, &at));
-  NH_TRY(nh_scene_as_string(c, at, "name", s->name, sizeof s->name));
+  NH_TRY(field(c, root, "", "name", 1, &at));
+  NH_TRY(as_string(c, at, "name", s->name, sizeof s->name));
   size_t len = strlen(s->name);
   if (len == 0 ||
       strspn(s->name, "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz"
                       "0123456789._-") != len ||
       !strcmp(s->name, ".") || !strcmp(s->name, ".."))
-    return nh_scene_fail(
-        c, at, "name",
-        "%s may only contain letters, digits, '.', '_' and '-' (it names the output "
-        "folder)",
-        nh_scene_describe(at, d, sizeof d));
+    return fail(c, at, "name",
+                "%s may only contain letters, digits, '.', '_' and '-' (it names the output "
+                "folder)",
+                describe(at, d, sizeof d));
   return NH_OK;
 }
 
 /* The whole schema, in the order of docs/scene.md. */
-static int read_scene(const nh_scene_ctx *c, const nh_yaml_node *root, nh_scene *s) {
+static int read_scene(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   static const char *const keys[] = {"name",  "time",   "gravity", "tissue", "adapt", "solver",
                                      "tools", "probes", "targets", "output", NULL};
   NH_TRY(check_keys(c, root, "", keys));
@@ -1321,8 +1398,8 @@ static int read_scene(const nh_scene_ctx *c, const nh_yaml_node *root, nh_scene 
   NH_TRY(read_solver(c, root, s));
   NH_TRY(read_tools(c, root, s));
   NH_TRY(read_probes(c, root, s));
-  NH_TRY(read_targets(c, root, s));  /* after tools: a target names its tool */
-  NH_TRY(nh_scene_plan(c, root, s)); /* after targets: a trajectory names its target */
+  NH_TRY(read_targets(c, root, s)); /* after tools: a target names its tool */
+  NH_TRY(read_plans(c, root, s));   /* after targets: a trajectory names its target */
   NH_TRY(read_output(c, root, s));
   return NH_OK;
 }
@@ -1354,7 +1431,7 @@ static void resolve_time_length(nh_yaml_node *root) {
   time->n--;
 }
 
-static int load(const nh_scene_ctx *c, nh_scene *s, nh_yaml_node **root) {
+static int load(const nh_ctx *c, nh_scene *s, nh_yaml_node **root) {
   char d[96];
   NH_TRY(nh_yaml_parse_file(c->file, root));
   if (nh_yaml_is_null(*root))
@@ -1364,7 +1441,7 @@ static int load(const nh_scene_ctx *c, nh_scene *s, nh_yaml_node **root) {
   if ((*root)->kind != NH_YAML_MAP)
     return NH_ERROR(NH_ERR_INPUT,
                     "%s:%d: the scene must be a mapping (name: ..., tissue: ...), got %s", c->file,
-                    (*root)->line, nh_scene_describe(*root, d, sizeof d));
+                    (*root)->line, describe(*root, d, sizeof d));
   for (int k = 1; k <= c->n_overrides; ++k) {
     if (!c->overrides[k - 1]) return NH_ERROR(NH_ERR_INPUT, "--set:%d: missing KEY=VALUE", k);
     NH_TRY(nh_yaml_apply_override(*root, k, c->overrides[k - 1]));
@@ -1385,7 +1462,7 @@ int nh_scene_load(const char *path, int n_overrides, const char *const *override
   nh_scene *s = nh_calloc(1, sizeof *s);
   if (!s) return NH_ERR_MEMORY;
   memcpy(s->file, path, strlen(path) + 1);
-  nh_scene_ctx c = {.file = path, .overrides = overrides, .n_overrides = n_overrides};
+  nh_ctx c = {.file = path, .overrides = overrides, .n_overrides = n_overrides};
   nh_yaml_node *root = NULL;
   int rc = load(&c, s, &root);
   nh_yaml_free(&root);
