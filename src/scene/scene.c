@@ -37,7 +37,7 @@
  * Nothing here is global: the context of one load (file name, overrides)
  * travels in an nh_ctx.
  *
- * The module's other files: plan.c computes the planned trajectories and
+ * The module's other files: trajectory.c computes the planned trajectories and
  * the tip travel that symbolic untils resolve against; schedule.c evaluates
  * schedules and gravity at a time, once per step; print.c prints the
  * summary of `check`. */
@@ -1260,7 +1260,7 @@ static int resolve_trajectory(const nh_ctx *c, const nh_yaml_node *tool, const c
     return fail(c, at, key, "no target named %s (the targets are %s)", describe(at, d, sizeof d),
                 names);
   }
-  if (nh_scene_plan_line(t, s->targets[t->target].point))
+  if (nh_scene_trajectory_line(t, s->targets[t->target].point))
     return fail(c, at, key, "target %s is at the entry point [%g, %g, %g]: no direction",
                 describe(at, d, sizeof d), t->entry[0], t->entry[1], t->entry[2]);
   return NH_OK;

@@ -229,7 +229,7 @@ void nh_scene_gravity(const nh_scene *scene, double t, double g[3]);
  * s(t), the change of the buoyed fraction since the rest shape. */
 void nh_scene_tissue_gravity(const nh_scene *scene, double t, double g[3]);
 
-/* ---- trajectory planning (plan.c) ---- */
+/* ---- trajectory planning (trajectory.c) ---- */
 /* The distance tools[i]'s tip has travelled along its direction by time t,
  * from its first n motion segments (n <= n_motion; untils of those segments
  * resolved): a nested tool moves with its host until its release and by its
@@ -239,7 +239,7 @@ double nh_scene_tip_travel(const nh_scene *scene, int i, int n, double t);
  * (unit), tool->depth = standoff + distance and tool->base (the tip
  * standoff before the entry point). Returns NH_ERR_INPUT, without a message
  * and with the tool untouched, if the target is the entry point. */
-int nh_scene_plan_line(nh_tool_spec *tool, const double target[3]);
+int nh_scene_trajectory_line(nh_tool_spec *tool, const double target[3]);
 
 /* Print a human-readable summary of what will be modelled (for `check`). */
 void nh_scene_print(const nh_scene *scene, void *stdio_file);

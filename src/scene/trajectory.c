@@ -1,10 +1,10 @@
-/* plan.c — trajectory planning: the kinematics behind the tool keys that
+/* trajectory.c — trajectory planning: the kinematics behind the tool keys that
  * depend on other keys (docs/scene.md, tools), which scene.c resolves once
  * tools and targets are read and reports on at the key's line.
  *  - A planned trajectory (tools.i.trajectory: {target}) runs from the entry
  *    point to the target: its direction, the planned depth (standoff +
  *    distance) and the base, placed so that the tip starts `standoff`
- *    before the entry point on that line (nh_scene_plan_line).
+ *    before the entry point on that line (nh_scene_trajectory_line).
  *  - A symbolic until (target: the tip has travelled the planned depth;
  *    start: it is back at its start) needs the tip's travel by a time over
  *    the earlier motion segments, integrated exactly as the contact module
@@ -37,7 +37,7 @@ double nh_scene_tip_travel(const nh_scene *s, int i, int n, double t) {
   return segment_travel(host, host->n_motion, 0, release) + segment_travel(sp, n, release, t);
 }
 
-int nh_scene_plan_line(nh_tool_spec *t, const double target[3]) {
+int nh_scene_trajectory_line(nh_tool_spec *t, const double target[3]) {
   /* The distance scaled by its largest component, so that squaring neither
    * overflows nor underflows (as the reading of a direction). */
   double v[3], scale = 0, norm = 0;
