@@ -1,4 +1,5 @@
-/* main.c — the command-line front end (../shared/SCENE.md, docs/scene.md).
+/* main.c — the command-line front end (docs/scene.md: scene keys, overrides,
+ * errors; docs/outputs.md: what a run writes, restart and signals).
  *
  *   needlehex run SCENE.yaml [--out DIR] [--set KEY=VALUE ...] [--restart DIR] [--quiet]
  *   needlehex check SCENE.yaml [--set KEY=VALUE ...]

@@ -13,6 +13,6 @@ set_tests_properties(test_hdf5 PROPERTIES FIXTURES_SETUP nh_hdf5_files)
 nh_add_py_test(hdf5_readback io hdf5_readback.py check ${NH_HDF5_SCRATCH})
 set_tests_properties(hdf5_readback PROPERTIES FIXTURES_REQUIRED nh_hdf5_files)
 
-nh_add_py_test(hdf5_kill io hdf5_readback.py kill $<TARGET_FILE:test_hdf5>
+nh_add_py_test(hdf5_kill "io;slow" hdf5_readback.py kill $<TARGET_FILE:test_hdf5>
   ${CMAKE_CURRENT_BINARY_DIR}/hdf5_kill 30)
 set_tests_properties(hdf5_kill PROPERTIES TIMEOUT 300)

@@ -4,4 +4,4 @@
 nh_add_py_test(needle verify needle.py)
 # Hard cases: needle 10 GPa in tissue 6 kPa, nu 0.45/0.49, h 1e-3/5e-2 s, tip
 # path through nodes, in a face plane, through faces.
-nh_add_py_test(needle_hard hard needle.py --hard)
+nh_add_py_test(needle_hard "hard;slow" needle.py --hard)

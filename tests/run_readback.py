@@ -9,7 +9,7 @@ usage:
 The run is
   $NH_BINARY run cases/phantom-tissue.yaml --out DIR --quiet
              --set time.steps=20 --set output.every=5
-and the checks follow the output contract of SCENE.md and docs/outputs.md:
+and the checks follow the output contract of docs/outputs.md:
 
 - tissue.pvd lists frames; each tissue_NNNNNN.vtu (NNNNNN = step, 6 digits)
   exists and is read by VTK's XML reader and by meshio with identical points

@@ -1,8 +1,10 @@
 /* adapt — a posteriori error estimation by superconvergent patch recovery
- * (SPR, the seed's §2.3, Eq. 15) and the marking of leaves for refinement
- * (Eq. 16 and Dörfler's bulk criterion). The algorithms and their choices
- * (boundary patches, hanging nodes) are described at the top of
- * adapt/spr.c and adapt/mark.c.
+ * (SPR, the seed's §2.3, Eq. 15), the marking of leaves for refinement
+ * (Eq. 16 and Dörfler's bulk criterion), and the refinement driver that
+ * marks, applies the DOF budget, refines by the template and carries the
+ * state to the new nodes (Eq. 17). The algorithms and their choices
+ * (boundary patches, hanging nodes, budget) are described at the top of
+ * adapt/spr.c, adapt/mark.c and adapt/refine.c.
  *
  * Conventions: stresses are Voigt (xx, yy, zz, yz, xz, xy), Pa; arrays
  * "per node" have mesh->n_nodes entries, arrays "per cell" mesh->n_cells
@@ -94,5 +96,38 @@ typedef struct {
  * NH_ERR_MEMORY. */
 int nh_mark_cells(const nh_mesh *mesh, const double *eta_cell, const nh_mark_params *params,
                   int *marked, int *n_marked);
+
+/* ---- the refinement driver (refine.c) ---- */
+typedef struct nh_adapt nh_adapt; /* template, marking parameters, indicators */
+
+/* Create the driver of the scene's adapt section: loads spec->template_path.
+ * Fails as nh_template_load (NH_ERR_INPUT for a bad template), NH_ERR_MEMORY. */
+int nh_adapt_create(const nh_adapt_spec *spec, nh_adapt **out);
+/* Free and set *adapt = NULL (accepts NULL). */
+void nh_adapt_destroy(nh_adapt **adapt);
+
+/* Estimate the error of the solution u (nh_spr_estimate) and keep the
+ * element indicators for nh_adapt_indicators and nh_adapt_step.
+ * Out: *eta, *eta_rel as nh_spr_estimate. Fails as nh_spr_estimate,
+ * NH_ERR_MEMORY. */
+int nh_adapt_estimate(nh_adapt *adapt, const nh_mesh *mesh, const nh_tissue *tissue,
+                      const double *u, const nh_hanging *hanging, double *eta, double *eta_rel);
+
+/* The indicators ηₑ of the last estimate (per cell id, leaves meaningful),
+ * or NULL if there is none for the current mesh (none made yet, or the mesh
+ * was refined since; also for adapt = NULL). */
+const double *nh_adapt_indicators(const nh_adapt *adapt);
+
+/* One refinement from the last estimate: mark (nh_mark_cells), keep the
+ * cells of largest ηₑ within the DOF budget, refine them by the template
+ * (nh_mesh_refine) and carry each of the n_fields nodal fields (3 values per
+ * node; fields[f] is reallocated to the new node count) to the new nodes by
+ * Eq. 17.
+ * Out: *n_refined, the number of cells refined (0: mesh and fields
+ *      untouched, the indicators still valid).
+ * The caller rebuilds what depends on the mesh. Fails as nh_mark_cells and
+ * nh_mesh_refine, NH_ERR_INTERNAL without an estimate, NH_ERR_MEMORY; after
+ * a failure the mesh may be refined but the fields not transferred. */
+int nh_adapt_step(nh_adapt *adapt, nh_mesh *mesh, int n_fields, double **fields, int *n_refined);
 
 #endif

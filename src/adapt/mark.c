@@ -24,18 +24,12 @@
  * The result lists cell ids in ascending order (the refinement code may
  * then process them in mesh order). Work: O(L log L) for dorfler (a sort of
  * the L leaves), O(L) for max. */
-#include "adapt/adapt.h"
+#include "adapt/adapt_impl.h"
 
 #include <math.h>
 #include <stdlib.h>
 
-typedef struct {
-  double eta;
-  int cell;
-} nh_mark_entry;
-
-/* Decreasing η, then increasing cell id. */
-static int nh_mark_compare(const void *pa, const void *pb) {
+int nh_mark_entry_compare(const void *pa, const void *pb) {
   const nh_mark_entry *a = pa, *b = pb;
   if (a->eta != b->eta) return a->eta > b->eta ? -1 : 1;
   return (a->cell > b->cell) - (a->cell < b->cell);
@@ -78,7 +72,7 @@ int nh_mark_cells(const nh_mesh *m, const double *eta_cell, const nh_mark_params
       order[l].cell = m->leaves[l];
       order[l].eta = eta_cell[m->leaves[l]];
     }
-    qsort(order, (size_t)m->n_leaves, sizeof *order, nh_mark_compare);
+    qsort(order, (size_t)m->n_leaves, sizeof *order, nh_mark_entry_compare);
     double total = 0.0;
     for (int l = 0; l < m->n_leaves; l++) total += order[l].eta * order[l].eta;
     double goal = p->fraction * total, sum = 0.0;

@@ -63,15 +63,15 @@ int nh_beam_create(const nh_beam_spec *spec, nh_beam **out) {
   NH_CHECK(spec->length > 0 && isfinite(spec->length), NH_ERR_INPUT,
            "beam: length = %g must be positive", spec->length);
   const double *d = spec->direction;
-  double dn = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+  double dn = nh_vec3_norm(d);
   NH_CHECK(dn > 0 && isfinite(dn), NH_ERR_INPUT, "beam: direction must be a non-zero vector");
   double d1[3] = {d[0] / dn, d[1] / dn, d[2] / dn}, d2[3], d3[3];
   /* d2: the given normal made orthogonal to d1, else the coordinate axis
    * least aligned with d1, made orthogonal. */
   const double *nv = spec->normal;
-  double pn = nv[0] * d1[0] + nv[1] * d1[1] + nv[2] * d1[2], n2 = 0.0;
+  double pn = nh_vec3_dot(nv, d1), n2 = 0.0;
   for (int i = 0; i < 3; i++) d2[i] = nv[i] - pn * d1[i], n2 += d2[i] * d2[i];
-  double nn = sqrt(nv[0] * nv[0] + nv[1] * nv[1] + nv[2] * nv[2]);
+  double nn = nh_vec3_norm(nv);
   if (!(sqrt(n2) > 1e-6 * nn) || nn == 0.0) {
     int k = 0;
     for (int i = 1; i < 3; i++)

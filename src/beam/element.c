@@ -94,7 +94,7 @@ static void nh_beam_eta(double t, double *eta, double *mu) {
 /* J⁻¹(θ) = I − ½ S + η S². */
 static void nh_beam_jinv(const double th[3], double Ji[9]) {
   double S[9], S2[9], eta, mu;
-  nh_beam_eta(sqrt(th[0] * th[0] + th[1] * th[1] + th[2] * th[2]), &eta, &mu);
+  nh_beam_eta(nh_vec3_norm(th), &eta, &mu);
   nh_beam_skew(th, S);
   nh_mat3_mul(S, S, S2);
   for (int i = 0; i < 9; i++) Ji[i] = -0.5 * S[i] + eta * S2[i];
@@ -103,20 +103,15 @@ static void nh_beam_jinv(const double th[3], double Ji[9]) {
 
 /* H = ∂(J⁻ᵀ(θ) m)/∂θ, J⁻ᵀ m = m + ½ θ × m + η (θ (θ·m) − |θ|² m). */
 static void nh_beam_hmat(const double th[3], const double m[3], double H[9]) {
-  double t2 = th[0] * th[0] + th[1] * th[1] + th[2] * th[2], eta, mu, Sm[9];
+  double t2 = nh_vec3_dot(th, th), eta, mu, Sm[9];
   nh_beam_eta(sqrt(t2), &eta, &mu);
-  double tm = th[0] * m[0] + th[1] * m[1] + th[2] * m[2], a[3];
+  double tm = nh_vec3_dot(th, m), a[3];
   for (int i = 0; i < 3; i++) a[i] = th[i] * tm - t2 * m[i];
   nh_beam_skew(m, Sm);
   for (int i = 0; i < 3; i++)
     for (int j = 0; j < 3; j++)
       H[3 * i + j] = -0.5 * Sm[3 * i + j] + mu * a[i] * th[j] +
                      eta * ((i == j ? tm : 0.0) + th[i] * m[j] - 2 * m[i] * th[j]);
-}
-
-static void nh_cross(const double a[3], const double b[3], double c[3]) {
-  double t[3] = {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
-  memcpy(c, t, sizeof t);
 }
 
 double nh_beam_corot(const double x1[3], const double x2[3], const double T1[9], const double T2[9],
@@ -130,10 +125,10 @@ double nh_beam_corot(const double x1[3], const double x2[3], const double T1[9],
     e1[i] /= l;
     q1[i] = T1[3 * i + 1], q2[i] = T2[3 * i + 1], q[i] = 0.5 * (q1[i] + q2[i]);
   }
-  nh_cross(e1, q, e3);
+  nh_vec3_cross(e1, q, e3);
   double n3 = sqrt(e3[0] * e3[0] + e3[1] * e3[1] + e3[2] * e3[2]);
   for (int i = 0; i < 3; i++) e3[i] /= n3;
-  nh_cross(e3, e1, e2);
+  nh_vec3_cross(e3, e1, e2);
   double E[9];
   for (int i = 0; i < 3; i++) E[3 * i] = e1[i], E[3 * i + 1] = e2[i], E[3 * i + 2] = e3[i];
 

@@ -41,7 +41,7 @@ static int nh_channel_lay(nh_group *G, const nh_tool_spec *spec, const nh_mesh *
   for (;;) {
     const nh_cpoint *last = &G->chan[G->n_chan - 1];
     double d[3] = {to->X[0] - last->X[0], to->X[1] - last->X[1], to->X[2] - last->X[2]};
-    double dist = sqrt(dot3(d, d)), sp = nh_point_spacing(spec, m, last);
+    double dist = sqrt(nh_vec3_dot(d, d)), sp = nh_point_spacing(spec, m, last);
     if (dist < sp) return NH_OK;
     if (nh_grow((void **)&G->chan, &G->cap_chan, G->n_chan + 1, sizeof *G->chan))
       return NH_ERR_MEMORY;
@@ -65,10 +65,10 @@ static int nh_tie_rows(nh_contact *c, const nh_mesh *m, const double *u, nh_cpoi
   nh_beam_point(tl->beam, s, xb, t, &e, &xi, J);
   nh_point_position(m, u, p, xp);
   const double *T = nh_beam_directors(tl->beam) + 9 * (xi < 0.5 ? e : e + 1);
-  double n1[3] = {T[1], T[4], T[7]}, n2[3], d = dot3(n1, t);
+  double n1[3] = {T[1], T[4], T[7]}, n2[3], d = nh_vec3_dot(n1, t);
   for (int i = 0; i < 3; i++) n1[i] -= d * t[i];
-  normalize3(n1);
-  cross3(t, n1, n2);
+  nh_vec3_normalize(n1);
+  nh_vec3_cross(t, n1, n2);
   const double *dirs[3] = {n1, n2, t};
   int first = -1;
   for (int q = 0; q < 3; q++) {
@@ -80,7 +80,7 @@ static int nh_tie_rows(nh_contact *c, const nh_mesh *m, const double *u, nh_cpoi
     rows->tool[r] = tl->dyn, rows->elem[r] = e;
     memcpy(rows->J + 36 * r, J, sizeof J);
     double g[3] = {xp[0] - xb[0], xp[1] - xb[1], xp[2] - xb[2]};
-    rows->gap[r] = (q < 2 || tip) ? dot3(dirs[q], g) : 0.0;
+    rows->gap[r] = (q < 2 || tip) ? nh_vec3_dot(dirs[q], g) : 0.0;
     rows->lambda[r] = p->lam[q];
     if (q == 2)
       rows->law[r] =
@@ -132,7 +132,8 @@ int nh_tip_rows(nh_contact *c, nh_group *G, const nh_mesh *m, const double *u, d
   double xt[3], tt[3], xf[3];
   nh_beam_point(tl->beam, nh_beam_length(tl->beam), xt, tt, NULL, NULL, NULL);
   nh_point_position(m, u, &G->front, xf);
-  double ahead = dot3(tt, xf) - dot3(tt, xt), sp_f = nh_point_spacing(sp, m, &G->front);
+  double ahead = nh_vec3_dot(tt, xf) - nh_vec3_dot(tt, xt),
+         sp_f = nh_point_spacing(sp, m, &G->front);
   if (ahead < 0.0) { /* the tip passed the front inside the channel: the front moves to it */
     nh_cpoint p = G->front;
     if (!nh_material_point(m, u, xt, G->front.X, &p)) {
@@ -177,7 +178,8 @@ int nh_tip_update(nh_contact *c, nh_group *G, const nh_mesh *m, const double *u,
   nh_cpoint p = G->front;
   if (nh_material_point(m, u, xt, G->front.X, &p)) return NH_OK;
   double d[3] = {p.X[0] - G->front.X[0], p.X[1] - G->front.X[1], p.X[2] - G->front.X[2]};
-  if (sqrt(dot3(d, d)) > 1e-9 * nh_point_spacing(sp, m, &G->front)) ev->cut = 1; /* it advanced */
+  if (sqrt(nh_vec3_dot(d, d)) > 1e-9 * nh_point_spacing(sp, m, &G->front))
+    ev->cut = 1; /* it advanced */
   G->front = p;
   return nh_channel_lay(G, sp, m, &G->front);
 }

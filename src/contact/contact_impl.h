@@ -89,21 +89,6 @@ struct nh_contact {
   int cut;                /* groups whose tip cut in the last step */
 };
 
-static inline double dot3(const double a[3], const double b[3]) {
-  return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-}
-
-static inline void cross3(const double a[3], const double b[3], double c[3]) {
-  c[0] = a[1] * b[2] - a[2] * b[1];
-  c[1] = a[2] * b[0] - a[0] * b[2];
-  c[2] = a[0] * b[1] - a[1] * b[0];
-}
-
-static inline void normalize3(double a[3]) {
-  double n = sqrt(dot3(a, a));
-  if (n > 0) a[0] /= n, a[1] /= n, a[2] /= n;
-}
-
 /* ---- tools.c ---- */
 /* Speed of the prescribed insertion over the step t → t + h (m/s, < 0 retracting). */
 double nh_tool_speed(const nh_tool_spec *spec, double t, double h);

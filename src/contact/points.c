@@ -52,7 +52,8 @@ int nh_material_point(const nh_mesh *m, const double *u, const double x[3], cons
     if (nh_mat3_inverse(G, Fi)) return NH_ERR_INPUT;
     nh_mat3_vec(Fi, r, d);
     for (int i = 0; i < 3; i++) X[i] += d[i];
-    if (sqrt(dot3(d, d)) <= 1e-13 * (1.0 + sqrt(dot3(X, X)))) return nh_point_set(m, p, X);
+    if (sqrt(nh_vec3_dot(d, d)) <= 1e-13 * (1.0 + sqrt(nh_vec3_dot(X, X))))
+      return nh_point_set(m, p, X);
   }
   return nh_point_set(m, p, X);
 }

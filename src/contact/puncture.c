@@ -43,7 +43,7 @@ static void nh_puncture_refresh(nh_group *G, const nh_tool_spec *sp, const nh_me
     for (int i = 0; i < 3; i++) o[i] = sp->base[i] - (x[i] - G->entry.X[i]);
     if (!nh_domain_ray_entry(&m->domain, o, sp->direction, &tau, X, n)) return;
     double dX[3] = {X[0] - G->entry.X[0], X[1] - G->entry.X[1], X[2] - G->entry.X[2]};
-    double moved = sqrt(dot3(dX, dX));
+    double moved = sqrt(nh_vec3_dot(dX, dX));
     nh_cpoint p = G->entry;
     if (nh_point_set(m, &p, X)) return;
     G->entry = p;
@@ -58,12 +58,12 @@ static void nh_puncture_refresh(nh_group *G, const nh_tool_spec *sp, const nh_me
 static int nh_puncture_near(const nh_group *G, const nh_tool *tl, const nh_mesh *m,
                             const double xt[3], const double xp[3], double h) {
   nh_beam *b = tl->beam;
-  double gap = dot3(G->n_out, xt) - dot3(G->n_out, xp);
+  double gap = nh_vec3_dot(G->n_out, xt) - nh_vec3_dot(G->n_out, xp);
   const double *vb = nh_beam_velocities(b) + 6 * (nh_beam_nodes(b) - 1);
-  double reach =
-      2.0 * h *
-          (fabs(tl->base_v[0]) + fabs(tl->base_v[1]) + fabs(tl->base_v[2]) + sqrt(dot3(vb, vb))) +
-      1e-3 * nh_mesh_cell_size(m, G->entry.cell);
+  double reach = 2.0 * h *
+                     (fabs(tl->base_v[0]) + fabs(tl->base_v[1]) + fabs(tl->base_v[2]) +
+                      sqrt(nh_vec3_dot(vb, vb))) +
+                 1e-3 * nh_mesh_cell_size(m, G->entry.cell);
   return !(gap > reach);
 }
 
@@ -88,12 +88,12 @@ int nh_puncture_rows(nh_contact *c, nh_group *G, const nh_mesh *m, const double 
    * step, however short the contact) and the tip then cuts on, off its
    * line (docs/interaction.md, Puncture). */
   double tan1[3] = {1, 0, 0}, tan2[3], d[3] = {xp[0] - xt[0], xp[1] - xt[1], xp[2] - xt[2]};
-  double gap = dot3(tt, d);
+  double gap = nh_vec3_dot(tt, d);
   if (fabs(tt[0]) > 0.9) tan1[0] = 0, tan1[1] = 1;
-  double ct = dot3(tan1, tt);
+  double ct = nh_vec3_dot(tan1, tt);
   for (int i = 0; i < 3; i++) tan1[i] -= ct * tt[i];
-  normalize3(tan1);
-  cross3(tan1, tt, tan2);
+  nh_vec3_normalize(tan1);
+  nh_vec3_cross(tan1, tt, tan2);
   const double *dirs[3] = {tt, tan1, tan2};
   nh_rows *rows = &c->rows;
   for (int q = 0; q < 3; q++) {

@@ -67,9 +67,9 @@ void nh_tool_follow(nh_tool *in, const nh_tool *host, double h) {
     if (a > L || a < 0) /* beyond the host's ends: straight on along its end tangent */
       for (int i = 0; i < 3; i++) p[i] += (a > L ? a - L : a) * t[i];
     /* the rotation taking the rest axis to t, applied to the rest directors */
-    double ax[3], c = dot3(dir, t);
-    cross3(dir, t, ax);
-    double sn = sqrt(dot3(ax, ax)), ang = atan2(sn, c);
+    double ax[3], c = nh_vec3_dot(dir, t);
+    nh_vec3_cross(dir, t, ax);
+    double sn = sqrt(nh_vec3_dot(ax, ax)), ang = atan2(sn, c);
     if (sn > 0)
       for (int i = 0; i < 3; i++) ax[i] *= ang / sn;
     nh_mat3_rotation(ax, Q);
@@ -107,7 +107,7 @@ int nh_tool_init(nh_contact *c, int k, const nh_mesh *m) {
   if (tl->host < 0) return nh_tool_check_reach(c->scene, m, sp);
   const nh_tool_spec *hs = &c->scene->tools[tl->host];
   double d[3] = {sp->base[0] - hs->base[0], sp->base[1] - hs->base[1], sp->base[2] - hs->base[2]};
-  tl->offset = dot3(d, hs->direction);
+  tl->offset = nh_vec3_dot(d, hs->direction);
   nh_tool_follow(tl, &c->tools[tl->host], 0.0);
   return NH_OK;
 }
@@ -174,7 +174,7 @@ double nh_tool_project(const nh_beam *b, const double x[3], double s0) {
     double xs[3], t[3], sc = fmin(fmax(s, 0.0), L);
     nh_beam_point(b, sc, xs, t, NULL, NULL, NULL);
     double d[3] = {x[0] - xs[0], x[1] - xs[1], x[2] - xs[2]};
-    double ds = dot3(t, d);
+    double ds = nh_vec3_dot(t, d);
     s = sc + ds;
     if (fabs(ds) < 1e-13 * L || (sc != s - ds)) break;
   }
@@ -190,10 +190,10 @@ void nh_contact_report(const nh_contact *c, int k, nh_tool_report *r) {
   const nh_group *G = &c->groups[tl->group];
   double t[3], L = nh_beam_length(tl->beam);
   nh_beam_point(tl->beam, L, r->tip, t, NULL, NULL, NULL);
-  double ft = dot3(tl->F, t), lat[3];
+  double ft = nh_vec3_dot(tl->F, t), lat[3];
   for (int i = 0; i < 3; i++) lat[i] = tl->F[i] - ft * t[i];
   r->axial_force = -ft;
-  r->lateral_force = sqrt(dot3(lat, lat));
+  r->lateral_force = sqrt(nh_vec3_dot(lat, lat));
   r->state = tl->state;
   r->depth = 0.0;
   if (G->punctured && G->n_chan > 0 && tl->state != NH_TOOL_OUTSIDE) {

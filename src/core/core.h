@@ -66,6 +66,14 @@ void nh_log_warn(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
 /* Monotonic wall time in seconds. */
 double nh_time_now(void);
 
+/* ---- 3-vectors (mat3.c) ---- */
+double nh_vec3_dot(const double a[3], const double b[3]); /* a · b */
+double nh_vec3_norm(const double a[3]);                   /* |a| = (a · a)^½ */
+/* c = a × b (c may alias a or b). */
+void nh_vec3_cross(const double a[3], const double b[3], double c[3]);
+/* a /= |a| unless |a| = 0 (then a is left as is); returns |a| before. */
+double nh_vec3_normalize(double a[3]);
+
 /* ---- 3x3 algebra ---- */
 void nh_mat3_identity(double A[9]);
 void nh_mat3_mul(const double A[9], const double B[9], double C[9]);    /* C = A B   */

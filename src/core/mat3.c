@@ -18,6 +18,25 @@
 #include <math.h>
 #include <string.h>
 
+double nh_vec3_dot(const double a[3], const double b[3]) {
+  return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+
+double nh_vec3_norm(const double a[3]) {
+  return sqrt(nh_vec3_dot(a, a));
+}
+
+void nh_vec3_cross(const double a[3], const double b[3], double c[3]) {
+  double t[3] = {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
+  c[0] = t[0], c[1] = t[1], c[2] = t[2];
+}
+
+double nh_vec3_normalize(double a[3]) {
+  double n = nh_vec3_norm(a);
+  if (n > 0) a[0] /= n, a[1] /= n, a[2] /= n;
+  return n;
+}
+
 void nh_mat3_identity(double A[9]) {
   memset(A, 0, 9 * sizeof(double));
   A[0] = A[4] = A[8] = 1.0;
@@ -85,7 +104,7 @@ int nh_mat3_inverse(const double A[9], double Ainv[9]) {
 }
 
 void nh_mat3_rotation(const double r[3], double R[9]) {
-  double th = sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2]);
+  double th = nh_vec3_norm(r);
   nh_mat3_identity(R);
   if (th == 0.0) return;
   double k[3] = {r[0] / th, r[1] / th, r[2] / th};
@@ -151,16 +170,6 @@ void nh_mat3_sym_eigen(const double S[9], double w[3], double V[9]) {
     for (int k = 0; k < 3; k++) V[3 * k + 2] = -V[3 * k + 2];
 }
 
-static double nh_norm3(const double a[3]) {
-  return sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
-}
-
-static void nh_cross3(const double a[3], const double b[3], double c[3]) {
-  c[0] = a[1] * b[2] - a[2] * b[1];
-  c[1] = a[2] * b[0] - a[0] * b[2];
-  c[2] = a[0] * b[1] - a[1] * b[0];
-}
-
 void nh_polar_rotation(const double F[9], double R[9]) {
   double C[9], w[3], V[9];
   nh_mat3_mul_tn(F, F, C);
@@ -170,7 +179,7 @@ void nh_polar_rotation(const double F[9], double R[9]) {
     for (int k = 0; k < 3; k++) v[i][k] = V[3 * k + i];
     nh_mat3_vec(F, v[i], u[i]);
   }
-  double n0 = nh_norm3(u[0]);
+  double n0 = nh_vec3_norm(u[0]);
   if (!(n0 > 1e-300) || !isfinite(n0)) { /* F = 0 (or not finite): no rotation to extract */
     nh_mat3_identity(R);
     return;
@@ -178,17 +187,17 @@ void nh_polar_rotation(const double F[9], double R[9]) {
   for (int k = 0; k < 3; k++) u[0][k] /= n0;
   double d = u[0][0] * u[1][0] + u[0][1] * u[1][1] + u[0][2] * u[1][2];
   for (int k = 0; k < 3; k++) u[1][k] -= d * u[0][k];
-  double n1 = nh_norm3(u[1]);
+  double n1 = nh_vec3_norm(u[1]);
   if (n1 <= 1e-12 * n0) { /* rank 1: any direction orthogonal to u0 */
     double e[3] = {0, 0, 0};
     int m = fabs(u[0][0]) < fabs(u[0][1]) ? (fabs(u[0][0]) < fabs(u[0][2]) ? 0 : 2)
                                           : (fabs(u[0][1]) < fabs(u[0][2]) ? 1 : 2);
     e[m] = 1.0;
-    nh_cross3(u[0], e, u[1]);
-    n1 = nh_norm3(u[1]);
+    nh_vec3_cross(u[0], e, u[1]);
+    n1 = nh_vec3_norm(u[1]);
   }
   for (int k = 0; k < 3; k++) u[1][k] /= n1;
-  nh_cross3(u[0], u[1], u[2]);
+  nh_vec3_cross(u[0], u[1], u[2]);
   /* R = U Vᵀ = Σ_i u_i v_iᵀ */
   for (int a = 0; a < 3; a++)
     for (int b = 0; b < 3; b++)

@@ -8,7 +8,8 @@
  * with gₐ = ∇_X Nₐ at the Gauss point; this is Bᵀ D B written out.
  * The rotation is that of F at the centre (Müller & Gross 2004); the tangent
  * drops the variation of R (the usual corotational approximation: one
- * linearisation per step converges to the same equilibrium, DESIGN.md).
+ * linearisation per step converges to the same equilibrium, docs/theory.md
+ * §2, "Internal force and tangent").
  *
  * Precision: the state is the displacement u, not the position x. With
  * F = I + Σ uₐ ⊗ gₐ and, relative to the rest centroid X̄,

@@ -1,4 +1,4 @@
-/* csv.c — append-only CSV tables, mkdir -p and atomic text files.
+/* csv.c — append-only CSV tables.
  *
  * CSV tables (steps.csv, probes.csv, ...) grow by one row per step, so they
  * are the one kind of output that is not written through tmp + rename: the
@@ -14,11 +14,10 @@
  * trailing newline in the caller's format is dropped, so a row is always
  * exactly one line.
  *
- * nh_mkdir_p creates every missing component of a path (mode 0777 minus the
- * umask) and accepts components that already exist as directories.
- * nh_write_text writes a whole file through "<path>.tmp" and rename(), the
- * same atomic scheme as the VTU writer. All failures return NH_ERR_IO with a
- * message naming the path and strerror(errno). */
+ * nh_csv_resume re-creates a table from the rows of an interrupted run's
+ * file up to a step (the checkpoint's), so that a continued run's table is
+ * the uninterrupted one's. All failures return NH_ERR_IO with a message
+ * naming the path and strerror(errno). */
 #include "io/io.h"
 
 #include <errno.h>
@@ -26,8 +25,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/stat.h>
-#include <sys/types.h>
 
 struct nh_csv {
   FILE *file;
@@ -121,70 +118,6 @@ void nh_csv_destroy(nh_csv **csv) {
   *csv = NULL;
 }
 
-static int is_directory(const char *path) {
-  struct stat st;
-  return stat(path, &st) == 0 && S_ISDIR(st.st_mode);
-}
-
-int nh_mkdir_p(const char *path) {
-  NH_CHECK(path, NH_ERR_INTERNAL, "nh_mkdir_p: NULL path");
-  NH_CHECK(path[0] != '\0', NH_ERR_IO, "cannot create directory '': empty path");
-  char *p = copy_string(path);
-  if (!p) return NH_ERR_MEMORY;
-  int rc = NH_OK;
-  /* Create each prefix that ends at a '/' (skipping a leading one), then the whole path. */
-  for (char *s = p + 1;; ++s) {
-    if (*s != '/' && *s != '\0') continue;
-    char saved = *s;
-    *s = '\0';
-    if (mkdir(p, 0777) != 0 && !(errno == EEXIST && is_directory(p))) {
-      int e = errno;
-      if (e == EEXIST) e = ENOTDIR;
-      rc = NH_ERROR(NH_ERR_IO, "cannot create directory '%s' (at '%s'): %s", path, p, strerror(e));
-      break;
-    }
-    *s = saved;
-    if (saved == '\0') break;
-    while (s[1] == '/') ++s; /* "a//b" */
-    if (s[1] == '\0') break; /* trailing slash */
-  }
-  free(p);
-  return rc;
-}
-
-int nh_write_text(const char *path, const char *text) {
-  NH_CHECK(path && text, NH_ERR_INTERNAL, "nh_write_text: NULL argument");
-  size_t tmp_len = strlen(path) + 5;
-  char *tmp = nh_calloc(tmp_len, 1);
-  if (!tmp) return NH_ERR_MEMORY;
-  snprintf(tmp, tmp_len, "%s.tmp", path);
-  int rc = NH_OK;
-  FILE *f = fopen(tmp, "w");
-  if (!f) {
-    rc = NH_ERROR(NH_ERR_IO, "cannot write file '%s': %s", path, strerror(errno));
-    free(tmp);
-    return rc;
-  }
-  size_t len = strlen(text);
-  int failed = fwrite(text, 1, len, f) != len;
-  int saved_errno = failed ? errno : 0;
-  if (fclose(f) != 0 && !failed) {
-    failed = 1;
-    saved_errno = errno;
-  }
-  if (!failed && rename(tmp, path) != 0) {
-    failed = 1;
-    saved_errno = errno;
-  }
-  if (failed) {
-    remove(tmp);
-    rc = NH_ERROR(NH_ERR_IO, "cannot write file '%s': %s", path,
-                  saved_errno ? strerror(saved_errno) : "write error");
-  }
-  free(tmp);
-  return rc;
-}
-
 int nh_csv_values(nh_csv *csv, int n, const double *values) {
   char line[64 * 64];
   NH_CHECK(n > 0 && n <= 64, NH_ERR_INTERNAL, "nh_csv_values: %d columns", n);
@@ -192,4 +125,35 @@ int nh_csv_values(nh_csv *csv, int n, const double *values) {
   for (int i = 0; i < n; i++)
     len += (size_t)snprintf(line + len, sizeof line - len, i ? ",%.17g" : "%.17g", values[i]);
   return nh_csv_row(csv, "%s", line);
+}
+
+int nh_csv_resume(const char *path, int n_columns, const char *const *columns, int step,
+                  nh_csv **out) {
+  FILE *f = fopen(path, "r");
+  char *text = NULL;
+  size_t len = 0;
+  if (f) {
+    fseek(f, 0, SEEK_END);
+    long size = ftell(f);
+    rewind(f);
+    text = malloc((size_t)(size > 0 ? size : 0) + 1);
+    if (!text) {
+      fclose(f);
+      return NH_ERROR(NH_ERR_MEMORY, "out of memory resuming %s", path);
+    }
+    len = fread(text, 1, (size_t)(size > 0 ? size : 0), f);
+    text[len] = '\0';
+    fclose(f);
+  }
+  int rc = nh_csv_create(path, n_columns, columns, out);
+  char *line = text ? strchr(text, '\n') : NULL; /* skip the header */
+  while (!rc && line && line[1]) {
+    char *start = line + 1, *end = strchr(start, '\n');
+    if (end) *end = '\0';
+    if (atoi(start) <= step && start[0] >= '0' && start[0] <= '9')
+      rc = nh_csv_row(*out, "%s", start);
+    line = end;
+  }
+  free(text);
+  return rc;
 }

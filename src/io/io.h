@@ -1,7 +1,9 @@
 /* io — VTU (XML UnstructuredGrid, appended raw binary), PVD collections and
  * CSV tables. Writers take plain arrays; they know nothing of the mesh or the
- * simulation. Every file is written to "<path>.tmp" and renamed into place,
- * so a reader (or a killed run) never sees a half-written file. */
+ * simulation. Every file but the append-only CSV tables is written to
+ * "<path>.tmp" and renamed into place (io/file.c), so a reader (or a killed
+ * run) never sees a half-written file. The resume functions continue the
+ * outputs of an interrupted run at its checkpoint's step. */
 #ifndef NH_IO_H
 #define NH_IO_H
 
@@ -46,6 +48,11 @@ int nh_pvd_create(const char *path, nh_pvd **out);
 /* Add a frame (file relative to the PVD's folder) and rewrite the PVD
  * atomically, so that it always lists exactly the frames already written. */
 int nh_pvd_add(nh_pvd *pvd, double time, const char *file);
+/* Continue the collection DIR/PREFIX.pvd of an interrupted run at step
+ * `step`: a new collection listing, in step order, the frames
+ * PREFIX_NNNNNN.vtu found in DIR with NNNNNN <= step, at time NNNNNN * dt.
+ * Fails as nh_pvd_create and nh_pvd_add. */
+int nh_pvd_resume(const char *dir, const char *prefix, double dt, int step, nh_pvd **out);
 void nh_pvd_destroy(nh_pvd **pvd);
 
 /* A CSV table with a fixed header; rows are appended and flushed. */
@@ -57,11 +64,36 @@ int nh_csv_row(nh_csv *csv, const char *fmt, ...) __attribute__((format(printf, 
 /* Append one row of n (<= 64) numbers, each printed exactly (%.17g). */
 int nh_csv_values(nh_csv *csv, int n, const double *values);
 void nh_csv_destroy(nh_csv **csv);
+/* Continue the table `path` of an interrupted run at step `step`: re-create
+ * it (nh_csv_create) and re-append the rows of the old file whose first
+ * field, the step, is at most `step` (a missing file: just the header).
+ * Fails as nh_csv_create and nh_csv_row, NH_ERR_MEMORY. */
+int nh_csv_resume(const char *path, int n_columns, const char *const *columns, int step,
+                  nh_csv **out);
 
+/* ---- files (io/file.c) ---- */
 /* Create directory `path` and its parents (like mkdir -p). NH_ERR_IO on failure. */
 int nh_mkdir_p(const char *path);
-/* Copy text to a file atomically (tmp + rename). */
+/* Copy text to a file atomically (nh_atomic_open, no fsync). */
 int nh_write_text(const char *path, const char *text);
+
+/* A file written atomically: the caller writes to `file` ("<path>.tmp"),
+ * nh_atomic_commit renames it over the path. */
+typedef struct {
+  FILE *file;
+  char *path, *tmp;
+  const char *what; /* names the file in messages: "VTU file", "checkpoint" */
+  int sync;         /* fsync before the rename */
+} nh_atomic_file;
+/* Open "<path>.tmp" for writing (binary). `what` (kept, not copied) names
+ * the kind of file in messages. Fails with NH_ERR_IO ("cannot write WHAT
+ * 'PATH': reason"), NH_ERR_MEMORY; *a is then closed (commit is a no-op). */
+int nh_atomic_open(const char *path, const char *what, int sync, nh_atomic_file *a);
+/* Finish the file: `failed` (a write the caller saw fail) or an error of
+ * the stream, the fsync (if asked), the close or the rename removes the
+ * temporary and returns NH_ERR_IO naming the path; else the file is in
+ * place. Frees *a in both cases. */
+int nh_atomic_commit(nh_atomic_file *a, int failed);
 
 /* ---- HDF5 results: results.h5 + results.xdmf (io/hdf5.c) ----
  * One HDF5 file per run with the per-step table, time series of named items

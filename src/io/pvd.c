@@ -19,6 +19,8 @@
  *   would leave the closing tags missing whenever a run is killed; rewriting
  *   keeps the file always valid and listing exactly the frames written so
  *   far. The cost is O(frames) per add, negligible next to a VTU frame.
+ * - nh_pvd_resume rebuilds the list of a restarted run from the frame files
+ *   on disk (the PVD itself may list frames after the checkpoint).
  * - nh_pvd_create writes the empty collection at once, so an unwritable
  *   folder fails before the first step rather than after it.
  * - Times are printed with %.17g, which reproduces the double exactly, so a
@@ -29,6 +31,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 struct nh_pvd {
   char *path;
@@ -113,4 +116,22 @@ void nh_pvd_destroy(nh_pvd **pvd) {
   free(p->path);
   free(p);
   *pvd = NULL;
+}
+
+int nh_pvd_resume(const char *dir, const char *prefix, double dt, int step, nh_pvd **out) {
+  size_t size = strlen(dir) + strlen(prefix) + 32;
+  char *path = nh_calloc(size, 1), *name = nh_calloc(strlen(prefix) + 32, 1);
+  int rc = path && name ? NH_OK : NH_ERR_MEMORY;
+  if (!rc) {
+    snprintf(path, size, "%s/%s.pvd", dir, prefix);
+    rc = nh_pvd_create(path, out);
+  }
+  for (int k = 0; k <= step && !rc; k++) { /* in step order */
+    snprintf(name, strlen(prefix) + 32, "%s_%06d.vtu", prefix, k);
+    snprintf(path, size, "%s/%s", dir, name);
+    if (access(path, R_OK) == 0) rc = nh_pvd_add(*out, k * dt, name);
+  }
+  free(path);
+  free(name);
+  return rc;
 }

@@ -47,9 +47,10 @@
  *   a field with components < 1) is a caller bug: NH_ERR_INTERNAL, nothing
  *   written.
  * - Atomicity: everything goes to "<path>.tmp", which is closed (errors of
- *   the final flush included) and renamed over <path>. On any failure the tmp
- *   file is removed and NH_ERR_IO names the path and strerror(errno). There is
- *   no fsync: the rename protects readers and killed runs, not power loss. */
+ *   the final flush included) and renamed over <path> (nh_atomic_open /
+ *   nh_atomic_commit, io/file.c). On any failure the tmp file is removed and
+ *   NH_ERR_IO names the path and strerror(errno). There is no fsync: the
+ *   rename protects readers and killed runs, not power loss. */
 #include "io/io.h"
 
 #include <errno.h>
@@ -229,21 +230,10 @@ int nh_vtu_write(const char *path, const nh_vtu_grid *grid) {
     offset += sizeof(uint64_t) + arrays[i].elem_size * arrays[i].count;
   }
 
-  int rc = NH_OK;
-  size_t tmp_len = strlen(path) + 5;
-  char *tmp = nh_calloc(tmp_len, 1);
-  if (!tmp) {
-    free(arrays);
-    free(types);
-    return NH_ERR_MEMORY;
-  }
-  snprintf(tmp, tmp_len, "%s.tmp", path);
-
-  FILE *f = fopen(tmp, "wb");
-  if (!f) {
-    rc = NH_ERROR(NH_ERR_IO, "cannot write VTU file '%s': %s", path, strerror(errno));
-    goto done;
-  }
+  nh_atomic_file af;
+  int rc = nh_atomic_open(path, "VTU file", 0, &af);
+  if (rc) goto done;
+  FILE *f = af.file;
 
   fputs("<?xml version=\"1.0\"?>\n"
         "<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" byte_order=\"LittleEndian\""
@@ -274,24 +264,9 @@ int nh_vtu_write(const char *path, const nh_vtu_grid *grid) {
     fputs("\n  </AppendedData>\n</VTKFile>\n", f);
     failed = ferror(f);
   }
-  /* fclose flushes the last buffer: its failure (disk full) is a write failure. */
-  int saved_errno = failed ? errno : 0;
-  if (fclose(f) != 0 && !failed) {
-    failed = 1;
-    saved_errno = errno;
-  }
-  if (!failed && rename(tmp, path) != 0) {
-    failed = 1;
-    saved_errno = errno;
-  }
-  if (failed) {
-    remove(tmp);
-    rc = NH_ERROR(NH_ERR_IO, "cannot write VTU file '%s': %s", path,
-                  saved_errno ? strerror(saved_errno) : "write error");
-  }
+  rc = nh_atomic_commit(&af, failed);
 
 done:
-  free(tmp);
   free(arrays);
   free(types);
   return rc;

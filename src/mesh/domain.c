@@ -152,7 +152,7 @@ int nh_domain_ray_entry(const nh_domain *d, const double base[3], const double d
   if (nh_domain_level(d, base) <= 0.0) return 0;
   /* Where the ray crosses the bounding box (slightly enlarged): [t0, t1]. */
   const double L = nh_largest_edge(d), pad = 1e-3 * L;
-  double t0 = 0.0, t1 = INFINITY, speed = sqrt(dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]);
+  double t0 = 0.0, t1 = INFINITY, speed = nh_vec3_norm(dir);
   if (!(speed > 0)) return 0;
   for (int i = 0; i < 3; i++) {
     double lo = d->min[i] - pad, hi = d->max[i] + pad;

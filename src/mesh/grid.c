@@ -18,9 +18,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-const double nh_hex_corner[8][3] = {{-1, -1, -1}, {1, -1, -1}, {1, 1, -1}, {-1, 1, -1},
-                                    {-1, -1, 1},  {1, -1, 1},  {1, 1, 1},  {-1, 1, 1}};
-
 void nh_mesh_destroy(nh_mesh **mesh) {
   if (!mesh || !*mesh) return;
   nh_mesh *m = *mesh;

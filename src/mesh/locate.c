@@ -1,4 +1,4 @@
-/* locate.c — trilinear shape functions and point location.
+/* locate.c — point location.
  *
  * A material point is located in two stages: the initial grid is regular, so
  * its level-0 cell follows from the point's grid coordinates, through
@@ -15,22 +15,6 @@
 
 #include <float.h>
 #include <math.h>
-
-void nh_hex_shape(const double xi[3], double N[8]) {
-  for (int a = 0; a < 8; a++)
-    N[a] = 0.125 * (1 + nh_hex_corner[a][0] * xi[0]) * (1 + nh_hex_corner[a][1] * xi[1]) *
-           (1 + nh_hex_corner[a][2] * xi[2]);
-}
-
-void nh_hex_dshape(const double xi[3], double dN[8][3]) {
-  for (int a = 0; a < 8; a++) {
-    const double *s = nh_hex_corner[a];
-    double f0 = 1 + s[0] * xi[0], f1 = 1 + s[1] * xi[1], f2 = 1 + s[2] * xi[2];
-    dN[a][0] = 0.125 * s[0] * f1 * f2;
-    dN[a][1] = 0.125 * s[1] * f0 * f2;
-    dN[a][2] = 0.125 * s[2] * f0 * f1;
-  }
-}
 
 int nh_hex_invert(const double Xe[24], const double x[3], double xi[3]) {
   xi[0] = xi[1] = xi[2] = 0.0;

@@ -1,18 +1,40 @@
 /* mesh — nodes, hexahedral cells and their refinement hierarchy; point
  * location in natural coordinates; regions (fixed nodes, loads).
  *
- * Node numbering of a hexahedron (VTK_HEXAHEDRON), natural coordinates
- * ξ = (ξ, η, ζ) ∈ [-1, 1]³:
+ * The reference hexahedron (mesh/cell.c), natural coordinates
+ * ξ = (ξ, η, ζ) ∈ [-1, 1]³, corners in VTK_HEXAHEDRON order:
  *
- *          7 ─────── 6          node  ξ   η   ζ
- *         /|        /|           0   -1  -1  -1
- *        / |       / |           1   +1  -1  -1
- *       4 ─────── 5  |           2   +1  +1  -1
- *       |  3 ─────|─ 2           3   -1  +1  -1
- *   ζ η |/        | /            4   -1  -1  +1
- *   |/  0 ─────── 1              5   +1  -1  +1
- *   └─ξ                          6   +1  +1  +1
- *                                7   -1  +1  +1
+ *          7 ─────── 6          corner  ξ   η   ζ
+ *         /|        /|             0   -1  -1  -1
+ *        / |       / |             1   +1  -1  -1
+ *       4 ─────── 5  |             2   +1  +1  -1
+ *       |  3 ─────|─ 2             3   -1  +1  -1
+ *   ζ η |/        | /              4   -1  -1  +1
+ *   |/  0 ─────── 1                5   +1  -1  +1
+ *   └─ξ                            6   +1  +1  +1
+ *                                  7   -1  +1  +1
+ *
+ * Faces (nh_hex_face), by the coordinate held fixed; the corners run
+ * counter-clockwise seen from outside the cell for faces 1, 2, 5 and from
+ * inside for faces 0, 3, 4:
+ *
+ *   face 0: ξ = -1   0 3 7 4        face 1: ξ = +1   1 2 6 5
+ *   face 2: η = -1   0 1 5 4        face 3: η = +1   3 2 6 7
+ *   face 4: ζ = -1   0 1 2 3        face 5: ζ = +1   4 5 6 7
+ *
+ * Edges (nh_hex_edge): e0–e3 around the bottom face ζ = -1, e4–e7 around the
+ * top face ζ = +1, e8–e11 along ζ:
+ *
+ *            7 ───e6──── 6            edge  corners   edge  corners
+ *           /|          /|             e0    0 1       e6    6 7
+ *         e7 e11      e5 e10           e1    1 2       e7    7 4
+ *         /  |        /  |             e2    2 3       e8    0 4
+ *        4 ───e4──── 5   |             e3    3 0       e9    1 5
+ *        |   3 ───e2─|── 2             e4    4 5       e10   2 6
+ *        e8 /        e9 /              e5    5 6       e11   3 7
+ *        | e3        | e1
+ *        |/          |/
+ *        0 ───e0──── 1
  *
  * Cells are never deleted: a refined cell stays in the array as an inactive
  * parent whose children follow it in the hierarchy (first_child, n_children),
@@ -110,8 +132,16 @@ typedef struct nh_mesh {
   nh_domain domain; /* the shape the cells resolve (refinement measures φ on it) */
 } nh_mesh;
 
-/* Natural-coordinate signs of the 8 nodes (table above). */
+/* ---- the reference hexahedron (mesh/cell.c; numbering drawn above) ---- */
+/* Natural-coordinate signs of the 8 corners. */
 extern const double nh_hex_corner[8][3];
+/* The 4 corners of each of the 6 faces. */
+extern const int nh_hex_face[6][4];
+/* The 2 corners of each of the 12 edges. */
+extern const int nh_hex_edge[12][2];
+/* Trilinear shape functions N[8] and their derivatives dN[8][3] at ξ. */
+void nh_hex_shape(const double xi[3], double N[8]);
+void nh_hex_dshape(const double xi[3], double dN[8][3]);
 
 /* Build a (grid[0] x grid[1] x grid[2]) grid of level-0 cells over the box
  * [min, max]. Node (i, j, k) has index i + (g0+1) (j + (g1+1) k), cell
@@ -138,10 +168,6 @@ int nh_mesh_update_leaves(nh_mesh *mesh);
 
 /* Copy the rest coordinates of cell c into Xe[24] (node-major). */
 void nh_mesh_cell_coords(const nh_mesh *mesh, const double *positions, int c, double Xe[24]);
-
-/* Trilinear shape functions N[8] and their derivatives dN[8][3] at ξ. */
-void nh_hex_shape(const double xi[3], double N[8]);
-void nh_hex_dshape(const double xi[3], double dN[8][3]);
 
 /* Natural coordinates ξ of point x in the hexahedron with corners Xe by
  * Newton's method. Returns NH_OK if it converged (ξ may lie outside

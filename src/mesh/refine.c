@@ -74,12 +74,10 @@ static int nh_hash_find(const nh_node_hash *h, const double x[3]) {
 }
 
 double nh_mesh_cell_size(const nh_mesh *m, int c) {
-  static const int edge[12][2] = {{0, 1}, {1, 2}, {2, 3}, {3, 0}, {4, 5}, {5, 6},
-                                  {6, 7}, {7, 4}, {0, 4}, {1, 5}, {2, 6}, {3, 7}};
   double size = INFINITY;
   for (int e = 0; e < 12; e++) {
-    const double *a = m->X + 3 * m->cells[8 * c + edge[e][0]];
-    const double *b = m->X + 3 * m->cells[8 * c + edge[e][1]];
+    const double *a = m->X + 3 * m->cells[8 * c + nh_hex_edge[e][0]];
+    const double *b = m->X + 3 * m->cells[8 * c + nh_hex_edge[e][1]];
     size = fmin(size, sqrt((a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]) +
                            (a[2] - b[2]) * (a[2] - b[2])));
   }

@@ -339,10 +339,6 @@ static int check_centres(const nh_template *t, const nh_tmpl_lines *l) {
   return NH_OK;
 }
 
-/* Local faces of a hexahedron (VTK order): ξ = -1, +1, η = -1, +1, ζ = -1, +1. */
-static const int nh_hex_face[6][4] = {{0, 3, 7, 4}, {1, 2, 6, 5}, {0, 1, 5, 4},
-                                      {3, 2, 6, 7}, {0, 1, 2, 3}, {4, 5, 6, 7}};
-
 typedef struct {
   int key[4]; /* node indices, sorted */
   int child, face;

@@ -1,7 +1,7 @@
 /* scene — reading a YAML scene (libyaml) into validated plain structs in SI
  * units, with defaults and `--set KEY=VALUE` overrides by dotted path.
  *
- * The contract is ../shared/SCENE.md; docs/scene.md lists every key. Every
+ * docs/scene.md lists every key, its type, default and unit. Every
  * error is NH_ERR_INPUT with one message of the form
  *     FILE:LINE: KEY: what is wrong
  * where KEY is the dotted path (e.g. tissue.material.poisson) and, for an
@@ -120,6 +120,22 @@ typedef struct {
 typedef enum { NH_MARK_MAX = 0, NH_MARK_DORFLER = 1 } nh_mark_strategy;
 typedef enum { NH_HANGING_ELIMINATE = 0, NH_HANGING_LAGRANGE = 1 } nh_hanging_method;
 
+/* The adapt section: estimation, marking, template, limits (adapt/refine.c). */
+typedef struct {
+  int enabled;                       /* the scene has an `adapt` section */
+  nh_mark_strategy strategy;         /* adapt.marking.strategy: max (default) | dorfler */
+  double theta;                      /* adapt.marking.theta (max): in (0, 1), default 0.3 */
+  double fraction;                   /* adapt.marking.fraction (dorfler): in (0, 1], default 0.5 */
+  char template_path[NH_PATH_MAX];   /* adapt.template resolved to a file (default hex2) */
+  int max_level;                     /* adapt.max_level: >= 0, default 2 */
+  double min_size;                   /* adapt.min_size: m, >= 0, default 0 (no limit) */
+  int max_dofs;                      /* adapt.max_dofs: >= 0, default 0 (no budget) */
+  int every;                         /* adapt.every: >= 1, default 1 */
+  nh_hanging_method hanging;         /* adapt.hanging: eliminate (default) | lagrange */
+  char where[NH_WHERE_MAX];          /* "FILE:LINE: adapt" */
+  char where_template[NH_WHERE_MAX]; /* "FILE:LINE: adapt.template" */
+} nh_adapt_spec;
+
 typedef struct nh_scene {
   char file[NH_PATH_MAX]; /* the scene file as given */
   char name[NH_NAME_MAX]; /* name (required) */
@@ -165,20 +181,7 @@ typedef struct nh_scene {
     int threads;        /* solver.threads: OpenMP threads, 0 = all cores (default 0) */
   } solver;
 
-  struct {
-    int enabled;                     /* the scene has an `adapt` section */
-    nh_mark_strategy strategy;       /* adapt.marking.strategy: max (default) | dorfler */
-    double theta;                    /* adapt.marking.theta (max): in (0, 1), default 0.3 */
-    double fraction;                 /* adapt.marking.fraction (dorfler): in (0, 1], default 0.5 */
-    char template_path[NH_PATH_MAX]; /* adapt.template resolved to a file (default hex2) */
-    int max_level;                   /* adapt.max_level: >= 0, default 2 */
-    double min_size;                 /* adapt.min_size: m, >= 0, default 0 (no limit) */
-    int max_dofs;                    /* adapt.max_dofs: >= 0, default 0 (no budget) */
-    int every;                       /* adapt.every: >= 1, default 1 */
-    nh_hanging_method hanging;       /* adapt.hanging: eliminate (default) | lagrange */
-    char where[NH_WHERE_MAX];        /* "FILE:LINE: adapt" */
-    char where_template[NH_WHERE_MAX]; /* "FILE:LINE: adapt.template" */
-  } adapt;
+  nh_adapt_spec adapt;
 
   int n_probes;
   nh_probe *probes; /* probes: list of {name, point} */
@@ -225,6 +228,18 @@ void nh_scene_gravity(const nh_scene *scene, double t, double g[3]);
  * else nh_scene_gravity × (before − b(t)), b(t) = before + (after − before)
  * s(t), the change of the buoyed fraction since the rest shape. */
 void nh_scene_tissue_gravity(const nh_scene *scene, double t, double g[3]);
+
+/* ---- trajectory planning (trajectory.c) ---- */
+/* The distance tools[i]'s tip has travelled along its direction by time t,
+ * from its first n motion segments (n <= n_motion; untils of those segments
+ * resolved): a nested tool moves with its host until its release and by its
+ * own segments after, an outer tool by its own segments. */
+double nh_scene_tip_travel(const nh_scene *scene, int i, int n, double t);
+/* A planned trajectory from tool->entry to `target`: sets tool->direction
+ * (unit), tool->depth = standoff + distance and tool->base (the tip
+ * standoff before the entry point). Returns NH_ERR_INPUT, without a message
+ * and with the tool untouched, if the target is the entry point. */
+int nh_scene_trajectory_line(nh_tool_spec *tool, const double target[3]);
 
 /* Print a human-readable summary of what will be modelled (for `check`). */
 void nh_scene_print(const nh_scene *scene, void *stdio_file);

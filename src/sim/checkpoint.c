@@ -22,8 +22,9 @@
  * continued run is the uninterrupted one to round-off (it is in fact
  * bitwise equal: tests/restart.py).
  *
- * The file is written to "<path>.tmp", flushed with fsync and renamed, so a
- * kill at any instant leaves either the previous checkpoint or the new one.
+ * The file is written to "<path>.tmp", flushed with fsync and renamed
+ * (nh_atomic_open with sync, io/file.c), so a kill at any instant leaves
+ * either the previous checkpoint or the new one.
  * Reading checks magic, version, byte order, size, checksum and scene hash:
  * a foreign, truncated, corrupted or other-scene file is an input error
  * (exit 2) naming the file and what is wrong. */
@@ -34,7 +35,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <unistd.h>
 
 static const char nh_magic[8] = {'N', 'H', 'C', 'K', 'P', 'T', 0, 1};
 
@@ -104,25 +104,21 @@ int nh_checkpoint_write(const nh_sim *s) {
     free(b.data);
     return NH_ERROR(NH_ERR_MEMORY, "out of memory writing a checkpoint");
   }
-  char path[NH_PATH_MAX + 32], tmp[NH_PATH_MAX + 40];
+  char path[NH_PATH_MAX + 32];
   nh_checkpoint_path(s->scene->output.dir, path, sizeof path);
-  snprintf(tmp, sizeof tmp, "%s.tmp", path);
   uint32_t version = 1, order = 0x01020304;
   uint64_t size = b.len, sum = nh_fnv1a(b.data, b.len, NH_FNV_SEED);
-  FILE *f = fopen(tmp, "wb");
-  int ok = f && fwrite(nh_magic, 8, 1, f) == 1 && fwrite(&version, 4, 1, f) == 1 &&
-           fwrite(&order, 4, 1, f) == 1 && fwrite(&size, 8, 1, f) == 1 &&
-           fwrite(&sum, 8, 1, f) == 1 && fwrite(b.data, 1, b.len, f) == b.len && fflush(f) == 0 &&
-           fsync(fileno(f)) == 0;
-  int err = errno;
-  if (f && fclose(f) != 0 && ok) ok = 0, err = errno;
-  free(b.data);
-  if (!ok || rename(tmp, path) != 0) {
-    if (ok) err = errno;
-    remove(tmp);
-    return NH_ERROR(NH_ERR_IO, "%s: cannot write the checkpoint: %s", path, strerror(err));
+  nh_atomic_file af;
+  int rc = nh_atomic_open(path, "checkpoint", 1, &af);
+  if (!rc) {
+    FILE *f = af.file;
+    int ok = fwrite(nh_magic, 8, 1, f) == 1 && fwrite(&version, 4, 1, f) == 1 &&
+             fwrite(&order, 4, 1, f) == 1 && fwrite(&size, 8, 1, f) == 1 &&
+             fwrite(&sum, 8, 1, f) == 1 && fwrite(b.data, 1, b.len, f) == b.len;
+    rc = nh_atomic_commit(&af, !ok);
   }
-  return NH_OK;
+  free(b.data);
+  return rc;
 }
 
 /* Reading: a cursor over the payload that refuses to run past its end. */

@@ -5,9 +5,10 @@
  * equilibrium under the loads of that pseudo-time (static); with `adapt`,
  * the error of that solution is estimated (SPR); then rows of steps.csv and
  * probes.csv, and a frame when due, so a frame shows a solution on the mesh
- * it was computed on, with its error indicators; last, marked cells are
- * refined and the state is carried to the new nodes (Eq. 17), and the next
- * step continues on the new mesh. Every phase is timed and the times are
+ * it was computed on, with its error indicators; last, adapt marks and
+ * refines cells and carries the state to the new nodes (nh_adapt_step,
+ * Eq. 17), sim rebuilds what depends on the mesh, and the next step
+ * continues on the new mesh. Every phase is timed and the times are
  * kept per step for the summary. The initial state is frame 0, so a time
  * series always starts at rest.
  *
@@ -16,15 +17,11 @@
  * nh_sim_setup_mesh, at creation and after every refinement. */
 #include "sim/sim_impl.h"
 
-#include "adapt/adapt.h"
-
-#include <dirent.h>
 #include <math.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <unistd.h>
 
 static const char *const nh_step_columns[] = {"step",
                                               "time",
@@ -72,8 +69,7 @@ void nh_sim_destroy(nh_sim **sim) {
   free(s->probe_cell);
   free(s->probe_xi);
   free(s->phase_times);
-  free(s->eta_cell);
-  nh_template_destroy(&s->tmpl);
+  nh_adapt_destroy(&s->adapt);
   nh_hanging_destroy(&s->hanging);
   nh_csv_destroy(&s->steps_csv);
   nh_csv_destroy(&s->probes_csv);
@@ -170,6 +166,7 @@ static int nh_write_frame(nh_sim *s) {
   int *flags = malloc(sizeof(int) * (size_t)(np ? np : 1));
   double *cell = malloc(sizeof(double) * 4 * (size_t)(nc ? nc : 1));
   double *hang = calloc((size_t)(np ? np : 1), sizeof(double));
+  const double *eta = nh_adapt_indicators(s->adapt);
   int n_pr = sc->n_probes + sc->n_targets;
   double *pp = malloc(sizeof(double) * 3 * (size_t)(n_pr ? n_pr : 1));
   double *pu = malloc(sizeof(double) * 3 * (size_t)(n_pr ? n_pr : 1));
@@ -188,7 +185,7 @@ static int nh_write_frame(nh_sim *s) {
     cell[l] = nh_von_mises(sig);
     cell[nc + l] = m->level[c];
     cell[2 * nc + l] = m->fill[c];
-    cell[3 * nc + l] = s->have_eta ? s->eta_cell[c] : 0.0;
+    cell[3 * nc + l] = eta ? eta[c] : 0.0;
   }
   if (s->hanging)
     for (int k = 0; k < s->hanging->n_hanging; k++) hang[s->hanging->node[k]] = 1.0;
@@ -277,53 +274,6 @@ static int nh_write_probe_rows(nh_sim *s) {
                       u[1], u[2]));
   }
   return s->contact ? nh_sim_tools_rows(s) : NH_OK;
-}
-
-/* Keep the rows of an existing CSV file whose first field (the step) is at
- * most `step`: re-create the table and re-append them. */
-static int nh_csv_resume(const char *path, int n_columns, const char *const *columns, int step,
-                         nh_csv **out) {
-  FILE *f = fopen(path, "r");
-  char *text = NULL;
-  size_t len = 0;
-  if (f) {
-    fseek(f, 0, SEEK_END);
-    long size = ftell(f);
-    rewind(f);
-    text = malloc((size_t)(size > 0 ? size : 0) + 1);
-    if (!text) {
-      fclose(f);
-      return NH_ERROR(NH_ERR_MEMORY, "out of memory resuming %s", path);
-    }
-    len = fread(text, 1, (size_t)(size > 0 ? size : 0), f);
-    text[len] = '\0';
-    fclose(f);
-  }
-  int rc = nh_csv_create(path, n_columns, columns, out);
-  char *line = text ? strchr(text, '\n') : NULL; /* skip the header */
-  while (!rc && line && line[1]) {
-    char *start = line + 1, *end = strchr(start, '\n');
-    if (end) *end = '\0';
-    if (atoi(start) <= step && start[0] >= '0' && start[0] <= '9')
-      rc = nh_csv_row(*out, "%s", start);
-    line = end;
-  }
-  free(text);
-  return rc;
-}
-
-/* Re-list in a new PVD the frames PREFIX_NNNNNN.vtu on disk with NNNNNN <= step. */
-static int nh_pvd_resume(const char *dir, const char *prefix, double dt, int step, nh_pvd **out) {
-  char path[NH_PATH_MAX + 64];
-  snprintf(path, sizeof path, "%s/%s.pvd", dir, prefix);
-  NH_TRY(nh_pvd_create(path, out));
-  for (int k = 0; k <= step; k++) { /* in step order */
-    char name[64];
-    snprintf(name, sizeof name, "%s_%06d.vtu", prefix, k);
-    snprintf(path, sizeof path, "%s/%s", dir, name);
-    if (access(path, R_OK) == 0) NH_TRY(nh_pvd_add(*out, k * dt, name));
-  }
-  return NH_OK;
 }
 
 static int nh_open_outputs(nh_sim *s) {
@@ -462,7 +412,7 @@ static int nh_sim_build(nh_sim *s) {
   s->probe_xi = malloc(sizeof(double) * 3 * (size_t)(n_points ? n_points : 1));
   if (!s->u || !s->v || !s->probe_cell || !s->probe_xi)
     return NH_ERROR(NH_ERR_MEMORY, "out of memory building the model (%d nodes)", nn);
-  if (sc->adapt.enabled) NH_TRY(nh_template_load(sc->adapt.template_path, &s->tmpl));
+  if (sc->adapt.enabled) NH_TRY(nh_adapt_create(&sc->adapt, &s->adapt));
   NH_TRY(nh_sim_setup_mesh(s, 1));
   NH_TRY(nh_sim_tools_build(s));
   s->integrator = (nh_integrator){.dt = sc->time.step,
@@ -482,82 +432,22 @@ static int nh_sim_build(nh_sim *s) {
 
 /* ---- adaptivity ---- */
 
-/* SPR indicators of the current solution (s->eta_cell, s->eta, s->eta_rel). */
-static int nh_sim_estimate(nh_sim *s) {
-  const nh_mesh *m = s->mesh;
-  if (m->n_cells > s->cap_eta) {
-    double *e = realloc(s->eta_cell, sizeof(double) * (size_t)m->n_cells);
-    if (!e) return NH_ERROR(NH_ERR_MEMORY, "out of memory: error indicators");
-    s->eta_cell = e;
-    s->cap_eta = m->n_cells;
-  }
-  NH_TRY(nh_spr_estimate(m, s->tissue, s->u, s->hanging, s->eta_cell, &s->eta, &s->eta_rel));
-  s->have_eta = 1;
-  return NH_OK;
-}
-
-static const double *nh_sort_key;
-static int nh_by_eta_desc(const void *a, const void *b) {
-  double x = nh_sort_key[*(const int *)a], y = nh_sort_key[*(const int *)b];
-  if (x != y) return x > y ? -1 : 1;
-  return (*(const int *)a > *(const int *)b) - (*(const int *)a < *(const int *)b);
-}
-
-/* Mark, refine within the DOF budget, carry u and v to the new nodes and
- * rebuild everything that depends on the mesh. */
+/* Refine from this step's estimate (nh_adapt_step) and rebuild everything
+ * that depends on the mesh. */
 static int nh_sim_refine(nh_sim *s) {
-  const nh_scene *sc = s->scene;
-  nh_mesh *m = s->mesh;
-  int *marked = malloc(sizeof(int) * (size_t)(m->n_leaves ? m->n_leaves : 1)), n_marked = 0;
-  if (!marked) return NH_ERROR(NH_ERR_MEMORY, "out of memory: marking");
-  nh_mark_params mp = {.strategy = sc->adapt.strategy,
-                       .theta = sc->adapt.theta,
-                       .fraction = sc->adapt.fraction,
-                       .max_level = sc->adapt.max_level,
-                       .min_size = sc->adapt.min_size,
-                       .child_ratio = nh_template_child_ratio(s->tmpl)};
-  int rc = nh_mark_cells(m, s->eta_cell, &mp, marked, &n_marked);
-  if (!rc && sc->adapt.max_dofs > 0 && n_marked > 0) {
-    /* Keep the cells of largest η whose new nodes (counted as if none were
-     * shared, so the budget holds) fit in the budget. */
-    nh_sort_key = s->eta_cell;
-    qsort(marked, (size_t)n_marked, sizeof(int), nh_by_eta_desc);
-    long room = ((long)sc->adapt.max_dofs - 3L * m->n_nodes) / (3L * (s->tmpl->n_nodes - 8));
-    if (room < n_marked) n_marked = room > 0 ? (int)room : 0;
-  }
-  if (rc || n_marked == 0) {
-    free(marked);
-    return rc;
-  }
-  nh_refine_info info = {0};
-  int old_nodes = m->n_nodes;
-  rc = nh_mesh_refine(m, s->tmpl, marked, n_marked, &info);
-  free(marked);
-  if (!rc) rc = nh_resize(&s->u, m->n_nodes, 3);
-  if (!rc) rc = nh_resize(&s->v, m->n_nodes, 3);
-  if (!rc) /* Eq. 17 for the state: u and v of a new node from its parent's corners */
-    for (int k = 0; k < info.n_new; k++) {
-      int node = old_nodes + k;
-      double N[8];
-      nh_hex_shape(info.xi + 3 * k, N);
-      const int *e = m->cells + 8 * info.parent[k];
-      for (int i = 0; i < 3; i++) {
-        double u = 0.0, v = 0.0;
-        for (int a = 0; a < 8; a++) u += N[a] * s->u[3 * e[a] + i], v += N[a] * s->v[3 * e[a] + i];
-        s->u[3 * node + i] = u;
-        s->v[3 * node + i] = v;
-      }
-    }
-  nh_refine_info_free(&info);
-  if (!rc) rc = nh_sim_setup_mesh(s, 0);
-  s->have_eta = 0; /* the indicators belonged to the cells just replaced */
-  if (!rc) {       /* round-off: hanging values exactly their masters' interpolation */
-    nh_hanging_interpolate(s->hanging, s->u, 3);
-    nh_hanging_interpolate(s->hanging, s->v, 3);
-    for (int i = 0; i < 3 * m->n_nodes; i++)
-      if (s->fixed[i / 3]) s->v[i] = 0.0;
-  }
-  return rc;
+  double *state[2] = {s->u, s->v};
+  int n_refined = 0;
+  int rc = nh_adapt_step(s->adapt, s->mesh, 2, state, &n_refined);
+  s->u = state[0];
+  s->v = state[1];
+  if (rc || n_refined == 0) return rc;
+  NH_TRY(nh_sim_setup_mesh(s, 0));
+  /* round-off: hanging values exactly their masters' interpolation */
+  nh_hanging_interpolate(s->hanging, s->u, 3);
+  nh_hanging_interpolate(s->hanging, s->v, 3);
+  for (int i = 0; i < 3 * s->mesh->n_nodes; i++)
+    if (s->fixed[i / 3]) s->v[i] = 0.0;
+  return NH_OK;
 }
 
 int nh_sim_create(const nh_scene *scene, const nh_sim_options *options, nh_sim **out) {
@@ -599,7 +489,8 @@ int nh_sim_step(nh_sim *s) {
   int adapt_now = !rc && sc->adapt.enabled && (s->step + 1) % sc->adapt.every == 0;
   double ta = nh_time_now();
   s->eta = s->eta_rel = NAN; /* nan in steps.csv: not estimated at this step */
-  if (adapt_now) rc = nh_sim_estimate(s);
+  if (adapt_now)
+    rc = nh_adapt_estimate(s->adapt, s->mesh, s->tissue, s->u, s->hanging, &s->eta, &s->eta_rel);
   double t_estimate = nh_time_now() - ta;
   if (rc) {
     char reason[1024];

@@ -1,5 +1,5 @@
 /* sim — the step loop: builds the model a scene names, advances it, probes
- * it, times every phase and writes the outputs of SCENE.md. */
+ * it, times every phase and writes the outputs of docs/outputs.md. */
 #ifndef NH_SIM_H
 #define NH_SIM_H
 

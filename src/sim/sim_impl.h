@@ -3,6 +3,7 @@
 #ifndef NH_SIM_IMPL_H
 #define NH_SIM_IMPL_H
 
+#include "adapt/adapt.h"
 #include "contact/contact.h"
 #include "io/io.h"
 #include "sim/sim.h"
@@ -42,10 +43,8 @@ struct nh_sim {
   double *phase_times; /* NH_PHASES per step */
   int cap_steps;
   /* adaptivity (absent: all NULL / 0) */
-  nh_template *tmpl;
+  nh_adapt *adapt; /* template, marking, indicators */
   nh_hanging *hanging;
-  double *eta_cell; /* per cell id (leaves meaningful), valid when have_eta */
-  int cap_eta, have_eta;
   double eta, eta_rel;
   double t_adapt; /* s, this step: estimate + mark + refine + rebuild */
   /* tools (absent: contact NULL) */

@@ -1,0 +1,182 @@
+/* print.c — the summary `needlehex check` prints: what the scene will
+ * model (domain, material, loads, tools and their planned motion, adapt,
+ * outputs), with every value as read and resolved. */
+#include "scene/scene.h"
+
+#include <math.h>
+#include <stdio.h>
+
+static void print_box(FILE *f, const double min[3], const double max[3]) {
+  fprintf(f, "[%g, %g, %g] .. [%g, %g, %g] m", min[0], min[1], min[2], max[0], max[1], max[2]);
+}
+
+/* ", schedule [[t, s], ...]" (nothing for the constant 1). */
+static void print_schedule(FILE *f, const nh_schedule *sch) {
+  if (sch->n == 0) return;
+  fprintf(f, ", schedule [");
+  for (int i = 0; i < sch->n; ++i)
+    fprintf(f, "%s[%g, %g]", i ? ", " : "", sch->t[i], sch->value[i]);
+  fprintf(f, "]");
+}
+
+/* "box [..] .. [..] m", "sphere centre [..] m, radius r m", "cylinder ...". */
+static void print_region(FILE *f, const nh_region *r) {
+  if (r->kind == NH_REGION_SPHERE) {
+    fprintf(f, "sphere centre [%g, %g, %g] m, radius %g m", r->center[0], r->center[1],
+            r->center[2], r->radius);
+  } else if (r->kind == NH_REGION_CYLINDER) {
+    fprintf(f, "cylinder [%g, %g, %g] .. [%g, %g, %g] m, radius %g m", r->start[0], r->start[1],
+            r->start[2], r->end[0], r->end[1], r->end[2], r->radius);
+  } else {
+    fprintf(f, "box ");
+    print_box(f, r->min, r->max);
+  }
+}
+
+/* One tool, over a few lines indented under "tools". */
+static void print_tool(FILE *f, const nh_scene *s, int i) {
+  const nh_tool_spec *t = &s->tools[i];
+  fprintf(f, "          %s: length %g m, radius %g m", t->name, t->length, t->radius);
+  if (t->inner_radius > 0)
+    fprintf(f, ", inner radius %g m (tube)", t->inner_radius);
+  else
+    fprintf(f, " (solid)");
+  fprintf(f, ", %d beam element%s\n", t->elements, t->elements == 1 ? "" : "s");
+  fprintf(
+      f, "            E = %g Pa, nu = %g, density %g kg/m^3; damping mass %g 1/s, stiffness %g s\n",
+      t->young, t->poisson, t->density, t->damping_mass, t->damping_stiffness);
+  if (t->planned) {
+    const nh_target *g = &s->targets[t->target];
+    fprintf(f,
+            "            trajectory from entry [%g, %g, %g] m to target %s [%g, %g, %g] m, "
+            "standoff %g m: planned depth %.9g m\n",
+            t->entry[0], t->entry[1], t->entry[2], g->name, g->point[0], g->point[1], g->point[2],
+            t->standoff, t->depth);
+  }
+  fprintf(f, "            base [%g, %g, %g] m, direction [%g, %g, %g]\n", t->base[0], t->base[1],
+          t->base[2], t->direction[0], t->direction[1], t->direction[2]);
+  if (t->n_motion == 0) fprintf(f, "            motion none (at rest)\n");
+  for (int k = 0; k < t->n_motion; ++k) {
+    static const char *const word[] = {"", " (until: target)", " (until: start)"};
+    const nh_motion *m = &t->motion[k];
+    fprintf(f, "            %s %g m/s until %.*g s%s%s\n", k == 0 ? "motion" : "      ", m->speed,
+            m->kind == NH_UNTIL_TIME ? 6 : 9, m->until, word[m->kind],
+            k + 1 == t->n_motion ? ", then at rest" : "");
+  }
+  fprintf(f,
+          "            puncture %g N, cutting %g N, friction mu %g plus %g N/m, path points every ",
+          t->puncture_force, t->cutting_force, t->friction, t->friction_per_length);
+  if (t->spacing > 0)
+    fprintf(f, "%g m\n", t->spacing);
+  else
+    fprintf(f, "half a cell edge\n");
+  if (t->inside >= 0) {
+    fprintf(f, "            inside %s, ", s->tools[t->inside].name);
+    if (isfinite(t->release))
+      fprintf(f, "released at %.*g s%s\n", t->release_target ? 9 : 6, t->release,
+              t->release_target ? " (release: target, the end of its host's until: target)" : "");
+    else
+      fprintf(f, "never released\n");
+  }
+}
+
+void nh_scene_print(const nh_scene *s, void *stdio_file) {
+  FILE *f = stdio_file ? stdio_file : stdout;
+  fprintf(f, "scene     %s (%s)\n", s->name, s->file);
+  fprintf(f, "time      %s, %d steps of %g s (end %g s)\n",
+          s->time.mode == NH_MODE_STATIC ? "static" : "dynamic", s->time.steps, s->time.step,
+          s->time.steps * s->time.step);
+  fprintf(f, "gravity   [%g, %g, %g] m/s^2", s->gravity[0], s->gravity[1], s->gravity[2]);
+  print_schedule(f, &s->gravity_schedule);
+  fprintf(f, "\n");
+  if (s->tissue.domain == NH_DOMAIN_BRAIN) {
+    const double *z = s->tissue.brain_size, *c = s->tissue.brain_center;
+    fprintf(f, "tissue    brain of size [%g, %g, %g] m centred at [%g, %g, %g] m\n", z[0], z[1],
+            z[2], c[0], c[1], c[2]);
+    fprintf(f, "          grid %d x %d x %d cells over its bounding box ", s->tissue.grid[0],
+            s->tissue.grid[1], s->tissue.grid[2]);
+    print_box(f, s->tissue.box_min, s->tissue.box_max);
+    fprintf(f, " (the cells that meet the brain are kept)\n");
+  } else {
+    fprintf(f, "tissue    box ");
+    print_box(f, s->tissue.box_min, s->tissue.box_max);
+    fprintf(f, ", grid %d x %d x %d cells (%d nodes)\n", s->tissue.grid[0], s->tissue.grid[1],
+            s->tissue.grid[2],
+            (s->tissue.grid[0] + 1) * (s->tissue.grid[1] + 1) * (s->tissue.grid[2] + 1));
+  }
+  fprintf(f, "material  E = %g Pa, nu = %g, density %g kg/m^3\n", s->tissue.young,
+          s->tissue.poisson, s->tissue.density);
+  fprintf(f, "damping   mass %g 1/s, stiffness %g s\n", s->tissue.damping_mass,
+          s->tissue.damping_stiffness);
+  if (s->tissue.buoyant) {
+    fprintf(f, "buoyancy  before %g, after %g of the weight", s->tissue.buoyancy_before,
+            s->tissue.buoyancy_after);
+    if (s->tissue.buoyancy_schedule.n > 0)
+      print_schedule(f, &s->tissue.buoyancy_schedule);
+    else
+      fprintf(f, ", changed at t = 0");
+    fprintf(f, "; the tissue carries (before - b(t)) of its weight\n");
+  }
+  fprintf(f, "fixed     %d region%s\n", s->tissue.n_fixed, s->tissue.n_fixed == 1 ? "" : "s");
+  for (int i = 0; i < s->tissue.n_fixed; ++i) {
+    fprintf(f, "          tissue.fixed.%d: ", i);
+    print_region(f, &s->tissue.fixed[i]);
+    fprintf(f, "\n");
+  }
+  fprintf(f, "loads     %d\n", s->tissue.n_loads);
+  for (int i = 0; i < s->tissue.n_loads; ++i) {
+    const nh_load *l = &s->tissue.loads[i];
+    fprintf(f, "          tissue.loads.%d: force [%g, %g, %g] N over ", i, l->force[0], l->force[1],
+            l->force[2]);
+    print_region(f, &l->region);
+    if (l->schedule.n > 0)
+      fprintf(f, ", schedule of %d point%s", l->schedule.n, l->schedule.n == 1 ? "" : "s");
+    fprintf(f, "\n");
+  }
+  if (!s->adapt.enabled) {
+    fprintf(f, "adapt     no (the mesh stays fixed)\n");
+  } else {
+    fprintf(f, "adapt     estimator spr, every %d step%s; marking ", s->adapt.every,
+            s->adapt.every == 1 ? "" : "s");
+    if (s->adapt.strategy == NH_MARK_DORFLER)
+      fprintf(f, "dorfler, fraction %g of the total squared error\n", s->adapt.fraction);
+    else
+      fprintf(f, "max, theta %g of the largest error\n", s->adapt.theta);
+    fprintf(f, "          template %s\n", s->adapt.template_path);
+    fprintf(f, "          max_level %d, min_size ", s->adapt.max_level);
+    if (s->adapt.min_size > 0)
+      fprintf(f, "%g m", s->adapt.min_size);
+    else
+      fprintf(f, "none");
+    if (s->adapt.max_dofs > 0)
+      fprintf(f, ", max_dofs %d", s->adapt.max_dofs);
+    else
+      fprintf(f, ", max_dofs none");
+    fprintf(f, ", hanging nodes %s\n",
+            s->adapt.hanging == NH_HANGING_LAGRANGE ? "lagrange" : "eliminate");
+  }
+  fprintf(f, "solver    tolerance %g, at most %d iterations, ", s->solver.tolerance,
+          s->solver.max_iterations);
+  if (s->solver.threads > 0)
+    fprintf(f, "%d thread%s\n", s->solver.threads, s->solver.threads == 1 ? "" : "s");
+  else
+    fprintf(f, "all cores\n");
+  fprintf(f, "tools     %d\n", s->n_tools);
+  for (int i = 0; i < s->n_tools; ++i) print_tool(f, s, i);
+  fprintf(f, "probes    %d\n", s->n_probes);
+  for (int i = 0; i < s->n_probes; ++i)
+    fprintf(f, "          %s at [%g, %g, %g] m\n", s->probes[i].name, s->probes[i].point[0],
+            s->probes[i].point[1], s->probes[i].point[2]);
+  fprintf(f, "targets   %d\n", s->n_targets);
+  for (int i = 0; i < s->n_targets; ++i) {
+    const nh_target *t = &s->targets[i];
+    fprintf(f, "          %s at [%g, %g, %g] m, distance to the tip of %s\n", t->name, t->point[0],
+            t->point[1], t->point[2], s->tools[t->tool].name);
+  }
+  if (s->output.every > 0)
+    fprintf(f, "output    %s, a frame every %d step%s, hdf5 %s\n", s->output.dir, s->output.every,
+            s->output.every == 1 ? "" : "s", s->output.hdf5 ? "yes" : "no");
+  else
+    fprintf(f, "output    %s, the last step only, hdf5 %s\n", s->output.dir,
+            s->output.hdf5 ? "yes" : "no");
+}
