@@ -159,21 +159,15 @@ def median(a):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--binary", default=None, help="needlehex (default: build/needlehex, "
-                    "else /tmp/study-build/needlehex)")
+    ap.add_argument("--binary", default=None, help="needlehex (default: build/needlehex)")
     ap.add_argument("--cache", default=os.path.join(ROOT, "out", "adapt-study"))
     ap.add_argument("--img", default=None, help="where the PNGs go (default docs/img, quick: CACHE/img)")
     ap.add_argument("--quick", action="store_true", help="a smaller set (about two minutes)")
     ap.add_argument("--force", action="store_true", help="run everything again")
     ap.add_argument("--no-bench", action="store_true", help="skip the lagrange/eliminate timing")
     a = ap.parse_args()
-    binary = a.binary
-    if binary is None:
-        for b in (os.path.join(ROOT, "build", "needlehex"), "/tmp/study-build/needlehex"):
-            if os.path.exists(b):
-                binary = b
-                break
-    if binary is None or not os.path.exists(binary):
+    binary = a.binary or os.path.join(ROOT, "build", "needlehex")
+    if not os.path.exists(binary):
         raise SystemExit("no needlehex binary; build it and pass --binary")
     binary = os.path.abspath(binary)
     cache = os.path.join(a.cache, "quick") if a.quick else a.cache

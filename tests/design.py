@@ -1,0 +1,167 @@
+"""docs/design.md against the code (tests/design.cmake).
+
+  design.py layering   The module order: reads the line
+                       `layering: core < scene < ... < sim` and fails if any
+                       src/<module>/*.[ch] includes "<other>/..." for a module
+                       above its own, or any header of another module but its
+                       public "<other>/<other>.h"; also if a directory of src/
+                       is missing from the order or the order names a module
+                       that does not exist.
+  design.py refs       The page's references: every `nh_...` name is defined
+                       (a function, a type or a table) somewhere in src/, every
+                       `src/...` or `<module>/<file>.[ch]` path exists, and in
+                       a "`<module>/<file>.c`: `nh_a`, `nh_b`" reference each
+                       function is defined in that very file.
+
+Each first checks the checker on synthetic input (an upward include, a
+private one, a downward one; a page with a wrong file and an unknown name).
+Silent on success; on failure one line per offence.
+"""
+import glob
+import os
+import re
+import sys
+
+ROOT = os.environ.get("NH_SOURCE_DIR") or os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+DESIGN = os.path.join(ROOT, "docs", "design.md")
+
+# ---- layering ----
+INCLUDE = re.compile(r'^\s*#\s*include\s+"([A-Za-z0-9_]+)/([^"]+)"')
+
+
+def read_order(design):
+    lines = [l.strip() for l in open(design, encoding="utf-8") if l.strip().startswith("layering:")]
+    if len(lines) != 1:
+        sys.exit(f"{design}: expected exactly one line 'layering: a < b < ...', found {len(lines)}")
+    mods = [m.strip() for m in lines[0][len("layering:"):].split("<")]
+    if not all(re.fullmatch(r"[a-z0-9_]+", m) for m in mods) or len(set(mods)) != len(mods):
+        sys.exit(f"{design}: bad layering line: {lines[0]!r}")
+    return {m: i for i, m in enumerate(mods)}
+
+
+def violations(rank, files):
+    """files: iterable of (module, path, lines). One message per offending include."""
+    out = []
+    for mod, path, lines in files:
+        for n, line in enumerate(lines, 1):
+            m = INCLUDE.match(line)
+            if not m:
+                continue
+            dep = m.group(1)
+            if dep not in rank:
+                out.append(f"{path}:{n}: includes \"{dep}/...\", a module not in the layering line")
+            elif rank[dep] > rank[mod]:
+                out.append(f"{path}:{n}: {line.strip()}: {mod} (rank {rank[mod]}) includes "
+                           f"{dep} (rank {rank[dep]}), which is above it")
+            elif dep != mod and m.group(2) != dep + ".h":
+                out.append(f"{path}:{n}: {line.strip()}: a private header of {dep}; "
+                           f"other modules include only {dep}/{dep}.h")
+    return out
+
+
+def check_layering():
+    rank = read_order(DESIGN)
+    errors = []
+
+    # The checker itself: an upward include must be caught, a downward one not.
+    low, high = min(rank, key=rank.get), max(rank, key=rank.get)
+    if not violations(rank, [(low, "synthetic.c", [f'#include "{high}/{high}.h"'])]):
+        errors.append(f"self-check: {low} including {high} was not reported")
+    if violations(rank, [(high, "synthetic.c", [f'#include "{low}/{low}.h"'])]):
+        errors.append(f"self-check: {high} including {low} was reported")
+    if not violations(rank, [(high, "synthetic.c", [f'#include "{low}/{low}_impl.h"'])]):
+        errors.append(f"self-check: {high} including {low}'s private header was not reported")
+
+    src = os.path.join(ROOT, "src")
+    dirs = sorted(d for d in os.listdir(src) if os.path.isdir(os.path.join(src, d)))
+    for d in dirs:
+        if d not in rank:
+            errors.append(f"src/{d}/: module missing from the layering line of docs/design.md")
+    for m in rank:
+        if m not in dirs:
+            errors.append(f"docs/design.md: layering names {m}, which has no src/{m}/")
+    files = []
+    for d in dirs:
+        if d not in rank:
+            continue
+        for f in sorted(os.listdir(os.path.join(src, d))):
+            if f.endswith((".c", ".h")):
+                p = os.path.join(src, d, f)
+                files.append((d, os.path.relpath(p, ROOT), open(p, encoding="utf-8").read().splitlines()))
+    if not files:
+        errors.append("no source files found under src/")
+    errors += violations(rank, files)
+    return errors
+
+
+# ---- references ----
+# A definition: a function (return type, name, parenthesis, not a call
+# statement), a typedef'd name, or a const table, at the start of a line.
+DEF = re.compile(r"^(?:[A-Za-z_][\w \t*]*?[\s*])(nh_\w+)\s*[(\[]", re.M)
+TYPEDEF = re.compile(r"\}\s*(nh_\w+)\s*;|typedef\s+[\w\s*]+?\b(nh_\w+)\s*;")
+FILE_FNS = re.compile(r"`((?:src/)?[a-z0-9_]+/[a-z0-9_]+\.[ch])`: ((?:`nh_\w+`(?:, )?)+)")
+PATH = re.compile(r"`((?:src/)?[a-z0-9_]+/[a-z0-9_]+\.[ch])`")
+
+
+def definitions(root):
+    defs = {}
+    for f in glob.glob(os.path.join(root, "src", "**", "*.[ch]"), recursive=True):
+        rel = os.path.relpath(f, root)
+        text = open(f, encoding="utf-8").read()
+        for m in DEF.finditer(text):
+            head = text[m.start():m.end()]
+            if head.lstrip().startswith(("return", "if", "else")):
+                continue
+            defs.setdefault(m.group(1), set()).add(rel)
+        for m in TYPEDEF.finditer(text):
+            defs.setdefault(m.group(1) or m.group(2), set()).add(rel)
+    return defs
+
+
+def stale(page, defs, exists):
+    out = []
+    for name in sorted(set(re.findall(r"\bnh_\w+", page))):
+        if name not in defs:
+            out.append(f"{name}: defined nowhere in src/")
+    for p in sorted(set(PATH.findall(page))):
+        q = p if p.startswith("src/") else "src/" + p
+        if not exists(q):
+            out.append(f"{p}: no such file {q}")
+    for m in FILE_FNS.finditer(page):
+        q = m.group(1) if m.group(1).startswith("src/") else "src/" + m.group(1)
+        for fn in re.findall(r"nh_\w+", m.group(2)):
+            if fn in defs and q not in defs[fn]:
+                out.append(f"{m.group(1)}: {fn} is defined in {', '.join(sorted(defs[fn]))}, not here")
+    return out
+
+
+def check_refs():
+    defs = definitions(ROOT)
+    exists = lambda rel: os.path.exists(os.path.join(ROOT, rel))
+    errors = []
+    if "nh_sim_step" not in defs or "src/sim/sim.c" not in defs["nh_sim_step"]:
+        errors.append("self-check: nh_sim_step not found in src/sim/sim.c")
+    fake = "`sim/sim.c`: `nh_mcp_solve` and `nh_no_such_function` in `sim/nothing.c`"
+    if len(stale(fake, defs, exists)) != 3:
+        errors.append(f"self-check: the synthetic page gave {stale(fake, defs, exists)}")
+    page = open(DESIGN, encoding="utf-8").read()
+    errors += stale(page, defs, exists)
+    return errors
+
+
+def main():
+    checks = {"layering": (check_layering, "layering (docs/design.md) violated"),
+              "refs": (check_refs, "docs/design.md has stale references")}
+    if len(sys.argv) != 2 or sys.argv[1] not in checks:
+        sys.exit("usage: design.py layering|refs")
+    check, title = checks[sys.argv[1]]
+    errors = check()
+    if errors:
+        print(title + ":", file=sys.stderr)
+        for e in errors:
+            print("  " + e, file=sys.stderr)
+        sys.exit(1)
+
+
+if __name__ == "__main__":
+    main()
