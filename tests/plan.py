@@ -251,8 +251,9 @@ output:
 
 
 if __name__ == "__main__":
+    # The two ctest entries may run at once: each writes its own folders.
     if "--oblique" in sys.argv[1:]:
-        test_trajectory("plan-oblique", OBLIQUE)
+        test_trajectory("plan-oblique-target", OBLIQUE)
     else:
         test_trajectory("plan-line", NODE_LINE)
         test_trajectory("plan-oblique", OBLIQUE, on_target=False)
