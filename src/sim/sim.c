@@ -358,6 +358,19 @@ static int nh_sim_setup_mesh(nh_sim *s, int first) {
   if (first) {
     nh_material mat = {sc->tissue.young, sc->tissue.poisson, sc->tissue.density};
     NH_TRY(nh_tissue_create(m, &mat, &s->tissue));
+    if (sc->tissue.n_materials) {
+      int n = sc->tissue.n_materials, *labels = malloc(sizeof(int) * (size_t)n);
+      nh_material *mats = malloc(sizeof(nh_material) * (size_t)n);
+      int rc = labels && mats ? NH_OK : NH_ERROR(NH_ERR_MEMORY, "out of memory: materials");
+      for (int i = 0; i < n && !rc; i++) {
+        const nh_label_material *lm = &sc->tissue.materials[i];
+        labels[i] = lm->label;
+        mats[i] = (nh_material){lm->young, lm->poisson, lm->density};
+      }
+      if (!rc) rc = nh_tissue_set_label_materials(s->tissue, n, labels, mats);
+      free(labels), free(mats);
+      NH_TRY(rc);
+    }
   } else {
     NH_TRY(nh_tissue_update(s->tissue));
   }
@@ -401,8 +414,10 @@ static int nh_sim_build(nh_sim *s) {
     s->time = ck.time;
   } else {
     nh_domain domain;
-    nh_domain_from_scene(sc, &domain);
-    NH_TRY(nh_mesh_create(&domain, sc->tissue.grid, &s->mesh));
+    NH_TRY(nh_domain_from_scene(sc, &domain));
+    int rc = nh_mesh_create(&domain, sc->tissue.grid, &s->mesh);
+    nh_domain_release(&domain); /* the mesh holds its own reference */
+    NH_TRY(rc);
     s->u = calloc(3 * (size_t)s->mesh->n_nodes, sizeof(double));
     s->v = calloc(3 * (size_t)s->mesh->n_nodes, sizeof(double));
   }
