@@ -45,6 +45,10 @@ typedef struct nh_image {
   int lo[3], hi[3];      /* index bounds of the selected voxels (lo > hi if none) */
   double level_scale; /* 1 / (√3 ‖A⁻¹‖_F): makes F = (1/2 − χ) level_scale 1-Lipschitz */
   double box_min[3], box_max[3]; /* nh_image_bounds, set by nh_image_select */
+  float *distance; /* per voxel: a lower bound of the world distance from its centre to the
+                      nearest selected centre (σ_min(A) times the index-space EDT) */
+  double reach;    /* max |A d| over the diagonals d of [-1, 1]³ (world) */
+  int *prefix;     /* (n[0]+1)(n[1]+1)(n[2]+1) prefix sums of `inside` (box counts) */
   int refs;
 } nh_image;
 
@@ -84,10 +88,15 @@ int nh_image_print(const nh_image *image, FILE *f);
 int nh_image_select(nh_image *image, const int *labels, int n);
 /* Trilinear χ of the selected voxels at x (0 outside the image). */
 double nh_image_indicator(const nh_image *image, const double x[3]);
-/* F(x) = max((1/2 − χ(x)) level_scale, distance from x to the bounding box
- * of the selected voxels grown by half a voxel). 1-Lipschitz: |∇χ| ≤
- * √3 ‖A⁻¹‖₂ ≤ √3 ‖A⁻¹‖_F, and the box distance is a distance. */
+/* F(x) = max((1/2 − χ(x)) level_scale, I(distance)(x) − 2 reach, distance
+ * from x to the bounding box of the selected voxels grown by half a voxel),
+ * I the trilinear interpolation: negative exactly where χ > 1/2, and where
+ * positive a lower bound of the distance from x to {χ > 1/2}
+ * (docs/anatomy.md). */
 double nh_image_level(const nh_image *image, const double x[3]);
+/* 1 if the world box [lo, hi] may meet {χ > 1/2}: some selected voxel
+ * centre lies within one voxel (in index space) of the box, χ's support. */
+int nh_image_meets_box(const nh_image *image, const double lo[3], const double hi[3]);
 /* World bounding box of {χ > 1/2}: the selected voxels' index box grown by
  * half a voxel, mapped by the affine (its 8 corners' extent). */
 void nh_image_bounds(const nh_image *image, double min[3], double max[3]);

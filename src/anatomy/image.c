@@ -216,6 +216,8 @@ void nh_image_release(nh_image **image) {
   if (--im->refs > 0) return;
   free(im->label);
   free(im->inside);
+  free(im->distance);
+  free(im->prefix);
   free(im);
 }
 
@@ -302,6 +304,88 @@ int nh_image_print(const nh_image *im, FILE *f) {
   return NH_OK;
 }
 
+/* One line of the squared distance transform (Felzenszwalb and Huttenlocher,
+ * "Distance transforms of sampled functions"): d[q] = min_p (q − p)² + f[p]
+ * over n samples of f (stride `stride`), in place; v, z, g workspace. */
+static void nh_edt_line(float *f, size_t stride, int n, int *v, double *z, double *g) {
+  const double inf = 1e30;
+  for (int q = 0; q < n; q++) g[q] = f[q * stride];
+  int k = 0;
+  v[0] = 0, z[0] = -inf, z[1] = inf;
+  for (int q = 1; q < n; q++) {
+    double s;
+    for (;;) {
+      int p = v[k];
+      s = ((g[q] + (double)q * q) - (g[p] + (double)p * p)) / (2.0 * (q - p));
+      if (s > z[k] || k == 0) break;
+      k--;
+    }
+    if (s <= z[k]) { /* k == 0 and the new parabola is below everywhere */
+      v[0] = q, z[0] = -inf, z[1] = inf;
+      continue;
+    }
+    k++;
+    v[k] = q, z[k] = s, z[k + 1] = inf;
+  }
+  k = 0;
+  for (int q = 0; q < n; q++) {
+    while (z[k + 1] < q) k++;
+    double d = (double)(q - v[k]) * (q - v[k]) + g[v[k]];
+    f[q * stride] = (float)fmin(d, inf);
+  }
+}
+
+/* im->distance: σ_min(A) ≥ 1 / ‖A⁻¹‖_F times the exact index-space
+ * Euclidean distance transform of the selected voxels (three 1D passes). */
+static int nh_image_distance(nh_image *im) {
+  const int n0 = im->n[0], n1 = im->n[1], n2 = im->n[2];
+  size_t nvox = (size_t)n0 * n1 * n2;
+  int nmax = n0 > n1 ? (n0 > n2 ? n0 : n2) : (n1 > n2 ? n1 : n2);
+  free(im->distance);
+  im->distance = malloc(sizeof(float) * nvox);
+  int *v = malloc(sizeof(int) * (size_t)nmax);
+  double *z = malloc(sizeof(double) * (size_t)(nmax + 1)), *g = malloc(sizeof(double) * nmax);
+  if (!im->distance || !v || !z || !g) {
+    free(v), free(z), free(g);
+    return NH_ERROR(NH_ERR_MEMORY, "out of memory: distances in %s", im->path);
+  }
+  for (size_t q = 0; q < nvox; q++) im->distance[q] = im->inside[q] ? 0.0f : 1e30f;
+  for (int k = 0; k < n2; k++)
+    for (int j = 0; j < n1; j++)
+      nh_edt_line(im->distance + nh_voxel_index(im, 0, j, k), 1, n0, v, z, g);
+  for (int k = 0; k < n2; k++)
+    for (int i = 0; i < n0; i++)
+      nh_edt_line(im->distance + nh_voxel_index(im, i, 0, k), (size_t)n0, n1, v, z, g);
+  for (int j = 0; j < n1; j++)
+    for (int i = 0; i < n0; i++)
+      nh_edt_line(im->distance + nh_voxel_index(im, i, j, 0), (size_t)n0 * n1, n2, v, z, g);
+  free(v), free(z), free(g);
+  /* Prefix sums for box counts. */
+  const size_t m0 = (size_t)n0 + 1, m1 = (size_t)n1 + 1;
+  free(im->prefix);
+  im->prefix = calloc(m0 * m1 * ((size_t)n2 + 1), sizeof(int));
+  if (!im->prefix) return NH_ERROR(NH_ERR_MEMORY, "out of memory: %s", im->path);
+  for (int k = 1; k <= n2; k++)
+    for (int j = 1; j <= n1; j++)
+      for (int i = 1; i <= n0; i++) {
+        size_t q = (size_t)i + m0 * ((size_t)j + m1 * (size_t)k);
+        im->prefix[q] = im->inside[nh_voxel_index(im, i - 1, j - 1, k - 1)] + im->prefix[q - 1] +
+                        im->prefix[q - m0] + im->prefix[q - m0 * m1] - im->prefix[q - 1 - m0] -
+                        im->prefix[q - 1 - m0 * m1] - im->prefix[q - m0 - m0 * m1] +
+                        im->prefix[q - 1 - m0 - m0 * m1];
+      }
+  double sigma = sqrt(3.0) * im->level_scale; /* 1 / ‖A⁻¹‖_F ≤ σ_min(A) */
+  for (size_t q = 0; q < nvox; q++)
+    im->distance[q] = (float)(sigma * sqrt((double)im->distance[q]) * (1 - 1e-6));
+  im->reach = 0.0;
+  for (int d = 0; d < 4; d++) {
+    double u[3] = {1.0, d & 1 ? -1.0 : 1.0, d & 2 ? -1.0 : 1.0}, w[3];
+    nh_mat3_vec(im->A, u, w);
+    im->reach = fmax(im->reach, sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]));
+  }
+  return NH_OK;
+}
+
 int nh_image_select(nh_image *im, const int *labels, int n) {
   size_t nvox = (size_t)im->n[0] * im->n[1] * im->n[2];
   free(im->inside);
@@ -324,7 +408,7 @@ int nh_image_select(nh_image *im, const int *labels, int n) {
       }
   NH_CHECK(im->hi[0] >= 0, NH_ERR_INPUT, "%s: no voxel holds the selected labels", im->path);
   nh_image_bounds(im, im->box_min, im->box_max);
-  return NH_OK;
+  return nh_image_distance(im);
 }
 
 double nh_image_indicator(const nh_image *im, const double x[3]) {
@@ -359,6 +443,30 @@ static void nh_index_box_world(const nh_image *im, const double lo[3], const dou
   }
 }
 
+int nh_image_meets_box(const nh_image *im, const double lo[3], const double hi[3]) {
+  double plo[3] = {INFINITY, INFINITY, INFINITY}, phi[3] = {-INFINITY, -INFINITY, -INFINITY};
+  for (int c = 0; c < 8; c++) {
+    double x[3] = {c & 1 ? hi[0] : lo[0], c & 2 ? hi[1] : lo[1], c & 4 ? hi[2] : lo[2]}, p[3];
+    nh_image_to_voxel(im, x, p);
+    for (int k = 0; k < 3; k++) plo[k] = fmin(plo[k], p[k]), phi[k] = fmax(phi[k], p[k]);
+  }
+  /* Selected centres with index in (plo − 1, phi + 1), clipped to the image. */
+  int a[3], b[3];
+  for (int k = 0; k < 3; k++) {
+    double l = floor(plo[k] - 1.0) + 1.0, h = ceil(phi[k] + 1.0) - 1.0;
+    a[k] = (int)fmax(l, 0.0), b[k] = (int)fmin(h, im->n[k] - 1.0);
+    if (a[k] > b[k]) return 0;
+  }
+  const size_t m0 = (size_t)im->n[0] + 1, m1 = (size_t)im->n[1] + 1;
+#define NH_P(i, j, k) im->prefix[(size_t)(i) + m0 * ((size_t)(j) + m1 * (size_t)(k))]
+  long n = (long)NH_P(b[0] + 1, b[1] + 1, b[2] + 1) - NH_P(a[0], b[1] + 1, b[2] + 1) -
+           NH_P(b[0] + 1, a[1], b[2] + 1) - NH_P(b[0] + 1, b[1] + 1, a[2]) +
+           NH_P(a[0], a[1], b[2] + 1) + NH_P(a[0], b[1] + 1, a[2]) + NH_P(b[0] + 1, a[1], a[2]) -
+           NH_P(a[0], a[1], a[2]);
+#undef NH_P
+  return n > 0;
+}
+
 void nh_image_bounds(const nh_image *im, double min[3], double max[3]) {
   double lo[3], hi[3];
   for (int a = 0; a < 3; a++) lo[a] = im->lo[a] - 0.5, hi[a] = im->hi[a] + 0.5;
@@ -371,9 +479,47 @@ void nh_image_extent(const nh_image *im, double min[3], double max[3]) {
   nh_index_box_world(im, lo, hi, min, max);
 }
 
+/* Trilinear interpolation of the distance bound (the nearest voxel's value
+ * outside the image's centres). */
+static double nh_image_distance_at(const nh_image *im, const double x[3]) {
+  double p[3], w[3];
+  int q[3];
+  nh_image_to_voxel(im, x, p);
+  for (int k = 0; k < 3; k++) {
+    double c = fmin(fmax(p[k], 0.0), im->n[k] - 1.0);
+    q[k] = (int)floor(c);
+    if (q[k] > im->n[k] - 2) q[k] = im->n[k] > 1 ? im->n[k] - 2 : 0;
+    w[k] = im->n[k] > 1 ? c - q[k] : 0.0;
+  }
+  double d = 0.0;
+  for (int c = 0; c < 8; c++) {
+    int i = q[0] + (c & 1), j = q[1] + ((c >> 1) & 1), k = q[2] + ((c >> 2) & 1);
+    double wt = (c & 1 ? w[0] : 1 - w[0]) * ((c >> 1) & 1 ? w[1] : 1 - w[1]) *
+                ((c >> 2) & 1 ? w[2] : 1 - w[2]);
+    if (wt == 0.0) continue;
+    d += wt * im->distance[nh_voxel_index(im, i < im->n[0] ? i : im->n[0] - 1,
+                                          j < im->n[1] ? j : im->n[1] - 1,
+                                          k < im->n[2] ? k : im->n[2] - 1)];
+  }
+  return d;
+}
+
 double nh_image_level(const nh_image *im, const double x[3]) {
   double f = (0.5 - nh_image_indicator(im, x)) * im->level_scale;
   if (f <= 0.0) return f;
+  /* The distance bound: for each of the 8 centres v around x, d(x, S) ≥
+   * D_v − |x − v| ≥ D_v − reach, so d(x, S) ≥ I(D)(x) − reach; and the
+   * organ lies within the boxes v ± 1 (index) of the selected centres S (the
+   * support of χ), so its distance is ≥ d(x, S) − reach. Outside the image's
+   * centres the clamped values and |x − v| ≤ reach no longer hold: there
+   * only the box distance below is used. */
+  if (nh_image_contains(im, x)) {
+    double p[3];
+    nh_image_to_voxel(im, x, p);
+    int within = 1;
+    for (int k = 0; k < 3; k++) within &= p[k] >= 0.0 && p[k] <= im->n[k] - 1.0;
+    if (within) f = fmax(f, nh_image_distance_at(im, x) - 2.0 * im->reach);
+  }
   /* Distance to the grown index box, measured in world space through the
    * box's world-space bounding box (a box containing it: a lower bound). */
   const double *lo = im->box_min, *hi = im->box_max;

@@ -404,11 +404,18 @@ double nh_domain_volume(const nh_domain *d) {
   return 2.0 * sum * hy * hz; /* both halves: F is even in x − cx */
 }
 
+/* Mask and surface: may the box [lo, hi] meet the shape? Conservative:
+ * χ's support for a mask, a triangle's bounding box for a surface. */
+static int nh_domain_box_may_meet(const nh_domain *d, const double lo[3], const double hi[3]) {
+  return d->kind == NH_DOMAIN_MASK ? nh_image_meets_box(d->image, lo, hi)
+                                   : nh_surface_meets_box(d->surface, lo, hi);
+}
+
 double nh_domain_cell_fill(const nh_domain *d, const double Xe[24], int *meets) {
   const int n = NH_FILL_SAMPLES;
   double inside = 0.0, total = 0.0;
   int near = 0;
-  const int surface = d->kind == NH_DOMAIN_SURFACE;
+  const int sampled = d->kind == NH_DOMAIN_SURFACE || d->kind == NH_DOMAIN_MASK;
   for (int i = 0; i < n; i++)
     for (int j = 0; j < n; j++)
       for (int k = 0; k < n; k++) {
@@ -433,21 +440,21 @@ double nh_domain_cell_fill(const nh_domain *d, const double Xe[24], int *meets) 
         radius = sqrt(radius);
         double dv = fabs(nh_mat3_det(J));
         total += dv;
-        if (surface) { /* the inside test only; whether the cell meets the surface, below */
+        if (sampled) { /* the inside test only; whether the cell meets the shape, below */
           double x[3] = {d->center[0] + r[0], d->center[1] + r[1], d->center[2] + r[2]};
-          if (nh_surface_inside(d->surface, x)) inside += dv, near = 1;
+          if (nh_domain_inside(d, x)) inside += dv, near = 1;
           continue;
         }
         double f = nh_level_rel(d, r);
         if (f < 0) inside += dv;
         if (f <= radius * (1 + 1e-12)) near = 1;
       }
-  if (surface && !near) { /* a cell with no sample inside meets the shape only through a triangle */
+  if (sampled && !near) { /* no sample inside: may it meet the shape all the same? */
     double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
     for (int a = 0; a < 8; a++)
       for (int p = 0; p < 3; p++)
         lo[p] = fmin(lo[p], Xe[3 * a + p]), hi[p] = fmax(hi[p], Xe[3 * a + p]);
-    near = nh_surface_meets_box(d->surface, lo, hi);
+    near = nh_domain_box_may_meet(d, lo, hi);
   }
   if (meets) *meets = near;
   return total > 0 ? inside / total : 0.0;
@@ -467,20 +474,20 @@ double nh_domain_lattice_fill(const nh_domain *d, const int grid[3], const int i
   }
   radius = sqrt(radius) * (1 + 1e-12);
   int inside = 0, near = 0;
-  if (d->kind == NH_DOMAIN_SURFACE) {
+  if (d->kind == NH_DOMAIN_SURFACE || d->kind == NH_DOMAIN_MASK) {
     double lo[3], hi[3];
     for (int k = 0; k < n; k++)
       for (int j = 0; j < n; j++)
         for (int i = 0; i < n; i++) {
           double x[3] = {d->center[0] + off[0][i], d->center[1] + off[1][j],
                          d->center[2] + off[2][k]};
-          inside += nh_surface_inside(d->surface, x);
+          inside += nh_domain_inside(d, x);
         }
     for (int p = 0; p < 3; p++) {
       double h = 2.0 * d->half[p] / grid[p];
       lo[p] = d->min[p] + h * ijk[p], hi[p] = lo[p] + h;
     }
-    near = inside > 0 || nh_surface_meets_box(d->surface, lo, hi);
+    near = inside > 0 || nh_domain_box_may_meet(d, lo, hi);
     if (meets) *meets = near;
     return (double)inside / (n * n * n);
   }
