@@ -164,7 +164,7 @@ static int nh_write_frame(nh_sim *s) {
   int *conn = malloc(sizeof(int) * 8 * (size_t)(nc ? nc : 1));
   int *offsets = malloc(sizeof(int) * (size_t)(nc ? nc : 1));
   int *flags = malloc(sizeof(int) * (size_t)(np ? np : 1));
-  double *cell = malloc(sizeof(double) * 4 * (size_t)(nc ? nc : 1));
+  double *cell = malloc(sizeof(double) * 5 * (size_t)(nc ? nc : 1));
   double *hang = calloc((size_t)(np ? np : 1), sizeof(double));
   const double *eta = nh_adapt_indicators(s->adapt);
   int n_pr = sc->n_probes + sc->n_targets;
@@ -186,6 +186,9 @@ static int nh_write_frame(nh_sim *s) {
     cell[nc + l] = m->level[c];
     cell[2 * nc + l] = m->fill[c];
     cell[3 * nc + l] = eta ? eta[c] : 0.0;
+    double lambda, mu; /* the cell's Young's modulus (mixed cells: from the averaged λ, μ) */
+    nh_tissue_cell_material(s->tissue, c, &lambda, &mu, NULL);
+    cell[4 * nc + l] = mu * (3 * lambda + 2 * mu) / (lambda + mu);
   }
   if (s->hanging)
     for (int k = 0; k < s->hanging->n_hanging; k++) hang[s->hanging->node[k]] = 1.0;
@@ -194,10 +197,11 @@ static int nh_write_frame(nh_sim *s) {
     for (int k = 0; k < 3; k++) s->x[3 * i + k] = m->X[3 * i + k] + s->u[3 * i + k];
   }
   nh_field pf[3] = {{"displacement", 3, s->u}, {"velocity", 3, s->v}, {"hanging", 1, hang}};
-  nh_field cf[4] = {{"von_mises", 1, cell},
+  nh_field cf[5] = {{"von_mises", 1, cell},
                     {"level", 1, cell + nc},
                     {"fill", 1, cell + 2 * nc},
-                    {"eta", 1, cell + 3 * nc}};
+                    {"eta", 1, cell + 3 * nc},
+                    {"young", 1, cell + 4 * nc}};
   nh_vtu_grid g = {.n_points = np,
                    .points = s->x,
                    .n_cells = nc,
@@ -206,7 +210,7 @@ static int nh_write_frame(nh_sim *s) {
                    .type = NH_VTK_HEXAHEDRON,
                    .n_point_fields = 3,
                    .point_fields = pf,
-                   .n_cell_fields = 4,
+                   .n_cell_fields = 5,
                    .cell_fields = cf,
                    .point_int_flags = flags,
                    .point_flag_name = "fixed"};
