@@ -30,7 +30,13 @@
    moves u = (F/A)(Σ_{c < last} H/E_c + H/(2 E_last)) to 1e-8; the exact
    series value differs by the documented error (F/A) H (f/E1 + (1−f)/E2 −
    1/E_V), which halves with H.
+   With the clamp given as `{label: 5}` (the first voxel layer, label 5,
+   given E1 as well) instead of the box x = 0, the tip moves the same to 1e-12.
 4. The segmentation script reproduces cases/dbs-mri/ventricles.nii.gz.
+   Voxel points: a probe at {voxel: [4, 5, 6]} of a 2 mm image with origin
+   0 is at [0.008, 0.01, 0.012] m in check's listing.
+   Surface domain: an ellipsoid (semi-axes 30, 20, 15 mm) as ASCII STL in mm:
+   check's Σ φ V on a 24 x 16 x 12 grid is within 1 % of 4/3 π abc.
 5. Bad input exits 2 with the file and key: missing mask, label absent from
    the image, a probe outside the image, a truncated .nii.gz, a file that is
    not NIfTI, a material's label absent, a voxel index outside the image,
@@ -257,6 +263,8 @@ def test_series_bar():
         f = (a - int(a / H) * H) / H
         gap = F / A * H * (f / E1 + (1 - f) / E2 - 1 / (f * E1 + (1 - f) * E2))
         gaps.append(exact - u)
+        if cells == 10:
+            u_box = u
         if VERBOSE:
             print(f"bar {cells} cells: u {u:.12e}, springs {predicted:.12e}, series {exact:.12e}, "
                   f"gap {exact - u:.4e} (documented {gap:.4e}, f = {f})")
@@ -266,6 +274,74 @@ def test_series_bar():
             fail(f"bar {cells}: series gap {exact - u:.6e}, documented {gap:.6e}")
     if not gaps[1] < gaps[0]:
         fail(f"series gap did not shrink with H: {gaps}")
+    # The clamp as a label region: voxel layer 0 (x < 1.25 mm) holds label 5.
+    labels[:1] = 5
+    nib.save(nib.Nifti1Image(labels, affine), os.path.join(WORK, "bar.nii.gz"))
+    text = BAR_SCENE.format(cells=10, last=0.09, force=F)
+    text = text.replace("    - {box: {min: [0, 0, 0], max: [0, 0.01, 0.01]}}", "    - {label: 5}")
+    text = text.replace("    2: {young: 4000, poisson: 0.0}",
+                        "    2: {young: 4000, poisson: 0.0}\n    5: {young: 1000, poisson: 0.0}")
+    scene = write("bar_label.yaml", text.replace("name: bar-10", "name: bar-label"))
+    u_label = probe_displacements(scene, os.path.join(WORK, "out_bar_label"))["tip"][0]
+    if not abs(u_label - u_box) <= 1e-12 * abs(u_box) + 1e-20:
+        fail(f"bar clamped by {{label: 5}}: u = {u_label:.15e}, clamped by the box {u_box:.15e}")
+
+
+def test_voxel_point_and_surface():
+    cube = np.zeros((10, 10, 10), dtype=np.int16)
+    cube[2:8, 2:8, 2:8] = 3
+    aff = np.diag([2.0, 2.0, 2.0, 1.0])
+    img = nib.Nifti1Image(cube, aff)
+    img.set_sform(aff, 1)
+    nib.save(img, os.path.join(WORK, "voxcube.nii.gz"))
+    scene = write("voxel.yaml", """name: voxel
+tissue:
+  domain:
+    mask: {file: voxcube.nii.gz, labels: [3]}
+  material: {young: 1000, poisson: 0.3}
+probes:
+  - {name: p, point: {voxel: [4, 5, 6]}}
+""")
+    p = run(["check", scene])
+    if "p at [0.008, 0.01, 0.012] m" not in p.stdout:
+        fail(f"voxel [4, 5, 6] of a 2 mm image is not at [0.008, 0.01, 0.012] m:\n{p.stdout}")
+    # An ellipsoid as ASCII STL (mm), 64 x 128 latitude-longitude facets.
+    a, b, c = 30.0, 20.0, 15.0
+    nt, npp = 64, 128
+
+    def point(i, j):
+        th, ph = np.pi * i / nt, 2 * np.pi * (j % npp) / npp
+        if i in (0, nt):
+            return (a * np.cos(th), 0.0, 0.0)
+        return (a * np.cos(th), b * np.sin(th) * np.cos(ph), c * np.sin(th) * np.sin(ph))
+
+    lines = ["solid ellipsoid"]
+    for i in range(nt):
+        for j in range(npp):
+            q = [point(i, j), point(i + 1, j), point(i + 1, j + 1), point(i, j + 1)]
+            for t, tri in enumerate(((0, 1, 2), (0, 2, 3))):
+                if (i == 0 and t == 1) or (i == nt - 1 and t == 0):
+                    continue
+                lines += ["facet normal 0 0 0", " outer loop"]
+                lines += [" vertex %.9g %.9g %.9g" % q[k] for k in tri]
+                lines += [" endloop", "endfacet"]
+    lines.append("endsolid ellipsoid")
+    write("ellipsoid.stl", "\n".join(lines) + "\n")
+    scene = write("ellipsoid.yaml", """name: ellipsoid
+tissue:
+  domain:
+    surface: {file: ellipsoid.stl}
+  grid: [24, 16, 12]
+  material: {young: 1000, poisson: 0.3}
+""")
+    p = run(["check", scene])
+    m = VOLUME.search(p.stdout)
+    exact = 4.0 / 3.0 * np.pi * a * b * c * 1e-9
+    if not m or not abs(float(m.group(1)) / exact - 1) < 0.01:
+        fail(f"ellipsoid STL: sum phi V vs {exact:.6e}:\n{p.stdout}")
+    elif VERBOSE:
+        print(f"ellipsoid STL scene: sum phi V {float(m.group(1)):.6e}, "
+              f"{float(m.group(1)) / exact - 1:+.2%} of 4/3 pi abc; shape {float(m.group(2)):.6e}")
 
 
 def test_segmentation():
@@ -348,6 +424,7 @@ tissue:
 def main():
     test_series_bar()
     test_segmentation()
+    test_voxel_point_and_surface()
     test_bad_input()
     test_rasterised_brain()
     if failures:

@@ -14,7 +14,7 @@ Writes to --out:
 - anatomy_shift.png: the ventricles' outline in both planes at rest and
   deformed by the computed displacement at the listed frames (brain shift
   done at t = 3 s, end of the procedure), the displacement interpolated
-  from the tissue VTU (VTK's probe filter on the rest mesh).
+  trilinearly in the leaf of the tissue VTU's rest mesh that holds the point.
 Prints, per frame, the mean and the spread of the ventricle voxels'
 displacement (spread = the largest distance of a voxel's displacement from
 the mean: what deformation, not translation, does to them).
@@ -32,8 +32,6 @@ import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.collections import PolyCollection  # noqa: E402
 from vtkmodules.util.numpy_support import numpy_to_vtk, vtk_to_numpy  # noqa: E402
 from vtkmodules.vtkCommonCore import vtkPoints  # noqa: E402
-from vtkmodules.vtkCommonDataModel import vtkPolyData  # noqa: E402
-from vtkmodules.vtkFiltersCore import vtkProbeFilter  # noqa: E402
 from vtkmodules.vtkIOXML import vtkXMLUnstructuredGridReader  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -57,16 +55,25 @@ def read_frame(run, step):
 
 
 def probe(grid, points):
-    """Displacement at rest positions points[n, 3] (0 where outside the mesh)."""
-    pts = vtkPoints()
-    pts.SetData(numpy_to_vtk(np.ascontiguousarray(points, dtype=float), deep=True))
-    poly = vtkPolyData()
-    poly.SetPoints(pts)
-    f = vtkProbeFilter()
-    f.SetInputData(poly)
-    f.SetSourceData(grid)
-    f.Update()
-    return vtk_to_numpy(f.GetOutput().GetPointData().GetArray("displacement"))
+    """Displacement at rest positions points[n, 3]: trilinear in the leaf
+    containing each point (every rest cell is an axis-aligned box, VTK
+    order: corner 0 at the low end, 6 at the high end); NaN outside."""
+    x = vtk_to_numpy(grid.GetPoints().GetData())
+    u = vtk_to_numpy(grid.GetPointData().GetArray("displacement"))
+    conn = vtk_to_numpy(grid.GetCells().GetConnectivityArray()).reshape(-1, 8)
+    lo, hi = x[conn[:, 0]], x[conn[:, 6]]
+    corner = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0],
+                       [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]])
+    out = np.full((len(points), 3), np.nan)
+    for n, p in enumerate(np.asarray(points, dtype=float)):
+        inside = np.nonzero(np.all((lo <= p + 1e-12) & (p <= hi + 1e-12), axis=1))[0]
+        if len(inside) == 0:
+            continue
+        c = inside[0]
+        t = (p - lo[c]) / (hi[c] - lo[c])
+        w = np.prod(np.where(corner == 1, t, 1 - t), axis=1)
+        out[n] = w @ u[conn[c]]
+    return out
 
 
 def world(img, ijk):
@@ -74,12 +81,14 @@ def world(img, ijk):
 
 
 def slice_extent(img, plane):
-    """Axes (horizontal, vertical) in mm of the axial or sagittal slice."""
+    """imshow extent (mm) of the axial or sagittal slice: the world coordinate
+    of the first and last voxel edges along each of its axes (the sform's
+    negative x spacing makes the axial x run from right to left)."""
     n = img.shape
-    lo, hi = world(img, [-0.5, -0.5, -0.5]), world(img, [n[0] - 0.5, n[1] - 0.5, n[2] - 0.5])
+    first, last = world(img, [-0.5, -0.5, -0.5]), world(img, [n[0] - 0.5, n[1] - 0.5, n[2] - 0.5])
     if plane == "axial":
-        return [hi[0], lo[0], lo[1], hi[1]]  # x decreases with i (the sform's flip)
-    return [lo[1], hi[1], lo[2], hi[2]]
+        return [first[0], last[0], first[1], last[1]]
+    return [first[1], last[1], first[2], last[2]]
 
 
 def slice_of(data, plane):
@@ -94,7 +103,7 @@ def outline_points(img, labels, plane):
     hs = np.linspace(ext[0], ext[1], nx, endpoint=False) + (ext[1] - ext[0]) / (2 * nx)
     vs = np.linspace(ext[2], ext[3], ny, endpoint=False) + (ext[3] - ext[2]) / (2 * ny)
     cs = plt.figure().add_subplot().contour(hs, vs, mask, levels=[0.5])
-    paths = [p.vertices for p in cs.allsegs[0]]
+    paths = [np.asarray(p) for p in cs.allsegs[0]]
     plt.close("all")
     out = []
     for v in paths:
@@ -183,6 +192,9 @@ def plot_shift(img, labels, run, frames, out):
     for n, step in enumerate(frames):
         grid = read_frame(run, step)
         u = probe(grid, voxels)
+        missing = int(np.isnan(u[:, 0]).sum())
+        if missing:
+            raise SystemExit(f"{missing} ventricle voxels lie outside the mesh of frame {step}")
         mean = u.mean(axis=0)
         spread = np.linalg.norm(u - mean, axis=1).max()
         print(f"| {step} | {times.get(step, 0.0):.2f} | [{mean[0] * 1e3:.2f}, {mean[1] * 1e3:.2f}, "

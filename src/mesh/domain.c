@@ -73,6 +73,8 @@ static int nh_domain_fail(const char *where) {
 
 /* Every label of labels[0..n) is held by some voxel of the image. */
 static int nh_labels_present(const nh_image *im, const int *want, int n, const char *where) {
+  NH_CHECK(im, NH_ERR_INPUT,
+           "%s: labels need a label image: give tissue.domain.mask or tissue.labels", where);
   int *labels, nl;
   long *counts;
   NH_TRY(nh_image_labels(im, &labels, &counts, &nl));

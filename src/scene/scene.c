@@ -401,12 +401,8 @@ static int read_region_shape(const nh_ctx *c, const nh_yaml_node *node, const ch
   }
   if (!shape) return fail(c, node, path, "give one of box, sphere, cylinder, label");
   join(key, path, shape_key->text);
-  if (!strcmp(shape_key->text, "label")) { /* the voxels of the label image holding it */
-    if (!c->image)
-      return fail(c, shape_key, key,
-                  "a label region needs a label image: give tissue.domain.mask or "
-                  "tissue.labels");
-    region->kind = NH_REGION_LABEL;
+  if (!strcmp(shape_key->text, "label")) { /* the voxels of the label image holding it; */
+    region->kind = NH_REGION_LABEL;        /* that image is checked by the domain */
     return as_int(c, shape, key, &region->label);
   }
   if (!strcmp(shape_key->text, "box")) {
