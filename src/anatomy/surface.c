@@ -59,9 +59,7 @@ void nh_surface_release(nh_surface **surface) {
 static int nh_add_triangle(nh_surface *s, int *cap, const double t[9]) {
   double e1[3], e2[3], n[3];
   for (int k = 0; k < 3; k++) e1[k] = t[3 + k] - t[k], e2[k] = t[6 + k] - t[k];
-  n[0] = e1[1] * e2[2] - e1[2] * e2[1];
-  n[1] = e1[2] * e2[0] - e1[0] * e2[2];
-  n[2] = e1[0] * e2[1] - e1[1] * e2[0];
+  nh_vec3_cross(e1, e2, n);
   if (n[0] == 0 && n[1] == 0 && n[2] == 0) return NH_OK;
   if (nh_grow((void **)&s->v, cap, 9 * (s->n_tri + 1), sizeof(double)))
     return NH_ERROR(NH_ERR_MEMORY, "out of memory: %s", s->path);
@@ -446,15 +444,14 @@ static double nh_tri_dist2(const double *t, const double p[3]) {
   const double *a = t, *b = t + 3, *c = t + 6;
   double ab[3], ac[3], ap[3], q[3];
   for (int k = 0; k < 3; k++) ab[k] = b[k] - a[k], ac[k] = c[k] - a[k], ap[k] = p[k] - a[k];
-#define NH_DOT(u, v) ((u)[0] * (v)[0] + (u)[1] * (v)[1] + (u)[2] * (v)[2])
-  double d1 = NH_DOT(ab, ap), d2 = NH_DOT(ac, ap);
+  double d1 = nh_vec3_dot(ab, ap), d2 = nh_vec3_dot(ac, ap);
   if (d1 <= 0 && d2 <= 0) {
     for (int k = 0; k < 3; k++) q[k] = a[k];
     goto done;
   }
   double bp[3];
   for (int k = 0; k < 3; k++) bp[k] = p[k] - b[k];
-  double d3 = NH_DOT(ab, bp), d4 = NH_DOT(ac, bp);
+  double d3 = nh_vec3_dot(ab, bp), d4 = nh_vec3_dot(ac, bp);
   if (d3 >= 0 && d4 <= d3) {
     for (int k = 0; k < 3; k++) q[k] = b[k];
     goto done;
@@ -467,7 +464,7 @@ static double nh_tri_dist2(const double *t, const double p[3]) {
   }
   double cp[3];
   for (int k = 0; k < 3; k++) cp[k] = p[k] - c[k];
-  double d5 = NH_DOT(ab, cp), d6 = NH_DOT(ac, cp);
+  double d5 = nh_vec3_dot(ab, cp), d6 = nh_vec3_dot(ac, cp);
   if (d6 >= 0 && d5 <= d6) {
     for (int k = 0; k < 3; k++) q[k] = c[k];
     goto done;
@@ -490,8 +487,7 @@ static double nh_tri_dist2(const double *t, const double p[3]) {
   }
 done:;
   double d[3] = {p[0] - q[0], p[1] - q[1], p[2] - q[2]};
-  return NH_DOT(d, d);
-#undef NH_DOT
+  return nh_vec3_dot(d, d);
 }
 
 double nh_surface_level(const nh_surface *s, const double x[3], double cap) {
@@ -539,9 +535,10 @@ void nh_surface_print(const nh_surface *s, FILE *f) {
 double nh_surface_volume(const nh_surface *s) {
   double v = 0.0;
   for (int t = 0; t < s->n_tri; t++) {
-    const double *a = s->v + 9 * t, *b = a + 3, *c = a + 6;
-    v += a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) +
-         a[2] * (b[0] * c[1] - b[1] * c[0]);
+    const double *a = s->v + 9 * t;
+    double bc[3];
+    nh_vec3_cross(a + 3, a + 6, bc);
+    v += nh_vec3_dot(a, bc);
   }
   return fabs(v) / 6.0;
 }
@@ -554,31 +551,25 @@ int nh_surface_ray_entry(const nh_surface *s, const double base[3], const double
     const double *a = s->v + 9 * t;
     double e1[3], e2[3], p[3], q[3], r[3];
     for (int k = 0; k < 3; k++) e1[k] = a[3 + k] - a[k], e2[k] = a[6 + k] - a[k];
-    p[0] = dir[1] * e2[2] - dir[2] * e2[1];
-    p[1] = dir[2] * e2[0] - dir[0] * e2[2];
-    p[2] = dir[0] * e2[1] - dir[1] * e2[0];
-    double det = e1[0] * p[0] + e1[1] * p[1] + e1[2] * p[2];
+    nh_vec3_cross(dir, e2, p);
+    double det = nh_vec3_dot(e1, p);
     if (det == 0.0) continue;
     for (int k = 0; k < 3; k++) r[k] = base[k] - a[k];
-    double u = (r[0] * p[0] + r[1] * p[1] + r[2] * p[2]) / det;
+    double u = nh_vec3_dot(r, p) / det;
     if (u < 0 || u > 1) continue;
-    q[0] = r[1] * e1[2] - r[2] * e1[1];
-    q[1] = r[2] * e1[0] - r[0] * e1[2];
-    q[2] = r[0] * e1[1] - r[1] * e1[0];
-    double v = (dir[0] * q[0] + dir[1] * q[1] + dir[2] * q[2]) / det;
+    nh_vec3_cross(r, e1, q);
+    double v = nh_vec3_dot(dir, q) / det;
     if (v < 0 || u + v > 1) continue;
-    double tt = (e2[0] * q[0] + e2[1] * q[1] + e2[2] * q[2]) / det;
+    double tt = nh_vec3_dot(e2, q) / det;
     if (tt > 0 && tt < best) best = tt, hit = t;
   }
   if (hit < 0) return 0;
   const double *a = s->v + 9 * hit;
   double e1[3], e2[3], n[3];
   for (int k = 0; k < 3; k++) e1[k] = a[3 + k] - a[k], e2[k] = a[6 + k] - a[k];
-  n[0] = e1[1] * e2[2] - e1[2] * e2[1];
-  n[1] = e1[2] * e2[0] - e1[0] * e2[2];
-  n[2] = e1[0] * e2[1] - e1[1] * e2[0];
-  double len = sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-  double side = n[0] * dir[0] + n[1] * dir[1] + n[2] * dir[2] > 0 ? -1.0 : 1.0;
+  nh_vec3_cross(e1, e2, n);
+  double len = nh_vec3_norm(n);
+  double side = nh_vec3_dot(n, dir) > 0 ? -1.0 : 1.0;
   *tau = best;
   for (int k = 0; k < 3; k++) point[k] = base[k] + best * dir[k], normal[k] = side * n[k] / len;
   return 1;
