@@ -34,7 +34,8 @@
    given E1 as well) instead of the box x = 0, the tip moves the same to 1e-12.
 4. The segmentation script reproduces cases/dbs-mri/ventricles.nii.gz.
    Voxel points: a probe at {voxel: [4, 5, 6]} of a 2 mm image with origin
-   0 is at [0.008, 0.01, 0.012] m in check's listing.
+   0 is at [0.008, 0.01, 0.012] m in check's listing; the same image as an
+   uncompressed NIfTI-2 file gives the same listing.
    Surface domain: an ellipsoid (semi-axes 30, 20, 15 mm) as ASCII STL in mm:
    check's Σ φ V on a 24 x 16 x 12 grid is within 1 % of 4/3 π abc.
 5. Bad input exits 2 with the file and key: missing mask, label absent from
@@ -305,6 +306,15 @@ probes:
     p = run(["check", scene])
     if "p at [0.008, 0.01, 0.012] m" not in p.stdout:
         fail(f"voxel [4, 5, 6] of a 2 mm image is not at [0.008, 0.01, 0.012] m:\n{p.stdout}")
+    # The same image as NIfTI-2, uncompressed: the same check output.
+    img2 = nib.Nifti2Image(cube, aff)
+    img2.set_sform(aff, 1)
+    nib.save(img2, os.path.join(WORK, "voxcube2.nii"))
+    scene2 = write("voxel2.yaml", open(scene).read().replace("voxcube.nii.gz", "voxcube2.nii"))
+    p2 = run(["check", scene2])
+    strip = lambda t: [l for l in t.splitlines() if "voxcube" not in l and "scene" not in l]
+    if strip(p2.stdout) != strip(p.stdout):
+        fail(f"NIfTI-2 check differs from NIfTI-1:\n{p2.stdout}\nvs\n{p.stdout}")
     # An ellipsoid as ASCII STL (mm), 64 x 128 latitude-longitude facets.
     a, b, c = 30.0, 20.0, 15.0
     nt, npp = 64, 128

@@ -182,7 +182,12 @@ int nh_image_read(const char *path, int read_data, nh_image **out) {
   NH_CHECK(nifti_is_complete_filename(path), NH_ERR_INPUT,
            "%s: not a NIfTI file name (expected .nii, .nii.gz, .hdr or .img)", path);
   nifti_set_debug_level(0);
-  NH_CHECK(is_nifti_file(path) >= 0, NH_ERR_INPUT, "%s: not a NIfTI file (no valid header)", path);
+  int version = 0; /* a NIfTI-1 or NIfTI-2 header that passes libnifti2's checks */
+  void *header = nifti_read_header(path, &version, 1);
+  int is_nifti = header && (version == 1 || version == 2);
+  free(header);
+  NH_CHECK(is_nifti, NH_ERR_INPUT, "%s: not a NIfTI file (no valid NIfTI-1 or NIfTI-2 header)",
+           path);
   nifti_image *nim = nifti_image_read(path, read_data);
   NH_CHECK(nim, NH_ERR_INPUT,
            "%s: libnifti2 could not read it (corrupt or truncated header, data or gzip stream)",
