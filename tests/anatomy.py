@@ -38,7 +38,10 @@
    uncompressed NIfTI-2 file gives the same listing.
    Surface domain: an ellipsoid (semi-axes 30, 20, 15 mm) as ASCII STL in mm:
    check's Σ φ V on a 24 x 16 x 12 grid is within 1 % of 4/3 π abc.
-5. Bad input exits 2 with the file and key: missing mask, label absent from
+5. cases/dbs-mri runs its first 0.25 s (brain shift starting) with finite
+   results, and its last frame's `young` field holds the ventricles' mixed
+   cells: values strictly between 300 Pa and 6 kPa, none outside [300, 6000].
+6. Bad input exits 2 with the file and key: missing mask, label absent from
    the image, a probe outside the image, a truncated .nii.gz, a file that is
    not NIfTI, a material's label absent, a voxel index outside the image,
    an open STL surface.
@@ -369,6 +372,32 @@ def test_segmentation():
         fail("the segmentation's affine differs from the shipped one")
 
 
+def test_dbs_mri():
+    out = os.path.join(WORK, "out_dbs_mri")
+    run(["run", os.path.join(SRC, "cases", "dbs-mri", "dbs-mri.yaml"), "--out", out, "--quiet",
+         "--set", "time.end=0.25", "--set", "output.every=0"])
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+    from vtkmodules.vtkIOXML import vtkXMLUnstructuredGridReader
+    frames = sorted(f for f in os.listdir(out) if f.startswith("tissue_") and f.endswith(".vtu"))
+    if not frames:
+        fail(f"dbs-mri: no tissue frame in {out}")
+        return
+    r = vtkXMLUnstructuredGridReader()
+    r.SetFileName(os.path.join(out, frames[-1]))
+    r.Update()
+    g = r.GetOutput()
+    young = vtk_to_numpy(g.GetCellData().GetArray("young"))
+    u = vtk_to_numpy(g.GetPointData().GetArray("displacement"))
+    mixed = np.count_nonzero((young > 300) & (young < 6000 * (1 - 1e-9)))
+    if not (np.all(np.isfinite(u)) and np.abs(u).max() > 0):
+        fail(f"dbs-mri: displacements not finite or all zero (max {np.abs(u).max()})")
+    if mixed == 0 or young.min() < 300 * (1 - 1e-9) or young.max() > 6000 * (1 + 1e-9):
+        fail(f"dbs-mri: young in [{young.min()}, {young.max()}], {mixed} mixed cells")
+    if VERBOSE:
+        print(f"dbs-mri 0.25 s: {mixed} cells with ventricle, young min {young.min():.1f} Pa, "
+              f"max |u| {np.abs(u).max():.3e} m")
+
+
 def expect_error(name, scene_text, key, needles=()):
     path = write(name, scene_text)
     p = run(["check", path], expect=2)
@@ -435,6 +464,7 @@ def main():
     test_series_bar()
     test_segmentation()
     test_voxel_point_and_surface()
+    test_dbs_mri()
     test_bad_input()
     test_rasterised_brain()
     if failures:
