@@ -152,6 +152,8 @@ int main(int argc, char **argv) {
            "volume %.6g m^3 (sum of fill x cell volume) vs %.6g m^3 (the shape's)\n",
            nh_domain_name(d), d->max[0] - d->min[0], d->max[1] - d->min[1], d->max[2] - d->min[2],
            kept, lattice, NH_FILL_MIN, nh_mesh_fill_volume(m), nh_domain_volume(d));
+    if (d->labels) rc = nh_image_print(d->labels, stdout);
+    if (d->surface) nh_surface_print(d->surface, stdout);
   }
   if (!rc && is_run) rc = nh_sim_run(sim);
   int status = rc ? nh_fail(rc) : 0;

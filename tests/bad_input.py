@@ -34,7 +34,7 @@ CASES = [
     ("box_min_max.yaml", [], 7, "tissue.domain.box.max"),
     ("duplicate_key.yaml", [], 8, "tissue.material"),
     ("alias.yaml", [], 5, "tissue.domain.box.min"),
-    ("not_supported.yaml", [], 5, "tissue.domain.mask"),
+    ("mask_missing_file.yaml", [], 5, "tissue.domain.mask.file"),
     ("two_documents.yaml", [], 7, None),
     # Detected by the simulator (no node in the region), not by the scene
     # module: it reports the region's `where`, "FILE:11: tissue.fixed.0".

@@ -943,7 +943,7 @@ static void test_errors(void) {
        ":6: tissue.domain.box.max: must be greater than min in every component (z: max 0, "
        "min 0)"},
       {"mask.yaml", "name: w\ntissue:\n  domain:\n    mask: {file: b.nii}\n", NULL,
-       ":4: tissue.domain.mask: not supported in this version of needlehex"},
+       ":4: tissue.domain.mask.file: cannot read "},
       {"brain.yaml", "name: w\ntissue:\n  domain:\n    brain: {size: [1, 0, 1]}\n", NULL,
        ":4: tissue.domain.brain.size.1: must be greater than 0, got 0"},
       {"sphere.yaml",
@@ -957,8 +957,8 @@ static void test_errors(void) {
        "1}\n"
        "      box: {min: [0,0,0], max: [1,1,1]}\n      force: [0, 0, 1]\n",
        NULL,
-       ":7: tissue.loads.0.box: give exactly one of box, sphere, cylinder (sphere is already "
-       "given)"},
+       ":7: tissue.loads.0.box: give exactly one of box, sphere, cylinder, label (sphere is "
+       "already given)"},
       {"dup.yaml", "name: w\nname: v\n", NULL, ":2: name: duplicate key (first given at line 1)"},
       {"alias.yaml", "name: &n w\n", NULL, ":1: name: anchors (&n) and aliases are not supported"},
       {"docs.yaml", "name: w\n---\nname: v\n", NULL,

@@ -5,8 +5,8 @@ set -euo pipefail
 pkgs=(
   build-essential cmake pkg-config clang-format
   libsuitesparse-dev libopenblas-dev liblapacke-dev
-  libyaml-dev libhdf5-dev zlib1g-dev
-  python3 python3-numpy python3-matplotlib python3-vtk9 python3-meshio python3-h5py
+  libyaml-dev libhdf5-dev zlib1g-dev libnifti2-dev
+  python3 python3-numpy python3-matplotlib python3-vtk9 python3-meshio python3-h5py python3-nibabel python3-scipy
 )
 sudo=""
 if [ "$(id -u)" -ne 0 ]; then sudo="sudo"; fi

@@ -399,7 +399,9 @@ int nh_spr_estimate(const nh_mesh *m, const nh_tissue *t, const double *u, const
     double Xe[24], ue[24], sh[48], detJ[8], e2 = 0.0, n2 = 0.0;
     nh_mesh_cell_coords(m, m->X, c, Xe);
     nh_mesh_cell_coords(m, u, c, ue);
-    nh_hex_stress_at(Xe, ue, t->G0 + 24 * t->cell_shape[c], t->lambda, t->mu, 8, xi, sh, detJ);
+    double lambda, mu;
+    nh_tissue_cell_material(t, c, &lambda, &mu, NULL);
+    nh_hex_stress_at(Xe, ue, t->G0 + 24 * t->cell_shape[c], lambda, mu, 8, xi, sh, detJ);
     for (int g = 0; g < 8; g++) {
       if (!(detJ[g] > 0.0)) {
 #pragma omp atomic write
@@ -411,10 +413,10 @@ int nh_spr_estimate(const nh_mesh *m, const nh_tissue *t, const double *u, const
         for (int a = 0; a < 8; a++) s += N[g][a] * sigma_star[6 * corner[a] + k];
         diff[k] = s - sh[6 * g + k];
       }
-      nh_voigt_compliance(t->lambda, t->mu, diff, e);
+      nh_voigt_compliance(lambda, mu, diff, e);
       double de = 0.0;
       for (int k = 0; k < 6; k++) de += diff[k] * e[k];
-      nh_voigt_compliance(t->lambda, t->mu, sh + 6 * g, e);
+      nh_voigt_compliance(lambda, mu, sh + 6 * g, e);
       double dn = 0.0;
       for (int k = 0; k < 6; k++) dn += sh[6 * g + k] * e[k];
       e2 += detJ[g] * de;

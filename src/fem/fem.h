@@ -60,6 +60,12 @@ typedef struct nh_tissue {
   const nh_mesh *mesh; /* borrowed */
   nh_material material;
   double lambda, mu;
+  /* materials per label (nh_tissue_set_label_materials; n_labels = 0: one material) */
+  int n_labels;
+  int *label; /* n_labels image labels */
+  nh_material *label_material;
+  double *Kl, *Km;       /* 576 per shape: K0 for (λ, μ) = (1, 0) and (0, 1) */
+  double *cell_material; /* 3 per cell: the cell's λ, μ, ρ (λ NaN: not computed yet) */
   int n_shapes, cap_shapes;
   double *K0;      /* 576 per shape */
   double *G0;      /* 24 per shape */
@@ -75,6 +81,20 @@ typedef struct nh_tissue {
  * Fails with NH_ERR_INPUT if a cell has a non-positive Jacobian (an inverted
  * rest cell is a meshing error), NH_ERR_MEMORY. */
 int nh_tissue_create(const nh_mesh *mesh, const nh_material *material, nh_tissue **out);
+/* Materials per label of the domain's label image (mesh->domain.labels):
+ * labels[i] has materials[i]; voxels of other labels have the default. A
+ * cell gets the volume average (Voigt) of λ, μ and ρ over the tissue in it,
+ * measured at NH_FILL_SAMPLES³ sub-cell midpoints (docs/anatomy.md, "Mixed
+ * cells"); cells made later by refinement get theirs in nh_tissue_update.
+ * n = 0 restores the single material. Fails with NH_ERR_INPUT if n > 0 and
+ * the domain has no label image, NH_ERR_MEMORY. */
+int nh_tissue_set_label_materials(nh_tissue *tissue, int n, const int *labels,
+                                  const nh_material *materials);
+/* Lamé parameters and density of leaf c. */
+void nh_tissue_cell_material(const nh_tissue *tissue, int c, double *lambda, double *mu,
+                             double *density);
+/* Lumped mass per corner of leaf c: ρ_c φ_c V_c / 8. */
+double nh_tissue_corner_mass(const nh_tissue *tissue, int c);
 /* Recompute element data of new cells and the lumped mass after the mesh changed. */
 int nh_tissue_update(nh_tissue *tissue);
 void nh_tissue_destroy(nh_tissue **tissue);

@@ -54,7 +54,9 @@ void nh_tissue_gauss_stress(const nh_tissue *t, int c, const double *u, const do
   double Xe[24], ue[24];
   nh_mesh_cell_coords(m, m->X, c, Xe);
   nh_mesh_cell_coords(m, u, c, ue);
-  nh_hex_stress_at(Xe, ue, t->G0 + 24 * t->cell_shape[c], t->lambda, t->mu, 1, xi, s, NULL);
+  double lambda, mu;
+  nh_tissue_cell_material(t, c, &lambda, &mu, NULL);
+  nh_hex_stress_at(Xe, ue, t->G0 + 24 * t->cell_shape[c], lambda, mu, 1, xi, s, NULL);
 }
 
 void nh_voigt_compliance(double lambda, double mu, const double s[6], double e[6]) {

@@ -1,5 +1,16 @@
 /* tissue.c — element data of the tissue mesh and its lumped mass.
  *
+ * Materials per label (docs/anatomy.md, "Mixed cells"). K₀ is linear in the
+ * Lamé parameters, K₀ = λ K_λ + μ K_μ, so with materials per label every
+ * shape keeps K_λ and K_μ and a cell's K₀ is formed from its own (λ_c, μ_c)
+ * when needed. A cell that holds several labels gets the volume averages
+ *     λ_c = Σ_l f_l λ_l,   μ_c = Σ_l f_l μ_l,   ρ_c = Σ_l f_l ρ_l,
+ * f_l the fraction of the tissue's sub-cell midpoints (of NH_FILL_SAMPLES³)
+ * whose voxel holds label l: the Voigt average, exact for the mass and for
+ * strains that are uniform across the cell (layers loaded along them), an
+ * upper bound of the stiffness for layers loaded across (series), where the
+ * exact value is the harmonic (Reuss) mean of the compliances.
+ *
  * K₀ (4.6 kB) depends only on the rest shape of a cell up to translation.
  * A uniform grid has one shape, a refined one a handful per level, so cells
  * share element data through a hash of their rest corners relative to
@@ -22,6 +33,7 @@ void nh_tissue_destroy(nh_tissue **tissue) {
   free(t->key);
   free(t->cell_shape);
   free(t->mass);
+  free(t->label), free(t->label_material), free(t->Kl), free(t->Km), free(t->cell_material);
   free(t);
   *tissue = NULL;
 }
@@ -67,17 +79,33 @@ static int nh_tissue_shape(nh_tissue *t, const double Xe[24], int *table, int ta
     if (vol) t->volume = vol;
     double *keys = realloc(t->key, sizeof(double) * 24 * cap);
     if (keys) t->key = keys;
-    if (!K0 || !G0 || !vol || !keys) return NH_ERROR(NH_ERR_MEMORY, "out of memory: element data");
+    int mixed_ok = 1;
+    if (t->n_labels) {
+      double *Kl = realloc(t->Kl, sizeof(double) * 576 * cap);
+      if (Kl) t->Kl = Kl;
+      double *Km = realloc(t->Km, sizeof(double) * 576 * cap);
+      if (Km) t->Km = Km;
+      mixed_ok = Kl && Km;
+    }
+    if (!K0 || !G0 || !vol || !keys || !mixed_ok)
+      return NH_ERROR(NH_ERR_MEMORY, "out of memory: element data");
     t->cap_shapes = cap;
   }
   if (nh_hex_stiffness(Xe, t->lambda, t->mu, t->K0 + 576 * s, t->G0 + 24 * s, t->volume + s))
     return NH_ERR_INPUT;
+  if (t->n_labels) {
+    double G[24], v;
+    nh_hex_stiffness(Xe, 1.0, 0.0, t->Kl + 576 * s, G, &v);
+    nh_hex_stiffness(Xe, 0.0, 1.0, t->Km + 576 * s, G, &v);
+  }
   memcpy(t->key + 24 * s, key, sizeof key);
   t->n_shapes++;
   table[slot] = s;
   *shape = s;
   return NH_OK;
 }
+
+static void nh_tissue_mix(nh_tissue *t, int c);
 
 int nh_tissue_update(nh_tissue *t) {
   const nh_mesh *m = t->mesh;
@@ -86,6 +114,12 @@ int nh_tissue_update(nh_tissue *t) {
     if (!cs) return NH_ERROR(NH_ERR_MEMORY, "out of memory: cell data");
     for (int c = t->cap_cells; c < m->n_cells; c++) cs[c] = -1;
     t->cell_shape = cs;
+    if (t->n_labels) {
+      double *cm = realloc(t->cell_material, sizeof(double) * 3 * (size_t)m->n_cells);
+      if (!cm) return NH_ERROR(NH_ERR_MEMORY, "out of memory: cell materials");
+      for (int c = t->cap_cells; c < m->n_cells; c++) cm[3 * c] = NAN;
+      t->cell_material = cm;
+    }
     t->cap_cells = m->n_cells;
   }
   if (m->n_nodes > t->cap_nodes) {
@@ -119,13 +153,109 @@ int nh_tissue_update(nh_tissue *t) {
   }
   free(table);
   if (rc) return rc;
+  if (t->n_labels)
+    for (int l = 0; l < m->n_leaves; l++)
+      if (isnan(t->cell_material[3 * m->leaves[l]])) nh_tissue_mix(t, m->leaves[l]);
   memset(t->mass, 0, sizeof(double) * (size_t)m->n_nodes);
   for (int l = 0; l < m->n_leaves; l++) {
     int c = m->leaves[l];
-    double mc = t->material.density * m->fill[c] * t->volume[t->cell_shape[c]] / 8.0;
+    double mc = nh_tissue_corner_mass(t, c);
     for (int a = 0; a < 8; a++) t->mass[m->cells[8 * c + a]] += mc;
   }
   return NH_OK;
+}
+
+/* λ, μ, ρ of cell c: the volume average over the tissue's sub-cell
+ * midpoints of the materials of their voxels' labels. */
+static void nh_tissue_mix(nh_tissue *t, int c) {
+  const nh_mesh *m = t->mesh;
+  const nh_domain *d = &m->domain;
+  const int n = NH_FILL_SAMPLES;
+  double Xe[24], sum[3] = {0, 0, 0}, total = 0.0;
+  nh_mesh_cell_coords(m, m->X, c, Xe);
+  for (int i = 0; i < n; i++)
+    for (int j = 0; j < n; j++)
+      for (int k = 0; k < n; k++) {
+        double xi[3] = {-1 + (2 * i + 1.0) / n, -1 + (2 * j + 1.0) / n, -1 + (2 * k + 1.0) / n};
+        double N[8], x[3] = {0, 0, 0};
+        nh_hex_shape(xi, N);
+        for (int a = 0; a < 8; a++)
+          for (int p = 0; p < 3; p++) x[p] += N[a] * Xe[3 * a + p];
+        if (d->kind != NH_DOMAIN_BOX && !nh_domain_inside(d, x)) continue;
+        /* Equal weights: the sub-cells of a trilinear cell differ in volume
+         * only through det J, which varies little inside one cell. */
+        int label = nh_image_label_at(d->labels, x), q = -1;
+        for (int s = 0; s < t->n_labels && q < 0; s++)
+          if (t->label[s] == label) q = s;
+        const nh_material *mat = q >= 0 ? &t->label_material[q] : &t->material;
+        double lambda, mu;
+        nh_lame(mat->young, mat->poisson, &lambda, &mu);
+        sum[0] += lambda, sum[1] += mu, sum[2] += mat->density;
+        total += 1.0;
+      }
+  double *cm = t->cell_material + 3 * c;
+  if (total > 0) {
+    for (int k = 0; k < 3; k++) cm[k] = sum[k] / total;
+  } else { /* a cell kept at the fill floor with no sample inside: the default */
+    cm[0] = t->lambda, cm[1] = t->mu, cm[2] = t->material.density;
+  }
+}
+
+void nh_tissue_cell_material(const nh_tissue *t, int c, double *lambda, double *mu,
+                             double *density) {
+  if (t->n_labels) {
+    const double *cm = t->cell_material + 3 * c;
+    if (lambda) *lambda = cm[0];
+    if (mu) *mu = cm[1];
+    if (density) *density = cm[2];
+    return;
+  }
+  if (lambda) *lambda = t->lambda;
+  if (mu) *mu = t->mu;
+  if (density) *density = t->material.density;
+}
+
+double nh_tissue_corner_mass(const nh_tissue *t, int c) {
+  double rho;
+  nh_tissue_cell_material(t, c, NULL, NULL, &rho);
+  return rho * t->mesh->fill[c] * t->volume[t->cell_shape[c]] / 8.0;
+}
+
+/* K₀ of leaf c: the shape's, or λ_c K_λ + μ_c K_μ with materials per label. */
+static const double *nh_cell_K0(const nh_tissue *t, int c, double buf[576]) {
+  int s = t->cell_shape[c];
+  if (!t->n_labels) return t->K0 + 576 * s;
+  const double *cm = t->cell_material + 3 * c, *Kl = t->Kl + 576 * s, *Km = t->Km + 576 * s;
+  for (int i = 0; i < 576; i++) buf[i] = cm[0] * Kl[i] + cm[1] * Km[i];
+  return buf;
+}
+
+int nh_tissue_set_label_materials(nh_tissue *t, int n, const int *labels,
+                                  const nh_material *materials) {
+  const nh_mesh *m = t->mesh;
+  free(t->label), free(t->label_material), free(t->Kl), free(t->Km), free(t->cell_material);
+  t->label = NULL, t->label_material = NULL, t->Kl = t->Km = t->cell_material = NULL;
+  t->n_labels = 0;
+  if (n == 0) return nh_tissue_update(t);
+  NH_CHECK(m->domain.labels, NH_ERR_INPUT, "materials per label need a label image");
+  t->label = malloc(sizeof(int) * (size_t)n);
+  t->label_material = malloc(sizeof(nh_material) * (size_t)n);
+  size_t cap = t->cap_shapes > 0 ? (size_t)t->cap_shapes : 1;
+  t->Kl = malloc(sizeof(double) * 576 * cap);
+  t->Km = malloc(sizeof(double) * 576 * cap);
+  t->cell_material = malloc(sizeof(double) * 3 * (size_t)(t->cap_cells > 0 ? t->cap_cells : 1));
+  if (!t->label || !t->label_material || !t->Kl || !t->Km || !t->cell_material)
+    return NH_ERROR(NH_ERR_MEMORY, "out of memory: materials per label");
+  memcpy(t->label, labels, sizeof(int) * (size_t)n);
+  memcpy(t->label_material, materials, sizeof(nh_material) * (size_t)n);
+  t->n_labels = n;
+  for (int s = 0; s < t->n_shapes; s++) { /* the key is the rest shape up to translation */
+    double G[24], v;
+    nh_hex_stiffness(t->key + 24 * s, 1.0, 0.0, t->Kl + 576 * s, G, &v);
+    nh_hex_stiffness(t->key + 24 * s, 0.0, 1.0, t->Km + 576 * s, G, &v);
+  }
+  for (int c = 0; c < t->cap_cells; c++) t->cell_material[3 * c] = NAN;
+  return nh_tissue_update(t);
 }
 
 int nh_tissue_create(const nh_mesh *mesh, const nh_material *material, nh_tissue **out) {
@@ -150,7 +280,8 @@ void nh_tissue_element(const nh_tissue *t, int c, const double *u, double f[24],
   double Xe[24], ue[24], R[9];
   nh_mesh_cell_coords(m, m->X, c, Xe);
   nh_mesh_cell_coords(m, u, c, ue);
-  nh_hex_corot(Xe, ue, t->K0 + 576 * s, t->G0 + 24 * s, R, f, Kt);
+  double Kc[576];
+  nh_hex_corot(Xe, ue, nh_cell_K0(t, c, Kc), t->G0 + 24 * s, R, f, Kt);
   double phi = m->fill[c];
   if (phi != 1.0) {
     for (int i = 0; i < 24; i++) f[i] *= phi;
@@ -170,7 +301,8 @@ double nh_tissue_energy(const nh_tissue *t, const double *u) {
     /* ½ dᵀ K0 d with d computed as the force is (centroid-relative, no
      * cancellation of the coordinates' magnitude). */
     nh_hex_corotated(Xe, ue, t->G0 + 24 * s, R, d);
-    const double *K0 = t->K0 + 576 * s;
+    double Kc[576];
+    const double *K0 = nh_cell_K0(t, c, Kc);
     double e = 0.0;
     for (int r = 0; r < 24; r++) {
       double kd = 0.0;
@@ -187,5 +319,7 @@ void nh_tissue_cell_stress(const nh_tissue *t, int c, const double *u, double s[
   double Xe[24], ue[24];
   nh_mesh_cell_coords(m, m->X, c, Xe);
   nh_mesh_cell_coords(m, u, c, ue);
-  nh_hex_center_stress(Xe, ue, t->G0 + 24 * t->cell_shape[c], t->lambda, t->mu, s);
+  double lambda, mu;
+  nh_tissue_cell_material(t, c, &lambda, &mu, NULL);
+  nh_hex_center_stress(Xe, ue, t->G0 + 24 * t->cell_shape[c], lambda, mu, s);
 }

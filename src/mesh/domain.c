@@ -38,6 +38,8 @@
 #include "mesh/mesh.h"
 
 #include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 void nh_domain_box(const double min[3], const double max[3], nh_domain *d) {
@@ -62,15 +64,108 @@ void nh_domain_brain(const double center[3], const double size[3], nh_domain *d)
   }
 }
 
-void nh_domain_from_scene(const nh_scene *s, nh_domain *d) {
+/* Prefix the current error message with `where` (the scene's key). */
+static int nh_domain_fail(const char *where) {
+  char msg[1024];
+  snprintf(msg, sizeof msg, "%s", nh_error_message());
+  return NH_ERROR(NH_ERR_INPUT, "%s: %s", where, msg);
+}
+
+/* Every label of labels[0..n) is held by some voxel of the image. */
+static int nh_labels_present(const nh_image *im, const int *want, int n, const char *where) {
+  NH_CHECK(im, NH_ERR_INPUT,
+           "%s: labels need a label image: give tissue.domain.mask or tissue.labels", where);
+  int *labels, nl;
+  long *counts;
+  NH_TRY(nh_image_labels(im, &labels, &counts, &nl));
+  int rc = NH_OK;
+  for (int i = 0; i < n && !rc; i++) {
+    int found = 0;
+    for (int j = 0; j < nl && !found; j++) found = labels[j] == want[i];
+    if (!found) {
+      char have[256] = "";
+      for (int j = 0; j < nl && strlen(have) < 200; j++)
+        snprintf(have + strlen(have), sizeof have - strlen(have), "%s%d", j ? ", " : "", labels[j]);
+      rc = NH_ERROR(NH_ERR_INPUT, "%s: label %d is held by no voxel of %s (its labels: %s)", where,
+                    want[i], im->path, have);
+    }
+  }
+  free(labels), free(counts);
+  return rc;
+}
+
+static void nh_domain_set_box(nh_domain *d, const double min[3], const double max[3]) {
+  for (int k = 0; k < 3; k++) {
+    d->min[k] = min[k], d->max[k] = max[k];
+    d->center[k] = 0.5 * (min[k] + max[k]);
+    d->half[k] = 0.5 * (max[k] - min[k]);
+  }
+}
+
+static int nh_domain_load(const nh_scene *s, nh_domain *d) {
+  const int n_mat = s->tissue.n_materials;
+  if (s->tissue.domain == NH_DOMAIN_MASK) {
+    d->kind = NH_DOMAIN_MASK;
+    if (nh_image_read(s->tissue.mask_file, 1, &d->image))
+      return nh_domain_fail(s->tissue.where_domain);
+    NH_TRY(nh_labels_present(d->image, s->tissue.mask_labels, s->tissue.n_mask_labels,
+                             s->tissue.where_labels));
+    NH_TRY(nh_image_select(d->image, s->tissue.mask_labels, s->tissue.n_mask_labels));
+    nh_domain_set_box(d, d->image->box_min, d->image->box_max);
+    nh_image_retain(d->image);
+    d->labels = d->image;
+  } else if (s->tissue.domain == NH_DOMAIN_SURFACE) {
+    d->kind = NH_DOMAIN_SURFACE;
+    if (nh_surface_read(s->tissue.surface_file, s->tissue.surface_unit, &d->surface))
+      return nh_domain_fail(s->tissue.where_domain);
+    nh_domain_set_box(d, d->surface->min, d->surface->max);
+    /* Truncation of the distance: far above the sub-cell radii the mesh
+     * compares F with, small enough to keep the search local. */
+    d->cap = 0.25 * fmax(d->half[0], fmax(d->half[1], d->half[2]));
+  }
+  if (s->tissue.labels_file[0]) {
+    if (nh_image_read(s->tissue.labels_file, 1, &d->labels))
+      return nh_domain_fail(s->tissue.where_labels);
+  }
+  for (int i = 0; i < n_mat; i++)
+    NH_TRY(nh_labels_present(d->labels, &s->tissue.materials[i].label, 1,
+                             s->tissue.materials[i].where));
+  for (int i = 0; i < s->tissue.n_fixed; i++)
+    if (s->tissue.fixed[i].kind == NH_REGION_LABEL)
+      NH_TRY(nh_labels_present(d->labels, &s->tissue.fixed[i].label, 1, s->tissue.fixed[i].where));
+  for (int i = 0; i < s->tissue.n_loads; i++)
+    if (s->tissue.loads[i].region.kind == NH_REGION_LABEL)
+      NH_TRY(nh_labels_present(d->labels, &s->tissue.loads[i].region.label, 1,
+                               s->tissue.loads[i].region.where));
+  return NH_OK;
+}
+
+int nh_domain_from_scene(const nh_scene *s, nh_domain *d) {
   if (s->tissue.domain == NH_DOMAIN_BRAIN)
     nh_domain_brain(s->tissue.brain_center, s->tissue.brain_size, d);
   else
     nh_domain_box(s->tissue.box_min, s->tissue.box_max, d);
+  int rc = nh_domain_load(s, d);
+  if (rc) nh_domain_release(d);
+  return rc;
+}
+
+void nh_domain_copy(nh_domain *dst, const nh_domain *src) {
+  *dst = *src;
+  nh_image_retain(dst->image);
+  nh_image_retain(dst->labels);
+  nh_surface_retain(dst->surface);
+}
+
+void nh_domain_release(nh_domain *d) {
+  nh_image_release(&d->image);
+  nh_image_release(&d->labels);
+  nh_surface_release(&d->surface);
 }
 
 const char *nh_domain_name(const nh_domain *d) {
-  return d->kind == NH_DOMAIN_BRAIN ? "brain" : "box";
+  static const char *const names[] = {"box", "brain", "mask", "surface"};
+  return names[d->kind];
 }
 
 /* F of the brain at (X, Y, Z) relative to the centre, X = |x − cx| >= 0. */
@@ -91,6 +186,11 @@ static double nh_brain_level(const double half[3], double X, double Y, double Z)
 /* F at centre + r. */
 static double nh_level_rel(const nh_domain *d, const double r[3]) {
   if (d->kind == NH_DOMAIN_BRAIN) return nh_brain_level(d->half, fabs(r[0]), r[1], r[2]);
+  if (d->kind == NH_DOMAIN_MASK || d->kind == NH_DOMAIN_SURFACE) {
+    double x[3] = {d->center[0] + r[0], d->center[1] + r[1], d->center[2] + r[2]};
+    return d->kind == NH_DOMAIN_MASK ? nh_image_level(d->image, x)
+                                     : nh_surface_level(d->surface, x, d->cap);
+  }
   double f = -INFINITY;
   for (int k = 0; k < 3; k++) f = fmax(f, fabs(r[k]) - d->half[k]);
   return f;
@@ -107,6 +207,7 @@ int nh_domain_inside(const nh_domain *d, const double x[3]) {
     for (int i = 0; i < 3; i++) inside &= x[i] > d->min[i] && x[i] < d->max[i];
     return inside;
   }
+  if (d->kind == NH_DOMAIN_SURFACE) return nh_surface_inside(d->surface, x);
   return nh_domain_level(d, x) < 0.0;
 }
 
@@ -148,6 +249,9 @@ static void nh_ray_point(const double base[3], const double dir[3], double t, do
 int nh_domain_ray_entry(const nh_domain *d, const double base[3], const double dir[3], double *tau,
                         double point[3], double normal[3]) {
   if (d->kind == NH_DOMAIN_BOX) return nh_box_entry(d->min, d->max, base, dir, tau, point, normal);
+  if (d->kind == NH_DOMAIN_SURFACE) /* the triangles themselves: exact entry and normal */
+    return !nh_surface_inside(d->surface, base) &&
+           nh_surface_ray_entry(d->surface, base, dir, tau, point, normal);
   double x[3];
   if (nh_domain_level(d, base) <= 0.0) return 0;
   /* Where the ray crosses the bounding box (slightly enlarged): [t0, t1]. */
@@ -271,9 +375,26 @@ static double nh_line_inside(const nh_domain *d, double Y, double Z, double len,
   return total;
 }
 
+/* Volume of {χ > 1/2} of a mask: 4³ midpoints per voxel over the selected
+ * voxels' index box grown by one voxel. */
+static double nh_mask_volume(const nh_image *im) {
+  const int n = 4;
+  long inside = 0;
+  for (int k = n * (im->lo[2] - 1); k < n * (im->hi[2] + 2); k++)
+    for (int j = n * (im->lo[1] - 1); j < n * (im->hi[1] + 2); j++)
+      for (int i = n * (im->lo[0] - 1); i < n * (im->hi[0] + 2); i++) {
+        double ijk[3] = {(i + 0.5) / n - 0.5, (j + 0.5) / n - 0.5, (k + 0.5) / n - 0.5}, x[3];
+        nh_image_to_world(im, ijk, x);
+        inside += nh_image_indicator(im, x) > 0.5;
+      }
+  return inside * fabs(nh_mat3_det(im->A)) / (n * n * n);
+}
+
 double nh_domain_volume(const nh_domain *d) {
   if (d->kind == NH_DOMAIN_BOX)
     return (d->max[0] - d->min[0]) * (d->max[1] - d->min[1]) * (d->max[2] - d->min[2]);
+  if (d->kind == NH_DOMAIN_MASK) return nh_mask_volume(d->image);
+  if (d->kind == NH_DOMAIN_SURFACE) return nh_surface_volume(d->surface);
   const int n = 256;
   const double hy = 2 * d->half[1] / n, hz = 2 * d->half[2] / n;
   double sum = 0.0;
@@ -285,10 +406,18 @@ double nh_domain_volume(const nh_domain *d) {
   return 2.0 * sum * hy * hz; /* both halves: F is even in x − cx */
 }
 
+/* Mask and surface: may the box [lo, hi] meet the shape? Conservative:
+ * χ's support for a mask, a triangle's bounding box for a surface. */
+static int nh_domain_box_may_meet(const nh_domain *d, const double lo[3], const double hi[3]) {
+  return d->kind == NH_DOMAIN_MASK ? nh_image_meets_box(d->image, lo, hi)
+                                   : nh_surface_meets_box(d->surface, lo, hi);
+}
+
 double nh_domain_cell_fill(const nh_domain *d, const double Xe[24], int *meets) {
   const int n = NH_FILL_SAMPLES;
   double inside = 0.0, total = 0.0;
   int near = 0;
+  const int sampled = d->kind == NH_DOMAIN_SURFACE || d->kind == NH_DOMAIN_MASK;
   for (int i = 0; i < n; i++)
     for (int j = 0; j < n; j++)
       for (int k = 0; k < n; k++) {
@@ -311,11 +440,24 @@ double nh_domain_cell_fill(const nh_domain *d, const double Xe[24], int *meets) 
           radius += fmax(fmax(c * c, c1 * c1), fmax(c2 * c2, c3 * c3));
         }
         radius = sqrt(radius);
-        double f = nh_level_rel(d, r), dv = fabs(nh_mat3_det(J));
+        double dv = fabs(nh_mat3_det(J));
+        total += dv;
+        if (sampled) { /* the inside test only; whether the cell meets the shape, below */
+          double x[3] = {d->center[0] + r[0], d->center[1] + r[1], d->center[2] + r[2]};
+          if (nh_domain_inside(d, x)) inside += dv, near = 1;
+          continue;
+        }
+        double f = nh_level_rel(d, r);
         if (f < 0) inside += dv;
         if (f <= radius * (1 + 1e-12)) near = 1;
-        total += dv;
       }
+  if (sampled && !near) { /* no sample inside: may it meet the shape all the same? */
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (int a = 0; a < 8; a++)
+      for (int p = 0; p < 3; p++)
+        lo[p] = fmin(lo[p], Xe[3 * a + p]), hi[p] = fmax(hi[p], Xe[3 * a + p]);
+    near = nh_domain_box_may_meet(d, lo, hi);
+  }
   if (meets) *meets = near;
   return total > 0 ? inside / total : 0.0;
 }
@@ -334,6 +476,23 @@ double nh_domain_lattice_fill(const nh_domain *d, const int grid[3], const int i
   }
   radius = sqrt(radius) * (1 + 1e-12);
   int inside = 0, near = 0;
+  if (d->kind == NH_DOMAIN_SURFACE || d->kind == NH_DOMAIN_MASK) {
+    double lo[3], hi[3];
+    for (int k = 0; k < n; k++)
+      for (int j = 0; j < n; j++)
+        for (int i = 0; i < n; i++) {
+          double x[3] = {d->center[0] + off[0][i], d->center[1] + off[1][j],
+                         d->center[2] + off[2][k]};
+          inside += nh_domain_inside(d, x);
+        }
+    for (int p = 0; p < 3; p++) {
+      double h = 2.0 * d->half[p] / grid[p];
+      lo[p] = d->min[p] + h * ijk[p], hi[p] = lo[p] + h;
+    }
+    near = inside > 0 || nh_domain_box_may_meet(d, lo, hi);
+    if (meets) *meets = near;
+    return (double)inside / (n * n * n);
+  }
   for (int k = 0; k < n; k++)
     for (int j = 0; j < n; j++)
       for (int i = 0; i < n; i++) {

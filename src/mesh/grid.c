@@ -30,6 +30,7 @@ void nh_mesh_destroy(nh_mesh **mesh) {
   free(m->fill);
   free(m->leaves);
   free(m->root);
+  nh_domain_release(&m->domain);
   free(m);
   *mesh = NULL;
 }
@@ -142,7 +143,7 @@ int nh_mesh_create(const nh_domain *d, const int grid[3], nh_mesh **out) {
   *out = NULL;
   NH_TRY(nh_mesh_create_box(d->min, d->max, grid, out));
   nh_mesh *m = *out;
-  m->domain = *d;
+  nh_domain_copy(&m->domain, d);
   if (d->kind == NH_DOMAIN_BOX) return NH_OK;
   unsigned char *keep = malloc((size_t)m->n_cells);
   int *node_map = malloc(sizeof(int) * (size_t)m->n_nodes);

@@ -42,19 +42,27 @@
 #ifndef NH_MESH_H
 #define NH_MESH_H
 
+#include "anatomy/anatomy.h"
 #include "core/core.h"
 #include "scene/scene.h"
 
 /* ---- the tissue's domain (mesh/domain.c) ----
  * The shape the tissue fills, as an implicit function F (F < 0 inside,
- * docs/theory.md "Immersed domain"): a box, or the analytic brain (two
+ * docs/theory.md "Immersed domain"): a box, the analytic brain (two
  * ellipsoidal hemispheres split by a longitudinal fissure, and a brainstem),
+ * the selected labels of a NIfTI image or a closed surface (docs/anatomy.md),
  * which the grid over its bounding box resolves by cell fill fractions φ.
- * F is 1-Lipschitz: F(x) > 0 is a lower bound of the distance to the shape. */
+ * F is 1-Lipschitz: F(x) > 0 is a lower bound of the distance to the shape.
+ * A domain holds references to its image and surface: copy it with
+ * nh_domain_copy and drop it with nh_domain_release. */
 typedef struct nh_domain {
   nh_domain_kind kind;
   double min[3], max[3];     /* bounding box (exactly the shape's extent) */
   double center[3], half[3]; /* its centre and half sizes */
+  nh_image *image;           /* mask: the image whose selected labels are the shape */
+  nh_surface *surface;       /* surface: the closed surface */
+  nh_image *labels;          /* the label image of materials and {label: N} regions, or NULL */
+  double cap;                /* surface: F is the signed distance truncated at ±cap */
 } nh_domain;
 
 /* Floor of the fill fraction: a cell that barely meets the shape keeps
@@ -67,9 +75,17 @@ typedef struct nh_domain {
 void nh_domain_box(const double min[3], const double max[3], nh_domain *domain);
 /* The brain of bounding box center ± size / 2 (size > 0). */
 void nh_domain_brain(const double center[3], const double size[3], nh_domain *domain);
-/* The scene's tissue.domain. */
-void nh_domain_from_scene(const nh_scene *scene, nh_domain *domain);
-/* "box" or "brain". */
+/* The scene's tissue.domain, reading its image or surface and the label
+ * image (tissue.labels). Fails with NH_ERR_INPUT, message "FILE:LINE: KEY:
+ * reason" at the scene's key: an unreadable or corrupt file, a label of
+ * tissue.domain.mask.labels or tissue.materials that no voxel holds.
+ * Release with nh_domain_release. */
+int nh_domain_from_scene(const nh_scene *scene, nh_domain *domain);
+/* *dst = *src with a new reference to its image, surface and label image. */
+void nh_domain_copy(nh_domain *dst, const nh_domain *src);
+/* Drop the references the domain holds (keeps kind and box). */
+void nh_domain_release(nh_domain *domain);
+/* "box", "brain", "mask" or "surface". */
 const char *nh_domain_name(const nh_domain *domain);
 
 /* F(x): negative inside, positive outside, 1-Lipschitz. */
@@ -179,9 +195,10 @@ int nh_hex_invert(const double Xe[24], const double x[3], double xi[3]);
  * Returns NH_OK, or NH_ERR_INPUT (no message) if x is outside the mesh. */
 int nh_mesh_locate(const nh_mesh *mesh, const double x[3], int *cell, double xi[3]);
 
-/* True if x lies in the region (closed, enlarged by tol). */
+/* True if x lies in the region (closed, enlarged by tol); 0 for a label
+ * region (it needs the label image: the mesh functions below test it). */
 int nh_region_contains(const nh_region *region, const double x[3], double tol);
-/* "box [..] - [..]", "sphere centre [..] radius r", "cylinder [..] - [..] radius r". */
+/* "box [..] - [..]", "sphere centre [..] radius r", "cylinder [..] - [..] radius r", "label N". */
 void nh_region_describe(const nh_region *region, char *buf, size_t cap);
 
 /* Mark (flags[i] = 1) the nodes inside the region; returns how many nodes it

@@ -1,9 +1,11 @@
 /* region.c — regions of the scene on the mesh: nodes inside a region
  * (Dirichlet sets) and consistent nodal forces of a load region.
  *
- * A region is a closed box, a ball (sphere: centre, radius) or a finite
+ * A region is a closed box, a ball (sphere: centre, radius), a finite
  * cylinder (the points within `radius` of the segment [start, end] whose
- * projection falls on it: flat ends).
+ * projection falls on it: flat ends), or the voxels of the domain's label
+ * image that hold a label (`{label: N}`, docs/anatomy.md; a point belongs to
+ * the voxel whose centre is nearest).
  *
  * A load is a total force F spread as a uniform force density over the
  * tissue inside its region (docs/theory.md §5), so the nodal forces are
@@ -26,6 +28,7 @@
 #include <stdlib.h>
 
 int nh_region_contains(const nh_region *r, const double x[3], double tol) {
+  if (r->kind == NH_REGION_LABEL) return 0;
   if (r->kind == NH_REGION_SPHERE) {
     double d2 = 0.0;
     for (int k = 0; k < 3; k++) d2 += (x[k] - r->center[k]) * (x[k] - r->center[k]);
@@ -53,8 +56,16 @@ int nh_region_contains(const nh_region *r, const double x[3], double tol) {
   return 1;
 }
 
+/* nh_region_contains, and for a label region the label of x's voxel. */
+static int nh_region_holds(const nh_domain *d, const nh_region *r, const double x[3], double tol) {
+  if (r->kind == NH_REGION_LABEL) return d->labels && nh_image_label_at(d->labels, x) == r->label;
+  return nh_region_contains(r, x, tol);
+}
+
 void nh_region_describe(const nh_region *r, char *buf, size_t cap) {
-  if (r->kind == NH_REGION_SPHERE)
+  if (r->kind == NH_REGION_LABEL)
+    snprintf(buf, cap, "label %d", r->label);
+  else if (r->kind == NH_REGION_SPHERE)
     snprintf(buf, cap, "sphere centre [%g, %g, %g] radius %g", r->center[0], r->center[1],
              r->center[2], r->radius);
   else if (r->kind == NH_REGION_CYLINDER)
@@ -73,7 +84,7 @@ int nh_mesh_nodes_in_region(const nh_mesh *m, const nh_region *r, unsigned char 
   int count = 0;
   double tol = nh_mesh_tol(m);
   for (int i = 0; i < m->n_nodes; i++)
-    if (nh_region_contains(r, m->X + 3 * i, tol)) {
+    if (nh_region_holds(&m->domain, r, m->X + 3 * i, tol)) {
       count++;
       if (flags) flags[i] = 1;
     }
@@ -135,7 +146,7 @@ static double nh_cell_region_integrals(const nh_domain *d, const double Xe[24], 
             x[p] += N[a] * Xe[3 * a + p];
             for (int q = 0; q < 3; q++) J[3 * p + q] += Xe[3 * a + p] * dN[a][q];
           }
-        if (!nh_region_contains(r, x, 0.0)) continue;
+        if (!nh_region_holds(d, r, x, 0.0)) continue;
         if (immersed && !(nh_domain_level(d, x) < 0.0)) continue;
         double dv = fabs(nh_mat3_det(J)) * 8.0 / (n * n * n);
         for (int a = 0; a < 8; a++) w[a] += N[a] * dv;

@@ -21,7 +21,9 @@ static void print_schedule(FILE *f, const nh_schedule *sch) {
 
 /* "box [..] .. [..] m", "sphere centre [..] m, radius r m", "cylinder ...". */
 static void print_region(FILE *f, const nh_region *r) {
-  if (r->kind == NH_REGION_SPHERE) {
+  if (r->kind == NH_REGION_LABEL) {
+    fprintf(f, "the voxels of label %d", r->label);
+  } else if (r->kind == NH_REGION_SPHERE) {
     fprintf(f, "sphere centre [%g, %g, %g] m, radius %g m", r->center[0], r->center[1],
             r->center[2], r->radius);
   } else if (r->kind == NH_REGION_CYLINDER) {
@@ -97,6 +99,20 @@ void nh_scene_print(const nh_scene *s, void *stdio_file) {
             s->tissue.grid[1], s->tissue.grid[2]);
     print_box(f, s->tissue.box_min, s->tissue.box_max);
     fprintf(f, " (the cells that meet the brain are kept)\n");
+  } else if (s->tissue.domain == NH_DOMAIN_MASK || s->tissue.domain == NH_DOMAIN_SURFACE) {
+    if (s->tissue.domain == NH_DOMAIN_MASK) {
+      fprintf(f, "tissue    mask %s, labels", s->tissue.mask_file);
+      for (int i = 0; i < s->tissue.n_mask_labels; ++i)
+        fprintf(f, "%s %d", i ? "," : "", s->tissue.mask_labels[i]);
+      fprintf(f, "\n");
+    } else {
+      fprintf(f, "tissue    surface %s (%g m per file unit)\n", s->tissue.surface_file,
+              s->tissue.surface_unit);
+    }
+    fprintf(f,
+            "          grid %d x %d x %d cells over its bounding box (the cells that meet it "
+            "are kept)\n",
+            s->tissue.grid[0], s->tissue.grid[1], s->tissue.grid[2]);
   } else {
     fprintf(f, "tissue    box ");
     print_box(f, s->tissue.box_min, s->tissue.box_max);
@@ -104,8 +120,15 @@ void nh_scene_print(const nh_scene *s, void *stdio_file) {
             s->tissue.grid[2],
             (s->tissue.grid[0] + 1) * (s->tissue.grid[1] + 1) * (s->tissue.grid[2] + 1));
   }
-  fprintf(f, "material  E = %g Pa, nu = %g, density %g kg/m^3\n", s->tissue.young,
-          s->tissue.poisson, s->tissue.density);
+  if (s->tissue.labels_file[0]) fprintf(f, "labels    %s\n", s->tissue.labels_file);
+  fprintf(f, "material  E = %g Pa, nu = %g, density %g kg/m^3%s\n", s->tissue.young,
+          s->tissue.poisson, s->tissue.density,
+          s->tissue.n_materials ? " (voxels of other labels)" : "");
+  for (int i = 0; i < s->tissue.n_materials; ++i) {
+    const nh_label_material *m = &s->tissue.materials[i];
+    fprintf(f, "          label %d: E = %g Pa, nu = %g, density %g kg/m^3\n", m->label, m->young,
+            m->poisson, m->density);
+  }
   fprintf(f, "damping   mass %g 1/s, stiffness %g s\n", s->tissue.damping_mass,
           s->tissue.damping_stiffness);
   if (s->tissue.buoyant) {

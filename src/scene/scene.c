@@ -43,6 +43,7 @@
  * summary of `check`. */
 #include "scene/scene.h"
 
+#include "anatomy/anatomy.h"
 #include "scene/yaml_tree.h"
 
 #include <ctype.h>
@@ -73,6 +74,7 @@ typedef struct {
   const char *file;
   const char *const *overrides;
   int n_overrides;
+  const char *image; /* the scene's label image (mask or tissue.labels) once read, else NULL */
 } nh_ctx;
 
 /* "FILE:LINE" or "--set:K" of a node (the top of the file when NULL). */
@@ -384,7 +386,7 @@ static int read_radius(const nh_ctx *c, const nh_yaml_node *map, const char *pat
  * `node` (whose keys the caller has checked). */
 static int read_region_shape(const nh_ctx *c, const nh_yaml_node *node, const char *path,
                              nh_region *region) {
-  static const char *const shapes[] = {"box", "sphere", "cylinder", NULL};
+  static const char *const shapes[] = {"box", "sphere", "cylinder", "label", NULL};
   static const char *const sphere_keys[] = {"center", "radius", NULL};
   static const char *const cylinder_keys[] = {"start", "end", "radius", NULL};
   char key[NH_KEY_MAX], d[96];
@@ -393,12 +395,16 @@ static int read_region_shape(const nh_ctx *c, const nh_yaml_node *node, const ch
     if (!in_list(node->keys[i]->text, shapes)) continue;
     if (shape)
       return fail(c, node->keys[i], join(key, path, node->keys[i]->text),
-                  "give exactly one of box, sphere, cylinder (%s is already given)",
+                  "give exactly one of box, sphere, cylinder, label (%s is already given)",
                   shape_key->text);
     shape = node->items[i], shape_key = node->keys[i];
   }
-  if (!shape) return fail(c, node, path, "give one of box, sphere, cylinder");
+  if (!shape) return fail(c, node, path, "give one of box, sphere, cylinder, label");
   join(key, path, shape_key->text);
+  if (!strcmp(shape_key->text, "label")) { /* the voxels of the label image holding it; */
+    region->kind = NH_REGION_LABEL;        /* that image is checked by the domain */
+    return as_int(c, shape, key, &region->label);
+  }
   if (!strcmp(shape_key->text, "box")) {
     region->kind = NH_REGION_BOX;
     return read_box(c, shape, key, 0, region->min, region->max);
@@ -432,12 +438,12 @@ static int read_region_shape(const nh_ctx *c, const nh_yaml_node *node, const ch
 /* A region {box | sphere | cylinder} at `node` (for tissue.fixed items). */
 static int read_region(const nh_ctx *c, const nh_yaml_node *node, const char *path,
                        nh_region *region) {
-  static const char *const keys[] = {"box", "sphere", "cylinder", NULL};
+  static const char *const keys[] = {"box", "sphere", "cylinder", "label", NULL};
   char d[96];
   if (node->kind != NH_YAML_MAP)
     return fail(c, node, path,
-                "expected a region {box: {min, max}}, {sphere: {center, radius}} or "
-                "{cylinder: {start, end, radius}}, got %s",
+                "expected a region {box: {min, max}}, {sphere: {center, radius}}, "
+                "{cylinder: {start, end, radius}} or {label: N}, got %s",
                 describe(node, d, sizeof d));
   NH_TRY(check_keys(c, node, path, keys));
   NH_TRY(read_region_shape(c, node, path, region));
@@ -476,7 +482,8 @@ static int read_schedule(const nh_ctx *c, const nh_yaml_node *node, const char *
 
 /* {box | sphere | cylinder, force: [3], schedule: [[t, s], ...]} */
 static int read_load(const nh_ctx *c, const nh_yaml_node *node, const char *path, nh_load *load) {
-  static const char *const keys[] = {"box", "sphere", "cylinder", "force", "schedule", NULL};
+  static const char *const keys[] = {"box",   "sphere",   "cylinder", "label",
+                                     "force", "schedule", NULL};
   char key[NH_KEY_MAX], d[96];
   if (node->kind != NH_YAML_MAP)
     return fail(c, node, path, "expected a load {box: {min, max}, force: [fx, fy, fz]}, got %s",
@@ -581,18 +588,16 @@ static int read_time(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   return NH_OK;
 }
 
-/* PARENT.material {young, poisson, density} (required): young > 0 is
- * required; poisson must lie in (-1, 0.5) and is required if
+/* A material mapping {young, poisson, density} at `m` (key `path`): young > 0
+ * is required; poisson must lie in (-1, 0.5) and is required if
  * `poisson_required`; density is > 0 (`density_strict`) or >= 0. An absent
  * optional key leaves its target (the caller's default) untouched. */
-static int read_material(const nh_ctx *c, const nh_yaml_node *parent, const char *parent_path,
-                         int poisson_required, int density_strict, double *young, double *poisson,
-                         double *density) {
+static int read_material_map(const nh_ctx *c, const nh_yaml_node *m, const char *path,
+                             int poisson_required, int density_strict, double *young,
+                             double *poisson, double *density) {
   static const char *const keys[] = {"young", "poisson", "density", NULL};
-  char path[NH_KEY_MAX], key[NH_KEY_MAX];
-  const nh_yaml_node *m, *at;
-  join(path, parent_path, "material");
-  NH_TRY(section(c, parent, parent_path, "material", 1, &m));
+  char key[NH_KEY_MAX];
+  const nh_yaml_node *at;
   NH_TRY(check_keys(c, m, path, keys));
   NH_TRY(get_number(c, m, path, "young", 1, young, &at));
   NH_TRY(at_least(c, at, path, "young", *young, 0, 1));
@@ -607,6 +612,17 @@ static int read_material(const nh_ctx *c, const nh_yaml_node *parent, const char
   NH_TRY(get_number(c, m, path, "density", 0, density, &at));
   NH_TRY(at_least(c, at, path, "density", *density, 0, density_strict));
   return NH_OK;
+}
+
+/* PARENT.material (required): read_material_map. */
+static int read_material(const nh_ctx *c, const nh_yaml_node *parent, const char *parent_path,
+                         int poisson_required, int density_strict, double *young, double *poisson,
+                         double *density) {
+  char path[NH_KEY_MAX];
+  const nh_yaml_node *m;
+  join(path, parent_path, "material");
+  NH_TRY(section(c, parent, parent_path, "material", 1, &m));
+  return read_material_map(c, m, path, poisson_required, density_strict, young, poisson, density);
 }
 
 /* PARENT.damping {mass, stiffness} (optional): Rayleigh alpha, beta >= 0. */
@@ -624,6 +640,241 @@ static int read_damping(const nh_ctx *c, const nh_yaml_node *parent, const char 
   NH_TRY(get_number(c, m, path, "stiffness", 0, stiffness, &at));
   NH_TRY(at_least(c, at, path, "stiffness", *stiffness, 0, 0));
   return NH_OK;
+}
+
+/* ---- anatomy: label images, surfaces, materials per label, voxel points ----
+ * (docs/anatomy.md). Files are named relative to the scene file's folder
+ * unless absolute. Their headers are read here, so that a missing, unreadable
+ * or corrupt file fails `check` at its key; the voxels and triangles are
+ * read again, in full, when the domain is built (mesh/domain.c), which also
+ * checks that every label named exists in the image. */
+
+/* A path relative to the scene file's folder unless absolute; snprintf's count. */
+static int scene_relative(const nh_ctx *c, const char *value, char out[NH_PATH_MAX]) {
+  const char *slash = strrchr(c->file, '/');
+  if (value[0] == '/' || !slash) return snprintf(out, NH_PATH_MAX, "%s", value);
+  return snprintf(out, NH_PATH_MAX, "%.*s/%s", (int)(slash - c->file), c->file, value);
+}
+
+/* MAP.file (required): a readable file, resolved into out. */
+static int read_data_file(const nh_ctx *c, const nh_yaml_node *map, const char *path,
+                          char out[NH_PATH_MAX], const nh_yaml_node **at_out) {
+  char key[NH_KEY_MAX], value[NH_PATH_MAX];
+  const nh_yaml_node *at;
+  NH_TRY(field(c, map, path, "file", 1, &at));
+  join(key, path, "file");
+  NH_TRY(as_string(c, at, key, value, sizeof value));
+  int n = scene_relative(c, value, out);
+  if (n < 0 || n >= NH_PATH_MAX)
+    return fail(c, at, key, "the path is longer than %d characters", NH_PATH_MAX - 1);
+  struct stat st;
+  int err = access(out, R_OK) != 0 ? errno : 0;
+  if (!err && stat(out, &st) == 0 && S_ISDIR(st.st_mode)) err = EISDIR;
+  if (err) return fail(c, at, key, "cannot read %s: %s", out, strerror(err));
+  if (at_out) *at_out = at;
+  return NH_OK;
+}
+
+/* The header of the NIfTI file `path` named at `at` (key `key`). */
+static int read_image_header(const nh_ctx *c, const nh_yaml_node *at, const char *key,
+                             const char *path, nh_image **out) {
+  if (nh_image_read(path, 0, out) == NH_OK) return NH_OK;
+  char msg[1024];
+  snprintf(msg, sizeof msg, "%s", nh_error_message());
+  return fail(c, at, key, "%s", msg);
+}
+
+/* The mapping `node` at `path` with keys among `keys`; else an error that
+ * shows the expected form `example`. */
+static int expect_mapping(const nh_ctx *c, const nh_yaml_node *node, const char *path,
+                          const char *example, const char *const *keys) {
+  char d[96];
+  if (node->kind != NH_YAML_MAP)
+    return fail(c, node, path, "expected a mapping %s, got %s", example,
+                describe(node, d, sizeof d));
+  return check_keys(c, node, path, keys);
+}
+
+/* tissue.domain.mask {file, labels: [N, ...]}. */
+static int read_mask(const nh_ctx *c, const nh_yaml_node *mask, nh_scene *s) {
+  static const char *const keys[] = {"file", "labels", NULL};
+  const char *path = "tissue.domain.mask";
+  char key[NH_KEY_MAX], d[96];
+  const nh_yaml_node *at_file, *labels;
+  NH_TRY(expect_mapping(c, mask, path, "{file: FILE.nii.gz, labels: [1, 2]}", keys));
+  s->tissue.domain = NH_DOMAIN_MASK;
+  NH_TRY(read_data_file(c, mask, path, s->tissue.mask_file, &at_file));
+  nh_image *im;
+  NH_TRY(read_image_header(c, at_file, join(key, path, "file"), s->tissue.mask_file, &im));
+  nh_image_extent(im, s->tissue.box_min, s->tissue.box_max);
+  nh_image_release(&im);
+  make_where(c, at_file, join(key, path, "file"), s->tissue.where_domain);
+  NH_TRY(field(c, mask, path, "labels", 1, &labels));
+  join(key, path, "labels");
+  if (labels->kind != NH_YAML_SEQ || labels->n == 0)
+    return fail(c, labels, key, "expected a non-empty list of labels [1, 2, ...], got %s",
+                describe(labels, d, sizeof d));
+  s->tissue.mask_labels = nh_calloc((size_t)labels->n, sizeof(int));
+  if (!s->tissue.mask_labels) return NH_ERR_MEMORY;
+  for (int i = 0; i < labels->n; ++i) {
+    char item[NH_KEY_MAX];
+    NH_TRY(as_int(c, labels->items[i], join_index(item, key, i), &s->tissue.mask_labels[i]));
+    for (int j = 0; j < i; ++j)
+      if (s->tissue.mask_labels[j] == s->tissue.mask_labels[i])
+        return fail(c, labels->items[i], item, "label %d is listed twice",
+                    s->tissue.mask_labels[i]);
+    s->tissue.n_mask_labels = i + 1;
+  }
+  make_where(c, labels, key, s->tissue.where_labels);
+  return NH_OK;
+}
+
+/* tissue.domain.surface {file, unit (default 0.001: millimetres)}. The whole
+ * surface is read here: a bad STL fails at its own line, reported at the key. */
+static int read_surface(const nh_ctx *c, const nh_yaml_node *node, nh_scene *s) {
+  static const char *const keys[] = {"file", "unit", NULL};
+  const char *path = "tissue.domain.surface";
+  char key[NH_KEY_MAX];
+  const nh_yaml_node *at_file, *at_unit;
+  NH_TRY(expect_mapping(c, node, path, "{file: FILE.stl, unit: 0.001}", keys));
+  s->tissue.domain = NH_DOMAIN_SURFACE;
+  s->tissue.surface_unit = 1e-3;
+  NH_TRY(read_data_file(c, node, path, s->tissue.surface_file, &at_file));
+  NH_TRY(get_number(c, node, path, "unit", 0, &s->tissue.surface_unit, &at_unit));
+  NH_TRY(at_least(c, at_unit, path, "unit", s->tissue.surface_unit, 0, 1));
+  join(key, path, "file");
+  make_where(c, at_file, key, s->tissue.where_domain);
+  nh_surface *surface;
+  if (nh_surface_read(s->tissue.surface_file, s->tissue.surface_unit, &surface)) {
+    char msg[1024];
+    snprintf(msg, sizeof msg, "%s", nh_error_message());
+    return fail(c, at_file, key, "%s", msg);
+  }
+  for (int k = 0; k < 3; k++)
+    s->tissue.box_min[k] = surface->min[k], s->tissue.box_max[k] = surface->max[k];
+  nh_surface_release(&surface);
+  return NH_OK;
+}
+
+/* tissue.labels {file} (optional; not with a mask domain, whose image it is). */
+static int read_labels_image(const nh_ctx *c, const nh_yaml_node *t, nh_scene *s) {
+  static const char *const keys[] = {"file", NULL};
+  const nh_yaml_node *node, *at_file;
+  char key[NH_KEY_MAX];
+  NH_TRY(section(c, t, "tissue", "labels", 0, &node));
+  if (!node) return NH_OK;
+  if (s->tissue.domain == NH_DOMAIN_MASK)
+    return fail(c, node, "tissue.labels",
+                "a mask domain's image is the label image (give tissue.labels only with a box, "
+                "brain or surface domain)");
+  NH_TRY(check_keys(c, node, "tissue.labels", keys));
+  NH_TRY(read_data_file(c, node, "tissue.labels", s->tissue.labels_file, &at_file));
+  nh_image *im;
+  join(key, "tissue.labels", "file");
+  NH_TRY(read_image_header(c, at_file, key, s->tissue.labels_file, &im));
+  nh_image_release(&im);
+  make_where(c, at_file, key, s->tissue.where_labels);
+  return NH_OK;
+}
+
+/* tissue.materials {LABEL: {young, poisson, density}} (optional): poisson and
+ * density default to tissue.material's. */
+static int read_materials(const nh_ctx *c, const nh_yaml_node *t, nh_scene *s) {
+  const nh_yaml_node *m;
+  char key[NH_KEY_MAX], d[96];
+  NH_TRY(section(c, t, "tissue", "materials", 0, &m));
+  if (!m || m->n == 0) return NH_OK;
+  if (!s->tissue.mask_file[0] && !s->tissue.labels_file[0])
+    return fail(c, m, "tissue.materials",
+                "materials per label need a label image: give tissue.domain.mask or "
+                "tissue.labels");
+  s->tissue.materials = nh_calloc((size_t)m->n, sizeof *s->tissue.materials);
+  if (!s->tissue.materials) return NH_ERR_MEMORY;
+  for (int i = 0; i < m->n; ++i) {
+    nh_label_material *lm = &s->tissue.materials[i];
+    join(key, "tissue.materials", m->keys[i]->text);
+    char *end;
+    double v = strtod(m->keys[i]->text, &end);
+    if (end == m->keys[i]->text || *end || v != floor(v) || fabs(v) > INT_MAX)
+      return fail(c, m->keys[i], key, "a material's key is an integer label, got %s",
+                  describe(m->keys[i], d, sizeof d));
+    lm->label = (int)v;
+    for (int j = 0; j < i; ++j)
+      if (s->tissue.materials[j].label == lm->label)
+        return fail(c, m->keys[i], key, "label %d has a material already", lm->label);
+    if (m->items[i]->kind != NH_YAML_MAP)
+      return fail(c, m->items[i], key, "expected a mapping {young, poisson, density}, got %s",
+                  describe(m->items[i], d, sizeof d));
+    lm->poisson = s->tissue.poisson, lm->density = s->tissue.density;
+    NH_TRY(read_material_map(c, m->items[i], key, 0, 1, &lm->young, &lm->poisson, &lm->density));
+    make_where(c, m->keys[i], key, lm->where);
+    s->tissue.n_materials = i + 1;
+  }
+  return NH_OK;
+}
+
+/* MAP.NAME, a point: [x, y, z] in metres, or {voxel: [i, j, k], image: FILE}
+ * (image: default the scene's label image), the world position of that
+ * voxel's centre. */
+static int get_point(const nh_ctx *c, const nh_yaml_node *map, const char *path, const char *name,
+                     int required, double out[3], const nh_yaml_node **at_out) {
+  static const char *const keys[] = {"voxel", "image", NULL};
+  char key[NH_KEY_MAX], sub[NH_KEY_MAX], file[NH_PATH_MAX], value[NH_PATH_MAX];
+  const nh_yaml_node *n, *at_voxel, *at_image;
+  NH_TRY(field(c, map, path, name, required, &n));
+  if (at_out) *at_out = n;
+  if (!n) return NH_OK;
+  join(key, path, name);
+  if (n->kind != NH_YAML_MAP) return as_vec3(c, n, key, out);
+  NH_TRY(check_keys(c, n, key, keys));
+  NH_TRY(field(c, n, key, "voxel", 1, &at_voxel));
+  int ijk[3];
+  NH_TRY(as_ivec3(c, at_voxel, join(sub, key, "voxel"), ijk));
+  NH_TRY(field(c, n, key, "image", 0, &at_image));
+  const nh_yaml_node *at = at_image ? at_image : at_voxel;
+  if (at_image) {
+    NH_TRY(as_string(c, at_image, join(sub, key, "image"), value, sizeof value));
+    int len = scene_relative(c, value, file);
+    if (len < 0 || len >= NH_PATH_MAX)
+      return fail(c, at_image, sub, "the path is longer than %d characters", NH_PATH_MAX - 1);
+  } else if (c->image) {
+    snprintf(file, sizeof file, "%s", c->image);
+  } else {
+    return fail(c, at_voxel, sub,
+                "a voxel needs an image: give %s.image, or tissue.domain.mask or tissue.labels",
+                key);
+  }
+  nh_image *im;
+  NH_TRY(read_image_header(c, at, at_image ? sub : key, file, &im));
+  for (int k = 0; k < 3; ++k)
+    if (ijk[k] < 0 || ijk[k] >= im->n[k]) {
+      int nk = im->n[k];
+      nh_image_release(&im);
+      return fail(c, at_voxel, join(sub, key, "voxel"),
+                  "index %d along %c is outside the image %s (0 .. %d)", ijk[k], "ijk"[k], file,
+                  nk - 1);
+    }
+  double p[3] = {ijk[0], ijk[1], ijk[2]};
+  nh_image_to_world(im, p, out);
+  nh_image_release(&im);
+  return NH_OK;
+}
+
+/* A probe or target of a mask domain must lie inside the mask's image. */
+static int check_in_image(const nh_ctx *c, const nh_yaml_node *at, const char *key,
+                          const nh_scene *s, const double x[3]) {
+  if (s->tissue.domain != NH_DOMAIN_MASK) return NH_OK;
+  nh_image *im;
+  NH_TRY(read_image_header(c, at, key, s->tissue.mask_file, &im));
+  int inside = nh_image_contains(im, x);
+  double lo[3], hi[3];
+  nh_image_extent(im, lo, hi);
+  nh_image_release(&im);
+  if (inside) return NH_OK;
+  return fail(c, at, key,
+              "[%g, %g, %g] m lies outside the image %s (world extent [%g, %g, %g] - [%g, %g, "
+              "%g] m)",
+              x[0], x[1], x[2], s->tissue.mask_file, lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]);
 }
 
 /* tissue.domain.brain {size: [3] > 0 (required), center: [3] (default 0)}. */
@@ -652,21 +903,22 @@ static int read_brain(const nh_ctx *c, const nh_yaml_node *brain, nh_scene *s) {
 }
 
 static int read_tissue(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
-  static const char *const keys[] = {"domain", "grid",  "material", "damping",
-                                     "fixed",  "loads", "buoyancy", NULL};
-  static const char *const domain_keys[] = {"box", "brain", "mask", NULL};
+  static const char *const keys[] = {"domain", "grid",     "material", "damping",   "fixed",
+                                     "loads",  "buoyancy", "labels",   "materials", NULL};
+  static const char *const domain_keys[] = {"box", "brain", "mask", "surface", NULL};
   char key[NH_KEY_MAX];
   const nh_yaml_node *t, *domain, *n;
   NH_TRY(section(c, root, "", "tissue", 1, &t));
   NH_TRY(check_keys(c, t, "tissue", keys));
 
-  /* domain: exactly one of box, brain, mask; mask does not exist yet. */
+  /* domain: exactly one of box, brain, mask, surface. */
   NH_TRY(section(c, t, "tissue", "domain", 1, &domain));
   NH_TRY(check_keys(c, domain, "tissue.domain", domain_keys));
-  if (domain->n == 0) return fail(c, domain, "tissue.domain", "give one of box, brain, mask");
+  if (domain->n == 0)
+    return fail(c, domain, "tissue.domain", "give one of box, brain, mask, surface");
   if (domain->n > 1)
     return fail(c, domain->keys[1], join(key, "tissue.domain", domain->keys[1]->text),
-                "give exactly one of box, brain, mask (%s is already given)",
+                "give exactly one of box, brain, mask, surface (%s is already given)",
                 domain->keys[0]->text);
   if (!strcmp(domain->keys[0]->text, "brain")) {
     NH_TRY(read_brain(c, domain->items[0], s));
@@ -674,10 +926,12 @@ static int read_tissue(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
     s->tissue.domain = NH_DOMAIN_BOX;
     NH_TRY(read_box(c, domain->items[0], "tissue.domain.box", 1, s->tissue.box_min,
                     s->tissue.box_max));
+  } else if (!strcmp(domain->keys[0]->text, "mask")) {
+    NH_TRY(read_mask(c, domain->items[0], s));
   } else {
-    return fail(c, domain->keys[0], join(key, "tissue.domain", domain->keys[0]->text),
-                "not supported in this version of needlehex (use box or brain)");
+    NH_TRY(read_surface(c, domain->items[0], s));
   }
+  NH_TRY(read_labels_image(c, t, s));
 
   /* grid */
   s->tissue.grid[0] = 8, s->tissue.grid[1] = 4, s->tissue.grid[2] = 4;
@@ -697,6 +951,7 @@ static int read_tissue(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   s->tissue.density = 1000;
   NH_TRY(read_material(c, t, "tissue", 1, 1, &s->tissue.young, &s->tissue.poisson,
                        &s->tissue.density));
+  NH_TRY(read_materials(c, t, s));
   NH_TRY(read_damping(c, t, "tissue", &s->tissue.damping_mass, &s->tissue.damping_stiffness));
   NH_TRY(read_buoyancy(c, t, s));
 
@@ -761,14 +1016,8 @@ static int resolve_template(const nh_ctx *c, const nh_yaml_node *at, const nh_ya
     const char *env = getenv("NH_TEMPLATES_DIR");
     const char *dir = env && env[0] ? env : NH_TEMPLATES_DIR;
     n = snprintf(out, NH_PATH_MAX, "%s/%s.tmpl", dir, value);
-  } else if (value[0] == '/') {
-    n = snprintf(out, NH_PATH_MAX, "%s", value);
   } else {
-    const char *slash = strrchr(c->file, '/');
-    if (slash)
-      n = snprintf(out, NH_PATH_MAX, "%.*s/%s", (int)(slash - c->file), c->file, value);
-    else
-      n = snprintf(out, NH_PATH_MAX, "%s", value);
+    n = scene_relative(c, value, out);
   }
   if (n < 0 || n >= NH_PATH_MAX)
     return fail(c, where, "adapt.template", "the template's path is longer than %d characters",
@@ -917,7 +1166,8 @@ static int read_probes(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
       if (!strcmp(s->probes[j].name, probe->name))
         return fail(c, at, key, "%s is already the name of probes.%d", describe(at, d, sizeof d),
                     j);
-    NH_TRY(get_vec3(c, p, path, "point", 1, probe->point, NULL));
+    NH_TRY(get_point(c, p, path, "point", 1, probe->point, &at));
+    NH_TRY(check_in_image(c, at, join(key, path, "point"), s, probe->point));
     make_where(c, p, path, probe->where);
     s->n_probes = i + 1;
   }
@@ -1068,7 +1318,7 @@ static int read_trajectory(const nh_ctx *c, const nh_yaml_node *tool, const char
   join(sub, path, "trajectory");
   NH_TRY(check_keys(c, m, sub, keys));
   t->planned = 1;
-  NH_TRY(get_vec3(c, m, sub, "entry", 1, t->entry, NULL));
+  NH_TRY(get_point(c, m, sub, "entry", 1, t->entry, NULL));
   NH_TRY(field(c, m, sub, "target", 1, &at));
   NH_TRY(get_number(c, m, sub, "standoff", 0, &t->standoff, &at));
   NH_TRY(at_least(c, at, sub, "standoff", t->standoff, 0, 1));
@@ -1215,7 +1465,8 @@ static int read_targets(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) 
       if (!strcmp(s->targets[j].name, target->name))
         return fail(c, at, key, "%s is already the name of targets.%d", describe(at, d, sizeof d),
                     j);
-    NH_TRY(get_vec3(c, p, path, "point", 1, target->point, NULL));
+    NH_TRY(get_point(c, p, path, "point", 1, target->point, &at));
+    NH_TRY(check_in_image(c, at, join(key, path, "point"), s, target->point));
     NH_TRY(field(c, p, path, "tool", 1, &at));
     NH_TRY(as_string(c, at, join(key, path, "tool"), tool, sizeof tool));
     target->tool = -1;
@@ -1386,7 +1637,7 @@ static int read_name(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
 }
 
 /* The whole schema, in the order of docs/scene.md. */
-static int read_scene(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
+static int read_scene(nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   static const char *const keys[] = {"name",  "time",   "gravity", "tissue", "adapt", "solver",
                                      "tools", "probes", "targets", "output", NULL};
   NH_TRY(check_keys(c, root, "", keys));
@@ -1394,6 +1645,9 @@ static int read_scene(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   NH_TRY(read_time(c, root, s));
   NH_TRY(read_gravity(c, root, s));
   NH_TRY(read_tissue(c, root, s));
+  c->image = s->tissue.mask_file[0]     ? s->tissue.mask_file
+             : s->tissue.labels_file[0] ? s->tissue.labels_file
+                                        : NULL; /* voxel points of probes, targets, entries */
   NH_TRY(read_adapt(c, root, s));
   NH_TRY(read_solver(c, root, s));
   NH_TRY(read_tools(c, root, s));
@@ -1431,7 +1685,7 @@ static void resolve_time_length(nh_yaml_node *root) {
   time->n--;
 }
 
-static int load(const nh_ctx *c, nh_scene *s, nh_yaml_node **root) {
+static int load(nh_ctx *c, nh_scene *s, nh_yaml_node **root) {
   char d[96];
   NH_TRY(nh_yaml_parse_file(c->file, root));
   if (nh_yaml_is_null(*root))
@@ -1483,6 +1737,8 @@ void nh_scene_destroy(nh_scene **scene) {
   }
   free(s->tissue.loads);
   free(s->tissue.fixed);
+  free(s->tissue.mask_labels);
+  free(s->tissue.materials);
   free(s->gravity_schedule.t);
   free(s->gravity_schedule.value);
   free(s->tissue.buoyancy_schedule.t);

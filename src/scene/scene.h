@@ -19,16 +19,27 @@
 #define NH_PATH_MAX  1024
 
 typedef enum { NH_MODE_DYNAMIC = 0, NH_MODE_STATIC = 1 } nh_time_mode;
-typedef enum { NH_REGION_BOX = 0, NH_REGION_SPHERE = 1, NH_REGION_CYLINDER = 2 } nh_region_kind;
-typedef enum { NH_DOMAIN_BOX = 0, NH_DOMAIN_BRAIN = 1 } nh_domain_kind;
+typedef enum {
+  NH_REGION_BOX = 0,
+  NH_REGION_SPHERE = 1,
+  NH_REGION_CYLINDER = 2,
+  NH_REGION_LABEL = 3
+} nh_region_kind;
+typedef enum {
+  NH_DOMAIN_BOX = 0,
+  NH_DOMAIN_BRAIN = 1,
+  NH_DOMAIN_MASK = 2,   /* tissue.domain.mask: labelled voxels of a NIfTI image */
+  NH_DOMAIN_SURFACE = 3 /* tissue.domain.surface: a closed triangulated surface (STL) */
+} nh_domain_kind;
 
-/* A region of space (closed): exactly one of box, sphere, cylinder. */
+/* A region of space (closed): exactly one of box, sphere, cylinder, label. */
 typedef struct {
   nh_region_kind kind;
   double min[3], max[3];   /* box: inclusive bounds */
   double center[3];        /* sphere: centre */
   double start[3], end[3]; /* cylinder: the two ends of its axis (distinct) */
   double radius;           /* sphere, cylinder: > 0 */
+  int label;               /* label: the voxels of the scene's label image holding it */
   char where[NH_WHERE_MAX];
 } nh_region;
 
@@ -117,6 +128,13 @@ typedef struct {
   char where[NH_WHERE_MAX];
 } nh_target;
 
+/* tissue.materials.LABEL: the material of the voxels holding LABEL. */
+typedef struct {
+  int label;
+  double young, poisson, density;
+  char where[NH_WHERE_MAX]; /* "FILE:LINE: tissue.materials.LABEL" */
+} nh_label_material;
+
 typedef enum { NH_MARK_MAX = 0, NH_MARK_DORFLER = 1 } nh_mark_strategy;
 typedef enum { NH_HANGING_ELIMINATE = 0, NH_HANGING_LAGRANGE = 1 } nh_hanging_method;
 
@@ -150,14 +168,30 @@ typedef struct nh_scene {
   nh_schedule gravity_schedule; /* gravity.schedule: its factor of time (default: 1) */
 
   struct {
-    nh_domain_kind domain;                 /* tissue.domain: box | brain (exactly one, required) */
+    nh_domain_kind domain; /* tissue.domain: box | brain | mask | surface (exactly one, required) */
     double box_min[3], box_max[3];         /* the domain's bounding box: tissue.domain.box, or
                                               brain.center ± brain.size / 2 */
     double brain_center[3], brain_size[3]; /* tissue.domain.brain: center (default 0), size */
-    int grid[3];                           /* tissue.grid (default [8, 4, 4]); each >= 1 */
-    double young;                          /* tissue.material.young, Pa (required, > 0) */
-    double poisson;                        /* tissue.material.poisson (required, in (-1, 0.5)) */
-    double density;                        /* tissue.material.density, kg/m³ (default 1000, > 0) */
+    /* tissue.domain.mask {file, labels}: the NIfTI file (resolved against the scene's folder)
+       and the labels whose voxels are the tissue; the same image is the label image */
+    char mask_file[NH_PATH_MAX];
+    int n_mask_labels;
+    int *mask_labels;
+    /* tissue.domain.surface {file, unit}: STL file (resolved), metres per file unit (default
+       0.001: millimetres) */
+    char surface_file[NH_PATH_MAX];
+    double surface_unit;
+    /* tissue.labels {file}: a label image for tissue.materials and {label: N} regions on a
+       box, brain or surface domain (mask domains use the mask's image) */
+    char labels_file[NH_PATH_MAX];
+    char where_domain[NH_WHERE_MAX]; /* "FILE:LINE: tissue.domain.mask" (or .surface) */
+    char where_labels[NH_WHERE_MAX]; /* "FILE:LINE: tissue.domain.mask.labels" / tissue.labels */
+    int n_materials;
+    nh_label_material *materials; /* tissue.materials: {LABEL: {young, poisson, density}} */
+    int grid[3];                  /* tissue.grid (default [8, 4, 4]); each >= 1 */
+    double young;   /* tissue.material.young, Pa (required, > 0): every voxel without a material */
+    double poisson; /* tissue.material.poisson (required, in (-1, 0.5)) */
+    double density; /* tissue.material.density, kg/m³ (default 1000, > 0) */
     double damping_mass;      /* tissue.damping.mass (Rayleigh α, 1/s, default 0, >= 0) */
     double damping_stiffness; /* tissue.damping.stiffness (Rayleigh β, s, default 0, >= 0) */
     /* tissue.buoyancy {before, after, schedule} (optional): the rest shape is the equilibrium

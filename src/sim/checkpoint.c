@@ -252,7 +252,7 @@ int nh_checkpoint_read(const char *dir, const nh_scene *scene, nh_checkpoint *ck
     goto done;
   }
   rc = nh_mesh_update_leaves(m);
-  nh_domain_from_scene(scene, &m->domain);
+  if (!rc) rc = nh_domain_from_scene(scene, &m->domain);
   if (!rc && (rc = nh_mesh_index_roots(m)) == NH_ERR_INPUT)
     rc = NH_ERROR(NH_ERR_INPUT, "--restart: %s: the checkpoint's mesh is malformed", path);
   goto done;

@@ -164,7 +164,7 @@ static int nh_write_frame(nh_sim *s) {
   int *conn = malloc(sizeof(int) * 8 * (size_t)(nc ? nc : 1));
   int *offsets = malloc(sizeof(int) * (size_t)(nc ? nc : 1));
   int *flags = malloc(sizeof(int) * (size_t)(np ? np : 1));
-  double *cell = malloc(sizeof(double) * 4 * (size_t)(nc ? nc : 1));
+  double *cell = malloc(sizeof(double) * 5 * (size_t)(nc ? nc : 1));
   double *hang = calloc((size_t)(np ? np : 1), sizeof(double));
   const double *eta = nh_adapt_indicators(s->adapt);
   int n_pr = sc->n_probes + sc->n_targets;
@@ -186,6 +186,9 @@ static int nh_write_frame(nh_sim *s) {
     cell[nc + l] = m->level[c];
     cell[2 * nc + l] = m->fill[c];
     cell[3 * nc + l] = eta ? eta[c] : 0.0;
+    double lambda, mu; /* the cell's Young's modulus (mixed cells: from the averaged λ, μ) */
+    nh_tissue_cell_material(s->tissue, c, &lambda, &mu, NULL);
+    cell[4 * nc + l] = mu * (3 * lambda + 2 * mu) / (lambda + mu);
   }
   if (s->hanging)
     for (int k = 0; k < s->hanging->n_hanging; k++) hang[s->hanging->node[k]] = 1.0;
@@ -194,10 +197,11 @@ static int nh_write_frame(nh_sim *s) {
     for (int k = 0; k < 3; k++) s->x[3 * i + k] = m->X[3 * i + k] + s->u[3 * i + k];
   }
   nh_field pf[3] = {{"displacement", 3, s->u}, {"velocity", 3, s->v}, {"hanging", 1, hang}};
-  nh_field cf[4] = {{"von_mises", 1, cell},
+  nh_field cf[5] = {{"von_mises", 1, cell},
                     {"level", 1, cell + nc},
                     {"fill", 1, cell + 2 * nc},
-                    {"eta", 1, cell + 3 * nc}};
+                    {"eta", 1, cell + 3 * nc},
+                    {"young", 1, cell + 4 * nc}};
   nh_vtu_grid g = {.n_points = np,
                    .points = s->x,
                    .n_cells = nc,
@@ -206,7 +210,7 @@ static int nh_write_frame(nh_sim *s) {
                    .type = NH_VTK_HEXAHEDRON,
                    .n_point_fields = 3,
                    .point_fields = pf,
-                   .n_cell_fields = 4,
+                   .n_cell_fields = 5,
                    .cell_fields = cf,
                    .point_int_flags = flags,
                    .point_flag_name = "fixed"};
@@ -358,6 +362,19 @@ static int nh_sim_setup_mesh(nh_sim *s, int first) {
   if (first) {
     nh_material mat = {sc->tissue.young, sc->tissue.poisson, sc->tissue.density};
     NH_TRY(nh_tissue_create(m, &mat, &s->tissue));
+    if (sc->tissue.n_materials) {
+      int n = sc->tissue.n_materials, *labels = malloc(sizeof(int) * (size_t)n);
+      nh_material *mats = malloc(sizeof(nh_material) * (size_t)n);
+      int rc = labels && mats ? NH_OK : NH_ERROR(NH_ERR_MEMORY, "out of memory: materials");
+      for (int i = 0; i < n && !rc; i++) {
+        const nh_label_material *lm = &sc->tissue.materials[i];
+        labels[i] = lm->label;
+        mats[i] = (nh_material){lm->young, lm->poisson, lm->density};
+      }
+      if (!rc) rc = nh_tissue_set_label_materials(s->tissue, n, labels, mats);
+      free(labels), free(mats);
+      NH_TRY(rc);
+    }
   } else {
     NH_TRY(nh_tissue_update(s->tissue));
   }
@@ -401,8 +418,10 @@ static int nh_sim_build(nh_sim *s) {
     s->time = ck.time;
   } else {
     nh_domain domain;
-    nh_domain_from_scene(sc, &domain);
-    NH_TRY(nh_mesh_create(&domain, sc->tissue.grid, &s->mesh));
+    NH_TRY(nh_domain_from_scene(sc, &domain));
+    int rc = nh_mesh_create(&domain, sc->tissue.grid, &s->mesh);
+    nh_domain_release(&domain); /* the mesh holds its own reference */
+    NH_TRY(rc);
     s->u = calloc(3 * (size_t)s->mesh->n_nodes, sizeof(double));
     s->v = calloc(3 * (size_t)s->mesh->n_nodes, sizeof(double));
   }

@@ -430,7 +430,7 @@ void nh_system_assemble(nh_system *s, const double *u, const double *v, double c
         }
       }
       /* Aₑ = cK Kₑ + cM Mₑ, Mₑ the lumped mass ρ φ Vₑ / 8 per corner. */
-      double me = t->material.density * m->fill[c] * t->volume[t->cell_shape[c]] / 8.0;
+      double me = nh_tissue_corner_mass(t, c);
       for (int r = 0; r < 576; r++) K[r] *= cK;
       for (int r = 0; r < 24; r++) K[25 * r] += cM * me;
       if (s->eff_start[l + 1] > s->eff_start[l]) {

@@ -1,0 +1,161 @@
+/* anatomy — the patient's organs as data: NIfTI label images (read through
+ * Debian's libnifti2) and closed triangulated surfaces (STL), and what the
+ * immersed domain needs of them: an implicit function F (F < 0 inside,
+ * 1-Lipschitz, so F > 0 bounds the distance to the organ from below), an
+ * inside test, a ray entry and the label at a point (docs/anatomy.md).
+ *
+ * World coordinates are metres in the image's world frame (NIfTI: RAS+, x to
+ * the right, y anterior, z superior), the frame of every scene point.
+ *
+ * Voxel (i, j, k) of an image covers the box centred at its index:
+ *
+ *        world x = A (i, j, k)ᵀ + t          (A, t: the sform, else the qform)
+ *
+ *          k                 voxel centres •, the indicator χ of the
+ *          |  j              selected labels is trilinear between centres
+ *          | /               and 0 outside the image; the organ is
+ *          |/                {χ > 1/2}, its surface the level χ = 1/2.
+ *          •───── i
+ *
+ * Both kinds of object are shared (the scene's domain, the mesh and the
+ * tissue hold the same one) and reference counted: *_retain adds an owner,
+ * *_release drops one and frees the object with its last owner. */
+#ifndef NH_ANATOMY_H
+#define NH_ANATOMY_H
+
+#include "core/core.h"
+
+#include <stddef.h>
+#include <stdio.h>
+
+#define NH_ANATOMY_PATH_MAX 1024
+
+/* ---- label images (anatomy/image.c) ---- */
+typedef struct nh_image {
+  char path[NH_ANATOMY_PATH_MAX];
+  int n[3];              /* voxels along i, j, k */
+  int *label;            /* n[0] n[1] n[2] integer labels, i fastest (NULL: header only) */
+  double A[9], t[3];     /* world (m) = A ijk + t, A row-major */
+  double Ainv[9];        /* A⁻¹ */
+  double spacing[3];     /* |A e_i|: the voxel edges in metres */
+  char orientation[4];   /* the direction each of i, j, k increases to: L/R, P/A, I/S ("LAS") */
+  const char *xform;     /* which transform gave A, t: "sform", "qform" or "pixdim" */
+  double unit;           /* metres per file unit (1e-3 for mm) */
+  unsigned char *inside; /* per voxel: its label is selected (nh_image_select), else NULL */
+  int lo[3], hi[3];      /* index bounds of the selected voxels (lo > hi if none) */
+  double level_scale; /* 1 / (√3 ‖A⁻¹‖_F): makes F = (1/2 − χ) level_scale 1-Lipschitz */
+  double box_min[3], box_max[3]; /* nh_image_bounds, set by nh_image_select */
+  float *distance; /* per voxel: a lower bound of the world distance from its centre to the
+                      nearest selected centre (σ_min(A) times the index-space EDT) */
+  double reach;    /* max |A d| over the diagonals d of [-1, 1]³ (world) */
+  int *prefix;     /* (n[0]+1)(n[1]+1)(n[2]+1) prefix sums of `inside` (box counts) */
+  int refs;
+} nh_image;
+
+/* Read the NIfTI-1 or NIfTI-2 file `path` (.nii, .nii.gz, or a .hdr/.img
+ * pair) through libnifti2: its size, world transform (sform if its code is
+ * non-zero, else qform if non-zero, else the pixdim diagonal) in metres
+ * (xyz_units mm, m or µm; unknown units are taken as mm, as NIfTI readers
+ * do), and if `read_data` its voxels as integer labels (after scl_slope /
+ * scl_inter when the slope is non-zero). Output *out with one owner.
+ * Fails with NH_ERR_INPUT, message "PATH: reason": missing or unreadable
+ * file, not NIfTI, corrupt header or data (short or bad gzip), not 3D (a 4th
+ * dimension above 1), a singular transform, a complex/RGB data type, a
+ * voxel that is not an integer. NH_ERR_MEMORY. */
+int nh_image_read(const char *path, int read_data, nh_image **out);
+void nh_image_retain(nh_image *image);
+void nh_image_release(nh_image **image); /* sets *image = NULL */
+
+/* Voxel index (continuous) of world point x, and back. */
+void nh_image_to_voxel(const nh_image *image, const double x[3], double ijk[3]);
+void nh_image_to_world(const nh_image *image, const double ijk[3], double x[3]);
+/* True if world point x lies within the image's voxels (the boxes centred at
+ * the indices, so indices -1/2 .. n - 1/2). */
+int nh_image_contains(const nh_image *image, const double x[3]);
+/* Label of the voxel containing x (nearest centre); 0 outside the image. */
+int nh_image_label_at(const nh_image *image, const double x[3]);
+
+/* The distinct labels of the image in increasing order and their voxel
+ * counts: *labels and *counts (malloc'ed, caller frees), *n. Needs data. */
+int nh_image_labels(const nh_image *image, int **labels, long **counts, int *n);
+
+/* Print for `check`: file, size, spacing (mm), orientation, the transform
+ * used, and each label with its voxel count and volume (count × |det A|). */
+int nh_image_print(const nh_image *image, FILE *f);
+
+/* Select the organ: inside[v] = label[v] is one of labels[0..n). Sets lo,
+ * hi. Fails with NH_ERR_INPUT if no voxel is selected, NH_ERR_MEMORY. */
+int nh_image_select(nh_image *image, const int *labels, int n);
+/* Trilinear χ of the selected voxels at x (0 outside the image). */
+double nh_image_indicator(const nh_image *image, const double x[3]);
+/* F(x) = max((1/2 − χ(x)) level_scale, I(distance)(x) − 2 reach, distance
+ * from x to the bounding box of the selected voxels grown by half a voxel),
+ * I the trilinear interpolation: negative exactly where χ > 1/2, and where
+ * positive a lower bound of the distance from x to {χ > 1/2}
+ * (docs/anatomy.md). */
+double nh_image_level(const nh_image *image, const double x[3]);
+/* 1 if the world box [lo, hi] may meet {χ > 1/2}: some selected voxel
+ * centre lies within one voxel (in index space) of the box, χ's support. */
+int nh_image_meets_box(const nh_image *image, const double lo[3], const double hi[3]);
+/* World bounding box of {χ > 1/2}: the selected voxels' index box grown by
+ * half a voxel, mapped by the affine (its 8 corners' extent). */
+void nh_image_bounds(const nh_image *image, double min[3], double max[3]);
+/* World bounding box of the whole image (every voxel's box). */
+void nh_image_extent(const nh_image *image, double min[3], double max[3]);
+
+/* ---- closed triangulated surfaces (anatomy/surface.c) ---- */
+typedef struct nh_surface {
+  char path[NH_ANATOMY_PATH_MAX];
+  int n_tri;
+  double *v;             /* 9 per triangle: the three corners, metres */
+  double min[3], max[3]; /* bounding box */
+  double unit;           /* metres per file unit */
+  /* acceleration: triangles listed under each cell of a g[0] x g[1] x g[2]
+     grid over the box (distance, box tests) and of a yz_g[0] x yz_g[1] grid
+     over the (y, z) extent (inside test) */
+  int g[3], yz_g[2];
+  double cell[3], yz_cell[2];
+  int *xyz_start, *xyz_tri;
+  int *yz_start, *yz_tri;
+  int refs;
+} nh_surface;
+
+/* Read an ASCII or binary STL file (`solid` … `endsolid` with `facet normal`,
+ * `outer loop`, three `vertex` lines, `endloop`, `endfacet`; or the 80-byte
+ * header, a triangle count and 50 bytes per triangle, the size matching the
+ * count exactly). Coordinates are in `unit` metres per file unit (1e-3 for
+ * millimetres). Zero-area triangles are dropped. The file's normals are
+ * ignored (the inside test does not need an orientation).
+ * Fails with NH_ERR_INPUT, "PATH:LINE: reason" (ASCII) or "PATH: reason"
+ * (binary: triangle number): missing file, a keyword out of place, a
+ * non-number or non-finite coordinate, a truncated file, no triangles, an
+ * open surface (an edge not shared by an even number of triangles).
+ * NH_ERR_MEMORY. */
+int nh_surface_read(const char *path, double unit, nh_surface **out);
+void nh_surface_retain(nh_surface *surface);
+void nh_surface_release(nh_surface **surface);
+
+/* Inside test: the parity of the crossings of the ray from x along +x with
+ * the triangles. Whether the ray passes through a triangle is decided by the
+ * signs of its three edge functions in the (y, z) plane, each computed from
+ * the edge's endpoints in a canonical order (so two triangles sharing an
+ * edge see exactly opposite values), with a zero resolved by simulation of
+ * simplicity (the ray moved by (0, ε, ε²)): a ray through an edge or a vertex
+ * is counted in exactly one of the triangles that meet there, whatever their
+ * size or shape (slivers included). */
+int nh_surface_inside(const nh_surface *surface, const double x[3]);
+/* Signed distance (negative inside), truncated at `cap` in magnitude (the
+ * search stops there; 1-Lipschitz as a clamp of one). cap <= 0: no cap. */
+double nh_surface_level(const nh_surface *surface, const double x[3], double cap);
+/* Print for `check`: file, triangles, bounding box, enclosed volume. */
+void nh_surface_print(const nh_surface *surface, FILE *f);
+/* Volume enclosed, by the divergence theorem (orientation-free: |Σ|). */
+double nh_surface_volume(const nh_surface *surface);
+/* First crossing of the ray base + τ dir (τ > 0) with a triangle: τ, point
+ * and the unit normal of that triangle facing the ray's origin. 1 if hit. */
+int nh_surface_ray_entry(const nh_surface *surface, const double base[3], const double dir[3],
+                         double *tau, double point[3], double normal[3]);
+/* 1 if some triangle's bounding box meets the box [lo, hi]. */
+int nh_surface_meets_box(const nh_surface *surface, const double lo[3], const double hi[3]);
+
+#endif

@@ -1,0 +1,597 @@
+/* surface.c — closed triangulated surfaces: a strict STL reader, the inside
+ * test, a truncated signed distance and the ray entry (docs/anatomy.md,
+ * "Surface meshes").
+ *
+ * Reader. No maintained C library for STL ships with Debian (VTK's reader
+ * is C++), so this file reads both STL forms itself, strictly: binary when
+ * the file size is exactly 84 + 50 N for the count N in bytes 80–83 (some
+ * binary files begin with "solid" too), else ASCII, keyword by keyword,
+ * every error naming the file and line. A surface must be closed: after
+ * welding corners with identical coordinates, every edge is shared by an
+ * even number of triangles (2 for a manifold; 4 where two closed pieces
+ * touch along an edge). Zero-area triangles are dropped first.
+ *
+ * Inside test. The parity of the crossings of the ray x + s e_x (s > 0).
+ * A triangle is crossed if the ray's (y, z) lies inside its projection: the
+ * three edge functions e(u, v; p) = (v_y − u_y)(p_z − u_z) − (v_z − u_z)(p_y −
+ * u_y) have one sign. Each edge function is computed with its endpoints in
+ * lexicographic order and negated if they were swapped, so the two triangles
+ * on an edge see bitwise opposite values, and a zero is resolved as if p were
+ * moved by (ε, ε²): sign(−(v_z − u_z)), or sign(v_y − u_y) if that is 0. The
+ * decision is then that of a ray in general position: a ray through an edge
+ * or a vertex crosses exactly one of the triangles there (or, at a fold of
+ * the projection, 0 or 2, which keeps the parity), for slivers as for
+ * well-shaped triangles. Triangles are found through a grid over the (y, z)
+ * extent that lists every triangle under each grid cell its projected
+ * bounding box meets.
+ *
+ * Distance. The nearest triangle by the closest-point construction on each
+ * candidate (Ericson, "Real-Time Collision Detection" §5.1.5), candidates
+ * from a 3D grid searched in shells of growing Chebyshev radius r around the
+ * point's cell: triangles in shell > r are at least r · (smallest grid edge)
+ * away, so the search stops once the best distance is below that, or at the
+ * cap. */
+#include "anatomy/anatomy.h"
+
+#include <ctype.h>
+#include <errno.h>
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+void nh_surface_retain(nh_surface *s) {
+  if (s) s->refs++;
+}
+
+void nh_surface_release(nh_surface **surface) {
+  if (!surface || !*surface) return;
+  nh_surface *s = *surface;
+  *surface = NULL;
+  if (--s->refs > 0) return;
+  free(s->v);
+  free(s->yz_start), free(s->yz_tri), free(s->xyz_start), free(s->xyz_tri);
+  free(s);
+}
+
+/* Append triangle (9 doubles, file units) unless its area is zero. */
+static int nh_add_triangle(nh_surface *s, int *cap, const double t[9]) {
+  double e1[3], e2[3], n[3];
+  for (int k = 0; k < 3; k++) e1[k] = t[3 + k] - t[k], e2[k] = t[6 + k] - t[k];
+  nh_vec3_cross(e1, e2, n);
+  if (n[0] == 0 && n[1] == 0 && n[2] == 0) return NH_OK;
+  if (nh_grow((void **)&s->v, cap, 9 * (s->n_tri + 1), sizeof(double)))
+    return NH_ERROR(NH_ERR_MEMORY, "out of memory: %s", s->path);
+  for (int k = 0; k < 9; k++) s->v[9 * s->n_tri + k] = t[k] * s->unit;
+  s->n_tri++;
+  return NH_OK;
+}
+
+/* ---- ASCII STL ---- */
+typedef struct {
+  const char *path;
+  char *text, *p;
+  int line;
+} nh_stl_lexer;
+
+/* Next whitespace-separated word into buf; "" at the end of the file. */
+static void nh_stl_word(nh_stl_lexer *lx, char *buf, size_t cap) {
+  while (*lx->p && isspace((unsigned char)*lx->p)) {
+    if (*lx->p == '\n') lx->line++;
+    lx->p++;
+  }
+  size_t n = 0;
+  while (*lx->p && !isspace((unsigned char)*lx->p)) {
+    if (n + 1 < cap) buf[n++] = *lx->p;
+    lx->p++;
+  }
+  buf[n] = '\0';
+}
+
+static int nh_stl_expect(nh_stl_lexer *lx, const char *want) {
+  char w[64];
+  nh_stl_word(lx, w, sizeof w);
+  NH_CHECK(!strcmp(w, want), NH_ERR_INPUT, "%s:%d: expected '%s', got '%s'", lx->path, lx->line,
+           want, w[0] ? w : "the end of the file");
+  return NH_OK;
+}
+
+static int nh_stl_number(nh_stl_lexer *lx, const char *what, double *out) {
+  char w[128], *end;
+  nh_stl_word(lx, w, sizeof w);
+  errno = 0;
+  *out = strtod(w, &end);
+  NH_CHECK(w[0] && *end == '\0' && isfinite(*out), NH_ERR_INPUT,
+           "%s:%d: %s: expected a finite number, got '%s'", lx->path, lx->line, what,
+           w[0] ? w : "the end of the file");
+  return NH_OK;
+}
+
+/* The rest of the current line (the solid's name). */
+static void nh_stl_skip_line(nh_stl_lexer *lx) {
+  while (*lx->p && *lx->p != '\n') lx->p++;
+}
+
+static int nh_stl_ascii(nh_surface *s, char *text, int *cap) {
+  nh_stl_lexer lx = {s->path, text, text, 1};
+  char w[64];
+  NH_TRY(nh_stl_expect(&lx, "solid"));
+  nh_stl_skip_line(&lx);
+  for (;;) {
+    nh_stl_word(&lx, w, sizeof w);
+    if (!strcmp(w, "endsolid")) break;
+    NH_CHECK(strcmp(w, ""), NH_ERR_INPUT, "%s:%d: the file ends before 'endsolid'", s->path,
+             lx.line);
+    NH_CHECK(!strcmp(w, "facet"), NH_ERR_INPUT, "%s:%d: expected 'facet' or 'endsolid', got '%s'",
+             s->path, lx.line, w);
+    double n[3], t[9];
+    NH_TRY(nh_stl_expect(&lx, "normal"));
+    for (int k = 0; k < 3; k++) NH_TRY(nh_stl_number(&lx, "facet normal", &n[k]));
+    NH_TRY(nh_stl_expect(&lx, "outer"));
+    NH_TRY(nh_stl_expect(&lx, "loop"));
+    for (int c = 0; c < 3; c++) {
+      NH_TRY(nh_stl_expect(&lx, "vertex"));
+      for (int k = 0; k < 3; k++) NH_TRY(nh_stl_number(&lx, "vertex", &t[3 * c + k]));
+    }
+    NH_TRY(nh_stl_expect(&lx, "endloop"));
+    NH_TRY(nh_stl_expect(&lx, "endfacet"));
+    NH_TRY(nh_add_triangle(s, cap, t));
+  }
+  nh_stl_skip_line(&lx);
+  nh_stl_word(&lx, w, sizeof w);
+  NH_CHECK(!w[0], NH_ERR_INPUT, "%s:%d: unexpected '%s' after 'endsolid' (one solid per file)",
+           s->path, lx.line, w);
+  return NH_OK;
+}
+
+static float nh_le_float(const unsigned char *b) {
+  uint32_t u = (uint32_t)b[0] | (uint32_t)b[1] << 8 | (uint32_t)b[2] << 16 | (uint32_t)b[3] << 24;
+  float f;
+  memcpy(&f, &u, sizeof f);
+  return f;
+}
+
+static int nh_stl_binary(nh_surface *s, const unsigned char *data, uint32_t count, int *cap) {
+  for (uint32_t i = 0; i < count; i++) {
+    const unsigned char *rec = data + 84 + 50 * (size_t)i;
+    double t[9];
+    for (int k = 0; k < 9; k++) {
+      t[k] = nh_le_float(rec + 12 + 4 * k);
+      NH_CHECK(isfinite(t[k]), NH_ERR_INPUT, "%s: triangle %u: a corner coordinate is not finite",
+               s->path, i);
+    }
+    NH_TRY(nh_add_triangle(s, cap, t));
+  }
+  return NH_OK;
+}
+
+/* ---- closedness ---- */
+typedef struct {
+  double x[3];
+  int tri, corner;
+} nh_corner_ref;
+
+static int nh_corner_compare(const void *a, const void *b) {
+  const nh_corner_ref *p = a, *q = b;
+  for (int k = 0; k < 3; k++)
+    if (p->x[k] != q->x[k]) return p->x[k] < q->x[k] ? -1 : 1;
+  return 0;
+}
+
+static int nh_edge_compare(const void *a, const void *b) {
+  const long long *p = a, *q = b;
+  return (*p > *q) - (*p < *q);
+}
+
+static int nh_surface_check_closed(const nh_surface *s) {
+  int n = 3 * s->n_tri;
+  nh_corner_ref *c = malloc(sizeof *c * (size_t)n);
+  int *id = malloc(sizeof(int) * (size_t)n);
+  long long *edge = malloc(sizeof(long long) * (size_t)n);
+  if (!c || !id || !edge) {
+    free(c), free(id), free(edge);
+    return NH_ERROR(NH_ERR_MEMORY, "out of memory: %s", s->path);
+  }
+  for (int i = 0; i < n; i++) {
+    memcpy(c[i].x, s->v + 3 * i, sizeof c[i].x);
+    c[i].tri = i / 3, c[i].corner = i % 3;
+  }
+  qsort(c, (size_t)n, sizeof *c, nh_corner_compare);
+  int next = -1;
+  for (int i = 0; i < n; i++) {
+    if (i == 0 || nh_corner_compare(&c[i], &c[i - 1])) next++;
+    id[3 * c[i].tri + c[i].corner] = next;
+  }
+  for (int t = 0; t < s->n_tri; t++)
+    for (int e = 0; e < 3; e++) {
+      long long a = id[3 * t + e], b = id[3 * t + (e + 1) % 3];
+      edge[3 * t + e] = a < b ? a * n + b : b * n + a;
+    }
+  qsort(edge, (size_t)n, sizeof *edge, nh_edge_compare);
+  int rc = NH_OK;
+  for (int i = 0; i < n && !rc;) {
+    int j = i;
+    while (j < n && edge[j] == edge[i]) j++;
+    if ((j - i) % 2) {
+      /* Find a corner of the open edge for the message. */
+      int a = (int)(edge[i] / n);
+      double x[3] = {0, 0, 0};
+      for (int k = 0; k < n; k++)
+        if (id[k] == a) {
+          memcpy(x, s->v + 3 * k, sizeof x);
+          break;
+        }
+      rc = NH_ERROR(NH_ERR_INPUT,
+                    "%s: not a closed surface: an edge at [%g, %g, %g] m is shared by %d "
+                    "triangle%s (a closed surface shares every edge between 2)",
+                    s->path, x[0], x[1], x[2], j - i, j - i == 1 ? "" : "s");
+    }
+    i = j;
+  }
+  free(c), free(id), free(edge);
+  return rc;
+}
+
+/* ---- acceleration grids ---- */
+static int nh_clampi(int v, int lo, int hi) {
+  return v < lo ? lo : (v > hi ? hi : v);
+}
+
+static void nh_tri_box(const double *t, double lo[3], double hi[3]) {
+  for (int k = 0; k < 3; k++) {
+    lo[k] = fmin(t[k], fmin(t[3 + k], t[6 + k]));
+    hi[k] = fmax(t[k], fmax(t[3 + k], t[6 + k]));
+  }
+}
+
+static int nh_surface_cell_of(const nh_surface *s, int axis, double x) {
+  return nh_clampi((int)floor((x - s->min[axis]) / s->cell[axis]), 0, s->g[axis] - 1);
+}
+
+/* Bucket triangles into the grid cells of `axes` (2: y, z; 3: x, y, z). */
+static int nh_surface_bucket(nh_surface *s, int three_d, int **start_out, int **tri_out) {
+  const int a0 = three_d ? 0 : 1;
+  size_t cells = 1;
+  for (int a = a0; a < 3; a++) cells *= (size_t)s->g[a];
+  int *start = calloc(cells + 1, sizeof(int));
+  if (!start) return NH_ERROR(NH_ERR_MEMORY, "out of memory: %s", s->path);
+  for (int pass = 0; pass < 2; pass++) {
+    int *fill = NULL;
+    if (pass == 1) {
+      for (size_t c = 0; c < cells; c++) start[c + 1] += start[c];
+      *tri_out = malloc(sizeof(int) * (size_t)(start[cells] + 1));
+      fill = malloc(sizeof(int) * cells);
+      if (!*tri_out || !fill) {
+        free(fill), free(start);
+        return NH_ERROR(NH_ERR_MEMORY, "out of memory: %s", s->path);
+      }
+      memcpy(fill, start, sizeof(int) * cells);
+    }
+    for (int t = 0; t < s->n_tri; t++) {
+      double lo[3], hi[3];
+      int l[3] = {0, 0, 0}, h[3] = {0, 0, 0};
+      nh_tri_box(s->v + 9 * t, lo, hi);
+      for (int a = a0; a < 3; a++)
+        l[a] = nh_surface_cell_of(s, a, lo[a]), h[a] = nh_surface_cell_of(s, a, hi[a]);
+      for (int k = l[2]; k <= h[2]; k++)
+        for (int j = l[1]; j <= h[1]; j++)
+          for (int i = l[0]; i <= h[0]; i++) {
+            size_t c = three_d ? (size_t)i + (size_t)s->g[0] * (j + (size_t)s->g[1] * k)
+                               : (size_t)(j - 0) + (size_t)s->g[1] * k;
+            if (pass == 0)
+              start[c + 1]++;
+            else
+              (*tri_out)[fill[c]++] = t;
+          }
+    }
+    free(fill);
+  }
+  *start_out = start;
+  return NH_OK;
+}
+
+static int nh_surface_index(nh_surface *s) {
+  for (int k = 0; k < 3; k++) s->min[k] = INFINITY, s->max[k] = -INFINITY;
+  for (int i = 0; i < 3 * s->n_tri; i++)
+    for (int k = 0; k < 3; k++)
+      s->min[k] = fmin(s->min[k], s->v[3 * i + k]), s->max[k] = fmax(s->max[k], s->v[3 * i + k]);
+  /* About n^(1/3) cells per axis in 3D and n^(1/2) per axis in (y, z). */
+  int g3 = nh_clampi((int)ceil(cbrt((double)s->n_tri)), 1, 256);
+  double ext = 0.0;
+  for (int k = 0; k < 3; k++) ext = fmax(ext, s->max[k] - s->min[k]);
+  for (int k = 0; k < 3; k++) {
+    double e = fmax(s->max[k] - s->min[k], 1e-9 * ext);
+    s->g[k] = nh_clampi((int)ceil(g3 * e / ext), 1, 256);
+    s->cell[k] = e / s->g[k] * (1 + 1e-12);
+  }
+  NH_TRY(nh_surface_bucket(s, 1, &s->xyz_start, &s->xyz_tri));
+  /* The (y, z) grid, finer: reuse g[1], g[2] scaled up (cells of the 3D grid
+   * are kept in cell[]; the 2D grid uses its own counts below). */
+  int g3y = s->g[1], g3z = s->g[2];
+  double cy = s->cell[1], cz = s->cell[2];
+  int g2 = nh_clampi((int)ceil(sqrt((double)s->n_tri)), 1, 2048);
+  double eyz = fmax(s->max[1] - s->min[1], s->max[2] - s->min[2]);
+  for (int k = 1; k < 3; k++) {
+    double e = fmax(s->max[k] - s->min[k], 1e-9 * ext);
+    s->g[k] = nh_clampi((int)ceil(g2 * e / eyz), 1, 2048);
+    s->cell[k] = e / s->g[k] * (1 + 1e-12);
+  }
+  s->yz_g[0] = s->g[1], s->yz_g[1] = s->g[2];
+  s->yz_cell[0] = s->cell[1], s->yz_cell[1] = s->cell[2];
+  int rc = nh_surface_bucket(s, 0, &s->yz_start, &s->yz_tri);
+  s->g[1] = g3y, s->g[2] = g3z, s->cell[1] = cy, s->cell[2] = cz;
+  return rc;
+}
+
+int nh_surface_read(const char *path, double unit, nh_surface **out) {
+  *out = NULL;
+  size_t len = strlen(path);
+  NH_CHECK(len < NH_ANATOMY_PATH_MAX, NH_ERR_INPUT, "%s: path too long", path);
+  FILE *f = fopen(path, "rb");
+  if (!f) return NH_ERROR(NH_ERR_INPUT, "%s: cannot open: %s", path, strerror(errno));
+  unsigned char *data = NULL;
+  size_t size = 0, cap = 0;
+  for (;;) {
+    if (size + 65536 + 1 > cap) {
+      cap = 2 * cap + 65536 + 1;
+      unsigned char *d = realloc(data, cap);
+      if (!d) {
+        free(data), fclose(f);
+        return NH_ERROR(NH_ERR_MEMORY, "out of memory: %s", path);
+      }
+      data = d;
+    }
+    size_t got = fread(data + size, 1, 65536, f);
+    size += got;
+    if (got < 65536) break;
+  }
+  int read_error = ferror(f);
+  fclose(f);
+  if (read_error) {
+    free(data);
+    return NH_ERROR(NH_ERR_INPUT, "%s: read error", path);
+  }
+  data[size] = '\0';
+  nh_surface *s = nh_calloc(1, sizeof *s);
+  if (!s) {
+    free(data);
+    return NH_ERR_MEMORY;
+  }
+  memcpy(s->path, path, len + 1);
+  s->refs = 1;
+  s->unit = unit;
+  int tcap = 0, rc;
+  uint32_t count = 0;
+  if (size >= 84)
+    count = (uint32_t)data[80] | (uint32_t)data[81] << 8 | (uint32_t)data[82] << 16 |
+            (uint32_t)data[83] << 24;
+  if (size >= 84 && size == 84 + 50 * (size_t)count)
+    rc = nh_stl_binary(s, data, count, &tcap);
+  else if (size >= 5 && !memcmp(data, "solid", 5)) {
+    rc = memchr(data, '\0', size) ? NH_ERROR(NH_ERR_INPUT,
+                                             "%s: starts with 'solid' but holds binary bytes, and "
+                                             "its size %zu is not 84 + 50 x %u (a truncated "
+                                             "binary STL?)",
+                                             path, size, count)
+                                  : nh_stl_ascii(s, (char *)data, &tcap);
+  } else if (size < 84)
+    rc = NH_ERROR(NH_ERR_INPUT, "%s: %zu bytes: too short for an STL file", path, size);
+  else
+    rc = NH_ERROR(NH_ERR_INPUT,
+                  "%s: not an ASCII STL (no 'solid') and its size %zu is not 84 + 50 x %u as a "
+                  "binary STL of %u triangles needs (truncated or not STL)",
+                  path, size, count, count);
+  free(data);
+  if (!rc && s->n_tri < 4)
+    rc = NH_ERROR(NH_ERR_INPUT, "%s: %d triangle%s of non-zero area: not a closed surface", path,
+                  s->n_tri, s->n_tri == 1 ? "" : "s");
+  if (!rc) rc = nh_surface_check_closed(s);
+  if (!rc) rc = nh_surface_index(s);
+  if (rc) {
+    nh_surface_release(&s);
+    return rc;
+  }
+  *out = s;
+  return NH_OK;
+}
+
+/* ---- queries ---- */
+
+/* Sign (never 0) of the edge function of u → v at p in the (y, z) plane,
+ * computed in the canonical order of the endpoints, zero broken by the
+ * perturbation p + (ε, ε²). 0 only if u and v project to the same point. */
+static int nh_edge_sign(const double *u, const double *v, double py, double pz) {
+  int swap = u[1] > v[1] || (u[1] == v[1] && u[2] > v[2]);
+  const double *a = swap ? v : u, *b = swap ? u : v;
+  double e = (b[1] - a[1]) * (pz - a[2]) - (b[2] - a[2]) * (py - a[1]);
+  int s = e > 0 ? 1 : (e < 0 ? -1 : 0);
+  if (!s) {
+    double dz = b[2] - a[2], dy = b[1] - a[1];
+    s = dz < 0 ? 1 : (dz > 0 ? -1 : (dy > 0 ? 1 : (dy < 0 ? -1 : 0)));
+  }
+  return swap ? -s : s;
+}
+
+int nh_surface_inside(const nh_surface *s, const double x[3]) {
+  if (!(x[1] >= s->min[1] && x[1] <= s->max[1] && x[2] >= s->min[2] && x[2] <= s->max[2] &&
+        x[0] <= s->max[0]))
+    return 0;
+  int j = nh_clampi((int)floor((x[1] - s->min[1]) / s->yz_cell[0]), 0, s->yz_g[0] - 1);
+  int k = nh_clampi((int)floor((x[2] - s->min[2]) / s->yz_cell[1]), 0, s->yz_g[1] - 1);
+  size_t c = (size_t)j + (size_t)s->yz_g[0] * k;
+  int crossings = 0;
+  for (int q = s->yz_start[c]; q < s->yz_start[c + 1]; q++) {
+    const double *t = s->v + 9 * s->yz_tri[q];
+    int s0 = nh_edge_sign(t, t + 3, x[1], x[2]);
+    int s1 = nh_edge_sign(t + 3, t + 6, x[1], x[2]);
+    int s2 = nh_edge_sign(t + 6, t, x[1], x[2]);
+    if (!s0 || s0 != s1 || s1 != s2) continue;
+    /* Where the ray meets the triangle's plane: barycentric weights from the
+     * (y, z) areas (the projection has non-zero area here). */
+    double e0 = (t[4] - t[1]) * (x[2] - t[2]) - (t[5] - t[2]) * (x[1] - t[1]);
+    double e1 = (t[7] - t[4]) * (x[2] - t[5]) - (t[8] - t[5]) * (x[1] - t[4]);
+    double e2 = (t[1] - t[7]) * (x[2] - t[8]) - (t[2] - t[8]) * (x[1] - t[7]);
+    double sum = e0 + e1 + e2;
+    double hit = sum != 0 ? (e1 * t[0] + e2 * t[3] + e0 * t[6]) / sum : (t[0] + t[3] + t[6]) / 3.0;
+    if (hit > x[0]) crossings++;
+  }
+  return crossings & 1;
+}
+
+/* Squared distance from p to triangle t (closest-point regions). */
+static double nh_tri_dist2(const double *t, const double p[3]) {
+  const double *a = t, *b = t + 3, *c = t + 6;
+  double ab[3], ac[3], ap[3], q[3];
+  for (int k = 0; k < 3; k++) ab[k] = b[k] - a[k], ac[k] = c[k] - a[k], ap[k] = p[k] - a[k];
+  double d1 = nh_vec3_dot(ab, ap), d2 = nh_vec3_dot(ac, ap);
+  if (d1 <= 0 && d2 <= 0) {
+    for (int k = 0; k < 3; k++) q[k] = a[k];
+    goto done;
+  }
+  double bp[3];
+  for (int k = 0; k < 3; k++) bp[k] = p[k] - b[k];
+  double d3 = nh_vec3_dot(ab, bp), d4 = nh_vec3_dot(ac, bp);
+  if (d3 >= 0 && d4 <= d3) {
+    for (int k = 0; k < 3; k++) q[k] = b[k];
+    goto done;
+  }
+  double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0 && d1 >= 0 && d3 <= 0) {
+    double v = d1 / (d1 - d3);
+    for (int k = 0; k < 3; k++) q[k] = a[k] + v * ab[k];
+    goto done;
+  }
+  double cp[3];
+  for (int k = 0; k < 3; k++) cp[k] = p[k] - c[k];
+  double d5 = nh_vec3_dot(ab, cp), d6 = nh_vec3_dot(ac, cp);
+  if (d6 >= 0 && d5 <= d6) {
+    for (int k = 0; k < 3; k++) q[k] = c[k];
+    goto done;
+  }
+  double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0 && d2 >= 0 && d6 <= 0) {
+    double w = d2 / (d2 - d6);
+    for (int k = 0; k < 3; k++) q[k] = a[k] + w * ac[k];
+    goto done;
+  }
+  double va = d3 * d6 - d5 * d4;
+  if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) {
+    double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+    for (int k = 0; k < 3; k++) q[k] = b[k] + w * (c[k] - b[k]);
+    goto done;
+  }
+  {
+    double den = 1.0 / (va + vb + vc), v = vb * den, w = vc * den;
+    for (int k = 0; k < 3; k++) q[k] = a[k] + ab[k] * v + ac[k] * w;
+  }
+done:;
+  double d[3] = {p[0] - q[0], p[1] - q[1], p[2] - q[2]};
+  return nh_vec3_dot(d, d);
+}
+
+double nh_surface_level(const nh_surface *s, const double x[3], double cap) {
+  if (!(cap > 0)) cap = INFINITY;
+  double sign = nh_surface_inside(s, x) ? -1.0 : 1.0;
+  /* Outside the bounding box, its distance is a lower bound. */
+  double box2 = 0.0;
+  for (int k = 0; k < 3; k++) {
+    double e = x[k] < s->min[k] ? s->min[k] - x[k] : (x[k] > s->max[k] ? x[k] - s->max[k] : 0.0);
+    box2 += e * e;
+  }
+  if (sqrt(box2) >= cap) return sign * cap;
+  int c[3];
+  double hmin = fmin(s->cell[0], fmin(s->cell[1], s->cell[2]));
+  for (int k = 0; k < 3; k++) c[k] = nh_surface_cell_of(s, k, x[k]);
+  int rmax = s->g[0] + s->g[1] + s->g[2];
+  double best2 = INFINITY;
+  for (int r = 0; r <= rmax; r++) {
+    for (int k = c[2] - r; k <= c[2] + r; k++) {
+      if (k < 0 || k >= s->g[2]) continue;
+      for (int j = c[1] - r; j <= c[1] + r; j++) {
+        if (j < 0 || j >= s->g[1]) continue;
+        for (int i = c[0] - r; i <= c[0] + r; i++) {
+          if (i < 0 || i >= s->g[0]) continue;
+          int on_shell = abs(i - c[0]) == r || abs(j - c[1]) == r || abs(k - c[2]) == r;
+          if (!on_shell) continue;
+          size_t cell = (size_t)i + (size_t)s->g[0] * (j + (size_t)s->g[1] * k);
+          for (int q = s->xyz_start[cell]; q < s->xyz_start[cell + 1]; q++)
+            best2 = fmin(best2, nh_tri_dist2(s->v + 9 * s->xyz_tri[q], x));
+        }
+      }
+    }
+    double reach = r * hmin; /* every unsearched triangle is at least this far */
+    if (best2 <= reach * reach || reach >= cap) break;
+  }
+  return sign * fmin(sqrt(best2), cap);
+}
+
+void nh_surface_print(const nh_surface *s, FILE *f) {
+  fprintf(f, "surface   %s: %d triangles, box [%g, %g, %g] - [%g, %g, %g] m, volume %.6g m^3\n",
+          s->path, s->n_tri, s->min[0], s->min[1], s->min[2], s->max[0], s->max[1], s->max[2],
+          nh_surface_volume(s));
+}
+
+double nh_surface_volume(const nh_surface *s) {
+  double v = 0.0;
+  for (int t = 0; t < s->n_tri; t++) {
+    const double *a = s->v + 9 * t;
+    double bc[3];
+    nh_vec3_cross(a + 3, a + 6, bc);
+    v += nh_vec3_dot(a, bc);
+  }
+  return fabs(v) / 6.0;
+}
+
+int nh_surface_ray_entry(const nh_surface *s, const double base[3], const double dir[3],
+                         double *tau, double point[3], double normal[3]) {
+  double best = INFINITY;
+  int hit = -1;
+  for (int t = 0; t < s->n_tri; t++) {
+    const double *a = s->v + 9 * t;
+    double e1[3], e2[3], p[3], q[3], r[3];
+    for (int k = 0; k < 3; k++) e1[k] = a[3 + k] - a[k], e2[k] = a[6 + k] - a[k];
+    nh_vec3_cross(dir, e2, p);
+    double det = nh_vec3_dot(e1, p);
+    if (det == 0.0) continue;
+    for (int k = 0; k < 3; k++) r[k] = base[k] - a[k];
+    double u = nh_vec3_dot(r, p) / det;
+    if (u < 0 || u > 1) continue;
+    nh_vec3_cross(r, e1, q);
+    double v = nh_vec3_dot(dir, q) / det;
+    if (v < 0 || u + v > 1) continue;
+    double tt = nh_vec3_dot(e2, q) / det;
+    if (tt > 0 && tt < best) best = tt, hit = t;
+  }
+  if (hit < 0) return 0;
+  const double *a = s->v + 9 * hit;
+  double e1[3], e2[3], n[3];
+  for (int k = 0; k < 3; k++) e1[k] = a[3 + k] - a[k], e2[k] = a[6 + k] - a[k];
+  nh_vec3_cross(e1, e2, n);
+  double len = nh_vec3_norm(n);
+  double side = nh_vec3_dot(n, dir) > 0 ? -1.0 : 1.0;
+  *tau = best;
+  for (int k = 0; k < 3; k++) point[k] = base[k] + best * dir[k], normal[k] = side * n[k] / len;
+  return 1;
+}
+
+int nh_surface_meets_box(const nh_surface *s, const double lo[3], const double hi[3]) {
+  int l[3], h[3];
+  for (int k = 0; k < 3; k++) {
+    if (hi[k] < s->min[k] || lo[k] > s->max[k]) return 0;
+    l[k] = nh_surface_cell_of(s, k, lo[k]), h[k] = nh_surface_cell_of(s, k, hi[k]);
+  }
+  for (int k = l[2]; k <= h[2]; k++)
+    for (int j = l[1]; j <= h[1]; j++)
+      for (int i = l[0]; i <= h[0]; i++) {
+        size_t cell = (size_t)i + (size_t)s->g[0] * (j + (size_t)s->g[1] * k);
+        for (int q = s->xyz_start[cell]; q < s->xyz_start[cell + 1]; q++) {
+          double tl[3], th[3];
+          nh_tri_box(s->v + 9 * s->xyz_tri[q], tl, th);
+          if (tl[0] <= hi[0] && th[0] >= lo[0] && tl[1] <= hi[1] && th[1] >= lo[1] &&
+              tl[2] <= hi[2] && th[2] >= lo[2])
+            return 1;
+        }
+      }
+  return 0;
+}
