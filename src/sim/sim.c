@@ -49,7 +49,10 @@ static const char *const nh_step_columns[] = {"step",
                                               "cut",
                                               "path_points",
                                               "t_compliance",
-                                              "t_mcp"};
+                                              "t_mcp",
+                                              "factorised",
+                                              "pcg_iterations",
+                                              "corrections"};
 static const char *const nh_probe_columns[] = {"step", "time", "name", "x", "y",
                                                "z",    "ux",   "uy",   "uz"};
 
@@ -439,7 +442,8 @@ static int nh_sim_build(nh_sim *s) {
                                   .beta = sc->tissue.damping_stiffness,
                                   .tolerance = sc->solver.tolerance,
                                   .max_iterations = sc->solver.max_iterations,
-                                  .threads = sc->solver.threads};
+                                  .threads = sc->solver.threads,
+                                  .reuse = sc->solver.refactor == NH_REFACTOR_AUTO};
   s->cap_steps = sc->time.steps > s->step ? sc->time.steps : s->step + 1;
   s->phase_times =
       calloc((size_t)NH_PHASES * (size_t)(s->cap_steps ? s->cap_steps : 1), sizeof(double));
@@ -585,7 +589,10 @@ int nh_sim_step(nh_sim *s) {
                         cc.cut,
                         cc.path_points,
                         cs->t_compliance,
-                        cs->t_mcp};
+                        cs->t_mcp,
+                        st.factorised,
+                        st.pcg_iterations,
+                        st.corrections};
   enum { NH_STEP_COLUMNS = sizeof nh_step_columns / sizeof *nh_step_columns };
   _Static_assert(sizeof row / sizeof *row == NH_STEP_COLUMNS, "one value per steps.csv column");
   if (!s->options.dry_run) NH_TRY(nh_csv_values(s->steps_csv, NH_STEP_COLUMNS, row));

@@ -30,6 +30,12 @@ struct nh_system {
   cholmod_common cm;
   cholmod_sparse *A;
   cholmod_factor *L;
+  /* Reuse across steps (reuse.c): L factorises the assembled A
+   * (factor_current), or an earlier A and serves as a preconditioner. */
+  int factor_current;
+  int factor_age;   /* steps since the factorisation (0: factorised in this step) */
+  int refactor_due; /* a solve or correction passed its bound: factorise next step */
+  double *pcg[4];   /* n_free each: PCG work */
 
   int *scatter; /* 576 per plain leaf (leaf order): position in A->x of K_e[r][c], -1 if not stored
                  */
@@ -52,6 +58,39 @@ struct nh_system {
   double *work[4];  /* 3 per node each */
   double *fwork[2]; /* n_free each */
 };
+
+/* Reuse of factorisations (reuse.c). Bounds: a solve needing more than
+ * NH_PCG_BOUND iterations (or a step more than NH_OUTER_BOUND constraint
+ * corrections) marks the factor for renewal at the next step; NH_PCG_MAX
+ * iterations (NH_OUTER_MAX corrections) without convergence factorise at
+ * once; a factor is renewed after NH_REFACTOR_MAX_AGE steps in any case. */
+enum {
+  NH_PCG_BOUND = 8,
+  NH_PCG_MAX = 40,
+  NH_OUTER_BOUND = 4,
+  NH_OUTER_MAX = 10,
+  NH_REFACTOR_MAX_AGE = 200
+};
+
+/* Before a step's solves, after assembly: factorise A unless reuse is on and
+ * the current factor may still serve (see reuse.c); the time spent is added
+ * to *t_factor (may be NULL). Fails as nh_system_factor. */
+int nh_system_prepare(nh_system *s, int reuse, double *t_factor);
+
+/* Solve A x = b: directly when the factor is current, else by PCG with the
+ * factor as preconditioner to `tolerance` (relative, in the M⁻¹-norm), and if
+ * that fails in NH_PCG_MAX iterations, by a new factorisation (its time added
+ * to *t_factor). iterations (may be NULL): the PCG iterations used. */
+int nh_system_solve_reuse(nh_system *s, const double *b, double *x, double tolerance,
+                          int *iterations, double *t_factor);
+
+/* PCG on A x = b preconditioned by the factor (M), started from x₀ = M⁻¹ b,
+ * or from x as given when guess != 0, stopped at √(rᵀM⁻¹r) <= tolerance ·
+ * √(bᵀx₀) (≈ √(bᵀA⁻¹b) for a good start); at most max_iterations.
+ * Fails with NH_ERR_NUMERIC (not converged, or A not positive definite
+ * along a search direction). */
+int nh_system_pcg(nh_system *s, const double *b, double *x, int guess, double tolerance,
+                  int max_iterations, int *iterations);
 
 /* W += J A⁻¹ Jᵀ (Algorithm 3) for rows given as Jᵀ (n_free x m, CSC, sorted);
  * W dense column-major m x m. A must be factorised. */
