@@ -72,10 +72,11 @@ enum {
   NH_REFACTOR_MAX_AGE = 200
 };
 
-/* Before a step's solves, after assembly: factorise A unless reuse is on and
- * the current factor may still serve (see reuse.c); the time spent is added
- * to *t_factor (may be NULL). Fails as nh_system_factor. */
-int nh_system_prepare(nh_system *s, int reuse, double *t_factor);
+/* Before a step's solves, after assembly: factorise A unless in->reuse is on
+ * and the current factor may still serve (see reuse.c); the time spent is
+ * added to st->t_factor, and st->t_factor_reference (and t_aside) set.
+ * Fails as nh_system_factor. */
+int nh_system_prepare(nh_system *s, const nh_integrator *in, nh_step_stats *st);
 
 /* Solve A x = b: directly when the factor is current, else by PCG with the
  * factor as preconditioner to `tolerance` (relative, in the M⁻¹-norm), and if
