@@ -44,16 +44,18 @@ def read(out, name):
         return list(csv.DictReader(f))
 
 
-def run(name, scene, sets):
-    out = os.path.join(WORK, name)
-    cmd = [BIN, "run", scene, "--quiet", "--out", out]
-    for s in sets:
-        cmd += ["--set", s]
-    p = subprocess.run(cmd, capture_output=True, text=True)
-    if p.returncode != 0:
-        fail("%s: exit %d, expected 0: %s" % (name, p.returncode, p.stderr.strip()))
-        return None
-    return out
+def run_both(case, scene, sets):
+    """Runs the case with solver.refactor every, then auto: their folders (None if one failed)."""
+    outs = []
+    for mode in ("every", "auto"):
+        outs.append(os.path.join(WORK, "%s-%s" % (case, mode)))
+        args = [BIN, "run", scene, "--quiet", "--out", outs[-1], "--set", "solver.refactor=" + mode]
+        p = subprocess.run(args + [w for s in sets for w in ("--set", s)], capture_output=True,
+                           text=True)
+        if p.returncode != 0:
+            fail("%s (%s): exit %d, expected 0: %s" % (case, mode, p.returncode, p.stderr.strip()))
+            return None, None
+    return outs
 
 
 def series(out):
@@ -69,9 +71,8 @@ def series(out):
 
 
 def compare(case, scene, sets):
-    every = run(case + "-every", scene, sets + ["solver.refactor=every"])
-    auto = run(case + "-auto", scene, sets + ["solver.refactor=auto"])
-    if not every or not auto:
+    every, auto = run_both(case, scene, sets)
+    if not every:
         return
     steps = read(auto, "steps")
     n = len(steps)
