@@ -241,7 +241,6 @@ static int nh_corrected_step(nh_system *s, const nh_integrator *in, cholmod_spar
     for (int i = 0; i < nf; i++) bk[i] += b[i];
     int its = 0, prc = nh_system_pcg(s, bk, dv, k > 0, in->tolerance, NH_PCG_MAX, &its);
     st->step.pcg_iterations += its;
-    if (its > NH_PCG_BOUND) s->refactor_due = 1;
     if (prc) {
       if (prc == NH_ERR_NUMERIC) nh_error_clear(), prc = 1;
       rc = prc;
@@ -272,7 +271,6 @@ static int nh_corrected_step(nh_system *s, const nh_integrator *in, cholmod_spar
       break;
     }
   }
-  if (st->step.corrections > NH_OUTER_BOUND) s->refactor_due = 1;
   free(e);
   return rc;
 }
@@ -465,6 +463,9 @@ int nh_step_coupled(nh_system *s, const nh_integrator *in, const double *f_ext, 
       goto done;
   st.step.t_solve += nh_time_now() - t6;
   st.step.iterations = 1;
+  if (in->reuse)
+    nh_system_account(s, s->factor_age == 0 ? st.step.t_factor_reference : 0.0,
+                      st.step.t_solve + st.step.t_constraints);
 
 done:
   st.step.factorised = s->factor_age == 0;

@@ -19,8 +19,7 @@
  * When to factorise (nh_system_prepare):
  *   - no factor yet, or the pattern changed: a mesh change builds a new
  *     system, whose first step factorises;
- *   - the previous step needed more than NH_PCG_BOUND iterations in one
- *     solve, or more than NH_OUTER_BOUND constraint corrections;
+ *   - the renewal rule of nh_system_account asks for it;
  *   - the factor is NH_REFACTOR_MAX_AGE steps old (a schedule that bounds
  *     drift on long quiet runs);
  *   - hanging-node rows are enforced by multipliers (compliance.c builds
@@ -51,12 +50,11 @@ static int nh_precondition(nh_system *s, const double *r, double *z) {
  * (discarded): the reference a reused step is compared with. */
 static int nh_time_aside(nh_system *s, nh_step_stats *st) {
   double t0 = nh_time_now();
-  cholmod_factor *C = cholmod_copy_factor(s->L, &s->cm);
-  if (!C) return NH_ERROR(NH_ERR_MEMORY, "out of memory: a factor copy to time");
+  if (!s->L_aside && !(s->L_aside = cholmod_copy_factor(s->L, &s->cm)))
+    return NH_ERROR(NH_ERR_MEMORY, "out of memory: a factor copy to time");
   double t1 = nh_time_now();
-  int ok = cholmod_factorize(s->A, C, &s->cm);
+  int ok = cholmod_factorize(s->A, s->L_aside, &s->cm);
   double t2 = nh_time_now();
-  cholmod_free_factor(&C, &s->cm);
   if (!ok || s->cm.status < CHOLMOD_OK)
     return NH_ERROR(NH_ERR_NUMERIC, "timing a factorisation failed (status %d)", s->cm.status);
   st->t_factor_reference = t2 - t1;
@@ -123,13 +121,33 @@ int nh_system_pcg(nh_system *s, const double *b, double *x, int guess, double to
                   sqrt(rz / ref2), tolerance, *iterations);
 }
 
+/* The renewal rule of a sequence of solves with slowly degrading
+ * preconditioner: with F the cost of the factorisation that opened the
+ * cycle and s_j the solve time of its j-th step, the mean cost per step of
+ * a cycle of k steps is (F + Σ_{j<=k} s_j) / k; it is least when cut at the
+ * first step whose own cost exceeds that mean (marginal above average), so
+ * the next step factorises then. A per-step cost common to both paths (W,
+ * the constraint solve, a direct solve) cancels from the comparison. The
+ * rule uses measured times: on a loaded machine the moment of renewal may
+ * move, and with it the results, within the solver tolerance; `every` is
+ * bitwise reproducible. */
+void nh_system_account(nh_system *s, double t_factor, double t_solves) {
+  if (s->factor_age == 0) {
+    s->cycle_cost = t_factor + t_solves;
+    s->cycle_steps = 1;
+    return;
+  }
+  s->cycle_cost += t_solves;
+  s->cycle_steps++;
+  if (t_solves > s->cycle_cost / s->cycle_steps) s->refactor_due = 1;
+}
+
 int nh_system_solve_reuse(nh_system *s, const double *b, double *x, double tolerance,
                           int *iterations, double *t_factor) {
   if (iterations) *iterations = 0;
   if (s->factor_current) return nh_system_solve(s, b, x);
   int its = 0, rc = nh_system_pcg(s, b, x, 0, tolerance, NH_PCG_MAX, &its);
   if (iterations) *iterations = its;
-  if (its > NH_PCG_BOUND) s->refactor_due = 1;
   if (rc == NH_ERR_NUMERIC) { /* the old factor is too far from A: factorise now */
     nh_error_clear();
     double t0 = nh_time_now();

@@ -33,9 +33,12 @@ struct nh_system {
   /* Reuse across steps (reuse.c): L factorises the assembled A
    * (factor_current), or an earlier A and serves as a preconditioner. */
   int factor_current;
-  int factor_age;   /* steps since the factorisation (0: factorised in this step) */
-  int refactor_due; /* a solve or correction passed its bound: factorise next step */
-  double *pcg[4];   /* n_free each: PCG work */
+  int factor_age;    /* steps since the factorisation (0: factorised in this step) */
+  int refactor_due;  /* the renewal rule asks for a factorisation at the next step */
+  double cycle_cost; /* s: the last factorisation and every solve since (nh_system_account) */
+  int cycle_steps;
+  cholmod_factor *L_aside; /* benchmarks: the factor timed aside (NH_TIME_FACTOR) */
+  double *pcg[4];          /* n_free each: PCG work */
 
   int *scatter; /* 576 per plain leaf (leaf order): position in A->x of K_e[r][c], -1 if not stored
                  */
@@ -59,18 +62,16 @@ struct nh_system {
   double *fwork[2]; /* n_free each */
 };
 
-/* Reuse of factorisations (reuse.c). Bounds: a solve needing more than
- * NH_PCG_BOUND iterations (or a step more than NH_OUTER_BOUND constraint
- * corrections) marks the factor for renewal at the next step; NH_PCG_MAX
- * iterations (NH_OUTER_MAX corrections) without convergence factorise at
- * once; a factor is renewed after NH_REFACTOR_MAX_AGE steps in any case. */
-enum {
-  NH_PCG_BOUND = 8,
-  NH_PCG_MAX = 40,
-  NH_OUTER_BOUND = 4,
-  NH_OUTER_MAX = 10,
-  NH_REFACTOR_MAX_AGE = 200
-};
+/* Reuse of factorisations (reuse.c): a solve that misses its tolerance after
+ * NH_PCG_MAX iterations, or constraint forces after NH_OUTER_MAX corrections,
+ * factorise at once; a factor is renewed after NH_REFACTOR_MAX_AGE steps in
+ * any case. */
+enum { NH_PCG_MAX = 40, NH_OUTER_MAX = 10, NH_REFACTOR_MAX_AGE = 200 };
+
+/* After a step with reuse on: the renewal rule. t_factor: the step's
+ * factorisation of A (s; ignored if it reused), t_solves: the time of its
+ * solves (free, constraint forces, corrections). */
+void nh_system_account(nh_system *s, double t_factor, double t_solves);
 
 /* Before a step's solves, after assembly: factorise A unless in->reuse is on
  * and the current factor may still serve (see reuse.c); the time spent is
