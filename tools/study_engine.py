@@ -104,7 +104,9 @@ class Progress:
 def _client(workers, scheduler):
     from distributed import Client, LocalCluster
     if scheduler:
-        return Client(scheduler), None
+        client = Client(scheduler)
+        client.upload_file(os.path.abspath(__file__))  # the workers import `execute` from it
+        return client, None
     cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                            host="127.0.0.1", dashboard_address=None, silence_logs=40)
     return Client(cluster), cluster

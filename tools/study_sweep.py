@@ -182,7 +182,7 @@ def plot(spec, rows):
         if p.get("logx"):
             ax.set_xscale("log")
         ax.grid(alpha=0.3)
-        if series:
+        if series and ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=8)
         fig.tight_layout()
         name = os.path.join(spec["out"], "sweep_%s_%s.png" % (p["y"], p["x"].replace(".", "_")))
