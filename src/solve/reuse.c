@@ -126,14 +126,17 @@ int nh_system_pcg(nh_system *s, const double *b, double *x, int guess, double to
  * cycle and s_j the solve time of its j-th step, the mean cost per step of
  * a cycle of k steps is (F + Σ_{j<=k} s_j) / k; it is least when cut at the
  * first step whose own cost exceeds that mean (marginal above average), so
- * the next step factorises then. A per-step cost common to both paths (W,
+ * the next step factorises then. F is the fastest factorisation of this
+ * pattern measured so far (robust to load spikes). A per-step cost common to both paths (W,
  * the constraint solve, a direct solve) cancels from the comparison. The
  * rule uses measured times: on a loaded machine the moment of renewal may
  * move, and with it the results, within the solver tolerance; `every` is
  * bitwise reproducible. */
 void nh_system_account(nh_system *s, double t_factor, double t_solves) {
   if (s->factor_age == 0) {
-    s->cycle_cost = t_factor + t_solves;
+    /* the fastest factorisation seen: a load spike must not make reuse look cheap */
+    if (!(s->t_factor_best > 0.0) || t_factor < s->t_factor_best) s->t_factor_best = t_factor;
+    s->cycle_cost = s->t_factor_best + t_solves;
     s->cycle_steps = 1;
     return;
   }

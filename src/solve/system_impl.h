@@ -37,6 +37,7 @@ struct nh_system {
   int refactor_due;  /* the renewal rule asks for a factorisation at the next step */
   double cycle_cost; /* s: the last factorisation and every solve since (nh_system_account) */
   int cycle_steps;
+  double t_factor_best;    /* s: the fastest factorisation of this pattern so far */
   cholmod_factor *L_aside; /* benchmarks: the factor timed aside (NH_TIME_FACTOR) */
   double *pcg[4];          /* n_free each: PCG work */
 
