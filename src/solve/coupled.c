@@ -19,7 +19,13 @@
  * the point's cell, restricted to the unknowns by Pᵀ (hanging masters,
  * fixed nodes dropped); its tool part is −n · J_beam on the element's 12
  * DOFs, the base node's dropped (prescribed). Without tools and rows this
- * is nh_step_dynamic (which may carry hanging-node rows instead). */
+ * is nh_step_dynamic (which may carry hanging-node rows instead).
+ *
+ * With in->reuse (solver.refactor: auto) the tissue block may keep an
+ * earlier factorisation (reuse.c decides): its solves are then PCG with that
+ * factor as preconditioner, W's tissue part is the old factor's W₀, and
+ * steps 1-4 for the tissue become the outer correction of
+ * nh_corrected_step, exact at its fixed point (docs/performance.md). */
 #include "solve/system_impl.h"
 
 #include <math.h>
