@@ -228,9 +228,9 @@ static void nh_tissue_rates(const nh_system *s, const nh_rows *rows, const doubl
  * the start of the next correction's PCG. One correction (the usual case)
  * costs one PCG solve and one preconditioner solve: a solve fewer than the
  * free solve plus correction of a current factor would take with PCG.
- * Returns 1 (not converged in NH_OUTER_MAX corrections, or a PCG solve
- * failed: the caller factorises and solves exactly), 0, or an error code of
- * the constraint solve. work: 2 n_free scratch, full: 3 per node scratch. */
+ * Returns 1 (not converged in NH_OUTER_MAX corrections, or a PCG or
+ * constraint solve failed: the caller factorises and solves exactly), 0, or
+ * another error code (memory). work: 2 n_free scratch, full: 3 per node scratch. */
 static int nh_corrected_step(nh_system *s, const nh_integrator *in, cholmod_sparse *Jt,
                              nh_rows *rows, const double *Wt, const double *W,
                              const double *r_tools, const double *b, const double *v,
@@ -260,8 +260,11 @@ static int nh_corrected_step(nh_system *s, const nh_integrator *in, cholmod_spar
     }
     memcpy(prev, rows->lambda, sizeof(double) * (size_t)m);
     st->step.corrections = k + 1;
-    if ((rc = nh_constraint_solve(m, W, rk, rows, tolerance, accept, max_iterations, &st->mcp)))
+    if ((rc = nh_constraint_solve(m, W, rk, rows, tolerance, accept, max_iterations, &st->mcp))) {
+      /* not converged with W₀: the exact path decides (and reports) */
+      if (rc == NH_ERR_NUMERIC) nh_error_clear(), rc = 1;
       break;
+    }
     double delta = 0.0, scale = 0.0;
     for (int i = 0; i < m; i++) {
       dl[i] = rows->lambda[i] - prev[i];
