@@ -7,6 +7,7 @@ pkgs=(
   libsuitesparse-dev libopenblas-dev liblapacke-dev
   libyaml-dev libhdf5-dev zlib1g-dev libnifti2-dev
   python3 python3-numpy python3-matplotlib python3-vtk9 python3-meshio python3-h5py python3-nibabel python3-scipy
+  python3-distributed python3-yaml
 )
 sudo=""
 if [ "$(id -u)" -ne 0 ]; then sudo="sudo"; fi

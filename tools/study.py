@@ -3,8 +3,18 @@
 steps.csv / probes.csv / targets.csv and writes plots and a Markdown report.
 
     tools/study.py phantom [--binary PATH] [--out DIR] [--img DIR] [--only NAME ...]
-                           [--fresh-reference] [--steps N] [--reuse]
+                           [--fresh-reference] [--steps N] [--reuse | --restart]
+                           [--workers N | --scheduler tcp://HOST:PORT] [--threads T]
     tools/study.py dbs     [the same options]
+    tools/study.py sweep SPEC.yaml [--out DIR] [--fresh] [--workers N | --scheduler ...]
+
+Variants run through dask.distributed (study_engine.py): a LocalCluster of
+--workers processes on this machine (default 1 for phantom and dbs, whose
+timings are the point; the number of cores for a sweep), or an existing
+cluster given by --scheduler (docs/performance.md: a SLURM cluster through
+dask-jobqueue). A failed variant is reported and left out; the others go
+on. sweep: study_sweep.py (a base scene, lists of --set values, one table
+and plots).
 
 phantom (docs/phantom.md, seed 004 §3.1): cases/phantom/phantom.yaml on
 uniform 8×4×4, 16×8×8, 32×16×16 grids and adaptive from 8×4×4 (θ = 0.3,
@@ -37,6 +47,9 @@ import time
 
 import numpy as np
 import matplotlib
+
+import study_engine as engine
+import study_sweep
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -86,32 +99,22 @@ def find_binary(given):
     raise SystemExit("no needlehex binary (build it: tools/run-case.sh, or pass --binary)")
 
 
-def run(binary, scene, out, sets, steps=None):
-    """Runs needlehex into OUT; returns the wall time (s) and the command."""
-    cmd = [binary, "run", scene, "--quiet", "--out", out]
-    for s in sets + (["time.steps=%d" % steps] if steps else []):
-        cmd += ["--set", s]
-    os.makedirs(out, exist_ok=True)
-    log("needlehex %s" % " ".join(cmd[1:]))
-    t0 = time.time()
-    rc = subprocess.run(cmd).returncode
-    wall = time.time() - t0
-    if rc != 0:
-        raise SystemExit("needlehex failed (exit %d): %s" % (rc, " ".join(cmd)))
-    info = {"cmd": [os.path.basename(binary)] + cmd[1:], "wall": wall,
-            "date": time.strftime("%Y-%m-%d %H:%M")}
-    with open(os.path.join(out, "run.json"), "w") as f:
-        json.dump(info, f)
-    return info
-
-
-def run_or_reuse(a, binary, scene, out, sets):
-    """The run in OUT if --reuse and it finished (run.json), else a new run."""
-    stamp = os.path.join(out, "run.json")
-    if a.reuse and os.path.exists(stamp):
-        with open(stamp) as f:
-            return json.load(f)
-    return run(binary, scene, out, sets, a.steps)
+def run_variants(a, binary, scene, out, variants):
+    """Runs the variants [(name, sets)] of a study into OUT/NAME through the execution engine
+    (study_engine.py: --workers, --scheduler, --threads); with --reuse a variant already
+    complete in OUT is reported on, not run again (--restart: only if its command is the
+    same). Returns {name: run.json record} of the complete ones; failed ones are reported."""
+    jobs = []
+    for name, sets in variants:
+        cmd = [binary, "run", scene, "--quiet"]
+        for s in sets + (["time.steps=%d" % a.steps] if a.steps else []):
+            cmd += ["--set", s]
+        jobs.append(engine.Job(name, os.path.join(out, name), cmd))
+    done, failed = engine.run_jobs(jobs, workers=a.workers, scheduler=a.scheduler,
+                                   skip_complete=a.reuse or a.restart, same_command=not a.reuse,
+                                   threads=a.threads)
+    engine.report_failures(failed)
+    return done
 
 
 def write_report(out, lines):
@@ -205,8 +208,12 @@ def phantom(a, binary):
 
     rname, rlabel, rsets = st["reference"]
     rdir = os.path.join(out, rname)
+    selected = [(name, sets) for name, _, sets, _ in st["variants"] if not a.only or name in a.only]
     if a.fresh_reference or not os.path.exists(os.path.join(rdir, "run.json")):
-        run(binary, st["scene"], rdir, rsets, a.steps)
+        selected.insert(0, (rname, rsets))  # the longest run first
+    infos = run_variants(a, binary, st["scene"], out, selected)
+    if not os.path.exists(os.path.join(rdir, "run.json")):
+        raise SystemExit("no reference run in %s" % rdir)
     with open(os.path.join(rdir, "run.json")) as f:
         rinfo = json.load(f)
     ref_u, ref_steps = read_points(rdir)
@@ -215,10 +222,10 @@ def phantom(a, binary):
 
     runs = []
     for name, label, sets, kind in st["variants"]:
-        if a.only and name not in a.only:
+        if name not in infos:
             continue
         d = os.path.join(out, name)
-        info = run_or_reuse(a, binary, st["scene"], d, sets)
+        info = infos[name]
         u, steps = read_points(d)
         if len(steps) != len(ref_steps):
             raise SystemExit("%s has %d steps, the reference %d: run the reference with the "
@@ -363,12 +370,14 @@ def dbs(a, binary):
     os.makedirs(img, exist_ok=True)
     g = scene_grid(st["scene"])
     runs = []
+    infos = run_variants(a, binary, st["scene"], out, [
+        (name, [s % ("[%d,%d,%d]" % tuple(2 * v for v in g)) if "%s" in s else s for s in sets])
+        for name, _, sets, _ in st["variants"] if not a.only or name in a.only])
     for name, label, sets, kind in st["variants"]:
-        if a.only and name not in a.only:
+        if name not in infos:
             continue
-        sets = [s % ("[%d,%d,%d]" % tuple(2 * v for v in g)) if "%s" in s else s for s in sets]
         d = os.path.join(out, name)
-        info = run_or_reuse(a, binary, st["scene"], d, sets)
+        info = infos[name]
         pos, steps = read_points(d, "targets.csv")
         tgt = pos[st["target"]]
         tools = read_tools(d, st["cannula"])
@@ -450,7 +459,8 @@ def dbs(a, binary):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("study", choices=["phantom", "dbs"])
+    ap.add_argument("study", choices=["phantom", "dbs", "sweep"])
+    ap.add_argument("spec", nargs="?", help="sweep: the spec (YAML, see study_sweep.py)")
     ap.add_argument("--binary", default=None, help="needlehex (default build/needlehex)")
     ap.add_argument("--out", default=None, help="run folders and report (default out/study/STUDY)")
     ap.add_argument("--img", default=None, help="where the PNGs go (default docs/img)")
@@ -459,8 +469,17 @@ def main():
     ap.add_argument("--steps", type=int, default=None, help="fewer steps (a quick look)")
     ap.add_argument("--reuse", action="store_true",
                     help="report on the runs already in OUT instead of running them again")
+    ap.add_argument("--fresh", action="store_true", help="sweep: run complete variants again")
+    # timing studies: one run at a time unless asked (runs in parallel share the cores)
+    engine.add_arguments(ap, default_workers=None)
     a = ap.parse_args()
+    if a.workers is None:
+        a.workers = (os.cpu_count() or 1) if a.study == "sweep" else 1
     binary = find_binary(a.binary)
+    if a.study == "sweep":
+        if not a.spec:
+            ap.error("sweep needs SPEC.yaml")
+        return study_sweep.sweep(a, binary)
     return phantom(a, binary) if a.study == "phantom" else dbs(a, binary)
 
 

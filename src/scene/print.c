@@ -181,9 +181,10 @@ void nh_scene_print(const nh_scene *s, void *stdio_file) {
   fprintf(f, "solver    tolerance %g, at most %d iterations, ", s->solver.tolerance,
           s->solver.max_iterations);
   if (s->solver.threads > 0)
-    fprintf(f, "%d thread%s\n", s->solver.threads, s->solver.threads == 1 ? "" : "s");
+    fprintf(f, "%d thread%s, ", s->solver.threads, s->solver.threads == 1 ? "" : "s");
   else
-    fprintf(f, "all cores\n");
+    fprintf(f, "all cores, ");
+  fprintf(f, "refactor %s\n", s->solver.refactor == NH_REFACTOR_EVERY ? "every step" : "auto");
   fprintf(f, "tools     %d\n", s->n_tools);
   for (int i = 0; i < s->n_tools; ++i) print_tool(f, s, i);
   fprintf(f, "probes    %d\n", s->n_probes);

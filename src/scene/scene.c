@@ -1114,8 +1114,11 @@ static int read_adapt(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
 }
 
 static int read_solver(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
-  static const char *const keys[] = {"tolerance", "max_iterations", "threads", NULL};
+  static const char *const keys[] = {"tolerance", "max_iterations", "threads", "refactor", NULL};
+  static const char *const refactors[] = {"auto", "every", NULL};
   const nh_yaml_node *m, *at;
+  int choice = 0;
+  s->solver.refactor = NH_REFACTOR_AUTO;
   s->solver.tolerance = 1e-8;
   s->solver.max_iterations = 30;
   s->solver.threads = 0;
@@ -1128,6 +1131,11 @@ static int read_solver(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   NH_TRY(at_least(c, at, "solver", "max_iterations", s->solver.max_iterations, 1, 0));
   NH_TRY(get_int(c, m, "solver", "threads", &s->solver.threads, &at));
   NH_TRY(at_least(c, at, "solver", "threads", s->solver.threads, 0, 0));
+  NH_TRY(field(c, m, "solver", "refactor", 0, &at));
+  if (at) {
+    NH_TRY(as_choice(c, at, "solver.refactor", refactors, &choice));
+    s->solver.refactor = choice ? NH_REFACTOR_EVERY : NH_REFACTOR_AUTO;
+  }
   return NH_OK;
 }
 

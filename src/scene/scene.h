@@ -137,6 +137,7 @@ typedef struct {
 
 typedef enum { NH_MARK_MAX = 0, NH_MARK_DORFLER = 1 } nh_mark_strategy;
 typedef enum { NH_HANGING_ELIMINATE = 0, NH_HANGING_LAGRANGE = 1 } nh_hanging_method;
+typedef enum { NH_REFACTOR_AUTO = 0, NH_REFACTOR_EVERY = 1 } nh_refactor_mode;
 
 /* The adapt section: estimation, marking, template, limits (adapt/refine.c). */
 typedef struct {
@@ -213,6 +214,7 @@ typedef struct nh_scene {
     double tolerance;   /* solver.tolerance: static Newton relative residual (default 1e-8) */
     int max_iterations; /* solver.max_iterations: static Newton (default 30) */
     int threads;        /* solver.threads: OpenMP threads, 0 = all cores (default 0) */
+    nh_refactor_mode refactor; /* solver.refactor: auto (default) | every */
   } solver;
 
   nh_adapt_spec adapt;

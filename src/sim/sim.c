@@ -49,7 +49,11 @@ static const char *const nh_step_columns[] = {"step",
                                               "cut",
                                               "path_points",
                                               "t_compliance",
-                                              "t_mcp"};
+                                              "t_mcp",
+                                              "factorised",
+                                              "pcg_iterations",
+                                              "corrections",
+                                              "t_factor_reference"};
 static const char *const nh_probe_columns[] = {"step", "time", "name", "x", "y",
                                                "z",    "ux",   "uy",   "uz"};
 
@@ -439,7 +443,9 @@ static int nh_sim_build(nh_sim *s) {
                                   .beta = sc->tissue.damping_stiffness,
                                   .tolerance = sc->solver.tolerance,
                                   .max_iterations = sc->solver.max_iterations,
-                                  .threads = sc->solver.threads};
+                                  .threads = sc->solver.threads,
+                                  .reuse = sc->solver.refactor == NH_REFACTOR_AUTO,
+                                  .time_factor = getenv("NH_TIME_FACTOR") != NULL};
   s->cap_steps = sc->time.steps > s->step ? sc->time.steps : s->step + 1;
   s->phase_times =
       calloc((size_t)NH_PHASES * (size_t)(s->cap_steps ? s->cap_steps : 1), sizeof(double));
@@ -558,7 +564,7 @@ int nh_sim_step(nh_sim *s) {
   pt[NH_PHASE_CONSTRAINTS] = st.t_constraints;
   pt[NH_PHASE_ADAPT] = s->t_adapt;
   pt[NH_PHASE_OUTPUT] = t2 - t1 + t_checkpoint;
-  pt[NH_PHASE_STEP] = t3 - t0;
+  pt[NH_PHASE_STEP] = t3 - t0 - st.t_aside;
   const double row[] = {s->step,
                         s->time,
                         dofs,
@@ -585,7 +591,11 @@ int nh_sim_step(nh_sim *s) {
                         cc.cut,
                         cc.path_points,
                         cs->t_compliance,
-                        cs->t_mcp};
+                        cs->t_mcp,
+                        st.factorised,
+                        st.pcg_iterations,
+                        st.corrections,
+                        st.t_factor_reference};
   enum { NH_STEP_COLUMNS = sizeof nh_step_columns / sizeof *nh_step_columns };
   _Static_assert(sizeof row / sizeof *row == NH_STEP_COLUMNS, "one value per steps.csv column");
   if (!s->options.dry_run) NH_TRY(nh_csv_values(s->steps_csv, NH_STEP_COLUMNS, row));

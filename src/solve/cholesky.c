@@ -18,6 +18,7 @@ int nh_system_factor(nh_system *s) {
       return NH_ERROR(NH_ERR_NUMERIC, "CHOLMOD symbolic analysis failed (status %d)", s->cm.status);
   }
   s->W_valid = 0; /* the compliance belongs to the previous A */
+  s->factor_current = 0;
   int ok = cholmod_factorize(s->A, s->L, &s->cm);
   if (s->cm.status == CHOLMOD_NOT_POSDEF)
     return NH_ERROR(
@@ -26,6 +27,9 @@ int nh_system_factor(nh_system *s) {
         (int)s->L->minor, s->n_free);
   if (!ok || s->cm.status < CHOLMOD_OK)
     return NH_ERROR(NH_ERR_NUMERIC, "CHOLMOD factorisation failed (status %d)", s->cm.status);
+  s->factor_current = 1;
+  s->factor_age = 0;
+  s->refactor_due = 0;
   return NH_OK;
 }
 

@@ -19,7 +19,13 @@
  * the point's cell, restricted to the unknowns by Pᵀ (hanging masters,
  * fixed nodes dropped); its tool part is −n · J_beam on the element's 12
  * DOFs, the base node's dropped (prescribed). Without tools and rows this
- * is nh_step_dynamic (which may carry hanging-node rows instead). */
+ * is nh_step_dynamic (which may carry hanging-node rows instead).
+ *
+ * With in->reuse (solver.refactor: auto) the tissue block may keep an
+ * earlier factorisation (reuse.c decides): its solves are then PCG with that
+ * factor as preconditioner, W's tissue part is the old factor's W₀, and
+ * steps 1-4 for the tissue become the outer correction of
+ * nh_corrected_step, exact at its fixed point (docs/performance.md). */
 #include "solve/system_impl.h"
 
 #include <math.h>
@@ -151,6 +157,133 @@ static int nh_finite(const double *a, int n) {
   return 1;
 }
 
+/* The tissue part of W with the current factor, W_t = J_t A⁻¹ J_tᵀ, and the
+ * sum W = W_t + W_tools for the constraint solve. */
+static int nh_tissue_compliance(nh_system *s, cholmod_sparse *Jt, int m, const double *Wtools,
+                                double *Wt, double *W) {
+  memset(Wt, 0, sizeof(double) * (size_t)m * m);
+  NH_TRY(nh_system_compliance_add(s, Jt, Wt));
+  for (size_t k = 0; k < (size_t)m * m; k++) W[k] = Wt[k] + Wtools[k];
+  return NH_OK;
+}
+
+/* col = J_tᵀ λ (n_free values). */
+static void nh_jt_scatter(const cholmod_sparse *Jt, const double *lambda, double *col, int nf) {
+  const int *Jp = Jt->p, *Ji = Jt->i;
+  const double *Jx = Jt->x;
+  memset(col, 0, sizeof(double) * (size_t)nf);
+  for (int j = 0; j < (int)Jt->ncol; j++)
+    for (int p = Jp[j]; p < Jp[j + 1]; p++) col[Ji[p]] += Jx[p] * lambda[j];
+}
+
+/* nh_mcp_solve with the acceptance of a stalled solve (see nh_step_coupled). */
+static int nh_constraint_solve(int m, const double *W, const double *r, nh_rows *rows,
+                               double tolerance, double accept, int max_iterations,
+                               nh_mcp_stats *st) {
+  int rc = nh_mcp_solve(m, W, r, rows->law, tolerance, max_iterations, rows->lambda, st);
+  /* Projected Gauss-Seidel can stall short of a tight tolerance on nearly
+   * dependent friction rows (a stiff needle's shaft points share the
+   * axial load in many ways): its best iterate is accepted up to
+   * `accept` and its residual reported (steps.csv). */
+  if (rc == NH_ERR_NUMERIC && isfinite(st->residual) && st->residual <= accept) {
+    nh_error_clear();
+    rc = NH_OK;
+  }
+  return rc;
+}
+
+/* The tissue's end-of-step rates of the rows for a velocity update dv (free
+ * DOFs), plus `base` (the tools' rates and g/h): out_i = base_i +
+ * n_i · Σ_a N_a (v + P dv)_a; full: 3 per node scratch. */
+static void nh_tissue_rates(const nh_system *s, const nh_rows *rows, const double *v,
+                            const double *dv, const double *base, double *full, double *out) {
+  nh_system_scatter(s, dv, full);
+  for (int i = 0; i < rows->m; i++) {
+    double rate = 0.0;
+    for (int a = 0; a < 8; a++) {
+      int node = rows->node[8 * i + a];
+      if (node < 0) continue;
+      for (int c = 0; c < 3; c++)
+        rate += rows->N[8 * i + a] * rows->dir[3 * i + c] * (v[3 * node + c] + full[3 * node + c]);
+    }
+    out[i] = base[i] + rate;
+  }
+}
+
+/* The tissue's update and the constraint forces with a reused factor (L of
+ * an earlier A₀, M = A₀ as preconditioner), exact at convergence.
+ * W₀ = J_t A₀⁻¹ J_tᵀ + W_tools is the compliance the factor gives; the true
+ * W differs in its tissue part. Each correction k solves, by PCG, the
+ * tissue's whole update for the current forces,
+ *   dv_k = A⁻¹ (b + J_tᵀ λ_k),
+ * and linearises the rates about it with the factor's compliance:
+ *   w(λ) ≈ J_t (v + dv_k) + W₀,t (λ − λ_k) + [tools' rates, exact] + g/h,
+ *   λ_{k+1} = MCP(W₀, r_k),  r_k = J_t (v + dv_k) − W₀,t λ_k + r_tools.
+ * The fixed point is the exact problem: there J_t dv = J_t A⁻¹ b + W_t λ, so
+ * w = W λ + r. The map contracts at the rate ‖W₀⁻¹ (W − W₀)‖, the size of
+ * A's change since A₀. Stop when max|λ_{k+1} − λ_k| <= tol · max|λ|: the
+ * law then holds for rates off by at most ‖W − W₀‖ · tol · max|λ|. The
+ * update is dv_k + M⁻¹ J_tᵀ (λ_{k+1} − λ_k) (the last increment, a fraction
+ * tol of the whole, needs no more than the preconditioner), which is also
+ * the start of the next correction's PCG. One correction (the usual case)
+ * costs one PCG solve and one preconditioner solve: a solve fewer than the
+ * free solve plus correction of a current factor would take with PCG.
+ * Returns 1 (not converged in NH_OUTER_MAX corrections, or a PCG or
+ * constraint solve failed: the caller factorises and solves exactly), 0, or
+ * another error code (memory). work: 2 n_free scratch, full: 3 per node scratch. */
+static int nh_corrected_step(nh_system *s, const nh_integrator *in, cholmod_sparse *Jt,
+                             nh_rows *rows, const double *Wt, const double *W,
+                             const double *r_tools, const double *b, const double *v,
+                             double tolerance, double accept, int max_iterations, double *dv,
+                             double *work, double *full, nh_coupled_stats *st) {
+  const int nf = s->n_free, m = rows->m;
+  double *bk = work, *col = work + nf;
+  double *e = nh_calloc(3 * (size_t)m, sizeof(double));
+  if (!e) return NH_ERROR(NH_ERR_MEMORY, "out of memory: constraint corrections (%d rows)", m);
+  double *rk = e, *prev = e + m, *dl = e + 2 * m;
+  int rc = 1;
+  for (int k = 0; k < NH_OUTER_MAX; k++) {
+    nh_jt_scatter(Jt, rows->lambda, bk, nf);
+    for (int i = 0; i < nf; i++) bk[i] += b[i];
+    int its = 0, prc = nh_system_pcg(s, bk, dv, k > 0, in->tolerance, NH_PCG_MAX, &its);
+    st->step.pcg_iterations += its;
+    if (prc) {
+      if (prc == NH_ERR_NUMERIC) nh_error_clear(), prc = 1;
+      rc = prc;
+      break;
+    }
+    nh_tissue_rates(s, rows, v, dv, r_tools, full, rk);
+    for (int i = 0; i < m; i++) {
+      double w0 = 0.0;
+      for (int j = 0; j < m; j++) w0 += Wt[(size_t)j * m + i] * rows->lambda[j];
+      rk[i] -= w0;
+    }
+    memcpy(prev, rows->lambda, sizeof(double) * (size_t)m);
+    st->step.corrections = k + 1;
+    if ((rc = nh_constraint_solve(m, W, rk, rows, tolerance, accept, max_iterations, &st->mcp))) {
+      /* not converged with W₀: the exact path decides (and reports) */
+      if (rc == NH_ERR_NUMERIC) nh_error_clear(), rc = 1;
+      break;
+    }
+    double delta = 0.0, scale = 0.0;
+    for (int i = 0; i < m; i++) {
+      dl[i] = rows->lambda[i] - prev[i];
+      delta = fmax(delta, fabs(dl[i]));
+      scale = fmax(scale, fabs(rows->lambda[i]));
+    }
+    nh_jt_scatter(Jt, dl, col, nf);
+    if ((rc = nh_system_solve(s, col, bk))) break;
+    for (int i = 0; i < nf; i++) dv[i] += bk[i];
+    rc = 1;
+    if (delta <= in->tolerance * scale) {
+      rc = 0;
+      break;
+    }
+  }
+  free(e);
+  return rc;
+}
+
 int nh_step_coupled(nh_system *s, const nh_integrator *in, const double *f_ext, double *u,
                     double *v, int n_tools, nh_coupled_tool *tools, nh_rows *rows, double tolerance,
                     double accept, int max_iterations, nh_coupled_stats *stats) {
@@ -164,18 +297,23 @@ int nh_step_coupled(nh_system *s, const nh_integrator *in, const double *f_ext, 
            "coupled step: hanging-node rows and tool rows cannot be combined");
   int rc = NH_OK;
   nh_tool_work *tw = nh_calloc((size_t)(n_tools > 0 ? n_tools : 1), sizeof *tw);
-  double *W = m ? nh_calloc((size_t)m * m, sizeof(double)) : NULL;
-  double *r = m ? nh_calloc((size_t)m, sizeof(double)) : NULL;
-  double *col = m ? nh_calloc((size_t)nf, sizeof(double)) : NULL;
+  /* W, its tissue part W_t and its tools' part, m x m each */
+  double *W = m ? nh_calloc(3 * (size_t)m * m, sizeof(double)) : NULL;
+  double *Wt = W ? W + (size_t)m * m : NULL, *Wtools = W ? W + 2 * (size_t)m * m : NULL;
+  double *r = m ? nh_calloc(2 * (size_t)m, sizeof(double)) : NULL; /* r, r_tools */
+  double *col = m ? nh_calloc(2 * (size_t)nf, sizeof(double)) : NULL;
   int *mark = m ? malloc(sizeof(int) * (size_t)nf) : NULL;
   cholmod_sparse *Jt = NULL;
   if (!tw || (m && (!W || !r || !col || !mark))) {
     rc = NH_ERR_MEMORY;
     goto done;
   }
+  double *r_tools = r ? r + m : NULL;
   for (int i = 0; m && i < nf; i++) mark[i] = -1;
 
-  /* 1. Factorise every block and solve the free problems. */
+  /* 1. Factorise every block (or keep the tissue's recent factor) and solve
+   * the free problems; with a reused factor and rows, the tissue's solve
+   * waits for the corrections (nh_corrected_step). */
   double t0 = nh_time_now();
   s->t_constraints = 0.0;
   nh_system_assemble(s, u, v, 1.0 + h * in->alpha, h * in->beta + h * h, f_int, Kv, in->threads);
@@ -186,11 +324,16 @@ int nh_step_coupled(nh_system *s, const nh_integrator *in, const double *f_ext, 
   nh_system_gather(s, rhs, b);
   double t1 = nh_time_now();
   st.step.t_assemble = t1 - t0;
-  if ((rc = nh_system_factor(s))) goto done;
+  if ((rc = nh_system_prepare(s, in, &st.step))) goto done;
   double t2 = nh_time_now();
-  st.step.t_factor = t2 - t1;
-  /* (hanging-node rows, if any, are enforced here: then there are no tool rows) */
-  if ((rc = nh_system_solve_constrained(s, b, dv))) goto done;
+  if (s->n_rows > 0) {
+    /* hanging-node rows (then there are no tool rows): the factor is current */
+    if ((rc = nh_system_solve_constrained(s, b, dv))) goto done;
+  } else if (m == 0 || s->factor_current) {
+    if ((rc = nh_system_solve_reuse(s, b, dv, in->tolerance, &st.step.pcg_iterations,
+                                    &st.step.t_factor)))
+      goto done;
+  }
   st.step.t_constraints = s->t_constraints;
   st.step.t_solve = nh_time_now() - t2 - s->t_constraints;
   for (int k = 0; k < n_tools; k++) {
@@ -215,13 +358,13 @@ int nh_step_coupled(nh_system *s, const nh_integrator *in, const double *f_ext, 
   }
 
   if (m > 0) {
-    /* 2. The compliance W. */
+    /* 2. The compliance W: the tools' parts (exact, dense), then the tissue's
+     * (from the factor, current or reused). */
     double tc0 = nh_time_now();
     if (!(Jt = nh_rows_tissue_jt(s, rows, mark))) {
       rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: constraint rows (%d)", m);
       goto done;
     }
-    if ((rc = nh_system_compliance_add(s, Jt, W))) goto done;
     for (int i = 0; i < m; i++) {
       int k = rows->tool[i];
       if (k < 0) continue;
@@ -254,26 +397,16 @@ int nh_step_coupled(nh_system *s, const nh_integrator *in, const double *f_ext, 
           const double *x = w->X + (size_t)c * w->mfree;
           double sum = 0.0;
           for (int q = d0 < 0 ? -d0 : 0; q < 12; q++) sum += coef[q] * x[d0 + q];
-          W[(size_t)w->rows[c] * m + i] += sum;
+          Wtools[(size_t)w->rows[c] * m + i] += sum;
         }
       }
     }
+    if ((rc = nh_tissue_compliance(s, Jt, m, Wtools, Wt, W))) goto done;
     double tc1 = nh_time_now();
     st.t_compliance = tc1 - tc0;
 
-    /* 3. Free rates r = J v_free + g/h, then λ. */
-    nh_system_scatter(s, dv, full);
-    for (int i = 0; i < m; i++) {
-      double rate = 0.0;
-      for (int a = 0; a < 8; a++) {
-        int node = rows->node[8 * i + a];
-        if (node < 0) continue;
-        for (int c = 0; c < 3; c++)
-          rate +=
-              rows->N[8 * i + a] * rows->dir[3 * i + c] * (v[3 * node + c] + full[3 * node + c]);
-      }
-      r[i] = rate + rows->gap[i] / h;
-    }
+    /* The tools' free rates and g/h: r_tools. */
+    for (int i = 0; i < m; i++) r_tools[i] = rows->gap[i] / h;
     for (int k = 0; k < n_tools; k++) {
       nh_tool_work *w = &tw[k];
       if (!w->nrows) continue;
@@ -281,29 +414,38 @@ int nh_step_coupled(nh_system *s, const nh_integrator *in, const double *f_ext, 
       memcpy(w->vnew, tools[k].base_velocity, 6 * sizeof(double));
       for (int q = 0; q < w->mfree; q++) w->vnew[6 + q] = vb[6 + q] + w->dv[q];
       for (int a = 0; a < w->nrows; a++)
-        r[w->rows[a]] += nh_row_tool_rate(rows, w->rows[a], w->vnew);
+        r_tools[w->rows[a]] += nh_row_tool_rate(rows, w->rows[a], w->vnew);
     }
-    rc = nh_mcp_solve(m, W, r, rows->law, tolerance, max_iterations, rows->lambda, &st.mcp);
-    /* Projected Gauss-Seidel can stall short of a tight tolerance on nearly
-     * dependent friction rows (a stiff needle's shaft points share the
-     * axial load in many ways): its best iterate is accepted up to
-     * `accept` and its residual reported (steps.csv). */
-    if (rc == NH_ERR_NUMERIC && isfinite(st.mcp.residual) && st.mcp.residual <= accept) {
-      nh_error_clear();
-      rc = NH_OK;
+    if (!s->factor_current) {
+      /* 3'-4'. λ and the tissue's update with the reused factor. */
+      rc = nh_corrected_step(s, in, Jt, rows, Wt, W, r_tools, b, v, tolerance, accept,
+                             max_iterations, dv, col, full, &st);
+      if (rc == 1) { /* the reused factor did not serve: factorise, solve exactly */
+        double tf = nh_time_now();
+        if ((rc = nh_system_factor(s))) goto done;
+        double tf1 = nh_time_now();
+        if ((rc = nh_system_solve(s, b, dv))) goto done;
+        st.step.t_factor += tf1 - tf;
+        st.step.t_factor_reference = tf1 - tf;
+        tc0 += tf1 - tf; /* the factorisation is not a constraint cost */
+        if ((rc = nh_tissue_compliance(s, Jt, m, Wtools, Wt, W))) goto done;
+      }
     }
     double tc2 = nh_time_now();
-    st.t_mcp = tc2 - tc1;
-    if (rc) goto done;
-
-    /* 4. Corrections A⁻¹ Jᵀ λ. */
-    memset(col, 0, sizeof(double) * (size_t)nf);
-    const int *Jp = Jt->p, *Ji = Jt->i;
-    const double *Jx = Jt->x;
-    for (int j = 0; j < m; j++)
-      for (int p = Jp[j]; p < Jp[j + 1]; p++) col[Ji[p]] += Jx[p] * rows->lambda[j];
-    if ((rc = nh_system_solve(s, col, b))) goto done;
-    for (int i = 0; i < nf; i++) dv[i] += b[i];
+    if (s->factor_current) {
+      /* 3. Free rates r = J v_free + g/h, λ from the exact W; 4. the tissue's
+       * correction A⁻¹ J_tᵀ λ. */
+      nh_tissue_rates(s, rows, v, dv, r_tools, full, r);
+      rc = nh_constraint_solve(m, W, r, rows, tolerance, accept, max_iterations, &st.mcp);
+      st.t_mcp = nh_time_now() - tc2;
+      if (rc) goto done;
+      nh_jt_scatter(Jt, rows->lambda, col, nf);
+      if ((rc = nh_system_solve(s, col, b))) goto done;
+      for (int i = 0; i < nf; i++) dv[i] += b[i];
+    } else {
+      st.t_mcp = tc2 - tc1; /* the corrections: PCG and constraint solves */
+      if (rc) goto done;
+    }
     for (int k = 0; k < n_tools; k++) {
       nh_tool_work *w = &tw[k];
       for (int a = 0; a < w->nrows; a++) {
@@ -330,8 +472,12 @@ int nh_step_coupled(nh_system *s, const nh_integrator *in, const double *f_ext, 
       goto done;
   st.step.t_solve += nh_time_now() - t6;
   st.step.iterations = 1;
+  if (in->reuse)
+    nh_system_account(s, s->factor_age == 0 ? st.step.t_factor_reference : 0.0,
+                      st.step.t_solve + st.step.t_constraints);
 
 done:
+  st.step.factorised = s->factor_age == 0;
   if (stats) *stats = st;
   cholmod_free_sparse(&Jt, &s->cm);
   for (int k = 0; tw && k < n_tools; k++) nh_tool_work_free(&tw[k]);

@@ -76,6 +76,10 @@ int nh_solve_static(nh_system *s, const nh_integrator *in, const double *f_ext, 
     stats->t_constraints = s->t_constraints;
     stats->iterations = it;
     stats->residual = rel;
+    stats->factorised = it; /* one factorisation per Newton iteration */
+    stats->pcg_iterations = stats->corrections = 0;
+    stats->t_factor_reference = it > 0 ? t_fac / it : 0.0;
+    stats->t_aside = 0.0;
   }
   if (!(rel <= in->tolerance) && rel != 0.0)
     return NH_ERROR(

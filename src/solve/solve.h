@@ -77,15 +77,29 @@ typedef struct {
   double t_constraints;                 /* s: compliance W and multipliers */
   int iterations;                       /* Newton iterations (static), 1 (dynamic) */
   double residual;                      /* relative residual reached (static) */
+  int factorised;                       /* numeric factorisations of A in the step */
+  int pcg_iterations; /* PCG iterations of the step's solves with a reused factor */
+  int corrections;    /* outer constraint corrections with a reused factor (0: exact W) */
+  /* s: one numeric factorisation of this step's A — the one done, or with
+   * nh_integrator.time_factor one done aside (and discarded) on a step that
+   * reused the factor; 0 otherwise. t_aside: the time that aside cost (copy
+   * included), excluded from the phases and to be excluded from the step. */
+  double t_factor_reference, t_aside;
 } nh_step_stats;
 
 /* Integrator settings. */
 typedef struct {
   double dt;          /* time step h, s */
   double alpha, beta; /* Rayleigh damping C = α M + β K */
-  double tolerance;   /* static: relative residual */
+  double
+      tolerance; /* static: relative residual; dynamic with reuse: each solve's (nh_system_pcg) */
   int max_iterations; /* static: Newton iterations */
   int threads;        /* assembly threads (0 = all) */
+  int reuse;          /* dynamic: 1 = reuse a recent factorisation as a preconditioner
+                         (solver.refactor: auto, docs/performance.md), 0 = factorise every step;
+                         the solves then stop at `tolerance` (relative, see nh_system_pcg) */
+  int time_factor;    /* benchmarks: also time a factorisation of A on steps that reuse one
+                         (nh_step_stats.t_factor_reference; env NH_TIME_FACTOR=1) */
 } nh_integrator;
 
 /* One backward-Euler step with one linearisation (seed Eq. 13):

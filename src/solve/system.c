@@ -44,6 +44,8 @@ void nh_system_destroy(nh_system **sys) {
   free(s->W);
   free(s->lambda_total);
   cholmod_free_factor(&s->L, &s->cm);
+  cholmod_free_factor(&s->L_aside, &s->cm);
+  for (int i = 0; i < 4; i++) free(s->pcg[i]);
   cholmod_free_dense(&s->B, &s->cm);
   cholmod_free_dense(&s->X, &s->cm);
   cholmod_free_dense(&s->Y, &s->cm);
@@ -333,8 +335,9 @@ int nh_system_create(const nh_tissue *tissue, const unsigned char *fixed, const 
   s->dof_of = malloc(sizeof(int) * 3 * (size_t)m->n_nodes);
   for (int i = 0; i < 4; i++) s->work[i] = calloc(3 * (size_t)m->n_nodes, sizeof(double));
   for (int i = 0; i < 2; i++) s->fwork[i] = calloc(3 * (size_t)m->n_nodes, sizeof(double));
+  for (int i = 0; i < 4; i++) s->pcg[i] = calloc(3 * (size_t)m->n_nodes, sizeof(double));
   if (!s->free_of || !s->dof_of || !s->work[3] || !s->work[0] || !s->work[1] || !s->work[2] ||
-      !s->fwork[0] || !s->fwork[1]) {
+      !s->fwork[0] || !s->fwork[1] || !s->pcg[0] || !s->pcg[1] || !s->pcg[2] || !s->pcg[3]) {
     rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: DOF map");
     goto fail;
   }
@@ -402,6 +405,7 @@ void nh_system_assemble(nh_system *s, const double *u, const double *v, double c
   const nh_tissue *t = s->tissue;
   const nh_mesh *m = t->mesh;
   double *Ax = s->A->x;
+  s->factor_current = 0; /* A changes: a factor of the old values is now a preconditioner */
   memset(Ax, 0, sizeof(double) * ((int *)s->A->p)[s->n_free]);
   memset(f_int, 0, sizeof(double) * 3 * (size_t)m->n_nodes);
   if (Kv) memset(Kv, 0, sizeof(double) * 3 * (size_t)m->n_nodes);

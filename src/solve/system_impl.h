@@ -30,6 +30,16 @@ struct nh_system {
   cholmod_common cm;
   cholmod_sparse *A;
   cholmod_factor *L;
+  /* Reuse across steps (reuse.c): L factorises the assembled A
+   * (factor_current), or an earlier A and serves as a preconditioner. */
+  int factor_current;
+  int factor_age;    /* steps since the factorisation (0: factorised in this step) */
+  int refactor_due;  /* the renewal rule asks for a factorisation at the next step */
+  double cycle_cost; /* s: the last factorisation and every solve since (nh_system_account) */
+  int cycle_steps;
+  double t_factor_best;    /* s: the fastest factorisation of this pattern so far */
+  cholmod_factor *L_aside; /* benchmarks: the factor timed aside (NH_TIME_FACTOR) */
+  double *pcg[4];          /* n_free each: PCG work */
 
   int *scatter; /* 576 per plain leaf (leaf order): position in A->x of K_e[r][c], -1 if not stored
                  */
@@ -52,6 +62,38 @@ struct nh_system {
   double *work[4];  /* 3 per node each */
   double *fwork[2]; /* n_free each */
 };
+
+/* Reuse of factorisations (reuse.c): a solve that misses its tolerance after
+ * NH_PCG_MAX iterations, or constraint forces after NH_OUTER_MAX corrections,
+ * factorise at once; a factor is renewed after NH_REFACTOR_MAX_AGE steps in
+ * any case. */
+enum { NH_PCG_MAX = 40, NH_OUTER_MAX = 10, NH_REFACTOR_MAX_AGE = 200 };
+
+/* After a step with reuse on: the renewal rule. t_factor: the step's
+ * factorisation of A (s; ignored if it reused), t_solves: the time of its
+ * solves (free, constraint forces, corrections). */
+void nh_system_account(nh_system *s, double t_factor, double t_solves);
+
+/* Before a step's solves, after assembly: factorise A unless in->reuse is on
+ * and the current factor may still serve (see reuse.c); the time spent is
+ * added to st->t_factor, and st->t_factor_reference (and t_aside) set.
+ * Fails as nh_system_factor. */
+int nh_system_prepare(nh_system *s, const nh_integrator *in, nh_step_stats *st);
+
+/* Solve A x = b: directly when the factor is current, else by PCG with the
+ * factor as preconditioner to `tolerance` (relative, in the M⁻¹-norm), and if
+ * that fails in NH_PCG_MAX iterations, by a new factorisation (its time added
+ * to *t_factor). iterations (may be NULL): the PCG iterations used. */
+int nh_system_solve_reuse(nh_system *s, const double *b, double *x, double tolerance,
+                          int *iterations, double *t_factor);
+
+/* PCG on A x = b preconditioned by the factor (M), started from x₀ = M⁻¹ b,
+ * or from x as given when guess != 0, stopped at √(rᵀM⁻¹r) <= tolerance ·
+ * √(bᵀx₀) (≈ √(bᵀA⁻¹b) for a good start); at most max_iterations.
+ * Fails with NH_ERR_NUMERIC (not converged, or A not positive definite
+ * along a search direction). */
+int nh_system_pcg(nh_system *s, const double *b, double *x, int guess, double tolerance,
+                  int max_iterations, int *iterations);
 
 /* W += J A⁻¹ Jᵀ (Algorithm 3) for rows given as Jᵀ (n_free x m, CSC, sorted);
  * W dense column-major m x m. A must be factorised. */

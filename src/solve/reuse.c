@@ -1,0 +1,162 @@
+/* reuse.c — solves with a recent factorisation instead of a new one per step
+ * (solver.refactor: auto; docs/performance.md, docs/theory.md §4).
+ *
+ * Consecutive dynamic steps change A = (1 + hα) M + (hβ + h²) K(R) only
+ * through the element rotations R: the Cholesky factor L₀ of an earlier
+ * A₀ = L₀ L₀ᵀ is an excellent preconditioner for the current A. A system
+ * solve is then preconditioned conjugate gradients (PCG) on A x = b with
+ * M = A₀:
+ *   x₀ = M⁻¹ b,  r = b − A x,  z = M⁻¹ r,  p = z, ...
+ * stopped when the residual's M⁻¹-norm is a fraction `tolerance` of the
+ * right-hand side's, √(rᵀ M⁻¹ r) ≤ tol √(bᵀ M⁻¹ b). Because M⁻¹A ≈ I this
+ * norm is close to the energy norm of the error, so the stop bounds the
+ * relative error of x, not only of the residual. When the check passes, the
+ * last z (already computed for it) is added to x: one step of iterative
+ * refinement for free. Each iteration costs one product with A (nh_system_apply)
+ * and one pair of triangular solves with L₀ (a fraction of a factorisation:
+ * measured in docs/performance.md).
+ *
+ * When to factorise (nh_system_prepare):
+ *   - no factor yet, or the pattern changed: a mesh change builds a new
+ *     system, whose first step factorises;
+ *   - the renewal rule of nh_system_account asks for it;
+ *   - the factor is NH_REFACTOR_MAX_AGE steps old (a schedule that bounds
+ *     drift on long quiet runs);
+ *   - hanging-node rows are enforced by multipliers (compliance.c builds
+ *     their W from the factor, exactly).
+ * A solve that still misses the tolerance after NH_PCG_MAX iterations
+ * factorises at once and solves directly (nh_system_solve_reuse), so a step
+ * never returns a less accurate answer than asked for.
+ *
+ * The constraint rows of the coupled step (coupled.c) use W₀ = J A₀⁻¹ Jᵀ from
+ * the reused factor inside an outer correction: see nh_step_coupled. */
+#include "solve/system_impl.h"
+
+#include <math.h>
+#include <string.h>
+
+static double nh_dot(const double *a, const double *b, int n) {
+  double s = 0.0;
+  for (int i = 0; i < n; i++) s += a[i] * b[i];
+  return s;
+}
+
+/* z = M⁻¹ r with the factor (old or current). */
+static int nh_precondition(nh_system *s, const double *r, double *z) {
+  return nh_system_solve(s, r, z);
+}
+
+/* Time one numeric factorisation of the current A into a copy of the factor
+ * (discarded): the reference a reused step is compared with. */
+static int nh_time_aside(nh_system *s, nh_step_stats *st) {
+  double t0 = nh_time_now();
+  if (!s->L_aside && !(s->L_aside = cholmod_copy_factor(s->L, &s->cm)))
+    return NH_ERROR(NH_ERR_MEMORY, "out of memory: a factor copy to time");
+  double t1 = nh_time_now();
+  int ok = cholmod_factorize(s->A, s->L_aside, &s->cm);
+  double t2 = nh_time_now();
+  if (!ok || s->cm.status < CHOLMOD_OK)
+    return NH_ERROR(NH_ERR_NUMERIC, "timing a factorisation failed (status %d)", s->cm.status);
+  st->t_factor_reference = t2 - t1;
+  st->t_aside += nh_time_now() - t0;
+  return NH_OK;
+}
+
+int nh_system_prepare(nh_system *s, const nh_integrator *in, nh_step_stats *st) {
+  double t0 = nh_time_now();
+  int need = !in->reuse || !s->L || s->n_rows > 0 || s->refactor_due ||
+             s->factor_age >= NH_REFACTOR_MAX_AGE;
+  if (s->factor_current) need = 0; /* already the factor of this A */
+  if (need) {
+    NH_TRY(nh_system_factor(s));
+    st->t_factor_reference = nh_time_now() - t0;
+  } else {
+    s->factor_age++;
+    if (in->time_factor) NH_TRY(nh_time_aside(s, st));
+  }
+  st->t_factor += nh_time_now() - t0 - st->t_aside;
+  return NH_OK;
+}
+
+int nh_system_pcg(nh_system *s, const double *b, double *x, int guess, double tolerance,
+                  int max_iterations, int *iterations) {
+  const int n = s->n_free;
+  double *r = s->pcg[0], *z = s->pcg[1], *p = s->pcg[2], *q = s->pcg[3];
+  *iterations = 0;
+  if (!guess) NH_TRY(nh_precondition(s, b, x));
+  double ref2 = nh_dot(b, x, n);
+  if (!(ref2 > 0.0)) { /* b = 0 (M⁻¹ is positive definite) */
+    memset(x, 0, sizeof(double) * (size_t)n);
+    return NH_OK;
+  }
+  nh_system_apply(s, x, q);
+  for (int i = 0; i < n; i++) r[i] = b[i] - q[i];
+  NH_TRY(nh_precondition(s, r, z));
+  double rz = nh_dot(r, z, n);
+  memcpy(p, z, sizeof(double) * (size_t)n);
+  for (int it = 0;; it++) {
+    if (!isfinite(rz))
+      return NH_ERROR(NH_ERR_NUMERIC, "preconditioned CG: non-finite residual at iteration %d", it);
+    if (rz <= tolerance * tolerance * ref2) {
+      /* converged: z = M⁻¹ r is one refinement step more */
+      for (int i = 0; i < n; i++) x[i] += z[i];
+      *iterations = it;
+      return NH_OK;
+    }
+    if (it == max_iterations) break;
+    nh_system_apply(s, p, q);
+    double pq = nh_dot(p, q, n);
+    if (!(pq > 0.0)) break; /* A not positive definite along p: let the caller factorise */
+    double alpha = rz / pq;
+    for (int i = 0; i < n; i++) x[i] += alpha * p[i], r[i] -= alpha * q[i];
+    NH_TRY(nh_precondition(s, r, z));
+    double rz_new = nh_dot(r, z, n);
+    double beta = rz_new / rz;
+    rz = rz_new;
+    for (int i = 0; i < n; i++) p[i] = z[i] + beta * p[i];
+    *iterations = it + 1;
+  }
+  return NH_ERROR(NH_ERR_NUMERIC,
+                  "preconditioned CG: relative residual %.3g above %.3g after %d iterations",
+                  sqrt(rz / ref2), tolerance, *iterations);
+}
+
+/* The renewal rule of a sequence of solves with slowly degrading
+ * preconditioner: with F the cost of the factorisation that opened the
+ * cycle and s_j the solve time of its j-th step, the mean cost per step of
+ * a cycle of k steps is (F + Σ_{j<=k} s_j) / k; it is least when cut at the
+ * first step whose own cost exceeds that mean (marginal above average), so
+ * the next step factorises then. F is the fastest factorisation of this
+ * pattern measured so far (robust to load spikes). A per-step cost common to both paths (W,
+ * the constraint solve, a direct solve) cancels from the comparison. The
+ * rule uses measured times: on a loaded machine the moment of renewal may
+ * move, and with it the results, within the solver tolerance; `every` is
+ * bitwise reproducible. */
+void nh_system_account(nh_system *s, double t_factor, double t_solves) {
+  if (s->factor_age == 0) {
+    /* the fastest factorisation seen: a load spike must not make reuse look cheap */
+    if (!(s->t_factor_best > 0.0) || t_factor < s->t_factor_best) s->t_factor_best = t_factor;
+    s->cycle_cost = s->t_factor_best + t_solves;
+    s->cycle_steps = 1;
+    return;
+  }
+  s->cycle_cost += t_solves;
+  s->cycle_steps++;
+  if (t_solves > s->cycle_cost / s->cycle_steps) s->refactor_due = 1;
+}
+
+int nh_system_solve_reuse(nh_system *s, const double *b, double *x, double tolerance,
+                          int *iterations, double *t_factor) {
+  if (iterations) *iterations = 0;
+  if (s->factor_current) return nh_system_solve(s, b, x);
+  int its = 0, rc = nh_system_pcg(s, b, x, 0, tolerance, NH_PCG_MAX, &its);
+  if (iterations) *iterations = its;
+  if (rc == NH_ERR_NUMERIC) { /* the old factor is too far from A: factorise now */
+    nh_error_clear();
+    double t0 = nh_time_now();
+    NH_TRY(nh_system_factor(s));
+    if (t_factor) *t_factor += nh_time_now() - t0;
+    return nh_system_solve(s, b, x);
+  }
+  return rc;
+}

@@ -1,0 +1,114 @@
+#!/usr/bin/python3
+"""Reuse of factorisations (solver.refactor: auto) against a factorisation at
+every step (solver.refactor: every), through the binary ($NH_BINARY), runs in
+$NH_WORK/reuse. Silent on success, one line per failure, exit 1.
+
+Each solve with a reused factor stops at a relative error `solver.tolerance`
+(tol, 1e-8 by default), and the constraint forces' outer correction at a
+relative change tol. Backward Euler does not amplify a perturbation of the
+state (docs/theory.md §3), so after N steps the two runs differ by at most
+about N · tol relative to the largest value compared: the bound checked
+for every probe / target / tool tip displacement and tool force, over all
+steps. The auto run must have reused (fewer factorisations than steps),
+else the comparison says nothing.
+
+Cases: the needle phantom (cases/phantom/phantom.yaml) uniform 8×4×4 and
+adaptive (hex2), 40 steps of the insertion; a shortened DBS procedure
+(cases/dbs/dbs.yaml: steps of 0.1 s, the shift ramped over 0.5 s, the
+cannula inserted at 6 cm/s from 0.5 s), 25 steps.
+"""
+import csv
+import os
+import subprocess
+import sys
+
+import numpy as np
+
+BIN = os.environ["NH_BINARY"]
+SRC = os.environ.get("NH_SOURCE_DIR", os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+WORK = os.path.join(os.environ.get("NH_WORK", "."), "reuse")
+TOL = 1e-8
+failures = []
+
+
+def fail(msg):
+    failures.append(msg)
+    print("FAIL:", msg, file=sys.stderr)
+
+
+def read(out, name):
+    path = os.path.join(out, name + ".csv")
+    if not os.path.exists(path):
+        return []
+    with open(path) as f:
+        return list(csv.DictReader(f))
+
+
+def run_both(case, scene, sets):
+    """Runs the case with solver.refactor every, then auto: their folders (None if one failed)."""
+    outs = []
+    for mode in ("every", "auto"):
+        outs.append(os.path.join(WORK, "%s-%s" % (case, mode)))
+        args = [BIN, "run", scene, "--quiet", "--out", outs[-1], "--set", "solver.refactor=" + mode]
+        p = subprocess.run(args + [w for s in sets for w in ("--set", s)], capture_output=True,
+                           text=True)
+        if p.returncode != 0:
+            fail("%s (%s): exit %d, expected 0: %s" % (case, mode, p.returncode, p.stderr.strip()))
+            return None, None
+    return outs
+
+
+def series(out):
+    """{quantity: array over steps}: probe and target positions, tool tips and forces."""
+    s = {}
+    for fname, cols in (("probes", ["x", "y", "z"]), ("targets", ["x", "y", "z"]),
+                        ("tools", ["tip_x", "tip_y", "tip_z"]),
+                        ("tools", ["axial_force", "lateral_force"])):
+        for r in read(out, fname):
+            key = "%s %s %s" % (fname, r["name"], cols[0])
+            s.setdefault(key, []).append([float(r[c]) for c in cols])
+    return {k: np.array(v) for k, v in s.items()}
+
+
+def compare(case, scene, sets):
+    every, auto = run_both(case, scene, sets)
+    if not every:
+        return
+    steps = read(auto, "steps")
+    n = len(steps)
+    fact = sum(int(float(r["factorised"])) for r in steps)
+    if not fact < n:
+        fail("%s: the auto run factorised at %d of %d steps: nothing was reused" % (case, fact, n))
+    if sum(int(float(r["factorised"])) for r in read(every, "steps")) != n:
+        fail("%s: the every run did not factorise at every step" % case)
+    a, e = series(auto), series(every)
+    if set(a) != set(e) or not a:
+        fail("%s: the runs report different quantities (%s vs %s)" % (case, sorted(a), sorted(e)))
+        return
+    for k in sorted(e):
+        if a[k].shape != e[k].shape:
+            fail("%s: %s has %s values with auto, %s with every" % (case, k, a[k].shape, e[k].shape))
+            continue
+        # displacements: relative to the motion since step 0; forces: to their largest value
+        base = e[k] - e[k][0] if "force" not in k else e[k]
+        scale = np.abs(base).max()
+        diff = np.abs(a[k] - e[k]).max()
+        bound = n * TOL * scale
+        if not diff <= bound:
+            fail("%s: %s differs by %.3g between auto and every, bound %.3g (= %d steps x %g x "
+                 "largest %.3g)" % (case, k, diff, bound, n, TOL, scale))
+
+
+def main():
+    phantom = os.path.join(SRC, "cases", "phantom", "phantom.yaml")
+    compare("phantom-uniform", phantom, ["time.steps=40"])
+    compare("phantom-adaptive", phantom,
+            ["time.steps=40", "adapt.template=hex2", "adapt.max_level=1"])
+    compare("dbs-short", os.path.join(SRC, "cases", "dbs", "dbs.yaml"),
+            ["time.step=0.1", "time.end=2.5", "tissue.buoyancy.schedule=[[0, 0], [0.5, 1]]",
+             "tools.0.motion=[{until: 0.5, speed: 0}, {until: target, speed: 0.06}]"])
+    return 1 if failures else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,182 @@
+"""The execution engine of tools/study.py: runs the variants of a study (each
+one `needlehex run` into its own folder) through dask.distributed, on a
+LocalCluster of N worker processes on this machine or on an existing
+cluster (docs/performance.md, "Studies on a cluster").
+
+    jobs = [Job(name, out, cmd), ...]
+    done = run_jobs(jobs, workers=2)              # LocalCluster of 2 workers
+    done = run_jobs(jobs, scheduler="tcp://127.0.0.1:8786")
+    done = run_jobs(jobs, workers=0)              # serial, in this process, no Dask
+
+Each variant runs in OUT.partial and is renamed to OUT once needlehex exits
+0, with OUT/run.json recording its command, wall time, host and date: a
+folder OUT with a run.json is a complete variant, anything else is not.
+With skip_complete, a variant whose OUT/run.json records the same command
+is not run again (a restart after an interruption, or a sweep grown by new
+values). A variant that fails (exit code != 0, or its worker lost more
+often than the scheduler allows, e.g. killed by the cluster) is reported
+with its reason and the others go on; run_jobs returns the results of all
+and the caller reports the failed ones. A worker killed mid-variant is
+replaced by the LocalCluster's nanny and the variant rescheduled (Dask's
+distributed.scheduler.allowed-failures, default 3); the needlehex process
+of the killed worker dies with it (PR_SET_PDEATHSIG) and only ever wrote to
+its own partial folder.
+
+Each run is single-threaded by default (OMP_NUM_THREADS=1,
+OPENBLAS_NUM_THREADS=1): N workers on N cores then do not compete for
+cores inside one run. The scheduler and LocalCluster listen on 127.0.0.1
+only. Needs Debian's python3-distributed; use /usr/bin/python3.
+"""
+import ctypes
+import json
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections import namedtuple
+
+Job = namedtuple("Job", "name out cmd")
+
+
+def _die_with_parent():
+    """In the child: receive SIGKILL when the worker process that started it dies (Linux)."""
+    try:
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+    except OSError:
+        pass
+
+
+def execute(name, out, cmd, threads=1):
+    """Runs one variant (in a worker, or in this process): needlehex into OUT.partial, then
+    renamed to OUT. Returns its run.json record; raises RuntimeError on a non-zero exit."""
+    part = out + ".partial"
+    shutil.rmtree(part, ignore_errors=True)
+    os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
+    env = dict(os.environ, OMP_NUM_THREADS=str(threads), OPENBLAS_NUM_THREADS=str(threads))
+    argv = list(cmd) + ["--out", part]
+    t0 = time.time()
+    p = subprocess.run(argv, env=env, capture_output=True, text=True, preexec_fn=_die_with_parent)
+    wall = time.time() - t0
+    if p.returncode != 0:
+        tail = (p.stderr or p.stdout).strip().splitlines()[-3:]
+        raise RuntimeError("needlehex exit %d: %s" % (p.returncode, " / ".join(tail)))
+    info = {"cmd": list(cmd), "wall": wall, "host": socket.gethostname(), "pid": os.getpid(),
+            "date": time.strftime("%Y-%m-%d %H:%M:%S")}
+    with open(os.path.join(part, "run.json"), "w") as f:
+        json.dump(info, f)
+    shutil.rmtree(out, ignore_errors=True)
+    os.replace(part, out)
+    return info
+
+
+def complete(job, same_command=True):
+    """The run.json record of a complete variant (with the same command), else None."""
+    try:
+        with open(os.path.join(job.out, "run.json")) as f:
+            info = json.load(f)
+    except (OSError, ValueError):
+        return None
+    return info if not same_command or info.get("cmd") == list(job.cmd) else None
+
+
+class Progress:
+    """One line per finished variant on stderr: count, name, wall time, failures so far."""
+
+    def __init__(self, total, quiet=False):
+        self.total, self.done, self.failed, self.quiet, self.t0 = total, 0, 0, quiet, time.time()
+
+    def update(self, name, info=None, error=None):
+        self.done += 1
+        self.failed += error is not None
+        if self.quiet:
+            return
+        width = 24
+        bar = "#" * (width * self.done // max(self.total, 1))
+        what = ("FAILED: %s" % error) if error else ("%.1f s" % info["wall"])
+        print("[%-*s] %d/%d %s %s (%.0f s elapsed, %d failed)" % (
+            width, bar, self.done, self.total, name, what, time.time() - self.t0, self.failed),
+            file=sys.stderr, flush=True)
+
+
+def _client(workers, scheduler):
+    from distributed import Client, LocalCluster
+    if scheduler:
+        client = Client(scheduler)
+        client.upload_file(os.path.abspath(__file__))  # the workers import `execute` from it
+        return client, None
+    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                           host="127.0.0.1", dashboard_address=None, silence_logs=40)
+    return Client(cluster), cluster
+
+
+def run_jobs(jobs, workers=1, scheduler=None, skip_complete=False, same_command=True, threads=1,
+             quiet=False):
+    """Runs every job; returns ({name: run.json record}, {name: reason}) for the complete and the
+    failed ones. workers = 0 runs them one after another in this process (no Dask).
+    skip_complete: a job already complete in its folder (with the same command, unless
+    same_command is False) is not run again."""
+    done, failed, todo = {}, {}, []
+    for j in jobs:
+        info = complete(j, same_command) if skip_complete else None
+        if info is not None:
+            done[j.name] = dict(info, skipped=True)
+        else:
+            todo.append(j)
+    if skip_complete and done and not quiet:
+        print("%d of %d variants already complete: skipped" % (len(done), len(jobs)),
+              file=sys.stderr)
+    bar = Progress(len(todo), quiet)
+    if not todo:
+        return done, failed
+    if workers == 0 and not scheduler:
+        for j in todo:
+            try:
+                done[j.name] = execute(j.name, j.out, j.cmd, threads)
+                bar.update(j.name, done[j.name])
+            except RuntimeError as e:
+                failed[j.name] = str(e)
+                bar.update(j.name, error=str(e))
+        return done, failed
+    from distributed import as_completed
+    client, cluster = _client(workers, scheduler)
+    try:
+        futures = {client.submit(execute, j.name, j.out, j.cmd, threads, key="variant-%s-%s" % (
+            j.name, os.urandom(4).hex()), pure=False): j for j in todo}
+        for fut in as_completed(futures):
+            j = futures[fut]
+            try:
+                done[j.name] = fut.result()
+                bar.update(j.name, done[j.name])
+            except Exception as e:  # needlehex failed, or the worker was lost (KilledWorker)
+                reason = "%s: %s" % (type(e).__name__, e)
+                failed[j.name] = reason
+                bar.update(j.name, error=reason)
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    return done, failed
+
+
+def report_failures(failed):
+    """Prints the failed variants; returns the exit status (1 if any failed)."""
+    for name in sorted(failed):
+        print("variant %s failed: %s" % (name, failed[name]), file=sys.stderr)
+    return 1 if failed else 0
+
+
+def add_arguments(ap, default_workers):
+    """The engine's command-line options."""
+    g = ap.add_argument_group("execution (dask.distributed)")
+    g.add_argument("--workers", type=int, default=default_workers,
+                   help="LocalCluster worker processes (0: serial, no Dask; default: the cores "
+                   "for a sweep, 1 for the timing studies)")
+    g.add_argument("--scheduler", default=None,
+                   help="an existing Dask scheduler, tcp://HOST:PORT, instead of a LocalCluster")
+    g.add_argument("--threads", type=int, default=1,
+                   help="OpenMP/BLAS threads per run (default 1)")
+    g.add_argument("--restart", action="store_true",
+                   help="skip variants already complete in OUT (same command)")
