@@ -16,6 +16,10 @@ int nh_system_factor(nh_system *s) {
     s->L = cholmod_analyze(s->A, &s->cm);
     if (!s->L || s->cm.status < CHOLMOD_OK)
       return NH_ERROR(NH_ERR_NUMERIC, "CHOLMOD symbolic analysis failed (status %d)", s->cm.status);
+    /* operation counts for the renewal rule (reuse.c): the analysis reports
+     * the factorisation's flops and nnz(L); A is stored as one triangle */
+    s->flops_factor = s->cm.fl;
+    s->flops_iteration = 4.0 * s->cm.lnz + 4.0 * (double)cholmod_nnz(s->A, &s->cm);
   }
   s->W_valid = 0; /* the compliance belongs to the previous A */
   s->factor_current = 0;

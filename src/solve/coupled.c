@@ -472,9 +472,7 @@ int nh_step_coupled(nh_system *s, const nh_integrator *in, const double *f_ext, 
       goto done;
   st.step.t_solve += nh_time_now() - t6;
   st.step.iterations = 1;
-  if (in->reuse)
-    nh_system_account(s, s->factor_age == 0 ? st.step.t_factor_reference : 0.0,
-                      st.step.t_solve + st.step.t_constraints);
+  if (in->reuse) nh_system_account(s, st.step.pcg_iterations);
 
 done:
   st.step.factorised = s->factor_age == 0;

@@ -123,26 +123,30 @@ int nh_system_pcg(nh_system *s, const double *b, double *x, int guess, double to
 
 /* The renewal rule of a sequence of solves with slowly degrading
  * preconditioner: with F the cost of the factorisation that opened the
- * cycle and s_j the solve time of its j-th step, the mean cost per step of
- * a cycle of k steps is (F + Σ_{j<=k} s_j) / k; it is least when cut at the
- * first step whose own cost exceeds that mean (marginal above average), so
- * the next step factorises then. F is the fastest factorisation of this
- * pattern measured so far (robust to load spikes). A per-step cost common to both paths (W,
- * the constraint solve, a direct solve) cancels from the comparison. The
- * rule uses measured times: on a loaded machine the moment of renewal may
- * move, and with it the results, within the solver tolerance; `every` is
- * bitwise reproducible. */
-void nh_system_account(nh_system *s, double t_factor, double t_solves) {
+ * cycle and e_j the extra cost of the j-th step's solves with the reused
+ * factor, the mean cost per step of a cycle of k steps is
+ * (F + Σ_{j<=k} e_j) / k; it is least when cut at the first step whose own
+ * extra cost exceeds that mean (marginal above average), so the next step
+ * factorises then. A per-step cost common to both paths (W, the constraint
+ * solve, one pair of triangular solves) cancels from the comparison.
+ *
+ * Costs are operation counts, not measured times, so the moment of renewal,
+ * and with it every result, is the same on a loaded and an idle machine:
+ * F is CHOLMOD's flop count of the factorisation, e_j = its PCG iterations
+ * × the flops of one iteration (two triangular solves with L, one product
+ * with A) × NH_SOLVE_FLOP_COST, the time of a solve's flop relative to a
+ * factorisation's (triangular solves stream L from memory, the supernodal
+ * factorisation runs in dense BLAS-3 blocks: docs/performance.md). */
+void nh_system_account(nh_system *s, int pcg_iterations) {
+  double extra = (double)pcg_iterations * s->flops_iteration * NH_SOLVE_FLOP_COST;
   if (s->factor_age == 0) {
-    /* the fastest factorisation seen: a load spike must not make reuse look cheap */
-    if (!(s->t_factor_best > 0.0) || t_factor < s->t_factor_best) s->t_factor_best = t_factor;
-    s->cycle_cost = s->t_factor_best + t_solves;
+    s->cycle_cost = s->flops_factor;
     s->cycle_steps = 1;
     return;
   }
-  s->cycle_cost += t_solves;
+  s->cycle_cost += extra;
   s->cycle_steps++;
-  if (t_solves > s->cycle_cost / s->cycle_steps) s->refactor_due = 1;
+  if (extra > s->cycle_cost / s->cycle_steps) s->refactor_due = 1;
 }
 
 int nh_system_solve_reuse(nh_system *s, const double *b, double *x, double tolerance,

@@ -33,11 +33,12 @@ struct nh_system {
   /* Reuse across steps (reuse.c): L factorises the assembled A
    * (factor_current), or an earlier A and serves as a preconditioner. */
   int factor_current;
-  int factor_age;    /* steps since the factorisation (0: factorised in this step) */
-  int refactor_due;  /* the renewal rule asks for a factorisation at the next step */
-  double cycle_cost; /* s: the last factorisation and every solve since (nh_system_account) */
-  int cycle_steps;
-  double t_factor_best;    /* s: the fastest factorisation of this pattern so far */
+  int factor_age;          /* steps since the factorisation (0: factorised in this step) */
+  int refactor_due;        /* the renewal rule asks for a factorisation at the next step */
+  double cycle_cost;       /* flops: the last factorisation and the reuse's extra solves since */
+  int cycle_steps;         /* steps of the cycle (nh_system_account) */
+  double flops_factor;     /* one numeric factorisation (CHOLMOD's count at analysis) */
+  double flops_iteration;  /* one PCG iteration: two triangular solves and a product with A */
   cholmod_factor *L_aside; /* benchmarks: the factor timed aside (NH_TIME_FACTOR) */
   double *pcg[4];          /* n_free each: PCG work */
 
@@ -69,10 +70,16 @@ struct nh_system {
  * any case. */
 enum { NH_PCG_MAX = 40, NH_OUTER_MAX = 10, NH_REFACTOR_MAX_AGE = 200 };
 
-/* After a step with reuse on: the renewal rule. t_factor: the step's
- * factorisation of A (s; ignored if it reused), t_solves: the time of its
- * solves (free, constraint forces, corrections). */
-void nh_system_account(nh_system *s, double t_factor, double t_solves);
+/* The time of one flop of a triangular solve or sparse product relative to
+ * one flop of CHOLMOD's supernodal factorisation: measured 14 on the needle
+ * phantom at 4131 DOFs and 36 at 28611 (docs/performance.md); the mean cost
+ * of a cycle is flat near its optimum, so one value between serves both. */
+#define NH_SOLVE_FLOP_COST 20.0
+
+/* After a step with reuse on: the renewal rule, by operation counts.
+ * pcg_iterations: the step's PCG iterations with the reused factor (0 on a
+ * step that factorised). */
+void nh_system_account(nh_system *s, int pcg_iterations);
 
 /* Before a step's solves, after assembly: factorise A unless in->reuse is on
  * and the current factor may still serve (see reuse.c); the time spent is
