@@ -75,7 +75,11 @@ void nh_sim_destroy(nh_sim **sim) {
   nh_csv_destroy(&s->probes_csv);
   nh_pvd_destroy(&s->tissue_pvd);
   nh_pvd_destroy(&s->points_pvd);
-  nh_h5_close(&s->h5);
+  if (s->h5) { /* a run that failed: keep its rows if the disk allows, and its message */
+    char reason[1024];
+    snprintf(reason, sizeof reason, "%s", nh_error_message());
+    if (nh_h5_close(&s->h5)) nh_error_set(NH_ERR_IO, __FILE__, __LINE__, "%s", reason);
+  }
   free(s);
   *sim = NULL;
 }
@@ -469,6 +473,13 @@ static int nh_sim_refine(nh_sim *s) {
   return NH_OK;
 }
 
+/* The outputs of step `step` failed (disk full, folder not writable): the
+ * message names the step before the writer's reason (exit 1). */
+static int nh_output_failed(int rc, int step) {
+  char reason[1024];
+  snprintf(reason, sizeof reason, "%s", nh_error_message());
+  return NH_ERROR(rc, "step %d: writing the outputs failed: %s", step, reason);
+}
 int nh_sim_create(const nh_scene *scene, const nh_sim_options *options, nh_sim **out) {
   *out = NULL;
   nh_sim *s = nh_calloc(1, sizeof *s);
@@ -476,7 +487,8 @@ int nh_sim_create(const nh_scene *scene, const nh_sim_options *options, nh_sim *
   s->scene = scene;
   if (options) s->options = *options;
   int rc = nh_sim_build(s);
-  if (!rc && !s->options.dry_run) rc = nh_open_outputs(s);
+  if (!rc && !s->options.dry_run && (rc = nh_open_outputs(s)) == NH_ERR_IO)
+    rc = nh_output_failed(rc, s->step);
   if (rc) {
     nh_sim_destroy(&s);
     return rc;
@@ -486,6 +498,12 @@ int nh_sim_create(const nh_scene *scene, const nh_sim_options *options, nh_sim *
 }
 
 /* ---- stepping ---- */
+
+#define NH_TRY_OUTPUT(expr, step)                                                                  \
+  do {                                                                                             \
+    int nh_out_rc_ = (expr);                                                                       \
+    if (nh_out_rc_) return nh_output_failed(nh_out_rc_, (step));                                   \
+  } while (0)
 
 int nh_sim_step(nh_sim *s) {
   const nh_scene *sc = s->scene;
@@ -535,8 +553,8 @@ int nh_sim_step(nh_sim *s) {
   if (!s->options.dry_run) {
     int due =
         (sc->output.every > 0 && s->step % sc->output.every == 0) || s->step == sc->time.steps;
-    NH_TRY(nh_write_probe_rows(s));
-    if (due && s->last_frame != s->step) NH_TRY(nh_write_frame(s));
+    NH_TRY_OUTPUT(nh_write_probe_rows(s), s->step);
+    if (due && s->last_frame != s->step) NH_TRY_OUTPUT(nh_write_frame(s), s->step);
   }
   double t2 = nh_time_now();
   /* A failed refinement still leaves this step's row (written below). */
@@ -548,7 +566,7 @@ int nh_sim_step(nh_sim *s) {
   /* A checkpoint holds the state the next step starts from: after refinement. */
   if (!refine_rc && !s->options.dry_run && sc->output.checkpoint > 0 &&
       s->step % sc->output.checkpoint == 0)
-    NH_TRY(nh_checkpoint_write(s));
+    NH_TRY_OUTPUT(nh_checkpoint_write(s), s->step);
   double t_checkpoint = nh_time_now() - t3; /* counted as output */
   t3 += t_checkpoint;
   double *pt = s->phase_times + NH_PHASES * (size_t)(s->step - 1);
@@ -588,13 +606,14 @@ int nh_sim_step(nh_sim *s) {
                         cs->t_mcp};
   enum { NH_STEP_COLUMNS = sizeof nh_step_columns / sizeof *nh_step_columns };
   _Static_assert(sizeof row / sizeof *row == NH_STEP_COLUMNS, "one value per steps.csv column");
-  if (!s->options.dry_run) NH_TRY(nh_csv_values(s->steps_csv, NH_STEP_COLUMNS, row));
+  if (!s->options.dry_run)
+    NH_TRY_OUTPUT(nh_csv_values(s->steps_csv, NH_STEP_COLUMNS, row), s->step);
   if (s->h5) {
-    NH_TRY(nh_h5_append_steps(s->h5, row));
+    NH_TRY_OUTPUT(nh_h5_append_steps(s->h5, row), s->step);
     /* The checkpoint of this step is on disk: so must be its rows. */
     if (!refine_rc && !s->options.dry_run && sc->output.checkpoint > 0 &&
         s->step % sc->output.checkpoint == 0)
-      NH_TRY(nh_h5_flush(s->h5));
+      NH_TRY_OUTPUT(nh_h5_flush(s->h5), s->step);
   }
   /* The scene was validated at creation: nothing refinement meets later is
    * the scene's fault (exit 1, not 2). */
@@ -629,6 +648,9 @@ int nh_sim_run(nh_sim *s) {
       break;
     }
   }
+  /* results.h5 holds the rows since its last frame in memory: writing them
+   * is an output like any other, and can fail like any other. */
+  if (!rc && s->h5 && (rc = nh_h5_close(&s->h5))) rc = nh_output_failed(rc, s->step);
   if (s->options.progress) nh_progress_finish(s);
   return rc;
 }
