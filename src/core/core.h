@@ -29,7 +29,12 @@ typedef enum {
  * source location, kept for debugging (NH_DEBUG_ERRORS=1 prints them). */
 int nh_error_set(int code, const char *src_file, int src_line, const char *fmt, ...)
     __attribute__((format(printf, 4, 5)));
-/* The last recorded message ("" if none). */
+/* Copy `text` to `out` (`size` bytes, NUL-terminated) with every control
+ * byte (below 0x20, and 0x7f) written as \n, \t, \r or \xNN: what every
+ * message and warning goes through, so input bytes echoed in it can neither
+ * break the line nor drive the terminal. Truncates, never mid-escape. */
+void nh_escape_control(char *out, size_t size, const char *text);
+/* The last recorded message ("" if none; one line, no control byte). */
 const char *nh_error_message(void);
 /* Forget the last message. */
 void nh_error_clear(void);
