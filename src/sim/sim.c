@@ -435,7 +435,7 @@ static int nh_sim_build(nh_sim *s) {
   s->probe_xi = malloc(sizeof(double) * 3 * (size_t)(n_points ? n_points : 1));
   if (!s->u || !s->v || !s->probe_cell || !s->probe_xi)
     return NH_ERROR(NH_ERR_MEMORY, "out of memory building the model (%d nodes)", nn);
-  if (sc->adapt.enabled) NH_TRY(nh_adapt_create(&sc->adapt, &s->adapt));
+  if (sc->adapt.enabled) NH_TRY(nh_adapt_create(&sc->adapt, sc->limits.max_cells, &s->adapt));
   NH_TRY(nh_sim_setup_mesh(s, 1));
   NH_TRY(nh_sim_tools_build(s));
   s->integrator = (nh_integrator){.dt = sc->time.step,
