@@ -1180,14 +1180,33 @@ static int read_adapt(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
 }
 
 static int read_solver(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
-  static const char *const keys[] = {"tolerance", "max_iterations", "threads", NULL};
-  const nh_yaml_node *m, *at;
+  static const char *const keys[] = {"tolerance",  "max_iterations", "threads",
+                                     "on_invalid", "newton",         NULL};
+  static const char *const newton_keys[] = {"max_iterations", "tolerance", NULL};
+  static const char *const on_invalid[] = {"stop", "warn", NULL};
+  const nh_yaml_node *m, *at, *newton;
   s->solver.tolerance = 1e-8;
   s->solver.max_iterations = 30;
   s->solver.threads = 0;
+  s->solver.on_invalid_warn = 0;
+  s->solver.newton_iterations = 0;
+  s->solver.newton_tolerance = 1e-8;
   NH_TRY(section(c, root, "", "solver", 0, &m));
   if (!m) return NH_OK;
   NH_TRY(check_keys(c, m, "solver", keys));
+  NH_TRY(field(c, m, "solver", "on_invalid", 0, &at));
+  if (at) NH_TRY(as_choice(c, at, "solver.on_invalid", on_invalid, &s->solver.on_invalid_warn));
+  NH_TRY(section(c, m, "solver", "newton", 0, &newton));
+  if (newton) {
+    NH_TRY(check_keys(c, newton, "solver.newton", newton_keys));
+    s->solver.newton_iterations = 5;
+    NH_TRY(
+        get_int(c, newton, "solver.newton", "max_iterations", &s->solver.newton_iterations, &at));
+    NH_TRY(at_least(c, at, "solver.newton", "max_iterations", s->solver.newton_iterations, 0, 0));
+    NH_TRY(
+        get_number(c, newton, "solver.newton", "tolerance", 0, &s->solver.newton_tolerance, &at));
+    NH_TRY(at_least(c, at, "solver.newton", "tolerance", s->solver.newton_tolerance, 0, 1));
+  }
   NH_TRY(get_number(c, m, "solver", "tolerance", 0, &s->solver.tolerance, &at));
   NH_TRY(at_least(c, at, "solver", "tolerance", s->solver.tolerance, 0, 1));
   NH_TRY(get_int(c, m, "solver", "max_iterations", &s->solver.max_iterations, &at));

@@ -210,9 +210,12 @@ typedef struct nh_scene {
   } tissue;
 
   struct {
-    double tolerance;   /* solver.tolerance: static Newton relative residual (default 1e-8) */
-    int max_iterations; /* solver.max_iterations: static Newton (default 30) */
-    int threads;        /* solver.threads: OpenMP threads, 0 = all cores (default 0) */
+    double tolerance;        /* solver.tolerance: static Newton relative residual (default 1e-8) */
+    int max_iterations;      /* solver.max_iterations: static Newton (default 30) */
+    int threads;             /* solver.threads: OpenMP threads, 0 = all cores (default 0) */
+    int on_invalid_warn;     /* solver.on_invalid: stop (0, default) | warn (1) */
+    int newton_iterations;   /* solver.newton.max_iterations (dynamic; default 0: none) */
+    double newton_tolerance; /* solver.newton.tolerance (default 1e-8) */
   } solver;
 
   nh_adapt_spec adapt;

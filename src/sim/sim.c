@@ -49,7 +49,8 @@ static const char *const nh_step_columns[] = {"step",
                                               "cut",
                                               "path_points",
                                               "t_compliance",
-                                              "t_mcp"};
+                                              "t_mcp",
+                                              "inverted"};
 static const char *const nh_probe_columns[] = {"step", "time", "name", "x", "y",
                                                "z",    "ux",   "uy",   "uz"};
 
@@ -64,6 +65,7 @@ void nh_sim_destroy(nh_sim **sim) {
   free(s->u);
   free(s->x);
   free(s->v);
+  free(s->u_start);
   free(s->f_ext);
   free(s->load_unit);
   free(s->probe_cell);
@@ -353,6 +355,7 @@ static int nh_sim_setup_mesh(nh_sim *s, int first) {
   s->fixed = fixed;
   memset(s->fixed, 0, (size_t)nn);
   NH_TRY(nh_resize(&s->x, nn, 3));
+  NH_TRY(nh_resize(&s->u_start, nn, 3));
   NH_TRY(nh_resize(&s->f_ext, nn, 3));
   NH_TRY(nh_resize(&s->load_unit, nn, 3 * (sc->tissue.n_loads ? sc->tissue.n_loads : 1)));
   for (int r = 0; r < sc->tissue.n_fixed; r++) {
@@ -443,7 +446,9 @@ static int nh_sim_build(nh_sim *s) {
                                   .beta = sc->tissue.damping_stiffness,
                                   .tolerance = sc->solver.tolerance,
                                   .max_iterations = sc->solver.max_iterations,
-                                  .threads = sc->solver.threads};
+                                  .threads = sc->solver.threads,
+                                  .newton_iterations = sc->solver.newton_iterations,
+                                  .newton_tolerance = sc->solver.newton_tolerance};
   s->cap_steps = sc->time.steps > s->step ? sc->time.steps : s->step + 1;
   s->phase_times =
       calloc((size_t)NH_PHASES * (size_t)(s->cap_steps ? s->cap_steps : 1), sizeof(double));
@@ -518,11 +523,13 @@ int nh_sim_step(nh_sim *s) {
   double t_new = (s->step + 1) * sc->time.step;
   nh_sim_external_force(s, t_new, s->f_ext);
   nh_step_stats st = {0};
+  memcpy(s->u_start, s->u, sizeof(double) * 3 * (size_t)s->mesh->n_nodes);
   int rc = s->contact ? nh_contact_step(s->contact, s->system, &s->integrator, s->mesh, s->f_ext,
                                         s->u, s->v, t_new, &st)
            : sc->time.mode == NH_MODE_STATIC
                ? nh_solve_static(s->system, &s->integrator, s->f_ext, s->u, &st)
                : nh_step_dynamic(s->system, &s->integrator, s->f_ext, s->u, s->v, &st);
+  if (!rc) NH_TRY(nh_sim_guard(s, s->u_start)); /* its message names the step */
   int adapt_now = !rc && sc->adapt.enabled && (s->step + 1) % sc->adapt.every == 0;
   double ta = nh_time_now();
   s->eta = s->eta_rel = NAN; /* nan in steps.csv: not estimated at this step */
@@ -603,7 +610,8 @@ int nh_sim_step(nh_sim *s) {
                         cc.cut,
                         cc.path_points,
                         cs->t_compliance,
-                        cs->t_mcp};
+                        cs->t_mcp,
+                        s->inverted};
   enum { NH_STEP_COLUMNS = sizeof nh_step_columns / sizeof *nh_step_columns };
   _Static_assert(sizeof row / sizeof *row == NH_STEP_COLUMNS, "one value per steps.csv column");
   if (!s->options.dry_run)

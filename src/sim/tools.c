@@ -14,6 +14,53 @@ static const char *const nh_tool_columns[] = {"step",          "time",  "name", 
                                               "lateral_force", "state"};
 static const char *const nh_target_columns[] = {"step", "time", "name", "x", "y", "z", "distance"};
 
+/* How far the tool's motion has advanced it along its axis at time t. */
+static double nh_tool_advance(const nh_tool_spec *tool, double t) {
+  double p = 0.0, start = 0.0;
+  for (int k = 0; k < tool->n_motion && start < t; k++) {
+    p += tool->motion[k].speed * (fmin(t, tool->motion[k].until) - start);
+    start = tool->motion[k].until;
+  }
+  return p;
+}
+
+/* A tool that travels more than a cell per step jumps over the tissue its
+ * constraints should meet: a warning when one step moves it by more than
+ * the smallest grid cell edge, exit 2 when by more than the tissue's whole
+ * extent (nothing of the insertion would be resolved). `check` says so too. */
+static int nh_sim_tools_check_travel(const nh_sim *s) {
+  const nh_scene *sc = s->scene;
+  const nh_mesh *m = s->mesh;
+  double cell = INFINITY, extent = 0.0;
+  for (int k = 0; k < 3; k++) {
+    cell = fmin(cell, m->spacing[k]);
+    extent = fmax(extent, m->spacing[k] * m->grid[k]);
+  }
+  for (int t = 0; t < sc->n_tools; t++) {
+    const nh_tool_spec *tool = &sc->tools[t];
+    double fastest = 0.0, travel = 0.0, h = sc->time.step;
+    for (int k = 0; k < tool->n_motion; k++) fastest = fmax(fastest, fabs(tool->motion[k].speed));
+    /* The largest |p(t + h) − p(t)|: piecewise linear in t, so at a breakpoint. */
+    for (int k = -1; k < tool->n_motion; k++)
+      for (int side = 0; side < 2; side++) {
+        double t = k < 0 ? 0.0 : tool->motion[k].until - side * h;
+        if (t >= 0.0)
+          travel = fmax(travel, fabs(nh_tool_advance(tool, t + h) - nh_tool_advance(tool, t)));
+      }
+    NH_CHECK(!(travel > extent), NH_ERR_INPUT,
+             "%s: moves up to %.3g m in one step (speeds up to %g m/s, time.step %g s), more "
+             "than the tissue's extent (%.3g m): the insertion cannot be resolved; reduce "
+             "time.step",
+             tool->where, travel, fastest, sc->time.step, extent);
+    if (travel > cell)
+      nh_log_warn("%s: moves up to %.3g m in one step (speeds up to %g m/s, time.step %g s), "
+                  "more than a grid cell (%.3g m): contacts and the cut are resolved only every "
+                  "%.1f cells; reduce time.step below %.3g s",
+                  tool->where, travel, fastest, sc->time.step, cell, travel / cell, cell / fastest);
+  }
+  return NH_OK;
+}
+
 int nh_sim_tools_build(nh_sim *s) {
   const nh_scene *sc = s->scene;
   if (sc->n_tools == 0) return NH_OK;
@@ -27,6 +74,7 @@ int nh_sim_tools_build(nh_sim *s) {
            "%s: restarting a run with tools is not supported yet (the checkpoint holds no tool "
            "state): run it again from the start",
            sc->tools[0].where);
+  NH_TRY(nh_sim_tools_check_travel(s));
   NH_TRY(nh_contact_create(sc, s->mesh, &s->contact));
   s->tool_pvd = nh_calloc((size_t)sc->n_tools, sizeof *s->tool_pvd);
   if (!s->tool_pvd) return NH_ERROR(NH_ERR_MEMORY, "out of memory: tools");
