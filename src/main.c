@@ -38,7 +38,8 @@ static const char *nh_usage =
     "  --restart DIR      continue the run whose outputs (and checkpoint.nhc) are in DIR\n"
     "  --quiet            no progress line and no summary\n"
     "\n"
-    "SIGINT / SIGTERM stop a run after the current step with a final frame and a checkpoint.\n"
+    "SIGINT / SIGTERM stop a run within a second, at its last complete step, with a final frame\n"
+    "and a checkpoint.\n"
     "\n"
     "exit status: 0 success, 1 simulation failed, 2 bad scene or arguments\n";
 

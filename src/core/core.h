@@ -58,6 +58,17 @@ void *nh_calloc(size_t n, size_t size);
  * Returns NH_OK or NH_ERR_MEMORY (the old block is kept on failure). */
 int nh_grow(void **ptr, int *capacity, int need, size_t size);
 
+/* ---- stop requests (SIGINT, SIGTERM) ----
+ * A signal handler records the request (async-signal-safe); the long loops
+ * (assembly colours, compliance columns, constraint sweeps, Newton
+ * iterations) poll it and return NH_ERR_INTERRUPTED ("interrupted"), so a
+ * step stops within a fraction of a second instead of at its end. */
+void nh_stop_request(int signal_number);
+/* The signal that asked to stop (0: none). */
+int nh_stop_requested(void);
+/* NH_ERR_INTERRUPTED with a message if a stop was requested, else NH_OK. */
+int nh_stop_check(void);
+
 /* ---- logging ---- */
 typedef enum { NH_LOG_QUIET = 0, NH_LOG_INFO = 1, NH_LOG_DEBUG = 2 } nh_log_level;
 void nh_log_set_level(nh_log_level level);

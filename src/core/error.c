@@ -9,6 +9,7 @@
  * as \n, \t, \r or \xNN. */
 #include "core/core.h"
 
+#include <signal.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -55,6 +56,21 @@ const char *nh_error_message(void) {
 
 void nh_error_clear(void) {
   nh_message[0] = '\0';
+}
+
+static volatile sig_atomic_t nh_stop_signal = 0;
+
+void nh_stop_request(int signal_number) {
+  nh_stop_signal = signal_number ? signal_number : SIGTERM;
+}
+
+int nh_stop_requested(void) {
+  return (int)nh_stop_signal;
+}
+
+int nh_stop_check(void) {
+  if (!nh_stop_signal) return NH_OK;
+  return NH_ERROR(NH_ERR_INTERRUPTED, "interrupted by signal %d", (int)nh_stop_signal);
 }
 
 int nh_error_exit_status(int code) {

@@ -148,13 +148,14 @@ static int nh_cmp_double(const void *a, const void *b) {
 
 void nh_sim_median_times(const nh_sim *s, double t[7]) {
   for (int p = 0; p < NH_PHASES; p++) t[p] = 0.0;
-  if (s->step == 0) return;
-  double *buf = malloc(sizeof(double) * (size_t)s->step);
+  const int first = s->first_step, n = s->step - first; /* steps this process timed */
+  if (n <= 0) return;
+  double *buf = malloc(sizeof(double) * (size_t)n);
   if (!buf) return;
   for (int p = 0; p < NH_PHASES; p++) {
-    for (int k = 0; k < s->step; k++) buf[k] = s->phase_times[NH_PHASES * k + p];
-    qsort(buf, (size_t)s->step, sizeof(double), nh_cmp_double);
-    t[p] = s->step % 2 ? buf[s->step / 2] : 0.5 * (buf[s->step / 2 - 1] + buf[s->step / 2]);
+    for (int k = 0; k < n; k++) buf[k] = s->phase_times[NH_PHASES * (first + k) + p];
+    qsort(buf, (size_t)n, sizeof(double), nh_cmp_double);
+    t[p] = n % 2 ? buf[n / 2] : 0.5 * (buf[n / 2 - 1] + buf[n / 2]);
   }
   free(buf);
 }
@@ -421,7 +422,7 @@ static int nh_sim_build(nh_sim *s) {
     s->mesh = ck.mesh;
     s->u = ck.u;
     s->v = ck.v;
-    s->step = ck.step;
+    s->step = s->first_step = ck.step;
     s->time = ck.time;
   } else {
     nh_domain domain;
@@ -631,28 +632,42 @@ int nh_sim_step(nh_sim *s) {
   return NH_OK;
 }
 
-static volatile sig_atomic_t nh_stop_signal = 0;
-
 void nh_sim_request_stop(int signal_number) {
-  nh_stop_signal = signal_number ? signal_number : SIGTERM;
+  nh_stop_request(signal_number);
 }
 
 int nh_sim_run(nh_sim *s) {
   if (s->options.progress) nh_progress_start(s);
   int rc = NH_OK;
   while (s->step < s->scene->time.steps) {
-    if ((rc = nh_sim_step(s))) break;
-    if (s->options.progress) nh_progress_update(s);
-    if (nh_stop_signal && s->step < s->scene->time.steps) {
+    /* A step interrupted inside (nh_stop_check in its long loops) left the
+     * state of the last complete step: u is restored, v not yet updated. */
+    int during = 0;
+    if ((rc = nh_sim_step(s))) {
+      if (rc != NH_ERR_INTERRUPTED || !nh_stop_requested()) break;
+      memcpy(s->u, s->u_start, sizeof(double) * 3 * (size_t)s->mesh->n_nodes);
+      nh_error_clear();
+      rc = NH_OK;
+      during = 1;
+    }
+    if (s->options.progress && !during) nh_progress_update(s);
+    if (nh_stop_requested() && s->step < s->scene->time.steps) {
       if (!s->options.dry_run) {
         if (s->last_frame != s->step && (rc = nh_write_frame(s))) break;
         if ((rc = nh_checkpoint_write(s))) break;
       }
+      char when[64];
+      if (during)
+        snprintf(when, sizeof when, "during step %d, after", s->step + 1);
+      else
+        snprintf(when, sizeof when, "after");
+      /* The scene as run (overrides applied) is DIR/scene.yaml: the command
+       * continues exactly this run, whatever --set made it. */
       rc = NH_ERROR(NH_ERR_INTERRUPTED,
-                    "stopped by signal %d after step %d of %d (t = %g s); the last frame and a "
-                    "checkpoint are in %s; continue with: needlehex run %s --restart %s",
-                    (int)nh_stop_signal, s->step, s->scene->time.steps, s->time,
-                    s->scene->output.dir, s->scene->file, s->scene->output.dir);
+                    "stopped by signal %d %s step %d of %d (t = %g s); the last frame and a "
+                    "checkpoint are in %s; continue with: needlehex run %s/scene.yaml --restart %s",
+                    nh_stop_requested(), when, s->step, s->scene->time.steps, s->time,
+                    s->scene->output.dir, s->scene->output.dir, s->scene->output.dir);
       break;
     }
   }

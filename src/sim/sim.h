@@ -31,11 +31,12 @@ void nh_sim_destroy(nh_sim **sim);
 int nh_sim_step(nh_sim *sim);
 /* Run every remaining step, with progress and a closing summary if asked.
  * After nh_sim_request_stop (a signal handler may call it) the run stops
- * after the current step, writes a final frame and a checkpoint, and
- * returns NH_ERR_INTERRUPTED. */
+ * within the current step (its long loops poll the request; the state goes
+ * back to the last complete step) or after it, writes a final frame and a
+ * checkpoint, and returns NH_ERR_INTERRUPTED with the command that
+ * continues it. */
 int nh_sim_run(nh_sim *sim);
-/* Ask running simulations to stop after their current step
- * (async-signal-safe). */
+/* Ask running simulations to stop (async-signal-safe; nh_stop_request). */
 void nh_sim_request_stop(int signal_number);
 
 /* Inspection (tests, tools). */

@@ -39,6 +39,7 @@ struct nh_sim {
   int *probe_cell;   /* embedded points: the probes, then the targets */
   double *probe_xi;  /* 3 per point */
   int step;          /* steps done */
+  int first_step;    /* the step this process started from (the checkpoint's, or 0) */
   double time;
   double *phase_times; /* NH_PHASES per step */
   int cap_steps;

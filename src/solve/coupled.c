@@ -165,6 +165,7 @@ double nh_dynamic_residual(nh_system *s, const nh_integrator *in, const double *
     R[i] = h * (f_ext[i] - f_int[i] - in->alpha * t->mass[i / 3] * v[i] - in->beta * Kv[i]) - Mdv;
     fe += f_ext[i] * f_ext[i], fi += f_int[i] * f_int[i], md += Mdv * Mdv;
   }
+  if (nh_stop_requested()) return NAN; /* the assembly was cut short: unknown */
   nh_system_gather(s, R, b);
   nh_system_add_reactions(s, b);
   if (reaction)
@@ -211,6 +212,7 @@ int nh_step_coupled(nh_system *s, const nh_integrator *in, const double *f_ext, 
   nh_system_gather(s, rhs, b);
   double t1 = nh_time_now();
   st.step.t_assemble = t1 - t0;
+  if ((rc = nh_stop_check())) goto done; /* an assembly cut short */
   if ((rc = nh_system_factor(s))) goto done;
   double t2 = nh_time_now();
   st.step.t_factor = t2 - t1;

@@ -41,6 +41,7 @@ int nh_step_dynamic(nh_system *s, const nh_integrator *in, const double *f_ext, 
   double *dv = s->work[3], *delta = s->work[0], *b = s->fwork[0], *x = s->fwork[1];
   for (int it = 0; !rc && it < in->newton_iterations && !(st.step.residual <= in->newton_tolerance);
        it++) {
+    if (nh_stop_requested()) break; /* the step stands as linearised (u, v consistent) */
     double t0 = nh_time_now();
     if ((rc = nh_system_factor(s))) break;
     double t1 = nh_time_now();
@@ -74,6 +75,7 @@ int nh_solve_static(nh_system *s, const nh_integrator *in, const double *f_ext, 
   for (it = 0; it <= in->max_iterations; it++) {
     double t0 = nh_time_now();
     nh_system_assemble(s, u, NULL, 0.0, 1.0, f_int, NULL, in->threads);
+    NH_TRY(nh_stop_check()); /* SIGINT/SIGTERM: between iterations or in the assembly */
     for (int i = 0; i < n; i++) r[i] = f_ext[i] - f_int[i];
     nh_system_gather(s, r, b);
     nh_system_add_reactions(s, b);
