@@ -21,7 +21,7 @@ PHASES = ["t_assemble", "t_factor", "t_solve", "t_constraints", "t_adapt", "t_ou
 
 
 def run(binary, grid, steps, out):
-    cmd = [binary, "run", os.path.join(ROOT, "cases", "phantom-tissue.yaml"), "--quiet",
+    cmd = [binary, "run", os.path.join(ROOT, "cases", "phantom-tissue.yaml"), "--quiet", "--overwrite",
            "--out", out, "--set", "tissue.grid=[%d,%d,%d]" % grid,
            "--set", "time.steps=%d" % steps, "--set", "output.every=0"]
     subprocess.run(cmd, check=True)

@@ -88,7 +88,7 @@ def find_binary(given):
 
 def run(binary, scene, out, sets, steps=None):
     """Runs needlehex into OUT; returns the wall time (s) and the command."""
-    cmd = [binary, "run", scene, "--quiet", "--out", out]
+    cmd = [binary, "run", scene, "--quiet", "--overwrite", "--out", out]
     for s in sets + (["time.steps=%d" % steps] if steps else []):
         cmd += ["--set", s]
     os.makedirs(out, exist_ok=True)

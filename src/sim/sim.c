@@ -17,6 +17,8 @@
  * nh_sim_setup_mesh, at creation and after every refinement. */
 #include "sim/sim_impl.h"
 
+#include <dirent.h>
+#include <errno.h>
 #include <math.h>
 #include <signal.h>
 #include <stdio.h>
@@ -287,7 +289,56 @@ static int nh_write_probe_rows(nh_sim *s) {
   return s->contact ? nh_sim_tools_rows(s) : NH_OK;
 }
 
+/* Is `name` a file a run writes (docs/outputs.md): the tables, collections,
+ * frames NAME_NNNNNN.vtu and results_NNNNNN.h5, results.h5/.xdmf, the
+ * checkpoint, scene.yaml, a moved-aside results.h5.damaged*, a *.tmp? */
+static int nh_is_run_output(const char *name) {
+  static const char *const fixed[] = {"scene.yaml",   "steps.csv",      "probes.csv",
+                                      "targets.csv",  "tools.csv",      "results.h5",
+                                      "results.xdmf", "checkpoint.nhc", NULL};
+  for (int i = 0; fixed[i]; i++)
+    if (!strcmp(name, fixed[i])) return 1;
+  size_t n = strlen(name);
+  if (!strncmp(name, "results.h5.damaged", 18)) return 1;
+  if (n > 4 && (!strcmp(name + n - 4, ".pvd") || !strcmp(name + n - 4, ".tmp"))) return 1;
+  /* PREFIX_NNNNNN.vtu, results_NNNNNN.h5 */
+  const char *us = strrchr(name, '_');
+  if (!us || us == name) return 0;
+  size_t d = strspn(us + 1, "0123456789");
+  return d >= 6 && (!strcmp(us + 1 + d, ".vtu") ||
+                    (!strcmp(us + 1 + d, ".h5") && !strncmp(name, "results_", 8)));
+}
+
+/* A fresh run's folder: refuse one holding a previous run's outputs, or
+ * (overwrite) remove them; files that are not outputs are left alone. */
+static int nh_claim_folder(const nh_sim *s) {
+  const char *dir = s->scene->output.dir;
+  DIR *d = opendir(dir);
+  if (!d) return NH_OK; /* absent: created next */
+  int count = 0, rc = NH_OK;
+  char first[256] = "";
+  for (struct dirent *e; (e = readdir(d)) && !rc;) {
+    if (!nh_is_run_output(e->d_name)) continue;
+    if (!count++) snprintf(first, sizeof first, "%s", e->d_name);
+    if (s->options.overwrite) {
+      char path[NH_PATH_MAX + 300];
+      snprintf(path, sizeof path, "%s/%s", dir, e->d_name);
+      if (remove(path) != 0)
+        rc = NH_ERROR(NH_ERR_IO, "--overwrite: cannot remove '%s': %s", path, strerror(errno));
+    }
+  }
+  closedir(d);
+  if (!rc && count && !s->options.overwrite)
+    rc = NH_ERROR(NH_ERR_INPUT,
+                  "%s: the output folder holds the files of a previous run (%s and %d more): "
+                  "continue it with --restart %s, replace them with --overwrite, or choose "
+                  "another --out",
+                  dir, first, count - 1, dir);
+  return rc;
+}
+
 static int nh_open_outputs(nh_sim *s) {
+  if (!s->options.restart_dir) NH_TRY(nh_claim_folder(s));
   NH_TRY(nh_mkdir_p(s->scene->output.dir));
   if (s->scene->output.hdf5) {
     const char *yaml = s->scene->yaml ? s->scene->yaml : "";

@@ -15,11 +15,15 @@ typedef struct {
   int dry_run;             /* build and validate only: no output folder, no files (`check`) */
   int progress;            /* print a progress line and a summary on stderr */
   const char *restart_dir; /* continue from DIR/checkpoint.nhc (NULL: start at rest) */
+  int overwrite;           /* remove a previous run's outputs from the folder first (else: a
+                              folder holding them is refused, NH_ERR_INPUT) */
 } nh_sim_options;
 
 /* Build mesh, tissue, loads, probes and the linear system for `scene`
  * (borrowed: it must outlive the simulation), and unless dry_run create the
- * output folder and write the initial frame (step 0).
+ * output folder and write the initial frame (step 0). A fresh run (no
+ * restart_dir) into a folder holding a previous run's outputs fails with
+ * NH_ERR_INPUT unless options->overwrite, which removes them first.
  * Fails with NH_ERR_INPUT for scene errors only the mesh reveals (a fixed
  * region with no node, a load region with no tissue, a probe outside the
  * tissue: message FILE:LINE: KEY: reason), NH_ERR_IO, NH_ERR_MEMORY. */
