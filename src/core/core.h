@@ -69,6 +69,21 @@ int nh_stop_requested(void);
 /* NH_ERR_INTERRUPTED with a message if a stop was requested, else NH_OK. */
 int nh_stop_check(void);
 
+/* ---- bytes (bytes.c): a growable buffer and a bounded reader ---- */
+typedef struct {
+  unsigned char *data; /* malloc'd; the owner frees it */
+  size_t len, cap;
+  int failed; /* an allocation failed: later puts do nothing */
+} nh_bytes;
+/* Append n bytes (nothing once failed). */
+void nh_bytes_put(nh_bytes *b, const void *p, size_t n);
+typedef struct {
+  const unsigned char *p, *end;
+  int short_read; /* a read went past the end: it and later ones give zeros */
+} nh_byte_reader;
+/* Read n bytes into out. */
+void nh_bytes_get(nh_byte_reader *r, void *out, size_t n);
+
 /* ---- logging ---- */
 typedef enum { NH_LOG_QUIET = 0, NH_LOG_INFO = 1, NH_LOG_DEBUG = 2 } nh_log_level;
 void nh_log_set_level(nh_log_level level);

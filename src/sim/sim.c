@@ -68,6 +68,8 @@ void nh_sim_destroy(nh_sim **sim) {
   free(s->x);
   free(s->v);
   free(s->u_start);
+  free(s->restore_tools);
+  free(s->tools_start);
   free(s->f_ext);
   free(s->load_unit);
   free(s->probe_cell);
@@ -359,8 +361,9 @@ static int nh_open_outputs(nh_sim *s) {
     snprintf(path, sizeof path, "%s/probes.csv", dir);
     NH_TRY(nh_csv_resume(path, 9, nh_probe_columns, s->step, &s->probes_csv));
     NH_TRY(nh_pvd_resume(dir, "tissue", sc->time.step, s->step, &s->tissue_pvd));
-    if (sc->n_probes > 0)
+    if (sc->n_probes + sc->n_targets > 0) /* targets are points too */
       NH_TRY(nh_pvd_resume(dir, "points", sc->time.step, s->step, &s->points_pvd));
+    NH_TRY(nh_sim_tools_open(s));
     s->last_frame = s->step; /* its frame, if due, was written by the first run */
     return NH_OK;
   }
@@ -475,6 +478,8 @@ static int nh_sim_build(nh_sim *s) {
     s->v = ck.v;
     s->step = s->first_step = ck.step;
     s->time = ck.time;
+    s->restore_tools = ck.tools;
+    s->restore_tools_size = ck.tools_size;
   } else {
     nh_domain domain;
     NH_TRY(nh_domain_from_scene(sc, &domain));
@@ -576,6 +581,11 @@ int nh_sim_step(nh_sim *s) {
   nh_sim_external_force(s, t_new, s->f_ext);
   nh_step_stats st = {0};
   memcpy(s->u_start, s->u, sizeof(double) * 3 * (size_t)s->mesh->n_nodes);
+  if (s->contact) { /* a few kB: beams and channels, for a stop inside the step */
+    free(s->tools_start);
+    s->tools_start = NULL;
+    NH_TRY(nh_contact_state_save(s->contact, &s->tools_start, &s->tools_start_size));
+  }
   int rc = s->contact ? nh_contact_step(s->contact, s->system, &s->integrator, s->mesh, s->f_ext,
                                         s->u, s->v, t_new, &st)
            : sc->time.mode == NH_MODE_STATIC
@@ -697,6 +707,9 @@ int nh_sim_run(nh_sim *s) {
     if ((rc = nh_sim_step(s))) {
       if (rc != NH_ERR_INTERRUPTED || !nh_stop_requested()) break;
       memcpy(s->u, s->u_start, sizeof(double) * 3 * (size_t)s->mesh->n_nodes);
+      if (s->contact &&
+          (rc = nh_contact_state_load(s->contact, s->tools_start, s->tools_start_size)))
+        break;
       nh_error_clear();
       rc = NH_OK;
       during = 1;

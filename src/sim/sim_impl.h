@@ -61,14 +61,21 @@ struct nh_sim {
   nh_h5 *h5; /* results.h5 when output.hdf5 */
   int last_frame;
   nh_progress progress;
+  unsigned char *restore_tools; /* --restart: the checkpoint's tool state until applied */
+  size_t restore_tools_size;
+  unsigned char *tools_start; /* the tools' state at the start of the step (a step */
+  size_t tools_start_size;    /* interrupted inside goes back to it) */
 };
 
-/* A checkpoint read back: the mesh (owned), u, v (owned), step and time. */
+/* A checkpoint read back: the mesh (owned), u, v (owned), step and time,
+ * and the tools' state (owned; NULL without tools). */
 typedef struct {
   nh_mesh *mesh;
   double *u, *v;
   int step;
   double time;
+  unsigned char *tools;
+  size_t tools_size;
 } nh_checkpoint;
 
 /* DIR/checkpoint.nhc */

@@ -70,12 +70,20 @@ int nh_sim_tools_build(nh_sim *s) {
   NH_CHECK(!sc->adapt.enabled || sc->adapt.hanging == NH_HANGING_ELIMINATE, NH_ERR_INPUT,
            "%s: adapt.hanging: lagrange cannot be combined with tools (use eliminate)",
            sc->adapt.where);
-  NH_CHECK(!s->options.restart_dir, NH_ERR_INPUT,
-           "%s: restarting a run with tools is not supported yet (the checkpoint holds no tool "
-           "state): run it again from the start",
-           sc->tools[0].where);
   NH_TRY(nh_sim_tools_check_travel(s));
   NH_TRY(nh_contact_create(sc, s->mesh, &s->contact));
+  if (s->options.restart_dir) {
+    NH_CHECK(s->restore_tools, NH_ERR_INPUT,
+             "%s: --restart: the checkpoint in %s holds no tool state (written by an older "
+             "needlehex): run it again from the start",
+             sc->tools[0].where, s->options.restart_dir);
+    int rc = nh_contact_state_load(s->contact, s->restore_tools, s->restore_tools_size);
+    if (rc == NH_ERR_INPUT)
+      return NH_ERROR(rc, "--restart: %s: %s", s->options.restart_dir, nh_error_message());
+    NH_TRY(rc);
+    free(s->restore_tools);
+    s->restore_tools = NULL;
+  }
   s->tool_pvd = nh_calloc((size_t)sc->n_tools, sizeof *s->tool_pvd);
   if (!s->tool_pvd) return NH_ERROR(NH_ERR_MEMORY, "out of memory: tools");
   return NH_OK;
@@ -99,17 +107,22 @@ void nh_sim_point_position(const nh_sim *s, int i, double x[3]) {
 int nh_sim_tools_open(nh_sim *s) {
   const nh_scene *sc = s->scene;
   char path[NH_PATH_MAX + 2 * NH_NAME_MAX];
+  const int resume = s->options.restart_dir != NULL; /* keep the rows and frames <= step */
   if (sc->n_tools > 0) {
     snprintf(path, sizeof path, "%s/tools.csv", sc->output.dir);
-    NH_TRY(nh_csv_create(path, 10, nh_tool_columns, &s->tools_csv));
+    NH_TRY(resume ? nh_csv_resume(path, 10, nh_tool_columns, s->step, &s->tools_csv)
+                  : nh_csv_create(path, 10, nh_tool_columns, &s->tools_csv));
     for (int k = 0; k < sc->n_tools; k++) {
       snprintf(path, sizeof path, "%s/%s.pvd", sc->output.dir, sc->tools[k].name);
-      NH_TRY(nh_pvd_create(path, &s->tool_pvd[k]));
+      NH_TRY(resume ? nh_pvd_resume(sc->output.dir, sc->tools[k].name, sc->time.step, s->step,
+                                    &s->tool_pvd[k])
+                    : nh_pvd_create(path, &s->tool_pvd[k]));
     }
   }
   if (sc->n_targets > 0) {
     snprintf(path, sizeof path, "%s/targets.csv", sc->output.dir);
-    NH_TRY(nh_csv_create(path, 7, nh_target_columns, &s->targets_csv));
+    NH_TRY(resume ? nh_csv_resume(path, 7, nh_target_columns, s->step, &s->targets_csv)
+                  : nh_csv_create(path, 7, nh_target_columns, &s->targets_csv));
   }
   return NH_OK;
 }
