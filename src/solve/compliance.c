@@ -83,7 +83,7 @@ int nh_system_constraint_rows(const nh_system *s) {
 /* Columns of J per block of the compliance: a stop request (SIGINT,
  * SIGTERM) is honoured between blocks. Each column's arithmetic is the
  * same as in one CHOLMOD call over all of them. */
-#define NH_COMPLIANCE_BLOCK 32
+#define NH_COMPLIANCE_BLOCK 4
 
 int nh_system_compliance_add(nh_system *s, cholmod_sparse *Jt, double *W) {
   cholmod_common *cm = &s->cm;
@@ -148,7 +148,7 @@ static int nh_compliance_build(nh_system *s) {
   int rc = nh_system_compliance_add(s, s->Jt, s->W);
   /* Dense Cholesky W = G Gᵀ, lower triangle in place (column-major). */
   for (int j = 0; j < m && !rc; j++) {
-    if (j % 64 == 0 && (rc = nh_stop_check())) break;
+    if (j % 16 == 0 && (rc = nh_stop_check())) break;
     double *cj = s->W + (size_t)j * m;
     double d = cj[j];
     for (int k = 0; k < j; k++) d -= s->W[(size_t)k * m + j] * s->W[(size_t)k * m + j];
