@@ -1,7 +1,8 @@
 /* main.c — the command-line front end (docs/scene.md: scene keys, overrides,
  * errors; docs/outputs.md: what a run writes, restart and signals).
  *
- *   needlehex run SCENE.yaml [--out DIR] [--set KEY=VALUE ...] [--restart DIR] [--quiet]
+ *   needlehex run SCENE.yaml [--out DIR] [--set KEY=VALUE ...] [--restart DIR] [--overwrite]
+ *                 [--quiet]
  *   needlehex check SCENE.yaml [--set KEY=VALUE ...]
  *   needlehex --help | --version
  *
@@ -27,7 +28,9 @@
 #include <unistd.h>
 
 static const char *nh_usage =
-    "usage: needlehex run SCENE.yaml [--out DIR] [--set KEY=VALUE ...] [--restart DIR] [--quiet]\n"
+    "usage: needlehex run SCENE.yaml [--out DIR] [--set KEY=VALUE ...] [--restart DIR] "
+    "[--overwrite]\n"
+    "                     [--quiet]\n"
     "       needlehex check SCENE.yaml [--set KEY=VALUE ...]\n"
     "       needlehex --help | --version\n"
     "\n"
@@ -36,9 +39,12 @@ static const char *nh_usage =
     "  --out DIR          write outputs to DIR (overrides output.dir)\n"
     "  --set KEY=VALUE    override a scene key by dotted path, e.g. --set tissue.grid=[16,8,8]\n"
     "  --restart DIR      continue the run whose outputs (and checkpoint.nhc) are in DIR\n"
+    "  --overwrite        replace the outputs of a previous run in the output folder (a run\n"
+    "                     into a folder holding them is refused otherwise)\n"
     "  --quiet            no progress line and no summary\n"
     "\n"
-    "SIGINT / SIGTERM stop a run after the current step with a final frame and a checkpoint.\n"
+    "SIGINT / SIGTERM stop a run within a second, at its last complete step, with a final frame\n"
+    "and a checkpoint.\n"
     "\n"
     "exit status: 0 success, 1 simulation failed, 2 bad scene or arguments\n";
 
@@ -75,7 +81,7 @@ int main(int argc, char **argv) {
     return nh_fail(NH_ERROR(NH_ERR_INPUT, "unknown command '%s' (try --help)", command));
 
   const char *scene_path = NULL, *out_dir = NULL, *restart = NULL;
-  int quiet = 0, n_set = 0;
+  int quiet = 0, n_set = 0, overwrite = 0;
   const char **sets = calloc((size_t)argc + 1, sizeof(char *));
   if (!sets) return nh_fail(NH_ERROR(NH_ERR_MEMORY, "out of memory"));
   int rc = NH_OK;
@@ -98,6 +104,8 @@ int main(int argc, char **argv) {
       out_dir = a + 6;
     } else if (!strcmp(a, "--quiet") || !strcmp(a, "-q")) {
       quiet = 1;
+    } else if (!strcmp(a, "--overwrite")) {
+      overwrite = 1;
     } else if (a[0] == '-') {
       rc = NH_ERROR(NH_ERR_INPUT, "unknown option '%s' (try --help)", a);
     } else if (!scene_path) {
@@ -136,7 +144,10 @@ int main(int argc, char **argv) {
     sigaction(SIGTERM, &sa, NULL);
   }
 
-  nh_sim_options opt = {.dry_run = is_check, .progress = is_run && !quiet, .restart_dir = restart};
+  nh_sim_options opt = {.dry_run = is_check,
+                        .progress = is_run && !quiet,
+                        .restart_dir = restart,
+                        .overwrite = overwrite};
   rc = nh_sim_create(scene, &opt, &sim);
   if (!rc && is_check) nh_scene_print(scene, stdout);
   if (!rc && is_check)

@@ -154,7 +154,7 @@ def check_volumes(scene):
 
 
 def probe_displacements(scene, out):
-    run(["run", scene, "--out", out, "--quiet"])
+    run(["run", scene, "--out", out, "--quiet", "--overwrite"])
     rows = {}
     with open(os.path.join(out, "probes.csv")) as f:
         head = f.readline().strip().split(",")
@@ -374,7 +374,7 @@ def test_segmentation():
 
 def test_dbs_mri():
     out = os.path.join(WORK, "out_dbs_mri")
-    run(["run", os.path.join(SRC, "cases", "dbs-mri", "dbs-mri.yaml"), "--out", out, "--quiet",
+    run(["run", os.path.join(SRC, "cases", "dbs-mri", "dbs-mri.yaml"), "--out", out, "--quiet", "--overwrite",
          "--set", "time.end=0.25", "--set", "output.every=0"])
     from vtkmodules.util.numpy_support import vtk_to_numpy
     from vtkmodules.vtkIOXML import vtkXMLUnstructuredGridReader

@@ -18,8 +18,10 @@ Environment: NH_BINARY (the needlehex executable), NH_SOURCE_DIR (the source
 tree). Silent on success; prints every failing case and exits 1 otherwise.
 """
 import os
+import resource
 import subprocess
 import sys
+import time
 
 # (fixture, overrides, expected line or "--set:K", expected dotted key or None)
 CASES = [
@@ -121,7 +123,23 @@ CASES = [
     ("trajectory_base.yaml", ["tissue.buoyancy={before: 0.5}"], "--set:1", "tissue.buoyancy.after"),
     ("trajectory_base.yaml", ["gravity={vector: [0, 0, -9.81], ramp: 1}"], "--set:1",
      "gravity.ramp"),
+    # Limits (refused before anything is allocated: see SIZE_CASES for the
+    # time), a valid but degenerate box, raw control bytes in a key and in an
+    # override (the message shows them escaped: checked for every case).
+    ("limits_max_cells.yaml", [], 8, "tissue.grid"),
+    ("box_elongated.yaml", [], 6, "tissue.domain.box"),
+    ("control_bytes.yaml", [], 5, None),
+    ("set_base.yaml", ["tissue.grid=[16,\x1b[31m,8]"], "--set:1", "tissue.grid"),
+    ("set_base.yaml", ["limits.max_cells=0"], "--set:1", "limits.max_cells"),
 ]
+
+# Sizes far beyond the machine: refused by `check` within 1 s, naming the
+# grid and the estimated memory (the unchecked 400^3 grid took 35 s and
+# 10.4 GB before failing to allocate).
+SIZE_CASES = [("set_base.yaml", ["tissue.grid=[400,400,400]"], "--set:1", "tissue.grid"),
+              ("set_base.yaml", ["tissue.grid=[200,200,200]"], "--set:1", "tissue.grid"),
+              ("set_base.yaml", ["tissue.grid=[400,400,400]", "limits.max_cells=100000000"],
+               "--set:1", "tissue.grid")]
 
 # Scenes that must pass `check`.
 # The adapt ones need the shipped templates (templates/hex2.tmpl, hex3.tmpl)
@@ -168,6 +186,9 @@ def check_case(binary, bad_dir, fixture, overrides, where, key):
         problems.append("stderr: expected exactly one non-empty line, got %d line(s)"
                         % err.count("\n"))
     msg = lines[0]
+    raw = [c for c in msg if ord(c) < 0x20 or ord(c) == 0x7f]
+    if raw:
+        problems.append("message: raw control bytes %r (they must be escaped)" % raw)
     if not msg.startswith("needlehex: "):
         problems.append("message: expected to start with 'needlehex: '")
     if isinstance(where, int):
@@ -195,6 +216,26 @@ def main():
     failed = 0
     for fixture, overrides, where, key in CASES:
         problems = check_case(binary, bad_dir, fixture, overrides, where, key)
+        if problems:
+            failed += 1
+            print("FAILED %s %s" % (fixture, overrides), file=sys.stderr)
+            for p in problems:
+                print("  " + p, file=sys.stderr)
+    for fixture, overrides, where, key in SIZE_CASES:
+        # CPU seconds of the child: what `check` spent, whatever the load of
+        # a shared machine does to the wall clock (kept below 10 s too).
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        start = time.monotonic()
+        problems = check_case(binary, bad_dir, fixture, overrides, where, key)
+        elapsed = time.monotonic() - start
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+        _, _, err, _ = run(binary, os.path.join(bad_dir, fixture), overrides)
+        if cpu > 1.0 or elapsed > 10.0:
+            problems.append("answered after %.2f s of CPU (%.2f s wall), expected within 1 s"
+                            % (cpu, elapsed))
+        if " of memory" not in err:
+            problems.append("message: expected the estimated memory: %r" % err)
         if problems:
             failed += 1
             print("FAILED %s %s" % (fixture, overrides), file=sys.stderr)

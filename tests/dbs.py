@@ -44,7 +44,7 @@ def read(out, name):
 
 def run(name, sets):
     out = os.path.join(WORK, name)
-    cmd = [BIN, "run", SCENE, "--quiet", "--out", out]
+    cmd = [BIN, "run", SCENE, "--quiet", "--overwrite", "--out", out]
     for s in sets:
         cmd += ["--set", s]
     p = subprocess.run(cmd, capture_output=True, text=True)

@@ -16,3 +16,12 @@ set_tests_properties(hdf5_readback PROPERTIES FIXTURES_REQUIRED nh_hdf5_files)
 nh_add_py_test(hdf5_kill "io;slow" hdf5_readback.py kill $<TARGET_FILE:test_hdf5>
   ${CMAKE_CURRENT_BINARY_DIR}/hdf5_kill 30)
 set_tests_properties(hdf5_kill PROPERTIES TIMEOUT 300)
+
+# A full disk during a run (a tmpfs of random size; needs root to mount,
+# else skipped): exit 1 with "No space left on device" and the step, no
+# *.tmp left, every file written so far readable. 5 trials here, the
+# 20-trial campaign under `slow`.
+nh_add_py_test(disk_full io disk_full.py 5)
+set_tests_properties(disk_full PROPERTIES SKIP_RETURN_CODE 77 TIMEOUT 300)
+nh_add_py_test(disk_full_campaign io disk_full.py 20)
+set_tests_properties(disk_full_campaign PROPERTIES SKIP_RETURN_CODE 77 TIMEOUT 600 LABELS "io;slow")

@@ -17,3 +17,7 @@ set_tests_properties(io_readback PROPERTIES FIXTURES_REQUIRED nh_io_files)
 # not exist yet.
 nh_add_py_test(run_readback io run_readback.py)
 set_tests_properties(run_readback PROPERTIES SKIP_RETURN_CODE 77 TIMEOUT 600)
+
+# Output folder hygiene: a run into another run's folder is refused (exit 2)
+# unless --overwrite (removes that run's files, not the user's) or --restart.
+nh_add_py_test(output_folder io output_folder.py)

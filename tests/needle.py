@@ -95,7 +95,8 @@ def run(name, text):
     with open(path, "w") as f:
         f.write(text)
     out = os.path.join(WORK, name)
-    p = subprocess.run([BIN, "run", path, "--out", out, "--quiet"], capture_output=True, text=True)
+    p = subprocess.run([BIN, "run", path, "--out", out, "--quiet", "--overwrite"], capture_output=True,
+                       text=True)
     res = {}
     for k in ("steps", "tools", "probes"):
         fn = os.path.join(out, k + ".csv")

@@ -47,7 +47,7 @@ def run(name, text, command="run"):
     with open(path, "w") as f:
         f.write(text)
     out = os.path.join(WORK, name)
-    args = [BIN, command, path] + (["--out", out, "--quiet"] if command == "run" else [])
+    args = [BIN, command, path] + (["--out", out, "--quiet", "--overwrite"] if command == "run" else [])
     p = subprocess.run(args, capture_output=True, text=True)
     res = {"stdout": p.stdout}
     for k in ("tools", "probes"):

@@ -6,14 +6,17 @@
 2. `--restart DIR` continues it; at the last step the probes and the last
    frame's displacements equal an uninterrupted run's to 1e-12 relative.
 3. SIGTERM stops a run after the current step: exit status 1, a message
-   naming the step, a final frame and a checkpoint; restarting finishes it
-   with the same result.
+   naming the step, a final frame and a checkpoint; the command the message
+   prints ("continue with: needlehex run DIR/scene.yaml --restart DIR"),
+   run as printed, finishes it with the same result.
 4. A corrupted, a foreign and another scene's checkpoint are refused with
    exit status 2 and one message.
 5. HDF5 (output.hdf5 on in every run of cases 1-3, the reference included,
    since it is part of the scene): after each restart results.h5 has exactly
    one /steps row per step 1..30, equal to steps.csv, and its probe series
    equals the reference run's to 1e-12 relative.
+6. SIGTERM inside a long step (a `lagrange` W build of about 90 s) stops the
+   run within 1 s, exit 1, with the last complete step checkpointed.
 """
 import csv
 import os
@@ -193,9 +196,46 @@ def main():
             done = sum(1 for _ in f) - 1
         if not any(name == "tissue_%06d.vtu" % done for _, name in frames(term)):
             fail("SIGTERM: no final frame for step %d" % done)
-        run(term, "--restart", term, *HDF5)
+        # The printed command, exactly as printed (the scene as run: DIR/scene.yaml).
+        printed = err.split("continue with: ")[-1].strip().split()
+        if printed[:2] != ["needlehex", "run"] or "--restart" not in printed:
+            fail("SIGTERM: no 'continue with: needlehex run ...' command in %r" % err)
+        else:
+            p = subprocess.run([BIN] + printed[1:] + ["--quiet"], capture_output=True, text=True)
+            if p.returncode != 0:
+                fail("SIGTERM: the printed command %r failed (%d): %s" % (printed, p.returncode, p.stderr))
         compare(ref, term, "SIGTERM + restart")
         compare_h5(ref, term, "SIGTERM + restart")
+
+        # 6: SIGTERM inside a long step (a `lagrange` compliance W of ~2300
+        # rows, about 90 s on 2 cores): the run stops within 1 s of the signal,
+        # exit 1, with the last complete step checkpointed.
+        long_dir = os.path.join(tmp, "long")
+        p = subprocess.Popen([BIN, "run", SCENE, "--quiet", "--out", long_dir, "--set",
+                              "adapt.hanging=lagrange", "--set", "tissue.grid=[16,8,8]", "--set",
+                              "adapt.marking.theta=0.05", "--set", "adapt.max_level=1", "--set",
+                              "time.steps=3"], stderr=subprocess.PIPE, text=True)
+        steps = os.path.join(long_dir, "steps.csv")
+        while p.poll() is None:
+            try:
+                with open(steps) as f:
+                    if sum(1 for _ in f) >= 2:  # step 1 done; step 2 is the long one
+                        break
+            except FileNotFoundError:
+                pass
+            time.sleep(0.01)
+        time.sleep(2.0)
+        t0 = time.monotonic()
+        p.send_signal(signal.SIGTERM)
+        _, err = p.communicate()
+        latency = time.monotonic() - t0
+        if p.returncode != 1 or "during step 2, after step 1" not in err:
+            fail("SIGTERM in a long step: expected exit 1 and 'during step 2, after step 1', got "
+                 "%d: %r" % (p.returncode, err))
+        if latency > 1.0:
+            fail("SIGTERM in a long step: stopped %.2f s after the signal, expected within 1 s" % latency)
+        if not os.path.exists(os.path.join(long_dir, "checkpoint.nhc")):
+            fail("SIGTERM in a long step: no checkpoint of step 1")
 
         # 4: bad checkpoints.
         bad = os.path.join(tmp, "bad")

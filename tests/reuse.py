@@ -49,7 +49,8 @@ def run_both(case, scene, sets):
     outs = []
     for mode in ("every", "auto"):
         outs.append(os.path.join(WORK, "%s-%s" % (case, mode)))
-        args = [BIN, "run", scene, "--quiet", "--out", outs[-1], "--set", "solver.refactor=" + mode]
+        args = [BIN, "run", scene, "--quiet", "--overwrite", "--out", outs[-1],
+                "--set", "solver.refactor=" + mode]
         p = subprocess.run(args + [w for s in sets for w in ("--set", s)], capture_output=True,
                            text=True)
         if p.returncode != 0:

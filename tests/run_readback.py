@@ -347,7 +347,7 @@ def run_case(steps, every):
         for f in os.listdir(out):
             if re.search(r"\.(vtu|pvd|csv|h5|xdmf|yaml|tmp)$", f):
                 os.remove(os.path.join(out, f))
-    cmd = [binary, "run", case, "--out", out, "--quiet",
+    cmd = [binary, "run", case, "--out", out, "--quiet", "--overwrite",
            "--set", f"time.steps={steps}", "--set", f"output.every={every}"]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=540)
     if proc.returncode != 0:

@@ -92,7 +92,7 @@ def run_case(binary, cache, name, sets, steps, force=False, stop_when_static=Fal
     run with the same command is there. Returns the rows of steps.csv."""
     out = os.path.join(cache, name)
     stamp = os.path.join(out, "run.json")
-    cmd = [binary, "run", CASE, "--quiet", "--out", out, "--set", "time.steps=%d" % steps]
+    cmd = [binary, "run", CASE, "--quiet", "--overwrite", "--out", out, "--set", "time.steps=%d" % steps]
     for s in sets:
         cmd += ["--set", s]
     key = [os.path.basename(c) if i == 0 else c for i, c in enumerate(cmd)]

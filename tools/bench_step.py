@@ -53,7 +53,7 @@ DEFAULT = ["needle-16", "needle-32", "dbs-coarse", "dbs-fine"]
 
 def run(binary, case, mode, steps, out):
     scene, sets = CASES[case]
-    cmd = [binary, "run", scene, "--quiet", "--out", out, "--set", "time.steps=%d" % steps,
+    cmd = [binary, "run", scene, "--quiet", "--overwrite", "--out", out, "--set", "time.steps=%d" % steps,
            "--set", "output.every=0", "--set", "solver.refactor=" + mode]
     for s in sets:
         cmd += ["--set", s]

@@ -3,7 +3,7 @@
 # Idempotent; run as root (or with sudo available).
 set -euo pipefail
 pkgs=(
-  build-essential cmake pkg-config clang-format
+  build-essential cmake pkg-config clang-format clang libclang-rt-14-dev
   libsuitesparse-dev libopenblas-dev liblapacke-dev
   libyaml-dev libhdf5-dev zlib1g-dev libnifti2-dev
   python3 python3-numpy python3-matplotlib python3-vtk9 python3-meshio python3-h5py python3-nibabel python3-scipy

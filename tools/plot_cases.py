@@ -33,7 +33,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def run(binary, case, out, sets=()):
-    cmd = [binary, "run", os.path.join(ROOT, "cases", case), "--quiet", "--out", out]
+    cmd = [binary, "run", os.path.join(ROOT, "cases", case), "--quiet", "--overwrite", "--out", out]
     for s in sets:
         cmd += ["--set", s]
     subprocess.run(cmd, check=True)

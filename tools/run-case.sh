@@ -9,4 +9,4 @@ cmake -S . -B build -DCMAKE_BUILD_TYPE=Release >/dev/null
 cmake --build build -j"$(nproc)"
 scene=${1:-cases/phantom-tissue.yaml}
 shift || true
-build/needlehex run "$scene" "$@"
+build/needlehex run "$scene" --overwrite "$@"

@@ -4,9 +4,10 @@
  * nh_adapt_estimate computes the SPR indicators ηₑ (adapt/spr.c, Eq. 15) and
  * keeps them for the frame written before refinement. nh_adapt_step then
  *  1. marks leaves (adapt/mark.c: Eq. 16 or Dörfler, max_level, min_size);
- *  2. applies the DOF budget (adapt.max_dofs): the marked cells are sorted
- *     by decreasing ηₑ, ties by increasing cell id, and the longest prefix
- *     whose new nodes fit in the budget is kept. The new nodes of a cell are
+ *  2. applies the DOF budget (adapt.max_dofs) and the cell cap
+ *     (limits.max_cells): the marked cells are sorted by decreasing ηₑ, ties
+ *     by increasing cell id, and the longest prefix whose new nodes (and
+ *     new leaves) fit is kept. The new nodes of a cell are
  *     counted as if none were shared with a neighbour (template nodes less
  *     its 8 corners), so the budget holds whatever the sharing; the kept
  *     cells go to the refinement in that order;
@@ -24,12 +25,14 @@
 struct nh_adapt {
   nh_mark_params mark;
   int max_dofs;
+  int max_cells;    /* limits.max_cells (0: none) */
+  int warned_cells; /* the cap was met (warned once) */
   nh_template *tmpl;
   double *eta_cell; /* per cell id, valid when have_eta */
   int cap_eta, have_eta;
 };
 
-int nh_adapt_create(const nh_adapt_spec *spec, nh_adapt **out) {
+int nh_adapt_create(const nh_adapt_spec *spec, int max_cells, nh_adapt **out) {
   *out = NULL;
   nh_adapt *a = nh_calloc(1, sizeof *a);
   if (!a) return NH_ERR_MEMORY;
@@ -45,6 +48,7 @@ int nh_adapt_create(const nh_adapt_spec *spec, nh_adapt **out) {
                              .min_size = spec->min_size,
                              .child_ratio = nh_template_child_ratio(a->tmpl)};
   a->max_dofs = spec->max_dofs;
+  a->max_cells = max_cells;
   *out = a;
   return NH_OK;
 }
@@ -75,7 +79,7 @@ const double *nh_adapt_indicators(const nh_adapt *a) {
 }
 
 /* Keep the first cells of largest η whose new nodes fit in the budget. */
-static int nh_adapt_budget(const nh_adapt *a, const nh_mesh *m, int *marked, int *n_marked) {
+static int nh_adapt_budget(nh_adapt *a, const nh_mesh *m, int *marked, int *n_marked) {
   nh_mark_entry *order = malloc(sizeof *order * (size_t)*n_marked);
   if (!order) return NH_ERROR(NH_ERR_MEMORY, "out of memory: refinement budget");
   for (int i = 0; i < *n_marked; i++)
@@ -83,7 +87,18 @@ static int nh_adapt_budget(const nh_adapt *a, const nh_mesh *m, int *marked, int
   qsort(order, (size_t)*n_marked, sizeof *order, nh_mark_entry_compare);
   for (int i = 0; i < *n_marked; i++) marked[i] = order[i].cell;
   free(order);
-  long room = ((long)a->max_dofs - 3L * m->n_nodes) / (3L * (a->tmpl->n_nodes - 8));
+  long room = a->max_dofs > 0
+                  ? ((long)a->max_dofs - 3L * m->n_nodes) / (3L * (a->tmpl->n_nodes - 8))
+                  : *n_marked;
+  /* limits.max_cells: each refined cell adds n_children - 1 leaves. */
+  long cells =
+      a->max_cells > 0 ? ((long)a->max_cells - m->n_leaves) / (a->tmpl->n_children - 1) : *n_marked;
+  if (cells < *n_marked && cells <= room && !a->warned_cells) {
+    nh_log_warn("refinement stops at limits.max_cells = %d cells (%d now)", a->max_cells,
+                m->n_leaves);
+    a->warned_cells = 1;
+  }
+  if (cells < room) room = cells;
   if (room < *n_marked) *n_marked = room > 0 ? (int)room : 0;
   return NH_OK;
 }
@@ -109,7 +124,11 @@ int nh_adapt_step(nh_adapt *a, nh_mesh *m, int n_fields, double **fields, int *n
   int *marked = malloc(sizeof(int) * (size_t)(m->n_leaves ? m->n_leaves : 1)), n_marked = 0;
   if (!marked) return NH_ERROR(NH_ERR_MEMORY, "out of memory: marking");
   int rc = nh_mark_cells(m, a->eta_cell, &a->mark, marked, &n_marked);
-  if (!rc && a->max_dofs > 0 && n_marked > 0) rc = nh_adapt_budget(a, m, marked, &n_marked);
+  /* (marked cells keep mark order, and the mesh its numbering, unless a budget binds) */
+  int over_cap =
+      a->max_cells > 0 && m->n_leaves + (long)n_marked * (a->tmpl->n_children - 1) > a->max_cells;
+  if (!rc && (a->max_dofs > 0 || over_cap) && n_marked > 0)
+    rc = nh_adapt_budget(a, m, marked, &n_marked);
   if (rc || n_marked == 0) {
     free(marked);
     return rc;

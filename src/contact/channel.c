@@ -43,11 +43,11 @@ static int nh_channel_lay(nh_group *G, const nh_tool_spec *spec, const nh_mesh *
     double d[3] = {to->X[0] - last->X[0], to->X[1] - last->X[1], to->X[2] - last->X[2]};
     double dist = sqrt(nh_vec3_dot(d, d)), sp = nh_point_spacing(spec, m, last);
     if (dist < sp) return NH_OK;
+    double X[3]; /* before the array grows: `last` points into it */
+    for (int i = 0; i < 3; i++) X[i] = last->X[i] + d[i] * sp / dist;
     if (nh_grow((void **)&G->chan, &G->cap_chan, G->n_chan + 1, sizeof *G->chan))
       return NH_ERR_MEMORY;
     nh_cpoint p = {0};
-    double X[3];
-    for (int i = 0; i < 3; i++) X[i] = last->X[i] + d[i] * sp / dist;
     if (nh_point_set(m, &p, X)) return NH_OK; /* left the tissue */
     p.len = sp, p.tool = -1, p.row = -1;
     G->chan[G->n_chan++] = p;

@@ -88,4 +88,13 @@ void nh_contact_stats_get(const nh_contact *c, nh_contact_stats *stats);
  * nearest node; f: 3 per node. */
 void nh_contact_node_forces(const nh_contact *c, int tool, double *f);
 
+/* The tools' and constraints' state (beams, nesting, states, punctures,
+ * channels with their warm-start multipliers, the last step's statistics) as
+ * bytes, for checkpoints (contact/state.c): *out (malloc'd, caller frees),
+ * *size. NH_ERR_MEMORY. */
+int nh_contact_state_save(const nh_contact *c, unsigned char **out, size_t *size);
+/* Restore a state saved by nh_contact_state_save, on a contact created from
+ * the same scene and mesh. NH_ERR_INPUT if it does not fit, NH_ERR_MEMORY. */
+int nh_contact_state_load(nh_contact *c, const unsigned char *data, size_t size);
+
 #endif

@@ -29,7 +29,12 @@ typedef enum {
  * source location, kept for debugging (NH_DEBUG_ERRORS=1 prints them). */
 int nh_error_set(int code, const char *src_file, int src_line, const char *fmt, ...)
     __attribute__((format(printf, 4, 5)));
-/* The last recorded message ("" if none). */
+/* Copy `text` to `out` (`size` bytes, NUL-terminated) with every control
+ * byte (below 0x20, and 0x7f) written as \n, \t, \r or \xNN: what every
+ * message and warning goes through, so input bytes echoed in it can neither
+ * break the line nor drive the terminal. Truncates, never mid-escape. */
+void nh_escape_control(char *out, size_t size, const char *text);
+/* The last recorded message ("" if none; one line, no control byte). */
 const char *nh_error_message(void);
 /* Forget the last message. */
 void nh_error_clear(void);
@@ -52,6 +57,32 @@ void *nh_calloc(size_t n, size_t size);
 /* Grow *ptr to hold at least `need` items of `size` bytes (capacity doubles).
  * Returns NH_OK or NH_ERR_MEMORY (the old block is kept on failure). */
 int nh_grow(void **ptr, int *capacity, int need, size_t size);
+
+/* ---- stop requests (SIGINT, SIGTERM) ----
+ * A signal handler records the request (async-signal-safe); the long loops
+ * (assembly colours, compliance columns, constraint sweeps, Newton
+ * iterations) poll it and return NH_ERR_INTERRUPTED ("interrupted"), so a
+ * step stops within a fraction of a second instead of at its end. */
+void nh_stop_request(int signal_number);
+/* The signal that asked to stop (0: none). */
+int nh_stop_requested(void);
+/* NH_ERR_INTERRUPTED with a message if a stop was requested, else NH_OK. */
+int nh_stop_check(void);
+
+/* ---- bytes (bytes.c): a growable buffer and a bounded reader ---- */
+typedef struct {
+  unsigned char *data; /* malloc'd; the owner frees it */
+  size_t len, cap;
+  int failed; /* an allocation failed: later puts do nothing */
+} nh_bytes;
+/* Append n bytes (nothing once failed). */
+void nh_bytes_put(nh_bytes *b, const void *p, size_t n);
+typedef struct {
+  const unsigned char *p, *end;
+  int short_read; /* a read went past the end: it and later ones give zeros */
+} nh_byte_reader;
+/* Read n bytes into out. */
+void nh_bytes_get(nh_byte_reader *r, void *out, size_t n);
 
 /* ---- logging ---- */
 typedef enum { NH_LOG_QUIET = 0, NH_LOG_INFO = 1, NH_LOG_DEBUG = 2 } nh_log_level;

@@ -3,9 +3,13 @@
  * One message slot per thread: the failing site fills it, NH_TRY carries the
  * code up, and the front end prints it once. A later error replaces an
  * earlier one, so the message a user sees is the one closest to the cause
- * that was recorded last — callers that add context record a new message. */
+ * that was recorded last — callers that add context record a new message.
+ * A message is one line of printable text whatever the input echoed into it:
+ * control bytes (a scene's or template's raw bytes, a newline) are written
+ * as \n, \t, \r or \xNN. */
 #include "core/core.h"
 
+#include <signal.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -13,11 +17,34 @@
 
 static _Thread_local char nh_message[2048];
 
+void nh_escape_control(char *out, size_t size, const char *text) {
+  static const char hex[] = "0123456789abcdef";
+  size_t n = 0;
+  for (const unsigned char *c = (const unsigned char *)text; *c && n + 1 < size; ++c) {
+    if (*c >= 0x20 && *c != 0x7f) {
+      out[n++] = (char)*c;
+      continue;
+    }
+    if (n + 4 >= size) break; /* no half escape */
+    out[n++] = '\\';
+    if (*c == '\n' || *c == '\t' || *c == '\r') {
+      out[n++] = *c == '\n' ? 'n' : *c == '\t' ? 't' : 'r';
+    } else {
+      out[n++] = 'x';
+      out[n++] = hex[*c >> 4];
+      out[n++] = hex[*c & 15];
+    }
+  }
+  if (size) out[n < size ? n : size - 1] = '\0';
+}
+
 int nh_error_set(int code, const char *src_file, int src_line, const char *fmt, ...) {
+  char raw[sizeof nh_message];
   va_list ap;
   va_start(ap, fmt);
-  vsnprintf(nh_message, sizeof nh_message, fmt, ap);
+  vsnprintf(raw, sizeof raw, fmt, ap);
   va_end(ap);
+  nh_escape_control(nh_message, sizeof nh_message, raw);
   const char *dbg = getenv("NH_DEBUG_ERRORS");
   if (dbg && dbg[0] == '1') fprintf(stderr, "[%s:%d] %s\n", src_file, src_line, nh_message);
   return code;
@@ -29,6 +56,21 @@ const char *nh_error_message(void) {
 
 void nh_error_clear(void) {
   nh_message[0] = '\0';
+}
+
+static volatile sig_atomic_t nh_stop_signal = 0;
+
+void nh_stop_request(int signal_number) {
+  nh_stop_signal = signal_number ? signal_number : SIGTERM;
+}
+
+int nh_stop_requested(void) {
+  return (int)nh_stop_signal;
+}
+
+int nh_stop_check(void) {
+  if (!nh_stop_signal) return NH_OK;
+  return NH_ERROR(NH_ERR_INTERRUPTED, "interrupted by signal %d", (int)nh_stop_signal);
 }
 
 int nh_error_exit_status(int code) {

@@ -25,12 +25,13 @@ void nh_log_info(const char *fmt, ...) {
 }
 
 void nh_log_warn(const char *fmt, ...) {
+  char raw[2048], line[2048];
   va_list ap;
   va_start(ap, fmt);
-  fputs("warning: ", stderr);
-  vfprintf(stderr, fmt, ap);
+  vsnprintf(raw, sizeof raw, fmt, ap);
   va_end(ap);
-  fputc('\n', stderr);
+  nh_escape_control(line, sizeof line, raw);
+  fprintf(stderr, "warning: %s\n", line);
 }
 
 double nh_time_now(void) {

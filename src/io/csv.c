@@ -2,10 +2,12 @@
  *
  * CSV tables (steps.csv, probes.csv, ...) grow by one row per step, so they
  * are the one kind of output that is not written through tmp + rename: the
- * file is created (truncated) with its header and every row is appended and
- * flushed at once, so a run that is killed or fails keeps every row it
- * completed. Each row is formatted into memory first and handed to stdio in
- * one fwrite, which keeps partial lines to the rare case of a full disk.
+ * file is created (truncated) with its header and every row is appended with
+ * write(2) at once, so a run that is killed or fails keeps every row it
+ * completed. Each row is formatted into memory first and written in one
+ * call; if the disk fills in the middle of it, the file is cut back
+ * (ftruncate) to its last complete line, so a failed run never leaves half
+ * a row.
  *
  * Format: RFC 4180 style, comma separated, '\n' line ends, a header line of
  * column names (quoted only if a name contains a comma, quote or newline).
@@ -18,18 +20,40 @@
  * file up to a step (the checkpoint's), so that a continued run's table is
  * the uninterrupted one's. All failures return NH_ERR_IO with a message
  * naming the path and strerror(errno). */
-#include "io/io.h"
+#include "io/io_impl.h"
 
 #include <errno.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <fcntl.h>
+#include <sys/types.h>
+#include <unistd.h>
 
 struct nh_csv {
-  FILE *file;
+  int fd;
+  off_t size; /* bytes of complete lines on disk */
   char *path;
 };
+
+/* Append `len` bytes; on failure cut the file back to its complete lines,
+ * so a full disk never leaves half a row. 0 or errno. */
+static int csv_append(nh_csv *csv, const char *data, size_t len) {
+  size_t done = 0;
+  while (done < len) {
+    ssize_t n = write(csv->fd, data + done, len - done);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) {
+      int e = n < 0 ? errno : ENOSPC;
+      if (ftruncate(csv->fd, csv->size) == 0) lseek(csv->fd, csv->size, SEEK_SET);
+      return e;
+    }
+    done += (size_t)n;
+  }
+  csv->size += (off_t)len;
+  return 0;
+}
 
 static char *copy_string(const char *s) {
   char *c = nh_calloc(strlen(s) + 1, 1);
@@ -37,17 +61,11 @@ static char *copy_string(const char *s) {
   return c;
 }
 
-static void put_csv_field(FILE *f, const char *s) {
-  if (!strpbrk(s, ",\"\r\n")) {
-    fputs(s, f);
-    return;
-  }
-  fputc('"', f);
-  for (; *s; ++s) {
-    if (*s == '"') fputc('"', f);
-    fputc(*s, f);
-  }
-  fputc('"', f);
+static int put_csv_field(nh_text *b, const char *s) {
+  if (!strpbrk(s, ",\"\r\n")) return nh_text_printf(b, "%s", s);
+  NH_TRY(nh_text_printf(b, "\""));
+  for (; *s; ++s) NH_TRY(nh_text_printf(b, *s == '"' ? "\"\"" : "%c", *s));
+  return nh_text_printf(b, "\"");
 }
 
 int nh_csv_create(const char *path, int n_columns, const char *const *columns, nh_csv **out) {
@@ -56,24 +74,29 @@ int nh_csv_create(const char *path, int n_columns, const char *const *columns, n
   *out = NULL;
   nh_csv *csv = nh_calloc(1, sizeof *csv);
   if (!csv) return NH_ERR_MEMORY;
+  csv->fd = -1;
   csv->path = copy_string(path);
   if (!csv->path) {
     free(csv);
     return NH_ERR_MEMORY;
   }
-  csv->file = fopen(path, "w");
-  if (!csv->file) {
+  csv->fd = open(path, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
+  if (csv->fd < 0) {
     int rc = NH_ERROR(NH_ERR_IO, "cannot create CSV file '%s': %s", path, strerror(errno));
     nh_csv_destroy(&csv);
     return rc;
   }
-  for (int i = 0; i < n_columns; ++i) {
-    if (i) fputc(',', csv->file);
-    put_csv_field(csv->file, columns[i] ? columns[i] : "");
+  nh_text header = {0};
+  int rc = NH_OK;
+  for (int i = 0; i < n_columns && !rc; ++i) {
+    if (i) rc = nh_text_printf(&header, ",");
+    if (!rc) rc = put_csv_field(&header, columns[i] ? columns[i] : "");
   }
-  fputc('\n', csv->file);
-  if (fflush(csv->file) != 0 || ferror(csv->file)) {
-    int rc = NH_ERROR(NH_ERR_IO, "cannot write CSV file '%s': %s", path, strerror(errno));
+  if (!rc) rc = nh_text_printf(&header, "\n");
+  int e = rc ? 0 : csv_append(csv, header.s, header.len);
+  free(header.s);
+  if (rc || e) {
+    if (e) rc = NH_ERROR(NH_ERR_IO, "cannot write CSV file '%s': %s", path, strerror(e));
     nh_csv_destroy(&csv);
     return rc;
   }
@@ -82,7 +105,7 @@ int nh_csv_create(const char *path, int n_columns, const char *const *columns, n
 }
 
 int nh_csv_row(nh_csv *csv, const char *fmt, ...) {
-  NH_CHECK(csv && csv->file && fmt, NH_ERR_INTERNAL, "nh_csv_row: bad arguments");
+  NH_CHECK(csv && csv->fd >= 0 && fmt, NH_ERR_INTERNAL, "nh_csv_row: bad arguments");
   char small[1024];
   char *line = small;
   va_list ap;
@@ -100,19 +123,17 @@ int nh_csv_row(nh_csv *csv, const char *fmt, ...) {
   size_t len = (size_t)n;
   while (len > 0 && (line[len - 1] == '\n' || line[len - 1] == '\r')) --len;
   line[len++] = '\n';
-  int ok = fwrite(line, 1, len, csv->file) == len && fflush(csv->file) == 0;
-  int saved_errno = errno;
+  int e = csv_append(csv, line, len);
   if (line != small) free(line);
-  if (!ok)
-    return NH_ERROR(NH_ERR_IO, "cannot write CSV file '%s': %s", csv->path, strerror(saved_errno));
+  if (e) return NH_ERROR(NH_ERR_IO, "cannot write CSV file '%s': %s", csv->path, strerror(e));
   return NH_OK;
 }
 
 void nh_csv_destroy(nh_csv **csv) {
   if (!csv || !*csv) return;
   nh_csv *c = *csv;
-  /* Every row was flushed already; a close error here has nothing left to lose. */
-  if (c->file) fclose(c->file);
+  /* Every row was written already; a close error here has nothing left to lose. */
+  if (c->fd >= 0) close(c->fd);
   free(c->path);
   free(c);
   *csv = NULL;

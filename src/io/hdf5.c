@@ -23,44 +23,43 @@
  *
  * Choices:
  * - Steps and series are chunked datasets with an unlimited first dimension,
- *   extended by one row per call (H5Dset_extent + a one-row hyperslab). Chunks
- *   hold about 16 KiB, so a row costs a memcpy into HDF5's chunk cache, not a
- *   disk write. The handles stay open for the whole run.
+ *   extended by one row per call (H5Dset_extent + a one-row hyperslab). The
+ *   handles stay open for the whole run.
  * - Frames are contiguous (not chunked, not compressed): written once, read
- *   whole. When a frame's connectivity equals the previous frame's (the mesh
- *   did not change), "connectivity" is a hard link to the earlier dataset
- *   instead of a copy: readers see an ordinary dataset.
- * - Durability: after each frame the file is flushed (H5Fflush, global scope)
- *   and only then results.xdmf is rewritten (tmp + rename, nh_write_text), so
- *   the XDMF never lists a frame that is not on disk. A flush writes every
- *   dirty metadata entry and raw chunk, so all rows appended up to that frame
- *   are on disk too. Rows appended after the last frame reach the disk at the
- *   next frame, at nh_h5_flush or at nh_h5_close. There is no fsync: this
- *   protects a killed process (the page cache survives it), not power loss.
- *   HDF5 1.10 without SWMR does not order its metadata writes, so a process
- *   killed *inside* a flush (or while HDF5 evicts metadata) may leave a file
- *   whose last-modified structures are inconsistent. Measured with
- *   tests/hdf5_readback.py kill: 1 file in 300 SIGKILL trials of a writer
- *   doing nothing but HDF5 I/O had a corrupt /frames group ("bad heap free
- *   list": its local heap was half rewritten). The group is therefore created
- *   with a local heap of FRAMES_HEAP_BYTES (about 8000 frame names), so up to
- *   that many frames the heap is not relocated and each update of it is a
- *   single write (with it, the next 300 trials were all clean). Still, in a
- *   harsher trial (a 1-cell frame and a flush every step, so most kills land
- *   in a flush) 2 files in 200 had a frame listed by the XDMF that HDF5 could
- *   not open ("addr overflow": a group node written, the superblock's end of
- *   file not yet). The remedy, if this matters, is one file per frame written
- *   to a temporary name and renamed (the VTU scheme). SWMR is not used: it
- *   forbids creating groups and datasets once started (every frame creates
- *   some), and it needs the 1.10 file format, whose superblock flags keep a
- *   killed writer's file from opening without h5clear.
- * - Resume (nh_h5_resume, `--restart`): the file is reopened, every check
- *   and read is done first (format, columns, the step column of /steps and
- *   of each series, every kept frame's layout for the XDMF), then /steps and
- *   the series are shrunk with H5Dset_extent and later frames unlinked
- *   (H5Ldelete), and the file is flushed before results.xdmf is rewritten.
- *   A file that fails any of it is moved aside (results.h5.damaged), never
- *   truncated; the XDMF of kept frames lists their arrays in name order.
+ *   whole. Each frame is its own file DIR/results_NNNNNN.h5 (attributes and
+ *   arrays at its root), reached from results.h5 by the external link
+ *   /frames/NNNNNN. When a frame's connectivity equals the previous frame's
+ *   (the mesh did not change), "connectivity" is an external link to the
+ *   dataset in the frame file that holds it (never to another link: HDF5
+ *   follows at most 16 in a row), instead of a copy.
+ * - Durability: HDF5 never touches the disk. Every file is built in memory
+ *   (the core driver, no backing store) and persist() writes its image
+ *   (H5Fget_file_image) through nh_atomic_open/commit: "<path>.tmp", renamed.
+ *   At each frame: the frame file, then results.h5 (linking it), then
+ *   results.xdmf, so at any instant every listed frame is complete and every
+ *   file opens: a SIGKILL leaves the previous or the new version of each
+ *   (0 unreadable files in 300 trials of tests/hdf5_readback.py kill). A full
+ *   disk fails in nh_atomic_commit with the OS reason and the tmp file removed;
+ *   HDF5 has nothing to flush at close, so no failing H5Fclose is left for
+ *   its atexit handler (with files on disk, a full disk made H5Fclose fail
+ *   and the handler then crashed in H5F__close_cb). Rows appended after the
+ *   last frame reach the disk at the next frame, nh_h5_flush or nh_h5_close.
+ *   Cost: results.h5 is rewritten whole at each frame (steps and series:
+ *   hundreds of KB for hundreds of steps); measured on
+ *   cases/needle-phantom.yaml with a frame every step, 4.3 s against 6.3 s
+ *   for the former H5Fflush of one file on disk. The former design (one file
+ *   flushed in place) left 1 damaged file in 300 kill trials and 2 in 200
+ *   when kills were aimed at a flush: HDF5 1.10 without SWMR does not order
+ *   its metadata writes. SWMR is not used: it forbids creating groups and
+ *   datasets once started, and a killed SWMR writer's file needs h5clear.
+ * - Resume (nh_h5_resume, `--restart`): results.h5 is read into memory,
+ *   every check and read is done first (format, columns, the step column of
+ *   /steps and of each series, every kept frame's layout for the XDMF), then
+ *   /steps and the series are shrunk with H5Dset_extent and later frames
+ *   unlinked (H5Ldelete); the file is written, the files of later frames
+ *   are removed, and results.xdmf is rewritten. A file that fails any of it
+ *   is moved aside (results.h5.damaged), never changed; the XDMF of kept
+ *   frames lists their arrays in name order.
  * - The file uses the library's default (oldest compatible) format, readable
  *   by any HDF5 1.8+ tool (h5py, h5dump, ParaView, MATLAB).
  * - Strings (scene text, names) are variable-length UTF-8 attributes: h5py
@@ -74,6 +73,7 @@
  *   other HDF5 object of the process. */
 #include "io/io_impl.h"
 
+#include <dirent.h>
 #include <errno.h>
 #include <hdf5.h>
 #include <limits.h>
@@ -82,11 +82,10 @@
 #include <string.h>
 #include <unistd.h>
 
-#define H5_FILE_NAME      "results.h5"
-#define XDMF_FILE_NAME    "results.xdmf"
-#define FORMAT_NAME       "needlehex-results 1"
-#define CHUNK_BYTES       16384
-#define FRAMES_HEAP_BYTES 65536
+#define H5_FILE_NAME   "results.h5"
+#define XDMF_FILE_NAME "results.xdmf"
+#define FORMAT_NAME    "needlehex-results 1"
+#define CHUNK_BYTES    16384
 
 /* One time series group (/probes, /targets, /tools, ...). */
 typedef struct {
@@ -98,9 +97,12 @@ typedef struct {
 } h5_series;
 
 struct nh_h5 {
-  char *path;      /* DIR/results.h5 */
-  char *xdmf_path; /* DIR/results.xdmf */
-  hid_t file, frames;
+  char *dir;
+  char *path;         /* DIR/results.h5 */
+  char *xdmf_path;    /* DIR/results.xdmf */
+  hid_t file, frames; /* results.h5, held in memory (see "Durability") */
+  hid_t fapl;         /* HDF5's core driver without a backing store */
+  int live;           /* created or resumed: nh_h5_close writes the file */
   hid_t steps;
   int n_step_columns;
   hsize_t n_steps;
@@ -108,9 +110,9 @@ struct nh_h5 {
   h5_series *series;
   nh_text grids; /* XDMF <Grid> elements of the frames written so far */
   int n_frames;
-  int prev_cells; /* cells of the previous frame (-1: none) */
-  int *prev_conn; /* its connectivity, 8 * prev_cells ints */
-  char prev_frame[16];
+  int prev_cells;      /* cells of the previous frame (-1: none) */
+  int *prev_conn;      /* its connectivity, 8 * prev_cells ints */
+  char prev_frame[16]; /* the frame whose file holds that connectivity dataset */
 };
 
 /* ---- small helpers ---- */
@@ -126,6 +128,43 @@ static char *join_path(const char *dir, const char *name) {
   char *p = nh_calloc(n, 1);
   if (p) snprintf(p, n, "%s/%s", dir, name);
   return p;
+}
+
+/* The file of frame NNNNNN, relative to the results folder. */
+static void frame_file(const char *frame, char *out, size_t size) {
+  snprintf(out, size, "results_%s.h5", frame);
+}
+
+/* File access entirely in memory: HDF5's core driver without a backing
+ * store, so HDF5 itself never reads or writes the disk after opening. */
+static hid_t memory_fapl(void) {
+  hid_t fapl = H5Pcreate(H5P_FILE_ACCESS);
+  if (fapl >= 0 && H5Pset_fapl_core(fapl, (size_t)1 << 20, 0) < 0) {
+    H5Pclose(fapl);
+    return H5I_INVALID_HID;
+  }
+  return fapl;
+}
+
+static int h5_fail(const char *path, const char *call, const char *object);
+
+/* Write the image of in-memory file `file` to `path` atomically
+ * (nh_atomic_open: tmp, rename; no fsync). A full disk or a read-only folder is
+ * NH_ERR_IO with the OS reason; the previous `path` is untouched. */
+static int persist(hid_t file, const char *path) {
+  if (H5Fflush(file, H5F_SCOPE_GLOBAL) < 0) return h5_fail(path, "H5Fflush", "/");
+  ssize_t n = H5Fget_file_image(file, NULL, 0);
+  if (n < 0) return h5_fail(path, "H5Fget_file_image", "/");
+  void *image = malloc(n > 0 ? (size_t)n : 1);
+  if (!image) return NH_ERROR(NH_ERR_MEMORY, "out of memory writing '%s' (%zd bytes)", path, n);
+  int rc = NH_OK;
+  nh_atomic_file a;
+  if (H5Fget_file_image(file, image, (size_t)n) != n)
+    rc = h5_fail(path, "H5Fget_file_image", "/");
+  else if ((rc = nh_atomic_open(path, "HDF5 file", 0, &a)) == NH_OK)
+    rc = nh_atomic_commit(&a, n > 0 && fwrite(image, 1, (size_t)n, a.file) != (size_t)n);
+  free(image);
+  return rc;
 }
 
 /* HDF5's innermost error description (where the error was detected). */
@@ -308,14 +347,16 @@ static const char *attribute_type(int components) {
   }
 }
 
-/* A <DataItem> referencing results.h5:/frames/<frame>/[<group>/]<name>. */
+/* A <DataItem> referencing results_<frame>.h5:/[<group>/]<name>. */
 static int xdmf_item(nh_text *b, const char *frame, const char *group, const char *name, int n,
                      int components, int is_int) {
   NH_TRY(nh_text_printf(b, "          <DataItem Dimensions=\"%d", n));
   if (components > 1) NH_TRY(nh_text_printf(b, " %d", components));
-  NH_TRY(nh_text_printf(
-      b, "\" NumberType=\"%s\" Precision=\"%d\" Format=\"HDF\">" H5_FILE_NAME ":/frames/%s/%s%s",
-      is_int ? "Int" : "Float", is_int ? 4 : 8, frame, group ? group : "", group ? "/" : ""));
+  char file[32];
+  frame_file(frame, file, sizeof file);
+  NH_TRY(nh_text_printf(b, "\" NumberType=\"%s\" Precision=\"%d\" Format=\"HDF\">%s:/%s%s",
+                        is_int ? "Int" : "Float", is_int ? 4 : 8, file, group ? group : "",
+                        group ? "/" : ""));
   NH_TRY(nh_text_put_xml(b, name));
   return nh_text_printf(b, "</DataItem>\n");
 }
@@ -374,15 +415,19 @@ static nh_h5 *h5_alloc(const char *dir, int n_step_columns) {
   h->file = h->frames = h->steps = H5I_INVALID_HID;
   h->prev_cells = -1;
   h->n_step_columns = n_step_columns;
+  H5Eset_auto2(H5E_DEFAULT, NULL, NULL);
+  h->dir = copy_string(dir);
   h->path = join_path(dir, H5_FILE_NAME);
   h->xdmf_path = join_path(dir, XDMF_FILE_NAME);
-  if (!h->path || !h->xdmf_path) {
+  h->fapl = memory_fapl();
+  if (!h->dir || !h->path || !h->xdmf_path || h->fapl < 0) {
+    if (h->fapl >= 0) H5Pclose(h->fapl);
+    free(h->dir);
     free(h->path);
     free(h->xdmf_path);
     free(h);
     return NULL;
   }
-  H5Eset_auto2(H5E_DEFAULT, NULL, NULL);
   return h;
 }
 
@@ -396,7 +441,7 @@ int nh_h5_create(const char *dir, const char *scene_text, const char *version, i
   nh_h5 *h = h5_alloc(dir, n_step_columns);
   if (!h) return NH_ERR_MEMORY;
   int rc = NH_OK;
-  h->file = H5Fcreate(h->path, H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT);
+  h->file = H5Fcreate(h->path, H5F_ACC_TRUNC, H5P_DEFAULT, h->fapl);
   if (h->file < 0) {
     rc = h5_fail(h->path, "H5Fcreate", "/");
     goto fail;
@@ -413,22 +458,14 @@ int nh_h5_create(const char *dir, const char *scene_text, const char *version, i
     goto fail;
   }
   if ((rc = write_string_attr(h, h->steps, "columns", n_step_columns, step_columns))) goto fail;
-  /* A local heap sized for FRAMES_HEAP_BYTES / 8 frame names from the start
-   * stays one block with its header, so adding a frame rewrites it in one
-   * write instead of relocating it (see the durability note above). */
-  hid_t gcpl = H5Pcreate(H5P_GROUP_CREATE);
-  if (gcpl >= 0 && H5Pset_local_heap_size_hint(gcpl, FRAMES_HEAP_BYTES) >= 0)
-    h->frames = H5Gcreate2(h->file, "frames", H5P_DEFAULT, gcpl, H5P_DEFAULT);
-  close_id(&gcpl, H5Pclose);
+  h->frames = H5Gcreate2(h->file, "frames", H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
   if (h->frames < 0) {
     rc = h5_fail(h->path, "H5Gcreate2", "/frames");
     goto fail;
   }
-  if (H5Fflush(h->file, H5F_SCOPE_GLOBAL) < 0) {
-    rc = h5_fail(h->path, "H5Fflush", "/");
-    goto fail;
-  }
+  if ((rc = persist(h->file, h->path))) goto fail;
   if ((rc = xdmf_write(h))) goto fail;
+  h->live = 1;
   *out = h;
   return NH_OK;
 fail:
@@ -438,8 +475,7 @@ fail:
 
 int nh_h5_flush(nh_h5 *h) {
   NH_CHECK(h, NH_ERR_INTERNAL, "nh_h5_flush: NULL argument");
-  if (H5Fflush(h->file, H5F_SCOPE_GLOBAL) < 0) return h5_fail(h->path, "H5Fflush", "/");
-  return NH_OK;
+  return persist(h->file, h->path);
 }
 
 static void free_names(char **names, int n) {
@@ -465,8 +501,12 @@ int nh_h5_close(nh_h5 **hp) {
   free(h->series);
   close_id(&h->steps, H5Dclose);
   close_id(&h->frames, H5Gclose);
-  /* H5Fclose flushes; its failure (disk full) is a write failure. */
-  if (h->file >= 0 && H5Fclose(h->file) < 0) rc = h5_fail(h->path, "H5Fclose", "/");
+  /* The file lives in memory: writing it is the one step that can meet a
+   * full disk, and closing it afterwards cannot fail for want of space. */
+  if (h->file >= 0 && h->live) rc = persist(h->file, h->path);
+  if (h->file >= 0) H5Fclose(h->file);
+  H5Pclose(h->fapl);
+  free(h->dir);
   free(h->prev_conn);
   free(h->grids.s);
   free(h->path);
@@ -603,16 +643,18 @@ static int check_frame_grid(const nh_h5 *h, const nh_vtu_grid *g) {
   return NH_OK;
 }
 
-/* Connectivity: a hard link to the previous frame's when the mesh did not
- * change, else a new [n_cells x 8] dataset (and remembered for the next). */
+/* Connectivity: an external link to the dataset of the frame file that holds
+ * it when the mesh did not change (always the file that wrote it, never a
+ * chain of links), else a new [n_cells x 8] dataset (remembered for the next). */
 static int write_connectivity(nh_h5 *h, hid_t frame, const char *frame_name, const nh_vtu_grid *g) {
   size_t n = 8 * (size_t)g->n_cells;
   if (h->prev_cells == g->n_cells && g->n_cells > 0 &&
       memcmp(h->prev_conn, g->connectivity, n * sizeof(int)) == 0) {
-    char target[48];
-    snprintf(target, sizeof target, "/frames/%s/connectivity", h->prev_frame);
-    if (H5Lcreate_hard(h->file, target, frame, "connectivity", H5P_DEFAULT, H5P_DEFAULT) < 0)
-      return h5_fail(h->path, "H5Lcreate_hard", target);
+    char target[32];
+    frame_file(h->prev_frame, target, sizeof target);
+    if (H5Lcreate_external(target, "/connectivity", frame, "connectivity", H5P_DEFAULT,
+                           H5P_DEFAULT) < 0)
+      return h5_fail(h->path, "H5Lcreate_external", target);
     return NH_OK;
   }
   NH_TRY(write_array(h, frame, "connectivity", H5T_STD_I32LE, H5T_NATIVE_INT, g->n_cells, 8,
@@ -662,13 +704,25 @@ int nh_h5_write_frame(nh_h5 *h, int step, double time, const nh_vtu_grid *grid) 
   htri_t exists = H5Lexists(h->frames, name, H5P_DEFAULT);
   NH_CHECK(exists == 0, NH_ERR_INTERNAL, "HDF5 file '%s': frame /frames/%s written twice", h->path,
            name);
-  hid_t frame = H5Gcreate2(h->frames, name, H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT);
-  if (frame < 0) return h5_fail(h->path, "H5Gcreate2", name);
-  int rc = write_frame_data(h, frame, name, step, time, grid);
-  H5Gclose(frame);
-  NH_TRY(rc);
-  /* Everything up to this frame reaches the file before the XDMF lists it. */
-  if (H5Fflush(h->file, H5F_SCOPE_GLOBAL) < 0) return h5_fail(h->path, "H5Fflush", name);
+  char file[32];
+  frame_file(name, file, sizeof file);
+  char *path = join_path(h->dir, file);
+  if (!path) return NH_ERR_MEMORY;
+  /* The frame file first (complete on disk, or absent), then results.h5
+   * linking it, then the XDMF listing it: each renamed into place. */
+  hid_t frame = H5Fcreate(path, H5F_ACC_TRUNC, H5P_DEFAULT, h->fapl);
+  int rc = frame < 0 ? h5_fail(path, "H5Fcreate", "/") : NH_OK;
+  if (rc == NH_OK) rc = write_frame_data(h, frame, name, step, time, grid);
+  if (rc == NH_OK) rc = persist(frame, path);
+  if (frame >= 0) H5Fclose(frame);
+  free(path);
+  if (rc) { /* a frame not on disk is no frame to link to */
+    h->prev_cells = -1;
+    return rc;
+  }
+  if (H5Lcreate_external(file, "/", h->frames, name, H5P_DEFAULT, H5P_DEFAULT) < 0)
+    return h5_fail(h->path, "H5Lcreate_external", name);
+  NH_TRY(persist(h->file, h->path));
   NH_TRY(xdmf_add_frame(h, name, time, grid));
   h->n_frames++;
   return xdmf_write(h);
@@ -903,6 +957,37 @@ static int stored_fields(const nh_h5 *h, hid_t frame, const char *frame_name, in
   return rc;
 }
 
+/* The frame whose file holds the connectivity of frame `name` (opened as
+ * `frame`): itself, or the one its external link points to. */
+static int connectivity_owner(const nh_h5 *h, hid_t frame, const char *name, char *out,
+                              size_t size) {
+  H5L_info_t info;
+  if (H5Lget_info(frame, "connectivity", &info, H5P_DEFAULT) < 0)
+    return h5_fail(h->path, "H5Lget_info", "connectivity");
+  if (info.type != H5L_TYPE_EXTERNAL) {
+    snprintf(out, size, "%s", name);
+    return NH_OK;
+  }
+  char value[256];
+  const char *file = NULL, *object = NULL;
+  unsigned flags = 0;
+  if (info.u.val_size > sizeof value ||
+      H5Lget_val(frame, "connectivity", value, sizeof value, H5P_DEFAULT) < 0 ||
+      H5Lunpack_elink_val(value, info.u.val_size, &flags, &file, &object) < 0)
+    return h5_fail(h->path, "H5Lget_val", "connectivity");
+  long owner = -1;
+  if (strncmp(file, "results_", 8) == 0 && strlen(file) <= 8 + 9 + 3) {
+    char digits[16];
+    snprintf(digits, sizeof digits, "%.*s", (int)(strlen(file) - 8 - 3), file + 8);
+    if (!strcmp(file + strlen(file) - 3, ".h5")) owner = frame_step(digits);
+  }
+  NH_CHECK(owner >= 0, NH_ERR_IO,
+           "HDF5 file '%s': /frames/%s/connectivity links to '%s', not a frame file", h->path, name,
+           file);
+  snprintf(out, size, "%06d", (int)owner);
+  return NH_OK;
+}
+
 /* Add the <Grid> of stored frame /frames/<name> to the XDMF text; when
  * `last`, remember its connectivity (a following frame on the same mesh
  * links to it, as in an uninterrupted run). */
@@ -951,7 +1036,7 @@ static int stored_frame_xdmf(nh_h5 *h, const char *name, int last) {
         rc = h5_fail(h->path, "H5Dread", "connectivity");
       } else {
         h->prev_cells = (int)dc[0];
-        snprintf(h->prev_frame, sizeof h->prev_frame, "%s", name);
+        rc = connectivity_owner(h, frame, name, h->prev_frame, sizeof h->prev_frame);
       }
     }
   }
@@ -967,6 +1052,25 @@ static int stored_frame_xdmf(nh_h5 *h, const char *name, int last) {
 static int by_step(const void *a, const void *b) {
   long x = frame_step(*(char *const *)a), y = frame_step(*(char *const *)b);
   return (x > y) - (x < y);
+}
+
+/* Remove DIR/results_NNNNNN.h5 with NNNNNN > step: frames cut by a resume,
+ * and any written by a run killed before results.h5 linked them. */
+static void remove_frame_files(const nh_h5 *h, int step) {
+  DIR *d = opendir(h->dir);
+  if (!d) return;
+  for (struct dirent *e; (e = readdir(d));) {
+    size_t len = strlen(e->d_name);
+    if (len < 8 + 3 + 1 || strncmp(e->d_name, "results_", 8) || strcmp(e->d_name + len - 3, ".h5"))
+      continue;
+    char digits[16];
+    snprintf(digits, sizeof digits, "%.*s", (int)(len - 11), e->d_name + 8);
+    if (len - 11 > 9 || frame_step(digits) <= step) continue;
+    char *path = join_path(h->dir, e->d_name);
+    if (path) remove(path);
+    free(path);
+  }
+  closedir(d);
 }
 
 /* Open h->path and cut it back to step `step` (see nh_h5_resume). On
@@ -988,7 +1092,7 @@ static int resume_file(nh_h5 *h, const char *const *step_columns, int step_col, 
     H5Eclear2(H5E_DEFAULT);
     return NH_ERROR(NH_ERR_IO, "not an HDF5 file, or its superblock is damaged");
   }
-  h->file = H5Fopen(h->path, H5F_ACC_RDWR, H5P_DEFAULT);
+  h->file = H5Fopen(h->path, H5F_ACC_RDWR, h->fapl);
   if (h->file < 0) return h5_fail(h->path, "H5Fopen", "/");
   NH_TRY(read_string_attr(h, h->file, "/", "format", &n_format, &format));
   int ours = n_format == 1 && strcmp(format[0], FORMAT_NAME) == 0;
@@ -1056,10 +1160,8 @@ static int resume_file(nh_h5 *h, const char *const *step_columns, int step_col, 
       rc = h5_fail(h->path, "H5Ldelete", frames[i]);
   if (rc) goto done;
   h->n_frames = kept;
-  if (H5Fflush(h->file, H5F_SCOPE_GLOBAL) < 0) {
-    rc = h5_fail(h->path, "H5Fflush", "/");
-    goto done;
-  }
+  if ((rc = persist(h->file, h->path))) goto done;
+  remove_frame_files(h, step);
   if (last_step < step)
     nh_log_warn("'%s' holds /steps rows up to step %.0f only; the rows of steps %.0f to %d are "
                 "missing from it (steps.csv has them)",
@@ -1104,6 +1206,7 @@ int nh_h5_resume(const char *dir, const char *scene_text, const char *version, i
   int rc = resume_file(h, step_columns, step_col, step, &foreign);
   if (rc == NH_OK) rc = xdmf_write(h);
   if (rc == NH_OK) {
+    h->live = 1;
     *out = h;
     return NH_OK;
   }

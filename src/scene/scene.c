@@ -902,6 +902,74 @@ static int read_brain(const nh_ctx *c, const nh_yaml_node *brain, nh_scene *s) {
   return NH_OK;
 }
 
+double nh_scene_memory_estimate(double cells) {
+  return cells * (13.5e3 + 708.0 * cbrt(cells));
+}
+
+/* "12.3 GB" */
+static const char *bytes_text(double b, char *buf, size_t cap) {
+  static const char *const unit[] = {"B", "kB", "MB", "GB", "TB", "PB"};
+  int u = 0;
+  while (b >= 1000.0 && u < 5) b /= 1000.0, ++u;
+  snprintf(buf, cap, "%.3g %s", b, unit[u]);
+  return buf;
+}
+
+/* The lattice's size against limits.max_cells and its estimated memory
+ * against the machine's physical memory, before anything is allocated
+ * (`at`: tissue.grid, or tissue without it). */
+static int check_size(const nh_ctx *c, const nh_yaml_node *at, const nh_scene *s) {
+  const int *g = s->tissue.grid;
+  double cells = (double)g[0] * g[1] * g[2];
+  double nodes = (g[0] + 1.0) * (g[1] + 1.0) * (g[2] + 1.0);
+  char need[32], have[32];
+  bytes_text(nh_scene_memory_estimate(cells), need, sizeof need);
+  if (cells > s->limits.max_cells || 3 * nodes > INT_MAX)
+    return fail(c, at, "tissue.grid",
+                "%d x %d x %d = %.0f cells (%.0f nodes) exceed limits.max_cells = %d "
+                "(a run would need about %s of memory); coarsen the grid and let `adapt` "
+                "refine, or raise limits.max_cells",
+                g[0], g[1], g[2], cells, nodes, s->limits.max_cells, need);
+  double ram = (double)sysconf(_SC_PHYS_PAGES) * (double)sysconf(_SC_PAGESIZE);
+  if (ram > 0 && nh_scene_memory_estimate(cells) > ram)
+    return fail(c, at, "tissue.grid",
+                "%d x %d x %d = %.0f cells: a run would need about %s of memory, more than "
+                "this machine's %s; coarsen the grid and let `adapt` refine",
+                g[0], g[1], g[2], cells, need, bytes_text(ram, have, sizeof have));
+  return NH_OK;
+}
+
+/* The cells of a box lattice must be invertible in double precision: their
+ * Jacobian inverse is refused (nh_mat3_inverse) when the product of the two
+ * smaller edge ratios falls below 1e-14. An aspect ratio above 1e6 is
+ * refused here, naming the box, before any mesh is built. */
+static int check_box_cells(const nh_ctx *c, const nh_yaml_node *box, const nh_scene *s) {
+  double h[3], lo = INFINITY, hi = 0.0;
+  for (int i = 0; i < 3; ++i) {
+    h[i] = (s->tissue.box_max[i] - s->tissue.box_min[i]) / s->tissue.grid[i];
+    lo = fmin(lo, h[i]);
+    hi = fmax(hi, h[i]);
+  }
+  if (!(hi / lo <= 1e6) || !isfinite(hi))
+    return fail(c, box, "tissue.domain.box",
+                "its %d x %d x %d grid cells measure %g x %g x %g m, an aspect ratio of %.3g "
+                "(at most 1e6): such a cell's Jacobian cannot be inverted in double "
+                "precision; give a box and a grid whose cells are closer to cubes",
+                s->tissue.grid[0], s->tissue.grid[1], s->tissue.grid[2], h[0], h[1], h[2], hi / lo);
+  return NH_OK;
+}
+
+static int read_limits(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
+  static const char *const keys[] = {"max_cells", NULL};
+  const nh_yaml_node *m, *at;
+  s->limits.max_cells = 2000000;
+  NH_TRY(section(c, root, "", "limits", 0, &m));
+  if (!m) return NH_OK;
+  NH_TRY(check_keys(c, m, "limits", keys));
+  NH_TRY(get_int(c, m, "limits", "max_cells", &s->limits.max_cells, &at));
+  return at_least(c, at, "limits", "max_cells", s->limits.max_cells, 1, 0);
+}
+
 static int read_tissue(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   static const char *const keys[] = {"domain", "grid",     "material", "damping",   "fixed",
                                      "loads",  "buoyancy", "labels",   "materials", NULL};
@@ -938,15 +1006,13 @@ static int read_tissue(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   NH_TRY(field(c, t, "tissue", "grid", 0, &n));
   if (n) {
     NH_TRY(as_ivec3(c, n, "tissue.grid", s->tissue.grid));
-    double nodes = 1;
-    for (int i = 0; i < 3; ++i) {
+    for (int i = 0; i < 3; ++i)
       if (s->tissue.grid[i] < 1)
         return fail(c, n->items[i], join_index(key, "tissue.grid", i),
                     "a cell count must be at least 1, got %d", s->tissue.grid[i]);
-      nodes *= s->tissue.grid[i] + 1.0;
-    }
-    if (3 * nodes > INT_MAX) return fail(c, n, "tissue.grid", "%g nodes are too many", nodes);
   }
+  NH_TRY(check_size(c, n ? n : t, s));
+  if (s->tissue.domain == NH_DOMAIN_BOX) NH_TRY(check_box_cells(c, domain->items[0], s));
 
   s->tissue.density = 1000;
   NH_TRY(read_material(c, t, "tissue", 1, 1, &s->tissue.young, &s->tissue.poisson,
@@ -1114,17 +1180,36 @@ static int read_adapt(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
 }
 
 static int read_solver(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
-  static const char *const keys[] = {"tolerance", "max_iterations", "threads", "refactor", NULL};
+  static const char *const keys[] = {"tolerance",  "max_iterations", "threads", "refactor",
+                                     "on_invalid", "newton",         NULL};
   static const char *const refactors[] = {"auto", "every", NULL};
-  const nh_yaml_node *m, *at;
+  static const char *const newton_keys[] = {"max_iterations", "tolerance", NULL};
+  static const char *const on_invalid[] = {"stop", "warn", NULL};
+  const nh_yaml_node *m, *at, *newton;
   int choice = 0;
   s->solver.refactor = NH_REFACTOR_AUTO;
   s->solver.tolerance = 1e-8;
   s->solver.max_iterations = 30;
   s->solver.threads = 0;
+  s->solver.on_invalid_warn = 0;
+  s->solver.newton_iterations = 0;
+  s->solver.newton_tolerance = 1e-8;
   NH_TRY(section(c, root, "", "solver", 0, &m));
   if (!m) return NH_OK;
   NH_TRY(check_keys(c, m, "solver", keys));
+  NH_TRY(field(c, m, "solver", "on_invalid", 0, &at));
+  if (at) NH_TRY(as_choice(c, at, "solver.on_invalid", on_invalid, &s->solver.on_invalid_warn));
+  NH_TRY(section(c, m, "solver", "newton", 0, &newton));
+  if (newton) {
+    NH_TRY(check_keys(c, newton, "solver.newton", newton_keys));
+    s->solver.newton_iterations = 5;
+    NH_TRY(
+        get_int(c, newton, "solver.newton", "max_iterations", &s->solver.newton_iterations, &at));
+    NH_TRY(at_least(c, at, "solver.newton", "max_iterations", s->solver.newton_iterations, 0, 0));
+    NH_TRY(
+        get_number(c, newton, "solver.newton", "tolerance", 0, &s->solver.newton_tolerance, &at));
+    NH_TRY(at_least(c, at, "solver.newton", "tolerance", s->solver.newton_tolerance, 0, 1));
+  }
   NH_TRY(get_number(c, m, "solver", "tolerance", 0, &s->solver.tolerance, &at));
   NH_TRY(at_least(c, at, "solver", "tolerance", s->solver.tolerance, 0, 1));
   NH_TRY(get_int(c, m, "solver", "max_iterations", &s->solver.max_iterations, &at));
@@ -1646,12 +1731,13 @@ static int read_name(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
 
 /* The whole schema, in the order of docs/scene.md. */
 static int read_scene(nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
-  static const char *const keys[] = {"name",  "time",   "gravity", "tissue", "adapt", "solver",
-                                     "tools", "probes", "targets", "output", NULL};
+  static const char *const keys[] = {"name",  "time",   "gravity", "tissue", "adapt",  "solver",
+                                     "tools", "probes", "targets", "output", "limits", NULL};
   NH_TRY(check_keys(c, root, "", keys));
   NH_TRY(read_name(c, root, s));
   NH_TRY(read_time(c, root, s));
   NH_TRY(read_gravity(c, root, s));
+  NH_TRY(read_limits(c, root, s)); /* before tissue: the grid is checked against them */
   NH_TRY(read_tissue(c, root, s));
   c->image = s->tissue.mask_file[0]     ? s->tissue.mask_file
              : s->tissue.labels_file[0] ? s->tissue.labels_file

@@ -215,9 +215,16 @@ typedef struct nh_scene {
     int max_iterations; /* solver.max_iterations: static Newton (default 30) */
     int threads;        /* solver.threads: OpenMP threads, 0 = all cores (default 0) */
     nh_refactor_mode refactor; /* solver.refactor: auto (default) | every */
+    int on_invalid_warn;       /* solver.on_invalid: stop (0, default) | warn (1) */
+    int newton_iterations;     /* solver.newton.max_iterations (dynamic; default 0: none) */
+    double newton_tolerance;   /* solver.newton.tolerance (default 1e-8) */
   } solver;
 
   nh_adapt_spec adapt;
+
+  struct {
+    int max_cells; /* limits.max_cells: cap on tissue cells, lattice and refined (default 2e6) */
+  } limits;
 
   int n_probes;
   nh_probe *probes; /* probes: list of {name, point} */
@@ -276,6 +283,14 @@ double nh_scene_tip_travel(const nh_scene *scene, int i, int n, double t);
  * standoff before the entry point). Returns NH_ERR_INPUT, without a message
  * and with the tool untouched, if the target is the entry point. */
 int nh_scene_trajectory_line(nh_tool_spec *tool, const double target[3]);
+
+/* Estimated peak memory (bytes) of a run on `cells` hexahedra: a model
+ * fitted to measured peaks of static runs on cube grids of 16³, 24³ and 32³
+ * cells (101.7, 407, 1185 MB; the model gives 101.7, 421, 1185 MB):
+ * 13.5 kB per cell (element data, the assembled matrix) plus 708 B ×
+ * cells^(1/3) per cell (the fill of the sparse Cholesky factor, which for a
+ * 3-D grid grows like n^(4/3)). Tools, adaptivity and refinement add to it. */
+double nh_scene_memory_estimate(double cells);
 
 /* Print a human-readable summary of what will be modelled (for `check`). */
 void nh_scene_print(const nh_scene *scene, void *stdio_file);

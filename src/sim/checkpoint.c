@@ -46,32 +46,9 @@ static uint64_t nh_fnv1a(const void *data, size_t n, uint64_t h) {
 
 #define NH_FNV_SEED 14695981039346656037ull
 
-/* A growable byte buffer. */
-typedef struct {
-  unsigned char *data;
-  size_t len, cap;
-  int failed;
-} nh_buf;
-
-static void nh_put(nh_buf *b, const void *p, size_t n) {
-  if (b->failed) return;
-  if (b->len + n > b->cap) {
-    size_t cap = b->cap ? b->cap : 4096;
-    while (cap < b->len + n) cap *= 2;
-    unsigned char *d = realloc(b->data, cap);
-    if (!d) {
-      b->failed = 1;
-      return;
-    }
-    b->data = d, b->cap = cap;
-  }
-  memcpy(b->data + b->len, p, n);
-  b->len += n;
-}
-
-static void nh_put_i32(nh_buf *b, int v) {
+static void nh_put_i32(nh_bytes *b, int v) {
   int32_t x = v;
-  nh_put(b, &x, 4);
+  nh_bytes_put(b, &x, 4);
 }
 
 void nh_checkpoint_path(const char *dir, char *path, size_t size) {
@@ -80,33 +57,46 @@ void nh_checkpoint_path(const char *dir, char *path, size_t size) {
 
 int nh_checkpoint_write(const nh_sim *s) {
   const nh_mesh *m = s->mesh;
-  nh_buf b = {0};
+  nh_bytes b = {0};
   uint64_t scene_hash = nh_fnv1a(s->scene->yaml ? s->scene->yaml : "",
                                  strlen(s->scene->yaml ? s->scene->yaml : ""), NH_FNV_SEED);
-  nh_put(&b, &scene_hash, 8);
+  nh_bytes_put(&b, &scene_hash, 8);
   nh_put_i32(&b, s->step);
-  nh_put(&b, &s->time, 8);
+  nh_bytes_put(&b, &s->time, 8);
   for (int k = 0; k < 3; k++) nh_put_i32(&b, m->grid[k]);
-  nh_put(&b, m->origin, 24);
-  nh_put(&b, m->spacing, 24);
+  nh_bytes_put(&b, m->origin, 24);
+  nh_bytes_put(&b, m->spacing, 24);
   nh_put_i32(&b, m->n_nodes);
-  nh_put(&b, m->X, sizeof(double) * 3 * (size_t)m->n_nodes);
+  nh_bytes_put(&b, m->X, sizeof(double) * 3 * (size_t)m->n_nodes);
   nh_put_i32(&b, m->n_cells);
   for (int c = 0; c < 8 * m->n_cells; c++) nh_put_i32(&b, m->cells[c]);
   for (int c = 0; c < m->n_cells; c++) nh_put_i32(&b, m->level[c]);
   for (int c = 0; c < m->n_cells; c++) nh_put_i32(&b, m->parent[c]);
   for (int c = 0; c < m->n_cells; c++) nh_put_i32(&b, m->first_child[c]);
   for (int c = 0; c < m->n_cells; c++) nh_put_i32(&b, m->n_children[c]);
-  nh_put(&b, m->fill, sizeof(double) * (size_t)m->n_cells);
-  nh_put(&b, s->u, sizeof(double) * 3 * (size_t)m->n_nodes);
-  nh_put(&b, s->v, sizeof(double) * 3 * (size_t)m->n_nodes);
+  nh_bytes_put(&b, m->fill, sizeof(double) * (size_t)m->n_cells);
+  nh_bytes_put(&b, s->u, sizeof(double) * 3 * (size_t)m->n_nodes);
+  nh_bytes_put(&b, s->v, sizeof(double) * 3 * (size_t)m->n_nodes);
+  unsigned char *tools = NULL;
+  size_t tools_size = 0;
+  if (s->contact) {
+    int rc = nh_contact_state_save(s->contact, &tools, &tools_size);
+    if (rc) {
+      free(b.data);
+      return rc;
+    }
+  }
+  uint64_t tools_len = tools_size;
+  nh_bytes_put(&b, &tools_len, 8);
+  nh_bytes_put(&b, tools, tools_size);
+  free(tools);
   if (b.failed) {
     free(b.data);
     return NH_ERROR(NH_ERR_MEMORY, "out of memory writing a checkpoint");
   }
   char path[NH_PATH_MAX + 32];
   nh_checkpoint_path(s->scene->output.dir, path, sizeof path);
-  uint32_t version = 1, order = 0x01020304;
+  uint32_t version = 2, order = 0x01020304;
   uint64_t size = b.len, sum = nh_fnv1a(b.data, b.len, NH_FNV_SEED);
   nh_atomic_file af;
   int rc = nh_atomic_open(path, "checkpoint", 1, &af);
@@ -121,25 +111,9 @@ int nh_checkpoint_write(const nh_sim *s) {
   return rc;
 }
 
-/* Reading: a cursor over the payload that refuses to run past its end. */
-typedef struct {
-  const unsigned char *p, *end;
-  int short_read;
-} nh_cur;
-
-static void nh_get(nh_cur *c, void *out, size_t n) {
-  if (c->short_read || (size_t)(c->end - c->p) < n) {
-    c->short_read = 1;
-    memset(out, 0, n);
-    return;
-  }
-  memcpy(out, c->p, n);
-  c->p += n;
-}
-
-static int nh_get_i32(nh_cur *c) {
+static int nh_get_i32(nh_byte_reader *c) {
   int32_t x;
-  nh_get(c, &x, 4);
+  nh_bytes_get(c, &x, 4);
   return x;
 }
 
@@ -160,11 +134,11 @@ int nh_checkpoint_read(const char *dir, const nh_scene *scene, nh_checkpoint *ck
     fclose(f);
     return NH_ERROR(NH_ERR_INPUT, "--restart: %s: not a needlehex checkpoint", path);
   }
-  if (version != 1 || order != 0x01020304) {
+  if ((version != 1 && version != 2) || order != 0x01020304) {
     fclose(f);
     return NH_ERROR(NH_ERR_INPUT,
                     "--restart: %s: checkpoint format %u (byte order %#x) is not the one this "
-                    "needlehex reads (1, %#x)",
+                    "needlehex reads (1 or 2, %#x)",
                     path, version, order, 0x01020304u);
   }
   unsigned char *data = size < ((uint64_t)1 << 40) ? malloc(size ? size : 1) : NULL;
@@ -183,9 +157,9 @@ int nh_checkpoint_read(const char *dir, const nh_scene *scene, nh_checkpoint *ck
                     : extra     ? "trailing bytes"
                                 : "checksum mismatch");
   }
-  nh_cur c = {data, data + size, 0};
+  nh_byte_reader c = {data, data + size, 0};
   uint64_t scene_hash;
-  nh_get(&c, &scene_hash, 8);
+  nh_bytes_get(&c, &scene_hash, 8);
   uint64_t want =
       nh_fnv1a(scene->yaml ? scene->yaml : "", strlen(scene->yaml ? scene->yaml : ""), NH_FNV_SEED);
   if (scene_hash != want) {
@@ -197,7 +171,7 @@ int nh_checkpoint_read(const char *dir, const nh_scene *scene, nh_checkpoint *ck
         path, dir);
   }
   ck->step = nh_get_i32(&c);
-  nh_get(&c, &ck->time, 8);
+  nh_bytes_get(&c, &ck->time, 8);
   nh_mesh *m = calloc(1, sizeof *m);
   int rc = NH_OK;
   if (!m) {
@@ -205,8 +179,8 @@ int nh_checkpoint_read(const char *dir, const nh_scene *scene, nh_checkpoint *ck
     return NH_ERROR(NH_ERR_MEMORY, "out of memory reading a checkpoint");
   }
   for (int k = 0; k < 3; k++) m->grid[k] = nh_get_i32(&c);
-  nh_get(&c, m->origin, 24);
-  nh_get(&c, m->spacing, 24);
+  nh_bytes_get(&c, m->origin, 24);
+  nh_bytes_get(&c, m->spacing, 24);
   m->n_nodes = m->cap_nodes = nh_get_i32(&c);
   if (c.short_read || m->n_nodes <= 0 || (size_t)m->n_nodes > size / 24) {
     rc = NH_ERROR(NH_ERR_INPUT, "--restart: %s: the checkpoint's mesh is malformed", path);
@@ -214,7 +188,7 @@ int nh_checkpoint_read(const char *dir, const nh_scene *scene, nh_checkpoint *ck
   }
   m->X = malloc(sizeof(double) * 3 * (size_t)m->n_nodes);
   if (!m->X) goto oom;
-  nh_get(&c, m->X, sizeof(double) * 3 * (size_t)m->n_nodes);
+  nh_bytes_get(&c, m->X, sizeof(double) * 3 * (size_t)m->n_nodes);
   m->n_cells = m->cap_cells = nh_get_i32(&c);
   if (c.short_read || m->n_cells <= 0 || (size_t)m->n_cells > size / 32) {
     rc = NH_ERROR(NH_ERR_INPUT, "--restart: %s: the checkpoint's mesh is malformed", path);
@@ -237,9 +211,20 @@ int nh_checkpoint_read(const char *dir, const nh_scene *scene, nh_checkpoint *ck
   for (size_t i = 0; i < nc; i++) m->parent[i] = nh_get_i32(&c);
   for (size_t i = 0; i < nc; i++) m->first_child[i] = nh_get_i32(&c);
   for (size_t i = 0; i < nc; i++) m->n_children[i] = nh_get_i32(&c);
-  nh_get(&c, m->fill, sizeof(double) * nc);
-  nh_get(&c, ck->u, sizeof(double) * 3 * (size_t)m->n_nodes);
-  nh_get(&c, ck->v, sizeof(double) * 3 * (size_t)m->n_nodes);
+  nh_bytes_get(&c, m->fill, sizeof(double) * nc);
+  nh_bytes_get(&c, ck->u, sizeof(double) * 3 * (size_t)m->n_nodes);
+  nh_bytes_get(&c, ck->v, sizeof(double) * 3 * (size_t)m->n_nodes);
+  if (version >= 2) { /* the tools' state (contact/state.c) */
+    uint64_t n = 0;
+    nh_bytes_get(&c, &n, 8);
+    if (!c.short_read && n > 0 && n <= (uint64_t)(c.end - c.p)) {
+      if (!(ck->tools = malloc((size_t)n))) goto oom;
+      ck->tools_size = (size_t)n;
+      nh_bytes_get(&c, ck->tools, (size_t)n);
+    } else if (n > 0) {
+      c.short_read = 1;
+    }
+  }
   /* Structural sanity: indices in range (a checksum-valid file of a buggy writer must not crash
    * us). */
   int bad = c.short_read || c.p != c.end;
@@ -262,8 +247,9 @@ done:
   free(data);
   if (rc) {
     nh_mesh_destroy(&m);
-    free(ck->u), free(ck->v);
+    free(ck->u), free(ck->v), free(ck->tools);
     ck->u = ck->v = NULL;
+    ck->tools = NULL;
     return rc;
   }
   ck->mesh = m;

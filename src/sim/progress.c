@@ -3,7 +3,9 @@
  * On a terminal, one line rewritten in place (at most 5 times a second):
  * step/total, simulated time, DOFs, ms per step, ETA. When stderr is not a
  * terminal (CI, logs), a plain line every 10 % of the run or every 10 s.
- * At the end a summary: steps, DOFs, median ms/step by phase, output folder. */
+ * At the end a summary: steps, DOFs, median ms/step by phase, output folder.
+ * A continued run (--restart) counts, times and medians only the steps this
+ * process computed. */
 #include "sim/sim_impl.h"
 
 #include <stdio.h>
@@ -18,7 +20,8 @@ void nh_progress_start(nh_sim *s) {
 void nh_progress_update(nh_sim *s) {
   int total = s->scene->time.steps;
   double now = nh_time_now(), elapsed = now - s->progress.t_start;
-  double per_step = elapsed / s->step;
+  int done = s->step - s->first_step; /* by this process: what the clock measured */
+  double per_step = done > 0 ? elapsed / done : 0.0;
   double eta = per_step * (total - s->step);
   int dofs = 3 * s->mesh->n_nodes;
   if (s->progress.is_tty) {
@@ -39,11 +42,15 @@ void nh_progress_finish(nh_sim *s) {
   if (s->progress.is_tty && s->progress.printed) fputc('\n', stderr);
   double t[NH_PHASES];
   nh_sim_median_times(s, t);
+  int done = s->step - s->first_step;
+  if (s->first_step > 0)
+    fprintf(stderr, "%s: continued from step %d: %d steps now, to step %d\n", s->scene->name,
+            s->first_step, done, s->step);
   fprintf(stderr,
           "%s: %d steps, %d dofs (%d free), %d cells, %.2f s\n"
           "  median ms/step: assemble %.3f  factor %.3f  solve %.3f  constraints %.3f  "
           "adapt %.3f  output %.3f  | step %.3f\n",
-          s->scene->name, s->step, 3 * s->mesh->n_nodes, nh_system_free_dofs(s->system),
+          s->scene->name, done, 3 * s->mesh->n_nodes, nh_system_free_dofs(s->system),
           s->mesh->n_leaves, nh_time_now() - s->progress.t_start, 1e3 * t[NH_PHASE_ASSEMBLE],
           1e3 * t[NH_PHASE_FACTOR], 1e3 * t[NH_PHASE_SOLVE], 1e3 * t[NH_PHASE_CONSTRAINTS],
           1e3 * t[NH_PHASE_ADAPT], 1e3 * t[NH_PHASE_OUTPUT], 1e3 * t[NH_PHASE_STEP]);

@@ -17,6 +17,8 @@
  * nh_sim_setup_mesh, at creation and after every refinement. */
 #include "sim/sim_impl.h"
 
+#include <dirent.h>
+#include <errno.h>
 #include <math.h>
 #include <signal.h>
 #include <stdio.h>
@@ -53,7 +55,8 @@ static const char *const nh_step_columns[] = {"step",
                                               "factorised",
                                               "pcg_iterations",
                                               "corrections",
-                                              "t_factor_reference"};
+                                              "t_factor_reference",
+                                              "inverted"};
 static const char *const nh_probe_columns[] = {"step", "time", "name", "x", "y",
                                                "z",    "ux",   "uy",   "uz"};
 
@@ -68,6 +71,9 @@ void nh_sim_destroy(nh_sim **sim) {
   free(s->u);
   free(s->x);
   free(s->v);
+  free(s->u_start);
+  free(s->restore_tools);
+  free(s->tools_start);
   free(s->f_ext);
   free(s->load_unit);
   free(s->probe_cell);
@@ -79,7 +85,11 @@ void nh_sim_destroy(nh_sim **sim) {
   nh_csv_destroy(&s->probes_csv);
   nh_pvd_destroy(&s->tissue_pvd);
   nh_pvd_destroy(&s->points_pvd);
-  nh_h5_close(&s->h5);
+  if (s->h5) { /* a run that failed: keep its rows if the disk allows, and its message */
+    char reason[1024];
+    snprintf(reason, sizeof reason, "%s", nh_error_message());
+    if (nh_h5_close(&s->h5)) nh_error_set(NH_ERR_IO, __FILE__, __LINE__, "%s", reason);
+  }
   free(s);
   *sim = NULL;
 }
@@ -146,13 +156,14 @@ static int nh_cmp_double(const void *a, const void *b) {
 
 void nh_sim_median_times(const nh_sim *s, double t[7]) {
   for (int p = 0; p < NH_PHASES; p++) t[p] = 0.0;
-  if (s->step == 0) return;
-  double *buf = malloc(sizeof(double) * (size_t)s->step);
+  const int first = s->first_step, n = s->step - first; /* steps this process timed */
+  if (n <= 0) return;
+  double *buf = malloc(sizeof(double) * (size_t)n);
   if (!buf) return;
   for (int p = 0; p < NH_PHASES; p++) {
-    for (int k = 0; k < s->step; k++) buf[k] = s->phase_times[NH_PHASES * k + p];
-    qsort(buf, (size_t)s->step, sizeof(double), nh_cmp_double);
-    t[p] = s->step % 2 ? buf[s->step / 2] : 0.5 * (buf[s->step / 2 - 1] + buf[s->step / 2]);
+    for (int k = 0; k < n; k++) buf[k] = s->phase_times[NH_PHASES * (first + k) + p];
+    qsort(buf, (size_t)n, sizeof(double), nh_cmp_double);
+    t[p] = n % 2 ? buf[n / 2] : 0.5 * (buf[n / 2 - 1] + buf[n / 2]);
   }
   free(buf);
 }
@@ -284,7 +295,56 @@ static int nh_write_probe_rows(nh_sim *s) {
   return s->contact ? nh_sim_tools_rows(s) : NH_OK;
 }
 
+/* Is `name` a file a run writes (docs/outputs.md): the tables, collections,
+ * frames NAME_NNNNNN.vtu and results_NNNNNN.h5, results.h5/.xdmf, the
+ * checkpoint, scene.yaml, a moved-aside results.h5.damaged*, a *.tmp? */
+static int nh_is_run_output(const char *name) {
+  static const char *const fixed[] = {"scene.yaml",   "steps.csv",      "probes.csv",
+                                      "targets.csv",  "tools.csv",      "results.h5",
+                                      "results.xdmf", "checkpoint.nhc", NULL};
+  for (int i = 0; fixed[i]; i++)
+    if (!strcmp(name, fixed[i])) return 1;
+  size_t n = strlen(name);
+  if (!strncmp(name, "results.h5.damaged", 18)) return 1;
+  if (n > 4 && (!strcmp(name + n - 4, ".pvd") || !strcmp(name + n - 4, ".tmp"))) return 1;
+  /* PREFIX_NNNNNN.vtu, results_NNNNNN.h5 */
+  const char *us = strrchr(name, '_');
+  if (!us || us == name) return 0;
+  size_t d = strspn(us + 1, "0123456789");
+  return d >= 6 && (!strcmp(us + 1 + d, ".vtu") ||
+                    (!strcmp(us + 1 + d, ".h5") && !strncmp(name, "results_", 8)));
+}
+
+/* A fresh run's folder: refuse one holding a previous run's outputs, or
+ * (overwrite) remove them; files that are not outputs are left alone. */
+static int nh_claim_folder(const nh_sim *s) {
+  const char *dir = s->scene->output.dir;
+  DIR *d = opendir(dir);
+  if (!d) return NH_OK; /* absent: created next */
+  int count = 0, rc = NH_OK;
+  char first[256] = "";
+  for (struct dirent *e; (e = readdir(d)) && !rc;) {
+    if (!nh_is_run_output(e->d_name)) continue;
+    if (!count++) snprintf(first, sizeof first, "%s", e->d_name);
+    if (s->options.overwrite) {
+      char path[NH_PATH_MAX + 300];
+      snprintf(path, sizeof path, "%s/%s", dir, e->d_name);
+      if (remove(path) != 0)
+        rc = NH_ERROR(NH_ERR_IO, "--overwrite: cannot remove '%s': %s", path, strerror(errno));
+    }
+  }
+  closedir(d);
+  if (!rc && count && !s->options.overwrite)
+    rc = NH_ERROR(NH_ERR_INPUT,
+                  "%s: the output folder holds the files of a previous run (%s and %d more): "
+                  "continue it with --restart %s, replace them with --overwrite, or choose "
+                  "another --out",
+                  dir, first, count - 1, dir);
+  return rc;
+}
+
 static int nh_open_outputs(nh_sim *s) {
+  if (!s->options.restart_dir) NH_TRY(nh_claim_folder(s));
   NH_TRY(nh_mkdir_p(s->scene->output.dir));
   if (s->scene->output.hdf5) {
     const char *yaml = s->scene->yaml ? s->scene->yaml : "";
@@ -305,8 +365,9 @@ static int nh_open_outputs(nh_sim *s) {
     snprintf(path, sizeof path, "%s/probes.csv", dir);
     NH_TRY(nh_csv_resume(path, 9, nh_probe_columns, s->step, &s->probes_csv));
     NH_TRY(nh_pvd_resume(dir, "tissue", sc->time.step, s->step, &s->tissue_pvd));
-    if (sc->n_probes > 0)
+    if (sc->n_probes + sc->n_targets > 0) /* targets are points too */
       NH_TRY(nh_pvd_resume(dir, "points", sc->time.step, s->step, &s->points_pvd));
+    NH_TRY(nh_sim_tools_open(s));
     s->last_frame = s->step; /* its frame, if due, was written by the first run */
     return NH_OK;
   }
@@ -353,6 +414,7 @@ static int nh_sim_setup_mesh(nh_sim *s, int first) {
   s->fixed = fixed;
   memset(s->fixed, 0, (size_t)nn);
   NH_TRY(nh_resize(&s->x, nn, 3));
+  NH_TRY(nh_resize(&s->u_start, nn, 3));
   NH_TRY(nh_resize(&s->f_ext, nn, 3));
   NH_TRY(nh_resize(&s->load_unit, nn, 3 * (sc->tissue.n_loads ? sc->tissue.n_loads : 1)));
   for (int r = 0; r < sc->tissue.n_fixed; r++) {
@@ -418,8 +480,10 @@ static int nh_sim_build(nh_sim *s) {
     s->mesh = ck.mesh;
     s->u = ck.u;
     s->v = ck.v;
-    s->step = ck.step;
+    s->step = s->first_step = ck.step;
     s->time = ck.time;
+    s->restore_tools = ck.tools;
+    s->restore_tools_size = ck.tools_size;
   } else {
     nh_domain domain;
     NH_TRY(nh_domain_from_scene(sc, &domain));
@@ -435,7 +499,7 @@ static int nh_sim_build(nh_sim *s) {
   s->probe_xi = malloc(sizeof(double) * 3 * (size_t)(n_points ? n_points : 1));
   if (!s->u || !s->v || !s->probe_cell || !s->probe_xi)
     return NH_ERROR(NH_ERR_MEMORY, "out of memory building the model (%d nodes)", nn);
-  if (sc->adapt.enabled) NH_TRY(nh_adapt_create(&sc->adapt, &s->adapt));
+  if (sc->adapt.enabled) NH_TRY(nh_adapt_create(&sc->adapt, sc->limits.max_cells, &s->adapt));
   NH_TRY(nh_sim_setup_mesh(s, 1));
   NH_TRY(nh_sim_tools_build(s));
   s->integrator = (nh_integrator){.dt = sc->time.step,
@@ -445,7 +509,9 @@ static int nh_sim_build(nh_sim *s) {
                                   .max_iterations = sc->solver.max_iterations,
                                   .threads = sc->solver.threads,
                                   .reuse = sc->solver.refactor == NH_REFACTOR_AUTO,
-                                  .time_factor = getenv("NH_TIME_FACTOR") != NULL};
+                                  .time_factor = getenv("NH_TIME_FACTOR") != NULL,
+                                  .newton_iterations = sc->solver.newton_iterations,
+                                  .newton_tolerance = sc->solver.newton_tolerance};
   s->cap_steps = sc->time.steps > s->step ? sc->time.steps : s->step + 1;
   s->phase_times =
       calloc((size_t)NH_PHASES * (size_t)(s->cap_steps ? s->cap_steps : 1), sizeof(double));
@@ -475,6 +541,13 @@ static int nh_sim_refine(nh_sim *s) {
   return NH_OK;
 }
 
+/* The outputs of step `step` failed (disk full, folder not writable): the
+ * message names the step before the writer's reason (exit 1). */
+static int nh_output_failed(int rc, int step) {
+  char reason[1024];
+  snprintf(reason, sizeof reason, "%s", nh_error_message());
+  return NH_ERROR(rc, "step %d: writing the outputs failed: %s", step, reason);
+}
 int nh_sim_create(const nh_scene *scene, const nh_sim_options *options, nh_sim **out) {
   *out = NULL;
   nh_sim *s = nh_calloc(1, sizeof *s);
@@ -482,7 +555,8 @@ int nh_sim_create(const nh_scene *scene, const nh_sim_options *options, nh_sim *
   s->scene = scene;
   if (options) s->options = *options;
   int rc = nh_sim_build(s);
-  if (!rc && !s->options.dry_run) rc = nh_open_outputs(s);
+  if (!rc && !s->options.dry_run && (rc = nh_open_outputs(s)) == NH_ERR_IO)
+    rc = nh_output_failed(rc, s->step);
   if (rc) {
     nh_sim_destroy(&s);
     return rc;
@@ -492,6 +566,12 @@ int nh_sim_create(const nh_scene *scene, const nh_sim_options *options, nh_sim *
 }
 
 /* ---- stepping ---- */
+
+#define NH_TRY_OUTPUT(expr, step)                                                                  \
+  do {                                                                                             \
+    int nh_out_rc_ = (expr);                                                                       \
+    if (nh_out_rc_) return nh_output_failed(nh_out_rc_, (step));                                   \
+  } while (0)
 
 int nh_sim_step(nh_sim *s) {
   const nh_scene *sc = s->scene;
@@ -506,11 +586,18 @@ int nh_sim_step(nh_sim *s) {
   double t_new = (s->step + 1) * sc->time.step;
   nh_sim_external_force(s, t_new, s->f_ext);
   nh_step_stats st = {0};
+  memcpy(s->u_start, s->u, sizeof(double) * 3 * (size_t)s->mesh->n_nodes);
+  if (s->contact) { /* a few kB: beams and channels, for a stop inside the step */
+    free(s->tools_start);
+    s->tools_start = NULL;
+    NH_TRY(nh_contact_state_save(s->contact, &s->tools_start, &s->tools_start_size));
+  }
   int rc = s->contact ? nh_contact_step(s->contact, s->system, &s->integrator, s->mesh, s->f_ext,
                                         s->u, s->v, t_new, &st)
            : sc->time.mode == NH_MODE_STATIC
                ? nh_solve_static(s->system, &s->integrator, s->f_ext, s->u, &st)
                : nh_step_dynamic(s->system, &s->integrator, s->f_ext, s->u, s->v, &st);
+  if (!rc) NH_TRY(nh_sim_guard(s, s->u_start)); /* its message names the step */
   int adapt_now = !rc && sc->adapt.enabled && (s->step + 1) % sc->adapt.every == 0;
   double ta = nh_time_now();
   s->eta = s->eta_rel = NAN; /* nan in steps.csv: not estimated at this step */
@@ -541,8 +628,8 @@ int nh_sim_step(nh_sim *s) {
   if (!s->options.dry_run) {
     int due =
         (sc->output.every > 0 && s->step % sc->output.every == 0) || s->step == sc->time.steps;
-    NH_TRY(nh_write_probe_rows(s));
-    if (due && s->last_frame != s->step) NH_TRY(nh_write_frame(s));
+    NH_TRY_OUTPUT(nh_write_probe_rows(s), s->step);
+    if (due && s->last_frame != s->step) NH_TRY_OUTPUT(nh_write_frame(s), s->step);
   }
   double t2 = nh_time_now();
   /* A failed refinement still leaves this step's row (written below). */
@@ -554,7 +641,7 @@ int nh_sim_step(nh_sim *s) {
   /* A checkpoint holds the state the next step starts from: after refinement. */
   if (!refine_rc && !s->options.dry_run && sc->output.checkpoint > 0 &&
       s->step % sc->output.checkpoint == 0)
-    NH_TRY(nh_checkpoint_write(s));
+    NH_TRY_OUTPUT(nh_checkpoint_write(s), s->step);
   double t_checkpoint = nh_time_now() - t3; /* counted as output */
   t3 += t_checkpoint;
   double *pt = s->phase_times + NH_PHASES * (size_t)(s->step - 1);
@@ -595,16 +682,18 @@ int nh_sim_step(nh_sim *s) {
                         st.factorised,
                         st.pcg_iterations,
                         st.corrections,
-                        st.t_factor_reference};
+                        st.t_factor_reference,
+                        s->inverted};
   enum { NH_STEP_COLUMNS = sizeof nh_step_columns / sizeof *nh_step_columns };
   _Static_assert(sizeof row / sizeof *row == NH_STEP_COLUMNS, "one value per steps.csv column");
-  if (!s->options.dry_run) NH_TRY(nh_csv_values(s->steps_csv, NH_STEP_COLUMNS, row));
+  if (!s->options.dry_run)
+    NH_TRY_OUTPUT(nh_csv_values(s->steps_csv, NH_STEP_COLUMNS, row), s->step);
   if (s->h5) {
-    NH_TRY(nh_h5_append_steps(s->h5, row));
+    NH_TRY_OUTPUT(nh_h5_append_steps(s->h5, row), s->step);
     /* The checkpoint of this step is on disk: so must be its rows. */
     if (!refine_rc && !s->options.dry_run && sc->output.checkpoint > 0 &&
         s->step % sc->output.checkpoint == 0)
-      NH_TRY(nh_h5_flush(s->h5));
+      NH_TRY_OUTPUT(nh_h5_flush(s->h5), s->step);
   }
   /* The scene was validated at creation: nothing refinement meets later is
    * the scene's fault (exit 1, not 2). */
@@ -614,31 +703,51 @@ int nh_sim_step(nh_sim *s) {
   return NH_OK;
 }
 
-static volatile sig_atomic_t nh_stop_signal = 0;
-
 void nh_sim_request_stop(int signal_number) {
-  nh_stop_signal = signal_number ? signal_number : SIGTERM;
+  nh_stop_request(signal_number);
 }
 
 int nh_sim_run(nh_sim *s) {
   if (s->options.progress) nh_progress_start(s);
   int rc = NH_OK;
   while (s->step < s->scene->time.steps) {
-    if ((rc = nh_sim_step(s))) break;
-    if (s->options.progress) nh_progress_update(s);
-    if (nh_stop_signal && s->step < s->scene->time.steps) {
+    /* A step interrupted inside (nh_stop_check in its long loops) left the
+     * state of the last complete step: u is restored, v not yet updated. */
+    int during = 0;
+    if ((rc = nh_sim_step(s))) {
+      if (rc != NH_ERR_INTERRUPTED || !nh_stop_requested()) break;
+      memcpy(s->u, s->u_start, sizeof(double) * 3 * (size_t)s->mesh->n_nodes);
+      if (s->contact &&
+          (rc = nh_contact_state_load(s->contact, s->tools_start, s->tools_start_size)))
+        break;
+      nh_error_clear();
+      rc = NH_OK;
+      during = 1;
+    }
+    if (s->options.progress && !during) nh_progress_update(s);
+    if (nh_stop_requested() && s->step < s->scene->time.steps) {
       if (!s->options.dry_run) {
         if (s->last_frame != s->step && (rc = nh_write_frame(s))) break;
         if ((rc = nh_checkpoint_write(s))) break;
       }
+      char when[64];
+      if (during)
+        snprintf(when, sizeof when, "during step %d, after", s->step + 1);
+      else
+        snprintf(when, sizeof when, "after");
+      /* The scene as run (overrides applied) is DIR/scene.yaml: the command
+       * continues exactly this run, whatever --set made it. */
       rc = NH_ERROR(NH_ERR_INTERRUPTED,
-                    "stopped by signal %d after step %d of %d (t = %g s); the last frame and a "
-                    "checkpoint are in %s; continue with: needlehex run %s --restart %s",
-                    (int)nh_stop_signal, s->step, s->scene->time.steps, s->time,
-                    s->scene->output.dir, s->scene->file, s->scene->output.dir);
+                    "stopped by signal %d %s step %d of %d (t = %g s); the last frame and a "
+                    "checkpoint are in %s; continue with: needlehex run %s/scene.yaml --restart %s",
+                    nh_stop_requested(), when, s->step, s->scene->time.steps, s->time,
+                    s->scene->output.dir, s->scene->output.dir, s->scene->output.dir);
       break;
     }
   }
+  /* results.h5 holds the rows since its last frame in memory: writing them
+   * is an output like any other, and can fail like any other. */
+  if (!rc && s->h5 && (rc = nh_h5_close(&s->h5))) rc = nh_output_failed(rc, s->step);
   if (s->options.progress) nh_progress_finish(s);
   return rc;
 }

@@ -15,11 +15,15 @@ typedef struct {
   int dry_run;             /* build and validate only: no output folder, no files (`check`) */
   int progress;            /* print a progress line and a summary on stderr */
   const char *restart_dir; /* continue from DIR/checkpoint.nhc (NULL: start at rest) */
+  int overwrite;           /* remove a previous run's outputs from the folder first (else: a
+                              folder holding them is refused, NH_ERR_INPUT) */
 } nh_sim_options;
 
 /* Build mesh, tissue, loads, probes and the linear system for `scene`
  * (borrowed: it must outlive the simulation), and unless dry_run create the
- * output folder and write the initial frame (step 0).
+ * output folder and write the initial frame (step 0). A fresh run (no
+ * restart_dir) into a folder holding a previous run's outputs fails with
+ * NH_ERR_INPUT unless options->overwrite, which removes them first.
  * Fails with NH_ERR_INPUT for scene errors only the mesh reveals (a fixed
  * region with no node, a load region with no tissue, a probe outside the
  * tissue: message FILE:LINE: KEY: reason), NH_ERR_IO, NH_ERR_MEMORY. */
@@ -31,11 +35,12 @@ void nh_sim_destroy(nh_sim **sim);
 int nh_sim_step(nh_sim *sim);
 /* Run every remaining step, with progress and a closing summary if asked.
  * After nh_sim_request_stop (a signal handler may call it) the run stops
- * after the current step, writes a final frame and a checkpoint, and
- * returns NH_ERR_INTERRUPTED. */
+ * within the current step (its long loops poll the request; the state goes
+ * back to the last complete step) or after it, writes a final frame and a
+ * checkpoint, and returns NH_ERR_INTERRUPTED with the command that
+ * continues it. */
 int nh_sim_run(nh_sim *sim);
-/* Ask running simulations to stop after their current step
- * (async-signal-safe). */
+/* Ask running simulations to stop (async-signal-safe; nh_stop_request). */
 void nh_sim_request_stop(int signal_number);
 
 /* Inspection (tests, tools). */

@@ -39,6 +39,7 @@ struct nh_sim {
   int *probe_cell;   /* embedded points: the probes, then the targets */
   double *probe_xi;  /* 3 per point */
   int step;          /* steps done */
+  int first_step;    /* the step this process started from (the checkpoint's, or 0) */
   double time;
   double *phase_times; /* NH_PHASES per step */
   int cap_steps;
@@ -46,7 +47,10 @@ struct nh_sim {
   nh_adapt *adapt; /* template, marking, indicators */
   nh_hanging *hanging;
   double eta, eta_rel;
-  double t_adapt; /* s, this step: estimate + mark + refine + rebuild */
+  double t_adapt;   /* s, this step: estimate + mark + refine + rebuild */
+  double *u_start;  /* u at the start of the step (the guard's increment) */
+  int inverted;     /* cells inverted after the last step (steps.csv `inverted`) */
+  int guard_warned; /* bit per kind of invalid step already warned about */
   /* tools (absent: contact NULL) */
   nh_contact *contact;
   nh_csv *tools_csv, *targets_csv;
@@ -57,14 +61,21 @@ struct nh_sim {
   nh_h5 *h5; /* results.h5 when output.hdf5 */
   int last_frame;
   nh_progress progress;
+  unsigned char *restore_tools; /* --restart: the checkpoint's tool state until applied */
+  size_t restore_tools_size;
+  unsigned char *tools_start; /* the tools' state at the start of the step (a step */
+  size_t tools_start_size;    /* interrupted inside goes back to it) */
 };
 
-/* A checkpoint read back: the mesh (owned), u, v (owned), step and time. */
+/* A checkpoint read back: the mesh (owned), u, v (owned), step and time,
+ * and the tools' state (owned; NULL without tools). */
 typedef struct {
   nh_mesh *mesh;
   double *u, *v;
   int step;
   double time;
+  unsigned char *tools;
+  size_t tools_size;
 } nh_checkpoint;
 
 /* DIR/checkpoint.nhc */
@@ -86,6 +97,16 @@ int nh_sim_tools_rows(nh_sim *sim);
 int nh_sim_tools_frame(nh_sim *sim);
 /* Current position of embedded point i (probes, then targets). */
 void nh_sim_point_position(const nh_sim *sim, int i, double x[3]);
+
+/* ---- step guards (sim/guard.c) ---- */
+/* Cells with det J <= 0 at a corner or Gauss point of their deformed shape
+ * (*first: the first one, or -1). */
+int nh_sim_count_inverted(const nh_sim *sim, int *first);
+/* Check the step just solved (u, v; u_start: u before it): non-finite
+ * values, inverted cells (sets sim->inverted), an implausible increment, a
+ * tool inside tissue it has left. NH_ERR_NUMERIC naming the step and the
+ * reason, or with solver.on_invalid: warn a warning and NH_OK. */
+int nh_sim_guard(nh_sim *sim, const double *u_start);
 
 void nh_progress_start(nh_sim *sim);
 void nh_progress_update(nh_sim *sim);

@@ -14,6 +14,53 @@ static const char *const nh_tool_columns[] = {"step",          "time",  "name", 
                                               "lateral_force", "state"};
 static const char *const nh_target_columns[] = {"step", "time", "name", "x", "y", "z", "distance"};
 
+/* How far the tool's motion has advanced it along its axis at time t. */
+static double nh_tool_advance(const nh_tool_spec *tool, double t) {
+  double p = 0.0, start = 0.0;
+  for (int k = 0; k < tool->n_motion && start < t; k++) {
+    p += tool->motion[k].speed * (fmin(t, tool->motion[k].until) - start);
+    start = tool->motion[k].until;
+  }
+  return p;
+}
+
+/* A tool that travels more than a cell per step jumps over the tissue its
+ * constraints should meet: a warning when one step moves it by more than
+ * the smallest grid cell edge, exit 2 when by more than the tissue's whole
+ * extent (nothing of the insertion would be resolved). `check` says so too. */
+static int nh_sim_tools_check_travel(const nh_sim *s) {
+  const nh_scene *sc = s->scene;
+  const nh_mesh *m = s->mesh;
+  double cell = INFINITY, extent = 0.0;
+  for (int k = 0; k < 3; k++) {
+    cell = fmin(cell, m->spacing[k]);
+    extent = fmax(extent, m->spacing[k] * m->grid[k]);
+  }
+  for (int t = 0; t < sc->n_tools; t++) {
+    const nh_tool_spec *tool = &sc->tools[t];
+    double fastest = 0.0, travel = 0.0, h = sc->time.step;
+    for (int k = 0; k < tool->n_motion; k++) fastest = fmax(fastest, fabs(tool->motion[k].speed));
+    /* The largest |p(t + h) − p(t)|: piecewise linear in t, so at a breakpoint. */
+    for (int k = -1; k < tool->n_motion; k++)
+      for (int side = 0; side < 2; side++) {
+        double t = k < 0 ? 0.0 : tool->motion[k].until - side * h;
+        if (t >= 0.0)
+          travel = fmax(travel, fabs(nh_tool_advance(tool, t + h) - nh_tool_advance(tool, t)));
+      }
+    NH_CHECK(!(travel > extent), NH_ERR_INPUT,
+             "%s: moves up to %.3g m in one step (speeds up to %g m/s, time.step %g s), more "
+             "than the tissue's extent (%.3g m): the insertion cannot be resolved; reduce "
+             "time.step",
+             tool->where, travel, fastest, sc->time.step, extent);
+    if (travel > cell)
+      nh_log_warn("%s: moves up to %.3g m in one step (speeds up to %g m/s, time.step %g s), "
+                  "more than a grid cell (%.3g m): contacts and the cut are resolved only every "
+                  "%.1f cells; reduce time.step below %.3g s",
+                  tool->where, travel, fastest, sc->time.step, cell, travel / cell, cell / fastest);
+  }
+  return NH_OK;
+}
+
 int nh_sim_tools_build(nh_sim *s) {
   const nh_scene *sc = s->scene;
   if (sc->n_tools == 0) return NH_OK;
@@ -23,11 +70,20 @@ int nh_sim_tools_build(nh_sim *s) {
   NH_CHECK(!sc->adapt.enabled || sc->adapt.hanging == NH_HANGING_ELIMINATE, NH_ERR_INPUT,
            "%s: adapt.hanging: lagrange cannot be combined with tools (use eliminate)",
            sc->adapt.where);
-  NH_CHECK(!s->options.restart_dir, NH_ERR_INPUT,
-           "%s: restarting a run with tools is not supported yet (the checkpoint holds no tool "
-           "state): run it again from the start",
-           sc->tools[0].where);
+  NH_TRY(nh_sim_tools_check_travel(s));
   NH_TRY(nh_contact_create(sc, s->mesh, &s->contact));
+  if (s->options.restart_dir) {
+    NH_CHECK(s->restore_tools, NH_ERR_INPUT,
+             "%s: --restart: the checkpoint in %s holds no tool state (written by an older "
+             "needlehex): run it again from the start",
+             sc->tools[0].where, s->options.restart_dir);
+    int rc = nh_contact_state_load(s->contact, s->restore_tools, s->restore_tools_size);
+    if (rc == NH_ERR_INPUT)
+      return NH_ERROR(rc, "--restart: %s: %s", s->options.restart_dir, nh_error_message());
+    NH_TRY(rc);
+    free(s->restore_tools);
+    s->restore_tools = NULL;
+  }
   s->tool_pvd = nh_calloc((size_t)sc->n_tools, sizeof *s->tool_pvd);
   if (!s->tool_pvd) return NH_ERROR(NH_ERR_MEMORY, "out of memory: tools");
   return NH_OK;
@@ -51,17 +107,22 @@ void nh_sim_point_position(const nh_sim *s, int i, double x[3]) {
 int nh_sim_tools_open(nh_sim *s) {
   const nh_scene *sc = s->scene;
   char path[NH_PATH_MAX + 2 * NH_NAME_MAX];
+  const int resume = s->options.restart_dir != NULL; /* keep the rows and frames <= step */
   if (sc->n_tools > 0) {
     snprintf(path, sizeof path, "%s/tools.csv", sc->output.dir);
-    NH_TRY(nh_csv_create(path, 10, nh_tool_columns, &s->tools_csv));
+    NH_TRY(resume ? nh_csv_resume(path, 10, nh_tool_columns, s->step, &s->tools_csv)
+                  : nh_csv_create(path, 10, nh_tool_columns, &s->tools_csv));
     for (int k = 0; k < sc->n_tools; k++) {
       snprintf(path, sizeof path, "%s/%s.pvd", sc->output.dir, sc->tools[k].name);
-      NH_TRY(nh_pvd_create(path, &s->tool_pvd[k]));
+      NH_TRY(resume ? nh_pvd_resume(sc->output.dir, sc->tools[k].name, sc->time.step, s->step,
+                                    &s->tool_pvd[k])
+                    : nh_pvd_create(path, &s->tool_pvd[k]));
     }
   }
   if (sc->n_targets > 0) {
     snprintf(path, sizeof path, "%s/targets.csv", sc->output.dir);
-    NH_TRY(nh_csv_create(path, 7, nh_target_columns, &s->targets_csv));
+    NH_TRY(resume ? nh_csv_resume(path, 7, nh_target_columns, s->step, &s->targets_csv)
+                  : nh_csv_create(path, 7, nh_target_columns, &s->targets_csv));
   }
   return NH_OK;
 }

@@ -80,29 +80,64 @@ int nh_system_constraint_rows(const nh_system *s) {
 
 /* W = J A⁻¹ Jᵀ (Algorithm 3) for the rows Jᵀ (n_free x m, CSC), added to the
  * dense column-major W (m x m): S = L⁻¹ P Jᵀ by sparse solves, W += Sᵀ D⁻¹ S. */
+/* Columns of J per block of the compliance: a stop request (SIGINT,
+ * SIGTERM) is honoured between blocks. Each column's arithmetic is the
+ * same as in one CHOLMOD call over all of them. */
+#define NH_COMPLIANCE_BLOCK 4
+
 int nh_system_compliance_add(nh_system *s, cholmod_sparse *Jt, double *W) {
   cholmod_common *cm = &s->cm;
-  const int m = (int)Jt->ncol;
-  cholmod_sparse *PJt = cholmod_spsolve(CHOLMOD_P, s->L, Jt, cm);
-  cholmod_sparse *S = PJt ? cholmod_spsolve(CHOLMOD_L, s->L, PJt, cm) : NULL;
-  cholmod_sparse *DS = S ? cholmod_spsolve(CHOLMOD_D, s->L, S, cm) : NULL;
-  cholmod_sparse *St = S ? cholmod_transpose(S, 1, cm) : NULL;
-  cholmod_sparse *Wsp = St && DS ? cholmod_ssmult(St, DS, 0, 1, 0, cm) : NULL;
-  int rc = NH_OK;
-  if (!Wsp) {
+  const int m = (int)Jt->ncol, nb = (m + NH_COMPLIANCE_BLOCK - 1) / NH_COMPLIANCE_BLOCK;
+  cholmod_sparse **S = nh_calloc((size_t)(nb ? nb : 1), sizeof *S);
+  cholmod_sparse **DS = nh_calloc((size_t)(nb ? nb : 1), sizeof *DS);
+  cholmod_sparse *all = NULL, *St = NULL;
+  int cols[NH_COMPLIANCE_BLOCK];
+  int rc = S && DS ? NH_OK : NH_ERR_MEMORY, failed = 0;
+  /* S_b = L⁻¹ P J_bᵀ and D⁻¹ S_b, block by block. */
+  for (int b = 0; b < nb && !rc && !failed; b++) {
+    int j0 = b * NH_COMPLIANCE_BLOCK,
+        nc = m - j0 < NH_COMPLIANCE_BLOCK ? m - j0 : NH_COMPLIANCE_BLOCK;
+    for (int k = 0; k < nc; k++) cols[k] = j0 + k;
+    cholmod_sparse *Jb = cholmod_submatrix(Jt, NULL, -1, cols, nc, 1, 1, cm);
+    cholmod_sparse *PJ = Jb ? cholmod_spsolve(CHOLMOD_P, s->L, Jb, cm) : NULL;
+    S[b] = PJ ? cholmod_spsolve(CHOLMOD_L, s->L, PJ, cm) : NULL;
+    DS[b] = S[b] ? cholmod_spsolve(CHOLMOD_D, s->L, S[b], cm) : NULL;
+    cholmod_free_sparse(&Jb, cm);
+    cholmod_free_sparse(&PJ, cm);
+    failed = !DS[b];
+    if (!failed) rc = nh_stop_check();
+  }
+  /* Sᵀ once, then W_b = Sᵀ (D⁻¹ S_b), block by block. */
+  for (int b = 0; b < nb && !rc && !failed; b++) {
+    cholmod_sparse *next = all ? cholmod_horzcat(all, S[b], 1, cm) : cholmod_copy_sparse(S[b], cm);
+    cholmod_free_sparse(&all, cm);
+    all = next;
+    failed = !all;
+  }
+  if (!rc && !failed && nb) failed = !(St = cholmod_transpose(all, 1, cm));
+  for (int b = 0; b < nb && !rc && !failed; b++) {
+    cholmod_sparse *Wb = cholmod_ssmult(St, DS[b], 0, 1, 0, cm);
+    if (!(failed = !Wb)) {
+      const int *Wp = Wb->p, *Wi = Wb->i;
+      const double *Wx = Wb->x;
+      for (int j = 0; j < (int)Wb->ncol; j++)
+        for (int p = Wp[j]; p < Wp[j + 1]; p++)
+          W[(size_t)(b * NH_COMPLIANCE_BLOCK + j) * m + Wi[p]] += Wx[p];
+      rc = nh_stop_check();
+    }
+    cholmod_free_sparse(&Wb, cm);
+  }
+  if (!rc && failed)
     rc = NH_ERROR(NH_ERR_NUMERIC, "computing the compliance W failed (CHOLMOD status %d)",
                   cm->status);
-  } else {
-    const int *Wp = Wsp->p, *Wi = Wsp->i;
-    const double *Wx = Wsp->x;
-    for (int j = 0; j < m; j++)
-      for (int p = Wp[j]; p < Wp[j + 1]; p++) W[(size_t)j * m + Wi[p]] += Wx[p];
+  for (int b = 0; b < nb && S && DS; b++) {
+    cholmod_free_sparse(&S[b], cm);
+    cholmod_free_sparse(&DS[b], cm);
   }
-  cholmod_free_sparse(&PJt, cm);
-  cholmod_free_sparse(&S, cm);
-  cholmod_free_sparse(&DS, cm);
+  free(S);
+  free(DS);
+  cholmod_free_sparse(&all, cm);
   cholmod_free_sparse(&St, cm);
-  cholmod_free_sparse(&Wsp, cm);
   return rc;
 }
 
@@ -113,6 +148,7 @@ static int nh_compliance_build(nh_system *s) {
   int rc = nh_system_compliance_add(s, s->Jt, s->W);
   /* Dense Cholesky W = G Gᵀ, lower triangle in place (column-major). */
   for (int j = 0; j < m && !rc; j++) {
+    if (j % 16 == 0 && (rc = nh_stop_check())) break;
     double *cj = s->W + (size_t)j * m;
     double d = cj[j];
     for (int k = 0; k < j; k++) d -= s->W[(size_t)k * m + j] * s->W[(size_t)k * m + j];

@@ -284,6 +284,31 @@ static int nh_corrected_step(nh_system *s, const nh_integrator *in, cholmod_spar
   return rc;
 }
 
+double nh_dynamic_residual(nh_system *s, const nh_integrator *in, const double *f_ext,
+                           const double *u, const double *v, const double *dv,
+                           const double *reaction, double *b) {
+  const nh_tissue *t = s->tissue;
+  const int n = 3 * s->n_nodes, nf = s->n_free;
+  const double h = in->dt;
+  double *f_int = s->work[0], *Kv = s->work[1], *R = s->work[2];
+  nh_system_assemble(s, u, v, 1.0 + h * in->alpha, h * in->beta + h * h, f_int, Kv, in->threads);
+  double fe = 0.0, fi = 0.0, md = 0.0;
+  for (int i = 0; i < n; i++) {
+    double Mdv = t->mass[i / 3] * dv[i];
+    R[i] = h * (f_ext[i] - f_int[i] - in->alpha * t->mass[i / 3] * v[i] - in->beta * Kv[i]) - Mdv;
+    fe += f_ext[i] * f_ext[i], fi += f_int[i] * f_int[i], md += Mdv * Mdv;
+  }
+  if (nh_stop_requested()) return NAN; /* the assembly was cut short: unknown */
+  nh_system_gather(s, R, b);
+  nh_system_add_reactions(s, b);
+  if (reaction)
+    for (int i = 0; i < nf; i++) b[i] += reaction[i];
+  double r = 0.0;
+  for (int i = 0; i < nf; i++) r += b[i] * b[i];
+  double scale = fmax(fmax(h * sqrt(fe), h * sqrt(fi)), fmax(sqrt(md), 1e-300));
+  return sqrt(r) / scale;
+}
+
 int nh_step_coupled(nh_system *s, const nh_integrator *in, const double *f_ext, double *u,
                     double *v, int n_tools, nh_coupled_tool *tools, nh_rows *rows, double tolerance,
                     double accept, int max_iterations, nh_coupled_stats *stats) {
@@ -316,6 +341,7 @@ int nh_step_coupled(nh_system *s, const nh_integrator *in, const double *f_ext, 
    * waits for the corrections (nh_corrected_step). */
   double t0 = nh_time_now();
   s->t_constraints = 0.0;
+  nh_system_reset_multipliers(s); /* this step's hanging-node reactions only */
   nh_system_assemble(s, u, v, 1.0 + h * in->alpha, h * in->beta + h * h, f_int, Kv, in->threads);
   for (int i = 0; i < n; i++) {
     double Mv = t->mass[i / 3] * v[i];
@@ -324,6 +350,7 @@ int nh_step_coupled(nh_system *s, const nh_integrator *in, const double *f_ext, 
   nh_system_gather(s, rhs, b);
   double t1 = nh_time_now();
   st.step.t_assemble = t1 - t0;
+  if ((rc = nh_stop_check())) goto done; /* an assembly cut short */
   if ((rc = nh_system_prepare(s, in, &st.step))) goto done;
   double t2 = nh_time_now();
   if (s->n_rows > 0) {
@@ -470,9 +497,15 @@ int nh_step_coupled(nh_system *s, const nh_integrator *in, const double *f_ext, 
   for (int k = 0; k < n_tools; k++)
     if ((rc = nh_beam_dynamic_finish(tools[k].beam, h, tools[k].base_velocity, tw[k].dv)))
       goto done;
-  st.step.t_solve += nh_time_now() - t6;
+  double t7 = nh_time_now();
+  st.step.t_solve += t7 - t6;
   st.step.iterations = 1;
   if (in->reuse) nh_system_account(s, st.step.pcg_iterations);
+  /* The residual of the one linearisation (full still holds the update; col
+   * the rows' reaction J_tᵀ λ, which the corrected path left as an increment). */
+  if (m) nh_jt_scatter(Jt, rows->lambda, col, nf);
+  st.step.residual = nh_dynamic_residual(s, in, f_ext, u, v, full, m ? col : NULL, b);
+  st.step.t_assemble += nh_time_now() - t7;
 
 done:
   st.step.factorised = s->factor_age == 0;

@@ -34,6 +34,31 @@ int nh_step_dynamic(nh_system *s, const nh_integrator *in, const double *f_ext, 
                     double *v, nh_step_stats *stats) {
   nh_coupled_stats st;
   int rc = nh_step_coupled(s, in, f_ext, u, v, 0, NULL, NULL, 1.0, 1.0, 0, &st);
+  /* Newton corrections on the implicit-Euler equations: the residual's
+   * evaluation left A(u) assembled and R in fwork[0]; work[3] holds the
+   * step's velocity change so far. */
+  const int n = 3 * s->n_nodes;
+  double *dv = s->work[3], *delta = s->work[0], *b = s->fwork[0], *x = s->fwork[1];
+  for (int it = 0; !rc && it < in->newton_iterations && !(st.step.residual <= in->newton_tolerance);
+       it++) {
+    if (nh_stop_requested()) break; /* the step stands as linearised (u, v consistent) */
+    double t0 = nh_time_now();
+    if ((rc = nh_system_factor(s))) break;
+    double t1 = nh_time_now();
+    if ((rc = nh_system_solve_constrained(s, b, x))) break;
+    nh_system_scatter(s, x, delta);
+    for (int i = 0; i < n; i++) {
+      v[i] += delta[i];
+      u[i] += in->dt * delta[i];
+      dv[i] += delta[i];
+    }
+    double t2 = nh_time_now();
+    st.step.residual = nh_dynamic_residual(s, in, f_ext, u, v, dv, NULL, b);
+    st.step.t_factor += t1 - t0;
+    st.step.t_solve += t2 - t1;
+    st.step.t_assemble += nh_time_now() - t2;
+    st.step.iterations++;
+  }
   if (stats) *stats = st.step;
   return rc;
 }
@@ -50,6 +75,7 @@ int nh_solve_static(nh_system *s, const nh_integrator *in, const double *f_ext, 
   for (it = 0; it <= in->max_iterations; it++) {
     double t0 = nh_time_now();
     nh_system_assemble(s, u, NULL, 0.0, 1.0, f_int, NULL, in->threads);
+    NH_TRY(nh_stop_check()); /* SIGINT/SIGTERM: between iterations or in the assembly */
     for (int i = 0; i < n; i++) r[i] = f_ext[i] - f_int[i];
     nh_system_gather(s, r, b);
     nh_system_add_reactions(s, b);

@@ -487,7 +487,9 @@ int nh_mcp_solve(int m, const double *W, const double *r, const nh_row_law *laws
   double res = nh_mcp_residual(&ws, W, laws), best_res = res;
   memcpy(ws.best, ws.lt, sizeof(double) * (size_t)m);
   int it = 0;
+  int stop = 0;
   while (!(best_res <= tolerance) && it < max_iterations) {
+    if ((stop = nh_stop_requested())) break; /* SIGINT/SIGTERM: within one sweep */
     double prev = res;
     nh_mcp_sweep(&ws, W, laws);
     it++;
@@ -509,6 +511,7 @@ int nh_mcp_solve(int m, const double *W, const double *r, const nh_row_law *laws
   nh_mcp_count(&ws, laws, stats);
   int block_ok = ws.block_ok;
   nh_mcp_work_free(&ws);
+  if (stop) return nh_stop_check();
   if (!(best_res <= tolerance))
     return NH_ERROR(NH_ERR_NUMERIC,
                     "constraint solve: residual %.3g > tolerance %.3g after %d sweeps (%d rows, "

@@ -76,8 +76,9 @@ typedef struct {
   double t_assemble, t_factor, t_solve; /* s (t_solve excludes t_constraints) */
   double t_constraints;                 /* s: compliance W and multipliers */
   int iterations;                       /* Newton iterations (static), 1 (dynamic) */
-  double residual;                      /* relative residual reached (static) */
-  int factorised;                       /* numeric factorisations of A in the step */
+  double residual;    /* relative residual reached: static Newton; dynamic: of the implicit-Euler
+                         equations at the end of the step (nh_dynamic_residual) */
+  int factorised;     /* numeric factorisations of A in the step */
   int pcg_iterations; /* PCG iterations of the step's solves with a reused factor */
   int corrections;    /* outer constraint corrections with a reused factor (0: exact W) */
   /* s: one numeric factorisation of this step's A — the one done, or with
@@ -93,14 +94,30 @@ typedef struct {
   double alpha, beta; /* Rayleigh damping C = α M + β K */
   double
       tolerance; /* static: relative residual; dynamic with reuse: each solve's (nh_system_pcg) */
-  int max_iterations; /* static: Newton iterations */
-  int threads;        /* assembly threads (0 = all) */
-  int reuse;          /* dynamic: 1 = reuse a recent factorisation as a preconditioner
-                         (solver.refactor: auto, docs/performance.md), 0 = factorise every step;
-                         the solves then stop at `tolerance` (relative, see nh_system_pcg) */
-  int time_factor;    /* benchmarks: also time a factorisation of A on steps that reuse one
-                         (nh_step_stats.t_factor_reference; env NH_TIME_FACTOR=1) */
+  int max_iterations;      /* static: Newton iterations */
+  int threads;             /* assembly threads (0 = all) */
+  int reuse;               /* dynamic: 1 = reuse a recent factorisation as a preconditioner
+                              (solver.refactor: auto, docs/performance.md), 0 = factorise every step;
+                              the solves then stop at `tolerance` (relative, see nh_system_pcg) */
+  int time_factor;         /* benchmarks: also time a factorisation of A on steps that reuse one
+                              (nh_step_stats.t_factor_reference; env NH_TIME_FACTOR=1) */
+  int newton_iterations;   /* dynamic, without tools: Newton corrections after the linearised
+                              step while the residual exceeds newton_tolerance (0: none) */
+  double newton_tolerance; /* dynamic: relative residual */
 } nh_integrator;
+
+/* The relative residual of the implicit-Euler equations of the step just
+ * taken (docs/theory.md §3): with v the end velocity, dv = v − v_start (3
+ * per node), R = h (f_ext − f_int(u) − α M v − β K(u) v) − M dv + reactions
+ * (the hanging-node rows' and `reaction`, the tools' Jᵀλ over the unknowns,
+ * may be NULL), |R| / max(h |f_ext|, h |f_int|, |M dv|). Zero to round-off
+ * for a linear problem; what the one linearisation missed otherwise.
+ * Assembles A = (1 + hα) M + (hβ + h²) K(u) (ready to factor for a Newton
+ * correction A δv = R) and leaves R over the unknowns in b. Uses the
+ * system's work vectors 0-2 (dv must not be one of them). */
+double nh_dynamic_residual(nh_system *sys, const nh_integrator *in, const double *f_ext,
+                           const double *u, const double *v, const double *dv,
+                           const double *reaction, double *b);
 
 /* One backward-Euler step with one linearisation (seed Eq. 13):
  *   A = (1 + hα) M + (hβ + h²) K,

@@ -411,6 +411,8 @@ void nh_system_assemble(nh_system *s, const double *u, const double *v, double c
   if (Kv) memset(Kv, 0, sizeof(double) * 3 * (size_t)m->n_nodes);
   int nt = threads > 0 ? threads : omp_get_max_threads();
   for (int colour = 0; colour <= s->n_colours; colour++) {
+    /* SIGINT/SIGTERM: A is left partial; callers ask nh_stop_check after. */
+    if (nh_stop_requested()) break;
     int lo = s->colour_start[colour], hi = s->colour_start[colour + 1];
     /* A parallel region costs tens of µs (far more when cores are shared):
      * only colours of at least 128 cells (≈ 1 ms of element work) are split;

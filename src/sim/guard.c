@@ -1,0 +1,152 @@
+/* guard.c — the checks every solved step passes before its results are
+ * written (docs/outputs.md, "When a step is not plausible").
+ *
+ * A linearised step can return numbers that no tissue could produce: an
+ * inverted element under an absurd load or a tiny Young's modulus, values
+ * that overflow, a step that moves the tissue by more than its own size, a
+ * tool reported inside tissue it has left. Each step is checked for:
+ *
+ * - non-finite displacements or velocities (always fatal: nothing after
+ *   them means anything);
+ * - inverted cells: det J <= 0 of the deformed cell at any of its 8 corners
+ *   or 2x2x2 Gauss points (the corners catch a cell folded at one node that
+ *   the Gauss points miss). Counted in steps.csv `inverted`;
+ * - an implausible step: a node moved by more than NH_GUARD_STEP_FRACTION
+ *   of the tissue's size (the diagonal of its rest bounding box) in one
+ *   step. No physical insertion does that, and an implicit Euler step that
+ *   does has left the range where its linearisation means anything;
+ * - a tool reported punctured or cutting whose tip lies outside the
+ *   tissue's current bounding box widened by one grid cell.
+ *
+ * With solver.on_invalid: stop (the default) the first of these ends the run
+ * with exit 1 naming the step, the cell, node or tool and the reason, before
+ * the step writes anything: the frames and rows on disk are those of the
+ * last plausible step. With warn, inverted cells, implausible steps and
+ * tools are reported once each (a warning) and the run goes on. */
+#include "sim/sim_impl.h"
+
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+
+/* A node may move by at most this fraction of the tissue's size in a step. */
+#define NH_GUARD_STEP_FRACTION 0.5
+
+int nh_sim_count_inverted(const nh_sim *s, int *first) {
+  static const double g = 0.57735026918962576; /* 1/sqrt(3) */
+  const nh_mesh *m = s->mesh;
+  int count = 0;
+  *first = -1;
+  for (int l = 0; l < m->n_leaves; l++) {
+    int c = m->leaves[l];
+    double X[24], x[24], grad[24];
+    nh_mesh_cell_coords(m, m->X, c, X);
+    nh_mesh_cell_coords(m, s->u, c, x);
+    for (int i = 0; i < 24; i++) x[i] += X[i];
+    int bad = 0;
+    for (int p = 0; p < 16 && !bad; p++) {
+      double a = p < 8 ? 1.0 : g;
+      double xi[3] = {(p & 1) ? a : -a, (p & 2) ? a : -a, (p & 4) ? a : -a};
+      bad = !(nh_hex_gradients(x, xi, grad) > 0.0);
+    }
+    if (bad) {
+      if (*first < 0) *first = c;
+      count++;
+    }
+  }
+  return count;
+}
+
+/* The tissue's rest size: the diagonal of the nodes' bounding box. */
+static double nh_tissue_size(const nh_mesh *m) {
+  double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+  for (int i = 0; i < m->n_nodes; i++)
+    for (int k = 0; k < 3; k++) {
+      lo[k] = fmin(lo[k], m->X[3 * i + k]);
+      hi[k] = fmax(hi[k], m->X[3 * i + k]);
+    }
+  return sqrt((hi[0] - lo[0]) * (hi[0] - lo[0]) + (hi[1] - lo[1]) * (hi[1] - lo[1]) +
+              (hi[2] - lo[2]) * (hi[2] - lo[2]));
+}
+
+/* Report an invalid step: an error (stop) or, once per kind, a warning. */
+static int nh_guard_report(nh_sim *s, int kind, const char *fmt, ...)
+    __attribute__((format(printf, 3, 4)));
+static int nh_guard_report(nh_sim *s, int kind, const char *fmt, ...) {
+  char reason[1024];
+  va_list ap;
+  va_start(ap, fmt);
+  vsnprintf(reason, sizeof reason, fmt, ap);
+  va_end(ap);
+  const double t = (s->step + 1) * s->scene->time.step;
+  if (!s->scene->solver.on_invalid_warn)
+    return NH_ERROR(NH_ERR_NUMERIC,
+                    "step %d (t = %g s): %s; stopped before writing this step "
+                    "(solver.on_invalid: warn goes on)",
+                    s->step + 1, t, reason);
+  if (!(s->guard_warned & (1 << kind)))
+    nh_log_warn("step %d (t = %g s): %s (solver.on_invalid: warn; reported once)", s->step + 1, t,
+                reason);
+  s->guard_warned |= 1 << kind;
+  return NH_OK;
+}
+
+int nh_sim_guard(nh_sim *s, const double *u_start) {
+  const nh_mesh *m = s->mesh;
+  const int n = 3 * m->n_nodes;
+  for (int i = 0; i < n; i++)
+    if (!isfinite(s->u[i]) || !isfinite(s->v[i]))
+      return NH_ERROR(NH_ERR_NUMERIC,
+                      "step %d (t = %g s): node %d has a non-finite %s; stopped before writing "
+                      "this step",
+                      s->step + 1, (s->step + 1) * s->scene->time.step, i / 3,
+                      isfinite(s->u[i]) ? "velocity" : "displacement");
+  int first = -1;
+  s->inverted = nh_sim_count_inverted(s, &first);
+  if (s->inverted > 0)
+    NH_TRY(nh_guard_report(s, 0,
+                           "%d of %d cells inverted (det J <= 0 at a corner or Gauss point; "
+                           "first: cell %d, level %d): the load or the material is beyond what "
+                           "the model can represent",
+                           s->inverted, m->n_leaves, first, m->level[first]));
+  double size = nh_tissue_size(m), worst = 0.0;
+  int node = -1;
+  for (int i = 0; i < m->n_nodes; i++) {
+    double d = 0.0;
+    for (int k = 0; k < 3; k++)
+      d += (s->u[3 * i + k] - u_start[3 * i + k]) * (s->u[3 * i + k] - u_start[3 * i + k]);
+    if (d > worst) worst = d, node = i;
+  }
+  worst = sqrt(worst);
+  if (worst > NH_GUARD_STEP_FRACTION * size)
+    NH_TRY(nh_guard_report(s, 1,
+                           "node %d moved by %.3g m in one step, more than %g x the tissue's "
+                           "size (%.3g m): an implausible step (reduce time.step or check the "
+                           "loads)",
+                           node, worst, NH_GUARD_STEP_FRACTION, size));
+  if (s->contact) {
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    double cell = 0.0;
+    for (int k = 0; k < 3; k++) cell = fmax(cell, m->spacing[k]);
+    for (int i = 0; i < m->n_nodes; i++)
+      for (int k = 0; k < 3; k++) {
+        lo[k] = fmin(lo[k], m->X[3 * i + k] + s->u[3 * i + k]);
+        hi[k] = fmax(hi[k], m->X[3 * i + k] + s->u[3 * i + k]);
+      }
+    for (int t = 0; t < s->scene->n_tools; t++) {
+      nh_tool_report r;
+      nh_contact_report(s->contact, t, &r);
+      if (r.state != NH_TOOL_PUNCTURED && r.state != NH_TOOL_CUTTING) continue;
+      int inside = 1;
+      for (int k = 0; k < 3; k++) inside &= r.tip[k] >= lo[k] - cell && r.tip[k] <= hi[k] + cell;
+      if (!inside)
+        NH_TRY(nh_guard_report(s, 2,
+                               "tool '%s' is %s but its tip [%.4g, %.4g, %.4g] m lies outside "
+                               "the tissue (beyond one cell of its bounding box): the tool "
+                               "travelled too far in one step (reduce time.step)",
+                               s->scene->tools[t].name, nh_tool_state_name(r.state), r.tip[0],
+                               r.tip[1], r.tip[2]));
+    }
+  }
+  return NH_OK;
+}

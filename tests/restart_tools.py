@@ -1,0 +1,161 @@
+#!/usr/bin/python3
+"""Restart with tools: a needle run and the shortened DBS procedure (a
+cannula with the electrode nested inside, released at the target, the
+cannula retracted), stopped and continued, equal the uninterrupted run.
+
+usage: restart_tools.py [needle | dbs]
+
+For each scene: a reference run; a run stopped by SIGTERM mid-way and
+continued with the command its message prints; a run SIGKILLed mid-way and
+continued with `--restart` from its last periodic checkpoint. At the last
+step the tools.csv and targets.csv rows, the probes and the last tissue
+frame must equal the reference's to 1e-12 relative for the needle (scale:
+the largest magnitude of the column), and every row of tools.csv must be
+there once. The DBS procedure meets only 1e-5 (see main: a known gap).
+Silent on success; loud (what, expected, actual, tolerance) on failure."""
+import csv
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+import vtk
+from vtk.util.numpy_support import vtk_to_numpy
+
+BIN, SRC = os.environ["NH_BINARY"], os.environ["NH_SOURCE_DIR"]
+failures = []
+
+
+def rows(out, name):
+    path = os.path.join(out, name + ".csv")
+    return list(csv.DictReader(open(path))) if os.path.exists(path) else []
+
+
+def numeric(rs):
+    keys = [k for k in rs[0] if k not in ("name", "state")] if rs else []
+    return np.array([[float(r[k]) for k in keys] for r in rs]), [(r["step"], r.get("name"), r.get("state")) for r in rs]
+
+
+def last_frame(out):
+    names = sorted(f for f in os.listdir(out) if f.startswith("tissue_") and f.endswith(".vtu"))
+    reader = vtk.vtkXMLUnstructuredGridReader()
+    reader.SetFileName(os.path.join(out, names[-1]))
+    reader.Update()
+    return names[-1], vtk_to_numpy(reader.GetOutput().GetPointData().GetArray("displacement"))
+
+
+def compare(what, ref, got, TOL):
+    for table in ("tools", "targets", "probes"):
+        a, ka = numeric(rows(ref, table))
+        b, kb = numeric(rows(got, table))
+        if ka != kb:
+            failures.append(f"{what}: {table}.csv rows (step, name, state) differ from the "
+                            f"reference ({len(kb)} rows, expected {len(ka)})")
+            continue
+        if a.size == 0:
+            continue
+        scale = np.maximum(np.abs(a).max(axis=0), 1e-300)
+        err = (np.abs(a - b) / scale).max()
+        if not err <= TOL:
+            failures.append(f"{what}: {table}.csv differs by {err:.3g} relative (tolerance {TOL})")
+    (na, ua), (nb, ub) = last_frame(ref), last_frame(got)
+    err = np.abs(ua - ub).max() / max(np.abs(ua).max(), 1e-300) if ua.shape == ub.shape else np.inf
+    if na != nb or not err <= TOL:
+        failures.append(f"{what}: last frame {nb} vs {na}: displacement differs by {err:.3g} "
+                        f"relative (tolerance {TOL})")
+
+
+def wait_rows(out, n, proc):
+    path = os.path.join(out, "steps.csv")
+    while proc.poll() is None:
+        try:
+            with open(path) as f:
+                if sum(1 for _ in f) > n:
+                    return True
+        except FileNotFoundError:
+            pass
+        time.sleep(0.005)
+    return False
+
+
+def check_scene(name, scene, sets, stop_after, tol):
+    tmp = tempfile.mkdtemp(prefix="nh-restart-tools-")
+    try:
+        args = sum([["--set", s] for s in sets], [])
+        ref = os.path.join(tmp, "ref")
+        r = subprocess.run([BIN, "run", scene, "--quiet", "--out", ref] + args,
+                           capture_output=True, text=True)
+        if r.returncode != 0:
+            failures.append(f"{name}: reference run failed ({r.returncode}): {r.stderr}")
+            return
+        # SIGTERM, then the printed command.
+        term = os.path.join(tmp, "term")
+        p = subprocess.Popen([BIN, "run", scene, "--quiet", "--out", term] + args,
+                             stderr=subprocess.PIPE, text=True)
+        if not wait_rows(term, stop_after, p):
+            failures.append(f"{name}: the run ended before step {stop_after}")
+            return
+        p.send_signal(signal.SIGTERM)
+        _, err = p.communicate()
+        printed = err.split("continue with: ")[-1].split()
+        if p.returncode != 1 or printed[:2] != ["needlehex", "run"]:
+            failures.append(f"{name}: SIGTERM: exit {p.returncode}, message {err!r}")
+            return
+        r = subprocess.run([BIN] + printed[1:] + ["--quiet"], capture_output=True, text=True)
+        if r.returncode != 0:
+            failures.append(f"{name}: the printed command failed ({r.returncode}): {r.stderr}")
+            return
+        compare(f"{name}: SIGTERM + printed command", ref, term, tol)
+        # SIGKILL, then --restart from the last periodic checkpoint.
+        kill = os.path.join(tmp, "kill")
+        p = subprocess.Popen([BIN, "run", scene, "--quiet", "--out", kill] + args)
+        if not wait_rows(kill, stop_after, p):
+            failures.append(f"{name}: the run ended before step {stop_after}")
+            return
+        p.send_signal(signal.SIGKILL)
+        p.wait()
+        r = subprocess.run([BIN, "run", os.path.join(kill, "scene.yaml"), "--quiet", "--restart",
+                            kill], capture_output=True, text=True)
+        if r.returncode != 0:
+            failures.append(f"{name}: --restart after SIGKILL failed ({r.returncode}): {r.stderr}")
+            return
+        compare(f"{name}: SIGKILL + --restart", ref, kill, tol)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def main():
+    which = sys.argv[1] if len(sys.argv) > 1 else "needle"
+    if which == "needle":
+        check_scene("needle-phantom", os.path.join(SRC, "cases", "needle-phantom.yaml"),
+                    ["output.checkpoint=20", "output.every=10"], 50, 1e-12)
+        return report()
+    # The DBS procedure, shortened as in tests/dbs.py's order of events:
+    # brain shift, insertion to the target, electrode released, retraction.
+    # NOT to 1e-12: the continued run's first step already differs in the
+    # last digits (eta by 4e-14, the constraint residual by 2e-6 relative at
+    # step 41 after a restart at 40), and the constraint solve, accepted at
+    # 1e-5, carries that to 7e-7 relative in tools.csv by step 45. The state
+    # that is not restored bit for bit is still to be found (issue 16); what
+    # is checked here is that the restart runs to the end within the
+    # constraint solve's acceptance (1e-5 relative).
+    check_scene("dbs", os.path.join(SRC, "cases", "dbs", "dbs.yaml"),
+                ["time.step=0.1", "time.end=4.5", "output.checkpoint=10", "output.every=5",
+                 "tissue.buoyancy.schedule=[[0, 0], [0.5, 1]]",
+                 "tools.0.motion=[{until: 1.0, speed: 0}, {until: target, speed: 0.06}, "
+                 "{until: 3.2, speed: 0}, {until: start, speed: -0.06}]"], 25, 1e-5)
+    return report()
+
+
+def report():
+    for f in failures:
+        print(f, file=sys.stderr)
+    return 1 if failures else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
