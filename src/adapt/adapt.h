@@ -146,6 +146,31 @@ const double *nh_adapt_indicators(const nh_adapt *adapt);
  * a failure the mesh may be refined but the fields not transferred. */
 int nh_adapt_step(nh_adapt *adapt, nh_mesh *mesh, int n_fields, double **fields, int *n_refined);
 
+/* What ended the last nh_adapt_step (steps.csv `refine_stop`). */
+typedef enum {
+  NH_ADAPT_REFINED = 0,   /* every marked cell was refined */
+  NH_ADAPT_TOLERANCE = 1, /* estimator goal: every goal estimate <= adapt.tolerance */
+  NH_ADAPT_BUDGET = 2,    /* adapt.max_dofs left marked cells unrefined */
+  NH_ADAPT_LIMIT = 3      /* nothing to refine (max_level, min_size, or every η 0) */
+} nh_adapt_stop;
+nh_adapt_stop nh_adapt_last_stop(const nh_adapt *adapt);
+
+/* Estimator goal: the points whose displacement is the goal (rest positions,
+ * 3 each); the averaging box's half-width is half the edge of the finest cell
+ * refinement can make (the initial grid's smallest spacing times the
+ * template's child ratio to the power max_level). NH_ERR_MEMORY. */
+int nh_adapt_set_goals(nh_adapt *adapt, const nh_mesh *mesh, int n, const double *points);
+/* Goal-oriented estimate of the solution u with the factor `sys` holds
+ * (nh_dwr_estimate; scale as there). Keeps each goal's |E_p| and, as the
+ * marking indicator, Σ η_K^p over the goals whose estimate exceeds
+ * adapt.tolerance (all goals without tolerance). *eta, *eta_rel: the
+ * primal's SPR estimate. Fails as nh_dwr_estimate, NH_ERR_MEMORY. */
+int nh_adapt_estimate_goal(nh_adapt *adapt, nh_system *sys, double scale, const nh_mesh *mesh,
+                           const nh_tissue *tissue, const double *u, const nh_hanging *hanging,
+                           double *eta, double *eta_rel);
+/* |E_p| per goal of the last goal estimate (m), or NULL (none for this mesh). */
+const double *nh_adapt_goal_errors(const nh_adapt *adapt);
+
 /* ---- goal-oriented estimate: the dual-weighted residual (adapt/dwr.c) ---- */
 
 /* Nodal vector j[3 n_nodes] (overwritten) of the regularised point

@@ -47,6 +47,11 @@ struct nh_sim {
   nh_hanging *hanging;
   double eta, eta_rel;
   double t_adapt; /* s, this step: estimate + mark + refine + rebuild */
+  /* estimator goal: goal index of each embedded point (−1: not a goal), the
+   * largest estimate so far (summary) and its point */
+  int *goal_of_point;
+  double max_goal_error;
+  int max_goal_point;
   /* tools (absent: contact NULL) */
   nh_contact *contact;
   nh_csv *tools_csv, *targets_csv;
@@ -86,6 +91,9 @@ int nh_sim_tools_rows(nh_sim *sim);
 int nh_sim_tools_frame(nh_sim *sim);
 /* Current position of embedded point i (probes, then targets). */
 void nh_sim_point_position(const nh_sim *sim, int i, double x[3]);
+/* Estimated error of embedded point i's displacement (m): the goal estimate
+ * of this step's solution, NaN if the point is no goal or none was made. */
+double nh_sim_point_error(const nh_sim *sim, int i);
 
 void nh_progress_start(nh_sim *sim);
 void nh_progress_update(nh_sim *sim);
