@@ -37,7 +37,7 @@
  * Fuenmayor 2014 do this with an equilibrated SPR):
  *     E_pk = Σ_K ε_K,   ε_K = φ_K ∫_K (σ*_u − σ_h(u))ᵀ D⁻¹ (σ*_z − σ_h(z)) dΩ,
  * (2x2x2 Gauss points; σ_h(z) the tangent stress of z at the state u,
- * nh_hex_tangent_stress_at). E_pk is signed: it estimates the error with
+ * nh_hex_rotated_stress of Rᵀz). E_pk is signed: it estimates the error with
  * its sign, J(u) − J(u_h). Per point the estimate of the error vector's
  * length is |E_p| = (Σ_k E_pk²)^½ (m).
  *
@@ -63,6 +63,15 @@
 #include <string.h>
 
 #define NH_DWR_PARALLEL_MIN 256
+
+/* d = Rᵀ w over cell c's corners (w a nodal field, 3 per node). */
+static void nh_dwr_corotate(const nh_mesh *m, const double *w, int c, const double R[9],
+                            double d[24]) {
+  for (int a = 0; a < 8; a++) {
+    const double *v = w + 3 * m->cells[8 * c + a];
+    for (int i = 0; i < 3; i++) d[3 * a + i] = R[i] * v[0] + R[3 + i] * v[1] + R[6 + i] * v[2];
+  }
+}
 
 int nh_goal_functional(const nh_mesh *m, const double point[3], double radius, int k,
                        const char *where, double *j) {
@@ -119,20 +128,20 @@ int nh_dwr_estimate(nh_system *sys, double scale, const nh_mesh *m, const nh_tis
                               j + n3 * (size_t)(3 * p + k));
   if (rc || (rc = nh_dwr_duals(sys, scale, nn, nz, j, z))) goto done;
 
-  /* Centre samples: the primal's corotational stress, each dual's tangent stress. */
-  static const double centre[3] = {0, 0, 0};
+    /* Centre samples: the primal's corotational stress, each dual's tangent stress. */
 #pragma omp parallel for schedule(static) if (nl >= NH_DWR_PARALLEL_MIN)
   for (int l = 0; l < nl; l++) {
     int c = m->leaves[l];
-    double Xe[24], ue[24], ze[24];
+    double Xe[24], ue[24], R[9], d[24];
     const double *G0 = t->G0 + 24 * t->cell_shape[c];
     double *s = samples + 6 * (size_t)nfld * c;
     nh_mesh_cell_coords(m, m->X, c, Xe);
     nh_mesh_cell_coords(m, u, c, ue);
-    nh_hex_stress_at(Xe, ue, G0, t->lambda, t->mu, 1, centre, s, NULL);
+    nh_hex_corotated(Xe, ue, G0, R, d);
+    nh_hex_rotated_stress(R, d, G0, t->lambda, t->mu, s);
     for (int q = 0; q < nz; q++) {
-      nh_mesh_cell_coords(m, z + n3 * q, c, ze);
-      nh_hex_tangent_stress_at(Xe, ue, ze, G0, t->lambda, t->mu, 1, centre, s + 6 * (1 + q), NULL);
+      nh_dwr_corotate(m, z + n3 * q, c, R, d);
+      nh_hex_rotated_stress(R, d, G0, t->lambda, t->mu, s + 6 * (1 + q));
     }
   }
   if ((rc = nh_spr_recover_fields(m, t, h, nfld, samples, star))) goto done;
@@ -151,27 +160,31 @@ int nh_dwr_estimate(nh_system *sys, double scale, const nh_mesh *m, const nh_tis
     int c = m->leaves[l];
     const int *corner = m->cells + 8 * c;
     const double *G0 = t->G0 + 24 * t->cell_shape[c];
-    double Xe[24], ue[24], ze[24], su[48], sz[48], detJ[8], eu[48], ceu[48];
+    double Xe[24], ue[24], R[9], d[24], g[8][24], detJ[8], eu[48], ceu[48];
     nh_mesh_cell_coords(m, m->X, c, Xe);
     nh_mesh_cell_coords(m, u, c, ue);
-    nh_hex_stress_at(Xe, ue, G0, t->lambda, t->mu, 8, xi, su, detJ);
+    nh_hex_corotated(Xe, ue, G0, R, d);
     double e2 = 0.0, n2 = 0.0;
-    for (int g = 0; g < 8; g++) {
-      if (!(detJ[g] > 0.0)) {
+    for (int gp = 0; gp < 8; gp++) {
+      memcpy(g[gp], G0, sizeof g[gp]);
+      detJ[gp] = nh_hex_gradients(Xe, xi + 3 * gp, g[gp]);
+      if (!(detJ[gp] > 0.0)) {
 #pragma omp atomic write
         bad_cell = c;
       }
+      double su[6];
+      nh_hex_rotated_stress(R, d, g[gp], t->lambda, t->mu, su);
       for (int k = 0; k < 6; k++) {
         double s = 0.0;
-        for (int a = 0; a < 8; a++) s += N[g][a] * star[6 * ((size_t)nfld * corner[a]) + k];
-        eu[6 * g + k] = s - su[6 * g + k];
+        for (int a = 0; a < 8; a++) s += N[gp][a] * star[6 * ((size_t)nfld * corner[a]) + k];
+        eu[6 * gp + k] = s - su[k];
       }
-      nh_voigt_compliance(t->lambda, t->mu, eu + 6 * g, ceu + 6 * g);
+      nh_voigt_compliance(t->lambda, t->mu, eu + 6 * gp, ceu + 6 * gp);
       double e[6], de = 0.0, dn = 0.0;
-      nh_voigt_compliance(t->lambda, t->mu, su + 6 * g, e);
-      for (int k = 0; k < 6; k++) de += eu[6 * g + k] * ceu[6 * g + k], dn += su[6 * g + k] * e[k];
-      e2 += detJ[g] * de;
-      n2 += detJ[g] * dn;
+      nh_voigt_compliance(t->lambda, t->mu, su, e);
+      for (int k = 0; k < 6; k++) de += eu[6 * gp + k] * ceu[6 * gp + k], dn += su[k] * e[k];
+      e2 += detJ[gp] * de;
+      n2 += detJ[gp] * dn;
     }
     cell_err2[l] = m->fill[c] * e2;
     cell_norm2[l] = m->fill[c] * n2;
@@ -179,21 +192,21 @@ int nh_dwr_estimate(nh_system *sys, double scale, const nh_mesh *m, const nh_tis
       double zn2 = 0.0;
       for (int k = 0; k < 3; k++) {
         int q = 3 * p + k;
-        nh_mesh_cell_coords(m, z + n3 * q, c, ze);
-        nh_hex_tangent_stress_at(Xe, ue, ze, G0, t->lambda, t->mu, 8, xi, sz, NULL);
-        double eps = 0.0, ezz = 0.0;
-        for (int g = 0; g < 8; g++) {
-          double ez[6], cez[6], a1 = 0.0, a2 = 0.0;
+        double dz[24], eps = 0.0, ezz = 0.0;
+        nh_dwr_corotate(m, z + n3 * q, c, R, dz);
+        for (int gp = 0; gp < 8; gp++) {
+          double sz[6], ez[6], cez[6], a1 = 0.0, a2 = 0.0;
+          nh_hex_rotated_stress(R, dz, g[gp], t->lambda, t->mu, sz);
           for (int i = 0; i < 6; i++) {
             double s = 0.0;
             for (int a = 0; a < 8; a++)
-              s += N[g][a] * star[6 * ((size_t)nfld * corner[a] + 1 + q) + i];
-            ez[i] = s - sz[6 * g + i];
+              s += N[gp][a] * star[6 * ((size_t)nfld * corner[a] + 1 + q) + i];
+            ez[i] = s - sz[i];
           }
           nh_voigt_compliance(t->lambda, t->mu, ez, cez);
-          for (int i = 0; i < 6; i++) a1 += ez[i] * ceu[6 * g + i], a2 += ez[i] * cez[i];
-          eps += detJ[g] * a1;
-          ezz += detJ[g] * a2;
+          for (int i = 0; i < 6; i++) a1 += ez[i] * ceu[6 * gp + i], a2 += ez[i] * cez[i];
+          eps += detJ[gp] * a1;
+          ezz += detJ[gp] * a2;
         }
         cell_eps[(size_t)nz * l + q] = m->fill[c] * eps;
         zn2 += m->fill[c] * ezz;
