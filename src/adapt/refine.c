@@ -239,7 +239,29 @@ int nh_adapt_step(nh_adapt *a, nh_mesh *m, int n_fields, double **fields, int *n
   if (a->goal && a->n_active == 0) {
     a->stop = NH_ADAPT_TOLERANCE;
   } else {
-    rc = nh_mark_cells(m, a->eta_cell, &a->mark, marked, &n_marked);
+    /* Tolerance mode: θ and the fraction refer to the cells that can still
+     * be refined, so that the goal error is chased below the tolerance
+     * (mark.c applies the limits after selection: a goal whose largest
+     * contributions sit at max_level would refine nothing more). */
+    const double *eta = a->eta_cell;
+    double *eligible = NULL;
+    if (a->goal && a->tolerance > 0) {
+      eligible = malloc(sizeof(double) * (size_t)m->n_cells);
+      if (!eligible) {
+        free(marked);
+        return NH_ERROR(NH_ERR_MEMORY, "out of memory: marking");
+      }
+      double ratio = a->mark.child_ratio > 0.0 ? a->mark.child_ratio : 0.5;
+      for (int l = 0; l < m->n_leaves; l++) {
+        int c = m->leaves[l];
+        int limit = m->level[c] >= a->mark.max_level ||
+                    (a->mark.min_size > 0.0 && ratio * nh_mesh_cell_size(m, c) < a->mark.min_size);
+        eligible[c] = limit ? 0.0 : a->eta_cell[c];
+      }
+      eta = eligible;
+    }
+    rc = nh_mark_cells(m, eta, &a->mark, marked, &n_marked);
+    free(eligible);
     a->stop = n_marked > 0 ? NH_ADAPT_REFINED : NH_ADAPT_LIMIT;
     for (int i = 0; i < n_marked; i++) threshold = fmin(threshold, a->eta_cell[marked[i]]);
     int wanted = n_marked;
