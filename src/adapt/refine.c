@@ -38,6 +38,8 @@ struct nh_adapt {
   double radius;       /* half-width of the averaging box */
   double *goal_error;  /* per goal: |E_p| of the last estimate, valid when have_eta */
   double *goal_ind;    /* n_goals x cap_eta */
+  double *eta_all;     /* per cell: Σ over every goal (coarsening: a goal below tolerance still
+                          needs its cells) */
   int n_active;        /* goals above tolerance at the last estimate */
   nh_adapt_stop stop;  /* what ended the last refinement */
 };
@@ -73,6 +75,7 @@ void nh_adapt_destroy(nh_adapt **adapt) {
   free((*adapt)->goal_points);
   free((*adapt)->goal_error);
   free((*adapt)->goal_ind);
+  free((*adapt)->eta_all);
   free(*adapt);
   *adapt = NULL;
 }
@@ -111,7 +114,9 @@ int nh_adapt_estimate_goal(nh_adapt *a, nh_system *sys, double scale, const nh_m
     if (e) a->eta_cell = e;
     double *g = realloc(a->goal_ind, sizeof(double) * (size_t)m->n_cells * (size_t)a->n_goals);
     if (g) a->goal_ind = g;
-    if (!e || !g) return NH_ERROR(NH_ERR_MEMORY, "out of memory: error indicators");
+    double *all = realloc(a->eta_all, sizeof(double) * (size_t)m->n_cells);
+    if (all) a->eta_all = all;
+    if (!e || !g || !all) return NH_ERROR(NH_ERR_MEMORY, "out of memory: error indicators");
     a->cap_eta = m->n_cells;
   }
   double *est = malloc(sizeof(double) * 3 * (size_t)a->n_goals);
@@ -126,10 +131,14 @@ int nh_adapt_estimate_goal(nh_adapt *a, nh_system *sys, double scale, const nh_m
   for (int p = 0; p < a->n_goals; p++) a->n_active += !(a->goal_error[p] <= a->tolerance);
   for (int l = 0; l < m->n_leaves; l++) {
     int c = m->leaves[l];
-    double sum = 0.0;
-    for (int p = 0; p < a->n_goals; p++)
-      if (!(a->goal_error[p] <= a->tolerance)) sum += a->goal_ind[(size_t)m->n_cells * p + c];
+    double sum = 0.0, all = 0.0;
+    for (int p = 0; p < a->n_goals; p++) {
+      double v = a->goal_ind[(size_t)m->n_cells * p + c];
+      all += v;
+      if (!(a->goal_error[p] <= a->tolerance)) sum += v;
+    }
     a->eta_cell[c] = sum;
+    a->eta_all[c] = all;
   }
   if (eta) *eta = r.eta;
   if (eta_rel) *eta_rel = r.eta_rel;
@@ -199,7 +208,8 @@ static int nh_adapt_coarsen(nh_adapt *a, nh_mesh *m, int old_cells, double thres
   if (!rc) {
     for (int l = 0; l < m->n_leaves; l++) {
       int c = m->leaves[l];
-      below[c] = c < old_cells && a->eta_cell[c] < a->coarsen * threshold;
+      const double *eta = a->goal ? a->eta_all : a->eta_cell;
+      below[c] = c < old_cells && eta[c] < a->coarsen * threshold;
     }
     int n = nh_mesh_coarsen_candidates(m, below, parents), old_nodes = m->n_nodes;
     if (n > 0 && !(rc = nh_mesh_coarsen(m, parents, n, map))) {
@@ -234,8 +244,9 @@ int nh_adapt_step(nh_adapt *a, nh_mesh *m, int n_fields, double **fields, int *n
   int *marked = malloc(sizeof(int) * (size_t)(m->n_leaves ? m->n_leaves : 1)), n_marked = 0;
   if (!marked) return NH_ERROR(NH_ERR_MEMORY, "out of memory: marking");
   int rc = NH_OK;
-  double threshold = 0.0; /* the smallest marked η (coarsening's reference) */
-  for (int l = 0; l < m->n_leaves; l++) threshold = fmax(threshold, a->eta_cell[m->leaves[l]]);
+  double threshold = 0.0;               /* the smallest marked η (coarsening's reference) */
+  for (int l = 0; l < m->n_leaves; l++) /* nothing marked: the largest indicator */
+    threshold = fmax(threshold, (a->goal ? a->eta_all : a->eta_cell)[m->leaves[l]]);
   if (a->goal && a->n_active == 0) {
     a->stop = NH_ADAPT_TOLERANCE;
   } else {
