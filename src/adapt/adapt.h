@@ -134,16 +134,23 @@ int nh_adapt_estimate(nh_adapt *adapt, const nh_mesh *mesh, const nh_tissue *tis
  * was refined since; also for adapt = NULL). */
 const double *nh_adapt_indicators(const nh_adapt *adapt);
 
-/* One refinement from the last estimate: mark (nh_mark_cells), keep the
- * cells of largest ηₑ within the DOF budget, refine them by the template
- * (nh_mesh_refine) and carry each of the n_fields nodal fields (3 values per
+/* One refinement from the last estimate: mark (nh_mark_cells; under
+ * estimator goal by the goal indicators, in tolerance mode among the cells
+ * that can still be refined, nothing when every goal is below tolerance),
+ * keep the cells of largest ηₑ within the DOF budget, close the set under
+ * the 2:1 rule (estimator goal), refine them by the template
+ * (nh_mesh_refine), carry each of the n_fields nodal fields (3 values per
  * node; fields[f] is reallocated to the new node count) to the new nodes by
- * Eq. 17.
- * Out: *n_refined, the number of cells refined (0: mesh and fields
- *      untouched, the indicators still valid).
- * The caller rebuilds what depends on the mesh. Fails as nh_mark_cells and
- * nh_mesh_refine, NH_ERR_INTERNAL without an estimate, NH_ERR_MEMORY; after
- * a failure the mesh may be refined but the fields not transferred. */
+ * Eq. 17, and with adapt.coarsen merge the families whose indicators are
+ * below the fraction of the marking threshold (fields compacted by
+ * injection; refine.c).
+ * Out: *n_refined, the number of cells refined plus families merged (0:
+ *      mesh and fields untouched, the indicators still valid);
+ *      nh_adapt_last_stop says what ended the refinement.
+ * The caller rebuilds what depends on the mesh and re-interpolates hanging
+ * values. Fails as nh_mark_cells, nh_mesh_refine and nh_mesh_coarsen,
+ * NH_ERR_INTERNAL without an estimate, NH_ERR_MEMORY; after a failure the
+ * mesh may be refined but the fields not transferred. */
 int nh_adapt_step(nh_adapt *adapt, nh_mesh *mesh, int n_fields, double **fields, int *n_refined);
 
 /* What ended the last nh_adapt_step (steps.csv `refine_stop`). */

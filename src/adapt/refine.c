@@ -14,6 +14,17 @@
  *  4. carries every nodal field to the new nodes by Eq. 17: the value at a
  *     new node is the trilinear interpolation of its parent's corner values
  *     at the node's reference coordinates in the parent.
+ * Under adapt.estimator goal (nh_adapt_estimate_goal, adapt/dwr.c) the
+ * indicators are the goal indicators summed over the goals above
+ * adapt.tolerance; with a tolerance, marking looks only at cells that can
+ * still be refined (so the goal error is chased below it), and the marked
+ * set is closed under the 2:1 rule (mesh/grade.c; with a budget the sorted
+ * prefix is shortened until the closed set fits). With adapt.coarsen,
+ *  5. families whose children all have an indicator (under goal: summed
+ *     over every goal) below fraction × the smallest marked indicator (the
+ *     largest one when nothing was marked) and whose merge keeps the 2:1
+ *     rule are merged (mesh/coarsen.c); the fields are compacted by
+ *     injection. Cells created by this refinement have no indicator and stay.
  * What depends on the mesh (element data, loads, hanging-node table, the
  * linear system) is rebuilt by the caller, which then makes the hanging
  * values exactly their masters' interpolation. */

@@ -12,6 +12,11 @@
  * kept per step for the summary. The initial state is frame 0, so a time
  * series always starts at rest.
  *
+ * With adapt.resolve (estimator goal, no tools) the step is refined and
+ * solved again from its start state, carried to the new mesh, up to N times
+ * before its rows are written (nh_sim_resolve), so the written solution is
+ * on the mesh its estimate asked for.
+ *
  * Everything that depends on the mesh (fixed nodes, element data, load
  * vectors, probe cells, hanging nodes, the linear system) is built by
  * nh_sim_setup_mesh, at creation and after every refinement. */
