@@ -189,7 +189,7 @@ def save_loglog(fig, ax, img, fname, xlabel, ylabel, title):
     ax.set_ylabel(ylabel)
     ax.set_title(title, fontsize=10)
     ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=7, loc="lower left")
     fig.tight_layout()
     fig.savefig(os.path.join(img, fname), dpi=110)
     plt.close(fig)
@@ -242,7 +242,8 @@ def style(name):
     return {"reference": "k--", "uniform-8x4x4": "C0-", "uniform-16x8x8": "C1-",
             "uniform-32x16x16": "C2-", "adaptive-hex2": "C3-", "adaptive-hex3": "C4-",
             "adaptive-hex4": "C5-", "adaptive-hex2-dorfler": "C6-", "adaptive-hex2-theta0.1": "C7-",
-            "adaptive-hex4-theta0.1": "C8-"}.get(name, "-")
+            "adaptive-hex4-theta0.1": "C8-", "adaptive-hex2-l2": "C9-", "goal-hex2-l2": "C4-",
+            "goal-hex2-l2-every4": "C5-", "goal-hex2-l2-tol": "C6-"}.get(name, "C7-")
 
 
 def phantom(a, binary):
