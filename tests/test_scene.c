@@ -1093,7 +1093,32 @@ static void test_errors(void) {
       {"adapt_estimator.yaml",
        "name: w\ntissue:\n  domain: {box: {min: [0,0,0], max: [1,1,1]}}\n"
        "  material: {young: 1, poisson: 0.3}\nadapt: {estimator: zz}\n",
-       NULL, ":5: adapt.estimator: expected spr, got 'zz'"},
+       NULL, ":5: adapt.estimator: expected spr or goal, got 'zz'"},
+      {"adapt_goal_spr.yaml",
+       "name: w\ntissue:\n  domain: {box: {min: [0,0,0], max: [1,1,1]}}\n"
+       "  material: {young: 1, poisson: 0.3}\nadapt:\n  goal: [p]\n",
+       NULL, ":6: adapt.goal: applies to estimator goal only (the estimator is spr, the default)"},
+      {"adapt_goal_name.yaml",
+       "name: w\ntissue:\n  domain: {box: {min: [0,0,0], max: [1,1,1]}}\n"
+       "  material: {young: 1, poisson: 0.3}\nadapt:\n  estimator: goal\n  goal: [p, q]\n"
+       "probes:\n  - {name: p, point: [0.5, 0.5, 0.5]}\n",
+       NULL, ":7: adapt.goal.1: no probe or target is named \"q\""},
+      {"adapt_goal_none.yaml",
+       "name: w\ntissue:\n  domain: {box: {min: [0,0,0], max: [1,1,1]}}\n"
+       "  material: {young: 1, poisson: 0.3}\nadapt:\n  estimator: goal\n",
+       NULL, ":6: adapt.estimator: goal needs probes or targets to estimate (the scene has none)"},
+      {"adapt_goal_lagrange.yaml",
+       "name: w\ntissue:\n  domain: {box: {min: [0,0,0], max: [1,1,1]}}\n"
+       "  material: {young: 1, poisson: 0.3}\nadapt:\n  estimator: goal\n  hanging: lagrange\n",
+       NULL, ":7: adapt.hanging: lagrange cannot be used with estimator goal"},
+      {"adapt_tolerance.yaml",
+       "name: w\ntissue:\n  domain: {box: {min: [0,0,0], max: [1,1,1]}}\n"
+       "  material: {young: 1, poisson: 0.3}\nadapt:\n  estimator: goal\n  tolerance: 0\n",
+       NULL, ":7: adapt.tolerance: must be greater than 0, got 0"},
+      {"adapt_coarsen.yaml",
+       "name: w\ntissue:\n  domain: {box: {min: [0,0,0], max: [1,1,1]}}\n"
+       "  material: {young: 1, poisson: 0.3}\nadapt:\n  coarsen: {fraction: 1.5}\n",
+       NULL, ":6: adapt.coarsen.fraction: must lie in (0, 1), got 1.5"},
       {"adapt_hanging.yaml",
        "name: w\ntissue:\n  domain: {box: {min: [0,0,0], max: [1,1,1]}}\n"
        "  material: {young: 1, poisson: 0.3}\nadapt:\n  hanging: both\n",

@@ -6,6 +6,7 @@ steps.csv / probes.csv / targets.csv and writes plots and a Markdown report.
                            [--fresh-reference] [--steps N] [--reuse | --restart]
                            [--workers N | --scheduler tcp://HOST:PORT] [--threads T]
     tools/study.py dbs     [the same options]
+    tools/study.py cube    [the same options]
     tools/study.py sweep SPEC.yaml [--out DIR] [--fresh] [--workers N | --scheduler ...]
 
 Variants run through dask.distributed (study_engine.py): a LocalCluster of
@@ -15,6 +16,11 @@ cluster given by --scheduler (docs/performance.md: a SLURM cluster through
 dask-jobqueue). A failed variant is reported and left out; the others go
 on. sweep: study_sweep.py (a base scene, lists of --set values, one table
 and plots).
+
+cube (docs/adaptivity.md, "Goal-oriented refinement"): the localized-load
+block, probe P's displacement on uniform, SPR-driven and goal-driven meshes
+against the goal-oriented sequence continued to 250 000 dofs, whose last
+three meshes give the observed order and the extrapolated reference.
 
 phantom (docs/phantom.md, seed 004 §3.1): cases/phantom/phantom.yaml on
 uniform 8×4×4, 16×8×8, 32×16×16 grids and adaptive from 8×4×4 (θ = 0.3,
@@ -57,11 +63,16 @@ import matplotlib.pyplot as plt  # noqa: E402
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
-def adaptive(template, marking=None):
-    sets = ["adapt.template=%s" % template, "adapt.max_level=1"]
+def adaptive(template, marking=None, levels=1):
+    sets = ["adapt.template=%s" % template, "adapt.max_level=%d" % levels]
     if marking:
         sets.append("adapt.marking=%s" % marking)
     return sets
+
+
+def goal(template="hex2", levels=2, extra=()):
+    """Goal-oriented (dual-weighted residual) refinement for every probe."""
+    return ["adapt.estimator=goal"] + adaptive(template, levels=levels) + list(extra)
 
 
 PHANTOM = {
@@ -82,6 +93,13 @@ PHANTOM = {
          adaptive("hex2", "{strategy: max, theta: 0.1}"), "adaptive"),
         ("adaptive-hex4-theta0.1", "adaptive hex4 θ = 0.1",
          adaptive("hex4", "{strategy: max, theta: 0.1}"), "adaptive"),
+        # issue 14: SPR and goal-oriented refinement with two levels of hex2 (locally 32×16×16)
+        ("adaptive-hex2-l2", "SPR hex2, 2 levels", adaptive("hex2", levels=2), "adaptive"),
+        ("goal-hex2-l2", "goal hex2, 2 levels", goal(), "goal"),
+        ("goal-hex2-l2-every4", "goal hex2, 2 levels, every 4", goal(extra=["adapt.every=4"]),
+         "goal"),
+        ("goal-hex2-l2-tol", "goal hex2, 2 levels, tolerance 0.03 µm, ≤ 9000 dofs",
+         goal(extra=["adapt.tolerance=3e-8", "adapt.max_dofs=9000"]), "goal"),
     ],
     "axis": ["1", "2", "3", "4", "5", "6", "7"],
     "radial": ["1A", "1B", "1C", "1D", "1E"],
@@ -143,7 +161,7 @@ def read_points(out, fname="probes.csv"):
         if not steps or steps[-1] != s:
             steps.append(s)
         if fname == "probes.csv":
-            v = [float(r["ux"]), float(r["uy"]), float(r["uz"])]
+            v = [float(r["ux"]), float(r["uy"]), float(r["uz"]), float(r.get("error_estimate", "nan"))]
         else:
             v = [float(r["x"]), float(r["y"]), float(r["z"]), float(r["distance"])]
         pts.setdefault(r["name"], []).append(v)
@@ -161,8 +179,36 @@ def speed(st):
 
 def probe_error(u, ref, names):
     """Max and RMS of |u − u_ref| over the probes `names` and all steps."""
-    d = np.concatenate([np.linalg.norm(u[n] - ref[n], axis=1) for n in names])
+    d = np.concatenate([np.linalg.norm(u[n][:, :3] - ref[n][:, :3], axis=1) for n in names])
     return float(d.max()), float(np.sqrt(np.mean(d ** 2)))
+
+
+def save_loglog(fig, ax, img, fname, xlabel, ylabel, title):
+    """Labels, grid and legend of a log-log plot; writes IMG/FNAME."""
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title, fontsize=10)
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=7, loc="lower left")
+    fig.tight_layout()
+    fig.savefig(os.path.join(img, fname), dpi=110)
+    plt.close(fig)
+    log("wrote %s" % os.path.join(img, fname))
+
+
+def effectivity(u, ref, names):
+    """Median, quartiles of estimate / true error and the share in [0.7, 1.5]."""
+    vals = []
+    for n in names:
+        est = u[n][:, 3]
+        err = np.linalg.norm(u[n][:, :3] - ref[n][:, :3], axis=1)
+        ok = np.isfinite(est) & (err > 0)
+        vals.extend(est[ok] / err[ok])
+    if not vals:
+        return None
+    v = np.array(vals)
+    return (float(np.median(v)), float(np.percentile(v, 25)), float(np.percentile(v, 75)),
+            int(round(100 * np.mean((v >= 0.7) & (v <= 1.5)))))
 
 
 def pareto(points):
@@ -178,7 +224,7 @@ def plot_probes(img, runs, names, fname, title):
     fig, axes = plt.subplots(1, len(names), figsize=(4.2 * len(names), 3.4), sharey=False)
     for ax, n in zip(np.atleast_1d(axes), names):
         for r in runs:
-            ax.plot(r["steps"], 1e6 * np.linalg.norm(r["u"][n], axis=1), r.get("style", "-"),
+            ax.plot(r["steps"], 1e6 * np.linalg.norm(r["u"][n][:, :3], axis=1), r.get("style", "-"),
                     label="%s (%d dofs)" % (r["label"], r["speed"]["max_dofs"]), lw=1.2)
         ax.set_title("point %s" % n)
         ax.set_xlabel("step")
@@ -196,7 +242,8 @@ def style(name):
     return {"reference": "k--", "uniform-8x4x4": "C0-", "uniform-16x8x8": "C1-",
             "uniform-32x16x16": "C2-", "adaptive-hex2": "C3-", "adaptive-hex3": "C4-",
             "adaptive-hex4": "C5-", "adaptive-hex2-dorfler": "C6-", "adaptive-hex2-theta0.1": "C7-",
-            "adaptive-hex4-theta0.1": "C8-"}.get(name, "-")
+            "adaptive-hex4-theta0.1": "C8-", "adaptive-hex2-l2": "C9-", "goal-hex2-l2": "C4-",
+            "goal-hex2-l2-every4": "C5-", "goal-hex2-l2-tol": "C6-"}.get(name, "C7-")
 
 
 def phantom(a, binary):
@@ -235,9 +282,10 @@ def phantom(a, binary):
         r["err_max"], r["err_rms"] = probe_error(u, ref_u, names)
         runs.append(r)
 
-    umax = max(float(np.linalg.norm(ref_u[n], axis=1).max()) for n in names)
+    umax = max(float(np.linalg.norm(ref_u[n][:, :3], axis=1).max()) for n in names)
     uni = [r for r in runs if r["kind"] == "uniform"]
     ada = [r for r in runs if r["kind"] == "adaptive"]
+    gor = [r for r in runs if r["kind"] == "goal"]
     lines = []
     p = lines.append
     p("Reference: %s, %d dofs, %d steps, %.0f s in all (median %.0f ms/step); "
@@ -270,6 +318,23 @@ def phantom(a, binary):
                   1e6 * A["err_max"], 1e6 * U["err_max"],
                   "met" if ok else "missed", A["speed"]["median"], U["speed"]["median"],
                   ratio, "met" if ratio >= 5 else "missed"))
+    for r in gor:
+        if "uniform-32x16x16" not in byname:
+            break
+        U = byname["uniform-32x16x16"]
+        ratio = U["speed"]["median"] / r["speed"]["median"]
+        p("- %s vs uniform 32×16×16: error RMS %.3f vs %.3f µm (%s), max %.3f vs %.3f µm; "
+          "median ms/step %.2f vs %.2f, %.1f× faster (goal ≥ 10× at no larger RMS error: %s)." % (
+              r["label"], 1e6 * r["err_rms"], 1e6 * U["err_rms"],
+              "reached" if r["err_rms"] <= U["err_rms"] else "not reached",
+              1e6 * r["err_max"], 1e6 * U["err_max"], r["speed"]["median"], U["speed"]["median"],
+              ratio, "met" if ratio >= 10 and r["err_rms"] <= U["err_rms"] else "missed"))
+        eff = effectivity(r["u"], ref_u, names)
+        if eff is not None:
+            p("  Effectivity |estimate| / |u_ref − u| of its error_estimate over probes and "
+              "estimated steps: median %.2f, quartiles %.2f–%.2f, %d %% of the values in "
+              "[0.7, 1.5] (estimate: the mean over a box of half-width r at the probe; error: "
+              "the point value)." % eff)
     front = pareto([(r["speed"]["median"], r["err_rms"]) for r in runs])
     p("- Pareto front of (median ms/step, RMS error) over all runs: %s." % (
         ", ".join(runs[i]["label"] for i in front)))
@@ -300,7 +365,7 @@ def phantom(a, binary):
         for ax, group, title in ((axes[0], st["axis"], "along the needle"),
                                  (axes[1], st["radial"], "normal to the needle")):
             for n in group:
-                ax.plot(fine["steps"], 1e6 * np.linalg.norm(fine["u"][n], axis=1), label=n)
+                ax.plot(fine["steps"], 1e6 * np.linalg.norm(fine["u"][n][:, :3], axis=1), label=n)
             ax.set_title("32×16×16: " + title, fontsize=10)
             ax.set_xlabel("step")
             ax.set_ylabel("|u| (µm)")
@@ -313,22 +378,16 @@ def phantom(a, binary):
                 "point 3: every run (templates hex2, hex3, hex4)")
 
     fig, ax = plt.subplots(figsize=(6, 4.2))
-    for group, mk in ((uni, "o-"), (ada, "s")):
+    for group, mk in ((uni, "o-"), (ada, "s"), (gor, "^")):
         for r in group:
             ax.loglog(r["speed"]["median"], 1e6 * r["err_rms"], mk, color=r["style"][:2], ms=7,
                       label="%s (%d dofs)" % (r["label"], r["speed"]["max_dofs"]))
     if len(uni) > 1:
         ax.loglog([r["speed"]["median"] for r in uni], [1e6 * r["err_rms"] for r in uni], "k:",
                   lw=1)
-    ax.set_xlabel("median time per step (ms)")
-    ax.set_ylabel("probe displacement error, RMS (µm)")
-    ax.set_title("phantom: speed against error (reference %s)" % rlabel, fontsize=10)
-    ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(os.path.join(img, "phantom_speed_error.png"), dpi=110)
-    plt.close(fig)
-    log("wrote %s" % os.path.join(img, "phantom_speed_error.png"))
+    save_loglog(fig, ax, img, "phantom_speed_error.png", "median time per step (ms)",
+                "probe displacement error, RMS (µm)",
+                "phantom: speed against error (reference %s)" % rlabel)
     return 0
 
 
@@ -361,6 +420,120 @@ def read_tools(out, name):
             "time": np.array([float(r["time"]) for r in rows]),
             "depth": np.array([float(r["depth"]) for r in rows]),
             "state": [r["state"] for r in rows]}
+
+
+CUBE = {
+    "scene": os.path.join(ROOT, "cases", "adapt-localized.yaml"),
+    "probe": "P",
+    # name, label, overrides, kind; every run static, one mesh per step
+    "variants": [
+        ("uniform-8x4x4", "uniform 8×4×4", ["adapt.max_level=0", "time.steps=1"], "uniform"),
+        ("uniform-16x8x8", "uniform 16×8×8",
+         ["adapt.max_level=0", "time.steps=1", "tissue.grid=[16,8,8]"], "uniform"),
+        ("uniform-24x12x12", "uniform 24×12×12",
+         ["adapt.max_level=0", "time.steps=1", "tissue.grid=[24,12,12]"], "uniform"),
+        ("uniform-32x16x16", "uniform 32×16×16",
+         ["adapt.max_level=0", "time.steps=1", "tissue.grid=[32,16,16]"], "uniform"),
+        ("spr", "SPR (max θ = 0.3)", ["time.steps=10", "adapt.max_dofs=60000"], "adaptive"),
+        ("goal", "goal (max θ = 0.3)",
+         ["adapt.estimator=goal", "time.steps=10", "adapt.max_dofs=60000"], "goal"),
+    ],
+    # the reference: the goal-oriented sequence continued to 250 000 dofs
+    "reference": ("reference", "goal-adaptive to 250 000 dofs",
+                  ["adapt.estimator=goal", "time.steps=11", "adapt.max_dofs=250000"]),
+}
+
+
+def cube(a, binary):
+    """The localized-load block (docs/adaptivity.md): probe P's displacement
+    on SPR-driven, goal-driven and uniform meshes against a converged value."""
+    st = CUBE
+    out = a.out or os.path.join(ROOT, "out", "study", "cube")
+    img = a.img or os.path.join(ROOT, "docs", "img")
+    os.makedirs(img, exist_ok=True)
+
+    def series(d):
+        u, _ = read_points(d)
+        sr = read_steps(d)
+        return {"dofs": sr["dofs"], "uz": u[st["probe"]][1:, 2], "est": u[st["probe"]][1:, 3],
+                "iterations": sr["iterations"], "t_step": sr["t_step"]}
+
+    rname, rlabel, rsets = st["reference"]
+    rdir = os.path.join(out, rname)
+    selected = [(name, sets) for name, _, sets, _ in st["variants"] if not a.only or name in a.only]
+    if a.fresh_reference or not os.path.exists(os.path.join(rdir, "run.json")):
+        selected.insert(0, (rname, rsets))  # the longest run first
+    infos = run_variants(a, binary, st["scene"], out, selected)
+    if not os.path.exists(os.path.join(rdir, "run.json")):
+        raise SystemExit("no reference run in %s" % rdir)
+    ref = series(rdir)
+    # Convergence of the reference: the last three meshes, u(N) = u_inf + C N^-q.
+    (n1, n2, n3), (u1, u2, u3) = ref["dofs"][-3:], ref["uz"][-3:]
+    lo, hi = 0.05, 5.0
+    for _ in range(200):  # q solving (u1 - u2)/(u2 - u3) = (n1^-q - n2^-q)/(n2^-q - n3^-q)
+        q = 0.5 * (lo + hi)
+        g = (n1 ** -q - n2 ** -q) / (n2 ** -q - n3 ** -q)
+        if g < (u1 - u2) / (u2 - u3):
+            lo = q
+        else:
+            hi = q
+    u_inf = u3 + (u3 - u2) * n3 ** -q / (n2 ** -q - n3 ** -q)
+    runs = []
+    for name, label, sets, kind in st["variants"]:
+        if name not in infos:
+            continue
+        d = os.path.join(out, name)
+        r = dict(series(d), name=name, label=label, kind=kind)
+        r["err"] = np.abs(r["uz"] - u_inf)
+        runs.append(r)
+    lines = []
+    p = lines.append
+    p("Reference (%s): u_z(P) on its last three meshes %s µm at %s dofs; observed order in N "
+      "%.2f (≈ %.2f in h), extrapolated u_z(P) = %.6f µm; |u_inf − u(last)| = %.2e µm; its own "
+      "estimate on the last mesh %.2e µm." % (
+          rlabel, ", ".join("%.6f" % (1e6 * v) for v in ref["uz"][-3:]),
+          ", ".join("%d" % v for v in ref["dofs"][-3:]), q, 3 * q, 1e6 * u_inf,
+          1e6 * abs(u_inf - u3), 1e6 * ref["est"][-1]))
+    p("")
+    p("| run | mesh | dofs | u_z(P) µm | error µm | estimate µm | effectivity |")
+    p("|---|---|---|---|---|---|---|")
+    for r in runs:
+        for i in range(len(r["dofs"])):
+            est = r["est"][i]
+            p("| %s | %d | %d | %.6f | %.3e | %s | %s |" % (
+                r["label"], i + 1, r["dofs"][i], 1e6 * r["uz"][i], 1e6 * r["err"][i],
+                "%.3e" % (1e6 * est) if est == est else "–",
+                "%.2f" % (est / r["err"][i]) if est == est and r["err"][i] > 0 else "–"))
+    byname = {r["name"]: r for r in runs}
+    if "spr" in byname and "goal" in byname:
+        S, G = byname["spr"], byname["goal"]
+        p("")
+        p("At equal dofs (the SPR error interpolated log-log in dofs at each goal mesh's dofs):")
+        for i in range(len(G["dofs"])):
+            N = G["dofs"][i]
+            if N < S["dofs"][0] or N > S["dofs"][-1]:
+                continue
+            e_s = float(np.exp(np.interp(np.log(N), np.log(S["dofs"]), np.log(S["err"]))))
+            p("- %d dofs: goal %.3e µm, SPR %.3e µm, ratio %.2f (goal ≤ 1/2: %s)" % (
+                N, 1e6 * G["err"][i], 1e6 * e_s, G["err"][i] / e_s,
+                "met" if G["err"][i] <= 0.5 * e_s else "missed"))
+    write_report(out, lines)
+
+    fig, ax = plt.subplots(figsize=(6, 4.2))
+    for r in runs:
+        mk = {"uniform": "o-", "adaptive": "s-", "goal": "^-"}[r["kind"]]
+        if r["kind"] == "uniform":
+            continue
+        ax.loglog(r["dofs"], 1e6 * r["err"], mk, label="%s: error" % r["label"])
+        if r["kind"] == "goal":
+            ax.loglog(r["dofs"], 1e6 * r["est"], "^:", color="C1", label="goal: its estimate")
+    uni = [r for r in runs if r["kind"] == "uniform"]
+    if uni:
+        ax.loglog([r["dofs"][0] for r in uni], [1e6 * r["err"][0] for r in uni], "ko-",
+                  label="uniform: error")
+    save_loglog(fig, ax, img, "cube_goal_error.png", "dofs", "|u_z(P) − u_ref| (µm)",
+                "localized load: error of the probe displacement")
+    return 0
 
 
 def dbs(a, binary):
@@ -459,7 +632,7 @@ def dbs(a, binary):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("study", choices=["phantom", "dbs", "sweep"])
+    ap.add_argument("study", choices=["phantom", "dbs", "sweep", "cube"])
     ap.add_argument("spec", nargs="?", help="sweep: the spec (YAML, see study_sweep.py)")
     ap.add_argument("--binary", default=None, help="needlehex (default build/needlehex)")
     ap.add_argument("--out", default=None, help="run folders and report (default out/study/STUDY)")
@@ -480,7 +653,7 @@ def main():
         if not a.spec:
             ap.error("sweep needs SPEC.yaml")
         return study_sweep.sweep(a, binary)
-    return phantom(a, binary) if a.study == "phantom" else dbs(a, binary)
+    return {"phantom": phantom, "dbs": dbs, "cube": cube}[a.study](a, binary)
 
 
 if __name__ == "__main__":

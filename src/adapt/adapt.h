@@ -18,6 +18,7 @@
 #include "fem/fem.h"
 #include "mesh/mesh.h"
 #include "scene/scene.h"
+#include "solve/solve.h"
 
 /* When a patch fit is refused (and the patch grown). With y the sample
  * points centred at their centroid and scaled to unit radius, C = Σ yyᵀ and
@@ -45,6 +46,12 @@
  * NH_SPR_MAX_LEVERAGE). */
 int nh_spr_fit_patch(int n, const double *points, const double *values, const double x0[3],
                      double out[6]);
+/* The same fit for m values per sample (values[m n], out[m]): the sample
+ * weights depend on the points only, so fields that share the points are fitted
+ * together. Returns as nh_spr_fit_patch, or NH_ERR_MEMORY (no message) for a
+ * patch of more than 256 samples whose weights cannot be allocated. */
+int nh_spr_fit_patch_n(int n, const double *points, int m, const double *values, const double x0[3],
+                       double *out);
 
 /* Recovered nodal stresses σ*.
  * In:  mesh and tissue (tissue->mesh == mesh, element data up to date for
@@ -59,6 +66,15 @@ int nh_spr_fit_patch(int n, const double *points, const double *values, const do
  * threads (bitwise). */
 int nh_spr_recover(const nh_mesh *mesh, const nh_tissue *tissue, const double *u,
                    const nh_hanging *hanging, double *sigma_star);
+/* Recovery of n_fields stress fields at once from their centre samples.
+ * In:  stress[6 n_fields per cell id] (leaves read): field f's centre stress
+ *      of cell c at stress[6 (n_fields c + f) ..]; mesh, tissue, hanging as
+ *      nh_spr_recover.
+ * Out: sigma_star[6 n_fields per node], laid out the same way.
+ * Every field gets the patches, growth and fallback nh_spr_recover would give
+ * it alone (they depend on the mesh only). Fails as nh_spr_recover. */
+int nh_spr_recover_fields(const nh_mesh *mesh, const nh_tissue *tissue, const nh_hanging *hanging,
+                          int n_fields, const double *stress, double *sigma_star);
 
 /* Element error indicators and the global estimate (seed Eq. 15, energy
  * form): ηₑ² = φₑ ∫ₑ (σ* − σₕ)ᵀ D⁻¹ (σ* − σₕ) dΩ (2x2x2 Gauss, σ* the
@@ -120,16 +136,84 @@ int nh_adapt_estimate(nh_adapt *adapt, const nh_mesh *mesh, const nh_tissue *tis
  * was refined since; also for adapt = NULL). */
 const double *nh_adapt_indicators(const nh_adapt *adapt);
 
-/* One refinement from the last estimate: mark (nh_mark_cells), keep the
- * cells of largest ηₑ within the DOF budget, refine them by the template
- * (nh_mesh_refine) and carry each of the n_fields nodal fields (3 values per
+/* One refinement from the last estimate: mark (nh_mark_cells; under
+ * estimator goal by the goal indicators, in tolerance mode among the cells
+ * that can still be refined, nothing when every goal is below tolerance),
+ * keep the cells of largest ηₑ within the DOF budget, close the set under
+ * the 2:1 rule (estimator goal), refine them by the template
+ * (nh_mesh_refine), carry each of the n_fields nodal fields (3 values per
  * node; fields[f] is reallocated to the new node count) to the new nodes by
- * Eq. 17.
- * Out: *n_refined, the number of cells refined (0: mesh and fields
- *      untouched, the indicators still valid).
- * The caller rebuilds what depends on the mesh. Fails as nh_mark_cells and
- * nh_mesh_refine, NH_ERR_INTERNAL without an estimate, NH_ERR_MEMORY; after
- * a failure the mesh may be refined but the fields not transferred. */
+ * Eq. 17, and with adapt.coarsen merge the families whose indicators are
+ * below the fraction of the marking threshold (fields compacted by
+ * injection; refine.c).
+ * Out: *n_refined, the number of cells refined plus families merged (0:
+ *      mesh and fields untouched, the indicators still valid);
+ *      nh_adapt_last_stop says what ended the refinement.
+ * The caller rebuilds what depends on the mesh and re-interpolates hanging
+ * values. Fails as nh_mark_cells, nh_mesh_refine and nh_mesh_coarsen,
+ * NH_ERR_INTERNAL without an estimate, NH_ERR_MEMORY; after a failure the
+ * mesh may be refined but the fields not transferred. */
 int nh_adapt_step(nh_adapt *adapt, nh_mesh *mesh, int n_fields, double **fields, int *n_refined);
+
+/* What ended the last nh_adapt_step (steps.csv `refine_stop`). */
+typedef enum {
+  NH_ADAPT_REFINED = 0,   /* every marked cell was refined */
+  NH_ADAPT_TOLERANCE = 1, /* estimator goal: every goal estimate <= adapt.tolerance */
+  NH_ADAPT_BUDGET = 2,    /* adapt.max_dofs left marked cells unrefined */
+  NH_ADAPT_LIMIT = 3      /* nothing to refine (max_level, min_size, or every η 0) */
+} nh_adapt_stop;
+nh_adapt_stop nh_adapt_last_stop(const nh_adapt *adapt);
+
+/* Estimator goal: the points whose displacement is the goal (rest positions,
+ * 3 each); the averaging box's half-width is half the edge of the finest cell
+ * refinement can make (the initial grid's smallest spacing times the
+ * template's child ratio to the power max_level). NH_ERR_MEMORY. */
+int nh_adapt_set_goals(nh_adapt *adapt, const nh_mesh *mesh, int n, const double *points);
+/* Goal-oriented estimate of the solution u with the factor `sys` holds
+ * (nh_dwr_estimate; scale as there). Keeps each goal's |E_p| and, as the
+ * marking indicator, Σ η_K^p over the goals whose estimate exceeds
+ * adapt.tolerance (all goals without tolerance). *eta, *eta_rel: the
+ * primal's SPR estimate. Fails as nh_dwr_estimate, NH_ERR_MEMORY. */
+int nh_adapt_estimate_goal(nh_adapt *adapt, nh_system *sys, double scale, const nh_mesh *mesh,
+                           const nh_tissue *tissue, const double *u, const nh_hanging *hanging,
+                           double *eta, double *eta_rel);
+/* |E_p| per goal of the last goal estimate (m), or NULL (none for this mesh). */
+const double *nh_adapt_goal_errors(const nh_adapt *adapt);
+
+/* ---- goal-oriented estimate: the dual-weighted residual (adapt/dwr.c) ---- */
+
+/* Nodal vector j[3 n_nodes] (overwritten) of the regularised point
+ * functional J(v) = mean of v_k over the tissue inside the box of half-width
+ * `radius` centred at point: J(v) = Σ j·v. `where` names the point in
+ * messages. Fails with NH_ERR_INPUT (message) if the box holds no tissue. */
+int nh_goal_functional(const nh_mesh *mesh, const double point[3], double radius, int k,
+                       const char *where, double *j);
+
+/* Dual solutions of n functionals with the system's current factor A:
+ * z_q = P A⁻¹ (scale Pᵀ j_q) for j[3 n_nodes n] (q-th at j + 3 n_nodes q),
+ * z likewise (fixed DOFs 0, hanging nodes their masters' interpolation).
+ * Fails with NH_ERR_INPUT (message) if the system carries constraint rows
+ * (hanging nodes by Lagrange multipliers), NH_ERR_MEMORY, NH_ERR_NUMERIC. */
+int nh_dwr_duals(nh_system *sys, double scale, int n_nodes, int n, const double *j, double *z);
+
+/* What nh_dwr_estimate returns (arrays allocated by the caller). */
+typedef struct {
+  double *estimate;    /* 3 per point: E_pk ≈ J_pk(u) − J_pk(u_h), signed, m */
+  double *norm;        /* per point: |E_p| = (Σ_k E_pk²)^½, m */
+  double *indicator;   /* n_points x n_cells (may be NULL): η_K^p at [n_cells p + c], m */
+  double *eta_cell;    /* n_cells (may be NULL): the primal's SPR indicators ηₑ */
+  double eta, eta_rel; /* the primal's SPR estimate (as nh_spr_estimate) */
+} nh_dwr_result;
+
+/* Goal-oriented estimate of the displacement at n_points points[3 each]
+ * (regularised over boxes of half-width radius) for the solution u of the
+ * system whose factor `sys` holds; scale = the coefficient of K in the
+ * factorised matrix (1 static, hβ + h² dynamic). dwr.c gives the formulas.
+ * where[p] (may be NULL) names point p in messages. Fails as
+ * nh_goal_functional, nh_dwr_duals and nh_spr_recover, and with
+ * NH_ERR_NUMERIC if an estimate is not finite. Thread-count independent. */
+int nh_dwr_estimate(nh_system *sys, double scale, const nh_mesh *mesh, const nh_tissue *tissue,
+                    const nh_hanging *hanging, const double *u, int n_points, const double *points,
+                    double radius, char (*where)[NH_WHERE_MAX], nh_dwr_result *out);
 
 #endif

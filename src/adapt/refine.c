@@ -15,12 +15,25 @@
  *  4. carries every nodal field to the new nodes by Eq. 17: the value at a
  *     new node is the trilinear interpolation of its parent's corner values
  *     at the node's reference coordinates in the parent.
+ * Under adapt.estimator goal (nh_adapt_estimate_goal, adapt/dwr.c) the
+ * indicators are the goal indicators summed over the goals above
+ * adapt.tolerance; with a tolerance, marking looks only at cells that can
+ * still be refined (so the goal error is chased below it), and the marked
+ * set is closed under the 2:1 rule (mesh/grade.c; with a budget the sorted
+ * prefix is shortened until the closed set fits). With adapt.coarsen,
+ *  5. families whose children all have an indicator (under goal: summed
+ *     over every goal) below fraction × the smallest marked indicator (the
+ *     largest one when nothing was marked) and whose merge keeps the 2:1
+ *     rule are merged (mesh/coarsen.c); the fields are compacted by
+ *     injection. Cells created by this refinement have no indicator and stay.
  * What depends on the mesh (element data, loads, hanging-node table, the
  * linear system) is rebuilt by the caller, which then makes the hanging
  * values exactly their masters' interpolation. */
 #include "adapt/adapt_impl.h"
 
+#include <math.h>
 #include <stdlib.h>
+#include <string.h>
 
 struct nh_adapt {
   nh_mark_params mark;
@@ -30,6 +43,19 @@ struct nh_adapt {
   nh_template *tmpl;
   double *eta_cell; /* per cell id, valid when have_eta */
   int cap_eta, have_eta;
+  /* goal-oriented estimation (estimator goal) */
+  int goal, grade;     /* estimator goal; refinement closed by the 2:1 rule */
+  double tolerance;    /* m (0: none) */
+  double coarsen;      /* fraction of the marking threshold (0: none) */
+  int n_goals;         /* goal points */
+  double *goal_points; /* 3 per goal */
+  double radius;       /* half-width of the averaging box */
+  double *goal_error;  /* per goal: |E_p| of the last estimate, valid when have_eta */
+  double *goal_ind;    /* n_goals x cap_eta */
+  double *eta_all;     /* per cell: Σ over every goal (coarsening: a goal below tolerance still
+                          needs its cells) */
+  int n_active;        /* goals above tolerance at the last estimate */
+  nh_adapt_stop stop;  /* what ended the last refinement */
 };
 
 int nh_adapt_create(const nh_adapt_spec *spec, int max_cells, nh_adapt **out) {
@@ -49,6 +75,10 @@ int nh_adapt_create(const nh_adapt_spec *spec, int max_cells, nh_adapt **out) {
                              .child_ratio = nh_template_child_ratio(a->tmpl)};
   a->max_dofs = spec->max_dofs;
   a->max_cells = max_cells;
+  a->goal = spec->estimator == NH_ESTIMATOR_GOAL;
+  a->grade = a->goal;
+  a->tolerance = spec->tolerance;
+  a->coarsen = spec->coarsen;
   *out = a;
   return NH_OK;
 }
@@ -57,6 +87,10 @@ void nh_adapt_destroy(nh_adapt **adapt) {
   if (!adapt || !*adapt) return;
   nh_template_destroy(&(*adapt)->tmpl);
   free((*adapt)->eta_cell);
+  free((*adapt)->goal_points);
+  free((*adapt)->goal_error);
+  free((*adapt)->goal_ind);
+  free((*adapt)->eta_all);
   free(*adapt);
   *adapt = NULL;
 }
@@ -72,6 +106,67 @@ int nh_adapt_estimate(nh_adapt *a, const nh_mesh *m, const nh_tissue *tissue, co
   NH_TRY(nh_spr_estimate(m, tissue, u, hanging, a->eta_cell, eta, eta_rel));
   a->have_eta = 1;
   return NH_OK;
+}
+
+int nh_adapt_set_goals(nh_adapt *a, const nh_mesh *m, int n, const double *points) {
+  free(a->goal_points), free(a->goal_error);
+  a->goal_points = malloc(sizeof(double) * 3 * (size_t)(n ? n : 1));
+  a->goal_error = malloc(sizeof(double) * (size_t)(n ? n : 1));
+  if (!a->goal_points || !a->goal_error) return NH_ERROR(NH_ERR_MEMORY, "out of memory: goals");
+  memcpy(a->goal_points, points, sizeof(double) * 3 * (size_t)n);
+  a->n_goals = n;
+  double h = fmin(m->spacing[0], fmin(m->spacing[1], m->spacing[2]));
+  a->radius = 0.5 * h * pow(a->mark.child_ratio, a->mark.max_level);
+  return NH_OK;
+}
+
+int nh_adapt_estimate_goal(nh_adapt *a, nh_system *sys, double scale, const nh_mesh *m,
+                           const nh_tissue *tissue, const double *u, const nh_hanging *hanging,
+                           double *eta, double *eta_rel) {
+  NH_CHECK(a->goal && a->n_goals > 0, NH_ERR_INTERNAL, "goal estimate without goals");
+  if (m->n_cells > a->cap_eta) {
+    double *e = realloc(a->eta_cell, sizeof(double) * (size_t)m->n_cells);
+    if (e) a->eta_cell = e;
+    double *g = realloc(a->goal_ind, sizeof(double) * (size_t)m->n_cells * (size_t)a->n_goals);
+    if (g) a->goal_ind = g;
+    double *all = realloc(a->eta_all, sizeof(double) * (size_t)m->n_cells);
+    if (all) a->eta_all = all;
+    if (!e || !g || !all) return NH_ERROR(NH_ERR_MEMORY, "out of memory: error indicators");
+    a->cap_eta = m->n_cells;
+  }
+  double *est = malloc(sizeof(double) * 3 * (size_t)a->n_goals);
+  if (!est) return NH_ERROR(NH_ERR_MEMORY, "out of memory: goal estimates");
+  nh_dwr_result r = {.estimate = est, .norm = a->goal_error, .indicator = a->goal_ind};
+  int rc = nh_dwr_estimate(sys, scale, m, tissue, hanging, u, a->n_goals, a->goal_points, a->radius,
+                           NULL, &r);
+  free(est);
+  NH_TRY(rc);
+  /* The marking indicator: the sum over the goals still above tolerance. */
+  a->n_active = 0;
+  for (int p = 0; p < a->n_goals; p++) a->n_active += !(a->goal_error[p] <= a->tolerance);
+  for (int l = 0; l < m->n_leaves; l++) {
+    int c = m->leaves[l];
+    double sum = 0.0, all = 0.0;
+    for (int p = 0; p < a->n_goals; p++) {
+      double v = a->goal_ind[(size_t)m->n_cells * p + c];
+      all += v;
+      if (!(a->goal_error[p] <= a->tolerance)) sum += v;
+    }
+    a->eta_cell[c] = sum;
+    a->eta_all[c] = all;
+  }
+  if (eta) *eta = r.eta;
+  if (eta_rel) *eta_rel = r.eta_rel;
+  a->have_eta = 1;
+  return NH_OK;
+}
+
+const double *nh_adapt_goal_errors(const nh_adapt *a) {
+  return a && a->goal && a->have_eta ? a->goal_error : NULL;
+}
+
+nh_adapt_stop nh_adapt_last_stop(const nh_adapt *a) {
+  return a ? a->stop : NH_ADAPT_REFINED;
 }
 
 const double *nh_adapt_indicators(const nh_adapt *a) {
@@ -103,6 +198,57 @@ static int nh_adapt_budget(nh_adapt *a, const nh_mesh *m, int *marked, int *n_ma
   return NH_OK;
 }
 
+/* Close the marked set under the 2:1 rule; with a budget, shorten the
+ * (η-sorted) prefix until the closed set fits. */
+static int nh_adapt_close(const nh_adapt *a, const nh_mesh *m, int *marked, int *n_marked) {
+  int *order = malloc(sizeof(int) * (size_t)(*n_marked ? *n_marked : 1));
+  if (!order) return NH_ERROR(NH_ERR_MEMORY, "out of memory: grading");
+  memcpy(order, marked, sizeof(int) * (size_t)*n_marked);
+  long room =
+      a->max_dofs > 0 ? ((long)a->max_dofs - 3L * m->n_nodes) / (3L * (a->tmpl->n_nodes - 8)) : -1;
+  int k = *n_marked, rc = NH_OK;
+  for (;;) {
+    int n = k;
+    memcpy(marked, order, sizeof(int) * (size_t)k);
+    if ((rc = nh_mesh_grade_marks(m, marked, &n))) break;
+    if (room < 0 || n <= room || k == 0) {
+      *n_marked = n;
+      break;
+    }
+    k -= k / 4 > 0 ? k / 4 : 1;
+  }
+  free(order);
+  return rc;
+}
+
+/* Merge families whose children all have η below fraction x threshold
+ * (cells created by this step's refinement have no η and stay), compact the
+ * fields. *n_merged: families merged. */
+static int nh_adapt_coarsen(nh_adapt *a, nh_mesh *m, int old_cells, double threshold, int n_fields,
+                            double **fields, int *n_merged) {
+  *n_merged = 0;
+  unsigned char *below = calloc((size_t)(m->n_cells ? m->n_cells : 1), 1);
+  int *parents = malloc(sizeof(int) * (size_t)(m->n_leaves / 2 + 1));
+  int *map = malloc(sizeof(int) * (size_t)(m->n_nodes ? m->n_nodes : 1));
+  int rc = below && parents && map ? NH_OK : NH_ERROR(NH_ERR_MEMORY, "out of memory: coarsening");
+  if (!rc) {
+    for (int l = 0; l < m->n_leaves; l++) {
+      int c = m->leaves[l];
+      const double *eta = a->goal ? a->eta_all : a->eta_cell;
+      below[c] = c < old_cells && eta[c] < a->coarsen * threshold;
+    }
+    int n = nh_mesh_coarsen_candidates(m, below, parents), old_nodes = m->n_nodes;
+    if (n > 0 && !(rc = nh_mesh_coarsen(m, parents, n, map))) {
+      for (int f = 0; f < n_fields; f++)
+        for (int v = 0; v < old_nodes; v++)
+          if (map[v] >= 0) memmove(fields[f] + 3 * map[v], fields[f] + 3 * v, 3 * sizeof(double));
+      *n_merged = n;
+    }
+  }
+  free(below), free(parents), free(map);
+  return rc;
+}
+
 /* Eq. 17: a new node's values from its parent's corners. */
 static void nh_adapt_transfer(const nh_mesh *m, const nh_refine_info *info, int old_nodes,
                               double *f) {
@@ -123,31 +269,71 @@ int nh_adapt_step(nh_adapt *a, nh_mesh *m, int n_fields, double **fields, int *n
   NH_CHECK(a->have_eta, NH_ERR_INTERNAL, "refinement without error indicators");
   int *marked = malloc(sizeof(int) * (size_t)(m->n_leaves ? m->n_leaves : 1)), n_marked = 0;
   if (!marked) return NH_ERROR(NH_ERR_MEMORY, "out of memory: marking");
-  int rc = nh_mark_cells(m, a->eta_cell, &a->mark, marked, &n_marked);
-  /* (marked cells keep mark order, and the mesh its numbering, unless a budget binds) */
-  int over_cap =
-      a->max_cells > 0 && m->n_leaves + (long)n_marked * (a->tmpl->n_children - 1) > a->max_cells;
-  if (!rc && (a->max_dofs > 0 || over_cap) && n_marked > 0)
-    rc = nh_adapt_budget(a, m, marked, &n_marked);
-  if (rc || n_marked == 0) {
+  int rc = NH_OK;
+  double threshold = 0.0;               /* the smallest marked η (coarsening's reference) */
+  for (int l = 0; l < m->n_leaves; l++) /* nothing marked: the largest indicator */
+    threshold = fmax(threshold, (a->goal ? a->eta_all : a->eta_cell)[m->leaves[l]]);
+  if (a->goal && a->n_active == 0) {
+    a->stop = NH_ADAPT_TOLERANCE;
+  } else {
+    /* Tolerance mode: θ and the fraction refer to the cells that can still
+     * be refined, so that the goal error is chased below the tolerance
+     * (mark.c applies the limits after selection: a goal whose largest
+     * contributions sit at max_level would refine nothing more). */
+    const double *eta = a->eta_cell;
+    double *eligible = NULL;
+    if (a->goal && a->tolerance > 0) {
+      eligible = malloc(sizeof(double) * (size_t)m->n_cells);
+      if (!eligible) {
+        free(marked);
+        return NH_ERROR(NH_ERR_MEMORY, "out of memory: marking");
+      }
+      double ratio = a->mark.child_ratio > 0.0 ? a->mark.child_ratio : 0.5;
+      for (int l = 0; l < m->n_leaves; l++) {
+        int c = m->leaves[l];
+        int limit = m->level[c] >= a->mark.max_level ||
+                    (a->mark.min_size > 0.0 && ratio * nh_mesh_cell_size(m, c) < a->mark.min_size);
+        eligible[c] = limit ? 0.0 : a->eta_cell[c];
+      }
+      eta = eligible;
+    }
+    rc = nh_mark_cells(m, eta, &a->mark, marked, &n_marked);
+    free(eligible);
+    a->stop = n_marked > 0 ? NH_ADAPT_REFINED : NH_ADAPT_LIMIT;
+    for (int i = 0; i < n_marked; i++) threshold = fmin(threshold, a->eta_cell[marked[i]]);
+    int wanted = n_marked;
+    /* (marked cells keep mark order, and the mesh its numbering, unless a budget binds) */
+    int over_cap =
+        a->max_cells > 0 && m->n_leaves + (long)n_marked * (a->tmpl->n_children - 1) > a->max_cells;
+    if (!rc && (a->max_dofs > 0 || over_cap) && n_marked > 0)
+      rc = nh_adapt_budget(a, m, marked, &n_marked);
+    if (!rc && a->grade && n_marked > 0) rc = nh_adapt_close(a, m, marked, &n_marked);
+    if (!rc && n_marked < wanted) a->stop = NH_ADAPT_BUDGET;
+  }
+  if (rc) {
     free(marked);
     return rc;
   }
-  nh_refine_info info = {0};
-  const int old_nodes = m->n_nodes;
-  rc = nh_mesh_refine(m, a->tmpl, marked, n_marked, &info);
-  free(marked);
-  a->have_eta = 0; /* the indicators belonged to the cells just replaced */
-  for (int f = 0; f < n_fields && !rc; f++) {
-    double *p = realloc(fields[f], sizeof(double) * 3 * (size_t)(m->n_nodes ? m->n_nodes : 1));
-    if (!p)
-      rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: %d nodes", m->n_nodes);
-    else {
-      fields[f] = p;
-      nh_adapt_transfer(m, &info, old_nodes, p);
+  const int old_nodes = m->n_nodes, old_cells = m->n_cells;
+  if (n_marked > 0) {
+    nh_refine_info info = {0};
+    rc = nh_mesh_refine(m, a->tmpl, marked, n_marked, &info);
+    for (int f = 0; f < n_fields && !rc; f++) {
+      double *p = realloc(fields[f], sizeof(double) * 3 * (size_t)(m->n_nodes ? m->n_nodes : 1));
+      if (!p)
+        rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: %d nodes", m->n_nodes);
+      else {
+        fields[f] = p;
+        nh_adapt_transfer(m, &info, old_nodes, p);
+      }
     }
+    nh_refine_info_free(&info);
   }
-  nh_refine_info_free(&info);
-  if (!rc) *n_refined = n_marked;
+  free(marked);
+  int n_merged = 0;
+  if (!rc && a->coarsen > 0)
+    rc = nh_adapt_coarsen(a, m, old_cells, threshold, n_fields, fields, &n_merged);
+  if (n_marked > 0 || n_merged > 0) a->have_eta = 0; /* the indicators belonged to the old cells */
+  if (!rc) *n_refined = n_marked + n_merged;
   return rc;
 }

@@ -88,14 +88,16 @@
 
 int nh_spr_fit_patch(int n, const double *points, const double *values, const double x0[3],
                      double out[6]) {
+  return nh_spr_fit_patch_n(n, points, 6, values, x0, out);
+}
+
+int nh_spr_fit_patch_n(int n, const double *points, int m, const double *values, const double x0[3],
+                       double *out) {
   if (n < 4) return NH_ERR_NUMERIC;
-  double xbar[3] = {0, 0, 0}, vbar[6] = {0, 0, 0, 0, 0, 0};
-  for (int i = 0; i < n; i++) {
+  double xbar[3] = {0, 0, 0};
+  for (int i = 0; i < n; i++)
     for (int k = 0; k < 3; k++) xbar[k] += points[3 * i + k];
-    for (int k = 0; k < 6; k++) vbar[k] += values[6 * i + k];
-  }
   for (int k = 0; k < 3; k++) xbar[k] /= n;
-  for (int k = 0; k < 6; k++) vbar[k] /= n;
   double h = 0.0;
   for (int i = 0; i < n; i++) {
     double r2 = 0.0;
@@ -104,15 +106,13 @@ int nh_spr_fit_patch(int n, const double *points, const double *values, const do
   }
   h = sqrt(h);
   if (!(h > 0.0)) return NH_ERR_NUMERIC;
-  /* Scatter matrix C = Σ y yᵀ and right-hand sides b_k = Σ y (v_k − v̄_k), y = (x − x̄)/h. */
-  double C[9] = {0}, b[3][6] = {{0}};
+  /* Scatter matrix C = Σ y yᵀ, y = (x − x̄)/h; it depends on the points only. */
+  double C[9] = {0};
   for (int i = 0; i < n; i++) {
     double y[3];
     for (int k = 0; k < 3; k++) y[k] = (points[3 * i + k] - xbar[k]) / h;
-    for (int r = 0; r < 3; r++) {
+    for (int r = 0; r < 3; r++)
       for (int s = 0; s < 3; s++) C[3 * r + s] += y[r] * y[s];
-      for (int k = 0; k < 6; k++) b[r][k] += y[r] * (values[6 * i + k] - vbar[k]);
-    }
   }
   double w[3], V[9];
   nh_mat3_sym_eigen(C, w, V);
@@ -124,16 +124,26 @@ int nh_spr_fit_patch(int n, const double *points, const double *values, const do
     leverage += vy[j] * vy[j] / w[j];
   }
   if (!(leverage <= NH_SPR_MAX_LEVERAGE)) return NH_ERR_NUMERIC;
-  /* p(x0) = v̄ + y0ᵀ C⁻¹ b = v̄ + Σ_j (V_jᵀ y0)(V_jᵀ b) / w_j. */
-  double res[6];
-  memcpy(res, vbar, sizeof res);
-  for (int j = 0; j < 3; j++) {
-    for (int k = 0; k < 6; k++) {
-      double vb = V[j] * b[0][k] + V[3 + j] * b[1][k] + V[6 + j] * b[2][k];
-      res[k] += vy[j] * vb / w[j];
-    }
+  /* p(x0) = v̄ + y0ᵀ C⁻¹ b = v̄ + Σ_i c_i (v_i − v̄), b = Σ_i y_i (v_i − v̄), with the
+   * sample weights c_i = y_iᵀ C⁻¹ y0 = Σ_j (V_jᵀ y_i)(V_jᵀ y0) / w_j shared by
+   * all m components. */
+  double c_stack[256], *c = n <= 256 ? c_stack : malloc(sizeof(double) * (size_t)n);
+  if (!c) return NH_ERR_MEMORY;
+  for (int i = 0; i < n; i++) {
+    double y[3];
+    for (int k = 0; k < 3; k++) y[k] = (points[3 * i + k] - xbar[k]) / h;
+    c[i] = 0.0;
+    for (int j = 0; j < 3; j++)
+      c[i] += (V[j] * y[0] + V[3 + j] * y[1] + V[6 + j] * y[2]) * vy[j] / w[j];
   }
-  memcpy(out, res, sizeof res);
+  for (int k = 0; k < m; k++) {
+    double vbar = 0.0, fit = 0.0;
+    for (int i = 0; i < n; i++) vbar += values[(size_t)m * i + k];
+    vbar /= n;
+    for (int i = 0; i < n; i++) fit += c[i] * (values[(size_t)m * i + k] - vbar);
+    out[k] = vbar + fit;
+  }
+  if (c != c_stack) free(c);
   return NH_OK;
 }
 
@@ -142,7 +152,8 @@ typedef struct {
   const nh_mesh *m;
   const int *start, *adj;     /* node -> leaves having it as a corner (CSR, ascending) */
   const double *centre;       /* 3 per cell */
-  const double *stress;       /* 6 per cell: the centre stress */
+  const double *stress;       /* nv per cell: the centre stresses of the fields */
+  int nv;                     /* values per sample: 6 per field */
   const double *weight;       /* per cell: φ V */
   const unsigned char *hangs; /* per node: 1 if hanging */
 } nh_spr_ctx;
@@ -198,7 +209,8 @@ static int nh_spr_grow(const nh_spr_ctx *x, nh_spr_work *w) {
 }
 
 /* σ*(node) for a non-hanging node with at least one leaf. */
-static int nh_spr_node(const nh_spr_ctx *x, int node, nh_spr_work *w, double out[6]) {
+static int nh_spr_node(const nh_spr_ctx *x, int node, nh_spr_work *w, double *out) {
+  const int nv = x->nv;
   const int *own = x->adj + x->start[node];
   int n_own = x->start[node + 1] - x->start[node];
   if (nh_spr_reserve_int(&w->patch, &w->cap_patch, n_own)) return NH_ERR_MEMORY;
@@ -214,7 +226,7 @@ static int nh_spr_node(const nh_spr_ctx *x, int node, nh_spr_work *w, double out
       while (c < n) c *= 2;
       double *p = realloc(w->points, sizeof(double) * 3 * (size_t)c);
       if (p) w->points = p;
-      double *v = realloc(w->values, sizeof(double) * 6 * (size_t)c);
+      double *v = realloc(w->values, sizeof(double) * (size_t)nv * (size_t)c);
       if (v) w->values = v;
       if (!p || !v) return NH_ERR_MEMORY;
       w->cap_samples = c;
@@ -222,18 +234,20 @@ static int nh_spr_node(const nh_spr_ctx *x, int node, nh_spr_work *w, double out
     for (int i = 0; i < n; i++) {
       int c = w->patch[i];
       memcpy(w->points + 3 * i, x->centre + 3 * c, 3 * sizeof(double));
-      memcpy(w->values + 6 * i, x->stress + 6 * c, 6 * sizeof(double));
+      memcpy(w->values + (size_t)nv * i, x->stress + (size_t)nv * c, (size_t)nv * sizeof(double));
     }
-    if (nh_spr_fit_patch(n, w->points, w->values, X0, out) == NH_OK) return NH_OK;
+    int rc = nh_spr_fit_patch_n(n, w->points, nv, w->values, X0, out);
+    if (rc != NH_ERR_NUMERIC) return rc;
   }
   /* Still rank-deficient: the φV-weighted mean of the node's own patch. */
-  double sum[6] = {0}, wsum = 0.0;
+  double wsum = 0.0;
+  for (int k = 0; k < nv; k++) out[k] = 0.0;
   for (int i = 0; i < n_own; i++) {
     int c = own[i];
-    for (int k = 0; k < 6; k++) sum[k] += x->weight[c] * x->stress[6 * c + k];
+    for (int k = 0; k < nv; k++) out[k] += x->weight[c] * x->stress[(size_t)nv * c + k];
     wsum += x->weight[c];
   }
-  for (int k = 0; k < 6; k++) out[k] = sum[k] / wsum;
+  for (int k = 0; k < nv; k++) out[k] /= wsum;
   return NH_OK;
 }
 
@@ -266,15 +280,28 @@ static int nh_spr_check(const nh_mesh *m, const nh_tissue *t, const nh_hanging *
 int nh_spr_recover(const nh_mesh *m, const nh_tissue *t, const double *u, const nh_hanging *h,
                    double *sigma_star) {
   NH_TRY(nh_spr_check(m, t, h));
+  double *stress = malloc(sizeof(double) * 6 * (size_t)(m->n_cells ? m->n_cells : 1));
+  if (!stress) return NH_ERROR(NH_ERR_MEMORY, "out of memory: SPR samples (%d cells)", m->n_cells);
+  const int nl = m->n_leaves;
+#pragma omp parallel for schedule(static) if (nl >= NH_SPR_PARALLEL_MIN)
+  for (int l = 0; l < nl; l++) nh_tissue_cell_stress(t, m->leaves[l], u, stress + 6 * m->leaves[l]);
+  int rc = nh_spr_recover_fields(m, t, h, 1, stress, sigma_star);
+  free(stress);
+  return rc;
+}
+
+int nh_spr_recover_fields(const nh_mesh *m, const nh_tissue *t, const nh_hanging *h, int n_fields,
+                          const double *stress, double *sigma_star) {
+  NH_TRY(nh_spr_check(m, t, h));
+  const int nv = 6 * n_fields;
   int nn = m->n_nodes, nl = m->n_leaves;
   double *centre = malloc(sizeof(double) * 3 * (size_t)m->n_cells);
-  double *stress = malloc(sizeof(double) * 6 * (size_t)m->n_cells);
   double *weight = malloc(sizeof(double) * (size_t)m->n_cells);
   int *start = calloc((size_t)nn + 1, sizeof(int));
   int *adj = malloc(sizeof(int) * 8 * (size_t)(nl > 0 ? nl : 1));
   unsigned char *hangs = calloc((size_t)nn, 1);
   int rc = NH_OK;
-  if (!centre || !stress || !weight || !start || !adj || !hangs) {
+  if (!centre || !weight || !start || !adj || !hangs) {
     rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: SPR workspace (%d nodes, %d cells)", nn,
                   m->n_cells);
     goto done;
@@ -290,7 +317,6 @@ int nh_spr_recover(const nh_mesh *m, const nh_tissue *t, const double *u, const 
       for (int a = 0; a < 8; a++) s += Xe[3 * a + k];
       centre[3 * c + k] = 0.125 * s;
     }
-    nh_tissue_cell_stress(t, c, u, stress + 6 * c);
     weight[c] = m->fill[c] * t->volume[t->cell_shape[c]];
   }
 
@@ -335,7 +361,7 @@ int nh_spr_recover(const nh_mesh *m, const nh_tissue *t, const double *u, const 
           goto done;
         }
 
-  nh_spr_ctx x = {m, start, adj, centre, stress, weight, hangs};
+  nh_spr_ctx x = {m, start, adj, centre, stress, nv, weight, hangs};
   int failed = 0;
 #pragma omp parallel if (nn >= NH_SPR_PARALLEL_MIN)
   {
@@ -343,9 +369,9 @@ int nh_spr_recover(const nh_mesh *m, const nh_tissue *t, const double *u, const 
     memset(&w, 0, sizeof w);
 #pragma omp for schedule(dynamic, 64)
     for (int v = 0; v < nn; v++) {
-      double *out = sigma_star + 6 * v;
+      double *out = sigma_star + (size_t)nv * v;
       if (hangs[v] || start[v + 1] == start[v]) {
-        memset(out, 0, 6 * sizeof(double));
+        memset(out, 0, (size_t)nv * sizeof(double));
         continue;
       }
       if (nh_spr_node(&x, v, &w, out)) {
@@ -361,13 +387,14 @@ int nh_spr_recover(const nh_mesh *m, const nh_tissue *t, const double *u, const 
   }
   if (h)
     for (int k = 0; k < h->n_hanging; k++) {
-      double *out = sigma_star + 6 * h->node[k];
+      double *out = sigma_star + (size_t)nv * h->node[k];
       for (int p = h->start[k]; p < h->start[k + 1]; p++)
-        for (int i = 0; i < 6; i++) out[i] += h->weight[p] * sigma_star[6 * h->master[p] + i];
+        for (int i = 0; i < nv; i++)
+          out[i] += h->weight[p] * sigma_star[(size_t)nv * h->master[p] + i];
     }
 
 done:
-  free(centre), free(stress), free(weight), free(start), free(adj), free(hangs);
+  free(centre), free(weight), free(start), free(adj), free(hangs);
   return rc;
 }
 

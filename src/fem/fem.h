@@ -123,6 +123,14 @@ void nh_tissue_cell_stress(const nh_tissue *tissue, int c, const double *u, doub
 void nh_hex_stress_at(const double X[24], const double u[24], const double G0[24], double lambda,
                       double mu, int n, const double *xi, double *s, double *detJ);
 
+/* σ = R (λ tr ε I + 2 μ ε) Rᵀ, ε = sym(Σₐ dₐ ⊗ gₐ), for element rotation
+ * R[9], corotated nodal values d[24] and shape-function gradients g[24] at a
+ * point; s[6] Voigt. With d = Rᵀw (node by node) it is the stress of the
+ * tangent R K₀ Rᵀ for nodal values w (an increment, a dual solution): the sum
+ * over the 2x2x2 Gauss points of det J σ(w)ᵀ D⁻¹ σ(v) is vᵀ R K₀ Rᵀ w. */
+void nh_hex_rotated_stress(const double R[9], const double d[24], const double g[24], double lambda,
+                           double mu, double s[6]);
+
 /* Corotational Cauchy stress s[6] (Voigt, Pa) of leaf c at the natural point
  * xi[3] for displacements u (3 per node). ξ = 0 gives nh_tissue_cell_stress. */
 void nh_tissue_gauss_stress(const nh_tissue *tissue, int c, const double *u, const double xi[3],

@@ -115,18 +115,9 @@ void nh_hex_corot(const double X[24], const double u[24], const double K0[576], 
 
 void nh_hex_center_stress(const double X[24], const double u[24], const double G0[24],
                           double lambda, double mu, double s[6]) {
-  double R[9], H[9] = {0}, d[24];
+  double R[9], d[24];
   nh_hex_corotated(X, u, G0, R, d);
-  for (int a = 0; a < 8; a++)
-    for (int i = 0; i < 3; i++)
-      for (int j = 0; j < 3; j++) H[3 * i + j] += d[3 * a + i] * G0[3 * a + j];
-  double tr = H[0] + H[4] + H[8], S[9];
-  for (int i = 0; i < 3; i++)
-    for (int j = 0; j < 3; j++)
-      S[3 * i + j] = mu * (H[3 * i + j] + H[3 * j + i]) + (i == j ? lambda * tr : 0.0);
-  nh_mat3_mul(R, S, S);
-  nh_mat3_mul_nt(S, R, S);
-  s[0] = S[0], s[1] = S[4], s[2] = S[8], s[3] = S[5], s[4] = S[2], s[5] = S[1];
+  nh_hex_rotated_stress(R, d, G0, lambda, mu, s);
 }
 
 double nh_von_mises(const double s[6]) {

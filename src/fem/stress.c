@@ -24,27 +24,32 @@
 #include <math.h>
 #include <string.h>
 
+void nh_hex_rotated_stress(const double R[9], const double d[24], const double g[24], double lambda,
+                           double mu, double s[6]) {
+  double H[9] = {0}, S[9], T[9];
+  for (int a = 0; a < 8; a++)
+    for (int i = 0; i < 3; i++)
+      for (int j = 0; j < 3; j++) H[3 * i + j] += d[3 * a + i] * g[3 * a + j];
+  double tr = H[0] + H[4] + H[8];
+  for (int i = 0; i < 3; i++)
+    for (int j = 0; j < 3; j++)
+      S[3 * i + j] = mu * (H[3 * i + j] + H[3 * j + i]) + (i == j ? lambda * tr : 0.0);
+  nh_mat3_mul(R, S, T);
+  nh_mat3_mul_nt(T, R, S);
+  s[0] = S[0], s[1] = S[4], s[2] = S[8], s[3] = S[5], s[4] = S[2], s[5] = S[1];
+}
+
 void nh_hex_stress_at(const double X[24], const double u[24], const double G0[24], double lambda,
                       double mu, int n, const double *xi, double *s, double *detJ) {
   /* The rotation and corotated displacements of the element, as hex.c. */
   double R[9], d[24];
   nh_hex_corotated(X, u, G0, R, d);
   for (int p = 0; p < n; p++) {
-    double g[24], H[9] = {0}, S[9], T[9];
+    double g[24];
     memcpy(g, G0, sizeof g);
     double det = nh_hex_gradients(X, xi + 3 * p, g);
     if (detJ) detJ[p] = det;
-    for (int a = 0; a < 8; a++)
-      for (int i = 0; i < 3; i++)
-        for (int j = 0; j < 3; j++) H[3 * i + j] += d[3 * a + i] * g[3 * a + j];
-    double tr = H[0] + H[4] + H[8];
-    for (int i = 0; i < 3; i++)
-      for (int j = 0; j < 3; j++)
-        S[3 * i + j] = mu * (H[3 * i + j] + H[3 * j + i]) + (i == j ? lambda * tr : 0.0);
-    nh_mat3_mul(R, S, T);
-    nh_mat3_mul_nt(T, R, S);
-    double *sp = s + 6 * p;
-    sp[0] = S[0], sp[1] = S[4], sp[2] = S[8], sp[3] = S[5], sp[4] = S[2], sp[5] = S[1];
+    nh_hex_rotated_stress(R, d, g, lambda, mu, s + 6 * p);
   }
 }
 

@@ -265,6 +265,38 @@ void nh_refine_info_free(nh_refine_info *info);
 /* Smallest edge length of cell c's rest shape. */
 double nh_mesh_cell_size(const nh_mesh *mesh, int c);
 
+/* ---- grading and coarsening (mesh/grade.c, mesh/coarsen.c) ----
+ * The 2:1 rule: no leaf has a face or edge neighbour leaf more than one
+ * level coarser (corner contacts are free). grade.c explains the search. */
+
+/* The distinct leaves other than c met just outside the centres of leaf c's
+ * 6 faces and the midpoints of its 12 edges (diagonally outward): every
+ * coarser or equal face/edge neighbour, and a finer one wherever one
+ * touches. Returns their count (<= 18), ids in out. */
+int nh_mesh_face_edge_leaves(const nh_mesh *mesh, int c, int out[18]);
+
+/* Close a set of leaves to refine under the 2:1 rule: on a graded mesh, add
+ * every coarser face/edge neighbour that refining the set would leave two
+ * levels apart, recursively. marked[] has room for mesh->n_leaves ids; on
+ * return it holds the closed set, ascending, without repeats, and *n_marked
+ * its size. Fails with NH_ERR_MEMORY. */
+int nh_mesh_grade_marks(const nh_mesh *mesh, int *marked, int *n_marked);
+
+/* Families that may be merged: parents whose children are all leaves with
+ * below[child] != 0, and whose merging keeps the 2:1 rule (no leaf of level
+ * >= parent's + 2 touches a child's face or edge). parents[] has room for
+ * mesh->n_leaves / 2 ids; returns the count (ascending). */
+int nh_mesh_coarsen_candidates(const nh_mesh *mesh, const unsigned char *below, int *parents);
+
+/* Merge the children of parents[0..n) (each with only leaf children) back
+ * into their parents: the children and the nodes no remaining cell uses are
+ * removed, both arrays compacted in order (coarsen.c). node_map[old n_nodes]
+ * receives each old node's new index, or -1 if removed. Coarsening the cells
+ * a refinement just refined restores the mesh exactly. Fails with
+ * NH_ERR_INTERNAL (a parent without children, or with a refined child),
+ * NH_ERR_MEMORY. */
+int nh_mesh_coarsen(nh_mesh *mesh, const int *parents, int n, int *node_map);
+
 /* ---- hanging nodes (mesh/hanging.c) ----
  * A node is hanging when it lies on a face or an edge of a leaf without
  * being one of its corners; its displacement is the trilinear interpolation

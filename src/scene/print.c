@@ -159,7 +159,8 @@ void nh_scene_print(const nh_scene *s, void *stdio_file) {
   if (!s->adapt.enabled) {
     fprintf(f, "adapt     no (the mesh stays fixed)\n");
   } else {
-    fprintf(f, "adapt     estimator spr, every %d step%s; marking ", s->adapt.every,
+    fprintf(f, "adapt     estimator %s, every %d step%s; marking ",
+            s->adapt.estimator == NH_ESTIMATOR_GOAL ? "goal" : "spr", s->adapt.every,
             s->adapt.every == 1 ? "" : "s");
     if (s->adapt.strategy == NH_MARK_DORFLER)
       fprintf(f, "dorfler, fraction %g of the total squared error\n", s->adapt.fraction);
@@ -177,6 +178,21 @@ void nh_scene_print(const nh_scene *s, void *stdio_file) {
       fprintf(f, ", max_dofs none");
     fprintf(f, ", hanging nodes %s\n",
             s->adapt.hanging == NH_HANGING_LAGRANGE ? "lagrange" : "eliminate");
+    if (s->adapt.estimator == NH_ESTIMATOR_GOAL) {
+      fprintf(f, "          goal:");
+      for (int i = 0; i < s->adapt.n_goals; i++) {
+        int g = s->adapt.goal[i];
+        fprintf(f, " %s", g < s->n_probes ? s->probes[g].name : s->targets[g - s->n_probes].name);
+      }
+      fprintf(f, "; tolerance ");
+      if (s->adapt.tolerance > 0)
+        fprintf(f, "%g m", s->adapt.tolerance);
+      else
+        fprintf(f, "none");
+      fprintf(f, ", resolve %d, graded (2:1)\n", s->adapt.resolve);
+    }
+    if (s->adapt.coarsen > 0)
+      fprintf(f, "          coarsen below %g of the marking threshold\n", s->adapt.coarsen);
   }
   fprintf(f, "solver    tolerance %g, at most %d iterations, ", s->solver.tolerance,
           s->solver.max_iterations);

@@ -1104,9 +1104,11 @@ static int resolve_template(const nh_ctx *c, const nh_yaml_node *at, const nh_ya
 /* adapt: present (even empty) means the mesh adapts. */
 static int read_adapt(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   static const char *const keys[] = {"estimator", "marking",  "max_level", "min_size", "max_dofs",
-                                     "every",     "template", "hanging",   NULL};
+                                     "every",     "template", "hanging",   "goal",     "tolerance",
+                                     "resolve",   "coarsen",  NULL};
   static const char *const marking_keys[] = {"strategy", "theta", "fraction", NULL};
-  static const char *const estimators[] = {"spr", NULL};
+  static const char *const coarsen_keys[] = {"fraction", NULL};
+  static const char *const estimators[] = {"spr", "goal", NULL};
   static const char *const strategies[] = {"max", "dorfler", NULL};
   static const char *const hangings[] = {"eliminate", "lagrange", NULL};
   const nh_yaml_node *n, *key, *m, *at, *marking;
@@ -1120,6 +1122,11 @@ static int read_adapt(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   s->adapt.max_dofs = 0;
   s->adapt.every = 1;
   s->adapt.hanging = NH_HANGING_ELIMINATE;
+  s->adapt.estimator = NH_ESTIMATOR_SPR;
+  s->adapt.n_goals = 0;
+  s->adapt.tolerance = 0;
+  s->adapt.resolve = 0;
+  s->adapt.coarsen = 0;
   n = nh_yaml_get(root, "adapt", &key);
   if (!n) return NH_OK;
   s->adapt.enabled = 1;
@@ -1130,6 +1137,8 @@ static int read_adapt(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   NH_TRY(field(c, m, "adapt", "estimator", 0, &at));
   int choice = 0;
   if (at) NH_TRY(as_choice(c, at, "adapt.estimator", estimators, &choice));
+  s->adapt.estimator = choice ? NH_ESTIMATOR_GOAL : NH_ESTIMATOR_SPR;
+  const nh_yaml_node *at_estimator = at;
 
   NH_TRY(section(c, m, "adapt", "marking", 0, &marking));
   if (marking) {
@@ -1175,6 +1184,78 @@ static int read_adapt(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   if (at) {
     NH_TRY(as_choice(c, at, "adapt.hanging", hangings, &choice));
     s->adapt.hanging = choice ? NH_HANGING_LAGRANGE : NH_HANGING_ELIMINATE;
+  }
+  const int goal = s->adapt.estimator == NH_ESTIMATOR_GOAL;
+  if (goal && s->adapt.hanging == NH_HANGING_LAGRANGE)
+    return fail(c, at, "adapt.hanging",
+                "lagrange cannot be used with estimator goal (the dual problems need the "
+                "hanging nodes eliminated)");
+  const nh_yaml_node *at_goal;
+  NH_TRY(field(c, m, "adapt", "goal", 0, &at_goal));
+  if (at_goal && !goal)
+    return fail(c, at_goal, "adapt.goal", "applies to estimator goal only (the estimator is %s)",
+                at_estimator ? "spr" : "spr, the default");
+  NH_TRY(get_number(c, m, "adapt", "tolerance", 0, &s->adapt.tolerance, &at));
+  NH_TRY(at_least(c, at, "adapt", "tolerance", s->adapt.tolerance, 0, 1));
+  if (at && !goal)
+    return fail(c, at, "adapt.tolerance",
+                "applies to estimator goal only (m, on the goal "
+                "quantities' estimated error)");
+  NH_TRY(get_int(c, m, "adapt", "resolve", &s->adapt.resolve, &at));
+  NH_TRY(at_least(c, at, "adapt", "resolve", s->adapt.resolve, 0, 0));
+  if (at && s->adapt.resolve > 0 && !goal)
+    return fail(c, at, "adapt.resolve", "applies to estimator goal only");
+  const nh_yaml_node *coarsen;
+  NH_TRY(section(c, m, "adapt", "coarsen", 0, &coarsen));
+  if (coarsen) {
+    NH_TRY(check_keys(c, coarsen, "adapt.coarsen", coarsen_keys));
+    NH_TRY(get_number(c, coarsen, "adapt.coarsen", "fraction", 1, &s->adapt.coarsen, &at));
+    if (!(s->adapt.coarsen > 0 && s->adapt.coarsen < 1))
+      return fail(c, at, "adapt.coarsen.fraction", "must lie in (0, 1), got %g", s->adapt.coarsen);
+  }
+  return NH_OK;
+}
+
+/* adapt.goal, after probes and targets: names to indices of the embedded
+ * points (probes, then targets); default every target, else every probe. */
+static int read_adapt_goal(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
+  if (!s->adapt.enabled || s->adapt.estimator != NH_ESTIMATOR_GOAL) return NH_OK;
+  const nh_yaml_node *m = nh_yaml_get(root, "adapt", NULL), *list = NULL;
+  if (m && m->kind == NH_YAML_MAP) list = nh_yaml_get(m, "goal", NULL);
+  if (s->adapt.resolve > 0 && s->n_tools > 0)
+    return fail(
+        c, nh_yaml_get(m, "resolve", NULL), "adapt.resolve",
+        "cannot re-solve steps of a scene with tools yet (the tools' state is not rewound)");
+  s->adapt.n_goals = 0;
+  if (!list) {
+    int from = s->n_targets > 0 ? s->n_probes : 0;
+    int n = s->n_targets > 0 ? s->n_targets : s->n_probes;
+    if (n == 0)
+      return fail(c, nh_yaml_get(m, "estimator", NULL), "adapt.estimator",
+                  "goal needs probes or targets to estimate (the scene has none)");
+    if (n > NH_MAX_GOALS) n = NH_MAX_GOALS;
+    for (int i = 0; i < n; i++) s->adapt.goal[s->adapt.n_goals++] = from + i;
+    return NH_OK;
+  }
+  char d[96], item[NH_KEY_MAX], name[NH_NAME_MAX];
+  if (list->kind != NH_YAML_SEQ || list->n == 0)
+    return fail(c, list, "adapt.goal", "expected a list of probe or target names, got %s",
+                describe(list, d, sizeof d));
+  if (list->n > NH_MAX_GOALS)
+    return fail(c, list, "adapt.goal", "at most %d goals, got %d", NH_MAX_GOALS, list->n);
+  for (int i = 0; i < list->n; i++) {
+    join_index(item, "adapt.goal", i);
+    NH_TRY(as_string(c, list->items[i], item, name, sizeof name));
+    int found = -1;
+    for (int p = 0; p < s->n_probes && found < 0; p++)
+      if (!strcmp(s->probes[p].name, name)) found = p;
+    for (int t = 0; t < s->n_targets && found < 0; t++)
+      if (!strcmp(s->targets[t].name, name)) found = s->n_probes + t;
+    if (found < 0) return fail(c, list->items[i], item, "no probe or target is named \"%s\"", name);
+    for (int k = 0; k < s->adapt.n_goals; k++)
+      if (s->adapt.goal[k] == found)
+        return fail(c, list->items[i], item, "\"%s\" is named twice", name);
+    s->adapt.goal[s->adapt.n_goals++] = found;
   }
   return NH_OK;
 }
@@ -1746,8 +1827,9 @@ static int read_scene(nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   NH_TRY(read_solver(c, root, s));
   NH_TRY(read_tools(c, root, s));
   NH_TRY(read_probes(c, root, s));
-  NH_TRY(read_targets(c, root, s)); /* after tools: a target names its tool */
-  NH_TRY(read_plans(c, root, s));   /* after targets: a trajectory names its target */
+  NH_TRY(read_targets(c, root, s));    /* after tools: a target names its tool */
+  NH_TRY(read_adapt_goal(c, root, s)); /* after probes and targets: goals name them */
+  NH_TRY(read_plans(c, root, s));      /* after targets: a trajectory names its target */
   NH_TRY(read_output(c, root, s));
   return NH_OK;
 }

@@ -138,20 +138,31 @@ typedef struct {
 typedef enum { NH_MARK_MAX = 0, NH_MARK_DORFLER = 1 } nh_mark_strategy;
 typedef enum { NH_HANGING_ELIMINATE = 0, NH_HANGING_LAGRANGE = 1 } nh_hanging_method;
 typedef enum { NH_REFACTOR_AUTO = 0, NH_REFACTOR_EVERY = 1 } nh_refactor_mode;
+typedef enum { NH_ESTIMATOR_SPR = 0, NH_ESTIMATOR_GOAL = 1 } nh_estimator;
+
+/* Most goal quantities adapt.goal may name. */
+#define NH_MAX_GOALS 64
 
 /* The adapt section: estimation, marking, template, limits (adapt/refine.c). */
 typedef struct {
-  int enabled;                       /* the scene has an `adapt` section */
-  nh_mark_strategy strategy;         /* adapt.marking.strategy: max (default) | dorfler */
-  double theta;                      /* adapt.marking.theta (max): in (0, 1), default 0.3 */
-  double fraction;                   /* adapt.marking.fraction (dorfler): in (0, 1], default 0.5 */
-  char template_path[NH_PATH_MAX];   /* adapt.template resolved to a file (default hex2) */
-  int max_level;                     /* adapt.max_level: >= 0, default 2 */
-  double min_size;                   /* adapt.min_size: m, >= 0, default 0 (no limit) */
-  int max_dofs;                      /* adapt.max_dofs: >= 0, default 0 (no budget) */
-  int every;                         /* adapt.every: >= 1, default 1 */
-  nh_hanging_method hanging;         /* adapt.hanging: eliminate (default) | lagrange */
-  char where[NH_WHERE_MAX];          /* "FILE:LINE: adapt" */
+  int enabled;                     /* the scene has an `adapt` section */
+  nh_mark_strategy strategy;       /* adapt.marking.strategy: max (default) | dorfler */
+  double theta;                    /* adapt.marking.theta (max): in (0, 1), default 0.3 */
+  double fraction;                 /* adapt.marking.fraction (dorfler): in (0, 1], default 0.5 */
+  char template_path[NH_PATH_MAX]; /* adapt.template resolved to a file (default hex2) */
+  int max_level;                   /* adapt.max_level: >= 0, default 2 */
+  double min_size;                 /* adapt.min_size: m, >= 0, default 0 (no limit) */
+  int max_dofs;                    /* adapt.max_dofs: >= 0, default 0 (no budget) */
+  int every;                       /* adapt.every: >= 1, default 1 */
+  nh_hanging_method hanging;       /* adapt.hanging: eliminate (default) | lagrange */
+  nh_estimator estimator;          /* adapt.estimator: spr (default) | goal */
+  int n_goals;                     /* goal: the embedded points adapt.goal names ... */
+  int goal[NH_MAX_GOALS];   /* ... as indices into probes, then targets (default: every target,
+                               else every probe) */
+  double tolerance;         /* adapt.tolerance, m, on each goal's estimate (>= 0; 0: none) */
+  int resolve;              /* adapt.resolve: re-solves of a step on its refined mesh (>= 0) */
+  double coarsen;           /* adapt.coarsen.fraction (0: no coarsening; in (0, 1)) */
+  char where[NH_WHERE_MAX]; /* "FILE:LINE: adapt" */
   char where_template[NH_WHERE_MAX]; /* "FILE:LINE: adapt.template" */
 } nh_adapt_spec;
 

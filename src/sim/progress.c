@@ -54,5 +54,12 @@ void nh_progress_finish(nh_sim *s) {
           s->mesh->n_leaves, nh_time_now() - s->progress.t_start, 1e3 * t[NH_PHASE_ASSEMBLE],
           1e3 * t[NH_PHASE_FACTOR], 1e3 * t[NH_PHASE_SOLVE], 1e3 * t[NH_PHASE_CONSTRAINTS],
           1e3 * t[NH_PHASE_ADAPT], 1e3 * t[NH_PHASE_OUTPUT], 1e3 * t[NH_PHASE_STEP]);
+  if (s->max_goal_point >= 0) {
+    const nh_scene *sc = s->scene;
+    int i = s->max_goal_point;
+    fprintf(stderr, "  largest estimated %s error: %.3e m (%s)\n",
+            i < sc->n_probes ? "probe" : "target", s->max_goal_error,
+            i < sc->n_probes ? sc->probes[i].name : sc->targets[i - sc->n_probes].name);
+  }
   if (!s->options.dry_run) fprintf(stderr, "  output: %s/\n", s->scene->output.dir);
 }

@@ -12,6 +12,11 @@
  * kept per step for the summary. The initial state is frame 0, so a time
  * series always starts at rest.
  *
+ * With adapt.resolve (estimator goal, no tools) the step is refined and
+ * solved again from its start state, carried to the new mesh, up to N times
+ * before its rows are written (nh_sim_resolve), so the written solution is
+ * on the mesh its estimate asked for.
+ *
  * Everything that depends on the mesh (fixed nodes, element data, load
  * vectors, probe cells, hanging nodes, the linear system) is built by
  * nh_sim_setup_mesh, at creation and after every refinement. */
@@ -56,9 +61,23 @@ static const char *const nh_step_columns[] = {"step",
                                               "pcg_iterations",
                                               "corrections",
                                               "t_factor_reference",
-                                              "inverted"};
-static const char *const nh_probe_columns[] = {"step", "time", "name", "x", "y",
-                                               "z",    "ux",   "uy",   "uz"};
+                                              "inverted",
+                                              "error_estimate",
+                                              "refine_stop",
+                                              "resolves"};
+static const char *const nh_probe_columns[] = {"step", "time", "name", "x",  "y",
+                                               "z",    "ux",   "uy",   "uz", "error_estimate"};
+
+/* probes.csv has error_estimate under estimator goal only. */
+static int nh_probe_column_count(const nh_scene *sc) {
+  return sc->adapt.enabled && sc->adapt.estimator == NH_ESTIMATOR_GOAL ? 10 : 9;
+}
+
+double nh_sim_point_error(const nh_sim *s, int i) {
+  const double *e = nh_adapt_goal_errors(s->adapt);
+  if (!e || !s->goal_of_point || s->goal_of_point[i] < 0) return NAN;
+  return e[s->goal_of_point[i]];
+}
 
 void nh_sim_destroy(nh_sim **sim) {
   if (!sim || !*sim) return;
@@ -79,6 +98,7 @@ void nh_sim_destroy(nh_sim **sim) {
   free(s->probe_cell);
   free(s->probe_xi);
   free(s->phase_times);
+  free(s->goal_of_point);
   nh_adapt_destroy(&s->adapt);
   nh_hanging_destroy(&s->hanging);
   nh_csv_destroy(&s->steps_csv);
@@ -288,9 +308,14 @@ static int nh_write_probe_rows(nh_sim *s) {
     double u[3];
     nh_sim_probe_displacement(s, i, u);
     const double *p = sc->probes[i].point;
-    NH_TRY(nh_csv_row(s->probes_csv, "%d,%.17g,%s,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g", s->step,
-                      s->time, sc->probes[i].name, p[0] + u[0], p[1] + u[1], p[2] + u[2], u[0],
-                      u[1], u[2]));
+    if (nh_probe_column_count(sc) == 10)
+      NH_TRY(nh_csv_row(s->probes_csv, "%d,%.17g,%s,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g",
+                        s->step, s->time, sc->probes[i].name, p[0] + u[0], p[1] + u[1], p[2] + u[2],
+                        u[0], u[1], u[2], nh_sim_point_error(s, i)));
+    else
+      NH_TRY(nh_csv_row(s->probes_csv, "%d,%.17g,%s,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g", s->step,
+                        s->time, sc->probes[i].name, p[0] + u[0], p[1] + u[1], p[2] + u[2], u[0],
+                        u[1], u[2]));
   }
   return s->contact ? nh_sim_tools_rows(s) : NH_OK;
 }
@@ -363,7 +388,8 @@ static int nh_open_outputs(nh_sim *s) {
     NH_TRY(nh_csv_resume(path, (int)(sizeof nh_step_columns / sizeof *nh_step_columns),
                          nh_step_columns, s->step, &s->steps_csv));
     snprintf(path, sizeof path, "%s/probes.csv", dir);
-    NH_TRY(nh_csv_resume(path, 9, nh_probe_columns, s->step, &s->probes_csv));
+    NH_TRY(
+        nh_csv_resume(path, nh_probe_column_count(sc), nh_probe_columns, s->step, &s->probes_csv));
     NH_TRY(nh_pvd_resume(dir, "tissue", sc->time.step, s->step, &s->tissue_pvd));
     if (sc->n_probes + sc->n_targets > 0) /* targets are points too */
       NH_TRY(nh_pvd_resume(dir, "points", sc->time.step, s->step, &s->points_pvd));
@@ -381,7 +407,7 @@ static int nh_open_outputs(nh_sim *s) {
   NH_TRY(nh_csv_create(path, (int)(sizeof nh_step_columns / sizeof *nh_step_columns),
                        nh_step_columns, &s->steps_csv));
   snprintf(path, sizeof path, "%s/probes.csv", dir);
-  NH_TRY(nh_csv_create(path, 9, nh_probe_columns, &s->probes_csv));
+  NH_TRY(nh_csv_create(path, nh_probe_column_count(sc), nh_probe_columns, &s->probes_csv));
   snprintf(path, sizeof path, "%s/tissue.pvd", dir);
   NH_TRY(nh_pvd_create(path, &s->tissue_pvd));
   if (sc->n_probes + sc->n_targets > 0) {
@@ -500,18 +526,37 @@ static int nh_sim_build(nh_sim *s) {
   if (!s->u || !s->v || !s->probe_cell || !s->probe_xi)
     return NH_ERROR(NH_ERR_MEMORY, "out of memory building the model (%d nodes)", nn);
   if (sc->adapt.enabled) NH_TRY(nh_adapt_create(&sc->adapt, sc->limits.max_cells, &s->adapt));
+  if (sc->adapt.enabled && sc->adapt.estimator == NH_ESTIMATOR_GOAL) {
+    double points[3 * NH_MAX_GOALS];
+    s->goal_of_point = malloc(sizeof(int) * (size_t)(n_points ? n_points : 1));
+    if (!s->goal_of_point) return NH_ERROR(NH_ERR_MEMORY, "out of memory: goals");
+    for (int i = 0; i < n_points; i++) s->goal_of_point[i] = -1;
+    for (int g = 0; g < sc->adapt.n_goals; g++) {
+      int i = sc->adapt.goal[g];
+      const double *X =
+          i < sc->n_probes ? sc->probes[i].point : sc->targets[i - sc->n_probes].point;
+      memcpy(points + 3 * g, X, 3 * sizeof(double));
+      s->goal_of_point[i] = g;
+    }
+    NH_TRY(nh_adapt_set_goals(s->adapt, s->mesh, sc->adapt.n_goals, points));
+  }
+  s->max_goal_error = NAN;
+  s->max_goal_point = -1;
   NH_TRY(nh_sim_setup_mesh(s, 1));
   NH_TRY(nh_sim_tools_build(s));
-  s->integrator = (nh_integrator){.dt = sc->time.step,
-                                  .alpha = sc->tissue.damping_mass,
-                                  .beta = sc->tissue.damping_stiffness,
-                                  .tolerance = sc->solver.tolerance,
-                                  .max_iterations = sc->solver.max_iterations,
-                                  .threads = sc->solver.threads,
-                                  .reuse = sc->solver.refactor == NH_REFACTOR_AUTO,
-                                  .time_factor = getenv("NH_TIME_FACTOR") != NULL,
-                                  .newton_iterations = sc->solver.newton_iterations,
-                                  .newton_tolerance = sc->solver.newton_tolerance};
+  s->integrator =
+      (nh_integrator){.dt = sc->time.step,
+                      .alpha = sc->tissue.damping_mass,
+                      .beta = sc->tissue.damping_stiffness,
+                      .tolerance = sc->solver.tolerance,
+                      .max_iterations = sc->solver.max_iterations,
+                      .threads = sc->solver.threads,
+                      /* the goal estimate's duals need this step's factor */
+                      .reuse = sc->solver.refactor == NH_REFACTOR_AUTO &&
+                               !(sc->adapt.enabled && sc->adapt.estimator == NH_ESTIMATOR_GOAL),
+                      .time_factor = getenv("NH_TIME_FACTOR") != NULL,
+                      .newton_iterations = sc->solver.newton_iterations,
+                      .newton_tolerance = sc->solver.newton_tolerance};
   s->cap_steps = sc->time.steps > s->step ? sc->time.steps : s->step + 1;
   s->phase_times =
       calloc((size_t)NH_PHASES * (size_t)(s->cap_steps ? s->cap_steps : 1), sizeof(double));
@@ -525,19 +570,24 @@ static int nh_sim_build(nh_sim *s) {
 
 /* Refine from this step's estimate (nh_adapt_step) and rebuild everything
  * that depends on the mesh. */
-static int nh_sim_refine(nh_sim *s) {
-  double *state[2] = {s->u, s->v};
-  int n_refined = 0;
-  int rc = nh_adapt_step(s->adapt, s->mesh, 2, state, &n_refined);
+static int nh_sim_refine(nh_sim *s, double **start, int *changed) {
+  double *state[4] = {s->u, s->v, start ? start[0] : NULL, start ? start[1] : NULL};
+  int n_refined = 0, n_fields = start ? 4 : 2;
+  int rc = nh_adapt_step(s->adapt, s->mesh, n_fields, state, &n_refined);
   s->u = state[0];
   s->v = state[1];
+  if (start) start[0] = state[2], start[1] = state[3];
+  if (changed) *changed = n_refined > 0;
   if (rc || n_refined == 0) return rc;
   NH_TRY(nh_sim_setup_mesh(s, 0));
-  /* round-off: hanging values exactly their masters' interpolation */
-  nh_hanging_interpolate(s->hanging, s->u, 3);
-  nh_hanging_interpolate(s->hanging, s->v, 3);
-  for (int i = 0; i < 3 * s->mesh->n_nodes; i++)
-    if (s->fixed[i / 3]) s->v[i] = 0.0;
+  /* round-off (refinement) and injection (coarsening): hanging values
+   * exactly their masters' interpolation */
+  for (int f = 0; f < n_fields; f++) {
+    nh_hanging_interpolate(s->hanging, state[f], 3);
+    if (f % 2 == 1)
+      for (int i = 0; i < 3 * s->mesh->n_nodes; i++)
+        if (s->fixed[i / 3]) state[f][i] = 0.0;
+  }
   return NH_OK;
 }
 
@@ -548,6 +598,60 @@ static int nh_output_failed(int rc, int step) {
   snprintf(reason, sizeof reason, "%s", nh_error_message());
   return NH_ERROR(rc, "step %d: writing the outputs failed: %s", step, reason);
 }
+/* The error estimate of this step's solution: SPR, or goal-oriented with the
+ * step's factor (the coefficient of K in A: 1 static, hβ + h² dynamic). */
+static int nh_sim_estimate(nh_sim *s) {
+  const nh_scene *sc = s->scene;
+  if (sc->adapt.estimator != NH_ESTIMATOR_GOAL)
+    return nh_adapt_estimate(s->adapt, s->mesh, s->tissue, s->u, s->hanging, &s->eta, &s->eta_rel);
+  const double h = sc->time.step;
+  double scale = sc->time.mode == NH_MODE_STATIC ? 1.0 : h * sc->tissue.damping_stiffness + h * h;
+  return nh_adapt_estimate_goal(s->adapt, s->system, scale, s->mesh, s->tissue, s->u, s->hanging,
+                                &s->eta, &s->eta_rel);
+}
+
+/* The step's solve (dynamic, static or with tools) at time t_new. */
+static int nh_sim_solve(nh_sim *s, double t_new, nh_step_stats *st) {
+  const nh_scene *sc = s->scene;
+  nh_sim_external_force(s, t_new, s->f_ext);
+  return s->contact ? nh_contact_step(s->contact, s->system, &s->integrator, s->mesh, s->f_ext,
+                                      s->u, s->v, t_new, st)
+         : sc->time.mode == NH_MODE_STATIC
+             ? nh_solve_static(s->system, &s->integrator, s->f_ext, s->u, st)
+             : nh_step_dynamic(s->system, &s->integrator, s->f_ext, s->u, s->v, st);
+}
+
+/* adapt.resolve: while a goal estimate exceeds the tolerance (or, without
+ * tolerance, up to N times), refine and solve the step again from its start
+ * state carried to the new mesh (Eq. 17), so the step's written solution is
+ * on the mesh its estimate asked for. Times add up in *st. */
+static int nh_sim_resolve(nh_sim *s, double t_new, double *const start_in[2], nh_step_stats *st,
+                          int *resolves) {
+  const nh_scene *sc = s->scene;
+  const int n = 3 * s->mesh->n_nodes;
+  double *start[2] = {malloc(sizeof(double) * n), malloc(sizeof(double) * n)};
+  int rc = start[0] && start[1] ? NH_OK : NH_ERROR(NH_ERR_MEMORY, "out of memory: re-solve");
+  if (!rc)
+    memcpy(start[0], start_in[0], sizeof(double) * n),
+        memcpy(start[1], start_in[1], sizeof(double) * n);
+  for (int r = 0; r < sc->adapt.resolve && !rc; r++) {
+    int changed = 0;
+    if ((rc = nh_sim_refine(s, start, &changed)) || !changed) break;
+    memcpy(s->u, start[0], sizeof(double) * 3 * s->mesh->n_nodes);
+    memcpy(s->v, start[1], sizeof(double) * 3 * s->mesh->n_nodes);
+    /* a stop inside the re-solve restores the start state on this mesh */
+    memcpy(s->u_start, start[0], sizeof(double) * 3 * s->mesh->n_nodes);
+    nh_step_stats again = {0};
+    if ((rc = nh_sim_solve(s, t_new, &again)) || (rc = nh_sim_estimate(s))) break;
+    st->t_assemble += again.t_assemble, st->t_factor += again.t_factor;
+    st->t_solve += again.t_solve, st->t_constraints += again.t_constraints;
+    st->iterations = again.iterations, st->residual = again.residual;
+    (*resolves)++;
+  }
+  free(start[0]), free(start[1]);
+  return rc;
+}
+
 int nh_sim_create(const nh_scene *scene, const nh_sim_options *options, nh_sim **out) {
   *out = NULL;
   nh_sim *s = nh_calloc(1, sizeof *s);
@@ -584,7 +688,6 @@ int nh_sim_step(nh_sim *s) {
   }
   double t0 = nh_time_now();
   double t_new = (s->step + 1) * sc->time.step;
-  nh_sim_external_force(s, t_new, s->f_ext);
   nh_step_stats st = {0};
   memcpy(s->u_start, s->u, sizeof(double) * 3 * (size_t)s->mesh->n_nodes);
   if (s->contact) { /* a few kB: beams and channels, for a stop inside the step */
@@ -592,17 +695,34 @@ int nh_sim_step(nh_sim *s) {
     s->tools_start = NULL;
     NH_TRY(nh_contact_state_save(s->contact, &s->tools_start, &s->tools_start_size));
   }
-  int rc = s->contact ? nh_contact_step(s->contact, s->system, &s->integrator, s->mesh, s->f_ext,
-                                        s->u, s->v, t_new, &st)
-           : sc->time.mode == NH_MODE_STATIC
-               ? nh_solve_static(s->system, &s->integrator, s->f_ext, s->u, &st)
-               : nh_step_dynamic(s->system, &s->integrator, s->f_ext, s->u, s->v, &st);
-  if (!rc) NH_TRY(nh_sim_guard(s, s->u_start)); /* its message names the step */
-  int adapt_now = !rc && sc->adapt.enabled && (s->step + 1) % sc->adapt.every == 0;
+  int adapt_now = sc->adapt.enabled && (s->step + 1) % sc->adapt.every == 0;
+  int resolve = adapt_now && sc->adapt.resolve > 0;
+  double *start[2] = {NULL, NULL}; /* the step's start state, for re-solves */
+  if (resolve) {
+    const size_t n = 3 * (size_t)s->mesh->n_nodes;
+    start[0] = malloc(sizeof(double) * n), start[1] = malloc(sizeof(double) * n);
+    if (!start[0] || !start[1]) {
+      free(start[0]), free(start[1]);
+      return NH_ERROR(NH_ERR_MEMORY, "out of memory: step %d start state", s->step + 1);
+    }
+    memcpy(start[0], s->u, sizeof(double) * n), memcpy(start[1], s->v, sizeof(double) * n);
+  }
+  int rc = nh_sim_solve(s, t_new, &st);
+  if (!rc && (rc = nh_sim_guard(s, s->u_start))) { /* its message names the step */
+    free(start[0]), free(start[1]);
+    return rc;
+  }
+  adapt_now = adapt_now && !rc;
   double ta = nh_time_now();
   s->eta = s->eta_rel = NAN; /* nan in steps.csv: not estimated at this step */
-  if (adapt_now)
-    rc = nh_adapt_estimate(s->adapt, s->mesh, s->tissue, s->u, s->hanging, &s->eta, &s->eta_rel);
+  if (adapt_now) rc = nh_sim_estimate(s);
+  int resolves = 0;
+  if (!rc && resolve) {
+    double t_solves = st.t_assemble + st.t_factor + st.t_solve + st.t_constraints;
+    rc = nh_sim_resolve(s, t_new, start, &st, &resolves);
+    ta += st.t_assemble + st.t_factor + st.t_solve + st.t_constraints - t_solves;
+  }
+  free(start[0]), free(start[1]);
   double t_estimate = nh_time_now() - ta;
   if (rc) {
     char reason[1024];
@@ -633,7 +753,20 @@ int nh_sim_step(nh_sim *s) {
   }
   double t2 = nh_time_now();
   /* A failed refinement still leaves this step's row (written below). */
-  int refine_rc = adapt_now && s->step < sc->time.steps ? nh_sim_refine(s) : NH_OK;
+  /* The estimate of the written solution (before it is refined away). */
+  double goal_max = NAN;
+  for (int i = 0; s->goal_of_point && i < sc->n_probes + sc->n_targets; i++) {
+    double e = nh_sim_point_error(s, i);
+    if (e == e && !(e <= goal_max)) goal_max = e;
+    if (e == e && !(e <= s->max_goal_error) && (i >= sc->n_probes || sc->n_targets == 0))
+      s->max_goal_error = e, s->max_goal_point = i;
+  }
+  int refine_rc = adapt_now && s->step < sc->time.steps ? nh_sim_refine(s, NULL, NULL) : NH_OK;
+  /* What ended this step's last refinement (the last step refines only in
+   * its re-solves). */
+  double refine_stop = adapt_now && (s->step < sc->time.steps || resolve)
+                           ? (double)nh_adapt_last_stop(s->adapt)
+                           : NAN;
   char refine_reason[1024] = "";
   if (refine_rc) snprintf(refine_reason, sizeof refine_reason, "%s", nh_error_message());
   double t3 = nh_time_now();
@@ -683,7 +816,10 @@ int nh_sim_step(nh_sim *s) {
                         st.pcg_iterations,
                         st.corrections,
                         st.t_factor_reference,
-                        s->inverted};
+                        s->inverted,
+                        goal_max,
+                        refine_stop,
+                        resolves};
   enum { NH_STEP_COLUMNS = sizeof nh_step_columns / sizeof *nh_step_columns };
   _Static_assert(sizeof row / sizeof *row == NH_STEP_COLUMNS, "one value per steps.csv column");
   if (!s->options.dry_run)

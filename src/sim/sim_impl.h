@@ -51,6 +51,11 @@ struct nh_sim {
   double *u_start;  /* u at the start of the step (the guard's increment) */
   int inverted;     /* cells inverted after the last step (steps.csv `inverted`) */
   int guard_warned; /* bit per kind of invalid step already warned about */
+  /* estimator goal: goal index of each embedded point (−1: not a goal), the
+   * largest estimate so far (summary) and its point */
+  int *goal_of_point;
+  double max_goal_error;
+  int max_goal_point;
   /* tools (absent: contact NULL) */
   nh_contact *contact;
   nh_csv *tools_csv, *targets_csv;
@@ -97,6 +102,9 @@ int nh_sim_tools_rows(nh_sim *sim);
 int nh_sim_tools_frame(nh_sim *sim);
 /* Current position of embedded point i (probes, then targets). */
 void nh_sim_point_position(const nh_sim *sim, int i, double x[3]);
+/* Estimated error of embedded point i's displacement (m): the goal estimate
+ * of this step's solution, NaN if the point is no goal or none was made. */
+double nh_sim_point_error(const nh_sim *sim, int i);
 
 /* ---- step guards (sim/guard.c) ---- */
 /* Cells with det J <= 0 at a corner or Gauss point of their deformed shape

@@ -12,7 +12,8 @@
 static const char *const nh_tool_columns[] = {"step",          "time",  "name",  "tip_x",
                                               "tip_y",         "tip_z", "depth", "axial_force",
                                               "lateral_force", "state"};
-static const char *const nh_target_columns[] = {"step", "time", "name", "x", "y", "z", "distance"};
+static const char *const nh_target_columns[] = {"step", "time", "name",     "x",
+                                                "y",    "z",    "distance", "error_estimate"};
 
 /* How far the tool's motion has advanced it along its axis at time t. */
 static double nh_tool_advance(const nh_tool_spec *tool, double t) {
@@ -121,8 +122,10 @@ int nh_sim_tools_open(nh_sim *s) {
   }
   if (sc->n_targets > 0) {
     snprintf(path, sizeof path, "%s/targets.csv", sc->output.dir);
-    NH_TRY(resume ? nh_csv_resume(path, 7, nh_target_columns, s->step, &s->targets_csv)
-                  : nh_csv_create(path, 7, nh_target_columns, &s->targets_csv));
+    int goal = sc->adapt.enabled && sc->adapt.estimator == NH_ESTIMATOR_GOAL;
+    int nc = goal ? 8 : 7;
+    NH_TRY(resume ? nh_csv_resume(path, nc, nh_target_columns, s->step, &s->targets_csv)
+                  : nh_csv_create(path, nc, nh_target_columns, &s->targets_csv));
   }
   return NH_OK;
 }
@@ -165,8 +168,13 @@ int nh_sim_tools_rows(nh_sim *s) {
       nh_contact_report(s->contact, tg->tool, &r);
       for (int k = 0; k < 3; k++) d[k] = r.tip[k] - x[k];
       double dist = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-      rc = nh_csv_row(s->targets_csv, "%d,%.17g,%s,%.17g,%.17g,%.17g,%.17g", s->step, s->time,
-                      tg->name, x[0], x[1], x[2], dist);
+      if (sc->adapt.enabled && sc->adapt.estimator == NH_ESTIMATOR_GOAL)
+        rc = nh_csv_row(s->targets_csv, "%d,%.17g,%s,%.17g,%.17g,%.17g,%.17g,%.17g", s->step,
+                        s->time, tg->name, x[0], x[1], x[2], dist,
+                        nh_sim_point_error(s, sc->n_probes + i));
+      else
+        rc = nh_csv_row(s->targets_csv, "%d,%.17g,%s,%.17g,%.17g,%.17g,%.17g", s->step, s->time,
+                        tg->name, x[0], x[1], x[2], dist);
       vals[4 * i] = x[0], vals[4 * i + 1] = x[1], vals[4 * i + 2] = x[2], vals[4 * i + 3] = dist;
       names[i] = tg->name;
     }

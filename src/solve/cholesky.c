@@ -48,3 +48,17 @@ int nh_system_solve(nh_system *s, const double *b, double *x) {
   memcpy(x, s->X->x, sizeof(double) * (size_t)s->n_free);
   return NH_OK;
 }
+
+int nh_system_solve_many(nh_system *s, int ncol, const double *b, double *x) {
+  if (ncol <= 0) return NH_OK;
+  const size_t n = (size_t)s->n_free;
+  cholmod_dense *B = cholmod_allocate_dense(n, (size_t)ncol, n, CHOLMOD_REAL, &s->cm);
+  if (!B) return NH_ERROR(NH_ERR_MEMORY, "out of memory: %d right-hand sides", ncol);
+  memcpy(B->x, b, sizeof(double) * n * (size_t)ncol);
+  cholmod_dense *X = cholmod_solve(CHOLMOD_A, s->L, B, &s->cm);
+  cholmod_free_dense(&B, &s->cm);
+  if (!X) return NH_ERROR(NH_ERR_NUMERIC, "CHOLMOD solve failed (status %d)", s->cm.status);
+  memcpy(x, X->x, sizeof(double) * n * (size_t)ncol);
+  cholmod_free_dense(&X, &s->cm);
+  return NH_OK;
+}

@@ -44,6 +44,10 @@ int nh_system_factor(nh_system *sys);
 
 /* Solve A x = b for free-DOF vectors (length nh_system_free_dofs). */
 int nh_system_solve(nh_system *sys, const double *b, double *x);
+/* Solve A X = B for ncol free-DOF vectors at once (column-major, n_free x
+ * ncol each): one pass of the triangular solves over all columns, with the
+ * factor of the last nh_system_factor. NH_ERR_MEMORY, NH_ERR_NUMERIC. */
+int nh_system_solve_many(nh_system *sys, int ncol, const double *b, double *x);
 
 /* Constraint rows tying each hanging node to its masters, u_h = Σ w u_m,
  * enforced by Lagrange multipliers through the compliance W = J A⁻¹ Jᵀ

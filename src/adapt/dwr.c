@@ -1,0 +1,250 @@
+/* dwr.c — goal-oriented error estimation: the dual-weighted residual for
+ * the displacement of points (docs/theory.md "Goal-oriented estimate";
+ * Becker & Rannacher 2001, Oden & Prudhomme 2001, and for soft tissue
+ * Duprez, Bordas, Bui et al. 2020).
+ *
+ * Quantity of interest. A point value is not a bounded functional on H¹ in
+ * 3-D (the dual solution would be the Green's function, of infinite energy),
+ * so each point p is regularised: for a component k,
+ *     J_pk(v) = (1 / |B ∩ Ω|) ∫_{B ∩ Ω} v_k dV,   B = p + [−r, r]³,
+ * the mean of v_k over the tissue in a box of half-width r around p. Its
+ * nodal vector j_a = (1/|B∩Ω|) ∫ N_a dV is the consistent load of a unit
+ * force spread over B (mesh/region.c, exact on box cells), so J is the
+ * same functional on every mesh of a refinement sequence: J(P u_h) =
+ * J_h(u_h) for the prolongation P of nested spaces. For a field that is
+ * smooth on the scale of r, J_pk(u) = u_k(p) + O(r² |∇²u|).
+ *
+ * Dual problem. With A the symmetric matrix factorised for the step's
+ * solution (static: the stiffness K; dynamic: (1 + hα) M + (hβ + h²) K),
+ * the dual solution of J is z with A z = c_K j, c_K the coefficient of K in
+ * A (1 static, hβ + h² dynamic): for the quasi-static steps of our cases
+ * (h²K ≫ M), z ≈ K⁻¹ j, the influence function of J. The factor is the
+ * step's: every dual costs one forward and one backward triangular solve,
+ * all of them in one multi-column pass (nh_system_solve_many); no new
+ * factorisation. Fixed DOFs carry z = 0, hanging nodes their masters'
+ * interpolation (z lies in the discrete space). The hanging-node rows of
+ * `adapt.hanging: lagrange` and the tools' constraint rows are not part of
+ * A; the dual is that of the tissue alone (a documented approximation:
+ * docs/adaptivity.md).
+ *
+ * Error representation. For a linear problem a(u, v) = f(v) and conforming
+ * Galerkin u_h, z_h: J(u) − J(u_h) = a(u − u_h, z) = f(z) − a(u_h, z) =:
+ * ρ(u_h; z) (the residual weighted by the dual), and by Galerkin
+ * orthogonality = ρ(u_h; z − z_h) = a(u − u_h, z − z_h). We approximate the
+ * last form with the recovered errors of both problems (superconvergent
+ * patch recovery, adapt/spr.c, applied to u_h and to each z_h with the same
+ * patches; González-Estrada, Nadal, Ródenas, Kerfriden, Bordas and
+ * Fuenmayor 2014 do this with an equilibrated SPR):
+ *     E_pk = Σ_K ε_K,   ε_K = φ_K ∫_K (σ*_u − σ_h(u))ᵀ D⁻¹ (σ*_z − σ_h(z)) dΩ,
+ * (2x2x2 Gauss points; σ_h(z) the tangent stress of z at the state u,
+ * nh_hex_rotated_stress of Rᵀz). E_pk is signed: it estimates the error with
+ * its sign, J(u) − J(u_h). Per point the estimate of the error vector's
+ * length is |E_p| = (Σ_k E_pk²)^½ (m).
+ *
+ * Cell indicators. Local contributions ε_K cancel between cells; a cell
+ * whose primal and dual errors happen to be orthogonal would never be
+ * refined. Marking uses the Cauchy–Schwarz bound of each cell's term
+ * instead,
+ *     η_K^p = ‖e*_u‖_K (Σ_k ‖e*_{z,pk}‖²_K)^½ ≥ |(ε_K,pk)_k|,
+ * (‖·‖_K the cell's energy norm of the recovered error), so Σ_K η_K^p ≥
+ * |E_p| up to the recovery's accuracy. As a by-product the primal's SPR
+ * indicators ηₑ, η and η_rel of nh_spr_estimate are returned too.
+ *
+ * Workspace: the duals (3 per point, 3 per node each), the centre samples
+ * and recovered nodal stresses of the 1 + 3 n_points fields (6 per cell or
+ * node each), one value per leaf and field for the ordered sums. The cell
+ * loop runs in parallel (OpenMP); sums are taken in leaf order afterwards,
+ * so results do not depend on the thread count. */
+#include "adapt/adapt.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define NH_DWR_PARALLEL_MIN 256
+
+/* d = Rᵀ w over cell c's corners (w a nodal field, 3 per node). */
+static void nh_dwr_corotate(const nh_mesh *m, const double *w, int c, const double R[9],
+                            double d[24]) {
+  for (int a = 0; a < 8; a++) {
+    const double *v = w + 3 * m->cells[8 * c + a];
+    for (int i = 0; i < 3; i++) d[3 * a + i] = R[i] * v[0] + R[3 + i] * v[1] + R[6 + i] * v[2];
+  }
+}
+
+int nh_goal_functional(const nh_mesh *m, const double point[3], double radius, int k,
+                       const char *where, double *j) {
+  nh_region box = {.kind = NH_REGION_BOX};
+  for (int i = 0; i < 3; i++) box.min[i] = point[i] - radius, box.max[i] = point[i] + radius;
+  snprintf(box.where, sizeof box.where, "%s", where ? where : "goal");
+  double unit[3] = {0, 0, 0};
+  unit[k] = 1.0;
+  memset(j, 0, sizeof(double) * 3 * (size_t)m->n_nodes);
+  return nh_mesh_region_load(m, &box, unit, j);
+}
+
+int nh_dwr_duals(nh_system *sys, double scale, int n_nodes, int n, const double *j, double *z) {
+  const int nf = nh_system_free_dofs(sys);
+  NH_CHECK(nh_system_constraint_rows(sys) == 0, NH_ERR_INPUT,
+           "the goal-oriented estimate needs hanging nodes eliminated (adapt.hanging: eliminate)");
+  double *b = malloc(sizeof(double) * (size_t)nf * (size_t)(n ? n : 1));
+  double *x = malloc(sizeof(double) * (size_t)nf * (size_t)(n ? n : 1));
+  int rc = b && x ? NH_OK : NH_ERROR(NH_ERR_MEMORY, "out of memory: %d dual problems", n);
+  for (int q = 0; q < n && !rc; q++) {
+    nh_system_gather(sys, j + 3 * (size_t)n_nodes * q, b + (size_t)nf * q);
+    for (int i = 0; i < nf; i++) b[(size_t)nf * q + i] *= scale;
+  }
+  if (!rc) rc = nh_system_solve_many(sys, n, b, x);
+  for (int q = 0; q < n && !rc; q++)
+    nh_system_scatter(sys, x + (size_t)nf * q, z + 3 * (size_t)n_nodes * q);
+  free(b);
+  free(x);
+  return rc;
+}
+
+int nh_dwr_estimate(nh_system *sys, double scale, const nh_mesh *m, const nh_tissue *t,
+                    const nh_hanging *h, const double *u, int n_points, const double *points,
+                    double radius, char (*where)[NH_WHERE_MAX], nh_dwr_result *out) {
+  const int nn = m->n_nodes, nl = m->n_leaves, nz = 3 * n_points, nfld = 1 + nz;
+  const size_t n3 = 3 * (size_t)nn;
+  double *j = malloc(sizeof(double) * n3 * (size_t)(nz ? nz : 1));
+  double *z = malloc(sizeof(double) * n3 * (size_t)(nz ? nz : 1));
+  double *samples =
+      malloc(sizeof(double) * 6 * (size_t)nfld * (size_t)(m->n_cells ? m->n_cells : 1));
+  double *star = malloc(sizeof(double) * 6 * (size_t)nfld * (size_t)(nn ? nn : 1));
+  double *cell_eps = malloc(sizeof(double) * (size_t)(nz ? nz : 1) * (size_t)(nl ? nl : 1));
+  double *cell_err2 = malloc(sizeof(double) * (size_t)(nl ? nl : 1));
+  double *cell_norm2 = malloc(sizeof(double) * (size_t)(nl ? nl : 1));
+  int rc = NH_OK;
+  if (!j || !z || !samples || !star || !cell_eps || !cell_err2 || !cell_norm2) {
+    rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: goal-oriented estimate (%d points, %d nodes)",
+                  n_points, nn);
+    goto done;
+  }
+  for (int p = 0; p < n_points && !rc; p++)
+    for (int k = 0; k < 3 && !rc; k++)
+      rc = nh_goal_functional(m, points + 3 * p, radius, k, where ? where[p] : NULL,
+                              j + n3 * (size_t)(3 * p + k));
+  if (rc || (rc = nh_dwr_duals(sys, scale, nn, nz, j, z))) goto done;
+
+    /* Centre samples: the primal's corotational stress, each dual's tangent stress. */
+#pragma omp parallel for schedule(static) if (nl >= NH_DWR_PARALLEL_MIN)
+  for (int l = 0; l < nl; l++) {
+    int c = m->leaves[l];
+    double Xe[24], ue[24], R[9], d[24];
+    const double *G0 = t->G0 + 24 * t->cell_shape[c];
+    double *s = samples + 6 * (size_t)nfld * c;
+    nh_mesh_cell_coords(m, m->X, c, Xe);
+    nh_mesh_cell_coords(m, u, c, ue);
+    nh_hex_corotated(Xe, ue, G0, R, d);
+    nh_hex_rotated_stress(R, d, G0, t->lambda, t->mu, s);
+    for (int q = 0; q < nz; q++) {
+      nh_dwr_corotate(m, z + n3 * q, c, R, d);
+      nh_hex_rotated_stress(R, d, G0, t->lambda, t->mu, s + 6 * (1 + q));
+    }
+  }
+  if ((rc = nh_spr_recover_fields(m, t, h, nfld, samples, star))) goto done;
+
+  static const double gq = 0.57735026918962576451; /* 1/√3 */
+  double xi[24], N[8][8];
+  for (int g = 0; g < 8; g++) {
+    for (int k = 0; k < 3; k++) xi[3 * g + k] = gq * nh_hex_corner[g][k];
+    nh_hex_shape(xi + 3 * g, N[g]);
+  }
+  for (int c = 0; c < m->n_cells && out->indicator; c++)
+    for (int p = 0; p < n_points; p++) out->indicator[(size_t)m->n_cells * p + c] = 0.0;
+  int bad_cell = -1;
+#pragma omp parallel for schedule(static) if (nl >= NH_DWR_PARALLEL_MIN)
+  for (int l = 0; l < nl; l++) {
+    int c = m->leaves[l];
+    const int *corner = m->cells + 8 * c;
+    const double *G0 = t->G0 + 24 * t->cell_shape[c];
+    double Xe[24], ue[24], R[9], d[24], g[8][24], detJ[8], eu[48], ceu[48];
+    nh_mesh_cell_coords(m, m->X, c, Xe);
+    nh_mesh_cell_coords(m, u, c, ue);
+    nh_hex_corotated(Xe, ue, G0, R, d);
+    double e2 = 0.0, n2 = 0.0;
+    for (int gp = 0; gp < 8; gp++) {
+      memcpy(g[gp], G0, sizeof g[gp]);
+      detJ[gp] = nh_hex_gradients(Xe, xi + 3 * gp, g[gp]);
+      if (!(detJ[gp] > 0.0)) {
+#pragma omp atomic write
+        bad_cell = c;
+      }
+      double su[6];
+      nh_hex_rotated_stress(R, d, g[gp], t->lambda, t->mu, su);
+      for (int k = 0; k < 6; k++) {
+        double s = 0.0;
+        for (int a = 0; a < 8; a++) s += N[gp][a] * star[6 * ((size_t)nfld * corner[a]) + k];
+        eu[6 * gp + k] = s - su[k];
+      }
+      nh_voigt_compliance(t->lambda, t->mu, eu + 6 * gp, ceu + 6 * gp);
+      double e[6], de = 0.0, dn = 0.0;
+      nh_voigt_compliance(t->lambda, t->mu, su, e);
+      for (int k = 0; k < 6; k++) de += eu[6 * gp + k] * ceu[6 * gp + k], dn += su[k] * e[k];
+      e2 += detJ[gp] * de;
+      n2 += detJ[gp] * dn;
+    }
+    cell_err2[l] = m->fill[c] * e2;
+    cell_norm2[l] = m->fill[c] * n2;
+    for (int p = 0; p < n_points; p++) {
+      double zn2 = 0.0;
+      for (int k = 0; k < 3; k++) {
+        int q = 3 * p + k;
+        double dz[24], eps = 0.0, ezz = 0.0;
+        nh_dwr_corotate(m, z + n3 * q, c, R, dz);
+        for (int gp = 0; gp < 8; gp++) {
+          double sz[6], ez[6], cez[6], a1 = 0.0, a2 = 0.0;
+          nh_hex_rotated_stress(R, dz, g[gp], t->lambda, t->mu, sz);
+          for (int i = 0; i < 6; i++) {
+            double s = 0.0;
+            for (int a = 0; a < 8; a++)
+              s += N[gp][a] * star[6 * ((size_t)nfld * corner[a] + 1 + q) + i];
+            ez[i] = s - sz[i];
+          }
+          nh_voigt_compliance(t->lambda, t->mu, ez, cez);
+          for (int i = 0; i < 6; i++) a1 += ez[i] * ceu[6 * gp + i], a2 += ez[i] * cez[i];
+          eps += detJ[gp] * a1;
+          ezz += detJ[gp] * a2;
+        }
+        cell_eps[(size_t)nz * l + q] = m->fill[c] * eps;
+        zn2 += m->fill[c] * ezz;
+      }
+      if (out->indicator)
+        out->indicator[(size_t)m->n_cells * p + c] = sqrt(fmax(cell_err2[l], 0.0) * fmax(zn2, 0.0));
+    }
+  }
+  if (bad_cell >= 0) {
+    rc = NH_ERROR(NH_ERR_INTERNAL, "goal estimate: leaf %d has a non-positive Jacobian", bad_cell);
+    goto done;
+  }
+  double sum_err = 0.0, sum_norm = 0.0;
+  for (int q = 0; q < nz; q++) out->estimate[q] = 0.0;
+  for (int l = 0; l < nl; l++) {
+    sum_err += cell_err2[l];
+    sum_norm += cell_norm2[l];
+    if (out->eta_cell) out->eta_cell[m->leaves[l]] = sqrt(fmax(cell_err2[l], 0.0));
+    for (int q = 0; q < nz; q++) out->estimate[q] += cell_eps[(size_t)nz * l + q];
+  }
+  for (int p = 0; p < n_points; p++) {
+    const double *e = out->estimate + 3 * p;
+    out->norm[p] = sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]);
+    if (!isfinite(out->norm[p])) {
+      rc = NH_ERROR(NH_ERR_NUMERIC, "goal estimate of point %d is not finite", p);
+      goto done;
+    }
+  }
+  if (!isfinite(sum_err) || !isfinite(sum_norm)) {
+    rc =
+        NH_ERROR(NH_ERR_NUMERIC, "SPR: the error estimate is not finite (eta^2 = %g, |u|_E^2 = %g)",
+                 sum_err, sum_norm);
+    goto done;
+  }
+  out->eta = sqrt(sum_err);
+  out->eta_rel = sum_err + sum_norm > 0.0 ? sqrt(sum_err / (sum_norm + sum_err)) : 0.0;
+
+done:
+  free(j), free(z), free(samples), free(star), free(cell_eps), free(cell_err2), free(cell_norm2);
+  return rc;
+}

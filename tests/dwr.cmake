@@ -1,0 +1,4 @@
+# Goal-oriented (dual-weighted residual) estimate: the DWR identity and effectivity (tests/test_dwr.c).
+nh_add_c_test(test_dwr "verify;slow")
+# adapt.resolve: a re-solved step equals the direct solve on its final mesh (tests/test_resolve.c).
+nh_add_c_test(test_resolve verify)

@@ -1,0 +1,309 @@
+/* test_dwr — the goal-oriented (dual-weighted residual) estimate of
+ * adapt/dwr.c on the localized-load block of cases/adapt-localized.yaml
+ * (4 x 2 x 2 cm, E 10 kPa, ν 0.3, clamped at x = 4 cm, 1 µN down over the
+ * 2 mm cube centred at (1, 1, 1) cm), goal: the displacement at the probe
+ * p = (2.5, 1.0, 1.5) cm, regularised over the box p ± 0.5 mm.
+ *
+ * The problem is linear: the corotational element at u = 0 is the
+ * small-strain element, so A = K (assembled at rest) and u_h = K⁻¹ f.
+ *
+ *  1. The DWR identity (dwr.c header). V_h: the 8x4x4 grid with three cells
+ *     refined (hanging nodes); V_f ⊃ V_h: every leaf refined once more.
+ *     With u_f, z_f the primal and dual Galerkin solutions in V_f and P u_h
+ *     the coarse solution carried to V_f by Eq. 17 (exact for nested
+ *     spaces),
+ *       J(u_f) − J(u_h) = f(z_f) − a(P u_h, z_f),
+ *     an algebraic identity of the Galerkin equations, so it holds to
+ *     round-off (asserted 1e-9 relative, per component). The two sides are
+ *     computed on different paths: the left from the solves (through
+ *     nh_dwr_duals' gather/solve/scatter for z_f), the right with a(·,·)
+ *     summed element by element from the tissue's K₀ (nh_tissue_element),
+ *     not from the assembled matrix. Also asserted: J(P u_h) computed on V_f
+ *     equals J(u_h) on V_h (the functional is the same on both meshes, the
+ *     premise of the identity), and Galerkin orthogonality of the coarse
+ *     dual, f(P z_h) − a(P u_h, P z_h) = 0 (relative to f(P z_h)).
+ *     A wrong scale of the dual, a gather instead of a scatter, or a
+ *     functional that depends on the mesh break these by O(1).
+ *  2. Effectivity. Goal-adaptive refinement from 8x4x4 (hex2, marking max
+ *     θ = 0.3 on the goal indicators η_K^p, up to level 4) for STEPS
+ *     meshes. The true error of the three finest adaptive meshes M is
+ *     measured against a converged reference: the finest mesh refined
+ *     uniformly by the 2x2x2 and by the 3x3x3 template (spaces with the same
+ *     grading, h/2 and h/3 everywhere) give with the finest mesh itself
+ *     three values J(h), J(h/2), J(h/3) of the dominant component (z);
+ *     their observed order p = log((J₁ − J₂)/(J₂ − J₃)) / log(·) (solved
+ *     for unequal ratios by bisection) must lie in [1.5, 3] (O(h²) expected
+ *     for a functional of a trilinear solution), and the Richardson value
+ *     J_∞ = J₃ + (J₃ − J₂) / ((3/2)^p − 1) is the reference. The reference's
+ *     own uncertainty |J_∞ − J₃| is asserted below 1/5 of the smallest true
+ *     error it measures. Effectivity θ = |E_p| / |J(u) − J(u_h)| with the
+ *     vector error (the x, y components from the h/3 mesh, which are two
+ *     orders smaller than z); asserted θ ∈ [0.7, 1.5] on the three finest
+ *     adaptive meshes (the issue's band).
+ * NH_VERBOSE=1 prints the sequence. */
+#include "check.h"
+#include "adapt/adapt.h"
+#include "fem/fem.h"
+#include "mesh/mesh.h"
+#include "solve/solve.h"
+
+#include <string.h>
+
+#include "hanging_mesh.h"
+
+#define STEPS     4
+#define MAX_LEVEL 4
+#define RADIUS    5e-4
+
+static const double probe[3] = {0.025, 0.010, 0.015};
+static const double lo[3] = {0, 0, 0}, hi[3] = {0.04, 0.02, 0.02};
+static const int grid[3] = {8, 4, 4};
+
+typedef struct {
+  nh_mesh *m;
+  nh_tissue *t;
+  unsigned char *fixed;
+  nh_hanging *h;
+  nh_system *s;
+  double *f, *u, *j; /* load, solution, the goal's 3 functionals (3 n each) */
+} problem;
+
+static void setup(problem *p) {
+  nh_mesh *m = p->m;
+  int n = 3 * m->n_nodes;
+  if (!p->t) {
+    nh_material mat = {1.0e4, 0.3, 1000};
+    CHECK_OK(nh_tissue_create(m, &mat, &p->t));
+  } else {
+    CHECK_OK(nh_tissue_update(p->t));
+  }
+  p->fixed = realloc(p->fixed, m->n_nodes);
+  for (int i = 0; i < m->n_nodes; i++) p->fixed[i] = m->X[3 * i] > 0.0399;
+  nh_hanging_destroy(&p->h);
+  CHECK_OK(nh_hanging_detect(m, p->fixed, &p->h));
+  nh_system_destroy(&p->s);
+  CHECK_OK(nh_system_create(p->t, p->fixed, p->h, &p->s));
+  p->f = realloc(p->f, sizeof(double) * n);
+  p->u = realloc(p->u, sizeof(double) * n);
+  p->j = realloc(p->j, sizeof(double) * 3 * n);
+  memset(p->f, 0, sizeof(double) * n);
+  nh_region load = {.min = {0.009, 0.009, 0.009}, .max = {0.011, 0.011, 0.011}};
+  double force[3] = {0, 0, -1e-6};
+  CHECK_OK(nh_mesh_region_load(m, &load, force, p->f));
+  for (int k = 0; k < 3; k++)
+    CHECK_OK(nh_goal_functional(m, probe, RADIUS, k, "probe", p->j + (size_t)n * k));
+}
+
+/* u = K⁻¹ f (A = K assembled at rest). */
+static void solve(problem *p) {
+  int n = 3 * p->m->n_nodes, nf = nh_system_free_dofs(p->s);
+  double *w = calloc(n, sizeof(double)), *b = malloc(sizeof(double) * nf);
+  double *x = malloc(sizeof(double) * nf);
+  nh_system_assemble(p->s, w, NULL, 0.0, 1.0, w, NULL, 0);
+  CHECK_OK(nh_system_factor(p->s));
+  nh_system_gather(p->s, p->f, b);
+  CHECK_OK(nh_system_solve(p->s, b, x));
+  nh_system_scatter(p->s, x, p->u);
+  free(w), free(b), free(x);
+}
+
+static double dot(int n, const double *a, const double *b) {
+  double s = 0.0;
+  for (int i = 0; i < n; i++) s += a[i] * b[i];
+  return s;
+}
+
+/* a(v, w) = Σ_leaves v_eᵀ φ K₀ w_e, element by element (R = I at rest). */
+static double energy_product(const problem *p, const double *v, const double *w) {
+  const nh_mesh *m = p->m;
+  double *zero = calloc(3 * m->n_nodes, sizeof(double)), s = 0.0;
+  for (int l = 0; l < m->n_leaves; l++) {
+    int c = m->leaves[l];
+    double fe[24], K[576], ve[24], we[24];
+    nh_tissue_element(p->t, c, zero, fe, K);
+    nh_mesh_cell_coords(m, v, c, ve);
+    nh_mesh_cell_coords(m, w, c, we);
+    for (int r = 0; r < 24; r++)
+      for (int q = 0; q < 24; q++) s += ve[r] * K[24 * r + q] * we[q];
+  }
+  free(zero);
+  return s;
+}
+
+/* Carry a nodal field to the nodes `info` created (Eq. 17). */
+static double *prolong(const nh_mesh *m, const nh_refine_info *info, const double *old, int n_old) {
+  double *v = calloc(3 * m->n_nodes, sizeof(double));
+  memcpy(v, old, sizeof(double) * 3 * n_old);
+  for (int k = 0; k < info->n_new; k++) {
+    double N[8];
+    nh_hex_shape(info->xi + 3 * k, N);
+    const int *e = m->cells + 8 * info->parent[k];
+    for (int i = 0; i < 3; i++)
+      for (int a = 0; a < 8; a++) v[3 * (info->first_new + k) + i] += N[a] * v[3 * e[a] + i];
+  }
+  return v;
+}
+
+static void destroy(problem *p) {
+  nh_system_destroy(&p->s);
+  nh_hanging_destroy(&p->h);
+  nh_tissue_destroy(&p->t);
+  nh_mesh_destroy(&p->m);
+  free(p->fixed), free(p->f), free(p->u), free(p->j);
+}
+
+static void test_identity(void) {
+  problem p = {0};
+  CHECK_OK(nh_mesh_create_box(lo, hi, grid, &p.m));
+  nh_template *t2 = regular_template(2);
+  int first[3] = {1 + 8 * (1 + 4 * 1), 2 + 8 * (1 + 4 * 2), 4 + 8 * (2 + 4 * 2)};
+  CHECK_OK(nh_mesh_refine(p.m, t2, first, 3, NULL));
+  setup(&p);
+  solve(&p);
+  int nc = p.m->n_nodes, n = 3 * nc;
+  double Jh[3], *uh = malloc(sizeof(double) * n), *zh = malloc(sizeof(double) * 3 * n);
+  for (int k = 0; k < 3; k++) Jh[k] = dot(n, p.j + (size_t)n * k, p.u);
+  memcpy(uh, p.u, sizeof(double) * n);
+  CHECK_OK(nh_dwr_duals(p.s, 1.0, nc, 3, p.j, zh));
+
+  /* V_f: every leaf refined once. */
+  nh_refine_info info = {0};
+  int nl = p.m->n_leaves, *all = malloc(sizeof(int) * nl);
+  memcpy(all, p.m->leaves, sizeof(int) * nl);
+  CHECK_OK(nh_mesh_refine(p.m, t2, all, nl, &info));
+  double *Puh = prolong(p.m, &info, uh, nc);
+  setup(&p);
+  nh_hanging_interpolate(p.h, Puh, 3);
+  solve(&p);
+  int nfn = 3 * p.m->n_nodes;
+  double *zf = malloc(sizeof(double) * 3 * nfn);
+  CHECK_OK(nh_dwr_duals(p.s, 1.0, p.m->n_nodes, 3, p.j, zf));
+  for (int k = 0; k < 3; k++) {
+    const double *jk = p.j + (size_t)nfn * k, *zk = zf + (size_t)nfn * k;
+    double JPuh = dot(nfn, jk, Puh), Juf = dot(nfn, jk, p.u);
+    double lhs = Juf - Jh[k], rhs = dot(nfn, p.f, zk) - energy_product(&p, Puh, zk);
+    double scale = fmax(fabs(Juf), fabs(Jh[k]));
+    CHECK_CLOSE(JPuh, Jh[k], 1e-12 * scale, "J(P u_h) on V_f = J(u_h) on V_h");
+    CHECK_CLOSE(rhs, lhs, 1e-9 * fabs(lhs), "DWR identity J(u_f) - J(u_h) = rho(u_h; z_f)");
+    double *Pzh = prolong(p.m, &info, zh + (size_t)n * k, nc);
+    nh_hanging_interpolate(p.h, Pzh, 3);
+    double fz = dot(nfn, p.f, Pzh), orth = fz - energy_product(&p, Puh, Pzh);
+    CHECK_CLOSE(orth, 0.0, 1e-8 * fabs(fz), "Galerkin orthogonality rho(u_h; P z_h) = 0");
+    if (getenv("NH_VERBOSE"))
+      printf("identity k=%d: J(u_f)-J(u_h) = %.6e, rho(z_f) = %.6e, rel diff %.1e\n", k, lhs, rhs,
+             fabs(lhs - rhs) / fabs(lhs));
+    free(Pzh);
+  }
+  nh_refine_info_free(&info);
+  free(all), free(uh), free(zh), free(Puh), free(zf);
+  nh_template_destroy(&t2);
+  destroy(&p);
+}
+
+/* The goal-adaptive sequence: per mesh its dofs, J_h (3) and the estimate (3);
+ * leaves p on the finest mesh (solved). */
+static int adapt_sequence(problem *p, int *dofs, double (*Jh)[3], double (*E)[3]) {
+  CHECK_OK(nh_mesh_create_box(lo, hi, grid, &p->m));
+  nh_template *t2 = regular_template(2);
+  int steps = 0;
+  for (;;) {
+    setup(p);
+    solve(p);
+    int n = 3 * p->m->n_nodes, ncell = p->m->n_cells;
+    double est[3], norm, *ind = malloc(sizeof(double) * ncell);
+    nh_dwr_result r = {.estimate = est, .norm = &norm, .indicator = ind};
+    CHECK_OK(nh_dwr_estimate(p->s, 1.0, p->m, p->t, p->h, p->u, 1, probe, RADIUS, NULL, &r));
+    dofs[steps] = n;
+    for (int k = 0; k < 3; k++)
+      Jh[steps][k] = dot(n, p->j + (size_t)n * k, p->u), E[steps][k] = est[k];
+    if (getenv("NH_VERBOSE"))
+      printf("adaptive mesh %d: %d dofs, %d leaves, estimate %.3e\n", steps, n, p->m->n_leaves,
+             norm);
+    steps++;
+    if (steps == STEPS) {
+      free(ind);
+      break;
+    }
+    nh_mark_params mp = {.strategy = NH_MARK_MAX, .theta = 0.3, .max_level = MAX_LEVEL};
+    int *marked = malloc(sizeof(int) * p->m->n_leaves), n_marked = 0;
+    CHECK_OK(nh_mark_cells(p->m, ind, &mp, marked, &n_marked));
+    CHECK_OK(nh_mesh_refine(p->m, t2, marked, n_marked, NULL));
+    free(marked), free(ind);
+  }
+  nh_template_destroy(&t2);
+  return steps;
+}
+
+/* J (3 components) on the finest adaptive mesh with every leaf refined by the n x n x n template.
+ */
+static void refined_reference(int n, double J[3]) {
+  problem p = {0};
+  int dofs[STEPS];
+  double Jh[STEPS][3], E[STEPS][3];
+  adapt_sequence(&p, dofs, Jh, E);
+  nh_template *tn = regular_template(n);
+  int nl = p.m->n_leaves, *all = malloc(sizeof(int) * nl);
+  memcpy(all, p.m->leaves, sizeof(int) * nl);
+  CHECK_OK(nh_mesh_refine(p.m, tn, all, nl, NULL));
+  setup(&p);
+  solve(&p);
+  int nn = 3 * p.m->n_nodes;
+  for (int k = 0; k < 3; k++) J[k] = dot(nn, p.j + (size_t)nn * k, p.u);
+  if (getenv("NH_VERBOSE"))
+    printf("finest mesh refined by %d: %d dofs, J = %.9e %.9e %.9e\n", n, nn, J[0], J[1], J[2]);
+  free(all);
+  nh_template_destroy(&tn);
+  destroy(&p);
+}
+
+static void test_effectivity(void) {
+  problem p = {0};
+  int dofs[STEPS];
+  double Jh[STEPS][3], E[STEPS][3];
+  int steps = adapt_sequence(&p, dofs, Jh, E);
+  destroy(&p);
+  double J1 = Jh[steps - 1][2], J2[3], J3[3];
+  refined_reference(2, J2);
+  refined_reference(3, J3);
+  /* Observed order from h, h/2, h/3: (J1 − J2)/(J2 − J3) = (1 − 2^-p)/(2^-p − 3^-p). */
+  double ratio = (J1 - J2[2]) / (J2[2] - J3[2]), a = 0.5, b = 6.0;
+  for (int it = 0; it < 200; it++) {
+    double c = 0.5 * (a + b), g = (1 - pow(2, -c)) / (pow(2, -c) - pow(3, -c));
+    if (g < ratio)
+      a = c; /* g grows with p */
+    else
+      b = c;
+  }
+  double order = 0.5 * (a + b);
+  double Jinf = J3[2] + (J3[2] - J2[2]) / (pow(1.5, order) - 1.0);
+  CHECK(order >= 1.5 && order <= 3.0, "observed order of J on h, h/2, h/3: %.3f not in [1.5, 3]",
+        order);
+  double smallest = INFINITY;
+  for (int s = steps - 3; s < steps; s++) smallest = fmin(smallest, fabs(Jinf - Jh[s][2]));
+  CHECK(fabs(Jinf - J3[2]) <= 0.2 * smallest,
+        "reference uncertainty |J_inf - J(h/3)| = %.3e above 1/5 of the smallest true error %.3e",
+        fabs(Jinf - J3[2]), smallest);
+  if (getenv("NH_VERBOSE"))
+    printf("order %.3f, J_inf %.9e (|J_inf - J(h/3)| = %.3e)\n", order, Jinf, fabs(Jinf - J3[2]));
+  for (int s = 0; s < steps; s++) {
+    double e[3] = {J3[0] - Jh[s][0], J3[1] - Jh[s][1], Jinf - Jh[s][2]};
+    double en = sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]);
+    double En = sqrt(E[s][0] * E[s][0] + E[s][1] * E[s][1] + E[s][2] * E[s][2]);
+    double theta = En / en;
+    if (getenv("NH_VERBOSE"))
+      printf("mesh %d: %6d dofs, J_z %.6e, error %.3e, estimate %.3e (z: %.3e), effectivity %.3f\n",
+             s, dofs[s], Jh[s][2], en, En, E[s][2], theta);
+    if (s >= steps - 3)
+      CHECK(theta >= 0.7 && theta <= 1.5,
+            "effectivity on adaptive mesh %d (%d dofs): expected [0.7, 1.5], got %.3f "
+            "(estimate %.3e, error %.3e)",
+            s, dofs[s], theta, En, en);
+  }
+}
+
+int main(void) {
+  setvbuf(stdout, NULL, _IOLBF, 0);
+  test_identity();
+  test_effectivity();
+  TEST_END();
+}
