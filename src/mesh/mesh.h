@@ -198,6 +198,10 @@ int nh_mesh_locate(const nh_mesh *mesh, const double x[3], int *cell, double xi[
 /* True if x lies in the region (closed, enlarged by tol); 0 for a label
  * region (it needs the label image: the mesh functions below test it). */
 int nh_region_contains(const nh_region *region, const double x[3], double tol);
+/* The region's smallest size: a sphere's radius, a cylinder's radius (or
+ * half its length if shorter), a box's smallest half-extent (a label
+ * region: +inf). */
+double nh_region_size(const nh_region *region);
 /* "box [..] - [..]", "sphere centre [..] radius r", "cylinder [..] - [..] radius r", "label N". */
 void nh_region_describe(const nh_region *region, char *buf, size_t cap);
 
@@ -216,6 +220,19 @@ int nh_mesh_nodes_in_region(const nh_mesh *mesh, const nh_region *region, unsign
  * Returns NH_ERR_INPUT (message at region->where) if V = 0. */
 int nh_mesh_region_load(const nh_mesh *mesh, const nh_region *region, const double force[3],
                         double *f);
+
+/* The fraction of leaf c's tissue that lies above the plane through `point`
+ * normal to `up` ((x − point)·up > 0), by 8³ sub-cell midpoints of the rest
+ * shape; tissue is every point on a box domain and the points inside the
+ * shape on an immersed one (a cell with no such point counts all its
+ * points). 0: all below, 1: all above. */
+double nh_mesh_cell_fraction_above(const nh_mesh *mesh, int c, const double point[3],
+                                   const double up[3]);
+
+/* The tie of leaf c to a region: T[8x8] = ∫ χ Nₐ N_b dV over the cell ∩
+ * region ∩ tissue (χ as for loads), by 6³ sub-cell midpoints; returns that
+ * volume (0: the cell does not meet the region, T all zero). */
+double nh_mesh_region_tie(const nh_mesh *mesh, int c, const nh_region *region, double T[64]);
 
 /* ---- refinement templates (mesh/template.c) ----
  * A template is a set of nodes in the parent's natural coordinates [-1, 1]³
