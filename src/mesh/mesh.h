@@ -75,6 +75,8 @@ typedef struct nh_domain {
 void nh_domain_box(const double min[3], const double max[3], nh_domain *domain);
 /* The brain of bounding box center ± size / 2 (size > 0). */
 void nh_domain_brain(const double center[3], const double size[3], nh_domain *domain);
+/* The ball of the given centre and radius (tests: no scene key builds it). */
+void nh_domain_sphere(const double center[3], double radius, nh_domain *domain);
 /* The scene's tissue.domain, reading its image or surface and the label
  * image (tissue.labels). Fails with NH_ERR_INPUT, message "FILE:LINE: KEY:
  * reason" at the scene's key: an unreadable or corrupt file, a label of
@@ -85,11 +87,14 @@ int nh_domain_from_scene(const nh_scene *scene, nh_domain *domain);
 void nh_domain_copy(nh_domain *dst, const nh_domain *src);
 /* Drop the references the domain holds (keeps kind and box). */
 void nh_domain_release(nh_domain *domain);
-/* "box", "brain", "mask" or "surface". */
+/* "box", "brain", "mask", "surface" or "sphere". */
 const char *nh_domain_name(const nh_domain *domain);
 
 /* F(x): negative inside, positive outside, 1-Lipschitz. */
 double nh_domain_level(const nh_domain *domain, const double x[3]);
+/* F(x), and its gradient g[3] by central differences (step 1e-6 of the
+ * largest edge). */
+double nh_domain_gradient(const nh_domain *domain, const double x[3], double g[3]);
 /* True if x lies strictly inside (box: min < x < max componentwise; else F < 0). */
 int nh_domain_inside(const nh_domain *domain, const double x[3]);
 

@@ -34,7 +34,8 @@ typedef enum {
   NH_DOMAIN_BOX = 0,
   NH_DOMAIN_BRAIN = 1,
   NH_DOMAIN_MASK = 2,   /* tissue.domain.mask: labelled voxels of a NIfTI image */
-  NH_DOMAIN_SURFACE = 3 /* tissue.domain.surface: a closed triangulated surface (STL) */
+  NH_DOMAIN_SURFACE = 3, /* tissue.domain.surface: a closed triangulated surface (STL) */
+  NH_DOMAIN_SPHERE = 4   /* a ball, built by tests only (nh_domain_sphere): no scene key */
 } nh_domain_kind;
 
 /* A region of space (closed): exactly one of box, sphere, cylinder, label. */
