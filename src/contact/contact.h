@@ -107,10 +107,11 @@ int nh_skull_relocate(nh_skull *skull, const nh_mesh *mesh);
 /* Number of contact points, and the surface area they represent (m²). */
 int nh_skull_points(const nh_skull *skull);
 double nh_skull_area(const nh_skull *skull);
-/* Append the rows of the points that may touch the skull this step (gap
- * below a quarter of their cell's edge, or pushing in the last step) at
- * the tissue state u. */
-int nh_skull_rows(nh_skull *skull, const nh_mesh *mesh, const double *u, nh_rows *rows);
+/* Append the rows of the points that may touch the skull in the step of
+ * length h from the tissue state (u, v) (gap below twice their closing in
+ * a step plus 1 % of their cell's edge, or pushing in the last step). */
+int nh_skull_rows(nh_skull *skull, const nh_mesh *mesh, const double *u, const double *v, double h,
+                  nh_rows *rows);
 /* After the solved step: keep each row's impulse (warm start), and the
  * total contact force on the tissue. */
 void nh_skull_end_step(nh_skull *skull, const nh_rows *rows, double h);

@@ -21,9 +21,11 @@
  * point ends the step inside the skull, and only pushes are transmitted
  * (frictionless: no tangential row). The normal is re-evaluated at the
  * current position every step, so the brain may slide along the curved
- * skull. Only points with g below a margin (a quarter of the cell's edge)
- * get a row: the others cannot close in one step at the speeds of brain
- * shift, and leaving them out keeps W = J A⁻¹ Jᵀ small. λ is warm-started
+ * skull. Only points whose gap is below a margin (twice what their
+ * current outward speed closes in a step, plus 1 % of their cell's edge)
+ * or that pushed in the last step get a row: leaving the others out keeps
+ * W = J A⁻¹ Jᵀ small; one that closes faster gets its row the next step
+ * (and its violation g < 0 is then removed within that step). λ is warm-started
  * from the point's previous step. The rows' impulses λ / h are the contact
  * forces; λ / (h A) is the contact pressure. */
 #include "contact/contact.h"
@@ -175,14 +177,20 @@ double nh_skull_penetration(const nh_skull *s, const nh_mesh *m, const double *u
   return worst;
 }
 
-int nh_skull_rows(nh_skull *s, const nh_mesh *m, const double *u, nh_rows *rows) {
+int nh_skull_rows(nh_skull *s, const nh_mesh *m, const double *u, const double *v, double h,
+                  nh_rows *rows) {
   for (int i = 0; i < s->n; i++) {
     nh_skull_point *p = &s->p[i];
-    double x[3], N[8], nrm[3];
+    double x[3], N[8], nrm[3], vn = 0.0;
     nh_skull_position(m, u, p, x, N);
     double g = s->gap - nh_skull_distance(&s->domain, x, nrm);
+    const int *e = m->cells + 8 * p->cell;
+    for (int a = 0; a < 8; a++)
+      for (int k = 0; k < 3; k++) vn += N[a] * v[3 * e[a] + k] * nrm[k];
     p->row = -1;
-    if (g > 0.25 * p->edge && p->lam == 0.0) continue;
+    /* closing speed vn > 0 (outwards): twice a step's approach, plus 1 % of
+     * the cell as a floor */
+    if (g > 2.0 * h * fmax(vn, 0.0) + 0.01 * p->edge && p->lam == 0.0) continue;
     int r = nh_rows_add(rows);
     if (r < 0) return NH_ERROR(NH_ERR_MEMORY, "out of memory: skull rows");
     for (int a = 0; a < 8; a++)

@@ -553,6 +553,32 @@ static int read_buoyancy(const nh_ctx *c, const nh_yaml_node *tissue, nh_scene *
   return NH_OK;
 }
 
+/* tissue.skull: {gap: g >= 0 (default 0)}, an immersed domain only. */
+static int read_skull(const nh_ctx *c, const nh_yaml_node *tissue, nh_scene *s) {
+  static const char *const keys[] = {"gap", NULL};
+  const nh_yaml_node *m, *at, *key;
+  NH_TRY(section(c, tissue, "tissue", "skull", 0, &m));
+  nh_yaml_get(tissue, "skull", &key);
+  if (!key) return NH_OK;
+  if (m) NH_TRY(check_keys(c, m, "tissue.skull", keys));
+  make_where(c, key, "tissue.skull", s->tissue.where_skull);
+  s->tissue.skull = 1;
+  s->tissue.skull_gap = 0.0;
+  if (m) {
+    NH_TRY(get_number(c, m, "tissue.skull", "gap", 0, &s->tissue.skull_gap, &at));
+    NH_TRY(at_least(c, at, "tissue.skull", "gap", s->tissue.skull_gap, 0, 0));
+  }
+  if (s->tissue.domain == NH_DOMAIN_BOX)
+    return fail(c, key, "tissue.skull",
+                "needs an immersed domain (brain): the skull is the domain's surface offset by "
+                "the gap");
+  if (s->time.mode != NH_MODE_DYNAMIC)
+    return fail(c, key, "tissue.skull",
+                "needs time.mode: dynamic (the contact rows are solved in the backward-Euler "
+                "step; for a quasi-static shift, run dynamic with damping to rest)");
+  return NH_OK;
+}
+
 static int read_time(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   static const char *const keys[] = {"mode", "step", "end", "steps", NULL};
   const nh_yaml_node *t, *at_step, *at_end, *at_steps, *at_mode;
@@ -938,8 +964,9 @@ static int read_brain(const nh_ctx *c, const nh_yaml_node *brain, nh_scene *s) {
 }
 
 static int read_tissue(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
-  static const char *const keys[] = {"domain", "grid",     "material", "damping",   "fixed",
-                                     "loads",  "buoyancy", "labels",   "materials", NULL};
+  static const char *const keys[] = {"domain",   "grid",   "material",  "damping", "fixed",
+                                     "loads",    "buoyancy", "labels", "materials", "skull",
+                                     NULL};
   static const char *const domain_keys[] = {"box", "brain", "mask", "surface", NULL};
   char key[NH_KEY_MAX];
   const nh_yaml_node *t, *domain, *n;
@@ -991,6 +1018,7 @@ static int read_tissue(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   NH_TRY(read_materials(c, t, s));
   NH_TRY(read_damping(c, t, "tissue", &s->tissue.damping_mass, &s->tissue.damping_stiffness));
   NH_TRY(read_buoyancy(c, t, s));
+  NH_TRY(read_skull(c, t, s));
 
   /* fixed: where_fixed points at the key `fixed:`, or at `tissue:` without it. */
   const nh_yaml_node *fixed, *fixed_key, *tissue_key;

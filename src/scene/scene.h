@@ -213,6 +213,9 @@ typedef struct nh_scene {
     int buoyancy_has_level;        /* tissue.buoyancy.level given */
     double buoyancy_level[3];      /* tissue.buoyancy.level: a point of the fluid level (the
                                       plane normal to gravity); only tissue above it drains */
+    int skull;                     /* tissue.skull given (immersed domains, dynamic mode) */
+    double skull_gap; /* tissue.skull.gap, m (default 0, >= 0): the CSF gap to the skull */
+    char where_skull[NH_WHERE_MAX];
     int n_fixed;
     nh_region *fixed; /* tissue.fixed: list of {box | sphere | cylinder} */
     int n_loads;
