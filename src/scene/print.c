@@ -144,6 +144,8 @@ void nh_scene_print(const nh_scene *s, void *stdio_file) {
       fprintf(f, ", changed at t = 0");
     fprintf(f, "; the tissue carries (before - b(t)) of its weight\n");
   }
+  if (s->tissue.skull)
+    fprintf(f, "skull     rigid, frictionless, CSF gap %g m\n", s->tissue.skull_gap);
   fprintf(f, "fixed     %d region%s\n", s->tissue.n_fixed, s->tissue.n_fixed == 1 ? "" : "s");
   for (int i = 0; i < s->tissue.n_fixed; ++i) {
     fprintf(f, "          tissue.fixed.%d: ", i);
