@@ -866,8 +866,8 @@ static int read_materials(const nh_ctx *c, const nh_yaml_node *t, nh_scene *s) {
       return fail(c, m->items[i], key, "expected a mapping {young, poisson, density}, got %s",
                   describe(m->items[i], d, sizeof d));
     lm->poisson = s->tissue.poisson, lm->density = s->tissue.density;
-    NH_TRY(read_material_map(c, m->items[i], key, 0, 1, &lm->young, &lm->poisson, &lm->density,
-                             NULL));
+    NH_TRY(
+        read_material_map(c, m->items[i], key, 0, 1, &lm->young, &lm->poisson, &lm->density, NULL));
     make_where(c, m->keys[i], key, lm->where);
     s->tissue.n_materials = i + 1;
   }
@@ -964,9 +964,8 @@ static int read_brain(const nh_ctx *c, const nh_yaml_node *brain, nh_scene *s) {
 }
 
 static int read_tissue(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
-  static const char *const keys[] = {"domain",   "grid",   "material",  "damping", "fixed",
-                                     "loads",    "buoyancy", "labels", "materials", "skull",
-                                     NULL};
+  static const char *const keys[] = {"domain",   "grid",   "material",  "damping", "fixed", "loads",
+                                     "buoyancy", "labels", "materials", "skull",   NULL};
   static const char *const domain_keys[] = {"box", "brain", "mask", "surface", NULL};
   char key[NH_KEY_MAX];
   const nh_yaml_node *t, *domain, *n;

@@ -33,7 +33,7 @@ typedef enum {
 typedef enum {
   NH_DOMAIN_BOX = 0,
   NH_DOMAIN_BRAIN = 1,
-  NH_DOMAIN_MASK = 2,   /* tissue.domain.mask: labelled voxels of a NIfTI image */
+  NH_DOMAIN_MASK = 2,    /* tissue.domain.mask: labelled voxels of a NIfTI image */
   NH_DOMAIN_SURFACE = 3, /* tissue.domain.surface: a closed triangulated surface (STL) */
   NH_DOMAIN_SPHERE = 4   /* a ball, built by tests only (nh_domain_sphere): no scene key */
 } nh_domain_kind;
@@ -200,8 +200,8 @@ typedef struct nh_scene {
     double poisson; /* tissue.material.poisson (required, in (-1, 0.5)) */
     double density; /* tissue.material.density, kg/m³ (default 1000, > 0) */
     nh_formulation formulation; /* tissue.material.formulation: bbar (default) | full */
-    double damping_mass;      /* tissue.damping.mass (Rayleigh α, 1/s, default 0, >= 0) */
-    double damping_stiffness; /* tissue.damping.stiffness (Rayleigh β, s, default 0, >= 0) */
+    double damping_mass;        /* tissue.damping.mass (Rayleigh α, 1/s, default 0, >= 0) */
+    double damping_stiffness;   /* tissue.damping.stiffness (Rayleigh β, s, default 0, >= 0) */
     /* tissue.buoyancy {before, after, schedule} (optional): the rest shape is the equilibrium
        under gravity with the fraction `before` of the weight carried by buoyancy, so the
        tissue's body force is ρ g (before − b(t)), b(t) = before + (after − before) s(t)

@@ -429,8 +429,7 @@ static int nh_sim_setup_mesh(nh_sim *s, int first) {
       double above = nh_mesh_cell_fraction_above(m, c, sc->tissue.buoyancy_level, up);
       double rho;
       nh_tissue_cell_material(s->tissue, c, NULL, NULL, &rho);
-      double mc = rho * m->fill[c] *
-                  s->tissue->volume[s->tissue->cell_shape[c]] / 8.0 * above;
+      double mc = rho * m->fill[c] * s->tissue->volume[s->tissue->cell_shape[c]] / 8.0 * above;
       for (int a = 0; a < 8; a++) s->drained[m->cells[8 * c + a]] += mc;
     }
   }
