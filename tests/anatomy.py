@@ -125,6 +125,10 @@ def save_mask(path, data, h, flip=False):
     nib.save(img, path)
 
 
+# formulation: full in both scenes: the bar's spring model and the tolerances of the
+# mask-vs-brain comparison were derived and measured for the fully integrated
+# element (with the B-bar default the mask's static shift differs from the
+# brain's by 24 % at 4 mm, above the 20 % set here; issue 13).
 BRAIN_SCENE = """name: {name}
 time: {{mode: static, steps: 1}}
 gravity: [0, 0, -9.81]
@@ -132,7 +136,7 @@ tissue:
   domain:
 {domain}
   grid: [12, 14, 10]
-  material: {{young: 1.0e6, poisson: 0.45, density: 1040}}
+  material: {{young: 1.0e6, poisson: 0.45, density: 1040, formulation: full}}
   fixed:
     - {{cylinder: {{start: [0, -0.013, -0.07], end: [0, -0.013, -0.05], radius: 0.015}}}}
 probes:
@@ -226,7 +230,7 @@ tissue:
   domain: {{box: {{min: [0, 0, 0], max: [0.1, 0.01, 0.01]}}}}
   labels: {{file: bar.nii.gz}}
   grid: [{cells}, 1, 1]
-  material: {{young: 100000, poisson: 0.0, density: 1000}}
+  material: {{young: 100000, poisson: 0.0, density: 1000, formulation: full}}
   materials:
     1: {{young: 1000, poisson: 0.0}}
     2: {{young: 4000, poisson: 0.0}}

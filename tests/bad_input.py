@@ -30,6 +30,7 @@ CASES = [
     ("wrong_type.yaml", [], 9, "tissue.grid.1"),
     ("missing_tissue.yaml", [], 3, "tissue"),
     ("incompressible.yaml", [], 9, "tissue.material.poisson"),
+    ("formulation.yaml", [], 9, "tissue.material.formulation"),
     ("young_zero.yaml", [], 8, "tissue.material.young"),
     ("zero_cells.yaml", [], 6, "tissue.grid.2"),
     ("end_and_steps.yaml", [], 6, "time.steps"),
@@ -46,6 +47,7 @@ CASES = [
     # bounding box but outside the brain (reported by the simulator).
     ("region_no_shape.yaml", [], 10, "tissue.fixed.0"),
     ("region_two_shapes.yaml", [], 12, "tissue.loads.0.cylinder"),
+    ("brain_region_no_tissue.yaml", [], 11, "tissue.fixed.0"),
     ("region_sphere_radius.yaml", [], 12, "tissue.fixed.0.sphere.radius"),
     ("region_cylinder_axis.yaml", [], 11, "tissue.fixed.0.cylinder.end"),
     ("brain_size.yaml", [], 6, "tissue.domain.brain.size.2"),
@@ -74,6 +76,8 @@ CASES = [
     ("set_base.yaml", ["adapt.every=2", "adapt.marking.theta=1.5"], "--set:2",
      "adapt.marking.theta"),
     ("set_base.yaml", ["adapt.hanging=both"], "--set:1", "adapt.hanging"),
+    ("set_base.yaml", ["tissue.material.formulation=[bbar]"], "--set:1",
+     "tissue.material.formulation"),
     # tools and targets: an unknown key, a missing length, a negative radius,
     # a wall of no thickness, a zero direction, motion times not increasing, a
     # host that does not exist, release without a host, a name given twice,
@@ -96,6 +100,9 @@ CASES = [
      "tools.1.inside"),
     ("tools_base.yaml", ["tools.2.length=1"], "--set:1", "tools.2"),
     ("set_base.yaml", ["tools.0.length=1"], "--set:1", "tools.0"),
+    # formulation is the tissue's: a tool's material does not take it
+    ("tools_base.yaml", ["tools.0.material.formulation=bbar"], "--set:1",
+     "tools.0.material.formulation"),
     # gravity with a schedule, tissue buoyancy, planned trajectories: a schedule
     # whose times go back, a fraction above 1, a target name that is not a
     # target, a target at the entry, base given with a trajectory, until:
@@ -104,6 +111,14 @@ CASES = [
     # the same kind of errors from overrides of the valid trajectory_base.yaml.
     ("gravity_schedule.yaml", [], 5, "gravity.schedule.1.0"),
     ("buoyancy_fraction.yaml", [], 7, "tissue.buoyancy.before"),
+    ("buoyancy_level.yaml", [], 9, "tissue.buoyancy.level"),
+    ("skull_box.yaml", [], 8, "tissue.skull"),
+    ("trajectory_base.yaml", ["tissue.skull={gap: -0.001}"], "--set:1", "tissue.skull.gap"),
+    ("trajectory_base.yaml", ["tissue.skull={gaps: 0}"], "--set:1", "tissue.skull.gaps"),
+    ("brain_region_no_tissue.yaml", ["tissue.skull={gap: 0}", "time.mode=static"], "--set:1",
+     "tissue.skull"),
+    ("trajectory_base.yaml", ["tissue.buoyancy.level=[0, 1]"], "--set:1",
+     "tissue.buoyancy.level"),
     ("trajectory_unknown_target.yaml", [], 12, "tools.0.trajectory.target"),
     ("trajectory_target_at_entry.yaml", [], 12, "tools.0.trajectory.target"),
     ("trajectory_with_base.yaml", [], 13, "tools.0.base"),

@@ -15,7 +15,11 @@ Silent on success, one line per failure, exit 1.
     refined (θ = 0.6); the cannula cuts, retracts and ends where it started
     (its base returns exactly; the tip within its own sag under gravity, far
     below 1 mm); the electrode, released at the target, stays: its tip moves
-    less than a tenth of the cannula's retraction after the release.
+    less than a tenth of the cannula's retraction after the release. Hand-over
+    (issue 13): during the retraction, as the cannula leaves channel points
+    to the electrode (which follows its host's deformed axis until its
+    release), the STN moves by no more than the tools' radius difference
+    from one step to the next.
 """
 import csv
 import math
@@ -119,6 +123,19 @@ def finite_csvs(out, name):
                     return
 
 
+def tool_radii():
+    """Radius of each tool of the case file, by name (block `- name:` ... `radius:`)."""
+    radii, name = {}, None
+    with open(SCENE) as f:
+        for line in f:
+            t = line.split("#")[0].strip()
+            if t.startswith("- name:"):
+                name = t.split(":", 1)[1].strip()
+            elif t.startswith("radius:") and name is not None:
+                radii[name] = float(t.split(":", 1)[1])
+    return radii
+
+
 def test_procedure():
     entry, standoff, stn = scene_numbers()
     direction, start, depth = plan(entry, stn, standoff)
@@ -165,7 +182,17 @@ def test_procedure():
     if not moved < 0.1 * depth:
         fail("procedure: the electrode tip moved %.3g m after its release (cannula retracted "
              "%.3g m)" % (moved, depth))
+    # Hand-over: no STN jump larger than the radius difference while retracting.
+    radii = tool_radii()
+    bound = radii["cannula"] - radii["electrode"]
+    pos = {int(r["step"]): np.array([float(r[k]) for k in "xyz"]) for r in tgt}
+    retract = [r[0] for r in can if r[3] == "retracting"]
+    jump = max((np.linalg.norm(pos[k] - pos[k - 1]) for k in retract if k - 1 in pos), default=0.0)
+    if not jump <= bound:
+        fail("procedure: the STN jumps %.3g m in one step of the retraction, more than the radius "
+             "difference %.3g m" % (jump, bound))
     if os.environ.get("NH_TEST_VERBOSE"):
+        print("procedure: largest STN step while retracting %.3g m (bound %.3g m)" % (jump, bound))
         print("procedure: %d steps, dofs %d..%d, STN shift %.3g m, cannula back %.3g m, electrode "
               "moved %.3g m, final distance %s m" % (steps, dofs[0], max(dofs), shift, back, moved,
                                                      tgt[-1]["distance"]))

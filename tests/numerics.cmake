@@ -2,6 +2,7 @@
 nh_add_c_test(test_polar unit)
 nh_add_c_test(test_rotation verify)
 nh_add_c_test(test_patch verify)
+nh_add_c_test(test_locking verify)
 nh_add_c_test(test_parallel unit)
 nh_add_c_test(test_cantilever verify)
 nh_add_c_test(test_dynamic verify)

@@ -25,4 +25,15 @@ static void nh_case_open(const char *name, const char *const *sets, nh_scene **s
   CHECK_OK(nh_sim_create(*scene, &opt, sim));
 }
 
+/* Run cases/NAME with the overrides to its end; u = displacement of probe i. */
+static inline void nh_case_probe(const char *name, const char *const *sets, int i, double u[3]) {
+  nh_scene *scene;
+  nh_sim *sim;
+  nh_case_open(name, sets, &scene, &sim);
+  CHECK_OK(nh_sim_run(sim));
+  nh_sim_probe_displacement(sim, i, u);
+  nh_sim_destroy(&sim);
+  nh_scene_destroy(&scene);
+}
+
 #endif

@@ -34,7 +34,7 @@ static nh_adapt *setup(const nh_adapt_spec *spec, nh_mesh **m, double **u, doubl
   const double lo[3] = {0, 0, 0}, hi[3] = {0.04, 0.02, 0.02};
   const int grid[3] = {4, 2, 2};
   CHECK_OK(nh_mesh_create_box(lo, hi, grid, m));
-  nh_material mat = {1e6, 0.3, 1000};
+  nh_material mat = {1e6, 0.3, 1000, NH_FORMULATION_BBAR};
   nh_tissue *t;
   CHECK_OK(nh_tissue_create(*m, &mat, &t));
   const int n = (*m)->n_nodes;

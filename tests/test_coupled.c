@@ -82,7 +82,7 @@ static void tissue_open(double young, double poisson, tissue_fix *f) {
   const double lo[3] = {0, 0, 0}, hi[3] = {0.04, 0.02, 0.02};
   const int grid[3] = {4, 2, 2};
   CHECK_OK(nh_mesh_create_box(lo, hi, grid, &f->mesh));
-  nh_material mat = {young, poisson, 1000};
+  nh_material mat = {young, poisson, 1000, NH_FORMULATION_BBAR};
   CHECK_OK(nh_tissue_create(f->mesh, &mat, &f->tissue));
   f->nn = f->mesh->n_nodes;
   f->fixed = calloc((size_t)f->nn, 1);

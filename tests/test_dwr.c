@@ -72,7 +72,7 @@ static void setup(problem *p) {
   nh_mesh *m = p->m;
   int n = 3 * m->n_nodes;
   if (!p->t) {
-    nh_material mat = {1.0e4, 0.3, 1000};
+    nh_material mat = {1.0e4, 0.3, 1000, NH_FORMULATION_FULL};
     CHECK_OK(nh_tissue_create(m, &mat, &p->t));
   } else {
     CHECK_OK(nh_tissue_update(p->t));

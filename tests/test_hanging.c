@@ -75,7 +75,7 @@ static void patch_test(int n) {
       for (int k = 0; k < 3; k++) x[k] += N[a] * Xe[3 * a + k];
     for (int k = 0; k < 3; k++) CHECK_CLOSE(x[k], m->X[3 * i + k], 1e-12, "located node position");
   }
-  nh_material mat = {1e5, 0.35, 1000};
+  nh_material mat = {1e5, 0.35, 1000, NH_FORMULATION_BBAR};
   nh_tissue *ts;
   CHECK_OK(nh_tissue_create(m, &mat, &ts));
   nh_system *s;

@@ -23,7 +23,7 @@ static void compare(int n) {
   for (int i = 0; i < nn; i++) fixed[i] = m->X[3 * i] < 1e-9;
   nh_hanging *h;
   CHECK_OK(nh_hanging_detect(m, fixed, &h));
-  nh_material mat = {1e5, 0.45, 1000};
+  nh_material mat = {1e5, 0.45, 1000, NH_FORMULATION_BBAR};
   nh_tissue *ts;
   CHECK_OK(nh_tissue_create(m, &mat, &ts));
   nh_system *se, *sl;

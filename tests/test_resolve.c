@@ -45,7 +45,8 @@ int main(void) {
             !memcmp(copy->X, m->X, sizeof(double) * 3 * m->n_nodes),
         "the copy is not the final mesh (%d nodes, expected %d)", copy->n_nodes, m->n_nodes);
 
-  nh_material mat = {scene->tissue.young, scene->tissue.poisson, scene->tissue.density};
+  nh_material mat = {scene->tissue.young, scene->tissue.poisson, scene->tissue.density,
+                     scene->tissue.formulation};
   nh_tissue *tissue;
   CHECK_OK(nh_tissue_create(copy, &mat, &tissue));
   unsigned char *fixed = malloc(copy->n_nodes);

@@ -7,6 +7,7 @@
  *     isoparametric element), d is linear in X, so at every ξ
  *     σ = R D sym(RᵀF − I) Rᵀ with R = polar(I + A), computed here directly.
  *     The compliance inverts D (engineering shears) and sᵀD⁻¹s = σ : ε.
+ *     B-bar: the same with the volumetric part κ (det F − 1) I.
  *  2. A linear displacement gives one constant stress: σ* equals it at every
  *     node (interior, boundary, grown and fallback patches) and η = 0.
  *  3. u = ∇φ with φ a cubic: on a rectilinear grid the centre gradient of
@@ -28,7 +29,10 @@
 #include <omp.h>
 #include <string.h>
 
-static const nh_material mat = {1e5, 0.35, 1000};
+/* Fully integrated except where a test says otherwise: SPR does not depend
+ * on the formulation, and the exactness arguments of 3 are linear ones
+ * (B-bar's θ̄ = det F̄ − 1 is not linear in u). */
+static nh_material mat = {1e5, 0.35, 1000, NH_FORMULATION_FULL};
 
 /* D ε for engineering Voigt strains e[6]. */
 static void voigt_stiffness(double lambda, double mu, const double e[6], double s[6]) {
@@ -64,7 +68,9 @@ static nh_mesh *make_mesh(const double lo[3], const double hi[3], const int grid
   return m;
 }
 
-/* The stress of u = A X: σ = R D sym(RᵀF − I) Rᵀ, F = I + A. */
+/* The stress of u = A X, F = I + A: σ = R D sym(RᵀF − I) Rᵀ for the fully
+ * integrated element; B-bar (the tissue of this test): the same with the
+ * volumetric part replaced by κ (det F − 1) I, κ = λ + ⅔μ (fem/hex.c). */
 static void homogeneous_stress(const double A[9], double lambda, double mu, double s[6]) {
   double F[9], R[9], RtF[9], E[9], e[6], sl[6], S[9], T[9];
   nh_mat3_identity(F);
@@ -77,12 +83,18 @@ static void homogeneous_stress(const double A[9], double lambda, double mu, doub
   e[0] = E[0], e[1] = E[4], e[2] = E[8], e[3] = 2 * E[5], e[4] = 2 * E[2], e[5] = 2 * E[1];
   voigt_stiffness(lambda, mu, e, sl);
   double Sl[9] = {sl[0], sl[5], sl[4], sl[5], sl[1], sl[3], sl[4], sl[3], sl[2]};
+  if (mat.formulation == NH_FORMULATION_BBAR) {
+    double p = (lambda + 2.0 * mu / 3.0) * (nh_mat3_det(F) - 1.0) - lambda * (e[0] + e[1] + e[2]) -
+               2.0 * mu / 3.0 * (e[0] + e[1] + e[2]);
+    for (int i = 0; i < 3; i++) Sl[4 * i] += p;
+  }
   nh_mat3_mul(R, Sl, T);
   nh_mat3_mul_nt(T, R, S);
   tensor_to_voigt(S, s);
 }
 
-static void test_element_stress(void) {
+static void test_element_stress(nh_formulation formulation) {
+  mat.formulation = formulation;
   const double lo[3] = {0.1, -0.2, 0.3}, hi[3] = {0.5, 0.1, 0.6};
   const int grid[3] = {3, 2, 2};
   nh_test_rng = 4242;
@@ -545,7 +557,8 @@ static void test_marking(void) {
 }
 
 int main(void) {
-  test_element_stress();
+  test_element_stress(NH_FORMULATION_BBAR);
+  test_element_stress(NH_FORMULATION_FULL);
   const double small[9] = {1e-4, 2e-5, -3e-5, 0.5e-4, -1e-4, 2e-5, 1e-5, 3e-5, 0.7e-4};
   double r[3] = {0.4, 0.1, -0.3}, Q[9], U[9] = {1.05, 0.01, 0.0, 0.01, 0.98, 0.02, 0.0, 0.02, 1.03},
          finite[9];

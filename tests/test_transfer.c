@@ -65,7 +65,7 @@ int main(void) {
   const int grid[3] = {8, 4, 4};
   nh_mesh *m;
   CHECK_OK(nh_mesh_create_box(lo, hi, grid, &m));
-  nh_material mat = {1e7, 0.4, 1000};
+  nh_material mat = {1e7, 0.4, 1000, NH_FORMULATION_BBAR};
   nh_tissue *t;
   CHECK_OK(nh_tissue_create(m, &mat, &t));
   unsigned char *fixed = NULL;

@@ -428,7 +428,8 @@ int nh_spr_estimate(const nh_mesh *m, const nh_tissue *t, const double *u, const
     nh_mesh_cell_coords(m, u, c, ue);
     double lambda, mu;
     nh_tissue_cell_material(t, c, &lambda, &mu, NULL);
-    nh_hex_stress_at(Xe, ue, t->G0 + 24 * t->cell_shape[c], lambda, mu, 8, xi, sh, detJ);
+    nh_hex_stress_at(Xe, ue, t->G0 + 24 * t->cell_shape[c], nh_tissue_gbar(t, c), lambda, mu, 8, xi,
+                     sh, detJ);
     for (int g = 0; g < 8; g++) {
       if (!(detJ[g] > 0.0)) {
 #pragma omp atomic write

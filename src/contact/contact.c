@@ -66,6 +66,10 @@ int nh_contact_create(const nh_scene *sc, const nh_mesh *m, nh_contact **out) {
     rc = nh_tool_init(c, k, m);
     if (!rc && tl->host < 0) nh_puncture_init(&c->groups[tl->group], tl->spec, m);
   }
+  if (!rc && sc->tissue.skull) {
+    rc = nh_skull_create(&m->domain, sc->tissue.skull_gap, &c->skull);
+    if (!rc) rc = nh_skull_build(c->skull, m);
+  }
   if (rc) {
     nh_contact_destroy(&c);
     return rc;
@@ -85,14 +89,15 @@ void nh_contact_destroy(nh_contact **pc) {
   free(c->tools);
   free(c->groups);
   free(c->blocks);
+  nh_skull_destroy(&c->skull);
   nh_rows_free(&c->rows);
   free(c);
   *pc = NULL;
 }
 
 /* Before the step t → t + h: the blocks and the rows of every constraint. */
-static int nh_contact_begin_step(nh_contact *c, const nh_mesh *m, const double *u, double t,
-                                 double h) {
+static int nh_contact_begin_step(nh_contact *c, const nh_mesh *m, const double *u, const double *v,
+                                 double t, double h) {
   nh_rows_clear(&c->rows);
   double g[3]; /* at the end of the step, as the tissue's loads; tools are not buoyed */
   nh_scene_gravity(c->scene, t + h, g);
@@ -103,6 +108,7 @@ static int nh_contact_begin_step(nh_contact *c, const nh_mesh *m, const double *
     NH_TRY(nh_tip_rows(c, G, m, u, t, h));
     NH_TRY(nh_shaft_rows(c, G, m, u, h));
   }
+  if (c->skull) NH_TRY(nh_skull_rows(c->skull, m, u, v, h, &c->rows));
   return NH_OK;
 }
 
@@ -164,13 +170,14 @@ static int nh_contact_end_step(nh_contact *c, const nh_mesh *m, const double *u,
   for (int k = 0; k < c->n; k++)
     if (c->tools[k].host >= 0) c->tools[k].state = nh_nested_state(c, k, t_new, h);
   nh_tools_follow(c, t_new, h);
+  if (c->skull) nh_skull_end_step(c->skull, &c->rows, h);
   return NH_OK;
 }
 
 int nh_contact_step(nh_contact *c, nh_system *sys, const nh_integrator *in, const nh_mesh *m,
                     const double *f_ext, double *u, double *v, double t_new, nh_step_stats *stats) {
   const double h = in->dt, t = t_new - h;
-  NH_TRY(nh_contact_begin_step(c, m, u, t, h));
+  NH_TRY(nh_contact_begin_step(c, m, u, v, t, h));
   int rc = nh_step_coupled(sys, in, f_ext, u, v, c->n_blocks, c->blocks, &c->rows, NH_MCP_TOLERANCE,
                            NH_MCP_ACCEPT, NH_MCP_SWEEPS, &c->solve);
   *stats = c->solve.step;
@@ -195,6 +202,7 @@ int nh_contact_relocate(nh_contact *c, const nh_mesh *m) {
     NH_CHECK(!bad, NH_ERR_INTERNAL, "tool %s: a path point left the refined mesh",
              c->tools[G->outer].spec->name);
   }
+  if (c->skull) NH_TRY(nh_skull_relocate(c->skull, m));
   return NH_OK;
 }
 

@@ -96,5 +96,37 @@ int nh_contact_state_save(const nh_contact *c, unsigned char **out, size_t *size
 /* Restore a state saved by nh_contact_state_save, on a contact created from
  * the same scene and mesh. NH_ERR_INPUT if it does not fit, NH_ERR_MEMORY. */
 int nh_contact_state_load(nh_contact *c, const unsigned char *data, size_t size);
+/* ---- skull contact (contact/skull.c) ----
+ * A rigid skull: the tissue's implicit surface offset outwards by `gap`,
+ * with frictionless unilateral contact rows of surface points (one per cut
+ * leaf, weighted by the area it stands for) solved with the tools' rows by
+ * nh_step_coupled (docs/interaction.md, "Skull contact"). */
+typedef struct nh_skull nh_skull;
+
+/* A skull around `domain` (immersed: not a box) at distance gap >= 0.
+ * Fails with NH_ERR_INPUT (box domain, bad gap; no location in the
+ * message: the caller adds it), NH_ERR_MEMORY. */
+int nh_skull_create(const nh_domain *domain, double gap, nh_skull **out);
+void nh_skull_destroy(nh_skull **skull);
+/* The contact points of the mesh's surface (rest shape), after creation;
+ * nh_skull_relocate after refinement keeps the warm starts. */
+int nh_skull_build(nh_skull *skull, const nh_mesh *mesh);
+int nh_skull_relocate(nh_skull *skull, const nh_mesh *mesh);
+/* Number of contact points, and the surface area they represent (m²). */
+int nh_skull_points(const nh_skull *skull);
+double nh_skull_area(const nh_skull *skull);
+/* Append the rows of the points that may touch the skull in the step of
+ * length h from the tissue state (u, v) (gap below twice their closing in
+ * a step plus 1 % of their cell's edge, or pushing in the last step). */
+int nh_skull_rows(nh_skull *skull, const nh_mesh *mesh, const double *u, const double *v, double h,
+                  nh_rows *rows);
+/* After the solved step: keep each row's impulse (warm start), and the
+ * total contact force on the tissue. */
+void nh_skull_end_step(nh_skull *skull, const nh_rows *rows, double h);
+/* The last step's total contact force on the tissue (N) and the number of
+ * rows that pushed (may be NULL). */
+void nh_skull_force(const nh_skull *skull, double force[3], int *active);
+/* The largest penetration φ(x) − gap over all points at u (m, 0 if none). */
+double nh_skull_penetration(const nh_skull *skull, const nh_mesh *mesh, const double *u);
 
 #endif

@@ -87,6 +87,7 @@ struct nh_contact {
   int n_blocks;
   nh_coupled_stats solve; /* the last step's */
   int cut;                /* groups whose tip cut in the last step */
+  nh_skull *skull;        /* tissue.skull (NULL without): its rows follow the tools' */
 };
 
 /* ---- tools.c ---- */

@@ -6,6 +6,8 @@
  *   R   = polar rotation of F     (robust to det F <= 0, core/mat3.c)
  *   fₑ  = R K₀ (Rᵀ x − X)         internal force (blockwise R per node)
  *   Kₑ  ≈ R K₀ Rᵀ                 tangent (the variation of R is dropped)
+ * K₀ is either the fully integrated one or the B-bar (mean-dilatation) one
+ * that does not lock near incompressibility (docs/theory.md §2b).
  * Lumped mass ρ Vₑ / 8 per node; an immersed cell scales stiffness and mass
  * by its fill fraction φ. Matrices are row-major, 24x24, row 3a+i is node a,
  * component i. Voigt order for stresses: xx, yy, zz, yz, xz, xy. */
@@ -17,14 +19,18 @@
 
 typedef struct {
   double young, poisson, density;
+  nh_formulation formulation; /* scene/scene.h; default (0): B-bar */
 } nh_material;
 
-/* Rest stiffness K0 (24x24) by 2x2x2 Gauss quadrature, the shape-function
- * gradients G0[8][3] = ∇_X N_a at the centre, and the volume.
+/* Rest stiffness K0 (24x24), the shape-function gradients G0[8][3] = ∇_X N_a
+ * at the centre, their volume averages Gbar[8][3] = (1/V) ∫ ∇_X N_a dV (may
+ * be NULL) and the volume. bbar = 0: K0 = ∫ Bᵀ D B by 2x2x2 Gauss points;
+ * bbar = 1: K0 = ∫ Bᵀ D_dev B (Gauss), the deviatoric part only (the
+ * volumetric part is nh_hex_corot's, from Gbar).
  * Fails with NH_ERR_NUMERIC (message names nothing: the caller knows the
  * cell) if the Jacobian is not positive at a Gauss point. */
-int nh_hex_stiffness(const double X[24], double lambda, double mu, double K0[576], double G0[24],
-                     double *volume);
+int nh_hex_stiffness(const double X[24], double lambda, double mu, int bbar, double K0[576],
+                     double G0[24], double Gbar[24], double *volume);
 
 /* Rest shape-function gradients g[8][3] = ∇_X Nₐ at ξ; returns det J.
  * g is written only when det J > 0 and J is invertible; otherwise g is left
@@ -37,15 +43,26 @@ double nh_hex_gradients(const double X[24], const double xi[3], double g[24]);
 void nh_hex_corotated(const double X[24], const double u[24], const double G0[24], double R[9],
                       double d[24]);
 
-/* Corotational internal force f[24] and (if Kt != NULL) tangent R K0 Rᵀ, and
- * the rotation R[9] of the element, at nodal displacements u[24]. */
-void nh_hex_corot(const double X[24], const double u[24], const double K0[576], const double G0[24],
-                  double R[9], double f[24], double Kt[576]);
+/* B-bar's volumetric part of one element: mean gradients, κ = λ + ⅔μ, V. */
+typedef struct {
+  const double *Gbar; /* 24 */
+  double kappa, volume;
+} nh_hex_volumetric;
 
-/* Cauchy stress at the centre, σ = R (λ tr ε I + 2 μ ε) Rᵀ with ε the
- * symmetric gradient of d = Rᵀx − X at the centre; s[6] in Voigt order. */
+/* The mean volume change θ̄ = det F̄ − 1, F̄ = I + Σ uₐ ⊗ Gbarₐ, computed
+ * without cancellation against 1; cof[9] (may be NULL) receives cof F̄. */
+double nh_hex_mean_dilatation(const double u[24], const double Gbar[24], double cof[9]);
+
+/* Corotational internal force f[24] and (if Kt != NULL) tangent R K0 Rᵀ, and
+ * the rotation R[9] of the element, at nodal displacements u[24]. With vol
+ * (B-bar; K0 then deviatoric) f gains κ V θ̄ cof(F̄) ḡₐ and Kt gains
+ * κ V bₐ ⊗ b_b, bₐ = cof(F̄) ḡₐ; vol = NULL for the fully integrated one. */
+void nh_hex_corot(const double X[24], const double u[24], const double K0[576], const double G0[24],
+                  const nh_hex_volumetric *vol, double R[9], double f[24], double Kt[576]);
+
+/* Cauchy stress at the centre: nh_hex_stress_at at ξ = 0; s[6] Voigt. */
 void nh_hex_center_stress(const double X[24], const double u[24], const double G0[24],
-                          double lambda, double mu, double s[6]);
+                          const double *Gbar, double lambda, double mu, double s[6]);
 
 /* von Mises equivalent stress of s[6] (Voigt). */
 double nh_von_mises(const double s[6]);
@@ -69,13 +86,22 @@ typedef struct nh_tissue {
   int n_shapes, cap_shapes;
   double *K0;      /* 576 per shape */
   double *G0;      /* 24 per shape */
+  double *Gbar;    /* 24 per shape: mean gradients (used by B-bar) */
   double *volume;  /* per shape */
   double *key;     /* 24 per shape: corners relative to corner 0 */
   int *cell_shape; /* per cell (leaves only meaningful), -1 if not computed */
   int cap_cells;
   double *mass; /* lumped nodal mass, per node */
   int cap_nodes;
+  /* ties of fixed regions (nh_tissue_set_ties): per cell index into tie or -1 */
+  int *cell_tie, cap_cell_tie;
+  double *tie; /* 64 per tied cell: k ∫ χ Nₐ N_b dV (8x8) */
+  int n_ties, cap_ties;
 } nh_tissue;
+
+/* The mean gradients of leaf c for the stress of its formulation: NULL for
+ * the fully integrated element. */
+const double *nh_tissue_gbar(const nh_tissue *tissue, int c);
 
 /* Element data for every leaf of `mesh` and the lumped mass.
  * Fails with NH_ERR_INPUT if a cell has a non-positive Jacobian (an inverted
@@ -99,12 +125,22 @@ double nh_tissue_corner_mass(const nh_tissue *tissue, int c);
 int nh_tissue_update(nh_tissue *tissue);
 void nh_tissue_destroy(nh_tissue **tissue);
 
+/* Tie the tissue inside each region to its rest position by a volumetric
+ * spring of stiffness k[r] (Pa/m²): energy ½ Σ_r k_r ∫_{region ∩ tissue} |u|²
+ * dV, nodal force fₐ = Σ_b Tₐ_b u_b, tangent Tₐ_b I (docs/theory.md §5,
+ * "Fixed regions"). Replaces earlier ties; call again after the mesh
+ * changed. volume[r] (may be NULL) receives the tissue volume tied by
+ * region r. Fails with NH_ERR_MEMORY. */
+int nh_tissue_set_ties(nh_tissue *tissue, int n_regions, const nh_region *regions, const double *k,
+                       double *volume);
+
 /* The element of leaf c at nodal displacements u (3 per node): force f[24]
- * and tangent Kt[576] (may be NULL), both scaled by φ. */
+ * and tangent Kt[576] (may be NULL), both scaled by φ, plus the cell's tie. */
 void nh_tissue_element(const nh_tissue *tissue, int c, const double *u, double f[24],
                        double Kt[576]);
 
-/* Elastic energy Σₑ ½ φ dₑᵀ K0 dₑ (dₑ = Rᵀxₑ − Xₑ) at displacements u. */
+/* Elastic energy Σₑ φ (½ dₑᵀ K0 dₑ + ½ κ V θ̄²) (dₑ = Rᵀxₑ − Xₑ; the second
+ * term for B-bar only) at displacements u. */
 double nh_tissue_energy(const nh_tissue *tissue, const double *u);
 
 /* Centre stress of leaf c at displacements u (Voigt, Pa). */
@@ -115,13 +151,17 @@ void nh_tissue_cell_stress(const nh_tissue *tissue, int c, const double *u, doub
 /* Cauchy stress at n natural points xi[3n] of one element: s[6n] (Voigt),
  * σ = R (λ tr ε I + 2 μ ε) Rᵀ with R the element's rotation (polar of F at
  * the centre, as nh_hex_corot) and ε the symmetric gradient of the corotated
- * displacements d = Rᵀu + (Rᵀ − I)(X − X̄) with the rest gradients at ξ.
+ * displacements d = Rᵀu + (Rᵀ − I)(X − X̄) with the rest gradients at ξ;
+ * with Gbar (B-bar) the volumetric part is the element's mean,
+ * σ = κ θ̄ I + R (2μ dev ε) Rᵀ, θ̄ = det F̄ − 1 (nh_hex_mean_dilatation),
+ * κ = λ + ⅔μ.
  * detJ[n] (may be NULL) receives the rest Jacobian determinant at each point.
  * Cannot fail: a point where det J <= 0 (outside a valid cell) uses the
  * centre gradients G0, so s is finite for finite input; callers that need
  * det J > 0 check detJ. At ξ = 0 the result equals nh_hex_center_stress. */
-void nh_hex_stress_at(const double X[24], const double u[24], const double G0[24], double lambda,
-                      double mu, int n, const double *xi, double *s, double *detJ);
+void nh_hex_stress_at(const double X[24], const double u[24], const double G0[24],
+                      const double *Gbar, double lambda, double mu, int n, const double *xi,
+                      double *s, double *detJ);
 
 /* σ = R (λ tr ε I + 2 μ ε) Rᵀ, ε = sym(Σₐ dₐ ⊗ gₐ), for element rotation
  * R[9], corotated nodal values d[24] and shape-function gradients g[24] at a

@@ -6,6 +6,14 @@
  * and b needs no B matrix:
  *   K_ab = Σ_g w_g det J_g [ λ gₐ ⊗ g_b + μ g_b ⊗ gₐ + μ (gₐ·g_b) I ]
  * with gₐ = ∇_X Nₐ at the Gauss point; this is Bᵀ D B written out.
+ * B-bar (mean dilatation, Hughes 1980, "Generalization of selective
+ * integration procedures to anisotropic and nonlinear media"; Nagtegaal,
+ * Parks & Rice 1974): K₀ keeps only the deviatoric part, and the volume
+ * change is one per element, θ̄ = det F̄ − 1 with F̄ = I + Σ uₐ ⊗ ḡₐ and ḡₐ
+ * the volume average of ∇Nₐ, carrying the energy ½ κ V θ̄² (κ = λ + ⅔μ).
+ * θ̄ is rotation invariant without R, so R's round-off (which the κ/μ ratio
+ * would amplify) does not enter it; for small strain it is the linear B-bar
+ * element's Σ ḡₐ·uₐ (docs/theory.md §2b).
  * The rotation is that of F at the centre (Müller & Gross 2004); the tangent
  * drops the variation of R (the usual corotational approximation: one
  * linearisation per step converges to the same equilibrium, docs/theory.md
@@ -41,9 +49,14 @@ double nh_hex_gradients(const double X[24], const double xi[3], double g[24]) {
   return det;
 }
 
-int nh_hex_stiffness(const double X[24], double lambda, double mu, double K0[576], double G0[24],
-                     double *volume) {
+int nh_hex_stiffness(const double X[24], double lambda, double mu, int bbar, double K0[576],
+                     double G0[24], double Gbar[24], double *volume) {
   static const double q = 0.57735026918962576451; /* 1/√3 */
+  /* B-bar: K0 is the deviatoric part only (λ → −2μ/3, so that
+   * λ m mᵀ + μ diag(2,2,2,1,1,1) becomes μ (diag − ⅔ m mᵀ)); the volumetric
+   * part is nh_hex_corot's, from the mean gradients. */
+  const double lam_gp = bbar ? -2.0 * mu / 3.0 : lambda;
+  double gmean[24] = {0};
   memset(K0, 0, 576 * sizeof(double));
   double vol = 0.0;
   for (int gp = 0; gp < 8; gp++) {
@@ -52,6 +65,7 @@ int nh_hex_stiffness(const double X[24], double lambda, double mu, double K0[576
     double det = nh_hex_gradients(X, xi, g);
     if (!(det > 0.0)) return NH_ERR_NUMERIC;
     vol += det;
+    for (int i = 0; i < 24; i++) gmean[i] += det * g[i];
     for (int a = 0; a < 8; a++)
       for (int b = 0; b < 8; b++) {
         const double *ga = g + 3 * a, *gb = g + 3 * b;
@@ -59,9 +73,11 @@ int nh_hex_stiffness(const double X[24], double lambda, double mu, double K0[576
         for (int i = 0; i < 3; i++)
           for (int j = 0; j < 3; j++)
             K0[24 * (3 * a + i) + 3 * b + j] +=
-                det * (lambda * ga[i] * gb[j] + mu * gb[i] * ga[j] + (i == j ? mu * dot : 0.0));
+                det * (lam_gp * ga[i] * gb[j] + mu * gb[i] * ga[j] + (i == j ? mu * dot : 0.0));
       }
   }
+  for (int i = 0; i < 24; i++) gmean[i] /= vol;
+  if (Gbar) memcpy(Gbar, gmean, sizeof gmean);
   const double centre[3] = {0, 0, 0};
   if (!(nh_hex_gradients(X, centre, G0) > 0.0)) return NH_ERR_NUMERIC;
   *volume = vol;
@@ -89,8 +105,32 @@ void nh_hex_corotated(const double X[24], const double u[24], const double G0[24
   }
 }
 
+double nh_hex_mean_dilatation(const double u[24], const double Gbar[24], double cof[9]) {
+  double H[9] = {0};
+  for (int a = 0; a < 8; a++)
+    for (int i = 0; i < 3; i++)
+      for (int j = 0; j < 3; j++) H[3 * i + j] += u[3 * a + i] * Gbar[3 * a + j];
+  /* det(I + H) − 1 = tr H + I₂(H) + det H: no cancellation against 1 */
+  double tr = H[0] + H[4] + H[8];
+  double i2 = H[0] * H[4] + H[4] * H[8] + H[0] * H[8] - H[1] * H[3] - H[2] * H[6] - H[5] * H[7];
+  if (cof) {
+    double F[9];
+    for (int i = 0; i < 9; i++) F[i] = H[i] + (i % 4 == 0 ? 1.0 : 0.0);
+    cof[0] = F[4] * F[8] - F[5] * F[7];
+    cof[1] = F[5] * F[6] - F[3] * F[8];
+    cof[2] = F[3] * F[7] - F[4] * F[6];
+    cof[3] = F[2] * F[7] - F[1] * F[8];
+    cof[4] = F[0] * F[8] - F[2] * F[6];
+    cof[5] = F[1] * F[6] - F[0] * F[7];
+    cof[6] = F[1] * F[5] - F[2] * F[4];
+    cof[7] = F[2] * F[3] - F[0] * F[5];
+    cof[8] = F[0] * F[4] - F[1] * F[3];
+  }
+  return tr + i2 + nh_mat3_det(H);
+}
+
 void nh_hex_corot(const double X[24], const double u[24], const double K0[576], const double G0[24],
-                  double R[9], double f[24], double Kt[576]) {
+                  const nh_hex_volumetric *vol, double R[9], double f[24], double Kt[576]) {
   double d[24], fl[24];
   nh_hex_corotated(X, u, G0, R, d);
   for (int r = 0; r < 24; r++) {
@@ -100,24 +140,38 @@ void nh_hex_corot(const double X[24], const double u[24], const double K0[576], 
     fl[r] = s;
   }
   for (int a = 0; a < 8; a++) nh_mat3_vec(R, fl + 3 * a, f + 3 * a);
+  /* B-bar's volumetric part: U = ½ κ V θ̄², θ̄ = det F̄ − 1, F̄ = I + Σ uₐ ⊗ ḡₐ;
+   * f = κ V θ̄ bₐ with bₐ = ∂θ̄/∂uₐ = cof(F̄) ḡₐ, tangent κ V bₐ ⊗ b_b (the
+   * term κ V θ̄ ∂b/∂u, of the order of the pressure, dropped as the
+   * variation of R is). */
+  double b[24], kv = 0.0;
+  if (vol) {
+    double cof[9];
+    double theta = nh_hex_mean_dilatation(u, vol->Gbar, cof);
+    kv = vol->kappa * vol->volume;
+    for (int a = 0; a < 8; a++) nh_mat3_vec(cof, vol->Gbar + 3 * a, b + 3 * a);
+    for (int i = 0; i < 24; i++) f[i] += kv * theta * b[i];
+  }
   if (!Kt) return;
   for (int a = 0; a < 8; a++)
-    for (int b = 0; b < 8; b++) {
+    for (int c = 0; c < 8; c++) {
       double B[9], T[9];
       for (int i = 0; i < 3; i++)
-        for (int j = 0; j < 3; j++) B[3 * i + j] = K0[24 * (3 * a + i) + 3 * b + j];
+        for (int j = 0; j < 3; j++) B[3 * i + j] = K0[24 * (3 * a + i) + 3 * c + j];
       nh_mat3_mul(R, B, T);
       nh_mat3_mul_nt(T, R, B);
       for (int i = 0; i < 3; i++)
-        for (int j = 0; j < 3; j++) Kt[24 * (3 * a + i) + 3 * b + j] = B[3 * i + j];
+        for (int j = 0; j < 3; j++) Kt[24 * (3 * a + i) + 3 * c + j] = B[3 * i + j];
     }
+  if (vol)
+    for (int r = 0; r < 24; r++)
+      for (int c = 0; c < 24; c++) Kt[24 * r + c] += kv * b[r] * b[c];
 }
 
 void nh_hex_center_stress(const double X[24], const double u[24], const double G0[24],
-                          double lambda, double mu, double s[6]) {
-  double R[9], d[24];
-  nh_hex_corotated(X, u, G0, R, d);
-  nh_hex_rotated_stress(R, d, G0, lambda, mu, s);
+                          const double *Gbar, double lambda, double mu, double s[6]) {
+  const double centre[3] = {0, 0, 0};
+  nh_hex_stress_at(X, u, G0, Gbar, lambda, mu, 1, centre, s, NULL);
 }
 
 double nh_von_mises(const double s[6]) {

@@ -15,6 +15,11 @@
  * 2x2x2 Gauss points is twice the element's corotational strain energy. At
  * ξ = 0, gₐ(0) = G0ₐ and σ equals nh_hex_center_stress.
  *
+ * B-bar (mean dilatation, docs/theory.md §2b): the volumetric part is the
+ * element's mean, σ(ξ) = κ θ̄ I + R (2 μ dev ε(ξ)) Rᵀ with κ = λ + ⅔μ and
+ * θ̄ = det F̄ − 1, F̄ = I + Σₐ uₐ ⊗ ḡₐ, ḡₐ the volume average of gₐ
+ * (hex.c); again the stress whose energy the element carries.
+ *
  * Compliance. With Voigt stresses s = (σxx, σyy, σzz, σyz, σxz, σxy) and
  * engineering strains e = (εxx, εyy, εzz, γyz, γxz, γxy), γ = 2ε:
  *   εᵢᵢ = (σᵢᵢ − λ / (3λ + 2μ) tr σ) / (2μ),   γᵢⱼ = σᵢⱼ / μ,
@@ -39,17 +44,33 @@ void nh_hex_rotated_stress(const double R[9], const double d[24], const double g
   s[0] = S[0], s[1] = S[4], s[2] = S[8], s[3] = S[5], s[4] = S[2], s[5] = S[1];
 }
 
-void nh_hex_stress_at(const double X[24], const double u[24], const double G0[24], double lambda,
-                      double mu, int n, const double *xi, double *s, double *detJ) {
+void nh_hex_stress_at(const double X[24], const double u[24], const double G0[24],
+                      const double *Gbar, double lambda, double mu, int n, const double *xi,
+                      double *s, double *detJ) {
   /* The rotation and corotated displacements of the element, as hex.c. */
   double R[9], d[24];
   nh_hex_corotated(X, u, G0, R, d);
+  /* B-bar: the mean volume change θ̄ = det F̄ − 1, one per element. */
+  double mean_dilatation = Gbar ? nh_hex_mean_dilatation(u, Gbar, NULL) : 0.0;
   for (int p = 0; p < n; p++) {
-    double g[24];
+    double g[24], H[9] = {0}, S[9], T[9];
     memcpy(g, G0, sizeof g);
     double det = nh_hex_gradients(X, xi + 3 * p, g);
     if (detJ) detJ[p] = det;
-    nh_hex_rotated_stress(R, d, g, lambda, mu, s + 6 * p);
+    for (int a = 0; a < 8; a++)
+      for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++) H[3 * i + j] += d[3 * a + i] * g[3 * a + j];
+    double tr = H[0] + H[4] + H[8];
+    /* full: λ tr ε I + 2με; B-bar: κ θ̄ I + 2μ dev ε (κ = λ + ⅔μ) */
+    double vol =
+        Gbar ? (lambda + 2.0 * mu / 3.0) * mean_dilatation - 2.0 * mu / 3.0 * tr : lambda * tr;
+    for (int i = 0; i < 3; i++)
+      for (int j = 0; j < 3; j++)
+        S[3 * i + j] = mu * (H[3 * i + j] + H[3 * j + i]) + (i == j ? vol : 0.0);
+    nh_mat3_mul(R, S, T);
+    nh_mat3_mul_nt(T, R, S);
+    double *sp = s + 6 * p;
+    sp[0] = S[0], sp[1] = S[4], sp[2] = S[8], sp[3] = S[5], sp[4] = S[2], sp[5] = S[1];
   }
 }
 
@@ -61,7 +82,8 @@ void nh_tissue_gauss_stress(const nh_tissue *t, int c, const double *u, const do
   nh_mesh_cell_coords(m, u, c, ue);
   double lambda, mu;
   nh_tissue_cell_material(t, c, &lambda, &mu, NULL);
-  nh_hex_stress_at(Xe, ue, t->G0 + 24 * t->cell_shape[c], lambda, mu, 1, xi, s, NULL);
+  nh_hex_stress_at(Xe, ue, t->G0 + 24 * t->cell_shape[c], nh_tissue_gbar(t, c), lambda, mu, 1, xi,
+                   s, NULL);
 }
 
 void nh_voigt_compliance(double lambda, double mu, const double s[6], double e[6]) {

@@ -29,11 +29,14 @@ void nh_tissue_destroy(nh_tissue **tissue) {
   nh_tissue *t = *tissue;
   free(t->K0);
   free(t->G0);
+  free(t->Gbar);
   free(t->volume);
   free(t->key);
   free(t->cell_shape);
   free(t->mass);
   free(t->label), free(t->label_material), free(t->Kl), free(t->Km), free(t->cell_material);
+  free(t->cell_tie);
+  free(t->tie);
   free(t);
   *tissue = NULL;
 }
@@ -75,6 +78,8 @@ static int nh_tissue_shape(nh_tissue *t, const double Xe[24], int *table, int ta
     if (K0) t->K0 = K0;
     double *G0 = realloc(t->G0, sizeof(double) * 24 * cap);
     if (G0) t->G0 = G0;
+    double *Gbar = realloc(t->Gbar, sizeof(double) * 24 * cap);
+    if (Gbar) t->Gbar = Gbar;
     double *vol = realloc(t->volume, sizeof(double) * cap);
     if (vol) t->volume = vol;
     double *keys = realloc(t->key, sizeof(double) * 24 * cap);
@@ -87,16 +92,17 @@ static int nh_tissue_shape(nh_tissue *t, const double Xe[24], int *table, int ta
       if (Km) t->Km = Km;
       mixed_ok = Kl && Km;
     }
-    if (!K0 || !G0 || !vol || !keys || !mixed_ok)
+    if (!K0 || !G0 || !Gbar || !vol || !keys || !mixed_ok)
       return NH_ERROR(NH_ERR_MEMORY, "out of memory: element data");
     t->cap_shapes = cap;
   }
-  if (nh_hex_stiffness(Xe, t->lambda, t->mu, t->K0 + 576 * s, t->G0 + 24 * s, t->volume + s))
+  if (nh_hex_stiffness(Xe, t->lambda, t->mu, t->material.formulation == NH_FORMULATION_BBAR,
+                       t->K0 + 576 * s, t->G0 + 24 * s, t->Gbar + 24 * s, t->volume + s))
     return NH_ERR_INPUT;
   if (t->n_labels) {
     double G[24], v;
-    nh_hex_stiffness(Xe, 1.0, 0.0, t->Kl + 576 * s, G, &v);
-    nh_hex_stiffness(Xe, 0.0, 1.0, t->Km + 576 * s, G, &v);
+    nh_hex_stiffness(Xe, 1.0, 0.0, 0, t->Kl + 576 * s, G, NULL, &v);
+    nh_hex_stiffness(Xe, 0.0, 1.0, 0, t->Km + 576 * s, G, NULL, &v);
   }
   memcpy(t->key + 24 * s, key, sizeof key);
   t->n_shapes++;
@@ -221,12 +227,14 @@ double nh_tissue_corner_mass(const nh_tissue *t, int c) {
   return rho * t->mesh->fill[c] * t->volume[t->cell_shape[c]] / 8.0;
 }
 
-/* K₀ of leaf c: the shape's, or λ_c K_λ + μ_c K_μ with materials per label. */
+/* K₀ of leaf c: the shape's, or λ_c K_λ + μ_c K_μ with materials per label
+ * (B-bar: the deviatoric part μ_c (K_μ − ⅔ K_λ), λ → −⅔μ as in hex.c). */
 static const double *nh_cell_K0(const nh_tissue *t, int c, double buf[576]) {
   int s = t->cell_shape[c];
   if (!t->n_labels) return t->K0 + 576 * s;
   const double *cm = t->cell_material + 3 * c, *Kl = t->Kl + 576 * s, *Km = t->Km + 576 * s;
-  for (int i = 0; i < 576; i++) buf[i] = cm[0] * Kl[i] + cm[1] * Km[i];
+  const double lam = t->material.formulation == NH_FORMULATION_BBAR ? -2.0 * cm[1] / 3.0 : cm[0];
+  for (int i = 0; i < 576; i++) buf[i] = lam * Kl[i] + cm[1] * Km[i];
   return buf;
 }
 
@@ -251,8 +259,8 @@ int nh_tissue_set_label_materials(nh_tissue *t, int n, const int *labels,
   t->n_labels = n;
   for (int s = 0; s < t->n_shapes; s++) { /* the key is the rest shape up to translation */
     double G[24], v;
-    nh_hex_stiffness(t->key + 24 * s, 1.0, 0.0, t->Kl + 576 * s, G, &v);
-    nh_hex_stiffness(t->key + 24 * s, 0.0, 1.0, t->Km + 576 * s, G, &v);
+    nh_hex_stiffness(t->key + 24 * s, 1.0, 0.0, 0, t->Kl + 576 * s, G, NULL, &v);
+    nh_hex_stiffness(t->key + 24 * s, 0.0, 1.0, 0, t->Km + 576 * s, G, NULL, &v);
   }
   for (int c = 0; c < t->cap_cells; c++) t->cell_material[3 * c] = NAN;
   return nh_tissue_update(t);
@@ -280,14 +288,61 @@ void nh_tissue_element(const nh_tissue *t, int c, const double *u, double f[24],
   double Xe[24], ue[24], R[9];
   nh_mesh_cell_coords(m, m->X, c, Xe);
   nh_mesh_cell_coords(m, u, c, ue);
-  double Kc[576];
-  nh_hex_corot(Xe, ue, nh_cell_K0(t, c, Kc), t->G0 + 24 * s, R, f, Kt);
+  double Kc[576], lambda, mu;
+  nh_tissue_cell_material(t, c, &lambda, &mu, NULL);
+  nh_hex_volumetric vol = {t->Gbar + 24 * s, lambda + 2.0 * mu / 3.0, t->volume[s]};
+  nh_hex_corot(Xe, ue, nh_cell_K0(t, c, Kc), t->G0 + 24 * s, nh_tissue_gbar(t, c) ? &vol : NULL, R,
+               f, Kt);
   double phi = m->fill[c];
   if (phi != 1.0) {
     for (int i = 0; i < 24; i++) f[i] *= phi;
     if (Kt)
       for (int i = 0; i < 576; i++) Kt[i] *= phi;
   }
+  int tie = c < t->cap_cell_tie ? t->cell_tie[c] : -1;
+  if (tie < 0) return;
+  const double *T = t->tie + 64 * tie;
+  for (int a = 0; a < 8; a++)
+    for (int b = 0; b < 8; b++) {
+      double w = T[8 * a + b];
+      for (int k = 0; k < 3; k++) f[3 * a + k] += w * ue[3 * b + k];
+      if (Kt)
+        for (int k = 0; k < 3; k++) Kt[24 * (3 * a + k) + 3 * b + k] += w;
+    }
+}
+
+int nh_tissue_set_ties(nh_tissue *t, int n_regions, const nh_region *regions, const double *k,
+                       double *volume) {
+  const nh_mesh *m = t->mesh;
+  if (m->n_cells > t->cap_cell_tie) {
+    int *ct = realloc(t->cell_tie, sizeof(int) * (size_t)m->n_cells);
+    if (!ct) return NH_ERROR(NH_ERR_MEMORY, "out of memory: ties");
+    t->cell_tie = ct;
+    t->cap_cell_tie = m->n_cells;
+  }
+  for (int c = 0; c < m->n_cells; c++) t->cell_tie[c] = -1;
+  t->n_ties = 0;
+  if (volume)
+    for (int r = 0; r < n_regions; r++) volume[r] = 0.0;
+  double T[64];
+  for (int l = 0; l < m->n_leaves; l++) {
+    int c = m->leaves[l], entry = -1;
+    for (int r = 0; r < n_regions; r++) {
+      double v = nh_mesh_region_tie(m, c, &regions[r], T);
+      if (v == 0.0) continue;
+      if (volume) volume[r] += v;
+      if (entry < 0) {
+        if (t->n_ties >= t->cap_ties &&
+            nh_grow((void **)&t->tie, &t->cap_ties, t->n_ties + 1, 64 * sizeof(double)))
+          return NH_ERROR(NH_ERR_MEMORY, "out of memory: ties");
+        entry = t->n_ties++;
+        memset(t->tie + 64 * entry, 0, 64 * sizeof(double));
+        t->cell_tie[c] = entry;
+      }
+      for (int i = 0; i < 64; i++) t->tie[64 * entry + i] += k[r] * T[i];
+    }
+  }
+  return NH_OK;
 }
 
 double nh_tissue_energy(const nh_tissue *t, const double *u) {
@@ -309,7 +364,19 @@ double nh_tissue_energy(const nh_tissue *t, const double *u) {
       for (int q = 0; q < 24; q++) kd += K0[24 * r + q] * d[q];
       e += d[r] * kd;
     }
+    const double *gbar = nh_tissue_gbar(t, c);
+    if (gbar) {
+      double theta = nh_hex_mean_dilatation(ue, gbar, NULL), lambda, mu;
+      nh_tissue_cell_material(t, c, &lambda, &mu, NULL);
+      e += (lambda + 2.0 * mu / 3.0) * t->volume[s] * theta * theta;
+    }
     energy += 0.5 * m->fill[c] * e;
+    int tie = c < t->cap_cell_tie ? t->cell_tie[c] : -1;
+    if (tie >= 0)
+      for (int a = 0; a < 8; a++)
+        for (int b = 0; b < 8; b++)
+          for (int k = 0; k < 3; k++)
+            energy += 0.5 * t->tie[64 * tie + 8 * a + b] * ue[3 * a + k] * ue[3 * b + k];
   }
   return energy;
 }
@@ -321,5 +388,10 @@ void nh_tissue_cell_stress(const nh_tissue *t, int c, const double *u, double s[
   nh_mesh_cell_coords(m, u, c, ue);
   double lambda, mu;
   nh_tissue_cell_material(t, c, &lambda, &mu, NULL);
-  nh_hex_center_stress(Xe, ue, t->G0 + 24 * t->cell_shape[c], lambda, mu, s);
+  nh_hex_center_stress(Xe, ue, t->G0 + 24 * t->cell_shape[c], nh_tissue_gbar(t, c), lambda, mu, s);
+}
+
+const double *nh_tissue_gbar(const nh_tissue *t, int c) {
+  if (t->material.formulation != NH_FORMULATION_BBAR) return NULL;
+  return t->Gbar + 24 * t->cell_shape[c];
 }

@@ -33,6 +33,8 @@
  * whose sub-cell midpoints have F above their sub-cell's circumradius does
  * not meet it.
  *
+ * The sphere (tests): F = |x − c| − R, the signed distance.
+ *
  * The box: F = maxₖ (|xₖ − cₖ| − hₖ); its ray entry and distances keep the
  * exact formulas the tools used before this module existed. */
 #include "mesh/mesh.h"
@@ -140,6 +142,17 @@ static int nh_domain_load(const nh_scene *s, nh_domain *d) {
   return NH_OK;
 }
 
+void nh_domain_sphere(const double center[3], double radius, nh_domain *d) {
+  memset(d, 0, sizeof *d);
+  d->kind = NH_DOMAIN_SPHERE;
+  for (int k = 0; k < 3; k++) {
+    d->center[k] = center[k];
+    d->half[k] = radius;
+    d->min[k] = center[k] - radius;
+    d->max[k] = center[k] + radius;
+  }
+}
+
 int nh_domain_from_scene(const nh_scene *s, nh_domain *d) {
   if (s->tissue.domain == NH_DOMAIN_BRAIN)
     nh_domain_brain(s->tissue.brain_center, s->tissue.brain_size, d);
@@ -164,7 +177,7 @@ void nh_domain_release(nh_domain *d) {
 }
 
 const char *nh_domain_name(const nh_domain *d) {
-  static const char *const names[] = {"box", "brain", "mask", "surface"};
+  static const char *const names[] = {"box", "brain", "mask", "surface", "sphere"};
   return names[d->kind];
 }
 
@@ -191,6 +204,8 @@ static double nh_level_rel(const nh_domain *d, const double r[3]) {
     return d->kind == NH_DOMAIN_MASK ? nh_image_level(d->image, x)
                                      : nh_surface_level(d->surface, x, d->cap);
   }
+  if (d->kind == NH_DOMAIN_SPHERE)
+    return sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2]) - d->half[0];
   double f = -INFINITY;
   for (int k = 0; k < 3; k++) f = fmax(f, fabs(r[k]) - d->half[k]);
   return f;
@@ -295,18 +310,22 @@ int nh_domain_ray_entry(const nh_domain *d, const double base[3], const double d
   }
   *tau = 0.5 * (lo + hi);
   nh_ray_point(base, dir, *tau, point);
-  /* Outward normal: ∇F by central differences of step 1e-6 L. */
-  const double e = 1e-6 * L;
-  double g[3], n2 = 0.0;
-  for (int i = 0; i < 3; i++) {
-    double p[3] = {point[0], point[1], point[2]}, m[3] = {point[0], point[1], point[2]};
-    p[i] += e, m[i] -= e;
-    g[i] = (nh_domain_level(d, p) - nh_domain_level(d, m)) / (2 * e);
-    n2 += g[i] * g[i];
-  }
-  double n = sqrt(n2);
+  double g[3];
+  nh_domain_gradient(d, point, g);
+  double n = sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
   for (int i = 0; i < 3; i++) normal[i] = n > 0 ? g[i] / n : 0.0;
   return 1;
+}
+
+double nh_domain_gradient(const nh_domain *d, const double x[3], double g[3]) {
+  /* central differences of step 1e-6 of the largest edge */
+  const double e = 1e-6 * nh_largest_edge(d);
+  for (int i = 0; i < 3; i++) {
+    double p[3] = {x[0], x[1], x[2]}, m[3] = {x[0], x[1], x[2]};
+    p[i] += e, m[i] -= e;
+    g[i] = (nh_domain_level(d, p) - nh_domain_level(d, m)) / (2 * e);
+  }
+  return nh_domain_level(d, x);
 }
 
 double nh_domain_segment_distance(const nh_domain *d, const double a[3], const double b[3]) {
@@ -391,6 +410,8 @@ static double nh_mask_volume(const nh_image *im) {
 }
 
 double nh_domain_volume(const nh_domain *d) {
+  if (d->kind == NH_DOMAIN_SPHERE)
+    return 4.0 / 3.0 * 3.14159265358979323846 * d->half[0] * d->half[0] * d->half[0];
   if (d->kind == NH_DOMAIN_BOX)
     return (d->max[0] - d->min[0]) * (d->max[1] - d->min[1]) * (d->max[2] - d->min[2]);
   if (d->kind == NH_DOMAIN_MASK) return nh_mask_volume(d->image);

@@ -75,6 +75,8 @@ typedef struct nh_domain {
 void nh_domain_box(const double min[3], const double max[3], nh_domain *domain);
 /* The brain of bounding box center ± size / 2 (size > 0). */
 void nh_domain_brain(const double center[3], const double size[3], nh_domain *domain);
+/* The ball of the given centre and radius (tests: no scene key builds it). */
+void nh_domain_sphere(const double center[3], double radius, nh_domain *domain);
 /* The scene's tissue.domain, reading its image or surface and the label
  * image (tissue.labels). Fails with NH_ERR_INPUT, message "FILE:LINE: KEY:
  * reason" at the scene's key: an unreadable or corrupt file, a label of
@@ -85,11 +87,14 @@ int nh_domain_from_scene(const nh_scene *scene, nh_domain *domain);
 void nh_domain_copy(nh_domain *dst, const nh_domain *src);
 /* Drop the references the domain holds (keeps kind and box). */
 void nh_domain_release(nh_domain *domain);
-/* "box", "brain", "mask" or "surface". */
+/* "box", "brain", "mask", "surface" or "sphere". */
 const char *nh_domain_name(const nh_domain *domain);
 
 /* F(x): negative inside, positive outside, 1-Lipschitz. */
 double nh_domain_level(const nh_domain *domain, const double x[3]);
+/* F(x), and its gradient g[3] by central differences (step 1e-6 of the
+ * largest edge). */
+double nh_domain_gradient(const nh_domain *domain, const double x[3], double g[3]);
 /* True if x lies strictly inside (box: min < x < max componentwise; else F < 0). */
 int nh_domain_inside(const nh_domain *domain, const double x[3]);
 
@@ -198,6 +203,10 @@ int nh_mesh_locate(const nh_mesh *mesh, const double x[3], int *cell, double xi[
 /* True if x lies in the region (closed, enlarged by tol); 0 for a label
  * region (it needs the label image: the mesh functions below test it). */
 int nh_region_contains(const nh_region *region, const double x[3], double tol);
+/* The region's smallest size: a sphere's radius, a cylinder's radius (or
+ * half its length if shorter), a box's smallest half-extent (a label
+ * region: +inf). */
+double nh_region_size(const nh_region *region);
 /* "box [..] - [..]", "sphere centre [..] radius r", "cylinder [..] - [..] radius r", "label N". */
 void nh_region_describe(const nh_region *region, char *buf, size_t cap);
 
@@ -216,6 +225,19 @@ int nh_mesh_nodes_in_region(const nh_mesh *mesh, const nh_region *region, unsign
  * Returns NH_ERR_INPUT (message at region->where) if V = 0. */
 int nh_mesh_region_load(const nh_mesh *mesh, const nh_region *region, const double force[3],
                         double *f);
+
+/* The fraction of leaf c's tissue that lies above the plane through `point`
+ * normal to `up` ((x − point)·up > 0), by 8³ sub-cell midpoints of the rest
+ * shape; tissue is every point on a box domain and the points inside the
+ * shape on an immersed one (a cell with no such point counts all its
+ * points). 0: all below, 1: all above. */
+double nh_mesh_cell_fraction_above(const nh_mesh *mesh, int c, const double point[3],
+                                   const double up[3]);
+
+/* The tie of leaf c to a region: T[8x8] = ∫ χ Nₐ N_b dV over the cell ∩
+ * region ∩ tissue (χ as for loads), by 6³ sub-cell midpoints; returns that
+ * volume (0: the cell does not meet the region, T all zero). */
+double nh_mesh_region_tie(const nh_mesh *mesh, int c, const nh_region *region, double T[64]);
 
 /* ---- refinement templates (mesh/template.c) ----
  * A template is a set of nodes in the parent's natural coordinates [-1, 1]³

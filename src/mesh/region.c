@@ -20,7 +20,13 @@
  * product of 1D linear factors the integral factorises into three exact 1D
  * integrals; that path serves box regions on box domains. Everything else
  * (sphere and cylinder regions, immersed domains, the distorted meshes of the
- * tests) is sampled by 6³ sub-cell midpoints. */
+ * tests) is sampled by 6³ sub-cell midpoints.
+ *
+ * The same sampling gives two more cell quantities: the fraction of a cell's
+ * tissue above a fluid level (the drainage of tissue.buoyancy.level) and the
+ * tie matrix ∫ χ Nₐ N_b dV over cell ∩ region, which turns a fixed region
+ * of an immersed domain into a stiff volumetric spring that converges to the
+ * region as the mesh refines (docs/theory.md §5, "Fixed regions"). */
 #include "mesh/mesh.h"
 
 #include <math.h>
@@ -60,6 +66,19 @@ int nh_region_contains(const nh_region *r, const double x[3], double tol) {
 static int nh_region_holds(const nh_domain *d, const nh_region *r, const double x[3], double tol) {
   if (r->kind == NH_REGION_LABEL) return d->labels && nh_image_label_at(d->labels, x) == r->label;
   return nh_region_contains(r, x, tol);
+}
+
+double nh_region_size(const nh_region *r) {
+  if (r->kind == NH_REGION_SPHERE) return r->radius;
+  if (r->kind == NH_REGION_CYLINDER) {
+    double len2 = 0.0;
+    for (int k = 0; k < 3; k++) len2 += (r->end[k] - r->start[k]) * (r->end[k] - r->start[k]);
+    return fmin(r->radius, 0.5 * sqrt(len2));
+  }
+  if (r->kind == NH_REGION_LABEL) return INFINITY;
+  double l = INFINITY;
+  for (int k = 0; k < 3; k++) l = fmin(l, 0.5 * (r->max[k] - r->min[k]));
+  return l;
 }
 
 void nh_region_describe(const nh_region *r, char *buf, size_t cap) {
@@ -103,6 +122,23 @@ static int nh_cell_is_box(const double Xe[24], double lo[3], double hi[3]) {
   return hi[0] > lo[0] && hi[1] > lo[1] && hi[2] > lo[2];
 }
 
+/* Midpoint n × n × n of the rest cell Xe: position, shape values, and the
+ * volume it stands for. */
+static void nh_cell_sample(const double Xe[24], int n, int i, int j, int k, double x[3],
+                           double N[8], double *dv) {
+  double xi[3] = {-1 + (2 * i + 1.0) / n, -1 + (2 * j + 1.0) / n, -1 + (2 * k + 1.0) / n};
+  double dN[8][3], J[9] = {0};
+  nh_hex_shape(xi, N);
+  nh_hex_dshape(xi, dN);
+  x[0] = x[1] = x[2] = 0.0;
+  for (int a = 0; a < 8; a++)
+    for (int p = 0; p < 3; p++) {
+      x[p] += N[a] * Xe[3 * a + p];
+      for (int q = 0; q < 3; q++) J[3 * p + q] += Xe[3 * a + p] * dN[a][q];
+    }
+  *dv = fabs(nh_mat3_det(J)) * 8.0 / (n * n * n);
+}
+
 /* ∫ χ N_a dV over cell ∩ region for the 8 nodes; returns ∫ χ dV. χ is 1 on
  * a box domain (the caller multiplies by φ) and the shape's indicator
  * otherwise. */
@@ -133,22 +169,13 @@ static double nh_cell_region_integrals(const nh_domain *d, const double Xe[24], 
     return vol;
   }
   const int n = 6;
-  double vol = 0.0;
+  double vol = 0.0, x[3], N[8], dv;
   for (int i = 0; i < n; i++)
     for (int j = 0; j < n; j++)
       for (int k = 0; k < n; k++) {
-        double xi[3] = {-1 + (2 * i + 1.0) / n, -1 + (2 * j + 1.0) / n, -1 + (2 * k + 1.0) / n};
-        double N[8], dN[8][3], x[3] = {0, 0, 0}, J[9] = {0};
-        nh_hex_shape(xi, N);
-        nh_hex_dshape(xi, dN);
-        for (int a = 0; a < 8; a++)
-          for (int p = 0; p < 3; p++) {
-            x[p] += N[a] * Xe[3 * a + p];
-            for (int q = 0; q < 3; q++) J[3 * p + q] += Xe[3 * a + p] * dN[a][q];
-          }
+        nh_cell_sample(Xe, n, i, j, k, x, N, &dv);
         if (!nh_region_holds(d, r, x, 0.0)) continue;
         if (immersed && !(nh_domain_level(d, x) < 0.0)) continue;
-        double dv = fabs(nh_mat3_det(J)) * 8.0 / (n * n * n);
         for (int a = 0; a < 8; a++) w[a] += N[a] * dv;
         vol += dv;
       }
@@ -173,4 +200,57 @@ int nh_mesh_region_load(const nh_mesh *m, const nh_region *r, const double force
       for (int k = 0; k < 3; k++) f[3 * m->cells[8 * c + a] + k] += force[k] * chi * w[a] / volume;
   }
   return NH_OK;
+}
+
+double nh_mesh_cell_fraction_above(const nh_mesh *m, int c, const double point[3],
+                                   const double up[3]) {
+  const int n = 8, immersed = m->domain.kind != NH_DOMAIN_BOX;
+  double Xe[24], x[3], N[8], dv;
+  double tissue = 0.0, above = 0.0, all = 0.0, all_above = 0.0;
+  nh_mesh_cell_coords(m, m->X, c, Xe);
+  for (int i = 0; i < n; i++)
+    for (int j = 0; j < n; j++)
+      for (int k = 0; k < n; k++) {
+        nh_cell_sample(Xe, n, i, j, k, x, N, &dv);
+        int up_side =
+            (x[0] - point[0]) * up[0] + (x[1] - point[1]) * up[1] + (x[2] - point[2]) * up[2] > 0;
+        all += dv, all_above += up_side ? dv : 0.0;
+        if (immersed && !(nh_domain_level(&m->domain, x) < 0.0)) continue;
+        tissue += dv, above += up_side ? dv : 0.0;
+      }
+  return tissue > 0.0 ? above / tissue : all_above / all;
+}
+
+double nh_mesh_region_tie(const nh_mesh *m, int c, const nh_region *r, double T[64]) {
+  const int n = 6, immersed = m->domain.kind != NH_DOMAIN_BOX;
+  double Xe[24], x[3], N[8], dv, vol = 0.0;
+  for (int i = 0; i < 64; i++) T[i] = 0.0;
+  nh_mesh_cell_coords(m, m->X, c, Xe);
+  /* Skip cells far from the region: the bounding boxes do not overlap. */
+  double lo[3], hi[3], rlo[3], rhi[3];
+  for (int k = 0; k < 3; k++) lo[k] = hi[k] = Xe[k];
+  for (int a = 1; a < 8; a++)
+    for (int k = 0; k < 3; k++)
+      lo[k] = fmin(lo[k], Xe[3 * a + k]), hi[k] = fmax(hi[k], Xe[3 * a + k]);
+  for (int k = 0; k < 3; k++) {
+    if (r->kind == NH_REGION_SPHERE)
+      rlo[k] = r->center[k] - r->radius, rhi[k] = r->center[k] + r->radius;
+    else if (r->kind == NH_REGION_CYLINDER)
+      rlo[k] = fmin(r->start[k], r->end[k]) - r->radius,
+      rhi[k] = fmax(r->start[k], r->end[k]) + r->radius;
+    else
+      rlo[k] = r->min[k], rhi[k] = r->max[k];
+    if (hi[k] < rlo[k] || lo[k] > rhi[k]) return 0.0;
+  }
+  for (int i = 0; i < n; i++)
+    for (int j = 0; j < n; j++)
+      for (int k = 0; k < n; k++) {
+        nh_cell_sample(Xe, n, i, j, k, x, N, &dv);
+        if (!nh_region_contains(r, x, 0.0)) continue;
+        if (immersed && !(nh_domain_level(&m->domain, x) < 0.0)) continue;
+        for (int a = 0; a < 8; a++)
+          for (int b = 0; b < 8; b++) T[8 * a + b] += N[a] * N[b] * dv;
+        vol += dv;
+      }
+  return vol;
 }

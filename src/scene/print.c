@@ -121,9 +121,10 @@ void nh_scene_print(const nh_scene *s, void *stdio_file) {
             (s->tissue.grid[0] + 1) * (s->tissue.grid[1] + 1) * (s->tissue.grid[2] + 1));
   }
   if (s->tissue.labels_file[0]) fprintf(f, "labels    %s\n", s->tissue.labels_file);
-  fprintf(f, "material  E = %g Pa, nu = %g, density %g kg/m^3%s\n", s->tissue.young,
+  fprintf(f, "material  E = %g Pa, nu = %g, density %g kg/m^3%s, %s hexahedra\n", s->tissue.young,
           s->tissue.poisson, s->tissue.density,
-          s->tissue.n_materials ? " (voxels of other labels)" : "");
+          s->tissue.n_materials ? " (voxels of other labels)" : "",
+          s->tissue.formulation == NH_FORMULATION_FULL ? "fully integrated" : "B-bar");
   for (int i = 0; i < s->tissue.n_materials; ++i) {
     const nh_label_material *m = &s->tissue.materials[i];
     fprintf(f, "          label %d: E = %g Pa, nu = %g, density %g kg/m^3\n", m->label, m->young,
@@ -134,12 +135,17 @@ void nh_scene_print(const nh_scene *s, void *stdio_file) {
   if (s->tissue.buoyant) {
     fprintf(f, "buoyancy  before %g, after %g of the weight", s->tissue.buoyancy_before,
             s->tissue.buoyancy_after);
+    if (s->tissue.buoyancy_has_level)
+      fprintf(f, ", fluid level through [%g, %g, %g]", s->tissue.buoyancy_level[0],
+              s->tissue.buoyancy_level[1], s->tissue.buoyancy_level[2]);
     if (s->tissue.buoyancy_schedule.n > 0)
       print_schedule(f, &s->tissue.buoyancy_schedule);
     else
       fprintf(f, ", changed at t = 0");
     fprintf(f, "; the tissue carries (before - b(t)) of its weight\n");
   }
+  if (s->tissue.skull)
+    fprintf(f, "skull     rigid, frictionless, CSF gap %g m\n", s->tissue.skull_gap);
   fprintf(f, "fixed     %d region%s\n", s->tissue.n_fixed, s->tissue.n_fixed == 1 ? "" : "s");
   for (int i = 0; i < s->tissue.n_fixed; ++i) {
     fprintf(f, "          tissue.fixed.%d: ", i);

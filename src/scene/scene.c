@@ -524,10 +524,12 @@ static int get_fraction(const nh_ctx *c, const nh_yaml_node *map, const char *pa
   return NH_OK;
 }
 
-/* tissue.buoyancy: {before: b0, after: b1, schedule: [[t, s], ...]}. Without
- * a schedule the change is a step at t = 0: s = 1 from the first step on. */
+/* tissue.buoyancy: {before: b0, after: b1, schedule: [[t, s], ...], level:
+ * [x, y, z]}. Without a schedule the change is a step at t = 0: s = 1 from
+ * the first step on. `level` needs gravity (read before) to say what is
+ * above it. */
 static int read_buoyancy(const nh_ctx *c, const nh_yaml_node *tissue, nh_scene *s) {
-  static const char *const keys[] = {"before", "after", "schedule", NULL};
+  static const char *const keys[] = {"before", "after", "schedule", "level", NULL};
   const char *path = "tissue.buoyancy";
   const nh_yaml_node *m, *schedule;
   NH_TRY(section(c, tissue, "tissue", "buoyancy", 0, &m));
@@ -539,6 +541,41 @@ static int read_buoyancy(const nh_ctx *c, const nh_yaml_node *tissue, nh_scene *
   NH_TRY(field(c, m, path, "schedule", 0, &schedule));
   if (schedule)
     NH_TRY(read_schedule(c, schedule, "tissue.buoyancy.schedule", &s->tissue.buoyancy_schedule));
+  const nh_yaml_node *at_level;
+  NH_TRY(get_vec3(c, m, path, "level", 0, s->tissue.buoyancy_level, &at_level));
+  s->tissue.buoyancy_has_level = at_level != NULL;
+  double g2 =
+      s->gravity[0] * s->gravity[0] + s->gravity[1] * s->gravity[1] + s->gravity[2] * s->gravity[2];
+  if (at_level && !(g2 > 0))
+    return fail(c, at_level, "tissue.buoyancy.level",
+                "a fluid level needs gravity (its direction says what lies above the level); "
+                "gravity is zero");
+  return NH_OK;
+}
+
+/* tissue.skull: {gap: g >= 0 (default 0)}, an immersed domain only. */
+static int read_skull(const nh_ctx *c, const nh_yaml_node *tissue, nh_scene *s) {
+  static const char *const keys[] = {"gap", NULL};
+  const nh_yaml_node *m, *at, *key;
+  NH_TRY(section(c, tissue, "tissue", "skull", 0, &m));
+  nh_yaml_get(tissue, "skull", &key);
+  if (!key) return NH_OK;
+  if (m) NH_TRY(check_keys(c, m, "tissue.skull", keys));
+  make_where(c, key, "tissue.skull", s->tissue.where_skull);
+  s->tissue.skull = 1;
+  s->tissue.skull_gap = 0.0;
+  if (m) {
+    NH_TRY(get_number(c, m, "tissue.skull", "gap", 0, &s->tissue.skull_gap, &at));
+    NH_TRY(at_least(c, at, "tissue.skull", "gap", s->tissue.skull_gap, 0, 0));
+  }
+  if (s->tissue.domain == NH_DOMAIN_BOX)
+    return fail(c, key, "tissue.skull",
+                "needs an immersed domain (brain): the skull is the domain's surface offset by "
+                "the gap");
+  if (s->time.mode != NH_MODE_DYNAMIC)
+    return fail(c, key, "tissue.skull",
+                "needs time.mode: dynamic (the contact rows are solved in the backward-Euler "
+                "step; for a quasi-static shift, run dynamic with damping to rest)");
   return NH_OK;
 }
 
@@ -588,17 +625,39 @@ static int read_time(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   return NH_OK;
 }
 
-/* A material mapping {young, poisson, density} at `m` (key `path`): young > 0
+/* One of the words `choices` (NULL-terminated); *out = its index. */
+static int as_choice(const nh_ctx *c, const nh_yaml_node *n, const char *key,
+                     const char *const *choices, int *out) {
+  char d[96], expected[256] = "";
+  if (n->kind == NH_YAML_SCALAR && !nh_yaml_is_null(n))
+    for (int i = 0; choices[i]; ++i)
+      if (!strcmp(n->text, choices[i])) return *out = i, NH_OK;
+  for (int i = 0; choices[i]; ++i) {
+    size_t len = strlen(expected);
+    snprintf(expected + len, sizeof expected - len, "%s%s",
+             i == 0 ? "" : (choices[i + 1] ? ", " : " or "), choices[i]);
+  }
+  return fail(c, n, key, "expected %s, got %s", expected, describe(n, d, sizeof d));
+}
+
+/* A material mapping {young, poisson, density} at `m` (key `path`), and
+ * `formulation` (bbar | full) where that pointer is not NULL: young > 0
  * is required; poisson must lie in (-1, 0.5) and is required if
  * `poisson_required`; density is > 0 (`density_strict`) or >= 0. An absent
  * optional key leaves its target (the caller's default) untouched. */
 static int read_material_map(const nh_ctx *c, const nh_yaml_node *m, const char *path,
                              int poisson_required, int density_strict, double *young,
-                             double *poisson, double *density) {
+                             double *poisson, double *density, int *formulation) {
   static const char *const keys[] = {"young", "poisson", "density", NULL};
+  static const char *const tissue_keys[] = {"young", "poisson", "density", "formulation", NULL};
+  static const char *const formulations[] = {"bbar", "full", NULL};
   char key[NH_KEY_MAX];
   const nh_yaml_node *at;
-  NH_TRY(check_keys(c, m, path, keys));
+  NH_TRY(check_keys(c, m, path, formulation ? tissue_keys : keys));
+  if (formulation) {
+    NH_TRY(field(c, m, path, "formulation", 0, &at));
+    if (at) NH_TRY(as_choice(c, at, join(key, path, "formulation"), formulations, formulation));
+  }
   NH_TRY(get_number(c, m, path, "young", 1, young, &at));
   NH_TRY(at_least(c, at, path, "young", *young, 0, 1));
   NH_TRY(get_number(c, m, path, "poisson", poisson_required, poisson, &at));
@@ -617,12 +676,13 @@ static int read_material_map(const nh_ctx *c, const nh_yaml_node *m, const char 
 /* PARENT.material (required): read_material_map. */
 static int read_material(const nh_ctx *c, const nh_yaml_node *parent, const char *parent_path,
                          int poisson_required, int density_strict, double *young, double *poisson,
-                         double *density) {
+                         double *density, int *formulation) {
   char path[NH_KEY_MAX];
   const nh_yaml_node *m;
   join(path, parent_path, "material");
   NH_TRY(section(c, parent, parent_path, "material", 1, &m));
-  return read_material_map(c, m, path, poisson_required, density_strict, young, poisson, density);
+  return read_material_map(c, m, path, poisson_required, density_strict, young, poisson, density,
+                           formulation);
 }
 
 /* PARENT.damping {mass, stiffness} (optional): Rayleigh alpha, beta >= 0. */
@@ -806,7 +866,8 @@ static int read_materials(const nh_ctx *c, const nh_yaml_node *t, nh_scene *s) {
       return fail(c, m->items[i], key, "expected a mapping {young, poisson, density}, got %s",
                   describe(m->items[i], d, sizeof d));
     lm->poisson = s->tissue.poisson, lm->density = s->tissue.density;
-    NH_TRY(read_material_map(c, m->items[i], key, 0, 1, &lm->young, &lm->poisson, &lm->density));
+    NH_TRY(
+        read_material_map(c, m->items[i], key, 0, 1, &lm->young, &lm->poisson, &lm->density, NULL));
     make_where(c, m->keys[i], key, lm->where);
     s->tissue.n_materials = i + 1;
   }
@@ -971,8 +1032,8 @@ static int read_limits(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
 }
 
 static int read_tissue(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
-  static const char *const keys[] = {"domain", "grid",     "material", "damping",   "fixed",
-                                     "loads",  "buoyancy", "labels",   "materials", NULL};
+  static const char *const keys[] = {"domain",   "grid",   "material",  "damping", "fixed", "loads",
+                                     "buoyancy", "labels", "materials", "skull",   NULL};
   static const char *const domain_keys[] = {"box", "brain", "mask", "surface", NULL};
   char key[NH_KEY_MAX];
   const nh_yaml_node *t, *domain, *n;
@@ -1015,11 +1076,14 @@ static int read_tissue(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   if (s->tissue.domain == NH_DOMAIN_BOX) NH_TRY(check_box_cells(c, domain->items[0], s));
 
   s->tissue.density = 1000;
+  int formulation = 0; /* bbar: docs/theory.md §2b */
   NH_TRY(read_material(c, t, "tissue", 1, 1, &s->tissue.young, &s->tissue.poisson,
-                       &s->tissue.density));
+                       &s->tissue.density, &formulation));
+  s->tissue.formulation = formulation ? NH_FORMULATION_FULL : NH_FORMULATION_BBAR;
   NH_TRY(read_materials(c, t, s));
   NH_TRY(read_damping(c, t, "tissue", &s->tissue.damping_mass, &s->tissue.damping_stiffness));
   NH_TRY(read_buoyancy(c, t, s));
+  NH_TRY(read_skull(c, t, s));
 
   /* fixed: where_fixed points at the key `fixed:`, or at `tissue:` without it. */
   const nh_yaml_node *fixed, *fixed_key, *tissue_key;
@@ -1050,21 +1114,6 @@ static int read_tissue(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
     }
   }
   return NH_OK;
-}
-
-/* One of the words `choices` (NULL-terminated); *out = its index. */
-static int as_choice(const nh_ctx *c, const nh_yaml_node *n, const char *key,
-                     const char *const *choices, int *out) {
-  char d[96], expected[256] = "";
-  if (n->kind == NH_YAML_SCALAR && !nh_yaml_is_null(n))
-    for (int i = 0; choices[i]; ++i)
-      if (!strcmp(n->text, choices[i])) return *out = i, NH_OK;
-  for (int i = 0; choices[i]; ++i) {
-    size_t len = strlen(expected);
-    snprintf(expected + len, sizeof expected - len, "%s%s",
-             i == 0 ? "" : (choices[i + 1] ? ", " : " or "), choices[i]);
-  }
-  return fail(c, n, key, "expected %s, got %s", expected, describe(n, d, sizeof d));
 }
 
 /* adapt.template (text `value`, at node `at`, NULL for the default) to a
@@ -1563,7 +1612,7 @@ static int read_tool(const nh_ctx *c, const nh_yaml_node *list, int i, nh_scene 
                 t->radius, t->inner_radius);
   NH_TRY(get_int(c, node, path, "elements", &t->elements, &at));
   NH_TRY(at_least(c, at, path, "elements", t->elements, 1, 0));
-  NH_TRY(read_material(c, node, path, 0, 0, &t->young, &t->poisson, &t->density));
+  NH_TRY(read_material(c, node, path, 0, 0, &t->young, &t->poisson, &t->density, NULL));
   NH_TRY(read_damping(c, node, path, &t->damping_mass, &t->damping_stiffness));
   NH_TRY(read_trajectory(c, node, path, t));
   if (!t->planned) {

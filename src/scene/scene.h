@@ -19,6 +19,11 @@
 #define NH_PATH_MAX  1024
 
 typedef enum { NH_MODE_DYNAMIC = 0, NH_MODE_STATIC = 1 } nh_time_mode;
+/* The tissue element's stiffness: B-bar (mean dilatation: the deviatoric
+ * part by 2x2x2 Gauss points, the volumetric part with the element's mean
+ * volume change; docs/theory.md §2b) or fully integrated (locks as ν → 0.5). */
+typedef enum { NH_FORMULATION_BBAR = 0, NH_FORMULATION_FULL = 1 } nh_formulation;
+
 typedef enum {
   NH_REGION_BOX = 0,
   NH_REGION_SPHERE = 1,
@@ -28,8 +33,9 @@ typedef enum {
 typedef enum {
   NH_DOMAIN_BOX = 0,
   NH_DOMAIN_BRAIN = 1,
-  NH_DOMAIN_MASK = 2,   /* tissue.domain.mask: labelled voxels of a NIfTI image */
-  NH_DOMAIN_SURFACE = 3 /* tissue.domain.surface: a closed triangulated surface (STL) */
+  NH_DOMAIN_MASK = 2,    /* tissue.domain.mask: labelled voxels of a NIfTI image */
+  NH_DOMAIN_SURFACE = 3, /* tissue.domain.surface: a closed triangulated surface (STL) */
+  NH_DOMAIN_SPHERE = 4   /* a ball, built by tests only (nh_domain_sphere): no scene key */
 } nh_domain_kind;
 
 /* A region of space (closed): exactly one of box, sphere, cylinder, label. */
@@ -204,8 +210,9 @@ typedef struct nh_scene {
     double young;   /* tissue.material.young, Pa (required, > 0): every voxel without a material */
     double poisson; /* tissue.material.poisson (required, in (-1, 0.5)) */
     double density; /* tissue.material.density, kg/m³ (default 1000, > 0) */
-    double damping_mass;      /* tissue.damping.mass (Rayleigh α, 1/s, default 0, >= 0) */
-    double damping_stiffness; /* tissue.damping.stiffness (Rayleigh β, s, default 0, >= 0) */
+    nh_formulation formulation; /* tissue.material.formulation: bbar (default) | full */
+    double damping_mass;        /* tissue.damping.mass (Rayleigh α, 1/s, default 0, >= 0) */
+    double damping_stiffness;   /* tissue.damping.stiffness (Rayleigh β, s, default 0, >= 0) */
     /* tissue.buoyancy {before, after, schedule} (optional): the rest shape is the equilibrium
        under gravity with the fraction `before` of the weight carried by buoyancy, so the
        tissue's body force is ρ g (before − b(t)), b(t) = before + (after − before) s(t)
@@ -214,6 +221,12 @@ typedef struct nh_scene {
     double buoyancy_before;        /* tissue.buoyancy.before, in [0, 1] (required) */
     double buoyancy_after;         /* tissue.buoyancy.after, in [0, 1] (required) */
     nh_schedule buoyancy_schedule; /* tissue.buoyancy.schedule (default: 1 from t = 0 on) */
+    int buoyancy_has_level;        /* tissue.buoyancy.level given */
+    double buoyancy_level[3];      /* tissue.buoyancy.level: a point of the fluid level (the
+                                      plane normal to gravity); only tissue above it drains */
+    int skull;                     /* tissue.skull given (immersed domains, dynamic mode) */
+    double skull_gap; /* tissue.skull.gap, m (default 0, >= 0): the CSF gap to the skull */
+    char where_skull[NH_WHERE_MAX];
     int n_fixed;
     nh_region *fixed; /* tissue.fixed: list of {box | sphere | cylinder} */
     int n_loads;

@@ -94,6 +94,7 @@ void nh_sim_destroy(nh_sim **sim) {
   free(s->restore_tools);
   free(s->tools_start);
   free(s->f_ext);
+  free(s->drained);
   free(s->load_unit);
   free(s->probe_cell);
   free(s->probe_xi);
@@ -144,7 +145,8 @@ void nh_sim_external_force(const nh_sim *s, double t, double *f) {
   const nh_scene *sc = s->scene;
   double g[3]; /* gravity by its schedule, less the tissue's buoyed part */
   nh_scene_tissue_gravity(sc, t, g);
-  for (int i = 0; i < n; i++) f[i] = s->tissue->mass[i / 3] * g[i % 3];
+  const double *mass = sc->tissue.buoyant ? s->drained : s->tissue->mass;
+  for (int i = 0; i < n; i++) f[i] = mass[i / 3] * g[i % 3];
   for (int l = 0; l < sc->tissue.n_loads; l++) {
     double factor = nh_schedule_eval(&sc->tissue.loads[l].schedule, t);
     if (factor == 0.0) continue;
@@ -431,6 +433,11 @@ static int nh_resize(double **a, int n_nodes, int comps) {
 
 /* Everything that depends on the mesh, built at creation (first = 1, which
  * also reports scene errors only the mesh reveals) and after refinement. */
+/* A fixed region's tie stiffness is NH_TIE_STIFFNESS E / ℓ², ℓ its smallest
+ * size (nh_region_size): the tissue inside moves by about 1/NH_TIE_STIFFNESS
+ * of what an elastic body of size ℓ would (docs/theory.md §5). */
+#define NH_TIE_STIFFNESS 1.0e3
+
 static int nh_sim_setup_mesh(nh_sim *s, int first) {
   const nh_scene *sc = s->scene;
   nh_mesh *m = s->mesh;
@@ -442,9 +449,15 @@ static int nh_sim_setup_mesh(nh_sim *s, int first) {
   NH_TRY(nh_resize(&s->x, nn, 3));
   NH_TRY(nh_resize(&s->u_start, nn, 3));
   NH_TRY(nh_resize(&s->f_ext, nn, 3));
+  NH_TRY(nh_resize(&s->drained, nn, 1));
   NH_TRY(nh_resize(&s->load_unit, nn, 3 * (sc->tissue.n_loads ? sc->tissue.n_loads : 1)));
+  /* Fixed regions (docs/theory.md §5, "Fixed regions"): on a box domain the
+   * nodes inside; on an immersed one a stiff volumetric tie over the
+   * region's tissue, which converges to the region under refinement. */
+  const int immersed = m->domain.kind != NH_DOMAIN_BOX;
   for (int r = 0; r < sc->tissue.n_fixed; r++) {
     const nh_region *reg = &sc->tissue.fixed[r];
+    if (immersed && reg->kind != NH_REGION_LABEL) continue; /* tied below */
     int count = nh_mesh_nodes_in_region(m, reg, s->fixed);
     char what[256];
     nh_region_describe(reg, what, sizeof what);
@@ -452,7 +465,8 @@ static int nh_sim_setup_mesh(nh_sim *s, int first) {
              reg->where, what);
   }
   if (first) {
-    nh_material mat = {sc->tissue.young, sc->tissue.poisson, sc->tissue.density};
+    nh_material mat = {sc->tissue.young, sc->tissue.poisson, sc->tissue.density,
+                       sc->tissue.formulation};
     NH_TRY(nh_tissue_create(m, &mat, &s->tissue));
     if (sc->tissue.n_materials) {
       int n = sc->tissue.n_materials, *labels = malloc(sizeof(int) * (size_t)n);
@@ -461,7 +475,7 @@ static int nh_sim_setup_mesh(nh_sim *s, int first) {
       for (int i = 0; i < n && !rc; i++) {
         const nh_label_material *lm = &sc->tissue.materials[i];
         labels[i] = lm->label;
-        mats[i] = (nh_material){lm->young, lm->poisson, lm->density};
+        mats[i] = (nh_material){lm->young, lm->poisson, lm->density, sc->tissue.formulation};
       }
       if (!rc) rc = nh_tissue_set_label_materials(s->tissue, n, labels, mats);
       free(labels), free(mats);
@@ -469,6 +483,43 @@ static int nh_sim_setup_mesh(nh_sim *s, int first) {
     }
   } else {
     NH_TRY(nh_tissue_update(s->tissue));
+  }
+  if (immersed && sc->tissue.n_fixed > 0) {
+    int nr = sc->tissue.n_fixed;
+    double *k = malloc(sizeof(double) * 2 * (size_t)nr), *vol = k + nr;
+    if (!k) return NH_ERROR(NH_ERR_MEMORY, "out of memory: ties");
+    for (int r = 0; r < nr; r++) {
+      double l = nh_region_size(&sc->tissue.fixed[r]);
+      k[r] = l > 0.0 && isfinite(l) ? NH_TIE_STIFFNESS * sc->tissue.young / (l * l) : 0.0;
+    }
+    int rc = nh_tissue_set_ties(s->tissue, nr, sc->tissue.fixed, k, vol);
+    for (int r = 0; r < nr && !rc; r++)
+      if (sc->tissue.fixed[r].kind != NH_REGION_LABEL && !(vol[r] > 0.0)) {
+        char what[256];
+        nh_region_describe(&sc->tissue.fixed[r], what, sizeof what);
+        rc = NH_ERROR(first ? NH_ERR_INPUT : NH_ERR_INTERNAL,
+                      "%s: the %s holds no tissue (on an immersed domain a fixed region ties the "
+                      "tissue inside it, so it needs a volume inside the shape)",
+                      sc->tissue.fixed[r].where, what);
+      }
+    free(k);
+    NH_TRY(rc);
+  }
+  /* The drained mass: all of it, or the part above the fluid level. */
+  memcpy(s->drained, s->tissue->mass, sizeof(double) * (size_t)nn);
+  if (sc->tissue.buoyant && sc->tissue.buoyancy_has_level) {
+    const double *g = sc->gravity;
+    double gn = sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]),
+           up[3] = {-g[0] / gn, -g[1] / gn, -g[2] / gn};
+    memset(s->drained, 0, sizeof(double) * (size_t)nn);
+    for (int l = 0; l < m->n_leaves; l++) {
+      int c = m->leaves[l];
+      double above = nh_mesh_cell_fraction_above(m, c, sc->tissue.buoyancy_level, up);
+      double rho;
+      nh_tissue_cell_material(s->tissue, c, NULL, NULL, &rho);
+      double mc = rho * m->fill[c] * s->tissue->volume[s->tissue->cell_shape[c]] / 8.0 * above;
+      for (int a = 0; a < 8; a++) s->drained[m->cells[8 * c + a]] += mc;
+    }
   }
   memset(s->load_unit, 0, sizeof(double) * (size_t)n * (size_t)sc->tissue.n_loads);
   for (int l = 0; l < sc->tissue.n_loads; l++)

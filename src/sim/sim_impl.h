@@ -35,6 +35,8 @@ struct nh_sim {
   double *u, *v;     /* displacement and velocity, 3 per node */
   double *x;         /* current positions X + u, for output */
   double *f_ext;     /* 3 per node, work */
+  double *drained;   /* per node: the lumped mass that loses buoyancy (tissue above the
+                        fluid level; the whole mass without tissue.buoyancy.level) */
   double *load_unit; /* n_loads x 3 n: nodal forces of each load at factor 1 */
   int *probe_cell;   /* embedded points: the probes, then the targets */
   double *probe_xi;  /* 3 per point */

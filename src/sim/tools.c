@@ -64,20 +64,24 @@ static int nh_sim_tools_check_travel(const nh_sim *s) {
 
 int nh_sim_tools_build(nh_sim *s) {
   const nh_scene *sc = s->scene;
-  if (sc->n_tools == 0) return NH_OK;
+  if (sc->n_tools == 0 && !sc->tissue.skull) return NH_OK;
+  const char *where = sc->n_tools > 0 ? sc->tools[0].where : sc->tissue.where_skull;
   NH_CHECK(sc->time.mode == NH_MODE_DYNAMIC, NH_ERR_INPUT,
-           "%s: tools need time.mode: dynamic (the quasi-static mode has no tools yet)",
-           sc->tools[0].where);
+           "%s: tools need time.mode: dynamic (the quasi-static mode has no tools yet)", where);
   NH_CHECK(!sc->adapt.enabled || sc->adapt.hanging == NH_HANGING_ELIMINATE, NH_ERR_INPUT,
            "%s: adapt.hanging: lagrange cannot be combined with tools (use eliminate)",
            sc->adapt.where);
+  NH_CHECK(!s->options.restart_dir || !sc->tissue.skull, NH_ERR_INPUT,
+           "%s: restarting a run with a skull is not supported yet (the checkpoint holds no "
+           "skull contact state): run it again from the start",
+           where);
   NH_TRY(nh_sim_tools_check_travel(s));
   NH_TRY(nh_contact_create(sc, s->mesh, &s->contact));
   if (s->options.restart_dir) {
     NH_CHECK(s->restore_tools, NH_ERR_INPUT,
              "%s: --restart: the checkpoint in %s holds no tool state (written by an older "
              "needlehex): run it again from the start",
-             sc->tools[0].where, s->options.restart_dir);
+             where, s->options.restart_dir);
     int rc = nh_contact_state_load(s->contact, s->restore_tools, s->restore_tools_size);
     if (rc == NH_ERR_INPUT)
       return NH_ERROR(rc, "--restart: %s: %s", s->options.restart_dir, nh_error_message());
@@ -85,7 +89,7 @@ int nh_sim_tools_build(nh_sim *s) {
     free(s->restore_tools);
     s->restore_tools = NULL;
   }
-  s->tool_pvd = nh_calloc((size_t)sc->n_tools, sizeof *s->tool_pvd);
+  s->tool_pvd = nh_calloc((size_t)(sc->n_tools ? sc->n_tools : 1), sizeof *s->tool_pvd);
   if (!s->tool_pvd) return NH_ERROR(NH_ERR_MEMORY, "out of memory: tools");
   return NH_OK;
 }

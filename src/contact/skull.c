@@ -1,0 +1,247 @@
+/* skull.c — frictionless unilateral contact of the brain with a rigid skull
+ * (docs/interaction.md, "Skull contact"; docs/theory.md §5c).
+ *
+ * The skull is the tissue's implicit surface offset outwards by the CSF gap:
+ * with φ(x) = F(x) / |∇F(x)| (F the domain's level function; φ is the signed
+ * distance to first order, exactly for a sphere), the tissue must stay where
+ * φ ≤ gap. Contact points are points of the immersed surface F = 0 of the
+ * rest shape, one per cut leaf, each carrying the surface area it stands for:
+ * with 6³ sub-cell midpoints xₛ of volume dvₛ and the one-sided smeared
+ * delta (inside only: the cells just outside the shape are not in the mesh)
+ *   δ_ε(φ) = 2 max(0, 1 + φ/ε) / ε for φ ≤ 0,   ε = 1.5 × the sub-cell edge,
+ * the cell's area is A = Σₛ δ_ε(φₛ) dvₛ (→ ∫ δ(φ) dV, the area of the
+ * surface in the cell), and its point is the δ-weighted mean of the
+ * projections xₛ − φₛ n(xₛ), projected onto F = 0 by three more steps. The
+ * points are material points (cell, ξ), found again after refinement.
+ *
+ * Each step, point i at its current position x = X + u(X) gives one row
+ * of the constraint solver (nh_rows, no tool part):
+ *   g = gap − φ(x),   direction n = −∇F/|∇F| at x (inwards),   λ ≥ 0,
+ * so the step enforces n·v + g/h ≥ 0 with λ (w = 0) complementary: the
+ * point ends the step inside the skull, and only pushes are transmitted
+ * (frictionless: no tangential row). The normal is re-evaluated at the
+ * current position every step, so the brain may slide along the curved
+ * skull. Only points whose gap is below a margin (twice what their
+ * current outward speed closes in a step, plus 1 % of their cell's edge)
+ * or that pushed in the last step get a row: leaving the others out keeps
+ * W = J A⁻¹ Jᵀ small; one that closes faster gets its row the next step
+ * (and its violation g < 0 is then removed within that step). λ is warm-started
+ * from the point's previous step. The rows' impulses λ / h are the contact
+ * forces; λ / (h A) is the contact pressure. */
+#include "contact/contact.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+typedef struct {
+  double X[3];  /* rest position on F = 0 */
+  double area;  /* m², the surface it stands for */
+  int cell;     /* leaf holding X */
+  double xi[3]; /* its natural coordinates */
+  double edge;  /* that leaf's largest edge, m */
+  double lam;   /* last impulse (N s), warm start */
+  int row;      /* its row this step, or −1 */
+} nh_skull_point;
+
+struct nh_skull {
+  nh_domain domain;
+  double gap;
+  nh_skull_point *p;
+  int n, cap;
+  double force[3]; /* last step's total contact force on the tissue, N */
+  int active;      /* rows with λ > 0 in the last step */
+};
+
+int nh_skull_create(const nh_domain *domain, double gap, nh_skull **out) {
+  *out = NULL;
+  NH_CHECK(domain->kind != NH_DOMAIN_BOX, NH_ERR_INPUT,
+           "skull contact needs an immersed domain (its surface is the domain's implicit one)");
+  NH_CHECK(gap >= 0.0 && isfinite(gap), NH_ERR_INPUT, "skull gap %g must be >= 0", gap);
+  nh_skull *s = nh_calloc(1, sizeof *s);
+  if (!s) return NH_ERR_MEMORY;
+  s->domain = *domain;
+  s->gap = gap;
+  *out = s;
+  return NH_OK;
+}
+
+void nh_skull_destroy(nh_skull **skull) {
+  if (!skull || !*skull) return;
+  free((*skull)->p);
+  free(*skull);
+  *skull = NULL;
+}
+
+/* φ = F/|∇F| and the outward unit normal at x. */
+static double nh_skull_distance(const nh_domain *d, const double x[3], double n[3]) {
+  double g[3], f = nh_domain_gradient(d, x, g);
+  double len = sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
+  if (!(len > 0)) len = 1.0, g[0] = g[1] = 0.0, g[2] = 1.0;
+  for (int k = 0; k < 3; k++) n[k] = g[k] / len;
+  return f / len;
+}
+
+/* The surface point and area of leaf c; 0 area if the surface misses it. */
+static double nh_cell_surface(const nh_domain *d, const double Xe[24], double P[3]) {
+  const int n = 6;
+  double edge = 0.0;
+  for (int k = 0; k < 3; k++) edge = fmax(edge, fabs(Xe[18 + k] - Xe[k]));
+  const double eps = 1.5 * edge / n;
+  double area = 0.0, acc[3] = {0, 0, 0};
+  for (int i = 0; i < n; i++)
+    for (int j = 0; j < n; j++)
+      for (int k = 0; k < n; k++) {
+        double xi[3] = {-1 + (2 * i + 1.0) / n, -1 + (2 * j + 1.0) / n, -1 + (2 * k + 1.0) / n};
+        double N[8], dN[8][3], x[3] = {0, 0, 0}, J[9] = {0}, nrm[3];
+        nh_hex_shape(xi, N);
+        nh_hex_dshape(xi, dN);
+        for (int a = 0; a < 8; a++)
+          for (int p = 0; p < 3; p++) {
+            x[p] += N[a] * Xe[3 * a + p];
+            for (int q = 0; q < 3; q++) J[3 * p + q] += Xe[3 * a + p] * dN[a][q];
+          }
+        double phi = nh_skull_distance(d, x, nrm);
+        if (phi > 0.0) continue; /* one-sided: outside may be a dropped cell */
+        double w =
+            2.0 * fmax(0.0, 1.0 + phi / eps) / eps * fabs(nh_mat3_det(J)) * 8.0 / (n * n * n);
+        if (w == 0.0) continue;
+        area += w;
+        for (int p = 0; p < 3; p++) acc[p] += w * (x[p] - phi * nrm[p]);
+      }
+  if (area == 0.0) return 0.0;
+  for (int p = 0; p < 3; p++) P[p] = acc[p] / area;
+  for (int it = 0; it < 3; it++) {
+    double nrm[3], phi = nh_skull_distance(d, P, nrm);
+    for (int p = 0; p < 3; p++) P[p] -= phi * nrm[p];
+  }
+  return area;
+}
+
+int nh_skull_build(nh_skull *s, const nh_mesh *m) {
+  s->n = 0;
+  for (int l = 0; l < m->n_leaves; l++) {
+    int c = m->leaves[l];
+    double Xe[24], P[3], xi[3];
+    int cell;
+    nh_mesh_cell_coords(m, m->X, c, Xe);
+    double area = nh_cell_surface(&s->domain, Xe, P);
+    if (area == 0.0) continue;
+    /* The point may lie in a neighbour: locate it (it is on the surface,
+     * so inside a kept cell unless round-off puts it just outside). */
+    if (nh_mesh_locate(m, P, &cell, xi) != NH_OK) {
+      cell = c;
+      if (nh_hex_invert(Xe, P, xi) != NH_OK) continue;
+    }
+    if (s->n >= s->cap && nh_grow((void **)&s->p, &s->cap, s->n + 1, sizeof *s->p))
+      return NH_ERR_MEMORY;
+    nh_skull_point *p = &s->p[s->n++];
+    memcpy(p->X, P, sizeof P);
+    memcpy(p->xi, xi, sizeof xi);
+    p->area = area, p->cell = cell, p->lam = 0.0, p->row = -1;
+    double edge = 0.0;
+    for (int k = 0; k < 3; k++) edge = fmax(edge, fabs(Xe[18 + k] - Xe[k]));
+    p->edge = edge;
+  }
+  return NH_OK;
+}
+
+int nh_skull_points(const nh_skull *s) {
+  return s->n;
+}
+
+double nh_skull_area(const nh_skull *s) {
+  double a = 0.0;
+  for (int i = 0; i < s->n; i++) a += s->p[i].area;
+  return a;
+}
+
+/* Current position of point p. */
+static void nh_skull_position(const nh_mesh *m, const double *u, const nh_skull_point *p,
+                              double x[3], double N[8]) {
+  nh_hex_shape(p->xi, N);
+  const int *e = m->cells + 8 * p->cell;
+  for (int k = 0; k < 3; k++) {
+    x[k] = p->X[k];
+    for (int a = 0; a < 8; a++) x[k] += N[a] * u[3 * e[a] + k];
+  }
+}
+
+double nh_skull_penetration(const nh_skull *s, const nh_mesh *m, const double *u) {
+  double worst = 0.0;
+  for (int i = 0; i < s->n; i++) {
+    double x[3], N[8], nrm[3];
+    nh_skull_position(m, u, &s->p[i], x, N);
+    worst = fmax(worst, nh_skull_distance(&s->domain, x, nrm) - s->gap);
+  }
+  return worst;
+}
+
+int nh_skull_rows(nh_skull *s, const nh_mesh *m, const double *u, const double *v, double h,
+                  nh_rows *rows) {
+  for (int i = 0; i < s->n; i++) {
+    nh_skull_point *p = &s->p[i];
+    double x[3], N[8], nrm[3], vn = 0.0;
+    nh_skull_position(m, u, p, x, N);
+    double g = s->gap - nh_skull_distance(&s->domain, x, nrm);
+    const int *e = m->cells + 8 * p->cell;
+    for (int a = 0; a < 8; a++)
+      for (int k = 0; k < 3; k++) vn += N[a] * v[3 * e[a] + k] * nrm[k];
+    p->row = -1;
+    /* closing speed vn > 0 (outwards): twice a step's approach, plus 1 % of
+     * the cell as a floor */
+    if (g > 2.0 * h * fmax(vn, 0.0) + 0.01 * p->edge && p->lam == 0.0) continue;
+    int r = nh_rows_add(rows);
+    if (r < 0) return NH_ERROR(NH_ERR_MEMORY, "out of memory: skull rows");
+    for (int a = 0; a < 8; a++)
+      rows->node[8 * r + a] = m->cells[8 * p->cell + a], rows->N[8 * r + a] = N[a];
+    for (int k = 0; k < 3; k++) rows->dir[3 * r + k] = -nrm[k];
+    rows->tool[r] = -1, rows->elem[r] = -1;
+    rows->gap[r] = g;
+    rows->law[r] = (nh_row_law){NH_ROW_UNILATERAL, -1, -1, 0.0, 0.0, -1};
+    rows->lambda[r] = p->lam;
+    p->row = r;
+  }
+  return NH_OK;
+}
+
+void nh_skull_end_step(nh_skull *s, const nh_rows *rows, double h) {
+  s->force[0] = s->force[1] = s->force[2] = 0.0;
+  s->active = 0;
+  for (int i = 0; i < s->n; i++) {
+    nh_skull_point *p = &s->p[i];
+    if (p->row < 0) {
+      p->lam = 0.0;
+      continue;
+    }
+    p->lam = rows->lambda[p->row];
+    if (p->lam > 0.0) s->active++;
+    for (int k = 0; k < 3; k++) s->force[k] += p->lam * rows->dir[3 * p->row + k] / h;
+  }
+}
+
+void nh_skull_force(const nh_skull *s, double force[3], int *active) {
+  memcpy(force, s->force, sizeof s->force);
+  if (active) *active = s->active;
+}
+
+int nh_skull_relocate(nh_skull *s, const nh_mesh *m) {
+  /* New leaves are smaller: rebuild the points on them (a finer surface
+   * sampling), carrying each new point's warm start from the old point
+   * nearest to it. */
+  int n_old = s->n;
+  nh_skull_point *old = malloc(sizeof *old * (size_t)(n_old ? n_old : 1));
+  if (!old) return NH_ERROR(NH_ERR_MEMORY, "out of memory: skull points");
+  memcpy(old, s->p, sizeof *old * (size_t)n_old);
+  int rc = nh_skull_build(s, m);
+  for (int i = 0; i < s->n && !rc; i++) {
+    double best = INFINITY;
+    for (int j = 0; j < n_old; j++) {
+      double d2 = 0.0;
+      for (int k = 0; k < 3; k++) d2 += (old[j].X[k] - s->p[i].X[k]) * (old[j].X[k] - s->p[i].X[k]);
+      if (d2 < best) best = d2, s->p[i].lam = old[j].lam * s->p[i].area / old[j].area;
+    }
+  }
+  free(old);
+  return rc;
+}

@@ -1,0 +1,138 @@
+/* test_brainshift — the loads and supports of a brain-shift scene
+ * (docs/theory.md §5: "Buoyancy and brain shift", "Fixed regions").
+ *  1. Drainage level (tissue.buoyancy.level). The tissue above the level
+ *     loses buoyancy, the tissue below keeps it, so:
+ *     a. a level above the whole brain drains nothing: the external force
+ *        is exactly 0 (full buoyancy);
+ *     b. a level below the whole brain drains everything: the external
+ *        force equals, bitwise, that of the same scene without `level`
+ *        (today's uniform loss);
+ *     c. on a box domain (0.1 m cube, 4³ cells, gravity −z) the total force
+ *        is ρ g Δb times the volume above the level: exactly for a level
+ *        through the middle of a cell layer (the 8³ sub-samples split
+ *        evenly), and within one sub-sample layer (ρ g Δb A h / 8) for a
+ *        level elsewhere.
+ *  2. Fixed regions on an immersed domain are ties over the region's
+ *     tissue. The brain of tests/data/brain.yaml under gravity, static: the
+ *     tie forces Σ T u over the whole mesh balance the weight (the elastic
+ *     forces of every element sum to zero), to the solver's tolerance; and
+ *     the tissue inside the region moves less than 2 % of the largest
+ *     displacement (the tie is 10³ E/ℓ²).
+ * Silent on success; NH_VERBOSE=1 prints the numbers. */
+#include "check.h"
+
+#include "sim/sim.h"
+
+static void open_brain(const char *const *sets, nh_scene **sc, nh_sim **sim) {
+  const char *src = getenv("NH_SOURCE_DIR");
+  char path[1024];
+  int n = 0;
+  while (sets && sets[n]) n++;
+  snprintf(path, sizeof path, "%s/tests/data/brain.yaml", src ? src : ".");
+  CHECK_OK(nh_scene_load(path, n, sets, sc));
+  nh_sim_options opt = {.dry_run = 1};
+  CHECK_OK(nh_sim_create(*sc, &opt, sim));
+}
+
+static double *external_force(const char *const *sets, int *n) {
+  nh_scene *sc;
+  nh_sim *sim;
+  open_brain(sets, &sc, &sim);
+  *n = 3 * nh_sim_mesh(sim)->n_nodes;
+  double *f = malloc(sizeof(double) * (size_t)*n);
+  nh_sim_external_force(sim, 1.0, f);
+  nh_sim_destroy(&sim);
+  nh_scene_destroy(&sc);
+  return f;
+}
+
+static void test_level_brain(void) {
+  int n0, n1, n2;
+  const char *uniform[] = {"tissue.buoyancy={before: 1, after: 0.9}", NULL};
+  const char *top[] = {"tissue.buoyancy={before: 1, after: 0.9, level: [0, 0, 0.2]}", NULL};
+  const char *bottom[] = {"tissue.buoyancy={before: 1, after: 0.9, level: [0, 0, -0.2]}", NULL};
+  double *fu = external_force(uniform, &n0), *ft = external_force(top, &n1);
+  double *fb = external_force(bottom, &n2);
+  CHECK(n0 == n1 && n0 == n2, "meshes differ: %d %d %d", n0, n1, n2);
+  double fbig = 0.0;
+  for (int i = 0; i < n0; i++) {
+    fbig = fmax(fbig, fabs(fu[i]));
+    CHECK(ft[i] == 0.0, "level above the brain: force[%d] = %g, expected 0", i, ft[i]);
+    CHECK(fb[i] == fu[i], "level below the brain: force[%d] = %.17g, uniform loss %.17g", i, fb[i],
+          fu[i]);
+  }
+  CHECK(fbig > 0.0, "the uniform loss gives no force");
+  free(fu), free(ft), free(fb);
+}
+
+static double total_z(const char *level) {
+  char buoy[160];
+  snprintf(buoy, sizeof buoy, "tissue.buoyancy={before: 1, after: 0.5, level: %s}", level);
+  const char *sets[] = {"tissue.domain={box: {min: [0, 0, 0], max: [0.1, 0.1, 0.1]}}",
+                        "tissue.grid=[4, 4, 4]",
+                        "tissue.fixed=[{box: {min: [0, 0, 0], max: [0.1, 0.1, 0]}}]", buoy, NULL};
+  int n;
+  double *f = external_force(sets, &n), sum = 0.0;
+  for (int i = 2; i < n; i += 3) sum += f[i];
+  free(f);
+  return sum;
+}
+
+static void test_level_box(void) {
+  const double rho = 1040, g = 9.81, db = 0.5, area = 0.01, h = 0.025;
+  double mid = total_z("[0, 0, 0.0375]"); /* the middle of the second cell layer */
+  double exact = -rho * g * db * area * (0.1 - 0.0375);
+  CHECK_CLOSE(mid, exact, 1e-12 * fabs(exact), "force above a level at a layer's middle");
+  double off = total_z("[0, 0, 0.06]");
+  double exact_off = -rho * g * db * area * (0.1 - 0.06);
+  CHECK_CLOSE(off, exact_off, rho * g * db * area * h / 8, "force above a level at z = 0.06");
+  if (getenv("NH_VERBOSE"))
+    printf("box: level 0.0375: %.12g N (exact %.12g); 0.06: %.12g N (exact %.12g)\n", mid, exact,
+           off, exact_off);
+}
+
+static void test_tie(void) {
+  nh_scene *sc;
+  nh_sim *sim;
+  const char *sets[] = {"solver.tolerance=1e-10", NULL};
+  open_brain(sets, &sc, &sim);
+  CHECK_OK(nh_sim_step(sim));
+  const nh_mesh *m = nh_sim_mesh(sim);
+  const nh_tissue *t = nh_sim_tissue(sim);
+  const double *u = nh_sim_displacements(sim);
+  int n = 3 * m->n_nodes;
+  double *fe = malloc(sizeof(double) * (size_t)n), weight[3] = {0, 0, 0}, tie[3] = {0, 0, 0};
+  nh_sim_external_force(sim, 1.0, fe);
+  for (int i = 0; i < n; i++) weight[i % 3] += fe[i];
+  for (int l = 0; l < m->n_leaves; l++) {
+    double f[24];
+    nh_tissue_element(t, m->leaves[l], u, f, NULL);
+    for (int i = 0; i < 24; i++) tie[i % 3] += f[i];
+  }
+  for (int k = 0; k < 3; k++)
+    CHECK_CLOSE(tie[k], weight[k], 1e-8 * fabs(weight[2]), "tie forces vs the weight");
+  /* displacement inside the region against the largest */
+  const nh_region *r = &sc->tissue.fixed[0];
+  double umax = 0.0, uin = 0.0;
+  for (int i = 0; i < m->n_nodes; i++) {
+    double a =
+        sqrt(u[3 * i] * u[3 * i] + u[3 * i + 1] * u[3 * i + 1] + u[3 * i + 2] * u[3 * i + 2]);
+    umax = fmax(umax, a);
+    if (nh_region_contains(r, m->X + 3 * i, 0.0)) uin = fmax(uin, a);
+  }
+  CHECK(uin <= 0.02 * umax, "tissue inside the fixed region moves %g m, %g of the largest", uin,
+        uin / umax);
+  if (getenv("NH_VERBOSE"))
+    printf("tie: weight %.9g N, tie forces %.9g N; inside %.3g m, max %.3g m\n", weight[2], tie[2],
+           uin, umax);
+  free(fe);
+  nh_sim_destroy(&sim);
+  nh_scene_destroy(&sc);
+}
+
+int main(void) {
+  test_level_brain();
+  test_level_box();
+  test_tie();
+  TEST_END();
+}
