@@ -90,6 +90,10 @@ CASES = [
     ("tool_poisson.yaml", [], 13, "tools.0.material.poisson"),
     ("tools_base.yaml", ["tools.0.interaction.friction=-0.1"], "--set:1",
      "tools.0.interaction.friction"),
+    # a static friction coefficient below the kinetic one
+    ("tools_base.yaml", ["tools.0.interaction.friction=0.2",
+                         "tools.0.interaction.friction_static=0.1"], "--set:2",
+     "tools.0.interaction.friction_static"),
     ("tools_base.yaml", ["tools.0.radius=0.001", "tools.1.inside=electrode"], "--set:2",
      "tools.1.inside"),
     ("tools_base.yaml", ["tools.2.length=1"], "--set:1", "tools.2"),

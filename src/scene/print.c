@@ -66,8 +66,10 @@ static void print_tool(FILE *f, const nh_scene *s, int i) {
             k + 1 == t->n_motion ? ", then at rest" : "");
   }
   fprintf(f,
-          "            puncture %g N, cutting %g N, friction mu %g plus %g N/m, path points every ",
-          t->puncture_force, t->cutting_force, t->friction, t->friction_per_length);
+          "            puncture %g N, cutting %g N, friction mu %g (static %g) plus %g N/m, path "
+          "points every ",
+          t->puncture_force, t->cutting_force, t->friction, t->friction_static,
+          t->friction_per_length);
   if (t->spacing > 0)
     fprintf(f, "%g m\n", t->spacing);
   else

@@ -1339,8 +1339,9 @@ static int read_tool(const nh_ctx *c, const nh_yaml_node *list, int i, nh_scene 
                                      "elements",  "material",   "damping", "base",
                                      "direction", "trajectory", "motion",  "interaction",
                                      "inside",    "release",    NULL};
-  static const char *const interaction_keys[] = {"puncture_force",      "cutting_force", "friction",
-                                                 "friction_per_length", "spacing",       NULL};
+  static const char *const interaction_keys[] = {
+      "puncture_force", "cutting_force",   "friction", "friction_per_length",
+      "spacing",        "friction_static", NULL};
   /* Files the output folder holds besides the tools' own. */
   static const char *const reserved[] = {"tissue", "points", NULL};
   char path[NH_KEY_MAX], sub[NH_KEY_MAX], key[NH_KEY_MAX], d[96];
@@ -1409,14 +1410,20 @@ static int read_tool(const nh_ctx *c, const nh_yaml_node *list, int i, nh_scene 
   join(sub, path, "interaction");
   NH_TRY(section(c, node, path, "interaction", 0, &m));
   if (m) {
-    double *value[] = {&t->puncture_force, &t->cutting_force, &t->friction, &t->friction_per_length,
-                       &t->spacing};
+    double *value[] = {&t->puncture_force,      &t->cutting_force, &t->friction,
+                       &t->friction_per_length, &t->spacing,       &t->friction_static};
     NH_TRY(check_keys(c, m, sub, interaction_keys));
+    t->friction_static = -1;
     for (int k = 0; interaction_keys[k]; ++k) {
       NH_TRY(get_number(c, m, sub, interaction_keys[k], 0, value[k], &at));
       NH_TRY(at_least(c, at, sub, interaction_keys[k], *value[k], 0, 0));
     }
+    if (at && t->friction_static < t->friction) /* `at`: friction_static, read last */
+      return fail(c, at, join(key, sub, "friction_static"),
+                  "the static coefficient must be at least the kinetic one (friction = %g), got %g",
+                  t->friction, t->friction_static);
   }
+  if (t->friction_static < t->friction) t->friction_static = t->friction;
 
   NH_TRY(read_host(c, list, i, path, s));
   NH_TRY(field(c, node, path, "release", 0, &at));

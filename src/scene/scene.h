@@ -107,9 +107,11 @@ typedef struct {
   double depth;    /* the planned depth D = standoff + |target − entry|, m */
   int n_motion;    /* tools[i].motion: list of {until, speed} (default: none, at rest) */
   nh_motion *motion;
-  double puncture_force;      /* tools[i].interaction.puncture_force, N (default 0, >= 0) */
-  double cutting_force;       /* tools[i].interaction.cutting_force, N (default 0, >= 0) */
-  double friction;            /* tools[i].interaction.friction, Coulomb μ (default 0, >= 0) */
+  double puncture_force;  /* tools[i].interaction.puncture_force, N (default 0, >= 0) */
+  double cutting_force;   /* tools[i].interaction.cutting_force, N (default 0, >= 0) */
+  double friction;        /* tools[i].interaction.friction, kinetic Coulomb μ (default 0, >= 0) */
+  double friction_static; /* tools[i].interaction.friction_static, static μ_s: the threshold
+                             to start sliding (default friction, >= friction) */
   double friction_per_length; /* tools[i].interaction.friction_per_length, N/m (default 0, >= 0) */
   double spacing;     /* tools[i].interaction.spacing: path-point spacing, m (default 0: half the
                          local cell edge; >= 0) */
