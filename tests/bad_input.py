@@ -106,6 +106,12 @@ CASES = [
     # the same kind of errors from overrides of the valid trajectory_base.yaml.
     ("gravity_schedule.yaml", [], 5, "gravity.schedule.1.0"),
     ("buoyancy_fraction.yaml", [], 7, "tissue.buoyancy.before"),
+    # tractions: both a traction and a pressure; a region without boundary
+    # (found by the simulator); neither, from an override
+    ("traction_both.yaml", [], 10, "tissue.tractions.0.pressure"),
+    ("traction_no_boundary.yaml", [], 11, "tissue.tractions.0"),
+    ("traction_both.yaml", ["tissue.tractions.0={box: {min: [0, 0, 0], max: [1, 1, 1]}}"],
+     "--set:1", "tissue.tractions.0"),
     ("trajectory_unknown_target.yaml", [], 12, "tools.0.trajectory.target"),
     ("trajectory_target_at_entry.yaml", [], 12, "tools.0.trajectory.target"),
     ("trajectory_with_base.yaml", [], 13, "tools.0.base"),

@@ -158,6 +158,20 @@ void nh_scene_print(const nh_scene *s, void *stdio_file) {
       fprintf(f, ", schedule of %d point%s", l->schedule.n, l->schedule.n == 1 ? "" : "s");
     fprintf(f, "\n");
   }
+  if (s->tissue.n_tractions > 0) fprintf(f, "tractions %d\n", s->tissue.n_tractions);
+  for (int i = 0; i < s->tissue.n_tractions; ++i) {
+    const nh_traction *t = &s->tissue.tractions[i];
+    if (t->is_pressure)
+      fprintf(f, "          tissue.tractions.%d: pressure %g N/m² on the boundary in ", i,
+              t->pressure);
+    else
+      fprintf(f, "          tissue.tractions.%d: traction [%g, %g, %g] N/m² on the boundary in ", i,
+              t->traction[0], t->traction[1], t->traction[2]);
+    print_region(f, &t->region);
+    if (t->schedule.n > 0)
+      fprintf(f, ", schedule of %d point%s", t->schedule.n, t->schedule.n == 1 ? "" : "s");
+    fprintf(f, "\n");
+  }
   if (!s->adapt.enabled) {
     fprintf(f, "adapt     no (the mesh stays fixed)\n");
   } else {

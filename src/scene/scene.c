@@ -435,18 +435,25 @@ static int read_region_shape(const nh_ctx *c, const nh_yaml_node *node, const ch
   return read_radius(c, shape, key, &region->radius);
 }
 
+/* A map at `node` with only `keys`, holding a region shape (read into
+ * region); `expected` describes the item for the message. */
+static int region_item(const nh_ctx *c, const nh_yaml_node *node, const char *path,
+                       const char *const *keys, const char *expected, nh_region *region) {
+  char d[96];
+  if (node->kind != NH_YAML_MAP)
+    return fail(c, node, path, "expected %s, got %s", expected, describe(node, d, sizeof d));
+  NH_TRY(check_keys(c, node, path, keys));
+  return read_region_shape(c, node, path, region);
+}
+
 /* A region {box | sphere | cylinder} at `node` (for tissue.fixed items). */
 static int read_region(const nh_ctx *c, const nh_yaml_node *node, const char *path,
                        nh_region *region) {
   static const char *const keys[] = {"box", "sphere", "cylinder", "label", NULL};
-  char d[96];
-  if (node->kind != NH_YAML_MAP)
-    return fail(c, node, path,
-                "expected a region {box: {min, max}}, {sphere: {center, radius}}, "
-                "{cylinder: {start, end, radius}} or {label: N}, got %s",
-                describe(node, d, sizeof d));
-  NH_TRY(check_keys(c, node, path, keys));
-  NH_TRY(read_region_shape(c, node, path, region));
+  NH_TRY(region_item(c, node, path, keys,
+                     "a region {box: {min, max}}, {sphere: {center, radius}}, "
+                     "{cylinder: {start, end, radius}} or {label: N}",
+                     region));
   make_where(c, node, path, region->where);
   return NH_OK;
 }
@@ -484,18 +491,42 @@ static int read_schedule(const nh_ctx *c, const nh_yaml_node *node, const char *
 static int read_load(const nh_ctx *c, const nh_yaml_node *node, const char *path, nh_load *load) {
   static const char *const keys[] = {"box",   "sphere",   "cylinder", "label",
                                      "force", "schedule", NULL};
-  char key[NH_KEY_MAX], d[96];
-  if (node->kind != NH_YAML_MAP)
-    return fail(c, node, path, "expected a load {box: {min, max}, force: [fx, fy, fz]}, got %s",
-                describe(node, d, sizeof d));
-  NH_TRY(check_keys(c, node, path, keys));
+  char key[NH_KEY_MAX];
+  NH_TRY(region_item(c, node, path, keys, "a load {box: {min, max}, force: [fx, fy, fz]}",
+                     &load->region));
   const nh_yaml_node *schedule;
-  NH_TRY(read_region_shape(c, node, path, &load->region));
   NH_TRY(get_vec3(c, node, path, "force", 1, load->force, NULL));
   NH_TRY(field(c, node, path, "schedule", 0, &schedule));
   if (schedule) NH_TRY(read_schedule(c, schedule, join(key, path, "schedule"), &load->schedule));
   make_where(c, node, path, load->where);
   make_where(c, node, path, load->region.where);
+  return NH_OK;
+}
+
+/* {box | sphere | cylinder, traction: [3] | pressure: p, schedule: [[t, s], ...]} */
+static int read_traction(const nh_ctx *c, const nh_yaml_node *node, const char *path,
+                         nh_traction *tr) {
+  static const char *const keys[] = {"box",      "sphere",   "cylinder", "traction",
+                                     "pressure", "schedule", NULL};
+  char key[NH_KEY_MAX];
+  NH_TRY(region_item(c, node, path, keys,
+                     "a traction {box: {min, max}, traction: [tx, ty, tz]} or {box: ..., "
+                     "pressure: p}",
+                     &tr->region));
+  const nh_yaml_node *schedule, *tv, *pv;
+  NH_TRY(field(c, node, path, "traction", 0, &tv));
+  NH_TRY(field(c, node, path, "pressure", 0, &pv));
+  if (!tv && !pv) return fail(c, node, path, "give traction: [tx, ty, tz] (N/m²) or pressure: p");
+  if (tv && pv)
+    return fail(c, pv, join(key, path, "pressure"),
+                "give either traction or pressure, not both (traction is already given)");
+  if (tv) NH_TRY(as_vec3(c, tv, join(key, path, "traction"), tr->traction));
+  if (pv) NH_TRY(as_number(c, pv, join(key, path, "pressure"), &tr->pressure));
+  tr->is_pressure = pv != NULL;
+  NH_TRY(field(c, node, path, "schedule", 0, &schedule));
+  if (schedule) NH_TRY(read_schedule(c, schedule, join(key, path, "schedule"), &tr->schedule));
+  make_where(c, node, path, tr->where);
+  make_where(c, node, path, tr->region.where);
   return NH_OK;
 }
 
@@ -902,9 +933,38 @@ static int read_brain(const nh_ctx *c, const nh_yaml_node *brain, nh_scene *s) {
   return NH_OK;
 }
 
+/* tissue.NAME: a list of items of `size` bytes read by `read` into a new
+ * array *items; *n counts each item before it is read, so that destroy frees
+ * a half-read one's schedule. */
+typedef int (*nh_item_reader)(const nh_ctx *c, const nh_yaml_node *node, const char *path,
+                              void *item);
+static int read_load_item(const nh_ctx *c, const nh_yaml_node *node, const char *path, void *item) {
+  return read_load(c, node, path, item);
+}
+static int read_traction_item(const nh_ctx *c, const nh_yaml_node *node, const char *path,
+                              void *item) {
+  return read_traction(c, node, path, item);
+}
+static int read_items(const nh_ctx *c, const nh_yaml_node *t, const char *name, size_t size,
+                      void **items, int *n, nh_item_reader read) {
+  char key[NH_KEY_MAX], path[NH_KEY_MAX];
+  const nh_yaml_node *list;
+  NH_TRY(list_section(c, t, "tissue", name, &list));
+  if (!list || list->n == 0) return NH_OK;
+  *items = nh_calloc((size_t)list->n, size);
+  if (!*items) return NH_ERR_MEMORY;
+  join(path, "tissue", name);
+  for (int i = 0; i < list->n; ++i) {
+    *n = i + 1;
+    NH_TRY(read(c, list->items[i], join_index(key, path, i), (char *)*items + (size_t)i * size));
+  }
+  return NH_OK;
+}
+
 static int read_tissue(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
-  static const char *const keys[] = {"domain", "grid",     "material", "damping",   "fixed",
-                                     "loads",  "buoyancy", "labels",   "materials", NULL};
+  static const char *const keys[] = {"domain", "grid",      "material",  "damping",
+                                     "fixed",  "loads",     "tractions", "buoyancy",
+                                     "labels", "materials", NULL};
   static const char *const domain_keys[] = {"box", "brain", "mask", "surface", NULL};
   char key[NH_KEY_MAX];
   const nh_yaml_node *t, *domain, *n;
@@ -971,18 +1031,10 @@ static int read_tissue(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
     }
   }
 
-  const nh_yaml_node *loads;
-  NH_TRY(list_section(c, t, "tissue", "loads", &loads));
-  if (loads && loads->n > 0) {
-    s->tissue.loads = nh_calloc((size_t)loads->n, sizeof *s->tissue.loads);
-    if (!s->tissue.loads) return NH_ERR_MEMORY;
-    for (int i = 0; i < loads->n; ++i) {
-      /* Count the load first so that destroy frees a half-read schedule. */
-      s->tissue.n_loads = i + 1;
-      NH_TRY(
-          read_load(c, loads->items[i], join_index(key, "tissue.loads", i), &s->tissue.loads[i]));
-    }
-  }
+  NH_TRY(read_items(c, t, "loads", sizeof *s->tissue.loads, (void **)&s->tissue.loads,
+                    &s->tissue.n_loads, read_load_item));
+  NH_TRY(read_items(c, t, "tractions", sizeof *s->tissue.tractions, (void **)&s->tissue.tractions,
+                    &s->tissue.n_tractions, read_traction_item));
   return NH_OK;
 }
 
@@ -1751,6 +1803,11 @@ void nh_scene_destroy(nh_scene **scene) {
     free(s->tissue.loads[i].schedule.value);
   }
   free(s->tissue.loads);
+  for (int i = 0; i < s->tissue.n_tractions; ++i) {
+    free(s->tissue.tractions[i].schedule.t);
+    free(s->tissue.tractions[i].schedule.value);
+  }
+  free(s->tissue.tractions);
   free(s->tissue.fixed);
   free(s->tissue.mask_labels);
   free(s->tissue.materials);

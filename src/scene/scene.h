@@ -57,6 +57,18 @@ typedef struct {
   char where[NH_WHERE_MAX];
 } nh_load;
 
+/* tissue.tractions[i]: a surface load on the tissue's boundary inside a
+ * region: a traction vector (N/m², the same on every face) or a pressure p
+ * (N/m², traction −p n with n the outward normal), times a schedule. */
+typedef struct {
+  nh_region region;
+  double traction[3];   /* traction, N/m² (when !is_pressure) */
+  double pressure;      /* pressure, N/m² (when is_pressure) */
+  int is_pressure;      /* given as pressure */
+  nh_schedule schedule; /* tractions[i].schedule */
+  char where[NH_WHERE_MAX];
+} nh_traction;
+
 typedef struct {
   char name[NH_NAME_MAX];
   double point[3];
@@ -209,6 +221,9 @@ typedef struct nh_scene {
     nh_region *fixed; /* tissue.fixed: list of {box | sphere | cylinder} */
     int n_loads;
     nh_load *loads; /* tissue.loads: list of {box | sphere | cylinder, force, schedule?} */
+    int n_tractions;
+    nh_traction *tractions; /* tissue.tractions: {box | sphere | cylinder, traction | pressure,
+                               schedule?} */
     char where_fixed[NH_WHERE_MAX];
   } tissue;
 

@@ -115,8 +115,10 @@ void nh_sim_external_force(const nh_sim *s, double t, double *f) {
   double g[3]; /* gravity by its schedule, less the tissue's buoyed part */
   nh_scene_tissue_gravity(sc, t, g);
   for (int i = 0; i < n; i++) f[i] = s->tissue->mass[i / 3] * g[i % 3];
-  for (int l = 0; l < sc->tissue.n_loads; l++) {
-    double factor = nh_schedule_eval(&sc->tissue.loads[l].schedule, t);
+  for (int l = 0; l < sc->tissue.n_loads + sc->tissue.n_tractions; l++) {
+    const int nl = sc->tissue.n_loads;
+    double factor = nh_schedule_eval(
+        l < nl ? &sc->tissue.loads[l].schedule : &sc->tissue.tractions[l - nl].schedule, t);
     if (factor == 0.0) continue;
     const double *u = s->load_unit + (size_t)l * n;
     for (int i = 0; i < n; i++) f[i] += factor * u[i];
@@ -354,7 +356,8 @@ static int nh_sim_setup_mesh(nh_sim *s, int first) {
   memset(s->fixed, 0, (size_t)nn);
   NH_TRY(nh_resize(&s->x, nn, 3));
   NH_TRY(nh_resize(&s->f_ext, nn, 3));
-  NH_TRY(nh_resize(&s->load_unit, nn, 3 * (sc->tissue.n_loads ? sc->tissue.n_loads : 1)));
+  const int n_unit = sc->tissue.n_loads + sc->tissue.n_tractions;
+  NH_TRY(nh_resize(&s->load_unit, nn, 3 * (n_unit ? n_unit : 1)));
   for (int r = 0; r < sc->tissue.n_fixed; r++) {
     const nh_region *reg = &sc->tissue.fixed[r];
     int count = nh_mesh_nodes_in_region(m, reg, s->fixed);
@@ -382,10 +385,13 @@ static int nh_sim_setup_mesh(nh_sim *s, int first) {
   } else {
     NH_TRY(nh_tissue_update(s->tissue));
   }
-  memset(s->load_unit, 0, sizeof(double) * (size_t)n * (size_t)sc->tissue.n_loads);
+  memset(s->load_unit, 0, sizeof(double) * (size_t)n * (size_t)n_unit);
   for (int l = 0; l < sc->tissue.n_loads; l++)
     NH_TRY(nh_mesh_region_load(m, &sc->tissue.loads[l].region, sc->tissue.loads[l].force,
                                s->load_unit + (size_t)l * n));
+  for (int l = 0; l < sc->tissue.n_tractions; l++)
+    NH_TRY(nh_traction_load(m, &sc->tissue.tractions[l],
+                            s->load_unit + (size_t)(sc->tissue.n_loads + l) * n, NULL));
   for (int i = 0; i < sc->n_probes + sc->n_targets; i++) {
     /* outside at creation: the scene's fault; later: ours */
     const int pr = i < sc->n_probes;

@@ -35,7 +35,8 @@ struct nh_sim {
   double *u, *v;     /* displacement and velocity, 3 per node */
   double *x;         /* current positions X + u, for output */
   double *f_ext;     /* 3 per node, work */
-  double *load_unit; /* n_loads x 3 n: nodal forces of each load at factor 1 */
+  double *load_unit; /* (n_loads + n_tractions) x 3 n: nodal forces of each load, then each
+                        traction, at factor 1 */
   int *probe_cell;   /* embedded points: the probes, then the targets */
   double *probe_xi;  /* 3 per point */
   int step;          /* steps done */
