@@ -109,6 +109,10 @@ CASES = [
     # tractions: both a traction and a pressure; a region without boundary
     # (found by the simulator); neither, from an override
     ("traction_both.yaml", [], 10, "tissue.tractions.0.pressure"),
+    # fixed: an unknown axis; a schedule without a displacement (override)
+    ("fixed_axes.yaml", [], 10, "tissue.fixed.0.axes.1"),
+    ("set_base.yaml", ["tissue.fixed.0.schedule=[[0, 0], [1, 1]]"], "--set:1",
+     "tissue.fixed.0.schedule"),
     ("traction_no_boundary.yaml", [], 11, "tissue.tractions.0"),
     ("traction_both.yaml", ["tissue.tractions.0={box: {min: [0, 0, 0], max: [1, 1, 1]}}"],
      "--set:1", "tissue.tractions.0"),

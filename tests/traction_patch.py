@@ -8,6 +8,12 @@ u_y = u_z = 0 (uniaxial stress; with ν = 0 the clamp adds no lateral
 strain), which lies in the trilinear space: every grid must reproduce it to
 round-off (tolerance 1e-9 relative to σL/E). Also as a pressure p = −σ
 (traction −p n = σ e_x on that face), and a pressure p = σ: u_x = −s σ x / E.
+
+Per-axis fixing and prescribed displacements (tissue.fixed's axes,
+displacement, schedule): with ν = 0.3 and rollers (x = 0 fixed in x, y = 0
+in y, z = 0 in z) uniaxial stress is again exact: u = s σ/E (x, −ν y, −ν z);
+and with the face x = L moved by δ along x (axes [x], displacement [δ, 0, 0],
+the same schedule) instead of the traction: u = s δ/L (x, −ν y, −ν z).
 """
 import csv
 import os
@@ -21,7 +27,7 @@ SCENE = os.path.join(SRC, "tests", "data", "traction_patch.yaml")
 E, SIGMA, L = 5000.0, 100.0, 0.04
 failures = []
 
-def run(tmp, name, sets, sign):
+def run(tmp, name, sets, sign, nu=0.0, strain=SIGMA / E):
     out = os.path.join(tmp, name)
     cmd = [BIN, "run", SCENE, "--quiet", "--out", out]
     for s in sets:
@@ -29,12 +35,14 @@ def run(tmp, name, sets, sign):
     subprocess.run(cmd, check=True)
     with open(os.path.join(out, "probes.csv")) as f:
         rows = list(csv.DictReader(f))
-    tol = 1e-9 * SIGMA * L / E
+    tol = 1e-9 * strain * L
     for r in rows:
-        t, x = float(r["time"]), float(r["x"]) - float(r["ux"])
+        t = float(r["time"])
+        X = [float(r[c]) - float(r["u" + c]) for c in "xyz"]
         s = min(max(t / 2.0, 0.0), 1.0)
         want = (float(r["ux"]), float(r["uy"]), float(r["uz"]))
-        exact = (sign * s * SIGMA * x / E, 0.0, 0.0)
+        e = sign * s * strain
+        exact = (e * X[0], -nu * e * X[1], -nu * e * X[2])
         for k in range(3):
             if abs(want[k] - exact[k]) > tol:
                 failures.append(f"{name}: probe {r['name']} at t = {t}: u[{k}] expected "
@@ -53,6 +61,19 @@ def main():
             ["tissue.tractions=[{%s, pressure: %g}]" % (region, -SIGMA)], 1)
         run(tmp, "push-by-pressure",
             ["tissue.tractions=[{%s, pressure: %g}]" % (region, SIGMA)], -1)
+        rollers = ("{box: {min: [-1, -1, -1], max: [0, 1, 1]}, axes: [x]}, "
+                   "{box: {min: [-1, -1, -1], max: [1, 0, 1]}, axes: [y]}, "
+                   "{box: {min: [-1, -1, -1], max: [1, 1, 0]}, axes: [z]}")
+        run(tmp, "rollers", ["tissue.material.poisson=0.3", "tissue.fixed=[%s]" % rollers], 1,
+            nu=0.3)
+        run(tmp, "rollers-7-5-3", ["tissue.grid=[7,5,3]", "tissue.material.poisson=0.3",
+                                   "tissue.fixed=[%s]" % rollers], 1, nu=0.3)
+        delta = 0.001
+        moved = ("{box: {min: [0.04, -1, -1], max: [1, 1, 1]}, axes: [x], "
+                 "displacement: [%g, 0, 0], schedule: [[0, 0], [2, 1]]}" % delta)
+        run(tmp, "prescribed", ["tissue.material.poisson=0.3", "tissue.tractions=[]",
+                                "tissue.fixed=[%s, %s]" % (rollers, moved)], 1, nu=0.3,
+            strain=delta / L)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     for f in failures:

@@ -446,15 +446,49 @@ static int region_item(const nh_ctx *c, const nh_yaml_node *node, const char *pa
   return read_region_shape(c, node, path, region);
 }
 
-/* A region {box | sphere | cylinder} at `node` (for tissue.fixed items). */
-static int read_region(const nh_ctx *c, const nh_yaml_node *node, const char *path,
-                       nh_region *region) {
-  static const char *const keys[] = {"box", "sphere", "cylinder", "label", NULL};
+static int as_choice(const nh_ctx *c, const nh_yaml_node *n, const char *key,
+                     const char *const *choices, int *out);
+static int read_schedule(const nh_ctx *c, const nh_yaml_node *node, const char *path,
+                         nh_schedule *s);
+
+/* A tissue.fixed item: a region {box | sphere | cylinder | label}, the components it
+ * fixes (axes: [x, z]; default all) and their prescribed displacement
+ * (displacement: [dx, dy, dz] times schedule; default 0). */
+static int read_fixed(const nh_ctx *c, const nh_yaml_node *node, const char *path,
+                      nh_region *region, nh_fix *fix) {
+  static const char *const keys[] = {"box",  "sphere",       "cylinder", "label",
+                                     "axes", "displacement", "schedule", NULL};
+  static const char *const axis_names[] = {"x", "y", "z", NULL};
+  char key[NH_KEY_MAX], sub[NH_KEY_MAX], d[96];
+  const nh_yaml_node *axes, *disp, *schedule;
   NH_TRY(region_item(c, node, path, keys,
                      "a region {box: {min, max}}, {sphere: {center, radius}}, "
                      "{cylinder: {start, end, radius}} or {label: N}",
                      region));
   make_where(c, node, path, region->where);
+  fix->axes = 7;
+  NH_TRY(field(c, node, path, "axes", 0, &axes));
+  if (axes) {
+    join(key, path, "axes");
+    if (axes->kind != NH_YAML_SEQ || axes->n == 0)
+      return fail(c, axes, key, "expected a non-empty list of axes among x, y, z, got %s",
+                  describe(axes, d, sizeof d));
+    fix->axes = 0;
+    for (int i = 0; i < axes->n; ++i) {
+      int a;
+      NH_TRY(as_choice(c, axes->items[i], join_index(sub, key, i), axis_names, &a));
+      if (fix->axes & (1 << a))
+        return fail(c, axes->items[i], sub, "axis %s is given twice", axis_names[a]);
+      fix->axes |= 1 << a;
+    }
+  }
+  NH_TRY(field(c, node, path, "displacement", 0, &disp));
+  if (disp) NH_TRY(as_vec3(c, disp, join(key, path, "displacement"), fix->displacement));
+  NH_TRY(field(c, node, path, "schedule", 0, &schedule));
+  if (schedule && !disp)
+    return fail(c, schedule, join(key, path, "schedule"),
+                "a schedule scales a prescribed displacement: give displacement too");
+  if (schedule) NH_TRY(read_schedule(c, schedule, join(key, path, "schedule"), &fix->schedule));
   return NH_OK;
 }
 
@@ -1023,11 +1057,12 @@ static int read_tissue(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   make_where(c, fixed_key ? fixed_key : tissue_key, "tissue.fixed", s->tissue.where_fixed);
   if (fixed && fixed->n > 0) {
     s->tissue.fixed = nh_calloc((size_t)fixed->n, sizeof *s->tissue.fixed);
-    if (!s->tissue.fixed) return NH_ERR_MEMORY;
+    s->tissue.fix = nh_calloc((size_t)fixed->n, sizeof *s->tissue.fix);
+    if (!s->tissue.fixed || !s->tissue.fix) return NH_ERR_MEMORY;
     for (int i = 0; i < fixed->n; ++i) {
-      NH_TRY(
-          read_region(c, fixed->items[i], join_index(key, "tissue.fixed", i), &s->tissue.fixed[i]));
       s->tissue.n_fixed = i + 1;
+      NH_TRY(read_fixed(c, fixed->items[i], join_index(key, "tissue.fixed", i), &s->tissue.fixed[i],
+                        &s->tissue.fix[i]));
     }
   }
 
@@ -1808,6 +1843,11 @@ void nh_scene_destroy(nh_scene **scene) {
     free(s->tissue.tractions[i].schedule.value);
   }
   free(s->tissue.tractions);
+  for (int i = 0; s->tissue.fix && i < s->tissue.n_fixed; ++i) {
+    free(s->tissue.fix[i].schedule.t);
+    free(s->tissue.fix[i].schedule.value);
+  }
+  free(s->tissue.fix);
   free(s->tissue.fixed);
   free(s->tissue.mask_labels);
   free(s->tissue.materials);

@@ -57,6 +57,14 @@ typedef struct {
   char where[NH_WHERE_MAX];
 } nh_load;
 
+/* tissue.fixed[i]'s options besides its region: which components it fixes
+ * and a prescribed displacement of those components. */
+typedef struct {
+  int axes;               /* bit k set: component k fixed (7 without `axes`: all) */
+  double displacement[3]; /* prescribed displacement, m, times the schedule (default 0) */
+  nh_schedule schedule;   /* fixed[i].schedule (only with displacement) */
+} nh_fix;
+
 /* tissue.tractions[i]: a surface load on the tissue's boundary inside a
  * region: a traction vector (N/m², the same on every face) or a pressure p
  * (N/m², traction −p n with n the outward normal), times a schedule. */
@@ -218,7 +226,9 @@ typedef struct nh_scene {
     double buoyancy_after;         /* tissue.buoyancy.after, in [0, 1] (required) */
     nh_schedule buoyancy_schedule; /* tissue.buoyancy.schedule (default: 1 from t = 0 on) */
     int n_fixed;
-    nh_region *fixed; /* tissue.fixed: list of {box | sphere | cylinder} */
+    nh_region *fixed; /* tissue.fixed: list of {box | sphere | cylinder, axes?, displacement?,
+                         schedule?} */
+    nh_fix *fix;      /* the options of each, n_fixed of them */
     int n_loads;
     nh_load *loads; /* tissue.loads: list of {box | sphere | cylinder, force, schedule?} */
     int n_tractions;

@@ -65,6 +65,7 @@ void nh_sim_destroy(nh_sim **sim) {
   nh_tissue_destroy(&s->tissue);
   nh_mesh_destroy(&s->mesh);
   free(s->fixed);
+  free(s->moved);
   free(s->u);
   free(s->x);
   free(s->v);
@@ -122,6 +123,20 @@ void nh_sim_external_force(const nh_sim *s, double t, double *f) {
     if (factor == 0.0) continue;
     const double *u = s->load_unit + (size_t)l * n;
     for (int i = 0; i < n; i++) f[i] += factor * u[i];
+  }
+}
+
+/* Prescribed displacements (tissue.fixed's displacement × schedule) of the
+ * fixed components at time t, set in u before the step solves: the step
+ * keeps fixed DOFs at their values (docs/theory.md §5). */
+static void nh_sim_prescribe(nh_sim *s, double t) {
+  const nh_scene *sc = s->scene;
+  for (int i = 0; i < s->mesh->n_nodes; i++) {
+    if (s->moved[i] < 0) continue;
+    const nh_fix *fx = &sc->tissue.fix[s->moved[i]];
+    double factor = nh_schedule_eval(&fx->schedule, t);
+    for (int k = 0; k < 3; k++)
+      if (nh_fixed_component(s->fixed, i, k)) s->u[3 * i + k] = factor * fx->displacement[k];
   }
 }
 
@@ -358,14 +373,43 @@ static int nh_sim_setup_mesh(nh_sim *s, int first) {
   NH_TRY(nh_resize(&s->f_ext, nn, 3));
   const int n_unit = sc->tissue.n_loads + sc->tissue.n_tractions;
   NH_TRY(nh_resize(&s->load_unit, nn, 3 * (n_unit ? n_unit : 1)));
+  int *moved = realloc(s->moved, sizeof(int) * (size_t)(nn ? nn : 1));
+  unsigned char *in = calloc((size_t)(nn ? nn : 1), 1);
+  if (moved) s->moved = moved;
+  if (!moved || !in) {
+    free(in);
+    return NH_ERROR(NH_ERR_MEMORY, "out of memory: %d nodes", nn);
+  }
+  for (int i = 0; i < nn; i++) s->moved[i] = -1;
   for (int r = 0; r < sc->tissue.n_fixed; r++) {
     const nh_region *reg = &sc->tissue.fixed[r];
-    int count = nh_mesh_nodes_in_region(m, reg, s->fixed);
+    const nh_fix *fx = &sc->tissue.fix[r];
+    memset(in, 0, (size_t)nn);
+    int count = nh_mesh_nodes_in_region(m, reg, in);
+    const int prescribed =
+        fx->displacement[0] != 0.0 || fx->displacement[1] != 0.0 || fx->displacement[2] != 0.0;
+    for (int i = 0; i < nn; i++) {
+      if (!in[i]) continue;
+      /* merge with the components fixed so far; all three: 1 */
+      int mask = (s->fixed[i] == 0              ? 0
+                  : (s->fixed[i] & NH_FIX_AXES) ? s->fixed[i] & 7
+                                                : 7) |
+                 fx->axes;
+      s->fixed[i] = mask == 7 ? 1 : (unsigned char)(NH_FIX_AXES | mask);
+      if (prescribed) s->moved[i] = r;
+    }
     char what[256];
     nh_region_describe(reg, what, sizeof what);
+    if (!(count > 0 || !first)) free(in);
     NH_CHECK(count > 0 || !first, NH_ERR_INPUT, "%s: the %s contains no node of the mesh",
              reg->where, what);
   }
+  /* Hanging nodes: every node not fixed in all three components (a node
+   * fixed in some axes keeps the hanging constraint on all three: its
+   * masters lie on the same fixed face); the Lagrange variant's rows take
+   * whole nodes: there every fixed node is left out. */
+  const int lagrange = sc->adapt.hanging == NH_HANGING_LAGRANGE;
+  for (int i = 0; i < nn; i++) in[i] = s->fixed[i] == 1 || (lagrange && s->fixed[i]);
   if (first) {
     nh_material mat = {sc->tissue.young, sc->tissue.poisson, sc->tissue.density};
     NH_TRY(nh_tissue_create(m, &mat, &s->tissue));
@@ -404,9 +448,10 @@ static int nh_sim_setup_mesh(nh_sim *s, int first) {
   }
   if (!first && s->contact) NH_TRY(nh_contact_relocate(s->contact, m));
   nh_hanging_destroy(&s->hanging);
-  if (sc->adapt.enabled) NH_TRY(nh_hanging_detect(m, s->fixed, &s->hanging));
+  int rc_h = sc->adapt.enabled ? nh_hanging_detect(m, in, &s->hanging) : NH_OK;
+  free(in);
+  NH_TRY(rc_h);
   nh_system_destroy(&s->system);
-  int lagrange = sc->adapt.hanging == NH_HANGING_LAGRANGE;
   int rc = nh_system_create(s->tissue, s->fixed, lagrange ? NULL : s->hanging, &s->system);
   if (rc == NH_ERR_INPUT)
     return NH_ERROR(NH_ERR_INPUT, "%s: every node of the tissue is fixed: nothing to simulate",
@@ -477,7 +522,7 @@ static int nh_sim_refine(nh_sim *s) {
   nh_hanging_interpolate(s->hanging, s->u, 3);
   nh_hanging_interpolate(s->hanging, s->v, 3);
   for (int i = 0; i < 3 * s->mesh->n_nodes; i++)
-    if (s->fixed[i / 3]) s->v[i] = 0.0;
+    if (nh_fixed_component(s->fixed, i / 3, i % 3)) s->v[i] = 0.0;
   return NH_OK;
 }
 
@@ -511,6 +556,7 @@ int nh_sim_step(nh_sim *s) {
   double t0 = nh_time_now();
   double t_new = (s->step + 1) * sc->time.step;
   nh_sim_external_force(s, t_new, s->f_ext);
+  nh_sim_prescribe(s, t_new);
   nh_step_stats st = {0};
   int rc = s->contact ? nh_contact_step(s->contact, s->system, &s->integrator, s->mesh, s->f_ext,
                                         s->u, s->v, t_new, &st)

@@ -31,7 +31,8 @@ struct nh_sim {
   nh_tissue *tissue;
   nh_system *system;
   nh_integrator integrator;
-  unsigned char *fixed;
+  unsigned char *fixed; /* per node: its fixed components (nh_fixed_component) */
+  int *moved;        /* per node: the tissue.fixed item that prescribes its displacement (−1) */
   double *u, *v;     /* displacement and velocity, 3 per node */
   double *x;         /* current positions X + u, for output */
   double *f_ext;     /* 3 per node, work */

@@ -17,8 +17,16 @@
 
 typedef struct nh_system nh_system;
 
+/* fixed[i] of a node: 0 free; otherwise all three components are fixed,
+ * unless the bit NH_FIX_AXES is set: then bit k (1 << k) fixes component k
+ * (tissue.fixed's `axes`). */
+#define NH_FIX_AXES 8
+static inline int nh_fixed_component(const unsigned char *fixed, int i, int k) {
+  return fixed && fixed[i] && (!(fixed[i] & NH_FIX_AXES) || (fixed[i] >> k) & 1);
+}
+
 /* Build the DOF map, pattern, scatter maps and colouring of the leaves of
- * `tissue->mesh`; fixed[i] != 0 fixes all three DOFs of node i. Hanging
+ * `tissue->mesh`; fixed[i] fixes components of node i (above). Hanging
  * nodes (may be NULL) are eliminated: u = P u_free, A = Pᵀ A P.
  * Fails with NH_ERR_INPUT if every DOF is fixed, NH_ERR_MEMORY. */
 int nh_system_create(const nh_tissue *tissue, const unsigned char *fixed, const nh_hanging *hanging,
