@@ -144,8 +144,17 @@ void nh_scene_print(const nh_scene *s, void *stdio_file) {
   }
   fprintf(f, "fixed     %d region%s\n", s->tissue.n_fixed, s->tissue.n_fixed == 1 ? "" : "s");
   for (int i = 0; i < s->tissue.n_fixed; ++i) {
+    const nh_fix *fx = &s->tissue.fix[i];
     fprintf(f, "          tissue.fixed.%d: ", i);
     print_region(f, &s->tissue.fixed[i]);
+    if (fx->axes != 7)
+      fprintf(f, ", axes%s%s%s", fx->axes & 1 ? " x" : "", fx->axes & 2 ? " y" : "",
+              fx->axes & 4 ? " z" : "");
+    if (fx->displacement[0] != 0.0 || fx->displacement[1] != 0.0 || fx->displacement[2] != 0.0)
+      fprintf(f, ", displacement [%g, %g, %g] m", fx->displacement[0], fx->displacement[1],
+              fx->displacement[2]);
+    if (fx->schedule.n > 0)
+      fprintf(f, ", schedule of %d point%s", fx->schedule.n, fx->schedule.n == 1 ? "" : "s");
     fprintf(f, "\n");
   }
   fprintf(f, "loads     %d\n", s->tissue.n_loads);
