@@ -410,6 +410,10 @@ static int nh_sim_setup_mesh(nh_sim *s, int first) {
    * whole nodes: there every fixed node is left out. */
   const int lagrange = sc->adapt.hanging == NH_HANGING_LAGRANGE;
   for (int i = 0; i < nn; i++) in[i] = s->fixed[i] == 1 || (lagrange && s->fixed[i]);
+  nh_hanging_destroy(&s->hanging);
+  int rc_h = sc->adapt.enabled ? nh_hanging_detect(m, in, &s->hanging) : NH_OK;
+  free(in);
+  NH_TRY(rc_h);
   if (first) {
     nh_material mat = {sc->tissue.young, sc->tissue.poisson, sc->tissue.density};
     NH_TRY(nh_tissue_create(m, &mat, &s->tissue));
@@ -447,10 +451,6 @@ static int nh_sim_setup_mesh(nh_sim *s, int first) {
              first ? "" : " of the refined mesh");
   }
   if (!first && s->contact) NH_TRY(nh_contact_relocate(s->contact, m));
-  nh_hanging_destroy(&s->hanging);
-  int rc_h = sc->adapt.enabled ? nh_hanging_detect(m, in, &s->hanging) : NH_OK;
-  free(in);
-  NH_TRY(rc_h);
   nh_system_destroy(&s->system);
   int rc = nh_system_create(s->tissue, s->fixed, lagrange ? NULL : s->hanging, &s->system);
   if (rc == NH_ERR_INPUT)
