@@ -96,6 +96,10 @@ CASES = [
     ("tool_poisson.yaml", [], 13, "tools.0.material.poisson"),
     ("tools_base.yaml", ["tools.0.interaction.friction=-0.1"], "--set:1",
      "tools.0.interaction.friction"),
+    # a static friction coefficient below the kinetic one
+    ("tools_base.yaml", ["tools.0.interaction.friction=0.2",
+                         "tools.0.interaction.friction_static=0.1"], "--set:2",
+     "tools.0.interaction.friction_static"),
     ("tools_base.yaml", ["tools.0.radius=0.001", "tools.1.inside=electrode"], "--set:2",
      "tools.1.inside"),
     ("tools_base.yaml", ["tools.2.length=1"], "--set:1", "tools.2"),
@@ -119,6 +123,16 @@ CASES = [
      "tissue.skull"),
     ("trajectory_base.yaml", ["tissue.buoyancy.level=[0, 1]"], "--set:1",
      "tissue.buoyancy.level"),
+    # tractions: both a traction and a pressure; a region without boundary
+    # (found by the simulator); neither, from an override
+    ("traction_both.yaml", [], 10, "tissue.tractions.0.pressure"),
+    # fixed: an unknown axis; a schedule without a displacement (override)
+    ("fixed_axes.yaml", [], 10, "tissue.fixed.0.axes.1"),
+    ("set_base.yaml", ["tissue.fixed.0.schedule=[[0, 0], [1, 1]]"], "--set:1",
+     "tissue.fixed.0.schedule"),
+    ("traction_no_boundary.yaml", [], 11, "tissue.tractions.0"),
+    ("traction_both.yaml", ["tissue.tractions.0={box: {min: [0, 0, 0], max: [1, 1, 1]}}"],
+     "--set:1", "tissue.tractions.0"),
     ("trajectory_unknown_target.yaml", [], 12, "tools.0.trajectory.target"),
     ("trajectory_target_at_entry.yaml", [], 12, "tools.0.trajectory.target"),
     ("trajectory_with_base.yaml", [], 13, "tools.0.base"),

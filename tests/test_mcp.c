@@ -9,6 +9,12 @@
  *  5. a warm start at the solution costs 0-1 sweeps;
  *  6. disc friction: the pair sticks inside the disc, and on it lies on the
  *     circle with the slip opposite to the force;
+ *  7. static and kinetic friction on a single shaft point (two lateral normal
+ *     rows, one axial friction row) under a load ramp up and down: it sticks
+ *     until its force reaches μ_s |λ_n| + c, then slides at μ_k |λ_n| + c,
+ *     sticks again below that and needs μ_s again to restart (decoupled W:
+ *     exact forces; coupled W: the slide force from an independent
+ *     fixed-point solve); the disc pair likewise;
  *  plus bad laws rejected and non-convergence reported. Silent on success. */
 #include "solve/solve.h"
 
@@ -19,7 +25,7 @@
 #define MAXM 64
 
 static nh_row_law law(nh_row_kind kind) {
-  nh_row_law l = {kind, -1, -1, 0.0, 0.0, -1};
+  nh_row_law l = {kind, -1, -1, 0.0, 0.0, -1, 0.0, 0};
   return l;
 }
 
@@ -352,6 +358,120 @@ static void test_two_normals(void) {
   CHECK(switched > 0 && switched < 81, "two normals: both stick and slide occur in the sweep");
 }
 
+/* Rows 0, 1 bilateral (a shaft point's lateral rows), row 2 axial friction on
+ * both with kinetic mu_k, static mu_s, threshold c. A ramp of the axial free
+ * violation r2 = ρ_k up to ρ_max and back down, the sliding state carried
+ * from load step to load step as the contact module does. Expected forces:
+ *   stuck (did not slide before, or arrested): λ = −W⁻¹ r while the stick
+ *   force |λ2| is within the bound of the state (μ_s if it stuck before,
+ *   μ_k if it slid); otherwise it slides: λ2 = −sign(r2)(μ_k N + c) with N =
+ *   |(λ0, λ1)| and (λ0, λ1) = −W_nn⁻¹ (r_n + W_n2 λ2): solved here by a
+ *   fixed point on N (a contraction: |W_n2| small). */
+static void static_kinetic_case(const double W[9], double mu_k, double mu_s, double c) {
+  nh_row_law laws[3] = {law(NH_ROW_BILATERAL), law(NH_ROW_BILATERAL), law(NH_ROW_FRICTION)};
+  laws[2].normal = 0, laws[2].normal2 = 1, laws[2].mu = mu_k, laws[2].mu_static = mu_s;
+  laws[2].threshold = c;
+  const double rn[2] = {-1.0, 0.7};
+  /* W_nn⁻¹ (2×2) */
+  double det = W[0] * W[4] - W[1] * W[3];
+  double Ni[4] = {W[4] / det, -W[1] / det, -W[3] / det, W[0] / det};
+  int slid = 0, n_break = 0, n_rearrest = 0, was_sliding = 0, n = 120;
+  double lam[3] = {0, 0, 0};
+  for (int k = 0; k <= 2 * n; k++) {
+    double rt = 3.0 * (k <= n ? k : 2 * n - k) / n; /* 0 → 3 → 0 */
+    double r[3] = {rn[0], rn[1], rt};
+    /* stick candidate: all three rows bilateral (Cramer on the 3×3) */
+    double A[9];
+    memcpy(A, W, sizeof A);
+    double d3 = A[0] * (A[4] * A[8] - A[7] * A[5]) - A[3] * (A[1] * A[8] - A[7] * A[2]) +
+                A[6] * (A[1] * A[5] - A[4] * A[2]);
+    double st[3];
+    for (int i = 0; i < 3; i++) {
+      double B[9];
+      memcpy(B, A, sizeof B);
+      for (int q = 0; q < 3; q++) B[3 * i + q] = -r[q];
+      st[i] = (B[0] * (B[4] * B[8] - B[7] * B[5]) - B[3] * (B[1] * B[8] - B[7] * B[2]) +
+               B[6] * (B[1] * B[5] - B[4] * B[2])) /
+              d3;
+    }
+    double mu_state = slid ? mu_k : mu_s;
+    int stick = fabs(st[2]) <= mu_state * hypot(st[0], st[1]) + c;
+    double e[3];
+    if (stick) {
+      memcpy(e, st, sizeof e);
+    } else {
+      double sg = st[2] > 0 ? 1.0 : -1.0, N = hypot(st[0], st[1]);
+      for (int it = 0; it < 200; it++) {
+        e[2] = sg * (mu_k * N + c);
+        double q0 = -(rn[0] + W[6] * e[2]), q1 = -(rn[1] + W[7] * e[2]);
+        e[0] = Ni[0] * q0 + Ni[2] * q1, e[1] = Ni[1] * q0 + Ni[3] * q1;
+        N = hypot(e[0], e[1]);
+      }
+      e[2] = sg * (mu_k * N + c);
+    }
+    laws[2].sliding = slid;
+    nh_mcp_stats sts;
+    CHECK_OK(nh_mcp_solve(3, W, r, laws, 1e-13, 1000, lam, &sts));
+    for (int i = 0; i < 3; i++)
+      CHECK(fabs(lam[i] - e[i]) <= 1e-9 * (1 + fabs(e[i])),
+            "static/kinetic (mu_k %g, mu_s %g, step %d, r_t %g, slid before %d): lambda_%d "
+            "expected %.12g, got %.12g (tol 1e-9 relative)",
+            mu_k, mu_s, k, rt, slid, i, e[i], lam[i]);
+    /* the solver's state: sliding iff the stick force does not fit the state's bound */
+    int slides = !stick;
+    CHECK(laws[2].sliding == slides, "static/kinetic step %d: sliding out %d, expected %d", k,
+          laws[2].sliding, slides);
+    if (!slid && laws[2].sliding && k > 0) n_break++;
+    if (was_sliding && !laws[2].sliding) n_rearrest++;
+    was_sliding = slid = laws[2].sliding;
+  }
+  CHECK(n_break == 1 && n_rearrest == 1,
+        "static/kinetic: one break-away on the way up and one arrest on the way down expected, "
+        "got %d and %d",
+        n_break, n_rearrest);
+}
+
+/* The break-away load: with decoupled rows the stick force is −r_t / W_tt, so
+ * the point breaks at r_t = W_tt (μ_s N + c) and then carries μ_k N + c. */
+static void test_static_kinetic(void) {
+  const double Wd[9] = {2.0, 0.0, 0.0, 0.0, 1.5, 0.0, 0.0, 0.0, 1.0};
+  const double Wc[9] = {2.0, 0.3, 0.2, 0.3, 1.5, -0.1, 0.2, -0.1, 1.0};
+  static_kinetic_case(Wd, 0.3, 0.6, 0.05); /* seed: static twice the kinetic */
+  static_kinetic_case(Wc, 0.3, 0.6, 0.05);
+  static_kinetic_case(Wc, 0.4, 0.4, 0.0); /* μ_s = μ_k: plain Coulomb */
+  /* The break-away point in the decoupled case, stated as numbers: N =
+   * |(0.5, −0.7/1.5)|; stuck at r_t just below W_tt (μ_s N + c), sliding at
+   * μ_k N + c just above it. */
+  nh_row_law laws[3] = {law(NH_ROW_BILATERAL), law(NH_ROW_BILATERAL), law(NH_ROW_FRICTION)};
+  laws[2].normal = 0, laws[2].normal2 = 1, laws[2].mu = 0.3, laws[2].mu_static = 0.6;
+  double N = hypot(0.5, 0.7 / 1.5), rb = 0.6 * N;
+  for (int side = -1; side <= 1; side += 2) {
+    double r[3] = {-1.0, 0.7, rb * (1 + side * 1e-6)}, lam[3] = {0, 0, 0};
+    laws[2].sliding = 0;
+    CHECK_OK(nh_mcp_solve(3, Wd, r, laws, 1e-14, 1000, lam, NULL));
+    double expect = side < 0 ? -r[2] : -0.3 * N;
+    CHECK_CLOSE(lam[2], expect, 1e-12, "static/kinetic break-away force");
+    CHECK(laws[2].sliding == (side > 0), "break-away: sliding %d on side %d", laws[2].sliding,
+          side);
+  }
+  /* A disc pair (the puncture's tangential rows) on a unilateral normal,
+   * decoupled: stuck up to μ_s λ_n, then on the μ_k circle. */
+  double Wp[9] = {1.0, 0, 0, 0, 2.0, 0, 0, 0, 2.0};
+  nh_row_law pl[3] = {law(NH_ROW_UNILATERAL), law(NH_ROW_FRICTION), law(NH_ROW_FRICTION)};
+  for (int q = 1; q <= 2; q++)
+    pl[q].normal = 0, pl[q].group = 1, pl[q].mu = 0.2, pl[q].mu_static = 0.4;
+  for (int side = -1; side <= 1; side += 2) {
+    double load = 0.4 * 1.0 * 2.0 * (1 + side * 1e-6); /* |stick| = load / W_tt */
+    double r[3] = {-1.0, 0.6 * load, 0.8 * load}, lam[3] = {0, 0, 0};
+    pl[1].sliding = pl[2].sliding = 0;
+    CHECK_OK(nh_mcp_solve(3, Wp, r, pl, 1e-14, 1000, lam, NULL));
+    double f = hypot(lam[1], lam[2]), expect = side < 0 ? load / 2.0 : 0.2;
+    CHECK_CLOSE(f, expect, 1e-10, "disc static/kinetic: tangential force");
+    CHECK(pl[1].sliding == (side > 0) && pl[2].sliding == pl[1].sliding,
+          "disc break-away: sliding %d %d on side %d", pl[1].sliding, pl[2].sliding, side);
+  }
+}
+
 int main(void) {
   test_bilateral();
   test_unilateral();
@@ -360,6 +480,7 @@ int main(void) {
   test_warm_start();
   test_disc();
   test_two_normals();
+  test_static_kinetic();
   test_failures();
   TEST_END();
 }

@@ -10,7 +10,9 @@
  * g = n · (x_P − x_tool), force on the tissue along +n):
  *   shaft point  n1, n2 bilateral (g the lateral offset); t friction with
  *                bound μ |(λ1, λ2)| + friction_per_length × spacing (g = 0):
- *                it sticks, or slides as the tool moves in or out;
+ *                it sticks, or slides as the tool moves in or out; a point
+ *                that stuck in the last step needs μ_s |(λ1, λ2)| + ... to
+ *                start sliding (friction_static; nh_cpoint.slid);
  *   tip          the same at the front with bound μ |(λ1, λ2)| + cutting
  *                force × h and g = t · (x_P − x_tip).
  * The tip rows belong to the group's leading tool (the outer tool unless it
@@ -29,6 +31,7 @@ int nh_channel_open(nh_group *G, const nh_tool_spec *sp, const nh_mesh *m) {
   G->entry.len = nh_point_spacing(sp, m, &G->entry);
   G->entry.tool = -1, G->entry.row = -1;
   memset(G->entry.lam, 0, sizeof G->entry.lam);
+  G->entry.slid = 0;
   G->chan[0] = G->entry;
   G->n_chan = 1;
   G->front = G->entry;
@@ -83,8 +86,9 @@ static int nh_tie_rows(nh_contact *c, const nh_mesh *m, const double *u, nh_cpoi
     rows->gap[r] = (q < 2 || tip) ? nh_vec3_dot(dirs[q], g) : 0.0;
     rows->lambda[r] = p->lam[q];
     if (q == 2)
-      rows->law[r] =
-          (nh_row_law){NH_ROW_FRICTION, first, first + 1, tl->spec->friction, threshold, -1};
+      rows->law[r] = (nh_row_law){NH_ROW_FRICTION,           first,     first + 1,
+                                  tl->spec->friction,        threshold, -1,
+                                  tl->spec->friction_static, p->slid};
   }
   p->row = first, p->tool = k, p->s = s;
   return first;
@@ -171,6 +175,7 @@ int nh_tip_update(nh_contact *c, nh_group *G, const nh_mesh *m, const double *u,
     G->front.lam[q] = rows->lambda[r + q];
     nh_tool_add_force(tl, rows, r + q, h, nh_beam_length(tl->beam));
   }
+  G->front.slid = rows->law[r + 2].sliding;
   if (!nh_on_bound(rows, r + 2) || rows->lambda[r + 2] < 0.0) return NH_OK; /* it sticks */
   /* cut and advance (Eq. 8): the front moves to the material point at the tip */
   double xt[3];
@@ -194,7 +199,7 @@ int nh_shaft_rows(nh_contact *c, nh_group *G, const nh_mesh *m, const double *u,
     p->row = -1;
     int k = nh_cover(c, G, xp, p->tool >= 0 ? p->s : L, 0.5 * p->len, &s);
     if (k < 0 || c->tools[k].dyn < 0) { /* uncovered: no rows */
-      p->tool = -1;
+      p->tool = -1, p->slid = 0;
       memset(p->lam, 0, sizeof p->lam);
       continue;
     }
@@ -213,5 +218,6 @@ void nh_shaft_update(nh_contact *c, nh_group *G, double h, nh_group_events *ev) 
       p->lam[q] = c->rows.lambda[p->row + q];
       nh_tool_add_force(&c->tools[p->tool], &c->rows, p->row + q, h, p->s);
     }
+    p->slid = c->rows.law[p->row + 2].sliding;
   }
 }

@@ -32,6 +32,7 @@ typedef struct {
   int tool;     /* the tool it was tied to in the last step (−1: none) */
   int row;      /* its first row in the last step (−1: none) */
   double lam[3];
+  int slid; /* its friction slid in the last step (static or kinetic bound next) */
 } nh_cpoint;
 
 /* One tool: a beam, its motion and the forces of the last step. */

@@ -80,6 +80,7 @@ int nh_puncture_rows(nh_contact *c, nh_group *G, const nh_mesh *m, const double 
   nh_point_position(m, u, &G->entry, xp);
   if (!nh_puncture_near(G, tl, m, xt, xp, h)) {
     memset(G->entry.lam, 0, sizeof G->entry.lam);
+    G->entry.slid = 0;
     return NH_OK;
   }
   /* The rows act along the tip's axis t and across it, not along the
@@ -107,9 +108,11 @@ int nh_puncture_rows(nh_contact *c, nh_group *G, const nh_mesh *m, const double 
     rows->gap[r] = q == 0 ? gap : 0.0;
     rows->lambda[r] = G->entry.lam[q];
     /* The normal yields at the puncture force (Eq. 6 within the step). */
-    rows->law[r] = q == 0 ? (nh_row_law){NH_ROW_UNILATERAL, -1, -1, 0.0, sp->puncture_force * h, -1}
-                          : (nh_row_law){NH_ROW_FRICTION, G->entry_row, -1,
-                                         sp->friction,    0.0,          G->entry_row + 1};
+    rows->law[r] =
+        q == 0
+            ? (nh_row_law){NH_ROW_UNILATERAL, -1, -1, 0.0, sp->puncture_force * h, -1, 0.0, 0}
+            : (nh_row_law){NH_ROW_FRICTION,  G->entry_row,        -1,           sp->friction, 0.0,
+                           G->entry_row + 1, sp->friction_static, G->entry.slid};
   }
   return NH_OK;
 }
@@ -121,6 +124,7 @@ void nh_puncture_update(nh_contact *c, nh_group *G, double h, nh_group_events *e
     G->entry.lam[q] = c->rows.lambda[G->entry_row + q];
     nh_tool_add_force(tl, &c->rows, G->entry_row + q, h, nh_beam_length(tl->beam));
   }
+  G->entry.slid = c->rows.law[G->entry_row + 1].sliding;
   double fn = G->entry.lam[0] / h, fp = tl->spec->puncture_force;
   ev->puncture_rows = 1;
   ev->touching = fn > 0;

@@ -181,4 +181,13 @@ void nh_tissue_gauss_stress(const nh_tissue *tissue, int c, const double *u, con
  * so that sᵀe = σ : ε and ½ sᵀe is the strain-energy density. */
 void nh_voigt_compliance(double lambda, double mu, const double s[6], double e[6]);
 
+/* ---- surface tractions (traction.c; docs/theory.md "Surface tractions") ----
+ * Consistent nodal forces of the traction tr at schedule factor 1: adds
+ * ∫_Γ N_a t dA to f[3 n] over the tissue's boundary Γ inside tr's region
+ * (the box domain's faces; for an immersed domain the surface F = 0 cut
+ * from its cells), t = tr->traction or −tr->pressure n. *area (may be NULL):
+ * the area of Γ it integrated over. NH_ERR_INPUT (at tr->where) if the region
+ * holds no boundary. */
+int nh_traction_load(const nh_mesh *mesh, const nh_traction *tr, double *f, double *area);
+
 #endif

@@ -66,8 +66,10 @@ static void print_tool(FILE *f, const nh_scene *s, int i) {
             k + 1 == t->n_motion ? ", then at rest" : "");
   }
   fprintf(f,
-          "            puncture %g N, cutting %g N, friction mu %g plus %g N/m, path points every ",
-          t->puncture_force, t->cutting_force, t->friction, t->friction_per_length);
+          "            puncture %g N, cutting %g N, friction mu %g (static %g) plus %g N/m, path "
+          "points every ",
+          t->puncture_force, t->cutting_force, t->friction, t->friction_static,
+          t->friction_per_length);
   if (t->spacing > 0)
     fprintf(f, "%g m\n", t->spacing);
   else
@@ -148,8 +150,17 @@ void nh_scene_print(const nh_scene *s, void *stdio_file) {
     fprintf(f, "skull     rigid, frictionless, CSF gap %g m\n", s->tissue.skull_gap);
   fprintf(f, "fixed     %d region%s\n", s->tissue.n_fixed, s->tissue.n_fixed == 1 ? "" : "s");
   for (int i = 0; i < s->tissue.n_fixed; ++i) {
+    const nh_fix *fx = &s->tissue.fix[i];
     fprintf(f, "          tissue.fixed.%d: ", i);
     print_region(f, &s->tissue.fixed[i]);
+    if (fx->axes != 7)
+      fprintf(f, ", axes%s%s%s", fx->axes & 1 ? " x" : "", fx->axes & 2 ? " y" : "",
+              fx->axes & 4 ? " z" : "");
+    if (fx->displacement[0] != 0.0 || fx->displacement[1] != 0.0 || fx->displacement[2] != 0.0)
+      fprintf(f, ", displacement [%g, %g, %g] m", fx->displacement[0], fx->displacement[1],
+              fx->displacement[2]);
+    if (fx->schedule.n > 0)
+      fprintf(f, ", schedule of %d point%s", fx->schedule.n, fx->schedule.n == 1 ? "" : "s");
     fprintf(f, "\n");
   }
   fprintf(f, "loads     %d\n", s->tissue.n_loads);
@@ -160,6 +171,20 @@ void nh_scene_print(const nh_scene *s, void *stdio_file) {
     print_region(f, &l->region);
     if (l->schedule.n > 0)
       fprintf(f, ", schedule of %d point%s", l->schedule.n, l->schedule.n == 1 ? "" : "s");
+    fprintf(f, "\n");
+  }
+  if (s->tissue.n_tractions > 0) fprintf(f, "tractions %d\n", s->tissue.n_tractions);
+  for (int i = 0; i < s->tissue.n_tractions; ++i) {
+    const nh_traction *t = &s->tissue.tractions[i];
+    if (t->is_pressure)
+      fprintf(f, "          tissue.tractions.%d: pressure %g N/m² on the boundary in ", i,
+              t->pressure);
+    else
+      fprintf(f, "          tissue.tractions.%d: traction [%g, %g, %g] N/m² on the boundary in ", i,
+              t->traction[0], t->traction[1], t->traction[2]);
+    print_region(f, &t->region);
+    if (t->schedule.n > 0)
+      fprintf(f, ", schedule of %d point%s", t->schedule.n, t->schedule.n == 1 ? "" : "s");
     fprintf(f, "\n");
   }
   if (!s->adapt.enabled) {

@@ -435,19 +435,60 @@ static int read_region_shape(const nh_ctx *c, const nh_yaml_node *node, const ch
   return read_radius(c, shape, key, &region->radius);
 }
 
-/* A region {box | sphere | cylinder} at `node` (for tissue.fixed items). */
-static int read_region(const nh_ctx *c, const nh_yaml_node *node, const char *path,
-                       nh_region *region) {
-  static const char *const keys[] = {"box", "sphere", "cylinder", "label", NULL};
+/* A map at `node` with only `keys`, holding a region shape (read into
+ * region); `expected` describes the item for the message. */
+static int region_item(const nh_ctx *c, const nh_yaml_node *node, const char *path,
+                       const char *const *keys, const char *expected, nh_region *region) {
   char d[96];
   if (node->kind != NH_YAML_MAP)
-    return fail(c, node, path,
-                "expected a region {box: {min, max}}, {sphere: {center, radius}}, "
-                "{cylinder: {start, end, radius}} or {label: N}, got %s",
-                describe(node, d, sizeof d));
+    return fail(c, node, path, "expected %s, got %s", expected, describe(node, d, sizeof d));
   NH_TRY(check_keys(c, node, path, keys));
-  NH_TRY(read_region_shape(c, node, path, region));
+  return read_region_shape(c, node, path, region);
+}
+
+static int as_choice(const nh_ctx *c, const nh_yaml_node *n, const char *key,
+                     const char *const *choices, int *out);
+static int read_schedule(const nh_ctx *c, const nh_yaml_node *node, const char *path,
+                         nh_schedule *s);
+
+/* A tissue.fixed item: a region {box | sphere | cylinder | label}, the components it
+ * fixes (axes: [x, z]; default all) and their prescribed displacement
+ * (displacement: [dx, dy, dz] times schedule; default 0). */
+static int read_fixed(const nh_ctx *c, const nh_yaml_node *node, const char *path,
+                      nh_region *region, nh_fix *fix) {
+  static const char *const keys[] = {"box",  "sphere",       "cylinder", "label",
+                                     "axes", "displacement", "schedule", NULL};
+  static const char *const axis_names[] = {"x", "y", "z", NULL};
+  char key[NH_KEY_MAX], sub[NH_KEY_MAX], d[96];
+  const nh_yaml_node *axes, *disp, *schedule;
+  NH_TRY(region_item(c, node, path, keys,
+                     "a region {box: {min, max}}, {sphere: {center, radius}}, "
+                     "{cylinder: {start, end, radius}} or {label: N}",
+                     region));
   make_where(c, node, path, region->where);
+  fix->axes = 7;
+  NH_TRY(field(c, node, path, "axes", 0, &axes));
+  if (axes) {
+    join(key, path, "axes");
+    if (axes->kind != NH_YAML_SEQ || axes->n == 0)
+      return fail(c, axes, key, "expected a non-empty list of axes among x, y, z, got %s",
+                  describe(axes, d, sizeof d));
+    fix->axes = 0;
+    for (int i = 0; i < axes->n; ++i) {
+      int a;
+      NH_TRY(as_choice(c, axes->items[i], join_index(sub, key, i), axis_names, &a));
+      if (fix->axes & (1 << a))
+        return fail(c, axes->items[i], sub, "axis %s is given twice", axis_names[a]);
+      fix->axes |= 1 << a;
+    }
+  }
+  NH_TRY(field(c, node, path, "displacement", 0, &disp));
+  if (disp) NH_TRY(as_vec3(c, disp, join(key, path, "displacement"), fix->displacement));
+  NH_TRY(field(c, node, path, "schedule", 0, &schedule));
+  if (schedule && !disp)
+    return fail(c, schedule, join(key, path, "schedule"),
+                "a schedule scales a prescribed displacement: give displacement too");
+  if (schedule) NH_TRY(read_schedule(c, schedule, join(key, path, "schedule"), &fix->schedule));
   return NH_OK;
 }
 
@@ -484,18 +525,42 @@ static int read_schedule(const nh_ctx *c, const nh_yaml_node *node, const char *
 static int read_load(const nh_ctx *c, const nh_yaml_node *node, const char *path, nh_load *load) {
   static const char *const keys[] = {"box",   "sphere",   "cylinder", "label",
                                      "force", "schedule", NULL};
-  char key[NH_KEY_MAX], d[96];
-  if (node->kind != NH_YAML_MAP)
-    return fail(c, node, path, "expected a load {box: {min, max}, force: [fx, fy, fz]}, got %s",
-                describe(node, d, sizeof d));
-  NH_TRY(check_keys(c, node, path, keys));
+  char key[NH_KEY_MAX];
+  NH_TRY(region_item(c, node, path, keys, "a load {box: {min, max}, force: [fx, fy, fz]}",
+                     &load->region));
   const nh_yaml_node *schedule;
-  NH_TRY(read_region_shape(c, node, path, &load->region));
   NH_TRY(get_vec3(c, node, path, "force", 1, load->force, NULL));
   NH_TRY(field(c, node, path, "schedule", 0, &schedule));
   if (schedule) NH_TRY(read_schedule(c, schedule, join(key, path, "schedule"), &load->schedule));
   make_where(c, node, path, load->where);
   make_where(c, node, path, load->region.where);
+  return NH_OK;
+}
+
+/* {box | sphere | cylinder, traction: [3] | pressure: p, schedule: [[t, s], ...]} */
+static int read_traction(const nh_ctx *c, const nh_yaml_node *node, const char *path,
+                         nh_traction *tr) {
+  static const char *const keys[] = {"box",      "sphere",   "cylinder", "traction",
+                                     "pressure", "schedule", NULL};
+  char key[NH_KEY_MAX];
+  NH_TRY(region_item(c, node, path, keys,
+                     "a traction {box: {min, max}, traction: [tx, ty, tz]} or {box: ..., "
+                     "pressure: p}",
+                     &tr->region));
+  const nh_yaml_node *schedule, *tv, *pv;
+  NH_TRY(field(c, node, path, "traction", 0, &tv));
+  NH_TRY(field(c, node, path, "pressure", 0, &pv));
+  if (!tv && !pv) return fail(c, node, path, "give traction: [tx, ty, tz] (N/m²) or pressure: p");
+  if (tv && pv)
+    return fail(c, pv, join(key, path, "pressure"),
+                "give either traction or pressure, not both (traction is already given)");
+  if (tv) NH_TRY(as_vec3(c, tv, join(key, path, "traction"), tr->traction));
+  if (pv) NH_TRY(as_number(c, pv, join(key, path, "pressure"), &tr->pressure));
+  tr->is_pressure = pv != NULL;
+  NH_TRY(field(c, node, path, "schedule", 0, &schedule));
+  if (schedule) NH_TRY(read_schedule(c, schedule, join(key, path, "schedule"), &tr->schedule));
+  make_where(c, node, path, tr->where);
+  make_where(c, node, path, tr->region.where);
   return NH_OK;
 }
 
@@ -1031,9 +1096,38 @@ static int read_limits(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   return at_least(c, at, "limits", "max_cells", s->limits.max_cells, 1, 0);
 }
 
+/* tissue.NAME: a list of items of `size` bytes read by `read` into a new
+ * array *items; *n counts each item before it is read, so that destroy frees
+ * a half-read one's schedule. */
+typedef int (*nh_item_reader)(const nh_ctx *c, const nh_yaml_node *node, const char *path,
+                              void *item);
+static int read_load_item(const nh_ctx *c, const nh_yaml_node *node, const char *path, void *item) {
+  return read_load(c, node, path, item);
+}
+static int read_traction_item(const nh_ctx *c, const nh_yaml_node *node, const char *path,
+                              void *item) {
+  return read_traction(c, node, path, item);
+}
+static int read_items(const nh_ctx *c, const nh_yaml_node *t, const char *name, size_t size,
+                      void **items, int *n, nh_item_reader read) {
+  char key[NH_KEY_MAX], path[NH_KEY_MAX];
+  const nh_yaml_node *list;
+  NH_TRY(list_section(c, t, "tissue", name, &list));
+  if (!list || list->n == 0) return NH_OK;
+  *items = nh_calloc((size_t)list->n, size);
+  if (!*items) return NH_ERR_MEMORY;
+  join(path, "tissue", name);
+  for (int i = 0; i < list->n; ++i) {
+    *n = i + 1;
+    NH_TRY(read(c, list->items[i], join_index(key, path, i), (char *)*items + (size_t)i * size));
+  }
+  return NH_OK;
+}
+
 static int read_tissue(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
-  static const char *const keys[] = {"domain",   "grid",   "material",  "damping", "fixed", "loads",
-                                     "buoyancy", "labels", "materials", "skull",   NULL};
+  static const char *const keys[] = {"domain", "grid",      "material",  "damping",
+                                     "fixed",  "loads",     "tractions", "buoyancy",
+                                     "labels", "materials", "skull",     NULL};
   static const char *const domain_keys[] = {"box", "brain", "mask", "surface", NULL};
   char key[NH_KEY_MAX];
   const nh_yaml_node *t, *domain, *n;
@@ -1093,26 +1187,19 @@ static int read_tissue(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   make_where(c, fixed_key ? fixed_key : tissue_key, "tissue.fixed", s->tissue.where_fixed);
   if (fixed && fixed->n > 0) {
     s->tissue.fixed = nh_calloc((size_t)fixed->n, sizeof *s->tissue.fixed);
-    if (!s->tissue.fixed) return NH_ERR_MEMORY;
+    s->tissue.fix = nh_calloc((size_t)fixed->n, sizeof *s->tissue.fix);
+    if (!s->tissue.fixed || !s->tissue.fix) return NH_ERR_MEMORY;
     for (int i = 0; i < fixed->n; ++i) {
-      NH_TRY(
-          read_region(c, fixed->items[i], join_index(key, "tissue.fixed", i), &s->tissue.fixed[i]));
       s->tissue.n_fixed = i + 1;
+      NH_TRY(read_fixed(c, fixed->items[i], join_index(key, "tissue.fixed", i), &s->tissue.fixed[i],
+                        &s->tissue.fix[i]));
     }
   }
 
-  const nh_yaml_node *loads;
-  NH_TRY(list_section(c, t, "tissue", "loads", &loads));
-  if (loads && loads->n > 0) {
-    s->tissue.loads = nh_calloc((size_t)loads->n, sizeof *s->tissue.loads);
-    if (!s->tissue.loads) return NH_ERR_MEMORY;
-    for (int i = 0; i < loads->n; ++i) {
-      /* Count the load first so that destroy frees a half-read schedule. */
-      s->tissue.n_loads = i + 1;
-      NH_TRY(
-          read_load(c, loads->items[i], join_index(key, "tissue.loads", i), &s->tissue.loads[i]));
-    }
-  }
+  NH_TRY(read_items(c, t, "loads", sizeof *s->tissue.loads, (void **)&s->tissue.loads,
+                    &s->tissue.n_loads, read_load_item));
+  NH_TRY(read_items(c, t, "tractions", sizeof *s->tissue.tractions, (void **)&s->tissue.tractions,
+                    &s->tissue.n_tractions, read_traction_item));
   return NH_OK;
 }
 
@@ -1554,8 +1641,9 @@ static int read_tool(const nh_ctx *c, const nh_yaml_node *list, int i, nh_scene 
                                      "elements",  "material",   "damping", "base",
                                      "direction", "trajectory", "motion",  "interaction",
                                      "inside",    "release",    NULL};
-  static const char *const interaction_keys[] = {"puncture_force",      "cutting_force", "friction",
-                                                 "friction_per_length", "spacing",       NULL};
+  static const char *const interaction_keys[] = {
+      "puncture_force", "cutting_force",   "friction", "friction_per_length",
+      "spacing",        "friction_static", NULL};
   /* Files the output folder holds besides the tools' own. */
   static const char *const reserved[] = {"tissue", "points", NULL};
   char path[NH_KEY_MAX], sub[NH_KEY_MAX], key[NH_KEY_MAX], d[96];
@@ -1624,14 +1712,20 @@ static int read_tool(const nh_ctx *c, const nh_yaml_node *list, int i, nh_scene 
   join(sub, path, "interaction");
   NH_TRY(section(c, node, path, "interaction", 0, &m));
   if (m) {
-    double *value[] = {&t->puncture_force, &t->cutting_force, &t->friction, &t->friction_per_length,
-                       &t->spacing};
+    double *value[] = {&t->puncture_force,      &t->cutting_force, &t->friction,
+                       &t->friction_per_length, &t->spacing,       &t->friction_static};
     NH_TRY(check_keys(c, m, sub, interaction_keys));
+    t->friction_static = -1;
     for (int k = 0; interaction_keys[k]; ++k) {
       NH_TRY(get_number(c, m, sub, interaction_keys[k], 0, value[k], &at));
       NH_TRY(at_least(c, at, sub, interaction_keys[k], *value[k], 0, 0));
     }
+    if (at && t->friction_static < t->friction) /* `at`: friction_static, read last */
+      return fail(c, at, join(key, sub, "friction_static"),
+                  "the static coefficient must be at least the kinetic one (friction = %g), got %g",
+                  t->friction, t->friction_static);
   }
+  if (t->friction_static < t->friction) t->friction_static = t->friction;
 
   NH_TRY(read_host(c, list, i, path, s));
   NH_TRY(field(c, node, path, "release", 0, &at));
@@ -1961,6 +2055,16 @@ void nh_scene_destroy(nh_scene **scene) {
     free(s->tissue.loads[i].schedule.value);
   }
   free(s->tissue.loads);
+  for (int i = 0; i < s->tissue.n_tractions; ++i) {
+    free(s->tissue.tractions[i].schedule.t);
+    free(s->tissue.tractions[i].schedule.value);
+  }
+  free(s->tissue.tractions);
+  for (int i = 0; s->tissue.fix && i < s->tissue.n_fixed; ++i) {
+    free(s->tissue.fix[i].schedule.t);
+    free(s->tissue.fix[i].schedule.value);
+  }
+  free(s->tissue.fix);
   free(s->tissue.fixed);
   free(s->tissue.mask_labels);
   free(s->tissue.materials);

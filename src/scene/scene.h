@@ -63,6 +63,26 @@ typedef struct {
   char where[NH_WHERE_MAX];
 } nh_load;
 
+/* tissue.fixed[i]'s options besides its region: which components it fixes
+ * and a prescribed displacement of those components. */
+typedef struct {
+  int axes;               /* bit k set: component k fixed (7 without `axes`: all) */
+  double displacement[3]; /* prescribed displacement, m, times the schedule (default 0) */
+  nh_schedule schedule;   /* fixed[i].schedule (only with displacement) */
+} nh_fix;
+
+/* tissue.tractions[i]: a surface load on the tissue's boundary inside a
+ * region: a traction vector (N/m², the same on every face) or a pressure p
+ * (N/m², traction −p n with n the outward normal), times a schedule. */
+typedef struct {
+  nh_region region;
+  double traction[3];   /* traction, N/m² (when !is_pressure) */
+  double pressure;      /* pressure, N/m² (when is_pressure) */
+  int is_pressure;      /* given as pressure */
+  nh_schedule schedule; /* tractions[i].schedule */
+  char where[NH_WHERE_MAX];
+} nh_traction;
+
 typedef struct {
   char name[NH_NAME_MAX];
   double point[3];
@@ -113,9 +133,11 @@ typedef struct {
   double depth;    /* the planned depth D = standoff + |target − entry|, m */
   int n_motion;    /* tools[i].motion: list of {until, speed} (default: none, at rest) */
   nh_motion *motion;
-  double puncture_force;      /* tools[i].interaction.puncture_force, N (default 0, >= 0) */
-  double cutting_force;       /* tools[i].interaction.cutting_force, N (default 0, >= 0) */
-  double friction;            /* tools[i].interaction.friction, Coulomb μ (default 0, >= 0) */
+  double puncture_force;  /* tools[i].interaction.puncture_force, N (default 0, >= 0) */
+  double cutting_force;   /* tools[i].interaction.cutting_force, N (default 0, >= 0) */
+  double friction;        /* tools[i].interaction.friction, kinetic Coulomb μ (default 0, >= 0) */
+  double friction_static; /* tools[i].interaction.friction_static, static μ_s: the threshold
+                             to start sliding (default friction, >= friction) */
   double friction_per_length; /* tools[i].interaction.friction_per_length, N/m (default 0, >= 0) */
   double spacing;     /* tools[i].interaction.spacing: path-point spacing, m (default 0: half the
                          local cell edge; >= 0) */
@@ -228,9 +250,14 @@ typedef struct nh_scene {
     double skull_gap; /* tissue.skull.gap, m (default 0, >= 0): the CSF gap to the skull */
     char where_skull[NH_WHERE_MAX];
     int n_fixed;
-    nh_region *fixed; /* tissue.fixed: list of {box | sphere | cylinder} */
+    nh_region *fixed; /* tissue.fixed: list of {box | sphere | cylinder, axes?, displacement?,
+                         schedule?} */
+    nh_fix *fix;      /* the options of each, n_fixed of them */
     int n_loads;
     nh_load *loads; /* tissue.loads: list of {box | sphere | cylinder, force, schedule?} */
+    int n_tractions;
+    nh_traction *tractions; /* tissue.tractions: {box | sphere | cylinder, traction | pressure,
+                               schedule?} */
     char where_fixed[NH_WHERE_MAX];
   } tissue;
 

@@ -87,6 +87,7 @@ void nh_sim_destroy(nh_sim **sim) {
   nh_tissue_destroy(&s->tissue);
   nh_mesh_destroy(&s->mesh);
   free(s->fixed);
+  free(s->moved);
   free(s->u);
   free(s->x);
   free(s->v);
@@ -147,11 +148,27 @@ void nh_sim_external_force(const nh_sim *s, double t, double *f) {
   nh_scene_tissue_gravity(sc, t, g);
   const double *mass = sc->tissue.buoyant ? s->drained : s->tissue->mass;
   for (int i = 0; i < n; i++) f[i] = mass[i / 3] * g[i % 3];
-  for (int l = 0; l < sc->tissue.n_loads; l++) {
-    double factor = nh_schedule_eval(&sc->tissue.loads[l].schedule, t);
+  for (int l = 0; l < sc->tissue.n_loads + sc->tissue.n_tractions; l++) {
+    const int nl = sc->tissue.n_loads;
+    double factor = nh_schedule_eval(
+        l < nl ? &sc->tissue.loads[l].schedule : &sc->tissue.tractions[l - nl].schedule, t);
     if (factor == 0.0) continue;
     const double *u = s->load_unit + (size_t)l * n;
     for (int i = 0; i < n; i++) f[i] += factor * u[i];
+  }
+}
+
+/* Prescribed displacements (tissue.fixed's displacement × schedule) of the
+ * fixed components at time t, set in u before the step solves: the step
+ * keeps fixed DOFs at their values (docs/theory.md §5). */
+static void nh_sim_prescribe(nh_sim *s, double t) {
+  const nh_scene *sc = s->scene;
+  for (int i = 0; i < s->mesh->n_nodes; i++) {
+    if (s->moved[i] < 0) continue;
+    const nh_fix *fx = &sc->tissue.fix[s->moved[i]];
+    double factor = nh_schedule_eval(&fx->schedule, t);
+    for (int k = 0; k < 3; k++)
+      if (nh_fixed_component(s->fixed, i, k)) s->u[3 * i + k] = factor * fx->displacement[k];
   }
 }
 
@@ -438,6 +455,14 @@ static int nh_resize(double **a, int n_nodes, int comps) {
  * of what an elastic body of size ℓ would (docs/theory.md §5). */
 #define NH_TIE_STIFFNESS 1.0e3
 
+/* tissue.fixed[r] on an immersed domain is a volumetric tie (all components
+ * clamped, no prescribed motion, a geometric region), not a node set. */
+static int nh_sim_fixed_is_tie(const nh_scene *sc, int immersed, int r) {
+  const nh_fix *fx = &sc->tissue.fix[r];
+  return immersed && sc->tissue.fixed[r].kind != NH_REGION_LABEL && fx->axes == 7 &&
+         fx->displacement[0] == 0.0 && fx->displacement[1] == 0.0 && fx->displacement[2] == 0.0;
+}
+
 static int nh_sim_setup_mesh(nh_sim *s, int first) {
   const nh_scene *sc = s->scene;
   nh_mesh *m = s->mesh;
@@ -450,20 +475,55 @@ static int nh_sim_setup_mesh(nh_sim *s, int first) {
   NH_TRY(nh_resize(&s->u_start, nn, 3));
   NH_TRY(nh_resize(&s->f_ext, nn, 3));
   NH_TRY(nh_resize(&s->drained, nn, 1));
-  NH_TRY(nh_resize(&s->load_unit, nn, 3 * (sc->tissue.n_loads ? sc->tissue.n_loads : 1)));
+  const int n_unit = sc->tissue.n_loads + sc->tissue.n_tractions;
+  NH_TRY(nh_resize(&s->load_unit, nn, 3 * (n_unit ? n_unit : 1)));
+  int *moved = realloc(s->moved, sizeof(int) * (size_t)(nn ? nn : 1));
+  unsigned char *in = calloc((size_t)(nn ? nn : 1), 1);
+  if (moved) s->moved = moved;
+  if (!moved || !in) {
+    free(in);
+    return NH_ERROR(NH_ERR_MEMORY, "out of memory: %d nodes", nn);
+  }
+  for (int i = 0; i < nn; i++) s->moved[i] = -1;
   /* Fixed regions (docs/theory.md §5, "Fixed regions"): on a box domain the
-   * nodes inside; on an immersed one a stiff volumetric tie over the
-   * region's tissue, which converges to the region under refinement. */
+   * nodes inside; on an immersed one a clamp of all components is a stiff
+   * volumetric tie over the region's tissue, which converges to the region
+   * under refinement (per-axis and prescribed regions stay node sets). */
   const int immersed = m->domain.kind != NH_DOMAIN_BOX;
   for (int r = 0; r < sc->tissue.n_fixed; r++) {
     const nh_region *reg = &sc->tissue.fixed[r];
-    if (immersed && reg->kind != NH_REGION_LABEL) continue; /* tied below */
-    int count = nh_mesh_nodes_in_region(m, reg, s->fixed);
+    const nh_fix *fx = &sc->tissue.fix[r];
+    if (nh_sim_fixed_is_tie(sc, immersed, r)) continue; /* tied below */
+    memset(in, 0, (size_t)nn);
+    int count = nh_mesh_nodes_in_region(m, reg, in);
+    const int prescribed =
+        fx->displacement[0] != 0.0 || fx->displacement[1] != 0.0 || fx->displacement[2] != 0.0;
+    for (int i = 0; i < nn; i++) {
+      if (!in[i]) continue;
+      /* merge with the components fixed so far; all three: 1 */
+      int mask = (s->fixed[i] == 0              ? 0
+                  : (s->fixed[i] & NH_FIX_AXES) ? s->fixed[i] & 7
+                                                : 7) |
+                 fx->axes;
+      s->fixed[i] = mask == 7 ? 1 : (unsigned char)(NH_FIX_AXES | mask);
+      if (prescribed) s->moved[i] = r;
+    }
     char what[256];
     nh_region_describe(reg, what, sizeof what);
+    if (!(count > 0 || !first)) free(in);
     NH_CHECK(count > 0 || !first, NH_ERR_INPUT, "%s: the %s contains no node of the mesh",
              reg->where, what);
   }
+  /* Hanging nodes: every node not fixed in all three components (a node
+   * fixed in some axes keeps the hanging constraint on all three: its
+   * masters lie on the same fixed face); the Lagrange variant's rows take
+   * whole nodes: there every fixed node is left out. */
+  const int lagrange = sc->adapt.hanging == NH_HANGING_LAGRANGE;
+  for (int i = 0; i < nn; i++) in[i] = s->fixed[i] == 1 || (lagrange && s->fixed[i]);
+  nh_hanging_destroy(&s->hanging);
+  int rc_h = sc->adapt.enabled ? nh_hanging_detect(m, in, &s->hanging) : NH_OK;
+  free(in);
+  NH_TRY(rc_h);
   if (first) {
     nh_material mat = {sc->tissue.young, sc->tissue.poisson, sc->tissue.density,
                        sc->tissue.formulation};
@@ -490,11 +550,13 @@ static int nh_sim_setup_mesh(nh_sim *s, int first) {
     if (!k) return NH_ERROR(NH_ERR_MEMORY, "out of memory: ties");
     for (int r = 0; r < nr; r++) {
       double l = nh_region_size(&sc->tissue.fixed[r]);
-      k[r] = l > 0.0 && isfinite(l) ? NH_TIE_STIFFNESS * sc->tissue.young / (l * l) : 0.0;
+      k[r] = nh_sim_fixed_is_tie(sc, immersed, r) && l > 0.0 && isfinite(l)
+                 ? NH_TIE_STIFFNESS * sc->tissue.young / (l * l)
+                 : 0.0;
     }
     int rc = nh_tissue_set_ties(s->tissue, nr, sc->tissue.fixed, k, vol);
     for (int r = 0; r < nr && !rc; r++)
-      if (sc->tissue.fixed[r].kind != NH_REGION_LABEL && !(vol[r] > 0.0)) {
+      if (nh_sim_fixed_is_tie(sc, immersed, r) && !(vol[r] > 0.0)) {
         char what[256];
         nh_region_describe(&sc->tissue.fixed[r], what, sizeof what);
         rc = NH_ERROR(first ? NH_ERR_INPUT : NH_ERR_INTERNAL,
@@ -521,10 +583,13 @@ static int nh_sim_setup_mesh(nh_sim *s, int first) {
       for (int a = 0; a < 8; a++) s->drained[m->cells[8 * c + a]] += mc;
     }
   }
-  memset(s->load_unit, 0, sizeof(double) * (size_t)n * (size_t)sc->tissue.n_loads);
+  memset(s->load_unit, 0, sizeof(double) * (size_t)n * (size_t)n_unit);
   for (int l = 0; l < sc->tissue.n_loads; l++)
     NH_TRY(nh_mesh_region_load(m, &sc->tissue.loads[l].region, sc->tissue.loads[l].force,
                                s->load_unit + (size_t)l * n));
+  for (int l = 0; l < sc->tissue.n_tractions; l++)
+    NH_TRY(nh_traction_load(m, &sc->tissue.tractions[l],
+                            s->load_unit + (size_t)(sc->tissue.n_loads + l) * n, NULL));
   for (int i = 0; i < sc->n_probes + sc->n_targets; i++) {
     /* outside at creation: the scene's fault; later: ours */
     const int pr = i < sc->n_probes;
@@ -536,10 +601,7 @@ static int nh_sim_setup_mesh(nh_sim *s, int first) {
              first ? "" : " of the refined mesh");
   }
   if (!first && s->contact) NH_TRY(nh_contact_relocate(s->contact, m));
-  nh_hanging_destroy(&s->hanging);
-  if (sc->adapt.enabled) NH_TRY(nh_hanging_detect(m, s->fixed, &s->hanging));
   nh_system_destroy(&s->system);
-  int lagrange = sc->adapt.hanging == NH_HANGING_LAGRANGE;
   int rc = nh_system_create(s->tissue, s->fixed, lagrange ? NULL : s->hanging, &s->system);
   if (rc == NH_ERR_INPUT)
     return NH_ERROR(NH_ERR_INPUT, "%s: every node of the tissue is fixed: nothing to simulate",
@@ -637,7 +699,7 @@ static int nh_sim_refine(nh_sim *s, double **start, int *changed) {
     nh_hanging_interpolate(s->hanging, state[f], 3);
     if (f % 2 == 1)
       for (int i = 0; i < 3 * s->mesh->n_nodes; i++)
-        if (s->fixed[i / 3]) state[f][i] = 0.0;
+        if (nh_fixed_component(s->fixed, i / 3, i % 3)) state[f][i] = 0.0;
   }
   return NH_OK;
 }
@@ -739,6 +801,7 @@ int nh_sim_step(nh_sim *s) {
   }
   double t0 = nh_time_now();
   double t_new = (s->step + 1) * sc->time.step;
+  nh_sim_prescribe(s, t_new); /* (the loads at t_new: nh_sim_solve) */
   nh_step_stats st = {0};
   memcpy(s->u_start, s->u, sizeof(double) * 3 * (size_t)s->mesh->n_nodes);
   if (s->contact) { /* a few kB: beams and channels, for a stop inside the step */

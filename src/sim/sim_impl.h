@@ -31,13 +31,15 @@ struct nh_sim {
   nh_tissue *tissue;
   nh_system *system;
   nh_integrator integrator;
-  unsigned char *fixed;
+  unsigned char *fixed; /* per node: its fixed components (nh_fixed_component) */
+  int *moved;        /* per node: the tissue.fixed item that prescribes its displacement (−1) */
   double *u, *v;     /* displacement and velocity, 3 per node */
   double *x;         /* current positions X + u, for output */
   double *f_ext;     /* 3 per node, work */
   double *drained;   /* per node: the lumped mass that loses buoyancy (tissue above the
                         fluid level; the whole mass without tissue.buoyancy.level) */
-  double *load_unit; /* n_loads x 3 n: nodal forces of each load at factor 1 */
+  double *load_unit; /* (n_loads + n_tractions) x 3 n: nodal forces of each load, then each
+                        traction, at factor 1 */
   int *probe_cell;   /* embedded points: the probes, then the targets */
   double *probe_xi;  /* 3 per point */
   int step;          /* steps done */

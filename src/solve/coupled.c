@@ -69,7 +69,7 @@ int nh_rows_add(nh_rows *r) {
   r->tool[i] = -1, r->elem[i] = 0;
   memset(r->J + 36 * i, 0, 36 * sizeof(double));
   r->gap[i] = 0.0, r->lambda[i] = 0.0;
-  r->law[i] = (nh_row_law){NH_ROW_BILATERAL, -1, -1, 0.0, 0.0, -1};
+  r->law[i] = (nh_row_law){NH_ROW_BILATERAL, -1, -1, 0.0, 0.0, -1, 0.0, 0};
   return i;
 }
 
@@ -103,7 +103,7 @@ static cholmod_sparse *nh_rows_tissue_jt(nh_system *s, const nh_rows *r, int *ma
         const int *f = s->free_of + 3 * s->exp_node[q];
         for (int k = 0; k < 3; k++) {
           double c = s->exp_w[q] * r->N[8 * i + a] * r->dir[3 * i + k];
-          if (c == 0.0) continue;
+          if (c == 0.0 || f[k] < 0) continue;
           if (mark[f[k]] < start) mark[f[k]] = pos, Ji[pos] = f[k], Jx[pos++] = 0.0;
           Jx[mark[f[k]]] += c;
         }

@@ -12,7 +12,11 @@
  *   friction    |λ_i| ≤ b_i = μ_i |λ_n(i)| + c_i, and w_i = 0 inside the
  *               bound (stick), w_i λ_i ≤ 0 on it (slide)       (Eqs. 7-9);
  *   disc pair   rows g, g+1 share one bound on |(λ_g, λ_g+1)|; inside it
- *               w = 0, on it w = −ν λ with ν ≥ 0 (slip opposite to force).
+ *               w = 0, on it w = −ν λ with ν ≥ 0 (slip opposite to force);
+ *   static      a friction row that stuck at the previous step has the bound
+ *               μ_s |λ_n| + c until its force reaches it; then it breaks away
+ *               and the solve is repeated, warm, with μ_k (break-away loop
+ *               below; Nienhuys's stick/slip rearrangement within a step).
  * Every law is the variational inequality "λ_i is the projection of
  * λ_i − w_i onto its set K_i" (ℝ, ℝ₊ or [0, c], [−b, b], the disc), so one residual
  * serves all rows: the natural map |λ − P_K(λ − w)|.
@@ -120,9 +124,11 @@ static int nh_mcp_check_laws(int m, const nh_row_law *laws) {
              "friction row %d: second normal row %d must be -1 or a non-friction row other than "
              "the first normal row %d",
              i, l->normal2, l->normal);
-    NH_CHECK(l->mu >= 0.0 && l->threshold >= 0.0 && isfinite(l->mu) && isfinite(l->threshold),
-             NH_ERR_INPUT, "friction row %d: mu = %g and threshold = %g must be finite and >= 0", i,
-             l->mu, l->threshold);
+    NH_CHECK(l->mu >= 0.0 && l->threshold >= 0.0 && l->mu_static >= 0.0 && isfinite(l->mu) &&
+                 isfinite(l->threshold) && isfinite(l->mu_static),
+             NH_ERR_INPUT,
+             "friction row %d: mu = %g, mu_static = %g and threshold = %g must be finite and >= 0",
+             i, l->mu, l->mu_static, l->threshold);
     if (l->group < 0) continue;
     int g = l->group;
     NH_CHECK(g == i || g == i - 1, NH_ERR_INPUT,
@@ -132,7 +138,8 @@ static int nh_mcp_check_laws(int m, const nh_row_law *laws) {
     const nh_row_law *a = &laws[g], *b = &laws[g + 1];
     NH_CHECK(a->kind == NH_ROW_FRICTION && b->kind == NH_ROW_FRICTION && a->group == g &&
                  b->group == g && a->normal == b->normal && a->normal2 == b->normal2 &&
-                 a->mu == b->mu && a->threshold == b->threshold,
+                 a->mu == b->mu && a->mu_static == b->mu_static && a->sliding == b->sliding &&
+                 a->threshold == b->threshold,
              NH_ERR_INPUT,
              "friction rows %d and %d: a disc pair needs two friction rows with group %d and the "
              "same normal, mu and threshold",
@@ -418,7 +425,38 @@ static void nh_mcp_count(const nh_mcp_work *ws, const nh_row_law *laws, nh_mcp_s
   }
 }
 
-int nh_mcp_solve(int m, const double *W, const double *r, const nh_row_law *laws, double tolerance,
+/* Sweeps from the current λ̃ until the residual of `laws` is below tolerance
+ * or max_iterations more sweeps were made (*it counts them); λ̃ is left at the
+ * best iterate, whose residual is returned. */
+static double nh_mcp_run(nh_mcp_work *ws, const double *W, const nh_row_law *laws, double tolerance,
+                         int max_iterations, int *it) {
+  int m = ws->m, n = 0;
+  nh_mcp_recompute_w(ws);
+  double res = nh_mcp_residual(ws, W, laws), best_res = res;
+  memcpy(ws->best, ws->lt, sizeof(double) * (size_t)m);
+  while (!(best_res <= tolerance) && n < max_iterations) {
+    if (nh_stop_requested()) break; /* SIGINT/SIGTERM: within one sweep (see nh_mcp_solve) */
+    double prev = res;
+    nh_mcp_sweep(ws, W, laws);
+    n++;
+    nh_mcp_recompute_w(ws);
+    res = nh_mcp_residual(ws, W, laws);
+    /* The subspace step costs O(|F|³): only when the sweeps contract slowly. */
+    if (NH_MCP_SUBSPACE && !(res <= tolerance) && !(res < 0.5 * prev))
+      res = nh_mcp_subspace(ws, W, laws, res);
+    if (!isfinite(res)) break;
+    if (res <= best_res || !(best_res <= HUGE_VAL)) {
+      best_res = res;
+      memcpy(ws->best, ws->lt, sizeof(double) * (size_t)m);
+    }
+  }
+  memcpy(ws->lt, ws->best, sizeof(double) * (size_t)m);
+  nh_mcp_recompute_w(ws);
+  *it += n;
+  return best_res;
+}
+
+int nh_mcp_solve(int m, const double *W, const double *r, nh_row_law *laws, double tolerance,
                  int max_iterations, double *lambda, nh_mcp_stats *stats) {
   nh_mcp_stats dummy;
   if (!stats) stats = &dummy;
@@ -461,9 +499,11 @@ int nh_mcp_solve(int m, const double *W, const double *r, const nh_row_law *laws
     ws.free_rows = malloc(sizeof(int) * (size_t)m);
   }
   ws.bil = malloc(sizeof(int) * ((size_t)nb + 1));
-  if (!ws.Wt || !ws.d || !ws.rt || !ws.lt || !ws.wt || !ws.best || !ws.L || !ws.tmp || !ws.bil ||
-      (NH_MCP_SUBSPACE && (!ws.Lf || !ws.save_l || !ws.save_w || !ws.free_rows))) {
+  nh_row_law *lw = malloc(sizeof *lw * (size_t)m);
+  if (!lw || !ws.Wt || !ws.d || !ws.rt || !ws.lt || !ws.wt || !ws.best || !ws.L || !ws.tmp ||
+      !ws.bil || (NH_MCP_SUBSPACE && (!ws.Lf || !ws.save_l || !ws.save_w || !ws.free_rows))) {
     nh_mcp_work_free(&ws);
+    free(lw);
     return NH_ERROR(NH_ERR_MEMORY, "out of memory: constraint solve (%d rows)", m);
   }
   for (int i = 0; i < m; i++) {
@@ -483,35 +523,45 @@ int nh_mcp_solve(int m, const double *W, const double *r, const nh_row_law *laws
     if (laws[i].kind == NH_ROW_BILATERAL) ws.bil[nb++] = i;
   ws.block_ok = NH_MCP_BILATERAL_BLOCK && nb > 0 ? nh_mcp_factor(&ws, nb, ws.bil, ws.L) : 0;
 
-  nh_mcp_recompute_w(&ws);
-  double res = nh_mcp_residual(&ws, W, laws), best_res = res;
-  memcpy(ws.best, ws.lt, sizeof(double) * (size_t)m);
+  /* The laws as solved: a row that stuck at the previous step starts with its
+   * static coefficient. */
+  for (int i = 0; i < m; i++) {
+    lw[i] = laws[i];
+    if (laws[i].kind == NH_ROW_FRICTION && !laws[i].sliding)
+      lw[i].mu = fmax(laws[i].mu, laws[i].mu_static);
+  }
   int it = 0;
-  int stop = 0;
-  while (!(best_res <= tolerance) && it < max_iterations) {
-    if ((stop = nh_stop_requested())) break; /* SIGINT/SIGTERM: within one sweep */
-    double prev = res;
-    nh_mcp_sweep(&ws, W, laws);
-    it++;
-    nh_mcp_recompute_w(&ws);
-    res = nh_mcp_residual(&ws, W, laws);
-    /* The subspace step costs O(|F|³): only when the sweeps contract slowly. */
-    if (NH_MCP_SUBSPACE && !(res <= tolerance) && !(res < 0.5 * prev))
-      res = nh_mcp_subspace(&ws, W, laws, res);
-    if (!isfinite(res)) break;
-    if (res <= best_res || !(best_res <= HUGE_VAL)) {
-      best_res = res;
-      memcpy(ws.best, ws.lt, sizeof(double) * (size_t)m);
+  double best_res = nh_mcp_run(&ws, W, lw, tolerance, max_iterations, &it);
+  /* Break-away: a row on its static bound slides, at the kinetic bound;
+   * solve again from here until no row breaks away (at most once per row). */
+  for (int broke = 1; broke && best_res <= tolerance && !nh_stop_requested();) {
+    broke = 0;
+    for (int i = 0; i < m; i++) {
+      nh_row_law *l = &lw[i];
+      if (l->kind != NH_ROW_FRICTION || (l->group >= 0 && l->group != i) || !(l->mu > laws[i].mu) ||
+          nh_mcp_friction_size(&ws, l, i) < nh_mcp_bound(&ws, l) * (1.0 - 1e-9))
+        continue;
+      l->mu = laws[i].mu;
+      if (l->group == i) lw[i + 1].mu = laws[i + 1].mu;
+      broke = 1;
     }
+    if (broke) best_res = nh_mcp_run(&ws, W, lw, tolerance, max_iterations, &it);
   }
   memcpy(ws.lt, ws.best, sizeof(double) * (size_t)m);
   for (int i = 0; i < m; i++) lambda[i] = ws.d[i] * ws.lt[i];
   stats->iterations = it;
   stats->residual = best_res;
-  nh_mcp_count(&ws, laws, stats);
+  nh_mcp_count(&ws, lw, stats);
+  for (int i = 0; i < m; i++)
+    if (laws[i].kind == NH_ROW_FRICTION) {
+      int g = laws[i].group < 0 ? i : laws[i].group;
+      laws[i].sliding =
+          nh_mcp_friction_size(&ws, &lw[g], g) >= nh_mcp_bound(&ws, &lw[g]) * (1.0 - 1e-9);
+    }
+  free(lw);
   int block_ok = ws.block_ok;
   nh_mcp_work_free(&ws);
-  if (stop) return nh_stop_check();
+  if (nh_stop_requested()) return nh_stop_check();
   if (!(best_res <= tolerance))
     return NH_ERROR(NH_ERR_NUMERIC,
                     "constraint solve: residual %.3g > tolerance %.3g after %d sweeps (%d rows, "

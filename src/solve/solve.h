@@ -17,8 +17,16 @@
 
 typedef struct nh_system nh_system;
 
+/* fixed[i] of a node: 0 free; otherwise all three components are fixed,
+ * unless the bit NH_FIX_AXES is set: then bit k (1 << k) fixes component k
+ * (tissue.fixed's `axes`). */
+#define NH_FIX_AXES 8
+static inline int nh_fixed_component(const unsigned char *fixed, int i, int k) {
+  return fixed && fixed[i] && (!(fixed[i] & NH_FIX_AXES) || (fixed[i] >> k) & 1);
+}
+
 /* Build the DOF map, pattern, scatter maps and colouring of the leaves of
- * `tissue->mesh`; fixed[i] != 0 fixes all three DOFs of node i. Hanging
+ * `tissue->mesh`; fixed[i] fixes components of node i (above). Hanging
  * nodes (may be NULL) are eliminated: u = P u_free, A = Pᵀ A P.
  * Fails with NH_ERR_INPUT if every DOF is fixed, NH_ERR_MEMORY. */
 int nh_system_create(const nh_tissue *tissue, const unsigned char *fixed, const nh_hanging *hanging,
@@ -159,8 +167,15 @@ int nh_solve_static(nh_system *sys, const nh_integrator *in, const double *f_ext
  * force: the tip and shaft rows of docs/interaction.md). threshold ≥ 0: cutting force or friction
  * per length × spacing. group: -1 for a one-dimensional friction row; for a disc pair (two tangent
  * rows g, g+1 sharing a normal, same mu and threshold) both rows have group = g and the bound
- * applies to |(λ_g, λ_g+1)|, with w = −ν λ, ν ≥ 0, on it. Fields other than kind (and threshold,
- * for a unilateral row) are ignored for non-friction rows. */
+ * applies to |(λ_g, λ_g+1)|, with w = −ν λ, ν ≥ 0, on it.
+ * Static and kinetic friction: mu is the kinetic coefficient; mu_static (a
+ * value below mu, such as the 0 of a zero-initialised law, means mu) the
+ * static one. sliding: in, whether the row slid at the previous step; a row
+ * that did not starts with the static bound mu_static |λ_normal| + threshold
+ * and, if its force reaches it, breaks away: its bound drops to the kinetic
+ * one within the same solve. out: whether the row slides at the solution (on
+ * its bound; a disc pair's two rows alike). Fields other than kind (and
+ * threshold, for a unilateral row) are ignored for non-friction rows. */
 typedef enum { NH_ROW_BILATERAL = 0, NH_ROW_UNILATERAL = 1, NH_ROW_FRICTION = 2 } nh_row_kind;
 typedef struct {
   nh_row_kind kind;
@@ -168,6 +183,8 @@ typedef struct {
   double mu;
   double threshold;
   int group;
+  double mu_static;
+  int sliding;
 } nh_row_law;
 
 /* What one constraint solve did. */
@@ -190,13 +207,14 @@ typedef struct {
  *     max|r̃| + max|W̃λ̃|; e.g. 1e-10;
  *   max_iterations: sweeps (0 only checks the warm start);
  *   lambda: in, the warm start (previous step, or zeros); out, the solution;
- *   stats (may be NULL): sweeps, residual, stick/slide/open counts.
+ *   stats (may be NULL): sweeps, residual, stick/slide/open counts;
+ *   laws[i].sliding: in, the previous step's state; out, this solution's.
  * Fails with NH_ERR_INPUT (bad laws: a normal index out of range or pointing to
  * a friction row, negative or non-finite mu/threshold, an inconsistent disc pair; m < 0,
  * tolerance <= 0), NH_ERR_NUMERIC (non-finite W, r or warm start, a negative
  * diagonal of W, or not converged in max_iterations: λ then holds the best
  * iterate and stats says how far it got), NH_ERR_MEMORY. m = 0 succeeds. */
-int nh_mcp_solve(int m, const double *W, const double *r, const nh_row_law *laws, double tolerance,
+int nh_mcp_solve(int m, const double *W, const double *r, nh_row_law *laws, double tolerance,
                  int max_iterations, double *lambda, nh_mcp_stats *stats);
 
 /* ---- tissue and tools in one step: Algorithm 1 across blocks (coupled.c) ----

@@ -258,6 +258,12 @@ static int nh_system_pattern(nh_system *s) {
 
 /* P node by node (exp_*), and the effective nodes and T of leaves with a
  * hanging corner (eff_*). */
+/* Node v has a free component (a node fixed in some axes only keeps the others). */
+static int nh_node_free(const nh_system *s, int v) {
+  const int *f = s->free_of + 3 * v;
+  return f[0] >= 0 || f[1] >= 0 || f[2] >= 0;
+}
+
 static int nh_system_prolongation(nh_system *s, const unsigned char *fixed, const nh_hanging *h) {
   const nh_mesh *m = s->tissue->mesh;
   int n = m->n_nodes, total = 0;
@@ -277,9 +283,9 @@ static int nh_system_prolongation(nh_system *s, const unsigned char *fixed, cons
     int k = h && h->n_hanging ? h->index[v] : -1;
     if (k >= 0) {
       for (int q = h->start[k]; q < h->start[k + 1]; q++)
-        if (s->free_of[3 * h->master[q]] >= 0)
+        if (nh_node_free(s, h->master[q]))
           s->exp_node[p] = h->master[q], s->exp_w[p++] = h->weight[q];
-    } else if (s->free_of[3 * v] >= 0) {
+    } else if (nh_node_free(s, v)) {
       s->exp_node[p] = v, s->exp_w[p++] = 1.0;
     }
   }
@@ -352,7 +358,7 @@ int nh_system_create(const nh_tissue *tissue, const unsigned char *fixed, const 
   for (int i = 0; i < m->n_nodes; i++)
     for (int k = 0; k < 3; k++) {
       int hang = hanging && hanging->n_hanging && hanging->index[i] >= 0;
-      if (used[i] && !(fixed && fixed[i]) && !hang) {
+      if (used[i] && !nh_fixed_component(fixed, i, k) && !hang) {
         s->dof_of[s->n_free] = 3 * i + k;
         s->free_of[3 * i + k] = s->n_free++;
       } else {
@@ -467,7 +473,8 @@ void nh_system_gather(const nh_system *s, const double *full, double *part) {
   for (int v = 0; v < s->n_nodes; v++)
     for (int q = s->exp_start[v]; q < s->exp_start[v + 1]; q++) {
       const int *f = s->free_of + 3 * s->exp_node[q];
-      for (int i = 0; i < 3; i++) part[f[i]] += s->exp_w[q] * full[3 * v + i];
+      for (int i = 0; i < 3; i++)
+        if (f[i] >= 0) part[f[i]] += s->exp_w[q] * full[3 * v + i];
     }
 }
 
@@ -476,7 +483,8 @@ void nh_system_scatter(const nh_system *s, const double *part, double *full) {
     double x[3] = {0, 0, 0};
     for (int q = s->exp_start[v]; q < s->exp_start[v + 1]; q++) {
       const int *f = s->free_of + 3 * s->exp_node[q];
-      for (int i = 0; i < 3; i++) x[i] += s->exp_w[q] * part[f[i]];
+      for (int i = 0; i < 3; i++)
+        if (f[i] >= 0) x[i] += s->exp_w[q] * part[f[i]];
     }
     for (int i = 0; i < 3; i++) full[3 * v + i] = x[i];
   }
