@@ -16,6 +16,10 @@ Silent on success, one line per failure, exit 1.
     (its base returns exactly; the tip within its own sag under gravity, far
     below 1 mm); the electrode, released at the target, stays: its tip moves
     less than a tenth of the cannula's retraction after the release.
+    Every VTU kind it wrote (tissue, each tool, points) reads with meshio:
+    tissue hexahedra; a tool's 16 elements as 16 two-node lines base to tip
+    (meshio keeps lines, it drops poly-lines) on points equal to VTK's; the
+    target STN named in the points' field data, flagged target = 1.
 """
 import csv
 import math
@@ -138,6 +142,7 @@ def test_procedure():
     if int(steps_rows[-1]["step"]) != steps:
         fail("procedure: last step %s, expected %d" % (steps_rows[-1]["step"], steps))
     finite_csvs(out, "procedure")
+    meshio_kinds(out)
     dofs = [int(r["dofs"]) for r in steps_rows]
     if not max(dofs) > dofs[0]:
         fail("procedure: the mesh was never refined (dofs %d .. %d)" % (dofs[0], max(dofs)))
@@ -169,6 +174,42 @@ def test_procedure():
         print("procedure: %d steps, dofs %d..%d, STN shift %.3g m, cannula back %.3g m, electrode "
               "moved %.3g m, final distance %s m" % (steps, dofs[0], max(dofs), shift, back, moved,
                                                      tgt[-1]["distance"]))
+
+
+def meshio_kinds(out):
+    """The last frame of each VTU kind through meshio, against VTK's reader."""
+    import glob
+    import meshio
+    import vtk
+    from vtk.util.numpy_support import vtk_to_numpy
+    for kind, cell_type in (("tissue", "hexahedron"), ("cannula", "line"),
+                            ("electrode", "line"), ("points", "vertex")):
+        path = sorted(glob.glob(os.path.join(out, kind + "_*.vtu")))[-1]
+        try:
+            m = meshio.read(path)
+        except Exception as e:
+            fail("meshio cannot read %s: %s: %s" % (path, type(e).__name__, e))
+            continue
+        r = vtk.vtkXMLUnstructuredGridReader()
+        r.SetFileName(path)
+        r.Update()
+        pts = vtk_to_numpy(r.GetOutput().GetPoints().GetData())
+        if not np.array_equal(m.points, pts):
+            fail("%s: meshio points differ from VTK's" % path)
+        types = [c.type for c in m.cells]
+        if types != [cell_type]:
+            fail("%s: meshio cell blocks %s, expected [%s]" % (path, types, cell_type))
+            continue
+        cells = m.cells[0].data
+        if cell_type == "line":
+            expect = np.array([[i, i + 1] for i in range(16)])
+            if not np.array_equal(cells, expect):
+                fail("%s: lines %s, expected 16 segments base to tip" % (path, cells.tolist()))
+        if kind == "points":
+            names = bytes(m.field_data.get("names", [])).decode().split("\n")[:-1]
+            flag = m.point_data.get("target")
+            if names != ["STN"] or flag is None or list(flag) != [1]:
+                fail("%s: names %s, target flag %s, expected ['STN'], [1]" % (path, names, flag))
 
 
 def main():
