@@ -2,7 +2,7 @@
 """Speed against error: runs the variants of a study, collects their
 steps.csv / probes.csv / targets.csv and writes plots and a Markdown report.
 
-    tools/study.py phantom [--binary PATH] [--out DIR] [--img DIR] [--only NAME ...]
+    tools/study.py phantom [--binary PATH] [--out DIR] [--img DIR | --docs] [--only NAME ...]
                            [--fresh-reference] [--steps N] [--reuse | --restart]
                            [--workers N | --scheduler tcp://HOST:PORT] [--threads T]
     tools/study.py dbs     [the same options]
@@ -31,10 +31,11 @@ first (the first includes CHOLMOD's symbolic analysis), and the total of
 t_step. Timings depend on the machine's load: run the study on a quiet
 machine.
 
-Output: OUT/report.md (the tables; also printed), plots in --img (default
-docs/img): phantom_axis.png, phantom_radial.png, phantom_fine.png,
-phantom_point3.png, phantom_speed_error.png. Needs numpy and matplotlib
-(Debian's python3-numpy, python3-matplotlib); use /usr/bin/python3.
+Output: OUT/report.md (the tables; also printed), plots in OUT/img (--img
+DIR: in DIR; --docs: in docs/img, where the docs take them from):
+phantom_axis.png, phantom_radial.png, phantom_fine.png, phantom_point3.png,
+phantom_speed_error.png. Needs numpy and matplotlib (Debian's python3-numpy,
+python3-matplotlib); use /usr/bin/python3.
 """
 import argparse
 import csv
@@ -199,11 +200,17 @@ def style(name):
             "adaptive-hex4-theta0.1": "C8-"}.get(name, "-")
 
 
+def plot_dir(a, out):
+    """Where the PNGs go: --img, else docs/img with --docs, else OUT/img."""
+    img = a.img or (os.path.join(ROOT, "docs", "img") if a.docs else os.path.join(out, "img"))
+    os.makedirs(img, exist_ok=True)
+    return img
+
+
 def phantom(a, binary):
     st = PHANTOM
     out = a.out or os.path.join(ROOT, "out", "study", "phantom")
-    img = a.img or os.path.join(ROOT, "docs", "img")
-    os.makedirs(img, exist_ok=True)
+    img = plot_dir(a, out)
     names = st["axis"] + st["radial"]
 
     rname, rlabel, rsets = st["reference"]
@@ -366,8 +373,7 @@ def read_tools(out, name):
 def dbs(a, binary):
     st = DBS
     out = a.out or os.path.join(ROOT, "out", "study", "dbs")
-    img = a.img or os.path.join(ROOT, "docs", "img")
-    os.makedirs(img, exist_ok=True)
+    img = plot_dir(a, out)
     g = scene_grid(st["scene"])
     runs = []
     infos = run_variants(a, binary, st["scene"], out, [
@@ -463,7 +469,9 @@ def main():
     ap.add_argument("spec", nargs="?", help="sweep: the spec (YAML, see study_sweep.py)")
     ap.add_argument("--binary", default=None, help="needlehex (default build/needlehex)")
     ap.add_argument("--out", default=None, help="run folders and report (default out/study/STUDY)")
-    ap.add_argument("--img", default=None, help="where the PNGs go (default docs/img)")
+    ap.add_argument("--img", default=None, help="where the PNGs go (default OUT/img)")
+    ap.add_argument("--docs", action="store_true",
+                    help="write the PNGs to docs/img (the plots the docs show)")
     ap.add_argument("--only", nargs="*", help="run only these variants (names as in the report)")
     ap.add_argument("--fresh-reference", action="store_true", help="run the reference again")
     ap.add_argument("--steps", type=int, default=None, help="fewer steps (a quick look)")
