@@ -504,21 +504,31 @@ static void test_adapt(void) {
     nh_scene_destroy(&s);
   }
 
-#ifdef NH_TEMPLATES_DIR
-  /* Without the environment variable, names resolve in the compiled-in
-   * folder, the source tree's templates/ (which ships hex2.tmpl). */
-  char saved[sizeof templates_dir];
-  snprintf(saved, sizeof saved, "%s", templates_dir);
-  unsetenv("NH_TEMPLATES_DIR");
-  snprintf(text, sizeof text, "%sadapt: {template: hex2}\n", minimal);
-  path = write_scene("adapt_builtin.yaml", text);
-  s = load_ok(path, 0, NULL, __LINE__);
-  if (s) {
-    EXPECT_STR(s->adapt.template_path, NH_TEMPLATES_DIR "/hex2.tmpl");
-    nh_scene_destroy(&s);
+  /* Without the environment variable, names resolve in the templates the
+   * build copies next to its binaries: the same file as
+   * dirname($NH_BINARY)/share/needlehex/templates/hex2.tmpl (this test runs
+   * from BUILD/tests, the binary is BUILD/needlehex). */
+  const char *binary = getenv("NH_BINARY");
+  if (binary) {
+    char saved[sizeof templates_dir], want[4200];
+    struct stat got, expect;
+    snprintf(saved, sizeof saved, "%s", templates_dir);
+    unsetenv("NH_TEMPLATES_DIR");
+    const char *slash = strrchr(binary, '/');
+    snprintf(want, sizeof want, "%.*s/share/needlehex/templates/hex2.tmpl",
+             slash ? (int)(slash - binary) : 1, slash ? binary : ".");
+    snprintf(text, sizeof text, "%sadapt: {template: hex2}\n", minimal);
+    path = write_scene("adapt_builtin.yaml", text);
+    s = load_ok(path, 0, NULL, __LINE__);
+    if (s) {
+      EXPECT(stat(s->adapt.template_path, &got) == 0 && stat(want, &expect) == 0 &&
+                 got.st_dev == expect.st_dev && got.st_ino == expect.st_ino,
+             "template hex2 without NH_TEMPLATES_DIR: %s, expected the file %s",
+             s->adapt.template_path, want);
+      nh_scene_destroy(&s);
+    }
+    setenv("NH_TEMPLATES_DIR", saved, 1);
   }
-  setenv("NH_TEMPLATES_DIR", saved, 1);
-#endif
 }
 
 /* ---- tools and targets ---- */

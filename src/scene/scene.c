@@ -28,8 +28,8 @@
  *
  * Files. adapt.template is resolved here, so that a scene naming a template
  * that does not exist fails `check` at the key's line: a name (hex2) is the
- * file NAME.tmpl in $NH_TEMPLATES_DIR, or in the compiled-in templates folder
- * when that variable is unset or empty; a value with a '/' or ending in
+ * file NAME.tmpl in nh_templates_dir() ($NH_TEMPLATES_DIR, or the templates
+ * installed or built next to the binary: core/paths.c); a value with a '/' or ending in
  * .tmpl is a path, relative to the scene file's folder unless absolute (so a
  * scene and its own template travel together). Only readability is checked
  * here; the template's contents are proved by nh_template_load.
@@ -60,14 +60,6 @@
 
 #define NH_KEY_MAX   256
 #define NH_STEPS_MAX 1000000000.0
-
-/* Where adapt.template names are looked up when the environment variable
- * NH_TEMPLATES_DIR is unset: the build sets it to the source tree's
- * templates/ folder; "templates" (relative to the working directory) is the
- * fallback for a build that does not. */
-#ifndef NH_TEMPLATES_DIR
-#define NH_TEMPLATES_DIR "templates"
-#endif
 
 /* What one load knows, for messages. */
 typedef struct {
@@ -1002,7 +994,7 @@ static int as_choice(const nh_ctx *c, const nh_yaml_node *n, const char *key,
 }
 
 /* adapt.template (text `value`, at node `at`, NULL for the default) to a
- * readable file: a name is NH_TEMPLATES_DIR/NAME.tmpl; a value with a '/' or
+ * readable file: a name is nh_templates_dir()/NAME.tmpl; a value with a '/' or
  * ending in .tmpl is a path, relative to the scene file's folder unless
  * absolute. The error is reported at `at`, or at `section` for the default. */
 static int resolve_template(const nh_ctx *c, const nh_yaml_node *at, const nh_yaml_node *section,
@@ -1013,8 +1005,8 @@ static int resolve_template(const nh_ctx *c, const nh_yaml_node *at, const nh_ya
   int n;
   if (len == 0) return fail(c, where, "adapt.template", "expected a template name or path");
   if (!is_path) {
-    const char *env = getenv("NH_TEMPLATES_DIR");
-    const char *dir = env && env[0] ? env : NH_TEMPLATES_DIR;
+    char buf[NH_PATH_MAX];
+    const char *dir = nh_templates_dir(buf, sizeof buf);
     n = snprintf(out, NH_PATH_MAX, "%s/%s.tmpl", dir, value);
   } else {
     n = scene_relative(c, value, out);
