@@ -1296,12 +1296,13 @@ static int read_host(const nh_ctx *c, const nh_yaml_node *list, int i, const cha
   return fail(c, at, key, "no tool named %s is listed before this one", describe(at, d, sizeof d));
 }
 
-/* PATH.trajectory {entry, target, standoff} (optional): sets t->planned, the
- * entry and the standoff; the target's name is looked up by read_plans, once
- * the targets are read. base and direction must then not be given. */
+/* PATH.trajectory {entry, target, standoff, aim} (optional): sets
+ * t->planned, the entry, the standoff and the aim if given; the target's
+ * name is looked up by read_plans, once the targets are read. base and
+ * direction must then not be given. */
 static int read_trajectory(const nh_ctx *c, const nh_yaml_node *tool, const char *path,
                            nh_tool_spec *t) {
-  static const char *const keys[] = {"entry", "target", "standoff", NULL};
+  static const char *const keys[] = {"entry", "target", "standoff", "aim", NULL};
   static const char *const computed[] = {"base", "direction", NULL};
   char sub[NH_KEY_MAX], key[NH_KEY_MAX];
   const nh_yaml_node *m, *at;
@@ -1322,6 +1323,9 @@ static int read_trajectory(const nh_ctx *c, const nh_yaml_node *tool, const char
   NH_TRY(field(c, m, sub, "target", 1, &at));
   NH_TRY(get_number(c, m, sub, "standoff", 0, &t->standoff, &at));
   NH_TRY(at_least(c, at, sub, "standoff", t->standoff, 0, 1));
+  t->aimed = 0;
+  NH_TRY(get_vec3(c, m, sub, "aim", 0, t->aim, &at));
+  t->aimed = at != NULL;
   return NH_OK;
 }
 
@@ -1511,10 +1515,17 @@ static int resolve_trajectory(const nh_ctx *c, const nh_yaml_node *tool, const c
     return fail(c, at, key, "no target named %s (the targets are %s)", describe(at, d, sizeof d),
                 names);
   }
-  if (nh_scene_trajectory_line(t, s->targets[t->target].point))
-    return fail(c, at, key, "target %s is at the entry point [%g, %g, %g]: no direction",
-                describe(at, d, sizeof d), t->entry[0], t->entry[1], t->entry[2]);
-  return NH_OK;
+  /* The aim: the target's point unless trajectory.aim moves it (`needlehex
+   * plan`, docs/dbs.md). */
+  if (!t->aimed) memcpy(t->aim, s->targets[t->target].point, sizeof t->aim);
+  const nh_yaml_node *aim_at = t->aimed ? nh_yaml_get(traj, "aim", NULL) : NULL;
+  if (nh_scene_trajectory_line(t, t->aim) == NH_OK) return NH_OK;
+  if (aim_at)
+    return fail(c, aim_at, join(key, sub, "aim"),
+                "the aim is the entry point [%g, %g, %g]: no direction", t->entry[0], t->entry[1],
+                t->entry[2]);
+  return fail(c, at, key, "target %s is at the entry point [%g, %g, %g]: no direction",
+              describe(at, d, sizeof d), t->entry[0], t->entry[1], t->entry[2]);
 }
 
 /* tools.i.release: target — the end of the host's until: target segment

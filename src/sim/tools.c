@@ -99,10 +99,7 @@ int nh_sim_tools_rows(nh_sim *s) {
     for (int i = 0; i < sc->n_targets && !rc; i++) {
       const nh_target *tg = &sc->targets[i];
       double x[3], d[3];
-      nh_tool_report r;
-      nh_sim_point_position(s, sc->n_probes + i, x);
-      nh_contact_report(s->contact, tg->tool, &r);
-      for (int k = 0; k < 3; k++) d[k] = r.tip[k] - x[k];
+      nh_sim_target_miss(s, i, x, d);
       double dist = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
       rc = nh_csv_row(s->targets_csv, "%d,%.17g,%s,%.17g,%.17g,%.17g,%.17g", s->step, s->time,
                       tg->name, x[0], x[1], x[2], dist);
@@ -117,6 +114,13 @@ int nh_sim_tools_rows(nh_sim *s) {
     free(names);
   }
   return rc;
+}
+
+void nh_sim_target_miss(const nh_sim *s, int i, double x[3], double miss[3]) {
+  nh_tool_report r;
+  nh_sim_point_position(s, s->scene->n_probes + i, x);
+  nh_contact_report(s->contact, s->scene->targets[i].tool, &r);
+  for (int k = 0; k < 3; k++) miss[k] = r.tip[k] - x[k];
 }
 
 int nh_sim_tools_frame(nh_sim *s) {
