@@ -4,6 +4,7 @@
  *   needlehex run SCENE.yaml [--out DIR] [--set KEY=VALUE ...] [--restart DIR] [--quiet]
  *   needlehex check SCENE.yaml [--set KEY=VALUE ...]
  *   needlehex plan SCENE.yaml [--out DIR] [--set KEY=VALUE ...] [--tolerance M] [--max-runs N]
+ *   needlehex keys
  *   needlehex --help | --version
  *
  * Exit status: 0 success; 1 the simulation failed (the message names the
@@ -36,11 +37,13 @@ static const char *nh_usage =
     "       needlehex check SCENE.yaml [--set KEY=VALUE ...]\n"
     "       needlehex plan SCENE.yaml [--out DIR] [--set KEY=VALUE ...] [--tolerance M] "
     "[--max-runs N]\n"
+    "       needlehex keys\n"
     "       needlehex --help | --version\n"
     "\n"
     "  run      simulate the scene; outputs go to output.dir (default out/<name>)\n"
     "  check    validate the scene (and the mesh it builds), print what will be modelled\n"
     "  plan     find where to aim so that the electrode ends on its target (target compensation)\n"
+    "  keys     print every scene key with its type, default, unit and notes (docs/scene.md)\n"
     "\n"
     "needlehex COMMAND --help describes a command and its options.\n"
     "exit status: 0 success, 1 simulation failed, 2 bad scene or arguments\n";
@@ -128,6 +131,17 @@ int main(int argc, char **argv) {
     return 0;
   }
   const char *command = argv[1];
+  if (!strcmp(command, "keys")) {
+    if (argc > 2 && (!strcmp(argv[2], "--help") || !strcmp(argv[2], "-h"))) {
+      puts("usage: needlehex keys\n\nPrint every scene key with its type, default, unit and notes\n"
+           "(the key tables of docs/scene.md, compiled in; the reader accepts no other key).");
+      return 0;
+    }
+    if (argc > 2)
+      return nh_fail(NH_ERROR(NH_ERR_INPUT, "keys takes no argument, got '%s'", argv[2]));
+    nh_scene_keys_print(stdout);
+    return 0;
+  }
   int is_run = !strcmp(command, "run"), is_check = !strcmp(command, "check");
   int is_plan = !strcmp(command, "plan");
   if (!is_run && !is_check && !is_plan)

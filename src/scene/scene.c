@@ -161,6 +161,7 @@ static int in_list(const char *key, const char *const *list) {
 static int check_keys(const nh_ctx *c, const nh_yaml_node *map, const char *path,
                       const char *const *allowed) {
   char key[NH_KEY_MAX];
+  NH_TRY(nh_scene_keys_check(path, allowed)); /* every key it reads is documented */
   for (int i = 0; i < map->n; ++i) {
     const nh_yaml_node *k = map->keys[i];
     if (in_list(k->text, allowed)) continue;

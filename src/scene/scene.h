@@ -280,6 +280,17 @@ double nh_scene_tip_travel(const nh_scene *scene, int i, int n, double t);
  * and with the tool untouched, if the target is the entry point. */
 int nh_scene_trajectory_line(nh_tool_spec *tool, const double target[3]);
 
+/* ---- the key table (keys.c) ---- */
+/* Every scene key with its type, default, unit and notes, from the key
+ * tables of docs/scene.md compiled into the program (`needlehex keys`). */
+void nh_scene_keys_print(void *stdio_file);
+
+/* NH_OK if every key of `allowed` (NULL-terminated) under the section `path`
+ * (dotted, "" for the top level, list indices as numbers) has a row in
+ * docs/scene.md's tables; else NH_ERR_INTERNAL naming the first that has
+ * not (the reader must not accept an undocumented key). */
+int nh_scene_keys_check(const char *path, const char *const *allowed);
+
 /* Print a human-readable summary of what will be modelled (for `check`). */
 void nh_scene_print(const nh_scene *scene, void *stdio_file);
 
