@@ -159,8 +159,11 @@ def render(a):
     if picked[-1] != len(tissue) - 1:
         picked.append(len(tissue) - 1)
     if a.frames and len(picked) > a.frames:
-        idx = np.unique(np.linspace(0, len(picked) - 1, a.frames).round().astype(int))
-        picked = [picked[i] for i in idx]
+        if a.frames == 1:
+            picked = picked[-1:]
+        else:
+            idx = np.unique(np.linspace(0, len(picked) - 1, a.frames).round().astype(int))
+            picked = [picked[i] for i in idx]
     grids = {}
     umax = 0.0
     for k in picked:
@@ -205,10 +208,10 @@ def render(a):
     lut.Build()
     bar = vtk.vtkScalarBarActor()
     bar.SetLookupTable(lut)
-    bar.SetTitle("|displacement| [mm]")
+    bar.SetTitle("|displacement|\n[mm]")
     bar.SetNumberOfLabels(5)
     bar.SetLabelFormat("%.2g")
-    bar.SetPosition(0.88, 0.1)
+    bar.SetPosition(0.86, 0.1)
     bar.SetWidth(0.08)
     bar.SetHeight(0.8)
     bar.UnconstrainedFontSizeOn()
