@@ -175,6 +175,11 @@ def pareto(points):
     return keep
 
 
+def legend_outside(ax):
+    """The legend right of the axes, never over the curves (saved with bbox_inches="tight")."""
+    ax.legend(fontsize=8, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)
+
+
 def plot_probes(img, runs, names, fname, title):
     fig, axes = plt.subplots(1, len(names), figsize=(4.2 * len(names), 3.4), sharey=False)
     for ax, n in zip(np.atleast_1d(axes), names):
@@ -185,10 +190,10 @@ def plot_probes(img, runs, names, fname, title):
         ax.set_xlabel("step")
         ax.grid(alpha=0.3)
     np.atleast_1d(axes)[0].set_ylabel("|u| (µm)")
-    np.atleast_1d(axes)[-1].legend(fontsize=7)
+    legend_outside(np.atleast_1d(axes)[-1])
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
-    fig.savefig(os.path.join(img, fname), dpi=110)
+    fig.savefig(os.path.join(img, fname), dpi=110, bbox_inches="tight")
     plt.close(fig)
     log("wrote %s" % os.path.join(img, fname))
 
@@ -312,9 +317,9 @@ def phantom(a, binary):
             ax.set_xlabel("step")
             ax.set_ylabel("|u| (µm)")
             ax.grid(alpha=0.3)
-            ax.legend(fontsize=7)
+            legend_outside(ax)
         fig.tight_layout()
-        fig.savefig(os.path.join(img, "phantom_fine.png"), dpi=110)
+        fig.savefig(os.path.join(img, "phantom_fine.png"), dpi=110, bbox_inches="tight")
         plt.close(fig)
     plot_probes(img, allruns, ["3"], "phantom_point3.png",
                 "point 3: every run (templates hex2, hex3, hex4)")
@@ -331,9 +336,9 @@ def phantom(a, binary):
     ax.set_ylabel("probe displacement error, RMS (µm)")
     ax.set_title("phantom: speed against error (reference %s)" % rlabel, fontsize=10)
     ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=7)
+    legend_outside(ax)
     fig.tight_layout()
-    fig.savefig(os.path.join(img, "phantom_speed_error.png"), dpi=110)
+    fig.savefig(os.path.join(img, "phantom_speed_error.png"), dpi=110, bbox_inches="tight")
     plt.close(fig)
     log("wrote %s" % os.path.join(img, "phantom_speed_error.png"))
     return 0
@@ -447,9 +452,9 @@ def dbs(a, binary):
         ax.set_ylabel(ylabel)
         ax.set_title(title, fontsize=10)
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
+        legend_outside(ax)
         fig.tight_layout()
-        fig.savefig(os.path.join(img, fname), dpi=110)
+        fig.savefig(os.path.join(img, fname), dpi=110, bbox_inches="tight")
         plt.close(fig)
         log("wrote %s" % os.path.join(img, fname))
 
