@@ -30,7 +30,10 @@ Silent on success, one line per failure, exit 1.
       1e-12 m): the entry is kept;
     - on a rigid brain (E 1e12 Pa, no shift, no gravity, no friction) the
       first run, aimed at the STN itself, is already on it (miss < 1e-6 m,
-      the rigid-plan accuracy of 1): one run.
+      the rigid-plan accuracy of 1): one run;
+    - bad input exits 2 with one line naming it: a scene without a
+      trajectory, --tolerance -1, --tolerance abc, --max-runs 0, --max-runs
+      2.5.
 """
 import csv
 import math
@@ -246,8 +249,24 @@ def run_plan(name, sets, extra):
     return p.returncode, doc, out, p.stderr.strip()
 
 
+def test_planner_input():
+    cases = [([os.path.join(SRC, "cases", "phantom-tissue.yaml")], "no tool has a trajectory"),
+             ([SCENE, "--tolerance", "-1"], "--tolerance"),
+             ([SCENE, "--tolerance", "abc"], "--tolerance"),
+             ([SCENE, "--max-runs", "0"], "--max-runs"),
+             ([SCENE, "--max-runs", "2.5"], "--max-runs")]
+    for args, word in cases:
+        p = subprocess.run([BIN, "plan"] + args + ["--out", os.path.join(WORK, "plan-bad")],
+                           capture_output=True, text=True)
+        lines = p.stderr.strip().split("\n")
+        if p.returncode != 2 or len(lines) != 1 or word not in lines[0]:
+            fail("plan %s: exit %d, stderr %r; expected exit 2 and one line naming %s"
+                 % (" ".join(args[1:]) or args[0], p.returncode, p.stderr, word))
+
+
 def test_planner():
     import yaml
+    test_planner_input()
     entry, standoff, stn = scene_numbers()
     direction, start, depth = plan_line(entry, stn, standoff)
     sets, _, _ = short_procedure(depth)

@@ -1171,6 +1171,29 @@ static void test_errors(void) {
          "missing file: rc %d, '%s'", rc, nh_error_message());
 }
 
+/* The key table (docs/scene.md compiled in): documented keys pass, under
+ * list indices and region lists too; an undocumented one is a bug named. */
+static void test_key_table(void) {
+  static const char *const tissue[] = {"domain", "grid", "material", "buoyancy", NULL};
+  static const char *const traj[] = {"entry", "target", "standoff", "aim", NULL};
+  static const char *const sphere[] = {"center", "radius", NULL};
+  static const char *const motion[] = {"until", "speed", NULL};
+  static const char *const top[] = {"name", "time", "tools", "targets", "output", NULL};
+  static const char *const bogus[] = {"grid", "gird", NULL};
+  EXPECT_OK(nh_scene_keys_check("tissue", tissue));
+  EXPECT_OK(nh_scene_keys_check("tools.3.trajectory", traj));
+  EXPECT_OK(nh_scene_keys_check("tissue.loads.12.sphere", sphere));
+  EXPECT_OK(nh_scene_keys_check("tools.0.motion.2", motion));
+  EXPECT_OK(nh_scene_keys_check("", top));
+  int rc = nh_scene_keys_check("tissue", bogus);
+  EXPECT(rc == NH_ERR_INTERNAL && strstr(nh_error_message(), "tissue.gird"),
+         "undocumented tissue.gird: rc %d, message '%s', expected NH_ERR_INTERNAL naming it", rc,
+         nh_error_message());
+  static const char *const half[] = {"entr", NULL}; /* a prefix of a key is not the key */
+  rc = nh_scene_keys_check("tools.0.trajectory", half);
+  EXPECT(rc == NH_ERR_INTERNAL, "tools.0.trajectory.entr accepted as documented (rc %d)", rc);
+}
+
 int main(void) {
   const char *tmp = getenv("TMPDIR");
   snprintf(dir, sizeof dir, "%s/nh_test_scene_XXXXXX", tmp && tmp[0] ? tmp : "/tmp");
@@ -1189,6 +1212,7 @@ int main(void) {
   touch("tmpl/hex2.tmpl");
   touch("tmpl/hex3.tmpl");
   setenv("NH_TEMPLATES_DIR", templates_dir, 1);
+  test_key_table();
   test_defaults();
   test_values_and_where();
   test_steps_from_end();
