@@ -49,8 +49,9 @@ VIEW_PY = '''# ParaView state of a needlehex run (written by tools/render.py).
 import glob
 import os
 
-from paraview.simple import (ColorBy, GetActiveViewOrCreate, GetAnimationScene, GetColorTransferFunction,
-                             OpenDataFile, Render, ResetCamera, SaveScreenshot, Show, Tube)
+from paraview.simple import (ColorBy, ExtractSurface, GetActiveViewOrCreate, GetAnimationScene,
+                             GetColorTransferFunction, OpenDataFile, Render, ResetCamera,
+                             SaveScreenshot, Show, Tube)
 
 here = os.path.dirname(os.path.abspath(__file__)) if "__file__" in globals() else os.getcwd()
 view = GetActiveViewOrCreate("RenderView")
@@ -65,7 +66,7 @@ for pvd in sorted(glob.glob(os.path.join(here, "*.pvd"))):
     name = os.path.basename(pvd)[:-4]
     if name in ("tissue", "points"):
         continue
-    tube = Tube(Input=OpenDataFile(pvd))
+    tube = Tube(Input=ExtractSurface(Input=OpenDataFile(pvd)))  # Tube takes polydata
     tube.Radius = %(tube)r
     tool = Show(tube, view)
     tool.DiffuseColor = [0.85, 0.85, 0.9]
@@ -79,7 +80,7 @@ GetAnimationScene().UpdateAnimationUsingDataTimeSteps()
 GetAnimationScene().GoToLast()
 ResetCamera()
 Render()
-if "__file__" in globals() and not globals().get("paraview_gui"):
+if __name__ == "__main__" and "__file__" in globals():
     try:
         SaveScreenshot(os.path.join(here, "view.png"), view, ImageResolution=[1280, 720])
     except Exception:
