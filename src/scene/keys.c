@@ -15,9 +15,11 @@
  * Table rows. A row of a table whose header starts `| key |` is
  *   | `KEY`[, `.SIBLING` ...] | type | default | unit | notes |
  * where `.SIBLING` replaces KEY's last component (`tissue.buoyancy.before`,
- * `.after`), and a KEY starting with "…" is a region key, found under every
- * region list (tissue.fixed.N, tissue.loads.N). List indices are N (or K)
- * in the docs and numbers in the reader's paths: both compare as N. A
+ * `.after`), and a KEY starting with "…" is a suffix, found under any parent
+ * (`….box.min`: the box of every region list, `….point.voxel`: of every
+ * point). List indices are N (or K)
+ * and material labels LABEL in the docs, numbers in the reader's paths: all
+ * compare as N. A
  * documented key documents its parents (tools.N.material.young documents
  * tools.N.material). Cells split at '|' not preceded by '\'. */
 #include "scene/scene.h"
@@ -49,7 +51,8 @@ static void normalise(const char *in, char *out, size_t size) {
   for (const char *p = in; *p && o + 2 < size;) {
     const char *q = p;
     while (*q && *q != '.') q++;
-    int numeric = q > p, letter = q == p + 1 && (*p == 'N' || *p == 'K');
+    int numeric = q > p, letter = (q == p + 1 && (*p == 'N' || *p == 'K')) ||
+                                  (q == p + 5 && !strncmp(p, "LABEL", 5));
     for (const char *r = p; r < q; r++) numeric &= isdigit((unsigned char)*r) != 0;
     if (numeric || letter) {
       out[o++] = 'N';
@@ -67,7 +70,6 @@ static void normalise(const char *in, char *out, size_t size) {
 typedef int (*nh_key_visit)(const char *key, char cells[][NH_KEYS_CELL], int n, void *arg);
 
 static int each_key(nh_key_visit visit, void *arg) {
-  static const char *const regions[] = {"tissue.fixed.N", "tissue.loads.N"};
   char cells[5][NH_KEYS_CELL];
   int in_table = 0;
   for (const char *line = nh_scene_md; *line;) {
@@ -96,19 +98,14 @@ static int each_key(nh_key_visit visit, void *arg) {
           snprintf(first, sizeof first, "%s", name);
           snprintf(key, sizeof key, "%s", name);
         }
-        if (!strncmp(key, "\xe2\x80\xa6", 3)) { /* "…": under every region list */
-          for (int k = 0; k < 2; k++) {
-            char full[320];
-            snprintf(full, sizeof full, "%s%s", regions[k], key + 3);
-            normalise(full, norm, sizeof norm);
-            int rc = visit(norm, cells, n, arg);
-            if (rc) return rc;
-          }
+        if (!strncmp(key, "\xe2\x80\xa6", 3)) { /* "…": a suffix, under any parent */
+          norm[0] = '.';
+          normalise(key + 4, norm + 1, sizeof norm - 1);
         } else {
           normalise(key, norm, sizeof norm);
-          int rc = visit(norm, cells, n, arg);
-          if (rc) return rc;
         }
+        int rc = visit(norm, cells, n, arg);
+        if (rc) return rc;
       }
     }
     line = *end ? end + 1 : end;
@@ -120,12 +117,21 @@ typedef struct {
   const char *want;
 } nh_key_find;
 
-/* Found: want is the key or one of its parents. */
+/* Found: want is the key or one of its parents. A key ".S" (written …S)
+ * stands for S under any parent: want is found when one of its tails (from a
+ * component on) is S or a parent of S. */
 static int find_key(const char *key, char cells[][NH_KEYS_CELL], int n, void *arg) {
   (void)cells, (void)n;
   const char *want = ((nh_key_find *)arg)->want;
-  size_t len = strlen(want);
-  return !strncmp(key, want, len) && (key[len] == '\0' || key[len] == '.');
+  if (key[0] != '.') {
+    size_t len = strlen(want);
+    return !strncmp(key, want, len) && (key[len] == '\0' || key[len] == '.');
+  }
+  for (const char *tail = want; tail; tail = strchr(tail, '.') ? strchr(tail, '.') + 1 : NULL) {
+    size_t len = strlen(tail);
+    if (!strncmp(key + 1, tail, len) && (key[1 + len] == '\0' || key[1 + len] == '.')) return 1;
+  }
+  return 0;
 }
 
 int nh_scene_keys_check(const char *path, const char *const *allowed) {
@@ -185,7 +191,7 @@ void nh_scene_keys_print(void *stdio_file) {
   pr.f = stdio_file;
   pr.last[0] = '\0';
   fputs("Scene keys, from docs/scene.md. N is a list index (0-based); a key starting\n"
-        "with … is one of a region's, under tissue.fixed.N and tissue.loads.N.\n\n",
+        "with … is found under several parents (regions, points: see its notes).\n\n",
         pr.f);
   each_key(print_key, &pr);
 }
