@@ -4,3 +4,8 @@
 # values, the brain shifting, the cannula back at its start and the
 # electrode left in place.
 nh_add_py_test(dbs verify dbs.py)
+# Target compensation (tests/dbs.py --plan): `needlehex plan` on the shortened
+# procedure gets the electrode within 0.5 mm of the STN in at most 6 runs,
+# keeping the entry; on a rigid brain the first run is on the target.
+nh_add_py_test(dbs_plan verify dbs.py --plan)
+set_tests_properties(dbs_plan PROPERTIES TIMEOUT 600 LABELS "verify;slow")

@@ -16,6 +16,11 @@ tests/test_io.c; keep the two in step):
   lines.vtu: points (0.1 i, 0, 0), i < 6; POLY_LINE (0 1 2 3), LINE (3 4),
     LINE (4 5), VERTEX (5); von_mises[c] = 1500 (c + 1).
   vertices.vtu: points (0.1 i, 0.2 i, 0.3 i), i < 3, one VERTEX each.
+  single.vtu: the point (0.1, 0.2, 0.3), one VERTEX, displacement(1).
+  named.vtu: single.vtu with the Int32 flag target = 1, field data names "STN\n".
+  named3.vtu: vertices.vtu with names "a", "probe 2", "STN".
+  Units (UNITS_LABEL): displacement m, velocity m/s, von_mises Pa, flags 1,
+    Points m; hex.vtu's level has none.
   series.pvd: times {0, 0.05, 0.1 + 0.2}, files series_%06d.vtu (step 5 k),
     displacement of frame k = (displacement above) * (k + 1).
   escape.pvd: one frame at 1.5, file "odd &<name>.vtu".
@@ -112,6 +117,32 @@ def vtk_array(data, name, dtype_kind=None):
     return a
 
 
+def vtk_unit(arr):
+    info = arr.GetInformation() if arr is not None else None
+    if info is None or not info.Has(vtk.vtkDataArray.UNITS_LABEL()):
+        return None
+    return info.Get(vtk.vtkDataArray.UNITS_LABEL())
+
+
+def check_units(path, grid, expected):
+    """expected: {array name: unit or None}; "Points" is the points array."""
+    for name, unit in expected.items():
+        if name == "Points":
+            arr = grid.GetPoints().GetData()
+        else:
+            arr = grid.GetPointData().GetArray(name) or grid.GetCellData().GetArray(name)
+        got = vtk_unit(arr)
+        if got != unit:
+            fail(f"{path} {name}: UNITS_LABEL {got!r}, expected {unit!r}")
+
+
+def names_of(field):
+    """The names from the UInt8 field data array "names" (each followed by a newline)."""
+    if field is None:
+        return None
+    return bytes(np.asarray(field, dtype=np.uint8)).decode().split("\n")[:-1]
+
+
 # ---- the shared formulas ----
 def displacement(i):
     return [0.001 * i, -0.002 * i, 0.5 + i]
@@ -168,6 +199,8 @@ def check_hex(path, frame=0):
         a = vtk_array(cd, name, "f")
         if a is not None:
             expect_equal(f"{path} VTK {name}", a, e[name])
+    check_units(path, g, {"displacement": "m", "velocity": "m/s", "fixed": "1", "von_mises": "Pa",
+                          "level": None, "Points": "m"})
 
     if meshio is None:
         fail("meshio is not installed (python3-meshio)")
@@ -316,6 +349,37 @@ def check_text(d):
         if f.read() != "hello\nworld\n":
             fail("hello.txt content differs")
 
+def check_named(d):
+    """single.vtu (one vertex: meshio failed on it when arrays were appended in
+    document order), named.vtu and named3.vtu: names, flag and units."""
+    for name, pts, disp, names in (
+            ("single.vtu", [(0.1, 0.2, 0.3)], [displacement(1)], None),
+            ("named.vtu", [(0.1, 0.2, 0.3)], [displacement(1)], ["STN"]),
+            ("named3.vtu", [(0.1 * i, 0.2 * i, 0.3 * i) for i in range(3)],
+             [displacement(i) for i in range(3)], ["a", "probe 2", "STN"])):
+        path = os.path.join(d, name)
+        g = read_vtk(path)
+        expect_equal(f"{path} VTK points", vtk_points(g), pts)
+        a = vtk_array(g.GetPointData(), "displacement", "f")
+        if a is not None:
+            expect_equal(f"{path} VTK displacement", a, disp)
+        fd = g.GetFieldData().GetArray("names")
+        got = names_of(vtk_to_numpy(fd)) if fd is not None else None
+        if got != names:
+            fail(f"{path} VTK names {got!r}, expected {names!r}")
+        check_units(path, g, {"displacement": "m", "Points": "m"})
+        if meshio is None:
+            continue
+        m = meshio.read(path)
+        expect_equal(f"{path} meshio points", m.points, pts)
+        expect_equal(f"{path} meshio displacement", m.point_data.get("displacement"), disp)
+        expect_equal(f"{path} meshio vertices", m.cells[0].data.ravel(), list(range(len(pts))))
+        got = names_of(m.field_data.get("names"))
+        if got != names:
+            fail(f"{path} meshio names {got!r}, expected {names!r}")
+        if name == "named.vtu":
+            expect_equal(f"{path} meshio target", m.point_data.get("target"), [1])
+
 
 def main():
     if len(sys.argv) != 2:
@@ -327,6 +391,7 @@ def main():
               (check_empty, os.path.join(d, "empty.vtu")),
               (check_lines, os.path.join(d, "lines.vtu")),
               (check_vertices, os.path.join(d, "vertices.vtu")),
+              (check_named, d),
               (check_series, d),
               (check_text, d)]
     for check, arg in checks:

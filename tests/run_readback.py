@@ -17,7 +17,9 @@ and the checks follow the output contract of docs/outputs.md:
   Int32 flag `fixed`, cell data von_mises, level, fill (1 component each),
   only VTK_HEXAHEDRON cells, and points = current positions.
 - points.pvd / points_NNNNNN.vtu hold the probes (then targets) as
-  VTK_VERTEX cells in scene order, with point data `displacement`.
+  VTK_VERTEX cells in scene order, with point data `displacement` and
+  `target` (0 for a probe) and the probes' names (probes.csv's, in order)
+  as the field data `names`; meshio reads them with the same points.
 - probes.csv (step,time,name,x,y,z,ux,uy,uz) rows at each frame's step equal
   the points VTU's positions and displacements to 1e-12 relative (both are
   printed from the same doubles).
@@ -236,6 +238,21 @@ def check_points(out, frames, probe_rows, n_probes):
         if pts.shape[0] < n_probes:
             fail(f"{path}: {pts.shape[0]} points, expected at least {n_probes} probes")
             continue
+        names = [r["name"] for r in rows]
+        fd = g.GetFieldData().GetArray("names")
+        got = bytes(vtk_to_numpy(fd)).decode().split("\n")[:n_probes] if fd else None
+        if got != names:
+            fail(f"{path}: names {got!r}, expected probes.csv's {names!r}")
+        kind = get_array(g.GetPointData(), "target", 1, path, kind="i")
+        if kind is not None and np.any(kind[:n_probes] != 0):
+            fail(f"{path}: target flag {kind[:n_probes]} for the probes, expected 0")
+        if meshio is not None:
+            m = meshio.read(path)
+            if not np.array_equal(m.points, pts):
+                fail(f"{path}: meshio and VTK points differ")
+            got = bytes(m.field_data.get("names", [])).decode().split("\n")[:n_probes]
+            if got != names:
+                fail(f"{path}: meshio names {got!r}, expected {names!r}")
         x = np.array([[float(r[k]) for k in ("x", "y", "z")] for r in rows])
         u = np.array([[float(r[k]) for k in ("ux", "uy", "uz")] for r in rows])
         expect_close(f"{path} probe positions vs probes.csv at step {step}", pts[:n_probes], x)

@@ -116,11 +116,11 @@ static void frame_build(frame_data *d, int f, int nx, int ny, int nz) {
         level[c] = c % 2;
         for (int k = 0; k < 6; ++k) stress[6 * c + k] = 10.0 * c + k + f;
       }
-  d->pf[0] = (nh_field){"displacement", 3, d->disp};
-  d->pf[1] = (nh_field){"velocity", 3, d->vel};
-  d->cf[0] = (nh_field){"von_mises", 1, von_mises};
-  d->cf[1] = (nh_field){"level", 1, level};
-  d->cf[2] = (nh_field){"stress", 6, stress};
+  d->pf[0] = (nh_field){"displacement", 3, d->disp, "m"};
+  d->pf[1] = (nh_field){"velocity", 3, d->vel, "m/s"};
+  d->cf[0] = (nh_field){"von_mises", 1, von_mises, "Pa"};
+  d->cf[1] = (nh_field){"level", 1, level, "1"};
+  d->cf[2] = (nh_field){"stress", 6, stress, "Pa"};
   d->grid = (nh_vtu_grid){.n_points = d->np,
                           .points = d->points,
                           .n_cells = d->nc,

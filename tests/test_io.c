@@ -28,6 +28,12 @@
  *     POLY_LINE (0 1 2 3), LINE (3 4), LINE (4 5), VERTEX (5); von_mises as above.
  *   vertices.vtu: points (0.1 i, 0.2 i, 0.3 i), i < 3, one VERTEX per point
  *     (types == NULL), displacement as above.
+ *   single.vtu: the point (0.1, 0.2, 0.3) as one VERTEX, displacement of
+ *     point 1 above.
+ *   named.vtu: single.vtu with the Int32 flag "target" = 1, names "STN".
+ *   named3.vtu: vertices.vtu with names "a", "probe 2", "STN".
+ *   Units (VTK's UNITS_LABEL): displacement m, velocity m/s, von_mises Pa,
+ *     flags 1, Points m; hex.vtu's level has none.
  *   series.pvd: frames k = 0, 1, 2 at times {0, 0.05, 0.1 + 0.2}, files
  *     series_%06d.vtu with step 5 k; each is hex.vtu with every displacement
  *     component multiplied by (k + 1) (after computing it as above).
@@ -62,7 +68,7 @@ static const char *const written[] = {
     "vertices.vtu",      "series.pvd",      "series_000000.vtu", "series_000005.vtu",
     "series_000010.vtu", "escape.pvd",      "odd &<name>.vtu",   "table.csv",
     "long.csv",          "hello.txt",       "bad.vtu",           "full.vtu",
-    "full.txt",
+    "full.txt",          "named.vtu",       "named3.vtu",        "single.vtu",
 };
 enum { N_WRITTEN = sizeof written / sizeof written[0] };
 
@@ -131,10 +137,10 @@ static void hex_build(hex_data *h, int frame) {
     h->von_mises[c] = 1500.0 * (c + 1);
     h->level[c] = c;
   }
-  h->point_fields[0] = (nh_field){"displacement", 3, h->displacement};
-  h->point_fields[1] = (nh_field){"velocity", 3, h->velocity};
-  h->cell_fields[0] = (nh_field){"von_mises", 1, h->von_mises};
-  h->cell_fields[1] = (nh_field){"level", 1, h->level};
+  h->point_fields[0] = (nh_field){"displacement", 3, h->displacement, "m"};
+  h->point_fields[1] = (nh_field){"velocity", 3, h->velocity, "m/s"};
+  h->cell_fields[0] = (nh_field){"von_mises", 1, h->von_mises, "Pa"};
+  h->cell_fields[1] = (nh_field){"level", 1, h->level, NULL};
   h->grid = (nh_vtu_grid){.n_points = HN,
                           .points = h->points,
                           .n_cells = HC,
@@ -161,8 +167,8 @@ static void write_vtus(void) {
     p4[3 * i] = 0.1 * i;
     displacement_of(i, &d4[3 * i]);
   }
-  nh_field pf4 = {"displacement", 3, d4};
-  nh_field cf0 = {"von_mises", 1, NULL};
+  nh_field pf4 = {"displacement", 3, d4, "m"};
+  nh_field cf0 = {"von_mises", 1, NULL, "Pa"};
   nh_vtu_grid g4 = {.n_points = 4,
                     .points = p4,
                     .type = NH_VTK_HEXAHEDRON,
@@ -173,7 +179,7 @@ static void write_vtus(void) {
   EXPECT_OK(nh_vtu_write(in_dir("empty_cells.vtu"), &g4));
 
   /* 0 points, 0 cells */
-  nh_field pf0 = {"displacement", 3, NULL};
+  nh_field pf0 = {"displacement", 3, NULL, "m"};
   nh_vtu_grid g0 = {.type = NH_VTK_HEXAHEDRON,
                     .n_point_fields = 1,
                     .point_fields = &pf0,
@@ -192,8 +198,8 @@ static void write_vtus(void) {
   int types6[] = {NH_VTK_POLY_LINE, NH_VTK_LINE, NH_VTK_LINE, NH_VTK_VERTEX};
   double vm6[4];
   for (int c = 0; c < 4; ++c) vm6[c] = 1500.0 * (c + 1);
-  nh_field pf6 = {"displacement", 3, d6};
-  nh_field cf6 = {"von_mises", 1, vm6};
+  nh_field pf6 = {"displacement", 3, d6, "m"};
+  nh_field cf6 = {"von_mises", 1, vm6, "Pa"};
   nh_vtu_grid g6 = {.n_points = 6,
                     .points = p6,
                     .n_cells = 4,
@@ -215,7 +221,7 @@ static void write_vtus(void) {
     conn3[i] = i;
     off3[i] = i + 1;
   }
-  nh_field pf3 = {"displacement", 3, d3};
+  nh_field pf3 = {"displacement", 3, d3, "m"};
   nh_vtu_grid g3 = {.n_points = 3,
                     .points = p3,
                     .n_cells = 3,
@@ -225,6 +231,30 @@ static void write_vtus(void) {
                     .n_point_fields = 1,
                     .point_fields = &pf3};
   EXPECT_OK(nh_vtu_write(in_dir("vertices.vtu"), &g3));
+
+  /* One vertex with only a displacement: appended in document order, meshio
+     could not read it (its offset rewriting hit the types' offset). */
+  nh_field pf1 = {"displacement", 3, d3 + 3, "m"};
+  nh_vtu_grid g1 = {.n_points = 1,
+                    .points = p3 + 3,
+                    .n_cells = 1,
+                    .connectivity = conn3,
+                    .offsets = off3,
+                    .type = NH_VTK_VERTEX,
+                    .n_point_fields = 1,
+                    .point_fields = &pf1};
+  EXPECT_OK(nh_vtu_write(in_dir("single.vtu"), &g1));
+  /* The same, named and with a flag (a points_NNNNNN.vtu with one target). */
+  const char *names1[] = {"STN"};
+  int flag1[] = {1};
+  g1.point_int_flags = flag1;
+  g1.point_flag_name = "target";
+  g1.point_names = names1;
+  EXPECT_OK(nh_vtu_write(in_dir("named.vtu"), &g1));
+  /* Three named vertices: the names in order. */
+  const char *names3[] = {"a", "probe 2", "STN"};
+  g3.point_names = names3;
+  EXPECT_OK(nh_vtu_write(in_dir("named3.vtu"), &g3));
 
   /* A caller bug (index out of range) is refused and writes nothing. */
   hex_build(&h, 0);

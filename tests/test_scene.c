@@ -504,21 +504,31 @@ static void test_adapt(void) {
     nh_scene_destroy(&s);
   }
 
-#ifdef NH_TEMPLATES_DIR
-  /* Without the environment variable, names resolve in the compiled-in
-   * folder, the source tree's templates/ (which ships hex2.tmpl). */
-  char saved[sizeof templates_dir];
-  snprintf(saved, sizeof saved, "%s", templates_dir);
-  unsetenv("NH_TEMPLATES_DIR");
-  snprintf(text, sizeof text, "%sadapt: {template: hex2}\n", minimal);
-  path = write_scene("adapt_builtin.yaml", text);
-  s = load_ok(path, 0, NULL, __LINE__);
-  if (s) {
-    EXPECT_STR(s->adapt.template_path, NH_TEMPLATES_DIR "/hex2.tmpl");
-    nh_scene_destroy(&s);
+  /* Without the environment variable, names resolve in the templates the
+   * build copies next to its binaries: the same file as
+   * dirname($NH_BINARY)/share/needlehex/templates/hex2.tmpl (this test runs
+   * from BUILD/tests, the binary is BUILD/needlehex). */
+  const char *binary = getenv("NH_BINARY");
+  if (binary) {
+    char saved[sizeof templates_dir], want[4200];
+    struct stat got, expect;
+    snprintf(saved, sizeof saved, "%s", templates_dir);
+    unsetenv("NH_TEMPLATES_DIR");
+    const char *slash = strrchr(binary, '/');
+    snprintf(want, sizeof want, "%.*s/share/needlehex/templates/hex2.tmpl",
+             slash ? (int)(slash - binary) : 1, slash ? binary : ".");
+    snprintf(text, sizeof text, "%sadapt: {template: hex2}\n", minimal);
+    path = write_scene("adapt_builtin.yaml", text);
+    s = load_ok(path, 0, NULL, __LINE__);
+    if (s) {
+      EXPECT(stat(s->adapt.template_path, &got) == 0 && stat(want, &expect) == 0 &&
+                 got.st_dev == expect.st_dev && got.st_ino == expect.st_ino,
+             "template hex2 without NH_TEMPLATES_DIR: %s, expected the file %s",
+             s->adapt.template_path, want);
+      nh_scene_destroy(&s);
+    }
+    setenv("NH_TEMPLATES_DIR", saved, 1);
   }
-  setenv("NH_TEMPLATES_DIR", saved, 1);
-#endif
 }
 
 /* ---- tools and targets ---- */
@@ -1186,6 +1196,29 @@ static void test_errors(void) {
          "missing file: rc %d, '%s'", rc, nh_error_message());
 }
 
+/* The key table (docs/scene.md compiled in): documented keys pass, under
+ * list indices and region lists too; an undocumented one is a bug named. */
+static void test_key_table(void) {
+  static const char *const tissue[] = {"domain", "grid", "material", "buoyancy", NULL};
+  static const char *const traj[] = {"entry", "target", "standoff", "aim", NULL};
+  static const char *const sphere[] = {"center", "radius", NULL};
+  static const char *const motion[] = {"until", "speed", NULL};
+  static const char *const top[] = {"name", "time", "tools", "targets", "output", NULL};
+  static const char *const bogus[] = {"grid", "gird", NULL};
+  EXPECT_OK(nh_scene_keys_check("tissue", tissue));
+  EXPECT_OK(nh_scene_keys_check("tools.3.trajectory", traj));
+  EXPECT_OK(nh_scene_keys_check("tissue.loads.12.sphere", sphere));
+  EXPECT_OK(nh_scene_keys_check("tools.0.motion.2", motion));
+  EXPECT_OK(nh_scene_keys_check("", top));
+  int rc = nh_scene_keys_check("tissue", bogus);
+  EXPECT(rc == NH_ERR_INTERNAL && strstr(nh_error_message(), "tissue.gird"),
+         "undocumented tissue.gird: rc %d, message '%s', expected NH_ERR_INTERNAL naming it", rc,
+         nh_error_message());
+  static const char *const half[] = {"entr", NULL}; /* a prefix of a key is not the key */
+  rc = nh_scene_keys_check("tools.0.trajectory", half);
+  EXPECT(rc == NH_ERR_INTERNAL, "tools.0.trajectory.entr accepted as documented (rc %d)", rc);
+}
+
 int main(void) {
   const char *tmp = getenv("TMPDIR");
   snprintf(dir, sizeof dir, "%s/nh_test_scene_XXXXXX", tmp && tmp[0] ? tmp : "/tmp");
@@ -1204,6 +1237,7 @@ int main(void) {
   touch("tmpl/hex2.tmpl");
   touch("tmpl/hex3.tmpl");
   setenv("NH_TEMPLATES_DIR", templates_dir, 1);
+  test_key_table();
   test_defaults();
   test_values_and_where();
   test_steps_from_end();

@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Install every Debian package needlehex needs: build, tests, plots.
+# Install every Debian package needlehex needs: build, tests, plots, pictures
+# (xvfb: a virtual display for tools/render.py; ffmpeg: its MP4).
 # Idempotent; run as root (or with sudo available).
 set -euo pipefail
 pkgs=(
@@ -8,6 +9,7 @@ pkgs=(
   libyaml-dev libhdf5-dev zlib1g-dev libnifti2-dev
   python3 python3-numpy python3-matplotlib python3-vtk9 python3-meshio python3-h5py python3-nibabel python3-scipy
   python3-distributed python3-yaml
+  xvfb ffmpeg git
 )
 sudo=""
 if [ "$(id -u)" -ne 0 ]; then sudo="sudo"; fi

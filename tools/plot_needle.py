@@ -223,7 +223,7 @@ def save(fig, out, filename):
     """Write the figure to out/filename, close it, return the path."""
     fig.tight_layout()
     path = os.path.join(out, filename)
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, bbox_inches="tight")
     plt.close(fig)
     return path
 
@@ -249,7 +249,7 @@ def plot_run(run, tl, probes, m, out, name, states):
     ax.set_ylabel("axial force on the tool (N)")
     ax.set_title("%s: insertion force versus depth" % os.path.basename(run))
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)
     files.append(save(fig, out, "%s_force_depth.png" % name))
 
     # force and depth versus time, states shaded
@@ -263,7 +263,8 @@ def plot_run(run, tl, probes, m, out, name, states):
     (l2,) = ax2.plot(t, 1e3 * d, "-", color="#2166ac", lw=1.0, label="depth")
     ax2.set_ylabel("depth (mm)")
     ax.set_title("%s: insertion force and depth versus time" % os.path.basename(run))
-    ax.legend(handles=[l1, l2] + handles, fontsize=8, loc="lower left" if f.min() < 0 else "upper left")
+    ax.legend(handles=[l1, l2] + handles, fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.14),
+              ncol=3, frameon=False)  # below: the right axis is the depth's
     ax.set_xlim(t[0], t[-1])
     files.append(save(fig, out, "%s_force_time.png" % name))
 
@@ -283,7 +284,7 @@ def plot_run(run, tl, probes, m, out, name, states):
         for a in (a1, a2):
             a.grid(alpha=0.3)
             a.set_xlim(t[0], t[-1])
-        a1.legend(fontsize=8)
+        a1.legend(fontsize=8, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)
         files.append(save(fig, out, "%s_probes.png" % name))
     return files
 
@@ -317,7 +318,7 @@ def main():
         ax.set_xlabel("time (s)")
         ax.set_ylabel("axial force on the tool (N)")
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
+        ax.legend(fontsize=8, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)
         written.append(save(fig, a.out, "needle_force_compare.png"))
     for p in written:
         print("wrote", os.path.relpath(p))

@@ -2,7 +2,7 @@
 """Speed against error: runs the variants of a study, collects their
 steps.csv / probes.csv / targets.csv and writes plots and a Markdown report.
 
-    tools/study.py phantom [--binary PATH] [--out DIR] [--img DIR] [--only NAME ...]
+    tools/study.py phantom [--binary PATH] [--out DIR] [--img DIR | --docs] [--only NAME ...]
                            [--fresh-reference] [--steps N] [--reuse | --restart]
                            [--workers N | --scheduler tcp://HOST:PORT] [--threads T]
     tools/study.py dbs     [the same options]
@@ -37,10 +37,11 @@ first (the first includes CHOLMOD's symbolic analysis), and the total of
 t_step. Timings depend on the machine's load: run the study on a quiet
 machine.
 
-Output: OUT/report.md (the tables; also printed), plots in --img (default
-docs/img): phantom_axis.png, phantom_radial.png, phantom_fine.png,
-phantom_point3.png, phantom_speed_error.png. Needs numpy and matplotlib
-(Debian's python3-numpy, python3-matplotlib); use /usr/bin/python3.
+Output: OUT/report.md (the tables; also printed), plots in OUT/img (--img
+DIR: in DIR; --docs: in docs/img, where the docs take them from):
+phantom_axis.png, phantom_radial.png, phantom_fine.png, phantom_point3.png,
+phantom_speed_error.png. Needs numpy and matplotlib (Debian's python3-numpy,
+python3-matplotlib); use /usr/bin/python3.
 """
 import argparse
 import csv
@@ -189,9 +190,9 @@ def save_loglog(fig, ax, img, fname, xlabel, ylabel, title):
     ax.set_ylabel(ylabel)
     ax.set_title(title, fontsize=10)
     ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=7, loc="lower left")
+    legend_outside(ax)
     fig.tight_layout()
-    fig.savefig(os.path.join(img, fname), dpi=110)
+    fig.savefig(os.path.join(img, fname), dpi=110, bbox_inches="tight")
     plt.close(fig)
     log("wrote %s" % os.path.join(img, fname))
 
@@ -220,6 +221,11 @@ def pareto(points):
     return keep
 
 
+def legend_outside(ax):
+    """The legend right of the axes, never over the curves (saved with bbox_inches="tight")."""
+    ax.legend(fontsize=8, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)
+
+
 def plot_probes(img, runs, names, fname, title):
     fig, axes = plt.subplots(1, len(names), figsize=(4.2 * len(names), 3.4), sharey=False)
     for ax, n in zip(np.atleast_1d(axes), names):
@@ -230,10 +236,10 @@ def plot_probes(img, runs, names, fname, title):
         ax.set_xlabel("step")
         ax.grid(alpha=0.3)
     np.atleast_1d(axes)[0].set_ylabel("|u| (µm)")
-    np.atleast_1d(axes)[-1].legend(fontsize=7)
+    legend_outside(np.atleast_1d(axes)[-1])
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
-    fig.savefig(os.path.join(img, fname), dpi=110)
+    fig.savefig(os.path.join(img, fname), dpi=110, bbox_inches="tight")
     plt.close(fig)
     log("wrote %s" % os.path.join(img, fname))
 
@@ -246,11 +252,17 @@ def style(name):
             "goal-hex2-l2-every4": "C5-", "goal-hex2-l2-tol": "C6-"}.get(name, "C7-")
 
 
+def plot_dir(a, out):
+    """Where the PNGs go: --img, else docs/img with --docs, else OUT/img."""
+    img = a.img or (os.path.join(ROOT, "docs", "img") if a.docs else os.path.join(out, "img"))
+    os.makedirs(img, exist_ok=True)
+    return img
+
+
 def phantom(a, binary):
     st = PHANTOM
     out = a.out or os.path.join(ROOT, "out", "study", "phantom")
-    img = a.img or os.path.join(ROOT, "docs", "img")
-    os.makedirs(img, exist_ok=True)
+    img = plot_dir(a, out)
     names = st["axis"] + st["radial"]
 
     rname, rlabel, rsets = st["reference"]
@@ -370,9 +382,9 @@ def phantom(a, binary):
             ax.set_xlabel("step")
             ax.set_ylabel("|u| (µm)")
             ax.grid(alpha=0.3)
-            ax.legend(fontsize=7)
+            legend_outside(ax)
         fig.tight_layout()
-        fig.savefig(os.path.join(img, "phantom_fine.png"), dpi=110)
+        fig.savefig(os.path.join(img, "phantom_fine.png"), dpi=110, bbox_inches="tight")
         plt.close(fig)
     plot_probes(img, allruns, ["3"], "phantom_point3.png",
                 "point 3: every run (templates hex2, hex3, hex4)")
@@ -539,8 +551,7 @@ def cube(a, binary):
 def dbs(a, binary):
     st = DBS
     out = a.out or os.path.join(ROOT, "out", "study", "dbs")
-    img = a.img or os.path.join(ROOT, "docs", "img")
-    os.makedirs(img, exist_ok=True)
+    img = plot_dir(a, out)
     g = scene_grid(st["scene"])
     runs = []
     infos = run_variants(a, binary, st["scene"], out, [
@@ -614,9 +625,9 @@ def dbs(a, binary):
         ax.set_ylabel(ylabel)
         ax.set_title(title, fontsize=10)
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
+        legend_outside(ax)
         fig.tight_layout()
-        fig.savefig(os.path.join(img, fname), dpi=110)
+        fig.savefig(os.path.join(img, fname), dpi=110, bbox_inches="tight")
         plt.close(fig)
         log("wrote %s" % os.path.join(img, fname))
 
@@ -636,7 +647,9 @@ def main():
     ap.add_argument("spec", nargs="?", help="sweep: the spec (YAML, see study_sweep.py)")
     ap.add_argument("--binary", default=None, help="needlehex (default build/needlehex)")
     ap.add_argument("--out", default=None, help="run folders and report (default out/study/STUDY)")
-    ap.add_argument("--img", default=None, help="where the PNGs go (default docs/img)")
+    ap.add_argument("--img", default=None, help="where the PNGs go (default OUT/img)")
+    ap.add_argument("--docs", action="store_true",
+                    help="write the PNGs to docs/img (the plots the docs show)")
     ap.add_argument("--only", nargs="*", help="run only these variants (names as in the report)")
     ap.add_argument("--fresh-reference", action="store_true", help="run the reference again")
     ap.add_argument("--steps", type=int, default=None, help="fewer steps (a quick look)")

@@ -93,6 +93,17 @@ void nh_log_info(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
 /* Warning line on stderr (always shown). */
 void nh_log_warn(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
 
+/* ---- paths (core/paths.c) ---- */
+/* The folder of the running program (/proc/self/exe without its last
+ * component) into out[size]. Returns 0, or -1 if it cannot be read or does
+ * not fit. */
+int nh_exe_dir(char *out, size_t size);
+/* The refinement templates folder: $NH_TEMPLATES_DIR if set and not empty,
+ * else EXE/../share/needlehex/templates or EXE/share/needlehex/templates (the
+ * first that exists; EXE from nh_exe_dir), else "templates". The result is
+ * the environment's string, `buf` (size bytes) or a literal. */
+const char *nh_templates_dir(char *buf, size_t size);
+
 /* ---- timers ---- */
 /* Monotonic wall time in seconds. */
 double nh_time_now(void);

@@ -951,7 +951,8 @@ static int stored_fields(const nh_h5 *h, hid_t frame, const char *frame_name, in
     if (is_int)
       f->flag = i;
     else
-      f->fields[pass][f->n_fields[pass]++] = (nh_field){name, rank == 1 ? 1 : (int)dims[1], NULL};
+      f->fields[pass][f->n_fields[pass]++] =
+          (nh_field){name, rank == 1 ? 1 : (int)dims[1], NULL, NULL};
   }
   H5Gclose(grp);
   return rc;

@@ -11,11 +11,14 @@
 #include <stdio.h>
 
 /* A field of n tuples of `components` doubles (row-major, tuple i at
- * data[i * components]). Written as Float64. */
+ * data[i * components]). Written as Float64; `unit` (SI, e.g. "m", "Pa";
+ * "1" for a dimensionless number; NULL: none written) goes into the VTU as
+ * the array's UNITS_LABEL (vtkDataArray information key). */
 typedef struct {
   const char *name;
   int components;
   const double *data;
+  const char *unit;
 } nh_field;
 
 /* VTK cell types used by needlehex. */
@@ -35,6 +38,8 @@ typedef struct {
   const nh_field *cell_fields;
   const int *point_int_flags; /* optional: n_points ints written as Int32 "point_flag_name" */
   const char *point_flag_name;
+  const char *const *point_names; /* optional: n_points names, written as the field data array
+                                     "names" (UInt8: the names, each followed by '\n') */
 } nh_vtu_grid;
 
 /* Write `grid` to `path` as a VTU file (UInt64 headers, raw appended data,

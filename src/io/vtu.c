@@ -19,10 +19,21 @@
  *
  * Each array's `offset` attribute counts bytes from the first byte after the
  * '_' to its 8-byte (UInt64) byte count n_k, which is followed by exactly n_k
- * bytes of little-endian data. Arrays are appended in the order the XML
- * declares them, offsets are plain decimal integers, and a newline follows
- * the last byte: meshio's raw reader depends on all three (it finds arrays by
- * walking offsets in order and cuts the data at the last newline).
+ * bytes of little-endian data. Arrays are appended in the REVERSE of the
+ * order the XML declares them, offsets are plain decimal integers, and a
+ * newline follows the last byte: meshio's raw reader depends on all three.
+ * It walks the block from offset 0, finds the DataArray whose offset
+ * attribute equals the position reached (the first in document order) and
+ * rewrites that attribute to a base64 position; appended in document order,
+ * a rewritten attribute can equal a later array's raw offset (one probe: the
+ * connectivity's new offset 88 was the types' raw one, and meshio failed
+ * with "buffer size must be a multiple of element size"). In reverse order
+ * every array not yet visited precedes, in the document, every rewritten one.
+ *
+ * Metadata: an nh_field's unit is written as VTK's UNITS_LABEL information
+ * key inside its DataArray (VTK and ParaView read it; meshio ignores it), and
+ * optional point names as the field data array "names" (UInt8 text, each
+ * name followed by '\n': meshio reads no String arrays).
  *
  * Choices:
  * - Raw rather than base64 or zlib: the tissue frame of a 32x16x16 grid is
@@ -67,7 +78,9 @@ _Static_assert(sizeof(double) == 8, "Float64 arrays are written straight from do
 typedef struct {
   const char *type; /* "Float64", "Int32", "UInt8" */
   const char *name;
-  int components; /* NumberOfComponents, written only when > 1 */
+  const char *unit; /* UNITS_LABEL, or NULL */
+  int field_data;   /* an array of <FieldData> */
+  int components;   /* NumberOfComponents, written only when > 1 */
   const void *data;
   size_t elem_size;
   size_t count; /* number of elements (tuples x components) */
@@ -138,7 +151,15 @@ static void put_array_xml(FILE *f, const vtu_array *a) {
   put_xml_attr(f, a->name);
   fputc('"', f);
   if (a->components > 1) fprintf(f, " NumberOfComponents=\"%d\"", a->components);
-  fprintf(f, " format=\"appended\" offset=\"%llu\"/>\n", (unsigned long long)a->offset);
+  if (a->field_data) fprintf(f, " NumberOfTuples=\"%zu\"", a->count); /* VTK needs it there */
+  fprintf(f, " format=\"appended\" offset=\"%llu\"", (unsigned long long)a->offset);
+  if (!a->unit) {
+    fputs("/>\n", f);
+    return;
+  }
+  fputs(">\n          <InformationKey name=\"UNITS_LABEL\" location=\"vtkDataArray\">", f);
+  put_xml_attr(f, a->unit);
+  fputs("</InformationKey>\n        </DataArray>\n", f);
 }
 
 /* Check what the writer relies on; a failure is a bug in the caller. */
@@ -169,6 +190,9 @@ static int check_grid(const char *path, const nh_vtu_grid *g) {
                "VTU '%s': cell type %d is not a VTK cell type", path, g->type);
     }
   }
+  for (int i = 0; g->point_names && i < g->n_points; ++i)
+    NH_CHECK(g->point_names[i] && !strchr(g->point_names[i], '\n'), NH_ERR_INTERNAL,
+             "VTU '%s': point name %d is missing or holds a newline", path, i);
   for (int pass = 0; pass < 2; ++pass) {
     int n = pass ? g->n_cell_fields : g->n_point_fields;
     const nh_field *fields = pass ? g->cell_fields : g->point_fields;
@@ -196,36 +220,60 @@ int nh_vtu_write(const char *path, const nh_vtu_grid *grid) {
   for (size_t c = 0; c < nc; ++c)
     types[c] = (unsigned char)(grid->types ? grid->types[c] : grid->type);
 
-  /* Arrays in the order they appear in the XML (and in the appended block). */
+  /* The names as one text: each followed by '\n'. */
+  size_t names_len = 0;
+  for (size_t i = 0; grid->point_names && i < np; ++i)
+    names_len += strlen(grid->point_names[i]) + 1;
+  char *names = nh_calloc(names_len + 1, 1);
+  if (!names) {
+    free(types);
+    return NH_ERR_MEMORY;
+  }
+  for (size_t i = 0, at = 0; grid->point_names && i < np; ++i)
+    at += (size_t)sprintf(names + at, "%s\n", grid->point_names[i]);
+
+  /* Arrays in the order they appear in the XML (appended in reverse). */
+  const int has_names = grid->point_names != NULL;
   const int n_arrays =
-      grid->n_point_fields + (grid->point_int_flags ? 1 : 0) + grid->n_cell_fields + 4;
+      has_names + grid->n_point_fields + (grid->point_int_flags ? 1 : 0) + grid->n_cell_fields + 4;
   vtu_array *arrays = nh_calloc((size_t)n_arrays, sizeof *arrays);
   if (!arrays) {
+    free(names);
     free(types);
     return NH_ERR_MEMORY;
   }
   int k = 0;
+  if (has_names) {
+    arrays[k] = make_array("UInt8", "names", 1, names, 1, names_len);
+    arrays[k++].field_data = 1;
+  }
+  const int first_point_field = k;
   for (int i = 0; i < grid->n_point_fields; ++i) {
     const nh_field *fld = &grid->point_fields[i];
-    arrays[k++] = make_array("Float64", fld->name, fld->components, fld->data, 8,
-                             np * (size_t)fld->components);
+    arrays[k] = make_array("Float64", fld->name, fld->components, fld->data, 8,
+                           np * (size_t)fld->components);
+    arrays[k++].unit = fld->unit;
   }
-  if (grid->point_int_flags)
-    arrays[k++] = make_array("Int32", grid->point_flag_name ? grid->point_flag_name : "flag", 1,
-                             grid->point_int_flags, 4, np);
+  if (grid->point_int_flags) {
+    arrays[k] = make_array("Int32", grid->point_flag_name ? grid->point_flag_name : "flag", 1,
+                           grid->point_int_flags, 4, np);
+    arrays[k++].unit = "1";
+  }
   const int first_cell_field = k;
   for (int i = 0; i < grid->n_cell_fields; ++i) {
     const nh_field *fld = &grid->cell_fields[i];
-    arrays[k++] = make_array("Float64", fld->name, fld->components, fld->data, 8,
-                             nc * (size_t)fld->components);
+    arrays[k] = make_array("Float64", fld->name, fld->components, fld->data, 8,
+                           nc * (size_t)fld->components);
+    arrays[k++].unit = fld->unit;
   }
   const int points_index = k;
-  arrays[k++] = make_array("Float64", "Points", 3, grid->points, 8, 3 * np);
+  arrays[k] = make_array("Float64", "Points", 3, grid->points, 8, 3 * np);
+  arrays[k++].unit = "m";
   arrays[k++] = make_array("Int32", "connectivity", 1, grid->connectivity, 4, nconn);
   arrays[k++] = make_array("Int32", "offsets", 1, grid->offsets, 4, nc);
   arrays[k++] = make_array("UInt8", "types", 1, types, 1, nc);
   uint64_t offset = 0;
-  for (int i = 0; i < n_arrays; ++i) {
+  for (int i = n_arrays - 1; i >= 0; --i) {
     arrays[i].offset = offset;
     offset += sizeof(uint64_t) + arrays[i].elem_size * arrays[i].count;
   }
@@ -240,10 +288,15 @@ int nh_vtu_write(const char *path, const nh_vtu_grid *grid) {
         " header_type=\"UInt64\">\n"
         "  <UnstructuredGrid>\n",
         f);
+  if (has_names) {
+    fputs("    <FieldData>\n", f);
+    put_array_xml(f, &arrays[0]);
+    fputs("    </FieldData>\n", f);
+  }
   fprintf(f, "    <Piece NumberOfPoints=\"%d\" NumberOfCells=\"%d\">\n", grid->n_points,
           grid->n_cells);
   fputs("      <PointData>\n", f);
-  for (int i = 0; i < first_cell_field; ++i) put_array_xml(f, &arrays[i]);
+  for (int i = first_point_field; i < first_cell_field; ++i) put_array_xml(f, &arrays[i]);
   fputs("      </PointData>\n      <CellData>\n", f);
   for (int i = first_cell_field; i < points_index; ++i) put_array_xml(f, &arrays[i]);
   fputs("      </CellData>\n      <Points>\n", f);
@@ -255,7 +308,7 @@ int nh_vtu_write(const char *path, const nh_vtu_grid *grid) {
         f);
 
   int failed = ferror(f);
-  for (int i = 0; i < n_arrays && !failed; ++i) {
+  for (int i = n_arrays - 1; i >= 0 && !failed; --i) {
     uint64_t bytes = (uint64_t)(arrays[i].elem_size * arrays[i].count);
     failed = write_le(f, &bytes, sizeof bytes, 1) ||
              write_le(f, arrays[i].data, arrays[i].elem_size, arrays[i].count);
@@ -268,6 +321,7 @@ int nh_vtu_write(const char *path, const nh_vtu_grid *grid) {
 
 done:
   free(arrays);
+  free(names);
   free(types);
   return rc;
 }

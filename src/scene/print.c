@@ -54,6 +54,9 @@ static void print_tool(FILE *f, const nh_scene *s, int i) {
             "standoff %g m: planned depth %.9g m\n",
             t->entry[0], t->entry[1], t->entry[2], g->name, g->point[0], g->point[1], g->point[2],
             t->standoff, t->depth);
+    if (t->aimed)
+      fprintf(f, "            aimed at [%.9g, %.9g, %.9g] m (trajectory.aim), not at the target\n",
+              t->aim[0], t->aim[1], t->aim[2]);
   }
   fprintf(f, "            base [%g, %g, %g] m, direction [%g, %g, %g]\n", t->base[0], t->base[1],
           t->base[2], t->direction[0], t->direction[1], t->direction[2]);

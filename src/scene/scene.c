@@ -28,8 +28,8 @@
  *
  * Files. adapt.template is resolved here, so that a scene naming a template
  * that does not exist fails `check` at the key's line: a name (hex2) is the
- * file NAME.tmpl in $NH_TEMPLATES_DIR, or in the compiled-in templates folder
- * when that variable is unset or empty; a value with a '/' or ending in
+ * file NAME.tmpl in nh_templates_dir() ($NH_TEMPLATES_DIR, or the templates
+ * installed or built next to the binary: core/paths.c); a value with a '/' or ending in
  * .tmpl is a path, relative to the scene file's folder unless absolute (so a
  * scene and its own template travel together). Only readability is checked
  * here; the template's contents are proved by nh_template_load.
@@ -60,14 +60,6 @@
 
 #define NH_KEY_MAX   256
 #define NH_STEPS_MAX 1000000000.0
-
-/* Where adapt.template names are looked up when the environment variable
- * NH_TEMPLATES_DIR is unset: the build sets it to the source tree's
- * templates/ folder; "templates" (relative to the working directory) is the
- * fallback for a build that does not. */
-#ifndef NH_TEMPLATES_DIR
-#define NH_TEMPLATES_DIR "templates"
-#endif
 
 /* What one load knows, for messages. */
 typedef struct {
@@ -169,6 +161,7 @@ static int in_list(const char *key, const char *const *list) {
 static int check_keys(const nh_ctx *c, const nh_yaml_node *map, const char *path,
                       const char *const *allowed) {
   char key[NH_KEY_MAX];
+  NH_TRY(nh_scene_keys_check(path, allowed)); /* every key it reads is documented */
   for (int i = 0; i < map->n; ++i) {
     const nh_yaml_node *k = map->keys[i];
     if (in_list(k->text, allowed)) continue;
@@ -1204,7 +1197,7 @@ static int read_tissue(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
 }
 
 /* adapt.template (text `value`, at node `at`, NULL for the default) to a
- * readable file: a name is NH_TEMPLATES_DIR/NAME.tmpl; a value with a '/' or
+ * readable file: a name is nh_templates_dir()/NAME.tmpl; a value with a '/' or
  * ending in .tmpl is a path, relative to the scene file's folder unless
  * absolute. The error is reported at `at`, or at `section` for the default. */
 static int resolve_template(const nh_ctx *c, const nh_yaml_node *at, const nh_yaml_node *section,
@@ -1215,8 +1208,8 @@ static int resolve_template(const nh_ctx *c, const nh_yaml_node *at, const nh_ya
   int n;
   if (len == 0) return fail(c, where, "adapt.template", "expected a template name or path");
   if (!is_path) {
-    const char *env = getenv("NH_TEMPLATES_DIR");
-    const char *dir = env && env[0] ? env : NH_TEMPLATES_DIR;
+    char buf[NH_PATH_MAX];
+    const char *dir = nh_templates_dir(buf, sizeof buf);
     n = snprintf(out, NH_PATH_MAX, "%s/%s.tmpl", dir, value);
   } else {
     n = scene_relative(c, value, out);
@@ -1606,12 +1599,13 @@ static int read_host(const nh_ctx *c, const nh_yaml_node *list, int i, const cha
   return fail(c, at, key, "no tool named %s is listed before this one", describe(at, d, sizeof d));
 }
 
-/* PATH.trajectory {entry, target, standoff} (optional): sets t->planned, the
- * entry and the standoff; the target's name is looked up by read_plans, once
- * the targets are read. base and direction must then not be given. */
+/* PATH.trajectory {entry, target, standoff, aim} (optional): sets
+ * t->planned, the entry, the standoff and the aim if given; the target's
+ * name is looked up by read_plans, once the targets are read. base and
+ * direction must then not be given. */
 static int read_trajectory(const nh_ctx *c, const nh_yaml_node *tool, const char *path,
                            nh_tool_spec *t) {
-  static const char *const keys[] = {"entry", "target", "standoff", NULL};
+  static const char *const keys[] = {"entry", "target", "standoff", "aim", NULL};
   static const char *const computed[] = {"base", "direction", NULL};
   char sub[NH_KEY_MAX], key[NH_KEY_MAX];
   const nh_yaml_node *m, *at;
@@ -1632,6 +1626,9 @@ static int read_trajectory(const nh_ctx *c, const nh_yaml_node *tool, const char
   NH_TRY(field(c, m, sub, "target", 1, &at));
   NH_TRY(get_number(c, m, sub, "standoff", 0, &t->standoff, &at));
   NH_TRY(at_least(c, at, sub, "standoff", t->standoff, 0, 1));
+  t->aimed = 0;
+  NH_TRY(get_vec3(c, m, sub, "aim", 0, t->aim, &at));
+  t->aimed = at != NULL;
   return NH_OK;
 }
 
@@ -1828,10 +1825,17 @@ static int resolve_trajectory(const nh_ctx *c, const nh_yaml_node *tool, const c
     return fail(c, at, key, "no target named %s (the targets are %s)", describe(at, d, sizeof d),
                 names);
   }
-  if (nh_scene_trajectory_line(t, s->targets[t->target].point))
-    return fail(c, at, key, "target %s is at the entry point [%g, %g, %g]: no direction",
-                describe(at, d, sizeof d), t->entry[0], t->entry[1], t->entry[2]);
-  return NH_OK;
+  /* The aim: the target's point unless trajectory.aim moves it (`needlehex
+   * plan`, docs/dbs.md). */
+  if (!t->aimed) memcpy(t->aim, s->targets[t->target].point, sizeof t->aim);
+  const nh_yaml_node *aim_at = t->aimed ? nh_yaml_get(traj, "aim", NULL) : NULL;
+  if (nh_scene_trajectory_line(t, t->aim) == NH_OK) return NH_OK;
+  if (aim_at)
+    return fail(c, aim_at, join(key, sub, "aim"),
+                "the aim is the entry point [%g, %g, %g]: no direction", t->entry[0], t->entry[1],
+                t->entry[2]);
+  return fail(c, at, key, "target %s is at the entry point [%g, %g, %g]: no direction",
+              describe(at, d, sizeof d), t->entry[0], t->entry[1], t->entry[2]);
 }
 
 /* tools.i.release: target — the end of the host's until: target segment

@@ -123,14 +123,17 @@ typedef struct {
   double damping_stiffness; /* tools[i].damping.stiffness (Rayleigh β, default 0, >= 0) */
   double base[3];           /* tools[i].base, m (required unless trajectory): base at t = 0 */
   double direction[3]; /* tools[i].direction (required unless trajectory, non-zero; unit length) */
-  /* tools[i].trajectory {entry, target, standoff} (optional; then base and direction are
-     computed from it, and must not be given): direction = unit(target − entry), the tip at
-     t = 0 at entry − standoff · direction */
+  /* tools[i].trajectory {entry, target, standoff, aim} (optional; then base and direction
+     are computed from it, and must not be given): direction = unit(aim − entry), the tip at
+     t = 0 at entry − standoff · direction; aim is the target's point unless given (the
+     compensated aim of `needlehex plan`) */
   int planned;     /* the tool has a trajectory */
   double entry[3]; /* trajectory.entry, m */
   int target;      /* trajectory.target: index in targets (-1: no trajectory) */
   double standoff; /* trajectory.standoff, m (default 0.005, > 0) */
-  double depth;    /* the planned depth D = standoff + |target − entry|, m */
+  double aim[3];   /* trajectory.aim, m (default: the target's point) */
+  int aimed;       /* trajectory.aim was given */
+  double depth;    /* the planned depth D = standoff + |aim − entry|, m */
   int n_motion;    /* tools[i].motion: list of {until, speed} (default: none, at rest) */
   nh_motion *motion;
   double puncture_force;  /* tools[i].interaction.puncture_force, N (default 0, >= 0) */
@@ -329,7 +332,7 @@ void nh_scene_tissue_gravity(const nh_scene *scene, double t, double g[3]);
  * resolved): a nested tool moves with its host until its release and by its
  * own segments after, an outer tool by its own segments. */
 double nh_scene_tip_travel(const nh_scene *scene, int i, int n, double t);
-/* A planned trajectory from tool->entry to `target`: sets tool->direction
+/* A planned trajectory from tool->entry to `target` (its aim): sets tool->direction
  * (unit), tool->depth = standoff + distance and tool->base (the tip
  * standoff before the entry point). Returns NH_ERR_INPUT, without a message
  * and with the tool untouched, if the target is the entry point. */
@@ -342,6 +345,16 @@ int nh_scene_trajectory_line(nh_tool_spec *tool, const double target[3]);
  * cells^(1/3) per cell (the fill of the sparse Cholesky factor, which for a
  * 3-D grid grows like n^(4/3)). Tools, adaptivity and refinement add to it. */
 double nh_scene_memory_estimate(double cells);
+/* ---- the key table (keys.c) ---- */
+/* Every scene key with its type, default, unit and notes, from the key
+ * tables of docs/scene.md compiled into the program (`needlehex keys`). */
+void nh_scene_keys_print(void *stdio_file);
+
+/* NH_OK if every key of `allowed` (NULL-terminated) under the section `path`
+ * (dotted, "" for the top level, list indices as numbers) has a row in
+ * docs/scene.md's tables; else NH_ERR_INTERNAL naming the first that has
+ * not (the reader must not accept an undocumented key). */
+int nh_scene_keys_check(const char *path, const char *const *allowed);
 
 /* Print a human-readable summary of what will be modelled (for `check`). */
 void nh_scene_print(const nh_scene *scene, void *stdio_file);

@@ -226,7 +226,10 @@ static int nh_write_frame(nh_sim *s) {
   double *pu = malloc(sizeof(double) * 3 * (size_t)(n_pr ? n_pr : 1));
   int *pconn = malloc(sizeof(int) * (size_t)(n_pr ? n_pr : 1));
   int *poff = malloc(sizeof(int) * (size_t)(n_pr ? n_pr : 1));
-  if (!conn || !offsets || !flags || !cell || !hang || !pp || !pu || !pconn || !poff) {
+  int *pkind = malloc(sizeof(int) * (size_t)(n_pr ? n_pr : 1));
+  const char **pname = malloc(sizeof(char *) * (size_t)(n_pr ? n_pr : 1));
+  if (!conn || !offsets || !flags || !cell || !hang || !pp || !pu || !pconn || !poff || !pkind ||
+      !pname) {
     rc = NH_ERROR(NH_ERR_MEMORY, "out of memory writing a frame");
     goto done;
   }
@@ -250,12 +253,13 @@ static int nh_write_frame(nh_sim *s) {
     flags[i] = s->fixed[i];
     for (int k = 0; k < 3; k++) s->x[3 * i + k] = m->X[3 * i + k] + s->u[3 * i + k];
   }
-  nh_field pf[3] = {{"displacement", 3, s->u}, {"velocity", 3, s->v}, {"hanging", 1, hang}};
-  nh_field cf[5] = {{"von_mises", 1, cell},
-                    {"level", 1, cell + nc},
-                    {"fill", 1, cell + 2 * nc},
-                    {"eta", 1, cell + 3 * nc},
-                    {"young", 1, cell + 4 * nc}};
+  nh_field pf[3] = {
+      {"displacement", 3, s->u, "m"}, {"velocity", 3, s->v, "m/s"}, {"hanging", 1, hang, "1"}};
+  nh_field cf[5] = {{"von_mises", 1, cell, "Pa"},
+                    {"level", 1, cell + nc, "1"},
+                    {"fill", 1, cell + 2 * nc, "1"},
+                    {"eta", 1, cell + 3 * nc, "J^(1/2)"},
+                    {"young", 1, cell + 4 * nc, "Pa"}};
   nh_vtu_grid g = {.n_points = np,
                    .points = s->x,
                    .n_cells = nc,
@@ -281,8 +285,10 @@ static int nh_write_frame(nh_sim *s) {
       for (int k = 0; k < 3; k++) pp[3 * i + k] = X[k] + pu[3 * i + k];
       pconn[i] = i;
       poff[i] = i + 1;
+      pkind[i] = i >= sc->n_probes;
+      pname[i] = i < sc->n_probes ? sc->probes[i].name : sc->targets[i - sc->n_probes].name;
     }
-    nh_field ppf[1] = {{"displacement", 3, pu}};
+    nh_field ppf[1] = {{"displacement", 3, pu, "m"}};
     nh_vtu_grid pg = {.n_points = n_pr,
                       .points = pp,
                       .n_cells = n_pr,
@@ -290,7 +296,10 @@ static int nh_write_frame(nh_sim *s) {
                       .offsets = poff,
                       .type = NH_VTK_VERTEX,
                       .n_point_fields = 1,
-                      .point_fields = ppf};
+                      .point_fields = ppf,
+                      .point_int_flags = pkind,
+                      .point_flag_name = "target",
+                      .point_names = pname};
     snprintf(name, sizeof name, "points_%06d.vtu", s->step);
     snprintf(path, sizeof path, "%s/%s", sc->output.dir, name);
     if ((rc = nh_vtu_write(path, &pg)) || (rc = nh_pvd_add(s->points_pvd, s->time, name)))
@@ -300,7 +309,7 @@ static int nh_write_frame(nh_sim *s) {
   s->last_frame = s->step;
 done:
   free(conn), free(offsets), free(flags), free(cell), free(hang);
-  free(pp), free(pu), free(pconn), free(poff);
+  free(pp), free(pu), free(pconn), free(poff), free(pkind), free(pname);
   return rc;
 }
 

@@ -58,6 +58,10 @@ int nh_sim_step_index(const nh_sim *sim);
 double nh_sim_time(const nh_sim *sim);
 /* Displacement of probe i (interpolated in its cell). */
 void nh_sim_probe_displacement(const nh_sim *sim, int i, double u[3]);
+/* Target i (scene order) now: its current position x (m; a material point,
+ * like a probe) and the miss = tip of its tool − x (m; targets.csv's
+ * distance is |miss|). The scene must have tools. */
+void nh_sim_target_miss(const nh_sim *sim, int i, double x[3], double miss[3]);
 /* Kinetic energy ½ vᵀ M v. */
 double nh_sim_kinetic_energy(const nh_sim *sim);
 /* Median seconds per step of each phase so far (assemble, factor, solve,

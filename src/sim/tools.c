@@ -167,10 +167,7 @@ int nh_sim_tools_rows(nh_sim *s) {
     for (int i = 0; i < sc->n_targets && !rc; i++) {
       const nh_target *tg = &sc->targets[i];
       double x[3], d[3];
-      nh_tool_report r;
-      nh_sim_point_position(s, sc->n_probes + i, x);
-      nh_contact_report(s->contact, tg->tool, &r);
-      for (int k = 0; k < 3; k++) d[k] = r.tip[k] - x[k];
+      nh_sim_target_miss(s, i, x, d);
       double dist = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
       if (sc->adapt.enabled && sc->adapt.estimator == NH_ESTIMATOR_GOAL)
         rc = nh_csv_row(s->targets_csv, "%d,%.17g,%s,%.17g,%.17g,%.17g,%.17g,%.17g", s->step,
@@ -192,31 +189,45 @@ int nh_sim_tools_rows(nh_sim *s) {
   return rc;
 }
 
+void nh_sim_target_miss(const nh_sim *s, int i, double x[3], double miss[3]) {
+  nh_tool_report r;
+  nh_sim_point_position(s, s->scene->n_probes + i, x);
+  nh_contact_report(s->contact, s->scene->targets[i].tool, &r);
+  for (int k = 0; k < 3; k++) miss[k] = r.tip[k] - x[k];
+}
+
 int nh_sim_tools_frame(nh_sim *s) {
   const nh_scene *sc = s->scene;
   int rc = NH_OK;
   for (int k = 0; k < sc->n_tools && !rc; k++) {
     nh_beam *b = nh_contact_beam(s->contact, k);
     const int nn = nh_beam_nodes(b);
-    int *conn = malloc(sizeof(int) * (size_t)nn), off = nn;
+    /* nn - 1 two-node VTK_LINE cells, base to tip (meshio drops poly-lines) */
+    int *conn = malloc(sizeof(int) * 2 * (size_t)nn), *off = malloc(sizeof(int) * (size_t)nn);
     double *f = malloc(sizeof(double) * 3 * (size_t)nn), *vel = malloc(sizeof(double) * 3 * nn);
     double *arc = malloc(sizeof(double) * (size_t)nn);
-    if (!conn || !f || !vel || !arc) rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: tool frame");
+    if (!conn || !off || !f || !vel || !arc)
+      rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: tool frame");
     if (!rc) {
       const double *v = nh_beam_velocities(b);
       nh_contact_node_forces(s->contact, k, f);
+      for (int i = 0; i + 1 < nn; i++) {
+        conn[2 * i] = i, conn[2 * i + 1] = i + 1;
+        off[i] = 2 * (i + 1);
+      }
       for (int i = 0; i < nn; i++) {
-        conn[i] = i;
         arc[i] = nh_beam_length(b) * i / (nn - 1);
         for (int c = 0; c < 3; c++) vel[3 * i + c] = v[6 * i + c];
       }
-      nh_field pf[3] = {{"constraint_force", 3, f}, {"velocity", 3, vel}, {"arc_length", 1, arc}};
+      nh_field pf[3] = {{"constraint_force", 3, f, "N"},
+                        {"velocity", 3, vel, "m/s"},
+                        {"arc_length", 1, arc, "m"}};
       nh_vtu_grid g = {.n_points = nn,
                        .points = nh_beam_positions(b),
-                       .n_cells = 1,
+                       .n_cells = nn - 1,
                        .connectivity = conn,
-                       .offsets = &off,
-                       .type = NH_VTK_POLY_LINE,
+                       .offsets = off,
+                       .type = NH_VTK_LINE,
                        .n_point_fields = 3,
                        .point_fields = pf};
       char name[NH_NAME_MAX + 16], path[NH_PATH_MAX + NH_NAME_MAX + 32];
@@ -225,7 +236,7 @@ int nh_sim_tools_frame(nh_sim *s) {
       rc = nh_vtu_write(path, &g);
       if (!rc) rc = nh_pvd_add(s->tool_pvd[k], s->time, name);
     }
-    free(conn), free(f), free(vel), free(arc);
+    free(conn), free(off), free(f), free(vel), free(arc);
   }
   return rc;
 }
