@@ -46,11 +46,8 @@ python3-matplotlib); use /usr/bin/python3.
 import argparse
 import csv
 import json
-import math
 import os
-import subprocess
 import sys
-import time
 
 import numpy as np
 import matplotlib
@@ -116,6 +113,21 @@ def find_binary(given):
         if b and os.path.exists(b):
             return os.path.abspath(b)
     raise SystemExit("no needlehex binary (build it: tools/run-case.sh, or pass --binary)")
+
+
+def run_with_reference(a, binary, st, out):
+    """Runs the study's selected variants (--only) and, when missing or with
+    --fresh-reference, its reference first (the longest run); returns the
+    reference's name, label and folder and the runs' records."""
+    rname, rlabel, rsets = st["reference"]
+    rdir = os.path.join(out, rname)
+    selected = [(name, sets) for name, _, sets, _ in st["variants"] if not a.only or name in a.only]
+    if a.fresh_reference or not os.path.exists(os.path.join(rdir, "run.json")):
+        selected.insert(0, (rname, rsets))  # the longest run first
+    infos = run_variants(a, binary, st["scene"], out, selected)
+    if not os.path.exists(os.path.join(rdir, "run.json")):
+        raise SystemExit("no reference run in %s" % rdir)
+    return rname, rlabel, rdir, infos
 
 
 def run_variants(a, binary, scene, out, variants):
@@ -265,14 +277,7 @@ def phantom(a, binary):
     img = plot_dir(a, out)
     names = st["axis"] + st["radial"]
 
-    rname, rlabel, rsets = st["reference"]
-    rdir = os.path.join(out, rname)
-    selected = [(name, sets) for name, _, sets, _ in st["variants"] if not a.only or name in a.only]
-    if a.fresh_reference or not os.path.exists(os.path.join(rdir, "run.json")):
-        selected.insert(0, (rname, rsets))  # the longest run first
-    infos = run_variants(a, binary, st["scene"], out, selected)
-    if not os.path.exists(os.path.join(rdir, "run.json")):
-        raise SystemExit("no reference run in %s" % rdir)
+    rname, rlabel, rdir, infos = run_with_reference(a, binary, st, out)
     with open(os.path.join(rdir, "run.json")) as f:
         rinfo = json.load(f)
     ref_u, ref_steps = read_points(rdir)
@@ -470,14 +475,7 @@ def cube(a, binary):
         return {"dofs": sr["dofs"], "uz": u[st["probe"]][1:, 2], "est": u[st["probe"]][1:, 3],
                 "iterations": sr["iterations"], "t_step": sr["t_step"]}
 
-    rname, rlabel, rsets = st["reference"]
-    rdir = os.path.join(out, rname)
-    selected = [(name, sets) for name, _, sets, _ in st["variants"] if not a.only or name in a.only]
-    if a.fresh_reference or not os.path.exists(os.path.join(rdir, "run.json")):
-        selected.insert(0, (rname, rsets))  # the longest run first
-    infos = run_variants(a, binary, st["scene"], out, selected)
-    if not os.path.exists(os.path.join(rdir, "run.json")):
-        raise SystemExit("no reference run in %s" % rdir)
+    rname, rlabel, rdir, infos = run_with_reference(a, binary, st, out)
     ref = series(rdir)
     # Convergence of the reference: the last three meshes, u(N) = u_inf + C N^-q.
     (n1, n2, n3), (u1, u2, u3) = ref["dofs"][-3:], ref["uz"][-3:]
