@@ -29,19 +29,29 @@
 #include <math.h>
 #include <string.h>
 
-void nh_hex_rotated_stress(const double R[9], const double d[24], const double g[24], double lambda,
-                           double mu, double s[6]) {
+/* σ at one point from R, the corotated nodal values d and the gradients g:
+ * full, λ tr ε I + 2με (theta_bar NULL); B-bar, κ θ̄ I + 2μ dev ε
+ * (κ = λ + ⅔μ, θ̄ = *theta_bar the element's mean volume change). */
+static void nh_point_stress(const double R[9], const double d[24], const double g[24],
+                            double lambda, double mu, const double *theta_bar, double s[6]) {
   double H[9] = {0}, S[9], T[9];
   for (int a = 0; a < 8; a++)
     for (int i = 0; i < 3; i++)
       for (int j = 0; j < 3; j++) H[3 * i + j] += d[3 * a + i] * g[3 * a + j];
   double tr = H[0] + H[4] + H[8];
+  double vol =
+      theta_bar ? (lambda + 2.0 * mu / 3.0) * *theta_bar - 2.0 * mu / 3.0 * tr : lambda * tr;
   for (int i = 0; i < 3; i++)
     for (int j = 0; j < 3; j++)
-      S[3 * i + j] = mu * (H[3 * i + j] + H[3 * j + i]) + (i == j ? lambda * tr : 0.0);
+      S[3 * i + j] = mu * (H[3 * i + j] + H[3 * j + i]) + (i == j ? vol : 0.0);
   nh_mat3_mul(R, S, T);
   nh_mat3_mul_nt(T, R, S);
   s[0] = S[0], s[1] = S[4], s[2] = S[8], s[3] = S[5], s[4] = S[2], s[5] = S[1];
+}
+
+void nh_hex_rotated_stress(const double R[9], const double d[24], const double g[24], double lambda,
+                           double mu, double s[6]) {
+  nh_point_stress(R, d, g, lambda, mu, NULL, s);
 }
 
 void nh_hex_stress_at(const double X[24], const double u[24], const double G0[24],
@@ -53,24 +63,11 @@ void nh_hex_stress_at(const double X[24], const double u[24], const double G0[24
   /* B-bar: the mean volume change θ̄ = det F̄ − 1, one per element. */
   double mean_dilatation = Gbar ? nh_hex_mean_dilatation(u, Gbar, NULL) : 0.0;
   for (int p = 0; p < n; p++) {
-    double g[24], H[9] = {0}, S[9], T[9];
+    double g[24];
     memcpy(g, G0, sizeof g);
     double det = nh_hex_gradients(X, xi + 3 * p, g);
     if (detJ) detJ[p] = det;
-    for (int a = 0; a < 8; a++)
-      for (int i = 0; i < 3; i++)
-        for (int j = 0; j < 3; j++) H[3 * i + j] += d[3 * a + i] * g[3 * a + j];
-    double tr = H[0] + H[4] + H[8];
-    /* full: λ tr ε I + 2με; B-bar: κ θ̄ I + 2μ dev ε (κ = λ + ⅔μ) */
-    double vol =
-        Gbar ? (lambda + 2.0 * mu / 3.0) * mean_dilatation - 2.0 * mu / 3.0 * tr : lambda * tr;
-    for (int i = 0; i < 3; i++)
-      for (int j = 0; j < 3; j++)
-        S[3 * i + j] = mu * (H[3 * i + j] + H[3 * j + i]) + (i == j ? vol : 0.0);
-    nh_mat3_mul(R, S, T);
-    nh_mat3_mul_nt(T, R, S);
-    double *sp = s + 6 * p;
-    sp[0] = S[0], sp[1] = S[4], sp[2] = S[8], sp[3] = S[5], sp[4] = S[2], sp[5] = S[1];
+    nh_point_stress(R, d, g, lambda, mu, Gbar ? &mean_dilatation : NULL, s + 6 * p);
   }
 }
 
