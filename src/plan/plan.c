@@ -96,7 +96,8 @@ static int run_once(const char *scene_path, int n_sets, const char *const *sets,
   if (!rc) rc = planned_target(scene, &target, ignored);
   if (!rc) {
     snprintf(scene->output.dir, sizeof scene->output.dir, "%.*s", NH_PATH_MAX - 1, dir);
-    nh_sim_options opt = {.dry_run = 0, .progress = 0, .restart_dir = NULL};
+    /* run_NN belongs to the plan: a plan run again replaces its runs */
+    nh_sim_options opt = {.dry_run = 0, .progress = 0, .restart_dir = NULL, .overwrite = 1};
     double t0 = nh_time_now();
     rc = nh_sim_create(scene, &opt, &sim);
     if (!rc) rc = nh_sim_run(sim);
