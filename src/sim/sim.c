@@ -93,7 +93,9 @@ void nh_sim_destroy(nh_sim **sim) {
   free(s->v);
   free(s->u_start);
   free(s->restore_tools);
+  free(s->restore_solver);
   free(s->tools_start);
+  free(s->solver_start.data);
   free(s->f_ext);
   free(s->drained);
   free(s->load_unit);
@@ -632,6 +634,8 @@ static int nh_sim_build(nh_sim *s) {
     s->time = ck.time;
     s->restore_tools = ck.tools;
     s->restore_tools_size = ck.tools_size;
+    s->restore_solver = ck.solver;
+    s->restore_solver_size = ck.solver_size;
   } else {
     nh_domain domain;
     NH_TRY(nh_domain_from_scene(sc, &domain));
@@ -679,6 +683,17 @@ static int nh_sim_build(nh_sim *s) {
                       .time_factor = getenv("NH_TIME_FACTOR") != NULL,
                       .newton_iterations = sc->solver.newton_iterations,
                       .newton_tolerance = sc->solver.newton_tolerance};
+  /* --restart: the factor the next step reuses, made again (with `every`
+   * every step factorises: nothing to restore) */
+  if (s->restore_solver && s->integrator.reuse) {
+    int rc = nh_system_reuse_load(s->system, s->restore_solver, s->restore_solver_size,
+                                  s->integrator.threads);
+    if (rc == NH_ERR_INPUT)
+      return NH_ERROR(rc, "--restart: %s: %s", s->options.restart_dir, nh_error_message());
+    NH_TRY(rc);
+  }
+  free(s->restore_solver);
+  s->restore_solver = NULL;
   s->cap_steps = sc->time.steps > s->step ? sc->time.steps : s->step + 1;
   s->phase_times =
       calloc((size_t)NH_PHASES * (size_t)(s->cap_steps ? s->cap_steps : 1), sizeof(double));
@@ -817,6 +832,12 @@ int nh_sim_step(nh_sim *s) {
     free(s->tools_start);
     s->tools_start = NULL;
     NH_TRY(nh_contact_state_save(s->contact, &s->tools_start, &s->tools_start_size));
+  }
+  if (s->integrator.reuse) { /* the step may renew the factor before a stop inside it */
+    s->solver_start.len = 0;
+    nh_system_reuse_save(s->system, &s->solver_start);
+    if (s->solver_start.failed)
+      return NH_ERROR(NH_ERR_MEMORY, "out of memory: step %d start state", s->step + 1);
   }
   int adapt_now = sc->adapt.enabled && (s->step + 1) % sc->adapt.every == 0;
   int resolve = adapt_now && sc->adapt.resolve > 0;
@@ -982,6 +1003,7 @@ int nh_sim_run(nh_sim *s) {
       nh_error_clear();
       rc = NH_OK;
       during = 1;
+      s->solver_past = 1;
     }
     if (s->options.progress && !during) nh_progress_update(s);
     if (nh_stop_requested() && s->step < s->scene->time.steps) {
