@@ -53,6 +53,7 @@ struct nh_sim {
   double eta, eta_rel;
   double t_adapt;   /* s, this step: estimate + mark + refine + rebuild */
   double *u_start;  /* u at the start of the step (the guard's increment) */
+  double *v_start;  /* v at the start of the step (a step interrupted inside goes back to it) */
   int inverted;     /* cells inverted after the last step (steps.csv `inverted`) */
   int guard_warned; /* bit per kind of invalid step already warned about */
   /* estimator goal: goal index of each embedded point (−1: not a goal), the
