@@ -10,7 +10,8 @@ success, one line per failure (expected, actual, tolerance), exit 1.
 `needle.py` (label verify):
  1. puncture threshold and indentation stiffness (a stiff needle pushed
     slowly against the face, compared with the tissue's point stiffness from
-    an independent static run with a point-like load and no tool);
+    an independent static run with a point-like load and no tool), and the
+    depth reported from the puncture on (tip_x - u_x of the entry node);
  2. a needle passing beside the block: no rows, tissue exactly at rest;
  3. insertion then full retraction: the tissue returns to rest;
  4. re-insertion into the remembered channel: no cutting, only shaft friction;
@@ -255,6 +256,21 @@ def test_puncture():
             t_got = float(tr[first_p]["time"])
             if abs(t_got - t_p) > 3 * DT1:
                 fail("push-punct: punctured at t = %.4g s, expected %.4g s +- 3 steps" % (t_got, t_p))
+            # depth = the tip's distance past the entry point where it is
+            # now: the needle is straight along x through the entry node, so
+            # tip_x - (0 + u_x(entry)), up to the needle's axial strain
+            # (F / EA < 1e-4) times the depth; from the puncturing step on
+            # (that step's report once used the entry position before it).
+            ux = probe_u(res, "entry")[1:, 0]
+            depth = col(tr, "depth")[first_p:]
+            want = col(tr, "tip_x")[first_p:] - ux[first_p:]
+            err = np.abs(depth - want) / np.maximum(want, 1e-300)
+            if os.environ.get("NH_VERBOSE"):
+                print("  depth at puncture %.6g m, tip_x - u_x(entry) %.6g m" % (depth[0], want[0]))
+            if err.max() > 1e-3:
+                k = int(err.argmax())
+                fail("push-punct: step %s depth %.6g m, expected tip_x - u_x(entry) = %.6g m "
+                     "(rel. tol 1e-3)" % (tr[first_p + k]["step"], depth[k], want[k]))
             inc = F[first_p] - F[first_p - 1]
             if F[first_p] > fp + 2 * K * V1 * DT1:
                 fail("push-punct: force at puncture %.6g, expected within one increment %.3g of %.6g"

@@ -13,12 +13,16 @@ nh_add_c_test(test_transfer verify)
 nh_add_py_test(restart "io;slow" restart.py)
 nh_add_py_test(run_hdf5 io run_hdf5.py)
 
-# Restart with tools (tests/restart_tools.py): the needle phantom stopped by
-# SIGTERM (continued by the printed command) and by SIGKILL (continued from
-# its checkpoint) equals the uninterrupted run to 1e-12; the shortened DBS
-# procedure (nested electrode, release) under `slow`, to 1e-4 (a known gap).
+# Restart with tools (tests/restart_tools.py): the needle phantom (also with
+# static friction), and under `slow` the shortened adaptive DBS procedure
+# (nested electrode, release) with solver.refactor auto and every, and a small
+# DBS procedure with skull contact, stopped by SIGTERM (continued by the
+# printed command) and by SIGKILL (continued from its checkpoint) equal the
+# uninterrupted run to 1e-12.
 nh_add_py_test(restart_tools io restart_tools.py needle)
 nh_add_py_test(restart_tools_dbs io restart_tools.py dbs)
 set_tests_properties(restart_tools_dbs PROPERTIES LABELS "io;slow" TIMEOUT 900)
+nh_add_py_test(restart_tools_skull io restart_tools.py skull)
+set_tests_properties(restart_tools_skull PROPERTIES LABELS "io;slow" TIMEOUT 600)
 nh_add_c_test(test_traction verify)
 nh_add_py_test(traction_patch verify traction_patch.py)

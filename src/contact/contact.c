@@ -123,6 +123,8 @@ static int nh_group_transition(nh_contact *c, nh_group *G, const nh_mesh *m, con
       G->punctured = 1;
       outer->state = NH_TOOL_PUNCTURED;
       NH_TRY(nh_channel_open(G, outer->spec, m));
+      /* where the entry is now: the depth of this step's report */
+      nh_point_position(m, u, &G->chan[0], G->entry_x);
     }
     return NH_OK;
   }

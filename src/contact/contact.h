@@ -128,5 +128,11 @@ void nh_skull_end_step(nh_skull *skull, const nh_rows *rows, double h);
 void nh_skull_force(const nh_skull *skull, double force[3], int *active);
 /* The largest penetration φ(x) − gap over all points at u (m, 0 if none). */
 double nh_skull_penetration(const nh_skull *skull, const nh_mesh *mesh, const double *u);
+/* The skull's state for a checkpoint (contact/state.c): each point's warm
+ * start λ and the last step's force. The points themselves are rebuilt from
+ * the mesh (nh_skull_build), so loading needs the skull of the same mesh:
+ * NH_ERR_INPUT when the point count differs; a short read is left in r. */
+void nh_skull_state_save(const nh_skull *skull, nh_bytes *b);
+int nh_skull_state_load(nh_skull *skull, nh_byte_reader *r);
 
 #endif

@@ -31,6 +31,7 @@
 #include "contact/contact.h"
 
 #include <math.h>
+#include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -244,4 +245,24 @@ int nh_skull_relocate(nh_skull *s, const nh_mesh *m) {
   }
   free(old);
   return rc;
+}
+
+void nh_skull_state_save(const nh_skull *s, nh_bytes *b) {
+  int32_t n = s->n, active = s->active;
+  nh_bytes_put(b, &n, sizeof n);
+  for (int i = 0; i < s->n; i++) nh_bytes_put(b, &s->p[i].lam, sizeof s->p[i].lam);
+  nh_bytes_put(b, s->force, sizeof s->force);
+  nh_bytes_put(b, &active, sizeof active);
+}
+
+int nh_skull_state_load(nh_skull *s, nh_byte_reader *r) {
+  int32_t n = -1, active = 0;
+  nh_bytes_get(r, &n, sizeof n);
+  NH_CHECK(!r->short_read && n == s->n, NH_ERR_INPUT,
+           "the checkpoint's skull has %d contact points, the restored mesh %d", (int)n, s->n);
+  for (int i = 0; i < s->n; i++) nh_bytes_get(r, &s->p[i].lam, sizeof s->p[i].lam);
+  nh_bytes_get(r, s->force, sizeof s->force);
+  nh_bytes_get(r, &active, sizeof active);
+  s->active = active;
+  return NH_OK;
 }

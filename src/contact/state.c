@@ -6,9 +6,11 @@
  * last forces; per group the puncture (entry point, outward normal, rows),
  * the channel (every point with its material position, cell, natural
  * coordinates, length, projection, tie and multipliers: the constraint warm
- * start), the front and the tip tool; and the last step's statistics. The
- * prescribed motion is a function of time, and the rows, blocks and rest
- * shapes are rebuilt from the scene, so none of them is saved. Cells and
+ * start, and whether its friction slid: the static or the kinetic bound
+ * next), the front and the tip tool; the skull's warm starts
+ * (contact/skull.c); and the last step's statistics. The prescribed motion
+ * is a function of time, and the rows, blocks, rest shapes and skull points
+ * are rebuilt from the scene and the mesh, so none of them is saved. Cells and
  * natural coordinates are saved as they are: the checkpoint restores the
  * same mesh. Native byte order, like the rest of the checkpoint. */
 #include "contact/contact_impl.h"
@@ -57,6 +59,7 @@ int nh_contact_state_save(const nh_contact *c, unsigned char **out, size_t *size
   }
   put_int(&b, c->cut);
   put(&b, &c->solve, sizeof c->solve);
+  if (c->skull) nh_skull_state_save(c->skull, &b);
   if (b.failed) {
     free(b.data);
     return NH_ERROR(NH_ERR_MEMORY, "out of memory saving the tools' state");
@@ -119,6 +122,7 @@ int nh_contact_state_load(nh_contact *c, const unsigned char *data, size_t size)
   }
   c->cut = get_int(&r);
   get(&r, &c->solve, sizeof c->solve);
+  if (c->skull) NH_TRY(nh_skull_state_load(c->skull, &r));
   if (r.short_read || r.p != r.end)
     return NH_ERROR(NH_ERR_INPUT, "the checkpoint's tool state is malformed");
   return NH_OK;

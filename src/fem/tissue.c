@@ -13,10 +13,18 @@
  *
  * K₀ (4.6 kB) depends only on the rest shape of a cell up to translation.
  * A uniform grid has one shape, a refined one a handful per level, so cells
- * share element data through a hash of their rest corners relative to
- * corner 0, quantised to 1e-9 of the cell size. Two shapes that differ by
- * less than that but straddle a quantisation boundary simply get two
- * entries: the cache never merges cells that differ. */
+ * share element data through a key: their rest corners relative to corner
+ * 0, rounded to a binary quantum of 2⁻⁴⁰ (about 1e-12) of the cell's size,
+ * which absorbs the round-off between cells of one shape in different places
+ * of the grid. The element data are computed from the key itself (the
+ * rounded corners, corner 0 at the origin), not from the first cell that
+ * had it: so they are a function of the cell's own corners alone, the same
+ * whichever cells were met before, and a run continued from a checkpoint
+ * (one pass over the restored mesh) has bit for bit the element data of the
+ * run that built them across its refinements. The rounding moves a corner
+ * by at most 2⁻⁴¹ of the cell size; two cells that differ by less but round
+ * to different keys simply get two entries. Every update looks up every
+ * leaf (a hash of 24 numbers), since coarsening renumbers the cells. */
 #include "fem/fem.h"
 
 #include <math.h>
@@ -41,11 +49,24 @@ void nh_tissue_destroy(nh_tissue **tissue) {
   *tissue = NULL;
 }
 
-static uint64_t nh_shape_hash(const double key[24], double size) {
+/* The cell's shape key: its rest corners relative to corner 0, rounded to
+ * the binary quantum q = 2^(e − 40), e the exponent of the largest
+ * coordinate (each key[i] an integer multiple of q, exactly representable;
+ * + 0.0 turns −0 into +0, so equal shapes have equal bits). */
+static void nh_shape_key(const double Xe[24], double key[24]) {
+  double big = 0.0;
+  for (int a = 0; a < 8; a++)
+    for (int k = 0; k < 3; k++) big = fmax(big, fabs(Xe[3 * a + k] - Xe[k]));
+  const double q = big > 0.0 ? ldexp(1.0, ilogb(big) - 40) : 1.0;
+  for (int i = 0; i < 24; i++) key[i] = nearbyint((Xe[i] - Xe[i % 3]) / q) * q + 0.0;
+}
+
+static uint64_t nh_shape_hash(const double key[24]) {
   uint64_t h = 1469598103934665603ull;
   for (int i = 0; i < 24; i++) {
-    int64_t q = (int64_t)llround(key[i] / (1e-9 * size));
-    h = (h ^ (uint64_t)q) * 1099511628211ull;
+    uint64_t bits;
+    memcpy(&bits, &key[i], sizeof bits);
+    h = (h ^ bits) * 1099511628211ull;
   }
   return h;
 }
@@ -53,19 +74,11 @@ static uint64_t nh_shape_hash(const double key[24], double size) {
 /* Find or compute the element data for the rest corners Xe. */
 static int nh_tissue_shape(nh_tissue *t, const double Xe[24], int *table, int table_size,
                            int *shape) {
-  double key[24], size = 0.0;
-  for (int a = 0; a < 8; a++)
-    for (int k = 0; k < 3; k++) {
-      key[3 * a + k] = Xe[3 * a + k] - Xe[k];
-      size = fmax(size, fabs(key[3 * a + k]));
-    }
-  uint64_t h = nh_shape_hash(key, size);
-  int slot = (int)(h % (uint64_t)table_size);
+  double key[24];
+  nh_shape_key(Xe, key);
+  int slot = (int)(nh_shape_hash(key) % (uint64_t)table_size);
   while (table[slot] >= 0) {
-    const double *other = t->key + 24 * table[slot];
-    int same = 1;
-    for (int i = 0; i < 24 && same; i++) same = fabs(other[i] - key[i]) <= 1e-12 * size;
-    if (same) {
+    if (!memcmp(t->key + 24 * table[slot], key, sizeof key)) {
       *shape = table[slot];
       return NH_OK;
     }
@@ -96,13 +109,13 @@ static int nh_tissue_shape(nh_tissue *t, const double Xe[24], int *table, int ta
       return NH_ERROR(NH_ERR_MEMORY, "out of memory: element data");
     t->cap_shapes = cap;
   }
-  if (nh_hex_stiffness(Xe, t->lambda, t->mu, t->material.formulation == NH_FORMULATION_BBAR,
+  if (nh_hex_stiffness(key, t->lambda, t->mu, t->material.formulation == NH_FORMULATION_BBAR,
                        t->K0 + 576 * s, t->G0 + 24 * s, t->Gbar + 24 * s, t->volume + s))
     return NH_ERR_INPUT;
   if (t->n_labels) {
     double G[24], v;
-    nh_hex_stiffness(Xe, 1.0, 0.0, 0, t->Kl + 576 * s, G, NULL, &v);
-    nh_hex_stiffness(Xe, 0.0, 1.0, 0, t->Km + 576 * s, G, NULL, &v);
+    nh_hex_stiffness(key, 1.0, 0.0, 0, t->Kl + 576 * s, G, NULL, &v);
+    nh_hex_stiffness(key, 0.0, 1.0, 0, t->Km + 576 * s, G, NULL, &v);
   }
   memcpy(t->key + 24 * s, key, sizeof key);
   t->n_shapes++;
@@ -140,17 +153,14 @@ int nh_tissue_update(nh_tissue *t) {
   if (!table) return NH_ERROR(NH_ERR_MEMORY, "out of memory: shape table");
   for (int i = 0; i < table_size; i++) table[i] = -1;
   for (int s = 0; s < t->n_shapes; s++) {
-    double size = 0.0;
-    for (int i = 0; i < 24; i++) size = fmax(size, fabs(t->key[24 * s + i]));
-    int slot = (int)(nh_shape_hash(t->key + 24 * s, size) % (uint64_t)table_size);
+    int slot = (int)(nh_shape_hash(t->key + 24 * s) % (uint64_t)table_size);
     while (table[slot] >= 0) slot = (slot + 1) % table_size;
     table[slot] = s;
   }
   int rc = NH_OK;
   double Xe[24];
   for (int l = 0; l < m->n_leaves && !rc; l++) {
-    int c = m->leaves[l];
-    if (t->cell_shape[c] >= 0) continue;
+    int c = m->leaves[l]; /* every leaf: coarsening renumbers cells */
     nh_mesh_cell_coords(m, m->X, c, Xe);
     rc = nh_tissue_shape(t, Xe, table, table_size, &t->cell_shape[c]);
     if (rc == NH_ERR_INPUT)

@@ -5,7 +5,7 @@
  * Format (little-endian, native doubles; a file from a machine of another
  * byte order is refused, not converted):
  *   "NHCKPT\0\1"   8-byte magic
- *   u32 version    1
+ *   u32 version    3 (1: no tools; 2: no solver state; both still read)
  *   u32 0x01020304 byte-order marker
  *   u64 size       bytes of payload
  *   u64 checksum   FNV-1a 64 of the payload
@@ -15,12 +15,20 @@
  *                    i32 n_nodes, f64 X[3 n], i32 n_cells, i32 cells[8 n],
  *                    i32 level[n], parent[n], first_child[n], n_children[n],
  *                    f64 fill[n],
- *                  f64 u[3 n_nodes], f64 v[3 n_nodes].
- * Everything else (element data, hanging nodes, the linear system, load
- * vectors, probe cells, the lattice-to-cell map mesh->root, the domain, which
- * the scene gives) is rebuilt from the mesh, deterministically, so the
- * continued run is the uninterrupted one to round-off (it is in fact
- * bitwise equal: tests/restart.py).
+ *                  f64 u[3 n_nodes], f64 v[3 n_nodes],
+ *                  (2) u64 length, the tools' state (contact/state.c),
+ *                  (3) u64 length, the factor reuse (solve/reuse.c: whether
+ *                    a factor exists, its age and the renewal rule's
+ *                    counters, the u and coefficients of the A it factorises).
+ * Everything else (element data, hanging nodes, the linear system and the
+ * reused factor, load vectors, probe cells, the lattice-to-cell map
+ * mesh->root, the domain, which the scene gives) is rebuilt from the mesh
+ * and that state, deterministically, so the continued run is the
+ * uninterrupted one bit for bit (tests/restart.py, tests/restart_tools.py).
+ * Two things make that so: the element data are a function of each cell's
+ * own corners (fem/tissue.c), not of the order the cells were met in across
+ * refinements; and the factor a reused step preconditions with is made
+ * again from the same A, not replaced by a new one.
  *
  * The file is written to "<path>.tmp", flushed with fsync and renamed
  * (nh_atomic_open with sync, io/file.c), so a kill at any instant leaves
@@ -90,13 +98,25 @@ int nh_checkpoint_write(const nh_sim *s) {
   nh_bytes_put(&b, &tools_len, 8);
   nh_bytes_put(&b, tools, tools_size);
   free(tools);
+  /* the factor reuse (solve/reuse.c), as a length and its bytes */
+  size_t at = b.len;
+  uint64_t solver_len = 0;
+  nh_bytes_put(&b, &solver_len, 8);
+  if (s->solver_past) /* a step interrupted inside: the state at its start */
+    nh_bytes_put(&b, s->solver_start.data, s->solver_start.len);
+  else
+    nh_system_reuse_save(s->system, &b);
+  if (!b.failed) {
+    solver_len = b.len - at - 8;
+    memcpy(b.data + at, &solver_len, 8);
+  }
   if (b.failed) {
     free(b.data);
     return NH_ERROR(NH_ERR_MEMORY, "out of memory writing a checkpoint");
   }
   char path[NH_PATH_MAX + 32];
   nh_checkpoint_path(s->scene->output.dir, path, sizeof path);
-  uint32_t version = 2, order = 0x01020304;
+  uint32_t version = 3, order = 0x01020304;
   uint64_t size = b.len, sum = nh_fnv1a(b.data, b.len, NH_FNV_SEED);
   nh_atomic_file af;
   int rc = nh_atomic_open(path, "checkpoint", 1, &af);
@@ -117,6 +137,22 @@ static int nh_get_i32(nh_byte_reader *c) {
   return x;
 }
 
+/* A block of the payload: u64 length, then that many bytes into *out (NULL
+ * when empty). Nonzero: out of memory; a length past the end is a short read. */
+static int nh_get_block(nh_byte_reader *c, unsigned char **out, size_t *size) {
+  uint64_t n = 0;
+  nh_bytes_get(c, &n, 8);
+  if (c->short_read || n == 0) return 0;
+  if (n > (uint64_t)(c->end - c->p)) {
+    c->short_read = 1;
+    return 0;
+  }
+  if (!(*out = malloc((size_t)n))) return 1;
+  *size = (size_t)n;
+  nh_bytes_get(c, *out, (size_t)n);
+  return 0;
+}
+
 int nh_checkpoint_read(const char *dir, const nh_scene *scene, nh_checkpoint *ck) {
   memset(ck, 0, sizeof *ck);
   char path[NH_PATH_MAX + 32];
@@ -134,11 +170,11 @@ int nh_checkpoint_read(const char *dir, const nh_scene *scene, nh_checkpoint *ck
     fclose(f);
     return NH_ERROR(NH_ERR_INPUT, "--restart: %s: not a needlehex checkpoint", path);
   }
-  if ((version != 1 && version != 2) || order != 0x01020304) {
+  if (version < 1 || version > 3 || order != 0x01020304) {
     fclose(f);
     return NH_ERROR(NH_ERR_INPUT,
                     "--restart: %s: checkpoint format %u (byte order %#x) is not the one this "
-                    "needlehex reads (1 or 2, %#x)",
+                    "needlehex reads (1 to 3, %#x)",
                     path, version, order, 0x01020304u);
   }
   unsigned char *data = size < ((uint64_t)1 << 40) ? malloc(size ? size : 1) : NULL;
@@ -214,17 +250,10 @@ int nh_checkpoint_read(const char *dir, const nh_scene *scene, nh_checkpoint *ck
   nh_bytes_get(&c, m->fill, sizeof(double) * nc);
   nh_bytes_get(&c, ck->u, sizeof(double) * 3 * (size_t)m->n_nodes);
   nh_bytes_get(&c, ck->v, sizeof(double) * 3 * (size_t)m->n_nodes);
-  if (version >= 2) { /* the tools' state (contact/state.c) */
-    uint64_t n = 0;
-    nh_bytes_get(&c, &n, 8);
-    if (!c.short_read && n > 0 && n <= (uint64_t)(c.end - c.p)) {
-      if (!(ck->tools = malloc((size_t)n))) goto oom;
-      ck->tools_size = (size_t)n;
-      nh_bytes_get(&c, ck->tools, (size_t)n);
-    } else if (n > 0) {
-      c.short_read = 1;
-    }
-  }
+  /* the tools' state (contact/state.c), the factor reuse (solve/reuse.c) */
+  if ((version >= 2 && nh_get_block(&c, &ck->tools, &ck->tools_size)) ||
+      (version >= 3 && nh_get_block(&c, &ck->solver, &ck->solver_size)))
+    goto oom;
   /* Structural sanity: indices in range (a checksum-valid file of a buggy writer must not crash
    * us). */
   int bad = c.short_read || c.p != c.end;
@@ -247,9 +276,9 @@ done:
   free(data);
   if (rc) {
     nh_mesh_destroy(&m);
-    free(ck->u), free(ck->v), free(ck->tools);
+    free(ck->u), free(ck->v), free(ck->tools), free(ck->solver);
     ck->u = ck->v = NULL;
-    ck->tools = NULL;
+    ck->tools = ck->solver = NULL;
     return rc;
   }
   ck->mesh = m;

@@ -92,8 +92,11 @@ void nh_sim_destroy(nh_sim **sim) {
   free(s->x);
   free(s->v);
   free(s->u_start);
+  free(s->v_start);
   free(s->restore_tools);
+  free(s->restore_solver);
   free(s->tools_start);
+  free(s->solver_start.data);
   free(s->f_ext);
   free(s->drained);
   free(s->load_unit);
@@ -482,6 +485,7 @@ static int nh_sim_setup_mesh(nh_sim *s, int first) {
   memset(s->fixed, 0, (size_t)nn);
   NH_TRY(nh_resize(&s->x, nn, 3));
   NH_TRY(nh_resize(&s->u_start, nn, 3));
+  NH_TRY(nh_resize(&s->v_start, nn, 3));
   NH_TRY(nh_resize(&s->f_ext, nn, 3));
   NH_TRY(nh_resize(&s->drained, nn, 1));
   const int n_unit = sc->tissue.n_loads + sc->tissue.n_tractions;
@@ -632,6 +636,8 @@ static int nh_sim_build(nh_sim *s) {
     s->time = ck.time;
     s->restore_tools = ck.tools;
     s->restore_tools_size = ck.tools_size;
+    s->restore_solver = ck.solver;
+    s->restore_solver_size = ck.solver_size;
   } else {
     nh_domain domain;
     NH_TRY(nh_domain_from_scene(sc, &domain));
@@ -679,6 +685,17 @@ static int nh_sim_build(nh_sim *s) {
                       .time_factor = getenv("NH_TIME_FACTOR") != NULL,
                       .newton_iterations = sc->solver.newton_iterations,
                       .newton_tolerance = sc->solver.newton_tolerance};
+  /* --restart: the factor the next step reuses, made again (with `every`
+   * every step factorises: nothing to restore) */
+  if (s->restore_solver && s->integrator.reuse) {
+    int rc = nh_system_reuse_load(s->system, s->restore_solver, s->restore_solver_size,
+                                  s->integrator.threads);
+    if (rc == NH_ERR_INPUT)
+      return NH_ERROR(rc, "--restart: %s: %s", s->options.restart_dir, nh_error_message());
+    NH_TRY(rc);
+  }
+  free(s->restore_solver);
+  s->restore_solver = NULL;
   s->cap_steps = sc->time.steps > s->step ? sc->time.steps : s->step + 1;
   s->phase_times =
       calloc((size_t)NH_PHASES * (size_t)(s->cap_steps ? s->cap_steps : 1), sizeof(double));
@@ -763,6 +780,7 @@ static int nh_sim_resolve(nh_sim *s, double t_new, double *const start_in[2], nh
     memcpy(s->v, start[1], sizeof(double) * 3 * s->mesh->n_nodes);
     /* a stop inside the re-solve restores the start state on this mesh */
     memcpy(s->u_start, start[0], sizeof(double) * 3 * s->mesh->n_nodes);
+    memcpy(s->v_start, start[1], sizeof(double) * 3 * s->mesh->n_nodes);
     nh_step_stats again = {0};
     if ((rc = nh_sim_solve(s, t_new, &again)) || (rc = nh_sim_estimate(s))) break;
     st->t_assemble += again.t_assemble, st->t_factor += again.t_factor;
@@ -813,10 +831,17 @@ int nh_sim_step(nh_sim *s) {
   nh_sim_prescribe(s, t_new); /* (the loads at t_new: nh_sim_solve) */
   nh_step_stats st = {0};
   memcpy(s->u_start, s->u, sizeof(double) * 3 * (size_t)s->mesh->n_nodes);
+  memcpy(s->v_start, s->v, sizeof(double) * 3 * (size_t)s->mesh->n_nodes);
   if (s->contact) { /* a few kB: beams and channels, for a stop inside the step */
     free(s->tools_start);
     s->tools_start = NULL;
     NH_TRY(nh_contact_state_save(s->contact, &s->tools_start, &s->tools_start_size));
+  }
+  if (s->integrator.reuse) { /* the step may renew the factor before a stop inside it */
+    s->solver_start.len = 0;
+    nh_system_reuse_save(s->system, &s->solver_start);
+    if (s->solver_start.failed)
+      return NH_ERROR(NH_ERR_MEMORY, "out of memory: step %d start state", s->step + 1);
   }
   int adapt_now = sc->adapt.enabled && (s->step + 1) % sc->adapt.every == 0;
   int resolve = adapt_now && sc->adapt.resolve > 0;
@@ -831,6 +856,11 @@ int nh_sim_step(nh_sim *s) {
     memcpy(start[0], s->u, sizeof(double) * n), memcpy(start[1], s->v, sizeof(double) * n);
   }
   int rc = nh_sim_solve(s, t_new, &st);
+  /* A stop that cut the residual's assembly short left u and v updated but
+   * the step's residual unknown (NaN): the step is not complete, and goes
+   * back to its start like one stopped earlier, so that a continued run
+   * computes it again and reports what the uninterrupted run reports. */
+  if (!rc && isnan(st.residual) && nh_stop_requested()) rc = nh_stop_check();
   if (!rc && (rc = nh_sim_guard(s, s->u_start))) { /* its message names the step */
     free(start[0]), free(start[1]);
     return rc;
@@ -976,12 +1006,14 @@ int nh_sim_run(nh_sim *s) {
     if ((rc = nh_sim_step(s))) {
       if (rc != NH_ERR_INTERRUPTED || !nh_stop_requested()) break;
       memcpy(s->u, s->u_start, sizeof(double) * 3 * (size_t)s->mesh->n_nodes);
+      memcpy(s->v, s->v_start, sizeof(double) * 3 * (size_t)s->mesh->n_nodes);
       if (s->contact &&
           (rc = nh_contact_state_load(s->contact, s->tools_start, s->tools_start_size)))
         break;
       nh_error_clear();
       rc = NH_OK;
       during = 1;
+      s->solver_past = 1;
     }
     if (s->options.progress && !during) nh_progress_update(s);
     if (nh_stop_requested() && s->step < s->scene->time.steps) {

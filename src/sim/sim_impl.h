@@ -53,6 +53,7 @@ struct nh_sim {
   double eta, eta_rel;
   double t_adapt;   /* s, this step: estimate + mark + refine + rebuild */
   double *u_start;  /* u at the start of the step (the guard's increment) */
+  double *v_start;  /* v at the start of the step (a step interrupted inside goes back to it) */
   int inverted;     /* cells inverted after the last step (steps.csv `inverted`) */
   int guard_warned; /* bit per kind of invalid step already warned about */
   /* estimator goal: goal index of each embedded point (−1: not a goal), the
@@ -72,12 +73,17 @@ struct nh_sim {
   nh_progress progress;
   unsigned char *restore_tools; /* --restart: the checkpoint's tool state until applied */
   size_t restore_tools_size;
+  unsigned char *restore_solver; /* --restart: the checkpoint's factor reuse until applied */
+  size_t restore_solver_size;
   unsigned char *tools_start; /* the tools' state at the start of the step (a step */
   size_t tools_start_size;    /* interrupted inside goes back to it) */
+  nh_bytes solver_start;      /* the factor reuse at the start of the step (solver.refactor auto) */
+  int solver_past;            /* the step was interrupted inside: the system's reuse state is
+                                 past the last complete step, a checkpoint takes solver_start */
 };
 
 /* A checkpoint read back: the mesh (owned), u, v (owned), step and time,
- * and the tools' state (owned; NULL without tools). */
+ * the tools' state (owned; NULL without tools) and the solver's. */
 typedef struct {
   nh_mesh *mesh;
   double *u, *v;
@@ -85,6 +91,8 @@ typedef struct {
   double time;
   unsigned char *tools;
   size_t tools_size;
+  unsigned char *solver; /* the factor reuse (owned; NULL before format 3) */
+  size_t solver_size;
 } nh_checkpoint;
 
 /* DIR/checkpoint.nhc */

@@ -71,10 +71,6 @@ int nh_sim_tools_build(nh_sim *s) {
   NH_CHECK(!sc->adapt.enabled || sc->adapt.hanging == NH_HANGING_ELIMINATE, NH_ERR_INPUT,
            "%s: adapt.hanging: lagrange cannot be combined with tools (use eliminate)",
            sc->adapt.where);
-  NH_CHECK(!s->options.restart_dir || !sc->tissue.skull, NH_ERR_INPUT,
-           "%s: restarting a run with a skull is not supported yet (the checkpoint holds no "
-           "skull contact state): run it again from the start",
-           where);
   NH_TRY(nh_sim_tools_check_travel(s));
   NH_TRY(nh_contact_create(sc, s->mesh, &s->contact));
   if (s->options.restart_dir) {

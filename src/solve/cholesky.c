@@ -32,6 +32,8 @@ int nh_system_factor(nh_system *s) {
   if (!ok || s->cm.status < CHOLMOD_OK)
     return NH_ERROR(NH_ERR_NUMERIC, "CHOLMOD factorisation failed (status %d)", s->cm.status);
   s->factor_current = 1;
+  memcpy(s->u_factored, s->u_assembled, sizeof(double) * 3 * (size_t)s->n_nodes);
+  memcpy(s->c_factored, s->c_assembled, sizeof s->c_factored);
   s->factor_age = 0;
   s->refactor_due = 0;
   return NH_OK;

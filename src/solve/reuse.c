@@ -33,6 +33,8 @@
 #include "solve/system_impl.h"
 
 #include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
 #include <string.h>
 
 static double nh_dot(const double *a, const double *b, int n) {
@@ -163,4 +165,56 @@ int nh_system_solve_reuse(nh_system *s, const double *b, double *x, double toler
     return nh_system_solve(s, b, x);
   }
   return rc;
+}
+
+/* The reuse state of a checkpoint: whether a factor exists, the u and
+ * coefficients of the A it factorises, its age and the renewal rule's
+ * counters. The factor itself (megabytes, CHOLMOD's layout) is not saved: it
+ * is made again from the same A, which the same assembly and the same
+ * CHOLMOD make bit for bit the same. */
+void nh_system_reuse_save(const nh_system *s, nh_bytes *b) {
+  int32_t head[4] = {s->L != NULL, s->n_nodes, s->factor_age, s->refactor_due};
+  nh_bytes_put(b, head, sizeof head);
+  int32_t steps = s->cycle_steps;
+  nh_bytes_put(b, &steps, sizeof steps);
+  nh_bytes_put(b, &s->cycle_cost, sizeof s->cycle_cost);
+  if (!s->L) return;
+  nh_bytes_put(b, s->c_factored, sizeof s->c_factored);
+  nh_bytes_put(b, s->u_factored, sizeof(double) * 3 * (size_t)s->n_nodes);
+}
+
+int nh_system_reuse_load(nh_system *s, const unsigned char *data, size_t size, int threads) {
+  nh_byte_reader r = {data, data + size, 0};
+  int32_t head[4], steps;
+  double cost, c[2];
+  nh_bytes_get(&r, head, sizeof head);
+  nh_bytes_get(&r, &steps, sizeof steps);
+  nh_bytes_get(&r, &cost, sizeof cost);
+  NH_CHECK(!r.short_read && head[1] == s->n_nodes && head[2] >= 0, NH_ERR_INPUT,
+           "the checkpoint's solver state is malformed");
+  if (head[0]) {
+    nh_bytes_get(&r, c, sizeof c);
+    /* f_int of the assembly goes to scratch (work[0]) */
+    double *u = malloc(sizeof(double) * 3 * (size_t)s->n_nodes);
+    if (!u) return NH_ERROR(NH_ERR_MEMORY, "out of memory restoring the solver's factor");
+    nh_bytes_get(&r, u, sizeof(double) * 3 * (size_t)s->n_nodes);
+    int bad = r.short_read || r.p != r.end;
+    for (int i = 0; i < 3 * s->n_nodes && !bad; i++) bad = !isfinite(u[i]);
+    int rc = bad ? NH_ERROR(NH_ERR_INPUT, "the checkpoint's solver state is malformed") : NH_OK;
+    if (!rc) {
+      nh_system_assemble(s, u, NULL, c[0], c[1], s->work[0], NULL, threads);
+      rc = nh_stop_check();
+    }
+    free(u);
+    NH_TRY(rc);
+    NH_TRY(nh_system_factor(s));
+    s->factor_current = 0; /* the next step assembles its own A */
+  } else {
+    NH_CHECK(r.p == r.end, NH_ERR_INPUT, "the checkpoint's solver state is malformed");
+  }
+  s->factor_age = head[2];
+  s->refactor_due = head[3];
+  s->cycle_steps = steps;
+  s->cycle_cost = cost;
+  return NH_OK;
 }

@@ -50,6 +50,16 @@ void nh_system_assemble(nh_system *sys, const double *u, const double *v, double
  * (CHOLMOD's common->status is checked) — message names the column. */
 int nh_system_factor(nh_system *sys);
 
+/* The state of factor reuse (solver.refactor: auto; solve/reuse.c) for a
+ * checkpoint: appended to b (a failed allocation is left in b->failed). */
+void nh_system_reuse_save(const nh_system *sys, nh_bytes *b);
+/* Restore what nh_system_reuse_save wrote, into a system built on the same
+ * mesh: a saved factor is made again from the A it factorised (assembled
+ * with `threads`), so the continued run renews or reuses factors exactly as
+ * the uninterrupted one. NH_ERR_INPUT (malformed), NH_ERR_NUMERIC (as
+ * nh_system_factor), NH_ERR_INTERRUPTED, NH_ERR_MEMORY. */
+int nh_system_reuse_load(nh_system *sys, const unsigned char *data, size_t size, int threads);
+
 /* Solve A x = b for free-DOF vectors (length nh_system_free_dofs). */
 int nh_system_solve(nh_system *sys, const double *b, double *x);
 /* Solve A X = B for ncol free-DOF vectors at once (column-major, n_free x

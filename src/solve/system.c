@@ -66,6 +66,7 @@ void nh_system_destroy(nh_system **sys) {
   free(s->colour_leaf);
   for (int i = 0; i < 4; i++) free(s->work[i]);
   for (int i = 0; i < 2; i++) free(s->fwork[i]);
+  free(s->u_assembled), free(s->u_factored);
   free(s);
   *sys = NULL;
 }
@@ -342,8 +343,11 @@ int nh_system_create(const nh_tissue *tissue, const unsigned char *fixed, const 
   for (int i = 0; i < 4; i++) s->work[i] = calloc(3 * (size_t)m->n_nodes, sizeof(double));
   for (int i = 0; i < 2; i++) s->fwork[i] = calloc(3 * (size_t)m->n_nodes, sizeof(double));
   for (int i = 0; i < 4; i++) s->pcg[i] = calloc(3 * (size_t)m->n_nodes, sizeof(double));
+  s->u_assembled = calloc(3 * (size_t)m->n_nodes, sizeof(double));
+  s->u_factored = calloc(3 * (size_t)m->n_nodes, sizeof(double));
   if (!s->free_of || !s->dof_of || !s->work[3] || !s->work[0] || !s->work[1] || !s->work[2] ||
-      !s->fwork[0] || !s->fwork[1] || !s->pcg[0] || !s->pcg[1] || !s->pcg[2] || !s->pcg[3]) {
+      !s->fwork[0] || !s->fwork[1] || !s->pcg[0] || !s->pcg[1] || !s->pcg[2] || !s->pcg[3] ||
+      !s->u_assembled || !s->u_factored) {
     rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: DOF map");
     goto fail;
   }
@@ -412,6 +416,8 @@ void nh_system_assemble(nh_system *s, const double *u, const double *v, double c
   const nh_mesh *m = t->mesh;
   double *Ax = s->A->x;
   s->factor_current = 0; /* A changes: a factor of the old values is now a preconditioner */
+  memcpy(s->u_assembled, u, sizeof(double) * 3 * (size_t)m->n_nodes);
+  s->c_assembled[0] = cM, s->c_assembled[1] = cK;
   memset(Ax, 0, sizeof(double) * ((int *)s->A->p)[s->n_free]);
   memset(f_int, 0, sizeof(double) * 3 * (size_t)m->n_nodes);
   if (Kv) memset(Kv, 0, sizeof(double) * 3 * (size_t)m->n_nodes);

@@ -40,7 +40,12 @@ struct nh_system {
   double flops_factor;     /* one numeric factorisation (CHOLMOD's count at analysis) */
   double flops_iteration;  /* one PCG iteration: two triangular solves and a product with A */
   cholmod_factor *L_aside; /* benchmarks: the factor timed aside (NH_TIME_FACTOR) */
-  double *pcg[4];          /* n_free each: PCG work */
+  /* What A was assembled from (u, and cM, cK), at the last assembly and at
+   * the one the factor L factorises: a continued run assembles and factorises
+   * that A again (nh_system_reuse_load), bit for bit the same L. */
+  double *u_assembled, *u_factored; /* 3 per node */
+  double c_assembled[2], c_factored[2];
+  double *pcg[4]; /* n_free each: PCG work */
 
   int *scatter; /* 576 per plain leaf (leaf order): position in A->x of K_e[r][c], -1 if not stored
                  */
