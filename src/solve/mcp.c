@@ -66,6 +66,7 @@
 #include "solve/solve.h"
 
 #include <float.h>
+#include <lapacke.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -271,24 +272,18 @@ static double nh_mcp_residual(const nh_mcp_work *ws, const double *W, const nh_r
   return res / scale;
 }
 
-/* Dense Cholesky of W̃(idx, idx) into L (nb×nb); 0 if it is not numerically positive definite. */
+/* Dense Cholesky of W̃(idx, idx) into L (nb×nb, lower triangle; the upper
+ * one keeps W̃'s entries); 0 if it is not numerically positive definite.
+ * LAPACK's blocked dpotrf: with hundreds of free skull rows this factor is
+ * O(nb³) per subspace step and was most of the step written as a loop. */
 static int nh_mcp_factor(const nh_mcp_work *ws, int nb, const int *idx, double *L) {
   int m = ws->m;
   for (int j = 0; j < nb; j++)
     for (int i = 0; i < nb; i++) L[(size_t)j * nb + i] = ws->Wt[(size_t)idx[j] * m + idx[i]];
-  for (int j = 0; j < nb; j++) {
-    double dj = L[(size_t)j * nb + j];
-    for (int k = 0; k < j; k++) dj -= L[(size_t)k * nb + j] * L[(size_t)k * nb + j];
-    /* W̃ has unit diagonal: a pivot below 1e-12 means dependent rows. */
-    if (!(dj > 1e-12)) return 0;
-    dj = sqrt(dj);
-    L[(size_t)j * nb + j] = dj;
-    for (int i = j + 1; i < nb; i++) {
-      double v = L[(size_t)j * nb + i];
-      for (int k = 0; k < j; k++) v -= L[(size_t)k * nb + i] * L[(size_t)k * nb + j];
-      L[(size_t)j * nb + i] = v / dj;
-    }
-  }
+  if (LAPACKE_dpotrf(LAPACK_COL_MAJOR, 'L', nb, L, nb) != 0) return 0;
+  /* W̃ has unit diagonal: a pivot below 1e-12 (L_jj below 1e-6) means dependent rows. */
+  for (int j = 0; j < nb; j++)
+    if (!(L[(size_t)j * nb + j] > 1e-6)) return 0;
   return 1;
 }
 
