@@ -160,9 +160,9 @@ static int nh_finite(const double *a, int n) {
 /* The tissue part of W with the current factor, W_t = J_t A⁻¹ J_tᵀ, and the
  * sum W = W_t + W_tools for the constraint solve. */
 static int nh_tissue_compliance(nh_system *s, cholmod_sparse *Jt, int m, const double *Wtools,
-                                double *Wt, double *W, int threads) {
+                                double *Wt, double *W) {
   memset(Wt, 0, sizeof(double) * (size_t)m * m);
-  NH_TRY(nh_system_compliance_add(s, Jt, Wt, threads));
+  NH_TRY(nh_system_compliance_add(s, Jt, Wt));
   for (size_t k = 0; k < (size_t)m * m; k++) W[k] = Wt[k] + Wtools[k];
   return NH_OK;
 }
@@ -428,7 +428,7 @@ int nh_step_coupled(nh_system *s, const nh_integrator *in, const double *f_ext, 
         }
       }
     }
-    if ((rc = nh_tissue_compliance(s, Jt, m, Wtools, Wt, W, in->threads))) goto done;
+    if ((rc = nh_tissue_compliance(s, Jt, m, Wtools, Wt, W))) goto done;
     double tc1 = nh_time_now();
     st.t_compliance = tc1 - tc0;
 
@@ -455,7 +455,7 @@ int nh_step_coupled(nh_system *s, const nh_integrator *in, const double *f_ext, 
         st.step.t_factor += tf1 - tf;
         st.step.t_factor_reference = tf1 - tf;
         tc0 += tf1 - tf; /* the factorisation is not a constraint cost */
-        if ((rc = nh_tissue_compliance(s, Jt, m, Wtools, Wt, W, in->threads))) goto done;
+        if ((rc = nh_tissue_compliance(s, Jt, m, Wtools, Wt, W))) goto done;
       }
     }
     double tc2 = nh_time_now();
