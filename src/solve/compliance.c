@@ -24,6 +24,7 @@
 #include "solve/system_impl.h"
 
 #include <cblas.h>
+#include <lapacke.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -359,7 +360,7 @@ static int nh_compliance_add_supernodal(nh_system *s, cholmod_sparse *Jt, double
   for (int k = 0; k < t.nsuper && !rc; k++) {
     if (count[k] == 0) continue;
     nh_super_apply(&t, k, blk, list + start[k], count[k], Z, G, U, W, m);
-    if (k % 64 == 0) rc = nh_stop_check();
+    rc = nh_stop_check();
   }
   if (rc == NH_ERR_MEMORY)
     rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: the compliance of %d rows", m);
@@ -379,27 +380,24 @@ static int nh_compliance_build(nh_system *s) {
   int m = s->n_rows;
   memset(s->W, 0, sizeof(double) * (size_t)m * (size_t)m);
   int rc = nh_system_compliance_add(s, s->Jt, s->W);
-  /* Dense Cholesky W = G Gᵀ, lower triangle in place (column-major). */
-  for (int j = 0; j < m && !rc; j++) {
-    if (j % 16 == 0 && (rc = nh_stop_check())) break;
-    double *cj = s->W + (size_t)j * m;
-    double d = cj[j];
-    for (int k = 0; k < j; k++) d -= s->W[(size_t)k * m + j] * s->W[(size_t)k * m + j];
-    if (!(d > 1e-14 * fabs(cj[j]))) {
-      rc = NH_ERROR(NH_ERR_NUMERIC, "the constraint rows are linearly dependent (row %d of %d)", j,
-                    m);
-      break;
+  /* Dense Cholesky W = G Gᵀ, lower triangle in place (column-major), by
+   * LAPACK (blocked: thousands of hanging rows are O(m³)). A pivot below
+   * 1e-14 of its diagonal means linearly dependent rows. */
+  double *diag = rc ? NULL : malloc(sizeof(double) * (size_t)(m ? m : 1));
+  if (!rc && !diag) rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: compliance (%d rows)", m);
+  if (!rc) {
+    for (int j = 0; j < m; j++) diag[j] = s->W[(size_t)j * m + j];
+    int info = (int)LAPACKE_dpotrf(LAPACK_COL_MAJOR, 'L', m, s->W, m);
+    for (int j = 0; j < m && !info; j++) {
+      double g = s->W[(size_t)j * m + j];
+      if (!(g * g > 1e-14 * fabs(diag[j]))) info = j + 1;
     }
-    d = sqrt(d);
-    cj[j] = d;
-    for (int i = j + 1; i < m; i++) {
-      double v = cj[i];
-      for (int k = 0; k < j; k++) v -= s->W[(size_t)k * m + i] * s->W[(size_t)k * m + j];
-      cj[i] = v / d;
-    }
-    /* Mirror into the upper triangle for the row access above. */
-    for (int i = j + 1; i < m; i++) s->W[(size_t)i * m + j] = cj[i];
+    if (info)
+      rc = NH_ERROR(NH_ERR_NUMERIC, "the constraint rows are linearly dependent (row %d of %d)",
+                    info - 1, m);
+    if (!rc) rc = nh_stop_check();
   }
+  free(diag);
   if (!rc) s->W_valid = 1;
   return rc;
 }
@@ -423,17 +421,8 @@ int nh_system_solve_constrained(nh_system *s, const double *b, double *x) {
     for (int p = Jp[j]; p < Jp[j + 1]; p++) v += Jx[p] * x[Ji[p]];
     lambda[j] = -v;
   }
-  for (int j = 0; j < m; j++) { /* G z = rhs */
-    double v = lambda[j];
-    for (int k = 0; k < j; k++) v -= s->W[(size_t)k * m + j] * lambda[k];
-    lambda[j] = v / s->W[(size_t)j * m + j];
-  }
-  for (int j = m - 1; j >= 0; j--) { /* Gᵀ λ = z */
-    double v = lambda[j];
-    for (int k = j + 1; k < m; k++) v -= s->W[(size_t)j * m + k] * lambda[k];
-    lambda[j] = v / s->W[(size_t)j * m + j];
-  }
-  memset(r, 0, sizeof(double) * (size_t)n); /* Jᵀ λ */
+  LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', m, 1, s->W, m, lambda, m); /* G Gᵀ λ = rhs */
+  memset(r, 0, sizeof(double) * (size_t)n);                        /* Jᵀ λ */
   for (int j = 0; j < m; j++)
     for (int p = Jp[j]; p < Jp[j + 1]; p++) r[Ji[p]] += Jx[p] * lambda[j];
   int rc = nh_system_solve(s, r, y);
