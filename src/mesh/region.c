@@ -208,6 +208,16 @@ double nh_mesh_cell_fraction_above(const nh_mesh *m, int c, const double point[3
   double Xe[24], x[3], N[8], dv;
   double tissue = 0.0, above = 0.0, all = 0.0, all_above = 0.0;
   nh_mesh_cell_coords(m, m->X, c, Xe);
+  /* A sample is a convex combination of the corners (N_a >= 0, Σ N_a = 1):
+   * with every corner on one side of the level, every sample is, and the
+   * fraction is 1 or 0 exactly; only cells the level cuts are sampled. */
+  int corners_up = 0;
+  for (int a = 0; a < 8; a++)
+    corners_up += (Xe[3 * a] - point[0]) * up[0] + (Xe[3 * a + 1] - point[1]) * up[1] +
+                      (Xe[3 * a + 2] - point[2]) * up[2] >
+                  0;
+  if (corners_up == 8) return 1.0;
+  if (corners_up == 0) return 0.0;
   for (int i = 0; i < n; i++)
     for (int j = 0; j < n; j++)
       for (int k = 0; k < n; k++) {

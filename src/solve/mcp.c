@@ -43,7 +43,9 @@
  *      0 < λ < c, friction inside the bound) form F, λ̃_F ← λ̃_F − W̃_FF⁻¹ w̃_F,
  *      then every row is projected; kept only if the residual drops. Plain
  *      sweeps on coupled shaft rows took 500-1600 sweeps where this takes
- *      7-12 (measured, docs/interaction.md).
+ *      7-12 (measured, docs/interaction.md). The factor of W̃_FF (LAPACK)
+ *      is kept while F does not change (hundreds of skull rows: F settles
+ *      long before the residual does).
  * w̃ is updated after each change (a column of W̃ per row) and recomputed
  * from scratch before each residual, so round-off does not accumulate. The
  * exact bilateral block (versus treating bilateral rows as unbounded GS
@@ -66,6 +68,7 @@
 #include "solve/solve.h"
 
 #include <float.h>
+#include <lapacke.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -95,12 +98,14 @@ typedef struct {
   double *Lf;   /* subspace step: factor of W̃_FF (m×m), saved λ̃ and w̃ */
   double *save_l, *save_w;
   int *free_rows;
+  int *lf_rows; /* the free set Lf factorises (lf_n rows; −1: none yet) */
+  int lf_n, lf_ok;
 } nh_mcp_work;
 
 static void nh_mcp_work_free(nh_mcp_work *ws) {
   free(ws->Wt), free(ws->d), free(ws->rt), free(ws->lt), free(ws->wt), free(ws->best);
   free(ws->L), free(ws->tmp), free(ws->bil), free(ws->Lf), free(ws->save_l), free(ws->save_w);
-  free(ws->free_rows);
+  free(ws->free_rows), free(ws->lf_rows);
 }
 
 static int nh_mcp_check_laws(int m, const nh_row_law *laws) {
@@ -271,24 +276,18 @@ static double nh_mcp_residual(const nh_mcp_work *ws, const double *W, const nh_r
   return res / scale;
 }
 
-/* Dense Cholesky of W̃(idx, idx) into L (nb×nb); 0 if it is not numerically positive definite. */
+/* Dense Cholesky of W̃(idx, idx) into L (nb×nb, lower triangle; the upper
+ * one keeps W̃'s entries); 0 if it is not numerically positive definite.
+ * LAPACK's blocked dpotrf: with hundreds of free skull rows this factor is
+ * O(nb³) per subspace step and was most of the step written as a loop. */
 static int nh_mcp_factor(const nh_mcp_work *ws, int nb, const int *idx, double *L) {
   int m = ws->m;
   for (int j = 0; j < nb; j++)
     for (int i = 0; i < nb; i++) L[(size_t)j * nb + i] = ws->Wt[(size_t)idx[j] * m + idx[i]];
-  for (int j = 0; j < nb; j++) {
-    double dj = L[(size_t)j * nb + j];
-    for (int k = 0; k < j; k++) dj -= L[(size_t)k * nb + j] * L[(size_t)k * nb + j];
-    /* W̃ has unit diagonal: a pivot below 1e-12 means dependent rows. */
-    if (!(dj > 1e-12)) return 0;
-    dj = sqrt(dj);
-    L[(size_t)j * nb + j] = dj;
-    for (int i = j + 1; i < nb; i++) {
-      double v = L[(size_t)j * nb + i];
-      for (int k = 0; k < j; k++) v -= L[(size_t)k * nb + i] * L[(size_t)k * nb + j];
-      L[(size_t)j * nb + i] = v / dj;
-    }
-  }
+  if (LAPACKE_dpotrf(LAPACK_COL_MAJOR, 'L', nb, L, nb) != 0) return 0;
+  /* W̃ has unit diagonal: a pivot below 1e-12 (L_jj below 1e-6) means dependent rows. */
+  for (int j = 0; j < nb; j++)
+    if (!(L[(size_t)j * nb + j] > 1e-6)) return 0;
   return 1;
 }
 
@@ -296,16 +295,8 @@ static int nh_mcp_factor(const nh_mcp_work *ws, int nb, const int *idx, double *
  * bilateral rows; the subspace step for the free rows). */
 static void nh_mcp_solve_block(nh_mcp_work *ws, int nb, const int *idx, const double *L) {
   double *z = ws->tmp;
-  for (int j = 0; j < nb; j++) { /* L z = w̃_B */
-    double v = ws->wt[idx[j]];
-    for (int k = 0; k < j; k++) v -= L[(size_t)k * nb + j] * z[k];
-    z[j] = v / L[(size_t)j * nb + j];
-  }
-  for (int j = nb - 1; j >= 0; j--) { /* Lᵀ δ = z */
-    double v = z[j];
-    for (int k = j + 1; k < nb; k++) v -= L[(size_t)j * nb + k] * z[k];
-    z[j] = v / L[(size_t)j * nb + j];
-  }
+  for (int j = 0; j < nb; j++) z[j] = ws->wt[idx[j]];
+  LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', nb, 1, L, nb, z, nb); /* L Lᵀ δ = w̃_B */
   for (int j = 0; j < nb; j++) nh_mcp_move(ws, idx[j], -z[j]);
 }
 
@@ -395,7 +386,15 @@ static double nh_mcp_subspace(nh_mcp_work *ws, const double *W, const nh_row_law
     }
     if (in && ws->Wt[(size_t)i * m + i] > 0.0) ws->free_rows[nf++] = i;
   }
-  if (nf == 0 || !nh_mcp_factor(ws, nf, ws->free_rows, ws->Lf)) return res;
+  if (nf == 0) return res;
+  /* Near convergence the free set stops changing: W̃ is fixed for the whole
+   * solve, so the factor of the same set is the same and is kept. */
+  if (nf != ws->lf_n || memcmp(ws->free_rows, ws->lf_rows, sizeof(int) * (size_t)nf)) {
+    ws->lf_ok = nh_mcp_factor(ws, nf, ws->free_rows, ws->Lf);
+    ws->lf_n = nf;
+    memcpy(ws->lf_rows, ws->free_rows, sizeof(int) * (size_t)nf);
+  }
+  if (!ws->lf_ok) return res;
   memcpy(ws->save_l, ws->lt, sizeof(double) * (size_t)m);
   memcpy(ws->save_w, ws->wt, sizeof(double) * (size_t)m);
   nh_mcp_solve_block(ws, nf, ws->free_rows, ws->Lf);
@@ -497,11 +496,14 @@ int nh_mcp_solve(int m, const double *W, const double *r, nh_row_law *laws, doub
     ws.save_l = malloc(sizeof(double) * (size_t)m);
     ws.save_w = malloc(sizeof(double) * (size_t)m);
     ws.free_rows = malloc(sizeof(int) * (size_t)m);
+    ws.lf_rows = malloc(sizeof(int) * (size_t)m);
   }
+  ws.lf_n = -1;
   ws.bil = malloc(sizeof(int) * ((size_t)nb + 1));
   nh_row_law *lw = malloc(sizeof *lw * (size_t)m);
   if (!lw || !ws.Wt || !ws.d || !ws.rt || !ws.lt || !ws.wt || !ws.best || !ws.L || !ws.tmp ||
-      !ws.bil || (NH_MCP_SUBSPACE && (!ws.Lf || !ws.save_l || !ws.save_w || !ws.free_rows))) {
+      !ws.bil ||
+      (NH_MCP_SUBSPACE && (!ws.Lf || !ws.save_l || !ws.save_w || !ws.free_rows || !ws.lf_rows))) {
     nh_mcp_work_free(&ws);
     free(lw);
     return NH_ERROR(NH_ERR_MEMORY, "out of memory: constraint solve (%d rows)", m);

@@ -108,7 +108,12 @@ int nh_system_pcg(nh_system *s, const double *b, double *x, int guess, double to
                   int max_iterations, int *iterations);
 
 /* W += J A⁻¹ Jᵀ (Algorithm 3) for rows given as Jᵀ (n_free x m, CSC, sorted);
- * W dense column-major m x m. A must be factorised. */
+ * W dense column-major m x m. A must be factorised. Fails with
+ * NH_ERR_MEMORY, NH_ERR_NUMERIC (CHOLMOD) or a stop request. */
 int nh_system_compliance_add(nh_system *s, cholmod_sparse *Jt, double *W);
+/* The same through CHOLMOD's sparse solves (cholmod_spsolve), for any
+ * factor: the path of a simplicial factor, and an independent one for the
+ * tests (tests/test_compliance.c). */
+int nh_system_compliance_add_spsolve(nh_system *s, cholmod_sparse *Jt, double *W);
 
 #endif

@@ -1,0 +1,168 @@
+/* test_compliance — the compliance W = J A⁻¹ Jᵀ of constraint rows
+ * (solve/compliance.c) against an independent computation.
+ *
+ * A clamped box of 14 x 10 x 10 hexahedra (4950 unknowns: CHOLMOD chooses
+ * a supernodal factor, checked) carries m = 203 point rows (not a multiple
+ * of the 16 columns of a block), each J_i = n_iᵀ N(ξ_i) on the nodes of a
+ * cell: pseudo-random cells, natural coordinates and unit directions, a
+ * quarter of them in the cells next to the clamped face (some of their
+ * nodes fixed). The reference is W_ref = J X with X = A⁻¹ Jᵀ from dense
+ * solves with A (nh_system_solve_many: forward and back substitution, no
+ * sparsity exploited). Checked, with tolerance 1e-10 max|W_ref| (round-off
+ * of solves with a well-conditioned A is ~1e-14 relative):
+ *   - the supernodal path (forward solves on the elimination-tree paths,
+ *     supernode by supernode, W = Yᵀ Y): equal to W_ref and symmetric;
+ *   - CHOLMOD's sparse solves on the same factor (the other path) equal
+ *     to W_ref;
+ *   - a simplicial LDLᵀ factor of the same A (the path small systems
+ *     take) equal to W_ref;
+ *   - W added to, not overwritten (W += ...: (W + W) − W equals W_ref);
+ *   - a row set with every column in its own block (m = 1) and the empty set.
+ * NH_VERBOSE=1 prints the agreements and the time of each path. */
+#include "check.h"
+#include "fem/fem.h"
+#include "mesh/mesh.h"
+#include "solve/system_impl.h"
+
+#include <string.h>
+#include <time.h>
+
+static int verbose = 0;
+static unsigned long long rng = 88172645463325252ULL;
+
+static double uniform(void) { /* xorshift64 in [0, 1) */
+  rng ^= rng << 13, rng ^= rng >> 7, rng ^= rng << 17;
+  return (double)(rng >> 11) / 9007199254740992.0;
+}
+
+/* Jᵀ (n_free x m) of m point rows in pseudo-random cells. */
+static cholmod_sparse *rows_create(nh_system *s, const nh_mesh *mesh, int m) {
+  cholmod_sparse *Jt = cholmod_allocate_sparse((size_t)s->n_free, (size_t)m, 24 * (size_t)m + 1, 1,
+                                               1, 0, CHOLMOD_REAL, &s->cm);
+  int *Jp = Jt->p, *Ji = Jt->i, pos = 0;
+  double *Jx = Jt->x;
+  for (int r = 0; r < m; r++) {
+    Jp[r] = pos;
+    int l = (int)(uniform() * mesh->n_leaves);
+    if (r % 4 == 0) l = (int)(uniform() * 100) * 14 + 13; /* a cell at x = max: clamped face */
+    if (l >= mesh->n_leaves) l = mesh->n_leaves - 1;
+    const int c = mesh->leaves[l];
+    double xi[3], N[8], n[3], len = 0.0;
+    for (int k = 0; k < 3; k++) xi[k] = 2.0 * uniform() - 1.0, n[k] = 2.0 * uniform() - 1.0;
+    for (int k = 0; k < 3; k++) len += n[k] * n[k];
+    for (int k = 0; k < 3; k++) n[k] /= sqrt(len);
+    nh_hex_shape(xi, N);
+    for (int a = 0; a < 8; a++)
+      for (int k = 0; k < 3; k++) {
+        int f = s->free_of[3 * mesh->cells[8 * c + a] + k];
+        if (f >= 0) Ji[pos] = f, Jx[pos++] = N[a] * n[k];
+      }
+  }
+  Jp[m] = pos;
+  cholmod_sort(Jt, &s->cm);
+  return Jt;
+}
+
+/* W_ref = J A⁻¹ Jᵀ by dense solves. */
+static void reference(nh_system *s, cholmod_sparse *Jt, double *W) {
+  const int n = s->n_free, m = (int)Jt->ncol;
+  const int *Jp = Jt->p, *Ji = Jt->i;
+  const double *Jx = Jt->x;
+  double *B = calloc((size_t)n * m, sizeof(double)), *X = calloc((size_t)n * m, sizeof(double));
+  for (int j = 0; j < m; j++)
+    for (int p = Jp[j]; p < Jp[j + 1]; p++) B[(size_t)j * n + Ji[p]] = Jx[p];
+  CHECK_OK(nh_system_solve_many(s, m, B, X));
+  for (int j = 0; j < m; j++)
+    for (int i = 0; i < m; i++) {
+      double v = 0.0;
+      for (int p = Jp[i]; p < Jp[i + 1]; p++) v += Jx[p] * X[(size_t)j * n + Ji[p]];
+      W[(size_t)j * m + i] = v;
+    }
+  free(B), free(X);
+}
+
+static double max_abs(const double *a, size_t n) {
+  double v = 0.0;
+  for (size_t i = 0; i < n; i++) v = fmax(v, fabs(a[i]));
+  return v;
+}
+
+static void compare(const double *W, const double *ref, int m, const char *what) {
+  const double tol = 1e-10 * max_abs(ref, (size_t)m * m);
+  double worst = 0.0;
+  int bad = -1;
+  for (size_t k = 0; k < (size_t)m * m; k++) {
+    double d = fabs(W[k] - ref[k]);
+    if (!(d <= worst)) worst = d, bad = (int)k;
+  }
+  if (verbose) printf("%-40s max |W - W_ref| = %.3g (max |W_ref| %.3g)\n", what, worst, tol * 1e10);
+  if (bad >= 0) CHECK_CLOSE(W[bad], ref[bad], tol, what);
+}
+
+static void run(int m, int supernodal) {
+  const double lo[3] = {0, 0, 0}, hi[3] = {0.14, 0.1, 0.1};
+  const int grid[3] = {14, 10, 10};
+  nh_mesh *mesh;
+  CHECK_OK(nh_mesh_create_box(lo, hi, grid, &mesh));
+  nh_material mat = {3000, 0.45, 1040, NH_FORMULATION_BBAR};
+  nh_tissue *tissue;
+  CHECK_OK(nh_tissue_create(mesh, &mat, &tissue));
+  const int nn = mesh->n_nodes;
+  unsigned char *fixed = calloc((size_t)nn, 1);
+  for (int i = 0; i < nn; i++) fixed[i] = mesh->X[3 * i] > 0.14 - 1e-9;
+  nh_system *s;
+  CHECK_OK(nh_system_create(tissue, fixed, NULL, &s));
+  double *u = calloc(3 * (size_t)nn, sizeof(double)), *f = calloc(3 * (size_t)nn, sizeof(double));
+  for (int i = 0; i < 3 * nn; i++) u[i] = 1e-3 * (uniform() - 0.5); /* rotated elements */
+  nh_system_assemble(s, u, NULL, 1.0, 0.05 * 0.05, f, NULL, 1);
+  if (!supernodal) s->cm.supernodal = CHOLMOD_SIMPLICIAL;
+  CHECK_OK(nh_system_factor(s));
+  CHECK(s->L->is_super == supernodal, "factor supernodal %d, want %d", (int)s->L->is_super,
+        supernodal);
+  cholmod_sparse *Jt = rows_create(s, mesh, m);
+  const size_t mm = m > 0 ? (size_t)m * m : 1;
+  double *ref = calloc(mm, sizeof(double)), *W1 = calloc(mm, sizeof(double)),
+         *W2 = calloc(mm, sizeof(double));
+  reference(s, Jt, ref);
+  char what[80];
+  double t0 = nh_time_now(), c0 = (double)clock() / CLOCKS_PER_SEC;
+  CHECK_OK(nh_system_compliance_add(s, Jt, W1));
+  double t1 = nh_time_now(), c1 = (double)clock() / CLOCKS_PER_SEC;
+  snprintf(what, sizeof what, "%s, m = %d", supernodal ? "supernodal" : "simplicial", m);
+  compare(W1, ref, m, what);
+  if (verbose) printf("  %.1f ms (CPU %.1f ms)\n", 1e3 * (t1 - t0), 1e3 * (c1 - c0));
+  if (supernodal) {
+    int asym = 0;
+    for (int i = 0; i < m; i++)
+      for (int j = 0; j < i; j++) asym += W1[(size_t)i * m + j] != W1[(size_t)j * m + i];
+    CHECK(asym == 0, "W not symmetric: %d pairs differ", asym);
+    /* W += ...: added to what W holds (here W itself: 2 W to round-off) */
+    memcpy(W2, W1, sizeof(double) * mm);
+    CHECK_OK(nh_system_compliance_add(s, Jt, W2));
+    for (size_t k = 0; k < (size_t)m * m; k++) W2[k] -= W1[k];
+    snprintf(what, sizeof what, "W + W - W, m = %d", m);
+    compare(W2, ref, m, what);
+    memset(W2, 0, sizeof(double) * mm);
+    t0 = nh_time_now(), c0 = (double)clock() / CLOCKS_PER_SEC;
+    CHECK_OK(nh_system_compliance_add_spsolve(s, Jt, W2));
+    t1 = nh_time_now(), c1 = (double)clock() / CLOCKS_PER_SEC;
+    snprintf(what, sizeof what, "spsolve on the supernodal factor, m = %d", m);
+    compare(W2, ref, m, what);
+    if (verbose) printf("  %.1f ms (CPU %.1f ms)\n", 1e3 * (t1 - t0), 1e3 * (c1 - c0));
+  }
+  free(ref), free(W1), free(W2), free(u), free(f), free(fixed);
+  cholmod_free_sparse(&Jt, &s->cm);
+  nh_system_destroy(&s);
+  nh_tissue_destroy(&tissue);
+  nh_mesh_destroy(&mesh);
+}
+
+int main(void) {
+  verbose = getenv("NH_VERBOSE") != NULL;
+  run(203, 1);
+  run(203, 0);
+  run(1, 1);
+  run(0, 1);
+  if (nh_test_failures) fprintf(stderr, "test_compliance: %d failures\n", nh_test_failures);
+  return nh_test_failures != 0;
+}
