@@ -5,7 +5,10 @@ renewed at every step (solver.refactor: every) and reused (auto). Not a
 test: it reports numbers (docs/performance.md).
 
     tools/bench_step.py [--binary build/needlehex] [--cases NAME ...] [--steps N]
+                        [--modes every auto] [--set KEY=VALUE ...]
                         [--markdown] [--json FILE] [--plot FILE]
+
+--set adds a scene override to every run (e.g. solver.lazy_rotation=1e-3).
 
 Cases (--cases, default all but the tissue-only ones):
   needle-16, needle-32   cases/phantom/phantom.yaml (needle inserted) at 16×8×8, 32×16×16
@@ -51,8 +54,9 @@ CASES = {
 DEFAULT = ["needle-16", "needle-32", "dbs-coarse", "dbs-fine"]
 
 
-def run(binary, case, mode, steps, out):
+def run(binary, case, mode, steps, out, extra=()):
     scene, sets = CASES[case]
+    sets = list(sets) + list(extra)
     cmd = [binary, "run", scene, "--quiet", "--overwrite", "--out", out, "--set", "time.steps=%d" % steps,
            "--set", "output.every=0", "--set", "solver.refactor=" + mode]
     for s in sets:
@@ -101,6 +105,9 @@ def main():
     ap.add_argument("--binary", default=os.path.join(ROOT, "build", "needlehex"))
     ap.add_argument("--cases", nargs="*", default=DEFAULT, choices=sorted(CASES))
     ap.add_argument("--steps", type=int, default=30)
+    ap.add_argument("--modes", nargs="*", default=["every", "auto"], choices=["every", "auto"])
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="a scene override for every run")
     ap.add_argument("--markdown", action="store_true", help="print a Markdown table")
     ap.add_argument("--json", help="write the results to this file")
     ap.add_argument("--plot", help="ms/step against DOFs (PNG)")
@@ -111,8 +118,8 @@ def main():
     print("%-10s %-5s %6s %4s %8s %8s %7s %7s %7s %8s %8s %8s %6s %3s %4s %5s" % head)
     with tempfile.TemporaryDirectory() as tmp:
         for case in a.cases:
-            for mode in ("every", "auto"):
-                r = run(a.binary, case, mode, a.steps, os.path.join(tmp, case + mode))
+            for mode in a.modes:
+                r = run(a.binary, case, mode, a.steps, os.path.join(tmp, case + mode), a.set)
                 results.append(r)
                 print("%-10s %-5s %6d %4.0f %8.2f %8.2f %7.2f %7.2f %7.2f %8.2f %8.2f %8.2f %6.2f "
                       "%3d %4.0f %5.1f" % (

@@ -64,7 +64,8 @@ static const char *const nh_step_columns[] = {"step",
                                               "inverted",
                                               "error_estimate",
                                               "refine_stop",
-                                              "resolves"};
+                                              "resolves",
+                                              "tangent_updates"};
 static const char *const nh_probe_columns[] = {"step", "time", "name", "x",  "y",
                                                "z",    "ux",   "uy",   "uz", "error_estimate"};
 
@@ -678,7 +679,8 @@ static int nh_sim_build(nh_sim *s) {
                                !(sc->adapt.enabled && sc->adapt.estimator == NH_ESTIMATOR_GOAL),
                       .time_factor = getenv("NH_TIME_FACTOR") != NULL,
                       .newton_iterations = sc->solver.newton_iterations,
-                      .newton_tolerance = sc->solver.newton_tolerance};
+                      .newton_tolerance = sc->solver.newton_tolerance,
+                      .lazy_rotation = sc->solver.lazy_rotation};
   s->cap_steps = sc->time.steps > s->step ? sc->time.steps : s->step + 1;
   s->phase_times =
       calloc((size_t)NH_PHASES * (size_t)(s->cap_steps ? s->cap_steps : 1), sizeof(double));
@@ -942,7 +944,8 @@ int nh_sim_step(nh_sim *s) {
                         s->inverted,
                         goal_max,
                         refine_stop,
-                        resolves};
+                        resolves,
+                        st.tangent_updates};
   enum { NH_STEP_COLUMNS = sizeof nh_step_columns / sizeof *nh_step_columns };
   _Static_assert(sizeof row / sizeof *row == NH_STEP_COLUMNS, "one value per steps.csv column");
   if (!s->options.dry_run)
