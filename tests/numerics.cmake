@@ -23,3 +23,7 @@ nh_add_py_test(restart_tools_dbs io restart_tools.py dbs)
 set_tests_properties(restart_tools_dbs PROPERTIES LABELS "io;slow" TIMEOUT 900)
 nh_add_c_test(test_traction verify)
 nh_add_py_test(traction_patch verify traction_patch.py)
+
+# Lazy element tangents in whole runs (tests/lazy_run.py): the needle phantom
+# with solver.lazy_rotation 0 and 1e-3, 1 and 2 threads, identical outputs.
+nh_add_py_test(lazy_run verify lazy_run.py)
