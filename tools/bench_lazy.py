@@ -17,12 +17,15 @@ value of the exact run: `probe u` (probes.csv displacements, and
 targets.csv positions for the DBS target: their motion from step 0), `tip`
 (tools.csv tip positions' motion from step 0) and `force` (tools.csv axial
 and lateral force). Times are medians over steps (ms; the first step, with
-CHOLMOD's analysis, left out); the load average is printed, as the machine
-may be shared.
+CHOLMOD's analysis, left out), and the least over steps of the assembly and
+of the step (`min`: on a shared machine, the closest to the cost on an idle
+one); `cpu` is the run's CPU time (user + system, all threads) per step, which
+the machine's load does not inflate. The load average is printed.
 """
 import argparse
 import csv
 import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -66,7 +69,10 @@ def run(binary, case, tol, steps, out):
     for s in sets:
         cmd += ["--set", s]
     load0 = os.getloadavg()[0]
+    ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     subprocess.run(cmd, check=True)
+    ru1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = ru1.ru_utime + ru1.ru_stime - ru0.ru_utime - ru0.ru_stime
     st = rows(os.path.join(out, "steps.csv"))[1:]
     med = lambda k: 1e3 * statistics.median(float(r[k]) for r in st)  # noqa: E731
     res = dict(case=case, tol=tol, dofs=int(st[-1]["dofs"]), cells=int(st[-1]["cells"]),
@@ -75,6 +81,8 @@ def run(binary, case, tol, steps, out):
                pcg=sum(int(float(r["pcg_iterations"])) for r in st),
                t_assemble=med("t_assemble"), t_factor=med("t_factor"),
                t_constraints=med("t_constraints"), t_step=med("t_step"),
+               min_assemble=1e3 * min(float(r["t_assemble"]) for r in st),
+               min_step=1e3 * min(float(r["t_step"]) for r in st), cpu=1e3 * cpu / (len(st) + 1),
                share=statistics.median(float(r["t_assemble"]) / float(r["t_step"]) for r in st),
                load=0.5 * (load0 + os.getloadavg()[0]))
     probes = motion(rows(os.path.join(out, "probes.csv")), ["ux", "uy", "uz"])
@@ -97,9 +105,9 @@ def main():
     ap.add_argument("--markdown", action="store_true")
     a = ap.parse_args()
     results = []
-    head = ("case", "tau", "dofs", "upd/step", "fact", "pcg", "assemble", "factor", "constr",
-            "step", "asm share", "probe u", "tip", "force", "load")
-    print("%-10s %7s %6s %8s %4s %4s %8s %8s %8s %8s %9s %9s %9s %9s %5s" % head)
+    head = ("case", "tau", "dofs", "upd/step", "fact", "pcg", "assemble", "min", "factor",
+            "constr", "step", "min", "cpu", "asm share", "probe u", "tip", "force", "load")
+    print("%-10s %7s %6s %8s %4s %4s %8s %8s %8s %8s %8s %8s %8s %9s %9s %9s %9s %5s" % head)
     with tempfile.TemporaryDirectory() as tmp:
         for case in a.cases:
             exact = None
@@ -109,22 +117,24 @@ def main():
                 for k in ("probe", "tip", "force"):
                     r[k] = rel_error(exact["_" + k], r["_" + k])
                 results.append(r)
-                print("%-10s %7.0e %6d %8.1f %4d %4d %8.2f %8.2f %8.2f %8.2f %8.0f%% %9.2e %9.2e "
-                      "%9.2e %5.1f" % (case, tol, r["dofs"], r["updates"], r["factorisations"],
-                                       r["pcg"], r["t_assemble"], r["t_factor"],
-                                       r["t_constraints"], r["t_step"], 100 * r["share"],
-                                       r["probe"], r["tip"], r["force"], r["load"]), flush=True)
+                print("%-10s %7.0e %6d %8.1f %4d %4d %8.2f %8.2f %8.2f %8.2f %8.2f %8.2f %8.2f "
+                      "%8.0f%% %9.2e %9.2e %9.2e %5.1f" % (
+                          case, tol, r["dofs"], r["updates"], r["factorisations"], r["pcg"],
+                          r["t_assemble"], r["min_assemble"], r["t_factor"], r["t_constraints"],
+                          r["t_step"], r["min_step"], r["cpu"], 100 * r["share"], r["probe"],
+                          r["tip"], r["force"], r["load"]), flush=True)
     if a.markdown:
         print("\n| case | τ | dofs | tangents rebuilt / step (of cells) | factorisations | PCG its "
-              "| assemble | factor | constraints | step | assembly share | probe u | tip | force "
-              "| load |")
-        print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+              "| assemble (min) | factor | constraints | step (min) | CPU / step | assembly share "
+              "| probe u | tip | force | load |")
+        print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
         for r in results:
-            print("| %s | %g | %d | %.1f (%d) | %d / %d | %d | %.2f | %.2f | %.2f | %.2f | %.0f %% "
-                  "| %.1e | %.1e | %.1e | %.1f |" % (
+            print("| %s | %g | %d | %.1f (%d) | %d / %d | %d | %.2f (%.2f) | %.2f | %.2f | "
+                  "%.2f (%.2f) | %.1f | %.0f %% | %.1e | %.1e | %.1e | %.1f |" % (
                       r["case"], r["tol"], r["dofs"], r["updates"], r["cells"],
-                      r["factorisations"], r["steps"], r["pcg"], r["t_assemble"], r["t_factor"],
-                      r["t_constraints"], r["t_step"], 100 * r["share"], r["probe"], r["tip"],
+                      r["factorisations"], r["steps"], r["pcg"], r["t_assemble"],
+                      r["min_assemble"], r["t_factor"], r["t_constraints"], r["t_step"],
+                      r["min_step"], r["cpu"], 100 * r["share"], r["probe"], r["tip"],
                       r["force"], r["load"]))
     return 0
 
