@@ -13,12 +13,17 @@
  * Every error is one line on stderr, prefixed "needlehex: ".
  *
  * Threads: CHOLMOD's BLAS (Debian's OpenBLAS, pthread build) keeps its
- * workers spinning for ~0.1 s after each call, and an OpenMP team that also
- * spins then fights them for the two cores: on the 16x8x8 phantom assembly
- * went from 1.8 ms to 58 ms per step. With OMP_WAIT_POLICY=passive the
- * OpenMP threads sleep instead, which measured best at every size
- * (docs/performance.md). libgomp reads the variable before main runs, so
- * when the user has not set it we set it and re-execute ourselves once. */
+ * workers spinning for ~0.1 s after each call, calling sched_yield: on the
+ * DBS case (2.7k DOFs, a few hundred small BLAS calls per step) that was as
+ * much system time as the whole run's user time (strace -c -f: 650k
+ * sched_yield in 100 steps), and an OpenMP team that also spins then fights
+ * those workers for the two cores: on the 16x8x8 phantom assembly went from
+ * 1.8 ms to 58 ms per step. So, unless the user chose otherwise, OpenMP
+ * threads sleep when idle (OMP_WAIT_POLICY=passive) and the BLAS runs on
+ * one thread (OPENBLAS_NUM_THREADS=1); the cores go to the assembly's
+ * OpenMP team. Measured before and after in docs/performance.md ("Threads").
+ * Both libraries read the variables before main runs, so when the user has
+ * set neither we set them and re-execute ourselves once. */
 #include "core/core.h"
 #include "plan/plan.h"
 #include "scene/scene.h"
@@ -115,16 +120,18 @@ static int nh_fail(int code) {
   return nh_error_exit_status(code);
 }
 
-/* Set OMP_WAIT_POLICY=passive (unless the user chose) and re-execute. On
- * failure to re-execute, carry on with the default policy. */
-static void nh_passive_threads(char **argv) {
-  if (getenv("OMP_WAIT_POLICY")) return;
-  if (setenv("OMP_WAIT_POLICY", "passive", 1) != 0) return;
-  execv("/proc/self/exe", argv);
+/* Set OMP_WAIT_POLICY=passive and OPENBLAS_NUM_THREADS=1 where the user
+ * has not chosen, and re-execute if either was set. On failure to
+ * re-execute, carry on with the libraries' defaults. */
+static void nh_thread_policy(char **argv) {
+  int changed = 0;
+  if (!getenv("OMP_WAIT_POLICY")) changed |= setenv("OMP_WAIT_POLICY", "passive", 1) == 0;
+  if (!getenv("OPENBLAS_NUM_THREADS")) changed |= setenv("OPENBLAS_NUM_THREADS", "1", 1) == 0;
+  if (changed) execv("/proc/self/exe", argv);
 }
 
 int main(int argc, char **argv) {
-  nh_passive_threads(argv);
+  nh_thread_policy(argv);
   if (argc < 2) {
     fputs(nh_usage, stderr);
     return 2;

@@ -63,6 +63,7 @@ CASES = [
     # A wrong type given by an override.
     ("set_base.yaml", ["tissue.grid=[16,x,8]"], "--set:1", "tissue.grid.1"),
     ("set_base.yaml", ["solver.refactor=sometimes"], "--set:1", "solver.refactor"),
+    ("set_base.yaml", ["solver.lazy_rotation=-1e-3"], "--set:1", "solver.lazy_rotation"),
     # An override that makes the file's time.end conflict.
     ("set_base.yaml", ["time.end=1", "time.steps=3"], "--set:2", "time.steps"),
     # adapt: a template name without a file, a theta outside (0, 1), theta

@@ -4,6 +4,7 @@ nh_add_c_test(test_rotation verify)
 nh_add_c_test(test_patch verify)
 nh_add_c_test(test_locking verify)
 nh_add_c_test(test_parallel unit)
+nh_add_c_test(test_lazy verify)
 nh_add_c_test(test_cantilever verify)
 nh_add_c_test(test_dynamic verify)
 nh_add_c_test(test_static_dynamic verify)
@@ -27,3 +28,7 @@ nh_add_py_test(restart_tools_skull io restart_tools.py skull)
 set_tests_properties(restart_tools_skull PROPERTIES LABELS "io;slow" TIMEOUT 600)
 nh_add_c_test(test_traction verify)
 nh_add_py_test(traction_patch verify traction_patch.py)
+
+# Lazy element tangents in whole runs (tests/lazy_run.py): the needle phantom
+# with solver.lazy_rotation 0 and 1e-3, 1 and 2 threads, identical outputs.
+nh_add_py_test(lazy_run verify lazy_run.py)

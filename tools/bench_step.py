@@ -5,7 +5,10 @@ renewed at every step (solver.refactor: every) and reused (auto). Not a
 test: it reports numbers (docs/performance.md).
 
     tools/bench_step.py [--binary build/needlehex] [--cases NAME ...] [--steps N]
+                        [--modes every auto] [--set KEY=VALUE ...]
                         [--markdown] [--json FILE] [--plot FILE]
+
+--set adds a scene override to every run (e.g. solver.lazy_rotation=1e-3).
 
 Cases (--cases, default all but the tissue-only ones):
   needle-16, needle-32   cases/phantom/phantom.yaml (needle inserted) at 16×8×8, 32×16×16
@@ -17,15 +20,18 @@ Every run has NH_TIME_FACTOR=1: on a step that reuses a factorisation, one
 numeric factorisation of that step's A is done aside and timed (its time is
 excluded from t_step), so each step has its reference t_factor_reference.
 The ratio reported is the median over steps of t_step / t_factor_reference;
-phases are medians over steps (ms). The first step (CHOLMOD's symbolic
-analysis) is left out. Runs are one after another, each with the default
-threads; the load average is printed with each run, since the machine may
-be shared.
+phases are medians over steps (ms), and so is the assembly's share of the
+step; `cpu` is the run's CPU time (user + system, all threads, the
+factorisations timed aside included) per step, which the machine's load does
+not inflate. The first step (CHOLMOD's symbolic analysis) is left out.
+Runs are one after another, each with the default threads; the load average
+is printed with each run, since the machine may be shared.
 """
 import argparse
 import csv
 import json
 import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -51,14 +57,17 @@ CASES = {
 DEFAULT = ["needle-16", "needle-32", "dbs-coarse", "dbs-fine"]
 
 
-def run(binary, case, mode, steps, out):
+def run(binary, case, mode, steps, out, extra=()):
     scene, sets = CASES[case]
+    sets = list(sets) + list(extra)
     cmd = [binary, "run", scene, "--quiet", "--overwrite", "--out", out, "--set", "time.steps=%d" % steps,
            "--set", "output.every=0", "--set", "solver.refactor=" + mode]
     for s in sets:
         cmd += ["--set", s]
     load0 = os.getloadavg()[0]
+    ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     subprocess.run(cmd, check=True, env=dict(os.environ, NH_TIME_FACTOR="1"))
+    ru1 = resource.getrusage(resource.RUSAGE_CHILDREN)
     with open(os.path.join(out, "steps.csv")) as f:
         rows = list(csv.DictReader(f))[1:]
     med = {p: 1e3 * statistics.median(float(r[p]) for r in rows) for p in PHASES}
@@ -67,7 +76,12 @@ def run(binary, case, mode, steps, out):
     med["factorisations"] = sum(int(float(r["factorised"])) for r in rows)
     med["pcg"] = statistics.median(float(r["pcg_iterations"]) for r in rows)
     med["rows"] = statistics.median(float(r["constraints"]) for r in rows)
+    # CPU (user + system, all threads) per step of the whole run, the factorisations
+    # timed aside included: what the machine's load does not inflate
+    cpu = ru1.ru_utime + ru1.ru_stime - ru0.ru_utime - ru0.ru_stime
     med.update(case=case, mode=mode, steps=len(rows), dofs=int(rows[-1]["dofs"]),
+               cpu=1e3 * cpu / (len(rows) + 1),
+               share=statistics.median(float(r["t_assemble"]) / float(r["t_step"]) for r in rows),
                free=int(rows[-1]["free_dofs"]), load=0.5 * (load0 + os.getloadavg()[0]))
     return med
 
@@ -101,37 +115,41 @@ def main():
     ap.add_argument("--binary", default=os.path.join(ROOT, "build", "needlehex"))
     ap.add_argument("--cases", nargs="*", default=DEFAULT, choices=sorted(CASES))
     ap.add_argument("--steps", type=int, default=30)
+    ap.add_argument("--modes", nargs="*", default=["every", "auto"], choices=["every", "auto"])
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="a scene override for every run")
     ap.add_argument("--markdown", action="store_true", help="print a Markdown table")
     ap.add_argument("--json", help="write the results to this file")
     ap.add_argument("--plot", help="ms/step against DOFs (PNG)")
     a = ap.parse_args()
     results = []
     head = ("case", "mode", "dofs", "rows", "assemble", "factor", "solve", "constr", "W",
-            "mcp/corr", "step", "1 factor", "step/factor", "factorisations", "pcg", "load")
-    print("%-10s %-5s %6s %4s %8s %8s %7s %7s %7s %8s %8s %8s %6s %3s %4s %5s" % head)
+            "mcp/corr", "step", "1 factor", "step/factor", "factorisations", "pcg", "asm %",
+            "cpu", "load")
+    print("%-10s %-5s %6s %4s %8s %8s %7s %7s %7s %8s %8s %8s %6s %3s %4s %5s %8s %5s" % head)
     with tempfile.TemporaryDirectory() as tmp:
         for case in a.cases:
-            for mode in ("every", "auto"):
-                r = run(a.binary, case, mode, a.steps, os.path.join(tmp, case + mode))
+            for mode in a.modes:
+                r = run(a.binary, case, mode, a.steps, os.path.join(tmp, case + mode), a.set)
                 results.append(r)
                 print("%-10s %-5s %6d %4.0f %8.2f %8.2f %7.2f %7.2f %7.2f %8.2f %8.2f %8.2f %6.2f "
-                      "%3d %4.0f %5.1f" % (
+                      "%3d %4.0f %5.0f %8.1f %5.1f" % (
                           case, mode, r["dofs"], r["rows"], r["t_assemble"], r["t_factor"],
                           r["t_solve"], r["t_constraints"], r["t_compliance"], r["t_mcp"],
                           r["t_step"], r["t_factor_reference"], r["ratio"], r["factorisations"],
-                          r["pcg"], r["load"]), flush=True)
+                          r["pcg"], 100 * r["share"], r["cpu"], r["load"]), flush=True)
     if a.markdown:
         print("\n| case | refactor | dofs | rows | assemble | factor | solve | constraints (W, "
               "λ) | step | one factorisation | step / factorisation | factorisations | PCG its "
-              "| load |")
-        print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+              "| assembly share | CPU ms / step | load |")
+        print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
         for r in results:
             print("| %s | %s | %d | %.0f | %.2f | %.2f | %.2f | %.2f (%.2f, %.2f) | %.2f | %.2f | "
-                  "%.2f | %d / %d | %.0f | %.1f |" % (
+                  "%.2f | %d / %d | %.0f | %.0f %% | %.1f | %.1f |" % (
                       r["case"], r["mode"], r["dofs"], r["rows"], r["t_assemble"], r["t_factor"],
                       r["t_solve"], r["t_constraints"], r["t_compliance"], r["t_mcp"], r["t_step"],
                       r["t_factor_reference"], r["ratio"], r["factorisations"], r["steps"],
-                      r["pcg"], r["load"]))
+                      r["pcg"], 100 * r["share"], r["cpu"], r["load"]))
     if a.json:
         with open(a.json, "w") as f:
             json.dump(results, f, indent=1)

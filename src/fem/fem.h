@@ -56,9 +56,25 @@ double nh_hex_mean_dilatation(const double u[24], const double Gbar[24], double 
 /* Corotational internal force f[24] and (if Kt != NULL) tangent R K0 Rᵀ, and
  * the rotation R[9] of the element, at nodal displacements u[24]. With vol
  * (B-bar; K0 then deviatoric) f gains κ V θ̄ cof(F̄) ḡₐ and Kt gains
- * κ V bₐ ⊗ b_b, bₐ = cof(F̄) ḡₐ; vol = NULL for the fully integrated one. */
+ * κ V bₐ ⊗ b_b, bₐ = cof(F̄) ḡₐ; vol = NULL for the fully integrated one.
+ * nh_hex_corot_force and nh_hex_corot_tangent below, in one call. */
 void nh_hex_corot(const double X[24], const double u[24], const double K0[576], const double G0[24],
                   const nh_hex_volumetric *vol, double R[9], double f[24], double Kt[576]);
+
+/* The two halves of nh_hex_corot, for tangents kept from an earlier state
+ * (lazy updates, solve/assemble.c). The tangent depends on u only through
+ * the element's frame[18]: its rotation R (frame[0..8]) and, with vol,
+ * C = cof F̄ (frame[9..17]; zero without vol).
+ * nh_hex_corot_force: f[24] at u[24] and the frame there.
+ * nh_hex_corot_tangent: Kt = R K0 Rᵀ (+ κ V bₐ ⊗ b_b, b = C ḡ) of a frame.
+ * nh_hex_corot_apply: y = Kt w without forming Kt (R (K0 (Rᵀ w)) + κ V b (b·w)). */
+void nh_hex_corot_force(const double X[24], const double u[24], const double K0[576],
+                        const double G0[24], const nh_hex_volumetric *vol, double frame[18],
+                        double f[24]);
+void nh_hex_corot_tangent(const double K0[576], const nh_hex_volumetric *vol,
+                          const double frame[18], double Kt[576]);
+void nh_hex_corot_apply(const double K0[576], const nh_hex_volumetric *vol, const double frame[18],
+                        const double w[24], double y[24]);
 
 /* Cauchy stress at the centre: nh_hex_stress_at at ξ = 0; s[6] Voigt. */
 void nh_hex_center_stress(const double X[24], const double u[24], const double G0[24],
@@ -138,6 +154,15 @@ int nh_tissue_set_ties(nh_tissue *tissue, int n_regions, const nh_region *region
  * and tangent Kt[576] (may be NULL), both scaled by φ, plus the cell's tie. */
 void nh_tissue_element(const nh_tissue *tissue, int c, const double *u, double f[24],
                        double Kt[576]);
+/* The same in parts (lazy tangents, solve/assemble.c; frame as nh_hex_corot_force):
+ * the force f[24] at u and the frame there; the tangent Kt[576] of a frame;
+ * y[24] = Kt w[24] of a frame without forming Kt. All scaled by φ, tie included. */
+void nh_tissue_element_force(const nh_tissue *tissue, int c, const double *u, double f[24],
+                             double frame[18]);
+void nh_tissue_element_tangent(const nh_tissue *tissue, int c, const double frame[18],
+                               double Kt[576]);
+void nh_tissue_element_apply(const nh_tissue *tissue, int c, const double frame[18],
+                             const double w[24], double y[24]);
 
 /* Elastic energy Σₑ φ (½ dₑᵀ K0 dₑ + ½ κ V θ̄²) (dₑ = Rᵀxₑ − Xₑ; the second
  * term for B-bar only) at displacements u. */

@@ -129,30 +129,41 @@ double nh_hex_mean_dilatation(const double u[24], const double Gbar[24], double 
   return tr + i2 + nh_mat3_det(H);
 }
 
-void nh_hex_corot(const double X[24], const double u[24], const double K0[576], const double G0[24],
-                  const nh_hex_volumetric *vol, double R[9], double f[24], double Kt[576]) {
-  double d[24], fl[24];
-  nh_hex_corotated(X, u, G0, R, d);
+/* y = R (K0 x) node by node: the rotated image of K0 x. */
+static void nh_rotated_k0(const double K0[576], const double R[9], const double x[24],
+                          double y[24]) {
+  double kx[24];
   for (int r = 0; r < 24; r++) {
     const double *row = K0 + 24 * r;
     double s = 0.0;
-    for (int c = 0; c < 24; c++) s += row[c] * d[c];
-    fl[r] = s;
+    for (int c = 0; c < 24; c++) s += row[c] * x[c];
+    kx[r] = s;
   }
-  for (int a = 0; a < 8; a++) nh_mat3_vec(R, fl + 3 * a, f + 3 * a);
+  for (int a = 0; a < 8; a++) nh_mat3_vec(R, kx + 3 * a, y + 3 * a);
+}
+
+void nh_hex_corot_force(const double X[24], const double u[24], const double K0[576],
+                        const double G0[24], const nh_hex_volumetric *vol, double frame[18],
+                        double f[24]) {
+  double d[24], *R = frame, *cof = frame + 9;
+  nh_hex_corotated(X, u, G0, R, d);
+  nh_rotated_k0(K0, R, d, f);
   /* B-bar's volumetric part: U = ½ κ V θ̄², θ̄ = det F̄ − 1, F̄ = I + Σ uₐ ⊗ ḡₐ;
-   * f = κ V θ̄ bₐ with bₐ = ∂θ̄/∂uₐ = cof(F̄) ḡₐ, tangent κ V bₐ ⊗ b_b (the
-   * term κ V θ̄ ∂b/∂u, of the order of the pressure, dropped as the
-   * variation of R is). */
-  double b[24], kv = 0.0;
+   * f = κ V θ̄ bₐ with bₐ = ∂θ̄/∂uₐ = cof(F̄) ḡₐ. */
   if (vol) {
-    double cof[9];
-    double theta = nh_hex_mean_dilatation(u, vol->Gbar, cof);
-    kv = vol->kappa * vol->volume;
-    for (int a = 0; a < 8; a++) nh_mat3_vec(cof, vol->Gbar + 3 * a, b + 3 * a);
-    for (int i = 0; i < 24; i++) f[i] += kv * theta * b[i];
+    double theta = nh_hex_mean_dilatation(u, vol->Gbar, cof), kv = vol->kappa * vol->volume, b[3];
+    for (int a = 0; a < 8; a++) {
+      nh_mat3_vec(cof, vol->Gbar + 3 * a, b);
+      for (int i = 0; i < 3; i++) f[3 * a + i] += kv * theta * b[i];
+    }
+  } else {
+    memset(cof, 0, 9 * sizeof(double));
   }
-  if (!Kt) return;
+}
+
+void nh_hex_corot_tangent(const double K0[576], const nh_hex_volumetric *vol,
+                          const double frame[18], double Kt[576]) {
+  const double *R = frame;
   for (int a = 0; a < 8; a++)
     for (int c = 0; c < 8; c++) {
       double B[9], T[9];
@@ -163,9 +174,36 @@ void nh_hex_corot(const double X[24], const double u[24], const double K0[576], 
       for (int i = 0; i < 3; i++)
         for (int j = 0; j < 3; j++) Kt[24 * (3 * a + i) + 3 * c + j] = B[3 * i + j];
     }
-  if (vol)
+  /* B-bar: κ V bₐ ⊗ b_b (the term κ V θ̄ ∂b/∂u, of the order of the
+   * pressure, dropped as the variation of R is). */
+  if (vol) {
+    double b[24], kv = vol->kappa * vol->volume;
+    for (int a = 0; a < 8; a++) nh_mat3_vec(frame + 9, vol->Gbar + 3 * a, b + 3 * a);
     for (int r = 0; r < 24; r++)
       for (int c = 0; c < 24; c++) Kt[24 * r + c] += kv * b[r] * b[c];
+  }
+}
+
+void nh_hex_corot_apply(const double K0[576], const nh_hex_volumetric *vol, const double frame[18],
+                        const double w[24], double y[24]) {
+  const double *R = frame;
+  double rw[24];
+  for (int a = 0; a < 8; a++) nh_mat3_tvec(R, w + 3 * a, rw + 3 * a);
+  nh_rotated_k0(K0, R, rw, y);
+  if (vol) {
+    double b[24], bw = 0.0, kv = vol->kappa * vol->volume;
+    for (int a = 0; a < 8; a++) nh_mat3_vec(frame + 9, vol->Gbar + 3 * a, b + 3 * a);
+    for (int i = 0; i < 24; i++) bw += b[i] * w[i];
+    for (int i = 0; i < 24; i++) y[i] += kv * bw * b[i];
+  }
+}
+
+void nh_hex_corot(const double X[24], const double u[24], const double K0[576], const double G0[24],
+                  const nh_hex_volumetric *vol, double R[9], double f[24], double Kt[576]) {
+  double frame[18];
+  nh_hex_corot_force(X, u, K0, G0, vol, frame, f);
+  memcpy(R, frame, 9 * sizeof(double));
+  if (Kt) nh_hex_corot_tangent(K0, vol, frame, Kt);
 }
 
 void nh_hex_center_stress(const double X[24], const double u[24], const double G0[24],

@@ -292,33 +292,80 @@ int nh_tissue_create(const nh_mesh *mesh, const nh_material *material, nh_tissue
   return NH_OK;
 }
 
-void nh_tissue_element(const nh_tissue *t, int c, const double *u, double f[24], double Kt[576]) {
-  const nh_mesh *m = t->mesh;
+/* The cell's tie (8x8 weights T, tangent T ⊗ I), or NULL. */
+static const double *nh_cell_tie(const nh_tissue *t, int c) {
+  int tie = c < t->cap_cell_tie ? t->cell_tie[c] : -1;
+  return tie < 0 ? NULL : t->tie + 64 * tie;
+}
+
+/* K₀ and the B-bar data of leaf c (vol filled, or NULL returned in *volp). */
+static const double *nh_cell_data(const nh_tissue *t, int c, double Kc[576], nh_hex_volumetric *vol,
+                                  const nh_hex_volumetric **volp) {
   int s = t->cell_shape[c];
-  double Xe[24], ue[24], R[9];
+  double lambda, mu;
+  nh_tissue_cell_material(t, c, &lambda, &mu, NULL);
+  *vol = (nh_hex_volumetric){t->Gbar + 24 * s, lambda + 2.0 * mu / 3.0, t->volume[s]};
+  *volp = nh_tissue_gbar(t, c) ? vol : NULL;
+  return nh_cell_K0(t, c, Kc);
+}
+
+void nh_tissue_element_force(const nh_tissue *t, int c, const double *u, double f[24],
+                             double frame[18]) {
+  const nh_mesh *m = t->mesh;
+  double Xe[24], ue[24], Kc[576];
+  nh_hex_volumetric vol;
+  const nh_hex_volumetric *vp;
   nh_mesh_cell_coords(m, m->X, c, Xe);
   nh_mesh_cell_coords(m, u, c, ue);
-  double Kc[576], lambda, mu;
-  nh_tissue_cell_material(t, c, &lambda, &mu, NULL);
-  nh_hex_volumetric vol = {t->Gbar + 24 * s, lambda + 2.0 * mu / 3.0, t->volume[s]};
-  nh_hex_corot(Xe, ue, nh_cell_K0(t, c, Kc), t->G0 + 24 * s, nh_tissue_gbar(t, c) ? &vol : NULL, R,
-               f, Kt);
+  const double *K0 = nh_cell_data(t, c, Kc, &vol, &vp);
+  nh_hex_corot_force(Xe, ue, K0, t->G0 + 24 * t->cell_shape[c], vp, frame, f);
   double phi = m->fill[c];
-  if (phi != 1.0) {
+  if (phi != 1.0)
     for (int i = 0; i < 24; i++) f[i] *= phi;
-    if (Kt)
-      for (int i = 0; i < 576; i++) Kt[i] *= phi;
-  }
-  int tie = c < t->cap_cell_tie ? t->cell_tie[c] : -1;
-  if (tie < 0) return;
-  const double *T = t->tie + 64 * tie;
-  for (int a = 0; a < 8; a++)
-    for (int b = 0; b < 8; b++) {
-      double w = T[8 * a + b];
-      for (int k = 0; k < 3; k++) f[3 * a + k] += w * ue[3 * b + k];
-      if (Kt)
-        for (int k = 0; k < 3; k++) Kt[24 * (3 * a + k) + 3 * b + k] += w;
-    }
+  const double *T = nh_cell_tie(t, c);
+  if (T)
+    for (int a = 0; a < 8; a++)
+      for (int b = 0; b < 8; b++)
+        for (int k = 0; k < 3; k++) f[3 * a + k] += T[8 * a + b] * ue[3 * b + k];
+}
+
+void nh_tissue_element_tangent(const nh_tissue *t, int c, const double frame[18], double Kt[576]) {
+  double Kc[576];
+  nh_hex_volumetric vol;
+  const nh_hex_volumetric *vp;
+  const double *K0 = nh_cell_data(t, c, Kc, &vol, &vp);
+  nh_hex_corot_tangent(K0, vp, frame, Kt);
+  double phi = t->mesh->fill[c];
+  if (phi != 1.0)
+    for (int i = 0; i < 576; i++) Kt[i] *= phi;
+  const double *T = nh_cell_tie(t, c);
+  if (T)
+    for (int a = 0; a < 8; a++)
+      for (int b = 0; b < 8; b++)
+        for (int k = 0; k < 3; k++) Kt[24 * (3 * a + k) + 3 * b + k] += T[8 * a + b];
+}
+
+void nh_tissue_element_apply(const nh_tissue *t, int c, const double frame[18], const double w[24],
+                             double y[24]) {
+  double Kc[576];
+  nh_hex_volumetric vol;
+  const nh_hex_volumetric *vp;
+  const double *K0 = nh_cell_data(t, c, Kc, &vol, &vp);
+  nh_hex_corot_apply(K0, vp, frame, w, y);
+  double phi = t->mesh->fill[c];
+  if (phi != 1.0)
+    for (int i = 0; i < 24; i++) y[i] *= phi;
+  const double *T = nh_cell_tie(t, c);
+  if (T)
+    for (int a = 0; a < 8; a++)
+      for (int b = 0; b < 8; b++)
+        for (int k = 0; k < 3; k++) y[3 * a + k] += T[8 * a + b] * w[3 * b + k];
+}
+
+void nh_tissue_element(const nh_tissue *t, int c, const double *u, double f[24], double Kt[576]) {
+  double frame[18];
+  nh_tissue_element_force(t, c, u, f, frame);
+  if (Kt) nh_tissue_element_tangent(t, c, frame, Kt);
 }
 
 int nh_tissue_set_ties(nh_tissue *t, int n_regions, const nh_region *regions, const double *k,

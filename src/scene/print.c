@@ -234,7 +234,9 @@ void nh_scene_print(const nh_scene *s, void *stdio_file) {
     fprintf(f, "%d thread%s, ", s->solver.threads, s->solver.threads == 1 ? "" : "s");
   else
     fprintf(f, "all cores, ");
-  fprintf(f, "refactor %s\n", s->solver.refactor == NH_REFACTOR_EVERY ? "every step" : "auto");
+  fprintf(f, "refactor %s", s->solver.refactor == NH_REFACTOR_EVERY ? "every step" : "auto");
+  if (s->solver.lazy_rotation > 0) fprintf(f, ", lazy tangents %g", s->solver.lazy_rotation);
+  fputc('\n', f);
   fprintf(f, "tools     %d\n", s->n_tools);
   for (int i = 0; i < s->n_tools; ++i) print_tool(f, s, i);
   fprintf(f, "probes    %d\n", s->n_probes);

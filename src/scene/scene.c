@@ -1390,8 +1390,8 @@ static int read_adapt_goal(const nh_ctx *c, const nh_yaml_node *root, nh_scene *
 }
 
 static int read_solver(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
-  static const char *const keys[] = {"tolerance",  "max_iterations", "threads", "refactor",
-                                     "on_invalid", "newton",         NULL};
+  static const char *const keys[] = {"tolerance",  "max_iterations", "threads",       "refactor",
+                                     "on_invalid", "newton",         "lazy_rotation", NULL};
   static const char *const refactors[] = {"auto", "every", NULL};
   static const char *const newton_keys[] = {"max_iterations", "tolerance", NULL};
   static const char *const on_invalid[] = {"stop", "warn", NULL};
@@ -1404,6 +1404,7 @@ static int read_solver(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   s->solver.on_invalid_warn = 0;
   s->solver.newton_iterations = 0;
   s->solver.newton_tolerance = 1e-8;
+  s->solver.lazy_rotation = 0.0;
   NH_TRY(section(c, root, "", "solver", 0, &m));
   if (!m) return NH_OK;
   NH_TRY(check_keys(c, m, "solver", keys));
@@ -1426,6 +1427,8 @@ static int read_solver(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   NH_TRY(at_least(c, at, "solver", "max_iterations", s->solver.max_iterations, 1, 0));
   NH_TRY(get_int(c, m, "solver", "threads", &s->solver.threads, &at));
   NH_TRY(at_least(c, at, "solver", "threads", s->solver.threads, 0, 0));
+  NH_TRY(get_number(c, m, "solver", "lazy_rotation", 0, &s->solver.lazy_rotation, &at));
+  NH_TRY(at_least(c, at, "solver", "lazy_rotation", s->solver.lazy_rotation, 0, 0));
   NH_TRY(field(c, m, "solver", "refactor", 0, &at));
   if (at) {
     NH_TRY(as_choice(c, at, "solver.refactor", refactors, &choice));

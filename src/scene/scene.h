@@ -269,6 +269,7 @@ typedef struct nh_scene {
     int max_iterations; /* solver.max_iterations: static Newton (default 30) */
     int threads;        /* solver.threads: OpenMP threads, 0 = all cores (default 0) */
     nh_refactor_mode refactor; /* solver.refactor: auto (default) | every */
+    double lazy_rotation;      /* solver.lazy_rotation: lazy tangents' tolerance (default 0) */
     int on_invalid_warn;       /* solver.on_invalid: stop (0, default) | warn (1) */
     int newton_iterations;     /* solver.newton.max_iterations (dynamic; default 0: none) */
     double newton_tolerance;   /* solver.newton.tolerance (default 1e-8) */

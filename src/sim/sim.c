@@ -64,7 +64,8 @@ static const char *const nh_step_columns[] = {"step",
                                               "inverted",
                                               "error_estimate",
                                               "refine_stop",
-                                              "resolves"};
+                                              "resolves",
+                                              "tangent_updates"};
 static const char *const nh_probe_columns[] = {"step", "time", "name", "x",  "y",
                                                "z",    "ux",   "uy",   "uz", "error_estimate"};
 
@@ -684,7 +685,8 @@ static int nh_sim_build(nh_sim *s) {
                                !(sc->adapt.enabled && sc->adapt.estimator == NH_ESTIMATOR_GOAL),
                       .time_factor = getenv("NH_TIME_FACTOR") != NULL,
                       .newton_iterations = sc->solver.newton_iterations,
-                      .newton_tolerance = sc->solver.newton_tolerance};
+                      .newton_tolerance = sc->solver.newton_tolerance,
+                      .lazy_rotation = sc->solver.lazy_rotation};
   /* --restart: the factor the next step reuses, made again (with `every`
    * every step factorises: nothing to restore) */
   if (s->restore_solver && s->integrator.reuse) {
@@ -972,7 +974,8 @@ int nh_sim_step(nh_sim *s) {
                         s->inverted,
                         goal_max,
                         refine_stop,
-                        resolves};
+                        resolves,
+                        st.tangent_updates};
   enum { NH_STEP_COLUMNS = sizeof nh_step_columns / sizeof *nh_step_columns };
   _Static_assert(sizeof row / sizeof *row == NH_STEP_COLUMNS, "one value per steps.csv column");
   if (!s->options.dry_run)

@@ -342,6 +342,8 @@ int nh_step_coupled(nh_system *s, const nh_integrator *in, const double *f_ext, 
   double t0 = nh_time_now();
   s->t_constraints = 0.0;
   nh_system_reset_multipliers(s); /* this step's hanging-node reactions only */
+  nh_system_set_lazy(s, in->lazy_rotation);
+  nh_system_lazy_reset(s);
   nh_system_assemble(s, u, v, 1.0 + h * in->alpha, h * in->beta + h * h, f_int, Kv, in->threads);
   for (int i = 0; i < n; i++) {
     double Mv = t->mass[i / 3] * v[i];
@@ -509,6 +511,7 @@ int nh_step_coupled(nh_system *s, const nh_integrator *in, const double *f_ext, 
 
 done:
   st.step.factorised = s->factor_age == 0;
+  st.step.tangent_updates = nh_system_lazy_updates(s);
   if (stats) *stats = st;
   cholmod_free_sparse(&Jt, &s->cm);
   for (int k = 0; tw && k < n_tools; k++) nh_tool_work_free(&tw[k]);

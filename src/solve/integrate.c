@@ -59,6 +59,7 @@ int nh_step_dynamic(nh_system *s, const nh_integrator *in, const double *f_ext, 
     st.step.t_assemble += nh_time_now() - t2;
     st.step.iterations++;
   }
+  st.step.tangent_updates = nh_system_lazy_updates(s);
   if (stats) *stats = st.step;
   return rc;
 }
@@ -69,9 +70,11 @@ int nh_solve_static(nh_system *s, const nh_integrator *in, const double *f_ext, 
   double *f_int = s->work[0], *r = s->work[2];
   double *b = s->fwork[0], *du = s->fwork[1];
   double t_asm = 0.0, t_fac = 0.0, t_sol = 0.0, rel = INFINITY;
-  int it;
+  int it, n_factor = 0;
   s->t_constraints = 0.0;
   nh_system_reset_multipliers(s);
+  nh_system_set_lazy(s, in->lazy_rotation);
+  nh_system_lazy_reset(s);
   for (it = 0; it <= in->max_iterations; it++) {
     double t0 = nh_time_now();
     nh_system_assemble(s, u, NULL, 0.0, 1.0, f_int, NULL, in->threads);
@@ -86,7 +89,10 @@ int nh_solve_static(nh_system *s, const nh_integrator *in, const double *f_ext, 
     if (!isfinite(rel)) return NH_ERROR(NH_ERR_NUMERIC, "the static residual is not finite");
     if (rel <= in->tolerance || nh_norm(b, s->n_free) == 0.0) break;
     if (it == in->max_iterations) break;
-    NH_TRY(nh_system_factor(s));
+    if (!s->factor_current) { /* lazy tangents may have left A as it was */
+      NH_TRY(nh_system_factor(s));
+      n_factor++;
+    }
     double t2 = nh_time_now();
     NH_TRY(nh_system_solve_constrained(s, b, du));
     nh_system_scatter(s, du, s->work[3]);
@@ -102,9 +108,10 @@ int nh_solve_static(nh_system *s, const nh_integrator *in, const double *f_ext, 
     stats->t_constraints = s->t_constraints;
     stats->iterations = it;
     stats->residual = rel;
-    stats->factorised = it; /* one factorisation per Newton iteration */
+    stats->factorised = n_factor; /* one per Newton iteration unless A was kept */
     stats->pcg_iterations = stats->corrections = 0;
-    stats->t_factor_reference = it > 0 ? t_fac / it : 0.0;
+    stats->tangent_updates = nh_system_lazy_updates(s);
+    stats->t_factor_reference = n_factor > 0 ? t_fac / n_factor : 0.0;
     stats->t_aside = 0.0;
   }
   if (!(rel <= in->tolerance) && rel != 0.0)

@@ -68,7 +68,9 @@ int nh_system_prepare(nh_system *s, const nh_integrator *in, nh_step_stats *st) 
   double t0 = nh_time_now();
   int need = !in->reuse || !s->L || s->n_rows > 0 || s->refactor_due ||
              s->factor_age >= NH_REFACTOR_MAX_AGE;
-  if (s->factor_current) need = 0; /* already the factor of this A */
+  /* already the factor of this A (lazy tangents may keep A): reuse takes it;
+   * `every` factorises at every step, as asked */
+  if (s->factor_current && in->reuse) need = 0;
   if (need) {
     NH_TRY(nh_system_factor(s));
     st->t_factor_reference = nh_time_now() - t0;

@@ -37,13 +37,24 @@ int nh_system_free_dofs(const nh_system *sys);
 /* Number of colours of the cell colouring. */
 int nh_system_colours(const nh_system *sys);
 
-/* Assemble A = cM M + cK K(u) (K the corotational tangent at nodal
- * displacements u) into the system, the internal force f_int (3 per node,
- * all DOFs) and, if v != NULL, the product Kv = K(u) v (3 per node). threads: 0 = OpenMP default, 1
- * = serial (in the same colour order, so the result is bitwise that of any thread count), n = n
- * threads. */
+/* Assemble A = cM M + cK K̃ (K̃ the corotational tangent at nodal
+ * displacements u, each leaf's kept from an earlier assembly while its
+ * rotation changed by at most the lazy tolerance: solve/assemble.c) into the
+ * system, the internal force f_int (3 per node, all DOFs, always at u) and,
+ * if v != NULL, the product Kv = K̃ v (3 per node). A keeps its values, and a
+ * factorisation of it stays current, when no leaf's tangent changed and cM,
+ * cK are those of the last assembly. threads: 0 = OpenMP default, 1 =
+ * serial (in the same colour order, so the result is bitwise that of any
+ * thread count), n = n threads. */
 void nh_system_assemble(nh_system *sys, const double *u, const double *v, double cM, double cK,
                         double *f_int, double *Kv, int threads);
+/* The lazy tolerance τ (solver.lazy_rotation, >= 0; 0 = exact, the default
+ * of a new system): a leaf's tangent is rebuilt when its rotation (or
+ * B-bar's cof F̄) moved by more than τ in the Frobenius norm. */
+void nh_system_set_lazy(nh_system *sys, double tolerance);
+/* Leaves whose tangent the assemblies since nh_system_lazy_reset rebuilt. */
+int nh_system_lazy_updates(const nh_system *sys);
+void nh_system_lazy_reset(nh_system *sys);
 
 /* Numeric Cholesky factorisation of the assembled A (symbolic analysis on
  * first use). Fails with NH_ERR_NUMERIC if A is not positive definite
@@ -98,11 +109,12 @@ typedef struct {
   double t_assemble, t_factor, t_solve; /* s (t_solve excludes t_constraints) */
   double t_constraints;                 /* s: compliance W and multipliers */
   int iterations;                       /* Newton iterations (static), 1 (dynamic) */
-  double residual;    /* relative residual reached: static Newton; dynamic: of the implicit-Euler
-                         equations at the end of the step (nh_dynamic_residual) */
-  int factorised;     /* numeric factorisations of A in the step */
-  int pcg_iterations; /* PCG iterations of the step's solves with a reused factor */
-  int corrections;    /* outer constraint corrections with a reused factor (0: exact W) */
+  double residual;     /* relative residual reached: static Newton; dynamic: of the implicit-Euler
+                          equations at the end of the step (nh_dynamic_residual) */
+  int factorised;      /* numeric factorisations of A in the step */
+  int pcg_iterations;  /* PCG iterations of the step's solves with a reused factor */
+  int corrections;     /* outer constraint corrections with a reused factor (0: exact W) */
+  int tangent_updates; /* leaves whose tangent the step's assemblies rebuilt (solve/assemble.c) */
   /* s: one numeric factorisation of this step's A — the one done, or with
    * nh_integrator.time_factor one done aside (and discarded) on a step that
    * reused the factor; 0 otherwise. t_aside: the time that aside cost (copy
@@ -126,6 +138,7 @@ typedef struct {
   int newton_iterations;   /* dynamic, without tools: Newton corrections after the linearised
                               step while the residual exceeds newton_tolerance (0: none) */
   double newton_tolerance; /* dynamic: relative residual */
+  double lazy_rotation;    /* lazy tangents' tolerance τ (solver.lazy_rotation; 0 = exact) */
 } nh_integrator;
 
 /* The relative residual of the implicit-Euler equations of the step just

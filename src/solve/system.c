@@ -1,5 +1,5 @@
-/* system.c — DOF map, sparsity pattern, cell colouring and parallel
- * assembly of A = cM M + cK K.
+/* system.c — DOF map, sparsity pattern and cell colouring for the
+ * assembly of A = cM M + cK K (the assembly itself: assemble.c).
  *
  * Fixed DOFs are eliminated: the unknowns are the free DOFs, numbered in node
  * order so that each column's rows come out sorted. Hanging nodes, when
@@ -13,7 +13,7 @@
  * goes (576 ints, -1 for the lower triangle and fixed DOFs), computed once
  * per pattern by binary search, so assembly is a straight scatter.
  *
- * Parallel assembly without races: leaves are coloured greedily so that no
+ * Parallel assembly without races (assemble.c): leaves are coloured greedily so that no
  * two leaves of one colour share a node; colours run one after the other,
  * the leaves of a colour in parallel. Leaves with a hanging corner share
  * masters with many others (every fine leaf on a coarse face couples that
@@ -23,7 +23,6 @@
 #include "solve/system_impl.h"
 
 #include <math.h>
-#include <omp.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
@@ -64,6 +63,9 @@ void nh_system_destroy(nh_system **sys) {
   free(s->scatter);
   free(s->colour_start);
   free(s->colour_leaf);
+  free(s->frame);
+  free(s->frame_new);
+  free(s->updated);
   for (int i = 0; i < 4; i++) free(s->work[i]);
   for (int i = 0; i < 2; i++) free(s->fwork[i]);
   free(s->u_assembled), free(s->u_factored);
@@ -377,89 +379,19 @@ int nh_system_create(const nh_tissue *tissue, const unsigned char *fixed, const 
   if ((rc = nh_system_prolongation(s, fixed, hanging)) || (rc = nh_system_pattern(s)) ||
       (rc = nh_colour_leaves(s)))
     goto fail;
+  size_t nl = m->n_leaves ? (size_t)m->n_leaves : 1;
+  s->frame = malloc(sizeof(double) * 18 * nl);
+  s->frame_new = malloc(sizeof(double) * 18 * nl);
+  s->updated = malloc(nl);
+  if (!s->frame || !s->frame_new || !s->updated) {
+    rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: element frames");
+    goto fail;
+  }
   *out = s;
   return NH_OK;
 fail:
   nh_system_destroy(&s);
   return rc;
-}
-
-/* Ã = Tᵀ Aₑ T of a leaf with a hanging corner, scattered through its map. */
-static void nh_scatter_expanded(const nh_system *s, int l, const double *Ae, double *Ax) {
-  int k = s->eff_start[l + 1] - s->eff_start[l], nd = 3 * k;
-  const double *T = s->eff_T + 8 * s->eff_start[l];
-  const int *map = s->emap + s->emap_start[l];
-  double *B = malloc(sizeof(double) * 24 * (size_t)nd); /* B = Aₑ T */
-  if (!B) return; /* cannot happen in practice; the factorisation then fails loudly */
-  for (int r = 0; r < 24; r++)
-    for (int q = 0; q < k; q++)
-      for (int j = 0; j < 3; j++) {
-        double sum = 0.0;
-        for (int b = 0; b < 8; b++) sum += Ae[24 * r + 3 * b + j] * T[b * k + q];
-        B[nd * r + 3 * q + j] = sum;
-      }
-  for (int p = 0; p < k; p++)
-    for (int i = 0; i < 3; i++)
-      for (int c = 0; c < nd; c++) {
-        int pos = map[nd * (3 * p + i) + c];
-        if (pos < 0) continue;
-        double sum = 0.0;
-        for (int a = 0; a < 8; a++) sum += T[a * k + p] * B[nd * (3 * a + i) + c];
-        Ax[pos] += sum;
-      }
-  free(B);
-}
-
-void nh_system_assemble(nh_system *s, const double *u, const double *v, double cM, double cK,
-                        double *f_int, double *Kv, int threads) {
-  const nh_tissue *t = s->tissue;
-  const nh_mesh *m = t->mesh;
-  double *Ax = s->A->x;
-  s->factor_current = 0; /* A changes: a factor of the old values is now a preconditioner */
-  memcpy(s->u_assembled, u, sizeof(double) * 3 * (size_t)m->n_nodes);
-  s->c_assembled[0] = cM, s->c_assembled[1] = cK;
-  memset(Ax, 0, sizeof(double) * ((int *)s->A->p)[s->n_free]);
-  memset(f_int, 0, sizeof(double) * 3 * (size_t)m->n_nodes);
-  if (Kv) memset(Kv, 0, sizeof(double) * 3 * (size_t)m->n_nodes);
-  int nt = threads > 0 ? threads : omp_get_max_threads();
-  for (int colour = 0; colour <= s->n_colours; colour++) {
-    /* SIGINT/SIGTERM: A is left partial; callers ask nh_stop_check after. */
-    if (nh_stop_requested()) break;
-    int lo = s->colour_start[colour], hi = s->colour_start[colour + 1];
-    /* A parallel region costs tens of µs (far more when cores are shared):
-     * only colours of at least 128 cells (≈ 1 ms of element work) are split;
-     * the last group (leaves with hanging corners) is serial. */
-    int parallel = nt > 1 && hi - lo >= 128 && colour < s->n_colours;
-#pragma omp parallel for num_threads(nt) schedule(static) if (parallel)
-    for (int k = lo; k < hi; k++) {
-      int l = s->colour_leaf[k], c = m->leaves[l];
-      const int *e = m->cells + 8 * c;
-      double f[24], K[576];
-      nh_tissue_element(t, c, u, f, K);
-      for (int a = 0; a < 8; a++)
-        for (int i = 0; i < 3; i++) f_int[3 * e[a] + i] += f[3 * a + i];
-      if (Kv) {
-        double ve[24];
-        nh_mesh_cell_coords(m, v, c, ve);
-        for (int r = 0; r < 24; r++) {
-          double sum = 0.0;
-          for (int q = 0; q < 24; q++) sum += K[24 * r + q] * ve[q];
-          Kv[3 * e[r / 3] + r % 3] += sum;
-        }
-      }
-      /* Aₑ = cK Kₑ + cM Mₑ, Mₑ the lumped mass ρ φ Vₑ / 8 per corner. */
-      double me = nh_tissue_corner_mass(t, c);
-      for (int r = 0; r < 576; r++) K[r] *= cK;
-      for (int r = 0; r < 24; r++) K[25 * r] += cM * me;
-      if (s->eff_start[l + 1] > s->eff_start[l]) {
-        nh_scatter_expanded(s, l, K, Ax);
-      } else {
-        const int *map = s->scatter + 576 * (size_t)l;
-        for (int r = 0; r < 576; r++)
-          if (map[r] >= 0) Ax[map[r]] += K[r];
-      }
-    }
-  }
 }
 
 void nh_system_apply(const nh_system *s, const double *x, double *y) {

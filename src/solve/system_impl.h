@@ -53,6 +53,17 @@ struct nh_system {
   int *colour_start; /* n_colours + 1 */
   int *colour_leaf;  /* leaf indices grouped by colour */
 
+  /* Lazy element tangents (assemble.c): the tangent of leaf l in A is that
+   * of frame[18 l ..] (its rotation R and, B-bar, cof F̄ when last updated);
+   * frame_new and updated: the current assembly's frames and which leaves it
+   * updates. A holds cM M + cK K̃ for a_cM, a_cK when a_valid. */
+  double lazy_tolerance; /* solver.lazy_rotation (0: exact) */
+  double *frame, *frame_new;
+  unsigned char *updated;
+  int a_valid;
+  double a_cM, a_cK;
+  int lazy_updates; /* leaves whose tangent the last assembly updated */
+
   /* Constraint rows J (m x n_free, stored as Jᵀ: n_free x m) solved through
    * the compliance W = J A⁻¹ Jᵀ (Algorithm 1); W and its Cholesky factor are
    * rebuilt after each numeric factorisation. */

@@ -1,0 +1,203 @@
+/* assemble.c — the internal force, A = cM M + cK K̃ and K̃ v, with element
+ * tangents updated lazily (solver.lazy_rotation; docs/theory.md §4,
+ * docs/performance.md "Lazy tangents").
+ *
+ * The corotational tangent of a leaf depends on the displacements only
+ * through its frame: the rotation R (polar of F at the centre) and, for
+ * B-bar, C = cof F̄ (fem/hex.c). Most leaves turn little from one assembly
+ * to the next, so, as Chentanez et al. ("Interactive simulation of surgical
+ * needle insertion and steering") do with their elements' Jacobians, a leaf
+ * keeps the frame its tangent in A was built with, R̃ (and C̃), and its
+ * tangent is rebuilt only when
+ *     δ = max(‖R − R̃‖_F, ‖C − C̃‖_F) > τ,      τ = solver.lazy_rotation.
+ * The internal force always uses the current R: the equations solved, and
+ * the equilibrium a Newton iteration converges to, are exact; only their
+ * linearisation, K̃ in A and in the K̃ v of the damping and implicit terms,
+ * lags. The error of a leaf's tangent (R = R̃ + ΔR, ‖ΔR‖₂ ≤ ‖ΔR‖_F ≤ τ, the
+ * rotation block-diagonal over the 8 corners):
+ *     R K₀ Rᵀ − R̃ K₀ R̃ᵀ = ΔR K₀ Rᵀ + R̃ K₀ ΔRᵀ,  ‖·‖₂ ≤ 2 τ ‖K₀‖₂,
+ * and for B-bar's κ V b bᵀ (b = C ḡ) ‖ΔC ḡ bᵀ + b̃ (ΔC ḡ)ᵀ‖₂ ≤
+ * τ ‖ḡ‖² (‖C‖₂ + ‖C̃‖₂) κ V; each scaled by φ and by cK in A
+ * (tests/test_lazy.c checks this bound on a deformed mesh).
+ *
+ * τ = 0 is the exact path: a leaf is updated when its frame differs in any
+ * bit, and A is then assembled afresh from every leaf's frame, so it is
+ * bitwise what an assembly with no history gives. Either way, an assembly in
+ * which no leaf is updated (and cM, cK are those A holds) leaves A's values
+ * untouched and a factorisation of A current: the assembly at the start of
+ * a step repeats the one of the previous step's residual at the same u, and
+ * with τ > 0 whole steps may keep A (the factor stays exact, no PCG).
+ *
+ * With τ > 0 and at most half of the leaves updated, A is updated in place,
+ *     A += cK (K̃_new − K̃_old) over the updated leaves,
+ * which costs two tangents per updated leaf instead of one per leaf; above
+ * half, A is assembled afresh from the frames. The in-place updates add
+ * round-off (about eps ‖K₀‖ each) that a fresh assembly (a mesh change, a
+ * change of cM or cK, more than half the leaves) clears.
+ *
+ * Two passes, each by colour (system.c): 1. every leaf's force, frame,
+ * update decision and K̃ v; 2. A. Within a colour no two leaves share a
+ * node, so every entry receives its contributions in colour order whatever
+ * the thread count: the result is bitwise that of one thread. */
+#include "solve/system_impl.h"
+
+#include <math.h>
+#include <omp.h>
+#include <stdlib.h>
+#include <string.h>
+
+void nh_system_set_lazy(nh_system *s, double tolerance) {
+  s->lazy_tolerance = tolerance;
+}
+
+int nh_system_lazy_updates(const nh_system *s) {
+  return s->lazy_updates;
+}
+
+void nh_system_lazy_reset(nh_system *s) {
+  s->lazy_updates = 0;
+}
+
+/* Ã = Tᵀ Aₑ T of a leaf with a hanging corner, scattered through its map. */
+static void nh_scatter_expanded(const nh_system *s, int l, const double *Ae, double *Ax) {
+  int k = s->eff_start[l + 1] - s->eff_start[l], nd = 3 * k;
+  const double *T = s->eff_T + 8 * s->eff_start[l];
+  const int *map = s->emap + s->emap_start[l];
+  double *B = malloc(sizeof(double) * 24 * (size_t)nd); /* B = Aₑ T */
+  if (!B) return; /* cannot happen in practice; the factorisation then fails loudly */
+  for (int r = 0; r < 24; r++)
+    for (int q = 0; q < k; q++)
+      for (int j = 0; j < 3; j++) {
+        double sum = 0.0;
+        for (int b = 0; b < 8; b++) sum += Ae[24 * r + 3 * b + j] * T[b * k + q];
+        B[nd * r + 3 * q + j] = sum;
+      }
+  for (int p = 0; p < k; p++)
+    for (int i = 0; i < 3; i++)
+      for (int c = 0; c < nd; c++) {
+        int pos = map[nd * (3 * p + i) + c];
+        if (pos < 0) continue;
+        double sum = 0.0;
+        for (int a = 0; a < 8; a++) sum += T[a * k + p] * B[nd * (3 * a + i) + c];
+        Ax[pos] += sum;
+      }
+  free(B);
+}
+
+static void nh_scatter_leaf(const nh_system *s, int l, const double *Ae, double *Ax) {
+  if (s->eff_start[l + 1] > s->eff_start[l]) {
+    nh_scatter_expanded(s, l, Ae, Ax);
+    return;
+  }
+  const int *map = s->scatter + 576 * (size_t)l;
+  for (int r = 0; r < 576; r++)
+    if (map[r] >= 0) Ax[map[r]] += Ae[r];
+}
+
+/* δ = max(‖R − R̃‖_F, ‖C − C̃‖_F) of two frames. */
+static double nh_frame_change(const double a[18], const double b[18]) {
+  double r = 0.0, c = 0.0;
+  for (int i = 0; i < 9; i++) {
+    r += (a[i] - b[i]) * (a[i] - b[i]);
+    c += (a[9 + i] - b[9 + i]) * (a[9 + i] - b[9 + i]);
+  }
+  return sqrt(fmax(r, c));
+}
+
+/* A parallel region costs tens of µs (far more when cores are shared): only
+ * colours with at least this many leaves to do (≈ 1 ms of element work) are
+ * split; the last group (leaves with hanging corners) is serial. */
+enum { NH_ASSEMBLE_PARALLEL_MIN = 128 };
+
+void nh_system_assemble(nh_system *s, const double *u, const double *v, double cM, double cK,
+                        double *f_int, double *Kv, int threads) {
+  const nh_tissue *t = s->tissue;
+  const nh_mesh *m = t->mesh;
+  const double tol = s->lazy_tolerance;
+  const int fresh = !s->a_valid || cM != s->a_cM || cK != s->a_cK;
+  memset(f_int, 0, sizeof(double) * 3 * (size_t)m->n_nodes);
+  if (Kv) memset(Kv, 0, sizeof(double) * 3 * (size_t)m->n_nodes);
+  int nt = threads > 0 ? threads : omp_get_max_threads();
+
+  /* 1. Forces, frames, which tangents to update, and K̃ v. */
+  for (int colour = 0; colour <= s->n_colours; colour++) {
+    /* SIGINT/SIGTERM: the results are left partial; callers ask
+     * nh_stop_check after. */
+    if (nh_stop_requested()) break;
+    int lo = s->colour_start[colour], hi = s->colour_start[colour + 1];
+    int parallel = nt > 1 && hi - lo >= NH_ASSEMBLE_PARALLEL_MIN && colour < s->n_colours;
+#pragma omp parallel for num_threads(nt) schedule(static) if (parallel)
+    for (int k = lo; k < hi; k++) {
+      int l = s->colour_leaf[k], c = m->leaves[l];
+      const int *e = m->cells + 8 * c;
+      double f[24], *now = s->frame_new + 18 * (size_t)l, *old = s->frame + 18 * (size_t)l;
+      nh_tissue_element_force(t, c, u, f, now);
+      int update = fresh || (tol > 0.0 ? nh_frame_change(now, old) > tol
+                                       : memcmp(now, old, 18 * sizeof(double)) != 0);
+      s->updated[l] = (unsigned char)update;
+      for (int a = 0; a < 8; a++)
+        for (int i = 0; i < 3; i++) f_int[3 * e[a] + i] += f[3 * a + i];
+      if (Kv) {
+        double ve[24], y[24];
+        nh_mesh_cell_coords(m, v, c, ve);
+        nh_tissue_element_apply(t, c, update ? now : old, ve, y);
+        for (int r = 0; r < 24; r++) Kv[3 * e[r / 3] + r % 3] += y[r];
+      }
+    }
+  }
+  if (nh_stop_requested()) { /* A and the frames no longer agree: start afresh */
+    s->a_valid = 0;
+    s->factor_current = 0;
+    return;
+  }
+  int todo[66] = {0}, count = 0;
+  for (int colour = 0; colour <= s->n_colours; colour++) {
+    for (int k = s->colour_start[colour]; k < s->colour_start[colour + 1]; k++)
+      todo[colour] += s->updated[s->colour_leaf[k]];
+    count += todo[colour];
+  }
+  s->lazy_updates += count;
+  if (count == 0) return; /* A keeps its values (and a factor of it stays current) */
+
+  /* 2. A: afresh from every leaf's frame, or updated in place. */
+  s->factor_current = 0; /* A changes: a factor of the old values is now a preconditioner */
+  memcpy(s->u_assembled, u, sizeof(double) * 3 * (size_t)m->n_nodes);
+  s->c_assembled[0] = cM, s->c_assembled[1] = cK;
+  const int full = fresh || tol == 0.0 || 2 * count > m->n_leaves;
+  double *Ax = s->A->x;
+  if (full) memset(Ax, 0, sizeof(double) * ((int *)s->A->p)[s->n_free]);
+  for (int colour = 0; colour <= s->n_colours; colour++) {
+    if (nh_stop_requested()) {
+      s->a_valid = 0;
+      return;
+    }
+    int lo = s->colour_start[colour], hi = s->colour_start[colour + 1];
+    int work = full ? hi - lo : todo[colour];
+    int parallel = nt > 1 && work >= NH_ASSEMBLE_PARALLEL_MIN && colour < s->n_colours;
+#pragma omp parallel for num_threads(nt) schedule(static) if (parallel)
+    for (int k = lo; k < hi; k++) {
+      int l = s->colour_leaf[k], c = m->leaves[l];
+      double *frame = s->frame + 18 * (size_t)l, *now = s->frame_new + 18 * (size_t)l;
+      if (!full && !s->updated[l]) continue;
+      double K[576];
+      if (full) {
+        if (s->updated[l]) memcpy(frame, now, 18 * sizeof(double));
+        /* Aₑ = cK Kₑ + cM Mₑ, Mₑ the lumped mass ρ φ Vₑ / 8 per corner. */
+        nh_tissue_element_tangent(t, c, frame, K);
+        double me = nh_tissue_corner_mass(t, c);
+        for (int r = 0; r < 576; r++) K[r] *= cK;
+        for (int r = 0; r < 24; r++) K[25 * r] += cM * me;
+      } else {
+        double K_old[576];
+        nh_tissue_element_tangent(t, c, now, K);
+        nh_tissue_element_tangent(t, c, frame, K_old);
+        for (int r = 0; r < 576; r++) K[r] = cK * (K[r] - K_old[r]);
+        memcpy(frame, now, 18 * sizeof(double));
+      }
+      nh_scatter_leaf(s, l, K, Ax);
+    }
+  }
+  s->a_valid = 1;
+  s->a_cM = cM;
+  s->a_cK = cK;
+}
