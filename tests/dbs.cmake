@@ -9,3 +9,9 @@ nh_add_py_test(dbs verify dbs.py)
 # keeping the entry; on a rigid brain the first run is on the target.
 nh_add_py_test(dbs_plan verify dbs.py --plan)
 set_tests_properties(dbs_plan PROPERTIES TIMEOUT 600 LABELS "verify;slow")
+# Quasi-static brain shift with skull contact (tests/static_skull.py): the
+# STN of cases/dbs/dbs-skull-static.yaml against the dynamic run of
+# dbs-skull.yaml (no tools) settled at 3 s, within the dynamic run's own
+# settling amplitude; coarse 10 x 12 x 9 grid.
+nh_add_py_test(static_skull verify static_skull.py)
+set_tests_properties(static_skull PROPERTIES LABELS "verify;slow")

@@ -5,3 +5,8 @@ nh_add_py_test(needle verify needle.py)
 # Hard cases: needle 10 GPa in tissue 6 kPa, nu 0.45/0.49, h 1e-3/5e-2 s, tip
 # path through nodes, in a face plane, through faces.
 nh_add_py_test(needle_hard "hard;slow" needle.py --hard)
+# Tools in the quasi-static mode (tests/static_insertion.py): the needle under
+# its own weight against q L^4 / 8EI, and a static insertion against slow,
+# heavily damped dynamic insertions (order 1 in the slowness, and the dynamic
+# step's known lag of the shaft forces).
+nh_add_py_test(static_insertion verify static_insertion.py)

@@ -182,6 +182,9 @@ typedef struct {
   double dt;          /* time step h, s */
   double alpha, beta; /* Rayleigh damping C = α M + β K */
   double gravity[3];  /* m/s², lumped (M g) */
+  int quasi_static;   /* a Newton iteration of the static problem (solve/coupled.c): A = K
+                         without the mass; with dt = 1, α = β = 0 and v = 0 the right-hand
+                         side is the static residual and the base velocity its increment */
 } nh_beam_dynamic_options;
 
 /* One backward-Euler step with one linearisation, the tissue's form

@@ -235,7 +235,7 @@ int nh_beam_dynamic_prepare(nh_beam *b, const nh_beam_dynamic_options *o, const 
            "beam dynamic step: dt %g must be positive, alpha %g and beta %g >= 0", o->dt, o->alpha,
            o->beta);
   const int N = s->N, m = s->m;
-  const double h = o->dt, cK = h * o->beta + h * h;
+  const double h = o->dt, cK = h * o->beta + h * h, cM = o->quasi_static ? 0.0 : 1.0 + h * o->alpha;
   double *fi = nh_calloc((size_t)N, sizeof(double));
   double *Kf = nh_calloc((size_t)m * m, sizeof(double));
   if (!fi || !Kf) {
@@ -260,25 +260,29 @@ int nh_beam_dynamic_prepare(nh_beam *b, const nh_beam_dynamic_options *o, const 
   nh_beam_free_block(s->K, N, Kf);
   int rc = NH_OK;
   s->projected = 0;
-  if (nh_beam_form_factor(s, Kf, 1.0 + h * o->alpha, cK)) {
+  if (nh_beam_form_factor(s, Kf, cM, cK)) {
     /* A is indefinite: the tool is compressed beyond a buckling load of
      * the step operator. Use the tangent's positive part (eigenvalues
-     * clipped at 0): the residual stays exact, A stays positive definite. */
+     * clipped at 0, or without mass at 1e-9 of the largest): the residual
+     * stays exact, A stays positive definite. */
     double *w = nh_calloc((size_t)m, sizeof(double));
     if (!w) rc = NH_ERR_MEMORY;
     if (!rc && LAPACKE_dsyev(LAPACK_ROW_MAJOR, 'V', 'U', m, Kf, m, w))
       rc = NH_ERROR(NH_ERR_NUMERIC, "beam dynamic step: eigen-decomposition of the tangent failed");
     if (!rc) {
       double *P = nh_calloc((size_t)m * m, sizeof(double));
+      const double floor = cM > 0 ? 0.0 : 1e-9 * fmax(w[m - 1], 0.0); /* dsyev: ascending */
       if (!P) rc = NH_ERR_MEMORY;
       for (int i = 0; i < m && !rc; i++)
         for (int j = 0; j < m; j++) {
           double v = 0.0;
-          for (int k = 0; k < m; k++)
-            if (w[k] > 0) v += Kf[(size_t)i * m + k] * w[k] * Kf[(size_t)j * m + k];
+          for (int k = 0; k < m; k++) {
+            const double wk = fmax(w[k], floor);
+            if (wk > 0) v += Kf[(size_t)i * m + k] * wk * Kf[(size_t)j * m + k];
+          }
           P[(size_t)i * m + j] = v;
         }
-      if (!rc && nh_beam_form_factor(s, P, 1.0 + h * o->alpha, cK))
+      if (!rc && nh_beam_form_factor(s, P, cM, cK))
         rc =
             NH_ERROR(NH_ERR_NUMERIC, "beam dynamic step: the step matrix is not positive definite");
       s->projected = 1;

@@ -9,12 +9,16 @@
  * orthogonal to t, n2 = t × n1. Rows (nh_rows, solve/solve.h:
  * g = n · (x_P − x_tool), force on the tissue along +n):
  *   shaft point  n1, n2 bilateral (g the lateral offset); t friction with
- *                bound μ |(λ1, λ2)| + friction_per_length × spacing (g = 0):
+ *                bound μ |(λ1, λ2)| + friction_per_length × spacing (g = 0;
+ *                quasi-static: the slip s − s0 along the tool since the step's
+ *                first iteration, so the law holds for the whole step):
  *                it sticks, or slides as the tool moves in or out; a point
  *                that stuck in the last step needs μ_s |(λ1, λ2)| + ... to
  *                start sliding (friction_static; nh_cpoint.slid);
  *   tip          the same at the front with bound μ |(λ1, λ2)| + cutting
- *                force × h and g = t · (x_P − x_tip).
+ *                force × τ and g = t · (x_P − x_tip).
+ * τ is the rows' time scale: the step h (dynamic: λ are impulses), or 1
+ * (quasi-static: λ are forces); thresholds are force × τ, forces λ / τ.
  * The tip rows belong to the group's leading tool (the outer tool unless it
  * retracts, else a released nested tool that does not): when their axial
  * row slides forward on its bound the tip cuts (Eq. 8) and the front moves
@@ -84,6 +88,10 @@ static int nh_tie_rows(nh_contact *c, const nh_mesh *m, const double *u, nh_cpoi
     memcpy(rows->J + 36 * r, J, sizeof J);
     double g[3] = {xp[0] - xb[0], xp[1] - xb[1], xp[2] - xb[2]};
     rows->gap[r] = (q < 2 || tip) ? nh_vec3_dot(dirs[q], g) : 0.0;
+    if (q == 2 && !tip && c->statics) { /* the shaft's slip since the step began */
+      if (c->iteration == 0 || p->tool != k) p->s0 = s;
+      rows->gap[r] = s - p->s0;
+    }
     rows->lambda[r] = p->lam[q];
     if (q == 2)
       rows->law[r] = (nh_row_law){NH_ROW_FRICTION,           first,     first + 1,
@@ -126,7 +134,8 @@ static int nh_leader(const nh_contact *c, const nh_group *G, double t, double h)
   return -1;
 }
 
-int nh_tip_rows(nh_contact *c, nh_group *G, const nh_mesh *m, const double *u, double t, double h) {
+int nh_tip_rows(nh_contact *c, nh_group *G, const nh_mesh *m, const double *u, double t, double h,
+                double tau) {
   if (!G->punctured) return NH_OK;
   const nh_tool_spec *sp = c->tools[G->outer].spec;
   G->tip_tool = -1;
@@ -138,7 +147,10 @@ int nh_tip_rows(nh_contact *c, nh_group *G, const nh_mesh *m, const double *u, d
   nh_point_position(m, u, &G->front, xf);
   double ahead = nh_vec3_dot(tt, xf) - nh_vec3_dot(tt, xt),
          sp_f = nh_point_spacing(sp, m, &G->front);
-  if (ahead < 0.0) { /* the tip passed the front inside the channel: the front moves to it */
+  /* the tip passed the front inside the channel: the front moves to it
+   * (quasi-static: at the step's start only; within the step the tip row's
+   * gap is the tip's advance past the front, whose slide is the cut) */
+  if (ahead < 0.0 && c->iteration == 0) {
     nh_cpoint p = G->front;
     if (!nh_material_point(m, u, xt, G->front.X, &p)) {
       G->front = p, ahead = 0.0;
@@ -147,8 +159,8 @@ int nh_tip_rows(nh_contact *c, nh_group *G, const nh_mesh *m, const double *u, d
   }
   if (ahead <= 0.05 * sp_f) {
     G->tip_tool = lead;
-    if (nh_tie_rows(c, m, u, &G->front, lead, nh_beam_length(tl->beam), tl->spec->cutting_force * h,
-                    1) < 0)
+    if (nh_tie_rows(c, m, u, &G->front, lead, nh_beam_length(tl->beam),
+                    tl->spec->cutting_force * tau, 1) < 0)
       return NH_ERR_MEMORY;
   }
   return NH_OK;
@@ -189,7 +201,7 @@ int nh_tip_update(nh_contact *c, nh_group *G, const nh_mesh *m, const double *u,
   return nh_channel_lay(G, sp, m, &G->front);
 }
 
-int nh_shaft_rows(nh_contact *c, nh_group *G, const nh_mesh *m, const double *u, double h) {
+int nh_shaft_rows(nh_contact *c, nh_group *G, const nh_mesh *m, const double *u, double tau) {
   if (!G->punctured) return NH_OK;
   const double L = nh_beam_length(c->tools[G->outer].beam);
   for (int i = 0; i < G->n_chan; i++) {
@@ -203,7 +215,7 @@ int nh_shaft_rows(nh_contact *c, nh_group *G, const nh_mesh *m, const double *u,
       memset(p->lam, 0, sizeof p->lam);
       continue;
     }
-    if (nh_tie_rows(c, m, u, p, k, s, c->tools[k].spec->friction_per_length * p->len * h, 0) < 0)
+    if (nh_tie_rows(c, m, u, p, k, s, c->tools[k].spec->friction_per_length * p->len * tau, 0) < 0)
       return NH_ERR_MEMORY;
   }
   return NH_OK;

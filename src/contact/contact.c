@@ -26,6 +26,7 @@
  * retracting or punctured by its own motion. */
 #include "contact/contact_impl.h"
 
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -91,24 +92,29 @@ void nh_contact_destroy(nh_contact **pc) {
   free(c->blocks);
   nh_skull_destroy(&c->skull);
   nh_rows_free(&c->rows);
+  free(c->du_last);
   free(c);
   *pc = NULL;
 }
 
-/* Before the step t → t + h: the blocks and the rows of every constraint. */
+/* Before the step t → t + h: the blocks and the rows of every constraint,
+ * with the rows' time scale τ (h, or 1 quasi-static) and v the tissue's
+ * velocity per τ (quasi-static: a predicted increment); `moving`: the
+ * tools' bases move over this solve (quasi-static: its first iteration). */
 static int nh_contact_begin_step(nh_contact *c, const nh_mesh *m, const double *u, const double *v,
-                                 double t, double h) {
+                                 double t, double h, double tau, int moving) {
   nh_rows_clear(&c->rows);
+  c->iteration = c->statics && !moving; /* (only whether it is the first one matters) */
   double g[3]; /* at the end of the step, as the tissue's loads; tools are not buoyed */
   nh_scene_gravity(c->scene, t + h, g);
-  nh_tools_blocks(c, t, h, g);
+  nh_tools_blocks(c, t, h, tau, moving, g);
   for (int i = 0; i < c->n_groups; i++) {
     nh_group *G = &c->groups[i];
-    NH_TRY(nh_puncture_rows(c, G, m, u, h));
-    NH_TRY(nh_tip_rows(c, G, m, u, t, h));
-    NH_TRY(nh_shaft_rows(c, G, m, u, h));
+    NH_TRY(nh_puncture_rows(c, G, m, u, tau));
+    NH_TRY(nh_tip_rows(c, G, m, u, t, h, tau));
+    NH_TRY(nh_shaft_rows(c, G, m, u, tau));
   }
-  if (c->skull) NH_TRY(nh_skull_rows(c->skull, m, u, v, h, &c->rows));
+  if (c->skull) NH_TRY(nh_skull_rows(c->skull, m, u, v, tau, &c->rows));
   return NH_OK;
 }
 
@@ -155,31 +161,33 @@ static nh_tool_state nh_nested_state(const nh_contact *c, int k, double t_new, d
                                                      : NH_TOOL_PUNCTURED;
 }
 
-/* After the solved step (u at t_new): forces, states, nested tools. */
+/* After the solved step (u at t_new): forces, states, nested tools; τ the
+ * rows' time scale (forces are λ / τ). Nested tools following their host
+ * get its velocity over h, and none quasi-static. */
 static int nh_contact_end_step(nh_contact *c, const nh_mesh *m, const double *u, double t_new,
-                               double h) {
+                               double h, double tau) {
   NH_TRY(nh_tools_clear_forces(c));
   c->cut = 0;
   for (int i = 0; i < c->n_groups; i++) {
     nh_group *G = &c->groups[i];
     nh_group_events ev = {0};
-    nh_puncture_update(c, G, h, &ev);
-    nh_shaft_update(c, G, h, &ev);
-    NH_TRY(nh_tip_update(c, G, m, u, h, &ev));
+    nh_puncture_update(c, G, tau, &ev);
+    nh_shaft_update(c, G, tau, &ev);
+    NH_TRY(nh_tip_update(c, G, m, u, tau, &ev));
     NH_TRY(nh_group_transition(c, G, m, u, &ev, t_new, h));
     c->cut += ev.cut;
   }
   for (int k = 0; k < c->n; k++)
     if (c->tools[k].host >= 0) c->tools[k].state = nh_nested_state(c, k, t_new, h);
-  nh_tools_follow(c, t_new, h);
-  if (c->skull) nh_skull_end_step(c->skull, &c->rows, h);
+  nh_tools_follow(c, t_new, c->statics ? 0.0 : h);
+  if (c->skull) nh_skull_end_step(c->skull, &c->rows, tau);
   return NH_OK;
 }
 
 int nh_contact_step(nh_contact *c, nh_system *sys, const nh_integrator *in, const nh_mesh *m,
                     const double *f_ext, double *u, double *v, double t_new, nh_step_stats *stats) {
   const double h = in->dt, t = t_new - h;
-  NH_TRY(nh_contact_begin_step(c, m, u, v, t, h));
+  NH_TRY(nh_contact_begin_step(c, m, u, v, t, h, h, 1));
   int rc = nh_step_coupled(sys, in, f_ext, u, v, c->n_blocks, c->blocks, &c->rows, NH_MCP_TOLERANCE,
                            NH_MCP_ACCEPT, NH_MCP_SWEEPS, &c->solve);
   *stats = c->solve.step;
@@ -191,7 +199,145 @@ int nh_contact_step(nh_contact *c, nh_system *sys, const nh_integrator *in, cons
     }
     return rc;
   }
-  return nh_contact_end_step(c, m, u, t_new, h);
+  return nh_contact_end_step(c, m, u, t_new, h, h);
+}
+
+/* Quasi-static: the redo rule of a skull point pushed through without a
+ * row (relative to its cell edge: what the rows' margin covers), and how
+ * often one iteration may be solved again for it. */
+#define NH_STATIC_MISSED 0.01
+#define NH_STATIC_REDOS  4
+
+/* Size of tool k's last increment (its velocities per τ = 1: translations,
+ * rotations times the tool's length). */
+static double nh_tool_increment(const nh_tool *tl) {
+  const double *v = nh_beam_velocities(tl->beam), L = nh_beam_length(tl->beam);
+  double s = 0.0;
+  for (int i = 0; i < nh_beam_dofs(tl->beam); i++) s += (i % 6 < 3 ? 1.0 : L * L) * v[i] * v[i];
+  return sqrt(s);
+}
+
+/* The forces of a quasi-static iteration as the next one's warm start (the
+ * points' stored forces; nothing else of the states moves). */
+static void nh_contact_keep_forces(nh_contact *c) {
+  const nh_rows *r = &c->rows;
+  for (int g = 0; g < c->n_groups; g++) {
+    nh_group *G = &c->groups[g];
+    for (int q = 0; q < 3; q++) {
+      if (G->entry_row >= 0) G->entry.lam[q] = r->lambda[G->entry_row + q];
+      if (G->tip_tool >= 0 && G->front.row >= 0) G->front.lam[q] = r->lambda[G->front.row + q];
+      for (int i = 0; i < G->n_chan; i++)
+        if (G->chan[i].row >= 0) G->chan[i].lam[q] = r->lambda[G->chan[i].row + q];
+    }
+  }
+  if (c->skull) nh_skull_end_step(c->skull, r, 1.0);
+}
+
+static void nh_tools_stop(nh_contact *c) {
+  for (int k = 0; k < c->n; k++)
+    memset(nh_beam_velocities(c->tools[k].beam), 0,
+           sizeof(double) * (size_t)nh_beam_dofs(c->tools[k].beam));
+}
+
+int nh_contact_solve_static(nh_contact *c, nh_system *sys, const nh_integrator *in,
+                            const nh_mesh *m, const double *f_ext, double *u, double *v,
+                            double t_new, nh_step_stats *stats) {
+  (void)v;
+  const double h = in->dt, t = t_new - h;
+  const int n = 3 * m->n_nodes;
+  nh_integrator it = *in; /* one Newton iteration per coupled solve, τ = 1 */
+  it.dt = 1.0, it.alpha = it.beta = 0.0, it.reuse = 0, it.time_factor = 0;
+  it.newton_iterations = 0, it.quasi_static = 1;
+  if (c->n_du != n) { /* a new mesh: no prediction */
+    free(c->du_last);
+    c->du_last = nh_calloc((size_t)n, sizeof(double));
+    c->n_du = c->du_last ? n : 0;
+  }
+  double *work = nh_calloc(3 * (size_t)n, sizeof(double));
+  double *acc = nh_calloc((size_t)(c->n ? c->n : 1), sizeof(double));
+  if (!c->du_last || !work || !acc) {
+    free(work), free(acc);
+    return NH_ERROR(NH_ERR_MEMORY, "out of memory: quasi-static step");
+  }
+  double *zero = work, *u_start = work + n, *u_iter = work + 2 * n, *pred = c->du_last;
+  memcpy(u_start, u, sizeof(double) * (size_t)n);
+  unsigned char *saved = NULL;
+  size_t saved_size = 0;
+  nh_step_stats sum = {0};
+  c->statics = 1;
+  nh_tools_stop(c);
+  int rc = NH_OK, iter = 0, redos = 0, converged = 0;
+  double residual = INFINITY, tool_rel = 0.0;
+  for (iter = 0; iter < in->max_iterations && !rc && !converged; iter++) {
+    memcpy(u_iter, u, sizeof(double) * (size_t)n);
+    if (c->skull) {
+      free(saved), saved = NULL;
+      if ((rc = nh_contact_state_save(c, &saved, &saved_size))) break;
+    }
+    if ((rc = nh_contact_begin_step(c, m, u, pred, t, h, 1.0, iter == 0))) break;
+    /* A constraint solve that stalls is accepted here whatever its
+     * residual: the next iteration starts from its forces, and only the
+     * last one must meet NH_MCP_ACCEPT (below). */
+    rc = nh_step_coupled(sys, &it, f_ext, u, zero, c->n_blocks, c->blocks, &c->rows,
+                         NH_MCP_TOLERANCE, INFINITY, NH_MCP_SWEEPS, &c->solve);
+    sum.t_assemble += c->solve.step.t_assemble, sum.t_factor += c->solve.step.t_factor;
+    sum.t_solve += c->solve.step.t_solve, sum.t_constraints += c->solve.step.t_constraints;
+    sum.factorised += c->solve.step.factorised;
+    if (rc) {
+      if (c->rows.m > 0 && c->solve.mcp.iterations >= NH_MCP_SWEEPS) {
+        char why[512];
+        snprintf(why, sizeof why, "%s", nh_error_message());
+        rc = NH_ERROR(rc, "quasi-static iteration %d: constraint solve (%d rows): %s", iter + 1,
+                      c->rows.m, why);
+      }
+      break;
+    }
+    /* the increment of this iteration predicts the next one's approach */
+    for (int i = 0; i < n; i++) pred[i] = u[i] - u_iter[i];
+    if (c->skull && redos < NH_STATIC_REDOS && nh_skull_missed(c->skull, m, u) > NH_STATIC_MISSED) {
+      /* a point went through the skull without its row: solve this
+       * iteration again from its start, the point's approach now known */
+      memcpy(u, u_iter, sizeof(double) * (size_t)n);
+      if ((rc = nh_contact_state_load(c, saved, saved_size))) break;
+      nh_tools_stop(c);
+      redos++, iter--;
+      continue;
+    }
+    nh_contact_keep_forces(c);
+    residual = c->solve.step.residual;
+    tool_rel = 0.0;
+    for (int k = 0; k < c->n; k++) {
+      const nh_tool *tl = &c->tools[k];
+      if (tl->dyn < 0) continue;
+      double d = nh_tool_increment(tl);
+      acc[k] += d;
+      if (d > 1e-15 * nh_beam_length(tl->beam)) tool_rel = fmax(tool_rel, d / acc[k]);
+    }
+    nh_tools_stop(c);
+    converged = residual <= in->tolerance && tool_rel <= in->tolerance &&
+                !(c->solve.mcp.residual > NH_MCP_ACCEPT);
+  }
+  free(saved);
+  if (!rc && !converged)
+    rc = NH_ERROR(NH_ERR_NUMERIC,
+                  "quasi-static Newton with constraints did not converge in %d iterations "
+                  "(relative residual %.3g, tool correction %.3g, tolerance %.3g; %d rows, "
+                  "constraint residual %.3g)",
+                  in->max_iterations, residual, tool_rel, in->tolerance, c->rows.m,
+                  c->solve.mcp.residual);
+  sum.iterations = iter;
+  sum.residual = residual;
+  sum.t_factor_reference = sum.factorised > 0 ? sum.t_factor / sum.factorised : 0.0;
+  *stats = sum;
+  c->solve.step = sum;
+  if (!rc) {
+    for (int i = 0; i < n; i++) pred[i] = u[i] - u_start[i];
+    rc = nh_contact_end_step(c, m, u, t_new, h, 1.0);
+  }
+  nh_tools_stop(c);
+  c->statics = 0;
+  free(work), free(acc);
+  return rc;
 }
 
 int nh_contact_relocate(nh_contact *c, const nh_mesh *m) {

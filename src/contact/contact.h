@@ -57,6 +57,24 @@ nh_beam *nh_contact_beam(nh_contact *c, int tool);
 int nh_contact_step(nh_contact *c, nh_system *sys, const nh_integrator *in, const nh_mesh *mesh,
                     const double *f_ext, double *u, double *v, double t_new, nh_step_stats *stats);
 
+/* One pseudo-time step t_new − h → t_new of the quasi-static mode
+ * (docs/interaction.md, "Quasi-static mode"): Newton iterations of the
+ * equilibrium of tissue and tools with the rows of every constraint
+ * rebuilt at each iterate (nh_step_coupled with in->quasi_static; the
+ * tools' bases moved by the motion's travel over the step in the first
+ * iteration), until the tissue's relative residual and each tool's
+ * correction (relative to its increments in the step) are below
+ * in->tolerance; then the constraints' forces move the states on as in
+ * nh_contact_step. An iteration that pushes a skull point without a row
+ * through the skull is solved again with that point's row. v is not
+ * changed (0 in the quasi-static mode). Fails with NH_ERR_NUMERIC (no
+ * convergence in in->max_iterations, with the residuals; the coupled
+ * iteration's errors): the state is then that of the last iterate, and
+ * the caller restores what it saved. NH_ERR_MEMORY. */
+int nh_contact_solve_static(nh_contact *c, nh_system *sys, const nh_integrator *in,
+                            const nh_mesh *mesh, const double *f_ext, double *u, double *v,
+                            double t_new, nh_step_stats *stats);
+
 /* After the mesh changed (refinement): relocate every embedded point by its
  * material coordinates. NH_ERR_INTERNAL if one is no longer in the mesh. */
 int nh_contact_relocate(nh_contact *c, const nh_mesh *mesh);
@@ -134,5 +152,10 @@ double nh_skull_penetration(const nh_skull *skull, const nh_mesh *mesh, const do
  * NH_ERR_INPUT when the point count differs; a short read is left in r. */
 void nh_skull_state_save(const nh_skull *skull, nh_bytes *b);
 int nh_skull_state_load(nh_skull *skull, nh_byte_reader *r);
+/* The largest penetration at u of the points that had no row in the last
+ * nh_skull_rows, relative to their cell's edge (0 if none): a solve that
+ * moved a point through the skull without its row (quasi-static Newton
+ * iterations check it and solve again with the point's approach known). */
+double nh_skull_missed(const nh_skull *skull, const nh_mesh *mesh, const double *u);
 
 #endif

@@ -29,6 +29,7 @@ typedef struct {
   double xi[3]; /* natural coordinates in it */
   double len;   /* channel length it stands for (spacing), m */
   double s;     /* arc length of its tool point (last projection) */
+  double s0;    /* quasi-static: s at the step's first iteration (the slip is s − s0) */
   int tool;     /* the tool it was tied to in the last step (−1: none) */
   int row;      /* its first row in the last step (−1: none) */
   double lam[3];
@@ -89,6 +90,11 @@ struct nh_contact {
   nh_coupled_stats solve; /* the last step's */
   int cut;                /* groups whose tip cut in the last step */
   nh_skull *skull;        /* tissue.skull (NULL without): its rows follow the tools' */
+  int statics;            /* this step is quasi-static (nh_contact_solve_static) */
+  int iteration;          /* its Newton iteration (0: the first; always 0 dynamic) */
+  double *du_last;        /* quasi-static: the tissue's increment over the last step (3 per
+                             node, n_du of them), which predicts the skull rows' approach */
+  int n_du;
 };
 
 /* ---- tools.c ---- */
@@ -106,13 +112,17 @@ void nh_tool_follow(nh_tool *in, const nh_tool *host, double h);
  * their release time t_new. */
 void nh_tools_follow(nh_contact *c, double t_new, double h);
 /* The coupled solve's block of every tool that moves by its own dynamics
- * (not a nested tool following its host) over t → t + h, under gravity g. */
-void nh_tools_blocks(nh_contact *c, double t, double h, const double g[3]);
+ * (not a nested tool following its host) over t → t + h, under gravity g,
+ * with the rows' time scale τ (docs/interaction.md): dynamic (τ = h) the
+ * base velocity of the motion; quasi-static (τ = 1) a Newton iteration
+ * whose base moves by the motion's travel over the step if `moving`, by 0
+ * otherwise (the later iterations of the step). */
+void nh_tools_blocks(nh_contact *c, double t, double h, double tau, int moving, const double g[3]);
 /* Zero the forces of the last step; NH_ERR_NUMERIC on a tool position that
  * is not finite. */
 int nh_tools_clear_forces(nh_contact *c);
-/* Add row r's force on the tool (−n λ / h) at arc length s to its totals. */
-void nh_tool_add_force(nh_tool *tool, const nh_rows *rows, int r, double h, double s);
+/* Add row r's force on the tool (−n λ / τ) at arc length s to its totals. */
+void nh_tool_add_force(nh_tool *tool, const nh_rows *rows, int r, double tau, double s);
 /* Closest point of a tool to x: arc length by Newton from s0 (unclamped:
  * the caller decides what lies beyond the ends). */
 double nh_tool_project(const nh_beam *beam, const double x[3], double s0);
@@ -135,17 +145,17 @@ void nh_row_tissue(nh_rows *rows, int r, const nh_mesh *mesh, const nh_cpoint *p
 /* The entry point of an outer tool on the rest surface (has_entry = 0: its
  * axis misses the tissue). */
 void nh_puncture_init(nh_group *G, const nh_tool_spec *spec, const nh_mesh *mesh);
-int nh_puncture_rows(nh_contact *c, nh_group *G, const nh_mesh *mesh, const double *u, double h);
-void nh_puncture_update(nh_contact *c, nh_group *G, double h, nh_group_events *ev);
+int nh_puncture_rows(nh_contact *c, nh_group *G, const nh_mesh *mesh, const double *u, double tau);
+void nh_puncture_update(nh_contact *c, nh_group *G, double tau, nh_group_events *ev);
 
 /* ---- channel.c ---- */
 /* Open the channel at the entry point (the transition to punctured). */
 int nh_channel_open(nh_group *G, const nh_tool_spec *spec, const nh_mesh *mesh);
 int nh_tip_rows(nh_contact *c, nh_group *G, const nh_mesh *mesh, const double *u, double t,
-                double h);
-int nh_tip_update(nh_contact *c, nh_group *G, const nh_mesh *mesh, const double *u, double h,
+                double h, double tau);
+int nh_tip_update(nh_contact *c, nh_group *G, const nh_mesh *mesh, const double *u, double tau,
                   nh_group_events *ev);
-int nh_shaft_rows(nh_contact *c, nh_group *G, const nh_mesh *mesh, const double *u, double h);
-void nh_shaft_update(nh_contact *c, nh_group *G, double h, nh_group_events *ev);
+int nh_shaft_rows(nh_contact *c, nh_group *G, const nh_mesh *mesh, const double *u, double tau);
+void nh_shaft_update(nh_contact *c, nh_group *G, double tau, nh_group_events *ev);
 
 #endif

@@ -266,3 +266,14 @@ int nh_skull_state_load(nh_skull *s, nh_byte_reader *r) {
   s->active = active;
   return NH_OK;
 }
+
+double nh_skull_missed(const nh_skull *s, const nh_mesh *m, const double *u) {
+  double worst = 0.0;
+  for (int i = 0; i < s->n; i++) {
+    if (s->p[i].row >= 0) continue;
+    double x[3], N[8], nrm[3];
+    nh_skull_position(m, u, &s->p[i], x, N);
+    worst = fmax(worst, (nh_skull_distance(&s->domain, x, nrm) - s->gap) / s->p[i].edge);
+  }
+  return worst;
+}

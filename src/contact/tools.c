@@ -121,21 +121,23 @@ void nh_tools_follow(nh_contact *c, double t_new, double h) {
   }
 }
 
-void nh_tools_blocks(nh_contact *c, double t, double h, const double g[3]) {
+void nh_tools_blocks(nh_contact *c, double t, double h, double tau, int moving, const double g[3]) {
+  const int statics = c->statics;
   int nd = 0;
   for (int k = 0; k < c->n; k++) {
     nh_tool *tl = &c->tools[k];
     const nh_tool_spec *sp = tl->spec;
     tl->dyn = -1;
-    if (tl->host >= 0 && !tl->released) continue; /* follows its host */
-    double speed = nh_tool_speed(sp, t, h);
-    for (int i = 0; i < 3; i++) tl->base_v[i] = speed * sp->direction[i], tl->base_v[3 + i] = 0.0;
+    if (tl->host >= 0 && !tl->released) continue;                   /* follows its host */
+    double rate = moving ? nh_tool_speed(sp, t, h) * h / tau : 0.0; /* travel per τ */
+    for (int i = 0; i < 3; i++) tl->base_v[i] = rate * sp->direction[i], tl->base_v[3 + i] = 0.0;
     tl->dyn = nd;
     c->blocks[nd] = (nh_coupled_tool){.beam = tl->beam,
-                                      .options = {.dt = h,
-                                                  .alpha = sp->damping_mass,
-                                                  .beta = sp->damping_stiffness,
-                                                  .gravity = {g[0], g[1], g[2]}},
+                                      .options = {.dt = tau,
+                                                  .alpha = statics ? 0.0 : sp->damping_mass,
+                                                  .beta = statics ? 0.0 : sp->damping_stiffness,
+                                                  .gravity = {g[0], g[1], g[2]},
+                                                  .quasi_static = statics},
                                       .f_ext = NULL};
     memcpy(c->blocks[nd].base_velocity, tl->base_v, sizeof tl->base_v);
     nd++;
@@ -156,12 +158,12 @@ int nh_tools_clear_forces(nh_contact *c) {
   return NH_OK;
 }
 
-void nh_tool_add_force(nh_tool *tl, const nh_rows *rows, int r, double h, double s) {
+void nh_tool_add_force(nh_tool *tl, const nh_rows *rows, int r, double tau, double s) {
   const double *n = rows->dir + 3 * r;
   int nn = nh_beam_nodes(tl->beam), node = (int)lround(s / nh_beam_length(tl->beam) * (nn - 1));
   node = node < 0 ? 0 : (node >= nn ? nn - 1 : node);
   for (int i = 0; i < 3; i++) {
-    double f = -n[i] * rows->lambda[r] / h;
+    double f = -n[i] * rows->lambda[r] / tau;
     tl->F[i] += f;
     tl->f_node[3 * node + i] += f;
   }

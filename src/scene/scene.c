@@ -630,10 +630,6 @@ static int read_skull(const nh_ctx *c, const nh_yaml_node *tissue, nh_scene *s) 
     return fail(c, key, "tissue.skull",
                 "needs an immersed domain (brain): the skull is the domain's surface offset by "
                 "the gap");
-  if (s->time.mode != NH_MODE_DYNAMIC)
-    return fail(c, key, "tissue.skull",
-                "needs time.mode: dynamic (the contact rows are solved in the backward-Euler "
-                "step; for a quasi-static shift, run dynamic with damping to rest)");
   return NH_OK;
 }
 

@@ -751,15 +751,56 @@ static int nh_sim_estimate(nh_sim *s) {
                                 &s->eta, &s->eta_rel);
 }
 
+/* Static mode: a step that does not converge is solved again from its
+ * start in 2, 4, … up to 2^NH_STATIC_SPLITS equal load steps (pseudo-time
+ * sub-steps: loads, prescribed displacements and the tools' travel at
+ * their intermediate values, the constraints' states moved on at each). */
+#define NH_STATIC_SPLITS 4
+
+/* The quasi-static step t_new − h → t_new (docs/theory.md §3, "Quasi-static
+ * Newton"; docs/interaction.md, "Quasi-static mode" with tools or a skull). */
+static int nh_sim_solve_static(nh_sim *s, double t_new, nh_step_stats *st) {
+  const double t_old = t_new - s->scene->time.step;
+  for (int depth = 0;; depth++) {
+    const int parts = 1 << depth;
+    nh_integrator in = s->integrator;
+    in.dt = (t_new - t_old) / parts;
+    nh_step_stats sum = {0}, one = {0};
+    int rc = NH_OK;
+    for (int k = 1; k <= parts && !rc; k++) {
+      double t = k == parts ? t_new : t_old + (t_new - t_old) * k / parts;
+      nh_sim_prescribe(s, t);
+      nh_sim_external_force(s, t, s->f_ext);
+      rc = s->contact ? nh_contact_solve_static(s->contact, s->system, &in, s->mesh, s->f_ext, s->u,
+                                                s->v, t, &one)
+                      : nh_solve_static(s->system, &in, s->f_ext, s->u, &one);
+      sum.t_assemble += one.t_assemble, sum.t_factor += one.t_factor;
+      sum.t_solve += one.t_solve, sum.t_constraints += one.t_constraints;
+      sum.iterations += one.iterations, sum.factorised += one.factorised;
+      sum.residual = one.residual;
+    }
+    sum.t_factor_reference = sum.factorised > 0 ? sum.t_factor / sum.factorised : 0.0;
+    *st = sum;
+    if (rc != NH_ERR_NUMERIC || depth == NH_STATIC_SPLITS) return rc;
+    /* back to the step's start, and again in twice as many load steps */
+    char why[512];
+    snprintf(why, sizeof why, "%s", nh_error_message());
+    nh_error_clear();
+    memcpy(s->u, s->u_start, sizeof(double) * 3 * (size_t)s->mesh->n_nodes);
+    if (s->contact) NH_TRY(nh_contact_state_load(s->contact, s->tools_start, s->tools_start_size));
+    nh_log_info("step %d (t = %g s): %s; solving it again in %d load steps", s->step + 1, t_new,
+                why, 2 * parts);
+  }
+}
+
 /* The step's solve (dynamic, static or with tools) at time t_new. */
 static int nh_sim_solve(nh_sim *s, double t_new, nh_step_stats *st) {
   const nh_scene *sc = s->scene;
+  if (sc->time.mode == NH_MODE_STATIC) return nh_sim_solve_static(s, t_new, st);
   nh_sim_external_force(s, t_new, s->f_ext);
   return s->contact ? nh_contact_step(s->contact, s->system, &s->integrator, s->mesh, s->f_ext,
                                       s->u, s->v, t_new, st)
-         : sc->time.mode == NH_MODE_STATIC
-             ? nh_solve_static(s->system, &s->integrator, s->f_ext, s->u, st)
-             : nh_step_dynamic(s->system, &s->integrator, s->f_ext, s->u, s->v, st);
+                    : nh_step_dynamic(s->system, &s->integrator, s->f_ext, s->u, s->v, st);
 }
 
 /* adapt.resolve: while a goal estimate exceeds the tolerance (or, without

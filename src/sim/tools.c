@@ -66,8 +66,6 @@ int nh_sim_tools_build(nh_sim *s) {
   const nh_scene *sc = s->scene;
   if (sc->n_tools == 0 && !sc->tissue.skull) return NH_OK;
   const char *where = sc->n_tools > 0 ? sc->tools[0].where : sc->tissue.where_skull;
-  NH_CHECK(sc->time.mode == NH_MODE_DYNAMIC, NH_ERR_INPUT,
-           "%s: tools need time.mode: dynamic (the quasi-static mode has no tools yet)", where);
   NH_CHECK(!sc->adapt.enabled || sc->adapt.hanging == NH_HANGING_ELIMINATE, NH_ERR_INPUT,
            "%s: adapt.hanging: lagrange cannot be combined with tools (use eliminate)",
            sc->adapt.where);

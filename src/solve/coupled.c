@@ -21,6 +21,14 @@
  * DOFs, the base node's dropped (prescribed). Without tools and rows this
  * is nh_step_dynamic (which may carry hanging-node rows instead).
  *
+ * Quasi-static (in->quasi_static): the same four steps are one Newton
+ * iteration of the equilibrium f_int(x) = f_ext + Jᵀλ with the rows' laws
+ * on the positions: A = K (no mass, no damping; the tools' options say
+ * so too), b = f_ext − f_int, τ = in->dt = 1 so the rows' "rates" are
+ * w = J δ + g (the new gaps, to first order) and λ are forces, not
+ * impulses; u ← u + δ. The contact module calls it until the residual
+ * vanishes (docs/interaction.md, "Quasi-static mode").
+ *
  * With in->reuse (solver.refactor: auto) the tissue block may keep an
  * earlier factorisation (reuse.c decides): its solves are then PCG with that
  * factor as preconditioner, W's tissue part is the old factor's W₀, and
@@ -344,12 +352,24 @@ int nh_step_coupled(nh_system *s, const nh_integrator *in, const double *f_ext, 
   nh_system_reset_multipliers(s); /* this step's hanging-node reactions only */
   nh_system_set_lazy(s, in->lazy_rotation);
   nh_system_lazy_reset(s);
-  nh_system_assemble(s, u, v, 1.0 + h * in->alpha, h * in->beta + h * h, f_int, Kv, in->threads);
-  for (int i = 0; i < n; i++) {
-    double Mv = t->mass[i / 3] * v[i];
-    rhs[i] = h * (f_ext[i] - f_int[i] - in->alpha * Mv - in->beta * Kv[i]) - h * h * Kv[i];
+  const int statics = in->quasi_static;
+  if (statics) { /* a Newton iteration: A = K(u), b = f_ext − f_int(u) */
+    nh_system_assemble(s, u, NULL, 0.0, 1.0, f_int, NULL, in->threads);
+    for (int i = 0; i < n; i++) rhs[i] = f_ext[i] - f_int[i];
+  } else {
+    nh_system_assemble(s, u, v, 1.0 + h * in->alpha, h * in->beta + h * h, f_int, Kv, in->threads);
+    for (int i = 0; i < n; i++) {
+      double Mv = t->mass[i / 3] * v[i];
+      rhs[i] = h * (f_ext[i] - f_int[i] - in->alpha * Mv - in->beta * Kv[i]) - h * h * Kv[i];
+    }
   }
   nh_system_gather(s, rhs, b);
+  double b_norm = 0.0, f_scale = 0.0; /* quasi-static: the residual's parts */
+  if (statics) {
+    double fe = 0.0, fi = 0.0;
+    for (int i = 0; i < n; i++) fe += f_ext[i] * f_ext[i], fi += f_int[i] * f_int[i];
+    f_scale = fmax(sqrt(fe), sqrt(fi));
+  }
   double t1 = nh_time_now();
   st.step.t_assemble = t1 - t0;
   if ((rc = nh_stop_check())) goto done; /* an assembly cut short */
@@ -469,6 +489,11 @@ int nh_step_coupled(nh_system *s, const nh_integrator *in, const double *f_ext, 
       st.t_mcp = nh_time_now() - tc2;
       if (rc) goto done;
       nh_jt_scatter(Jt, rows->lambda, col, nf);
+      if (statics) { /* the equilibrium residual with this iteration's forces */
+        double r2 = 0.0, j2 = 0.0;
+        for (int i = 0; i < nf; i++) r2 += (b[i] + col[i]) * (b[i] + col[i]), j2 += col[i] * col[i];
+        b_norm = sqrt(r2), f_scale = fmax(f_scale, sqrt(j2));
+      }
       if ((rc = nh_system_solve(s, col, b))) goto done;
       for (int i = 0; i < nf; i++) dv[i] += b[i];
     } else {
@@ -492,9 +517,17 @@ int nh_step_coupled(nh_system *s, const nh_integrator *in, const double *f_ext, 
     goto done;
   }
   nh_system_scatter(s, dv, full);
-  for (int i = 0; i < n; i++) {
-    v[i] += full[i];
-    u[i] += h * v[i];
+  if (statics) {
+    if (m == 0) { /* (with rows: measured before the correction, above) */
+      for (int i = 0; i < nf; i++) b_norm += b[i] * b[i];
+      b_norm = sqrt(b_norm);
+    }
+    for (int i = 0; i < n; i++) u[i] += full[i];
+  } else {
+    for (int i = 0; i < n; i++) {
+      v[i] += full[i];
+      u[i] += h * v[i];
+    }
   }
   for (int k = 0; k < n_tools; k++)
     if ((rc = nh_beam_dynamic_finish(tools[k].beam, h, tools[k].base_velocity, tw[k].dv)))
@@ -502,6 +535,10 @@ int nh_step_coupled(nh_system *s, const nh_integrator *in, const double *f_ext, 
   double t7 = nh_time_now();
   st.step.t_solve += t7 - t6;
   st.step.iterations = 1;
+  if (statics) {
+    st.step.residual = b_norm / fmax(f_scale, 1e-300);
+    goto done;
+  }
   if (in->reuse) nh_system_account(s, st.step.pcg_iterations);
   /* The residual of the one linearisation (full still holds the update; col
    * the rows' reaction J_tᵀ λ, which the corrected path left as an increment). */

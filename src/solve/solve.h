@@ -139,6 +139,8 @@ typedef struct {
                               step while the residual exceeds newton_tolerance (0: none) */
   double newton_tolerance; /* dynamic: relative residual */
   double lazy_rotation;    /* lazy tangents' tolerance τ (solver.lazy_rotation; 0 = exact) */
+  int quasi_static;        /* nh_step_coupled: one Newton iteration of the static problem with
+                              constraint rows instead of a backward-Euler step (see there) */
 } nh_integrator;
 
 /* The relative residual of the implicit-Euler equations of the step just
@@ -300,7 +302,16 @@ typedef struct {
  * independently. The system must not carry hanging-node rows
  * (nh_system_set_hanging_rows): use elimination. Fails with NH_ERR_NUMERIC
  * (a block not positive definite / singular, a non-finite update, the
- * constraint solve not converged: the message names which), NH_ERR_MEMORY. */
+ * constraint solve not converged: the message names which), NH_ERR_MEMORY.
+ * With in->quasi_static (in->dt = 1, the rows' time scale τ, and the
+ * tools' options quasi_static) it is one Newton iteration of the static
+ * equilibrium instead (docs/interaction.md, "Quasi-static mode"): A = K(u),
+ * b = f_ext − f_int(u), δ = A⁻¹ (b + Jᵀλ) per block, w = J δ + g (a tool's
+ * base moved by its base_velocity), λ the total forces, u ← u + δ (v is not
+ * used); stats->step.residual is the tissue's relative equilibrium residual
+ * |b + J_tᵀλ| / max(|f_ext|, |f_int|, |J_tᵀλ|) at the state the iteration
+ * started from (so K δ: zero at the solution), and the factor is always
+ * the current one (no reuse). */
 int nh_step_coupled(nh_system *sys, const nh_integrator *in, const double *f_ext, double *u,
                     double *v, int n_tools, nh_coupled_tool *tools, nh_rows *rows, double tolerance,
                     double accept, int max_iterations, nh_coupled_stats *stats);
