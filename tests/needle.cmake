@@ -5,3 +5,8 @@ nh_add_py_test(needle verify needle.py)
 # Hard cases: needle 10 GPa in tissue 6 kPa, nu 0.45/0.49, h 1e-3/5e-2 s, tip
 # path through nodes, in a face plane, through faces.
 nh_add_py_test(needle_hard "hard;slow" needle.py --hard)
+# Bevel-tip steering (tests/steering.py): psi = 0 straight under base spin,
+# deviation monotone in psi and along the bevel, a 180 deg turn at half depth
+# flips the curvature, circular paths with kappa proportional to tan(psi) in a
+# rigid-like medium (the bicycle model).
+nh_add_py_test(steering "verify;slow" steering.py)
