@@ -101,6 +101,12 @@ CASES = [
     ("tools_base.yaml", ["tools.0.interaction.friction=0.2",
                          "tools.0.interaction.friction_static=0.1"], "--set:2",
      "tools.0.interaction.friction_static"),
+    # bevel: the angle in [0, 90), required with the bevel; the side across the axis
+    ("tools_base.yaml", ["tools.0.bevel.angle=90"], "--set:1", "tools.0.bevel.angle"),
+    ("tools_base.yaml", ["tools.0.bevel.toward=[0,1,0]"], "--set:1", "tools.0.bevel.angle"),
+    ("tools_base.yaml", ["tools.0.bevel.angle=10", "tools.0.bevel.toward=[2,0,0]"], "--set:2",
+     "tools.0.bevel.toward"),
+    ("tools_base.yaml", ["tools.0.motion.0.spin=fast"], "--set:1", "tools.0.motion.0.spin"),
     ("tools_base.yaml", ["tools.0.radius=0.001", "tools.1.inside=electrode"], "--set:2",
      "tools.1.inside"),
     ("tools_base.yaml", ["tools.2.length=1"], "--set:1", "tools.2"),

@@ -10,3 +10,8 @@ nh_add_py_test(needle_hard "hard;slow" needle.py --hard)
 # heavily damped dynamic insertions (order 1 in the slowness, and the dynamic
 # step's known lag of the shaft forces).
 nh_add_py_test(static_insertion verify static_insertion.py)
+# Bevel-tip steering (tests/steering.py): psi = 0 straight under base spin,
+# deviation monotone in psi and along the bevel, a 180 deg turn at half depth
+# flips the curvature, circular paths with kappa proportional to tan(psi) in a
+# rigid-like medium (the bicycle model).
+nh_add_py_test(steering "verify;slow" steering.py)

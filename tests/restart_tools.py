@@ -145,6 +145,14 @@ def main():
                      "tools.0.interaction.friction_static=0.3",
                      "tools.0.motion=[{until: 0.5, speed: 0.02}, {until: 0.6, speed: 0}, "
                      "{until: 0.9, speed: -0.02}]"], 55, 1e-12)
+        # a bevel tip and a half turn of the base (stopped during the turn):
+        # the twist lives in the beam's directors, the bevel's offset in the
+        # front, both in the checkpoint already
+        check_scene("needle-phantom, bevel", needle,
+                    ["output.checkpoint=20", "output.every=10", "time.end=1.5",
+                     "tools.0.bevel.angle=3", "tools.0.bevel.toward=[0, 1, 1]",
+                     "tools.0.motion=[{until: 0.5, speed: 0.02}, {until: 1.0, speed: 0, "
+                     "spin: 6.283185307179586}, {until: 1.5, speed: 0.02}]"], 70, 1e-12)
         return report()
     # The DBS procedure, shortened as in tests/dbs.py's order of events:
     # brain shift, insertion to the target, electrode released, retraction;

@@ -19,6 +19,11 @@
  *                force × τ and g = t · (x_P − x_tip).
  * τ is the rows' time scale: the step h (dynamic: λ are impulses), or 1
  * (quasi-static: λ are forces); thresholds are force × τ, forces λ / τ.
+ * A bevel tip (tools.N.bevel, Chentanez et al. 2009 §3.5) cuts off its
+ * axis: when the tip cuts a distance d, the new front is the material point
+ * at x_tip + d tan ψ b, b the tip's n1 (its second director across t), so
+ * the lateral rows pull the tip that way in the following steps and the
+ * tissue's reaction bends the needle. The base's spin turns b.
  * The tip rows belong to the group's leading tool (the outer tool unless it
  * retracts, else a released nested tool that does not): when their axial
  * row slides forward on its bound the tip cuts (Eq. 8) and the front moves
@@ -61,6 +66,20 @@ static int nh_channel_lay(nh_group *G, const nh_tool_spec *spec, const nh_mesh *
   }
 }
 
+/* n1 of the rows' frame: the second director of the node T made
+ * orthogonal to the tangent t and normalised. */
+static void nh_frame_normal(const double *T, const double t[3], double n1[3]) {
+  double d = T[1] * t[0] + T[4] * t[1] + T[7] * t[2];
+  n1[0] = T[1] - d * t[0], n1[1] = T[4] - d * t[1], n1[2] = T[7] - d * t[2];
+  nh_vec3_normalize(n1);
+}
+
+/* The bevel direction at the tip: the tip node's second director made
+ * orthogonal to the tip tangent t (the n1 of the tip rows). */
+static void nh_tip_bevel_direction(nh_beam *beam, const double t[3], double b[3]) {
+  nh_frame_normal(nh_beam_directors(beam) + 9 * (nh_beam_nodes(beam) - 1), t, b);
+}
+
 /* Three rows tying P to tool k's point at s (shaft or tip); returns the
  * first row or −1 (memory). */
 static int nh_tie_rows(nh_contact *c, const nh_mesh *m, const double *u, nh_cpoint *p, int k,
@@ -71,10 +90,8 @@ static int nh_tie_rows(nh_contact *c, const nh_mesh *m, const double *u, nh_cpoi
   int e;
   nh_beam_point(tl->beam, s, xb, t, &e, &xi, J);
   nh_point_position(m, u, p, xp);
-  const double *T = nh_beam_directors(tl->beam) + 9 * (xi < 0.5 ? e : e + 1);
-  double n1[3] = {T[1], T[4], T[7]}, n2[3], d = nh_vec3_dot(n1, t);
-  for (int i = 0; i < 3; i++) n1[i] -= d * t[i];
-  nh_vec3_normalize(n1);
+  double n1[3], n2[3];
+  nh_frame_normal(nh_beam_directors(tl->beam) + 9 * (xi < 0.5 ? e : e + 1), t, n1);
   nh_vec3_cross(t, n1, n2);
   const double *dirs[3] = {n1, n2, t};
   int first = -1;
@@ -152,7 +169,9 @@ int nh_tip_rows(nh_contact *c, nh_group *G, const nh_mesh *m, const double *u, d
    * gap is the tip's advance past the front, whose slide is the cut) */
   if (ahead < 0.0 && c->iteration == 0) {
     nh_cpoint p = G->front;
-    if (!nh_material_point(m, u, xt, G->front.X, &p)) {
+    double xa[3]; /* a bevel's front keeps its offset across the tip: it moves along t only */
+    for (int i = 0; i < 3; i++) xa[i] = tl->spec->bevel > 0 ? xf[i] - ahead * tt[i] : xt[i];
+    if (!nh_material_point(m, u, xa, G->front.X, &p)) {
       G->front = p, ahead = 0.0;
       NH_TRY(nh_channel_lay(G, sp, m, &G->front));
     }
@@ -189,9 +208,19 @@ int nh_tip_update(nh_contact *c, nh_group *G, const nh_mesh *m, const double *u,
   }
   G->front.slid = rows->law[r + 2].sliding;
   if (!nh_on_bound(rows, r + 2) || rows->lambda[r + 2] < 0.0) return NH_OK; /* it sticks */
-  /* cut and advance (Eq. 8): the front moves to the material point at the tip */
-  double xt[3];
-  nh_beam_point(tl->beam, nh_beam_length(tl->beam), xt, NULL, NULL, NULL, NULL);
+  /* cut and advance (Eq. 8): the front moves to the material point at the
+   * tip; a bevel moves it on by d tan ψ along the tip's bevel direction
+   * (d the tip's advance along its tangent past the old front) */
+  double xt[3], tt[3], xf[3];
+  nh_beam_point(tl->beam, nh_beam_length(tl->beam), xt, tt, NULL, NULL, NULL);
+  if (tl->spec->bevel > 0) {
+    double b[3], d;
+    nh_tip_bevel_direction(tl->beam, tt, b);
+    nh_point_position(m, u, &G->front, xf);
+    d = fmax(0.0, nh_vec3_dot(tt, xt) - nh_vec3_dot(tt, xf));
+    const double h_bevel = d * tan(tl->spec->bevel * 3.14159265358979323846 / 180.0);
+    for (int i = 0; i < 3; i++) xt[i] += h_bevel * b[i];
+  }
   nh_cpoint p = G->front;
   if (nh_material_point(m, u, xt, G->front.X, &p)) return NH_OK;
   double d[3] = {p.X[0] - G->front.X[0], p.X[1] - G->front.X[1], p.X[2] - G->front.X[2]};

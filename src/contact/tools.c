@@ -4,9 +4,11 @@
  * report (docs/interaction.md, "Nested tools" and "Retraction").
  *
  * A tool's base moves along its direction with the speed of its motion
- * list (m/s per segment, 0 after the last); over a step the base velocity
- * is the travel of that step divided by h, so the base lands exactly on the
- * planned distance at every step end. A nested tool that is not yet
+ * list (m/s per segment, 0 after the last) and turns about it with the
+ * spin (rad/s); over a step the base velocity is the travel (turn) of that
+ * step divided by h, so the base lands exactly on the planned distance and
+ * angle at every step end. The turn reaches the tip through the beam's
+ * torsion (docs/interaction.md, "Bevel tip"). A nested tool that is not yet
  * released is kinematic: its nodes sit on the host's centre line at their
  * arc length (offset + k l₀, straight on along the end tangent beyond the
  * host's ends), its directors are the rest directors turned by the rotation
@@ -17,15 +19,20 @@
 #include <stdio.h>
 #include <string.h>
 
-/* Insertion distance d(t) = ∫₀ᵗ speed of a motion list (speed 0 after the last segment). */
-static double nh_motion_distance(const nh_tool_spec *sp, double t) {
+/* Insertion distance d(t) = ∫₀ᵗ speed (spin = 0), or base turn angle
+ * ∫₀ᵗ spin (spin = 1), of a motion list (0 after the last segment). */
+static double nh_motion_integral(const nh_tool_spec *sp, double t, int spin) {
   double d = 0.0, t0 = 0.0;
   for (int i = 0; i < sp->n_motion && t0 < t; i++) {
     double t1 = fmin(sp->motion[i].until, t);
-    if (t1 > t0) d += sp->motion[i].speed * (t1 - t0);
+    if (t1 > t0) d += (spin ? sp->motion[i].spin : sp->motion[i].speed) * (t1 - t0);
     t0 = sp->motion[i].until;
   }
   return d;
+}
+
+static double nh_motion_distance(const nh_tool_spec *sp, double t) {
+  return nh_motion_integral(sp, t, 0);
 }
 
 double nh_tool_speed(const nh_tool_spec *sp, double t, double h) {
@@ -96,6 +103,7 @@ int nh_tool_init(nh_contact *c, int k, const nh_mesh *m) {
                      .elements = sp->elements};
   memcpy(bs.base, sp->base, sizeof bs.base);
   memcpy(bs.direction, sp->direction, sizeof bs.direction);
+  memcpy(bs.normal, sp->bevel_toward, sizeof bs.normal); /* zero: the beam's default d2 */
   int rc = nh_beam_create(&bs, &tl->beam);
   if (rc) {
     char why[256];
@@ -128,9 +136,16 @@ void nh_tools_blocks(nh_contact *c, double t, double h, double tau, int moving, 
     nh_tool *tl = &c->tools[k];
     const nh_tool_spec *sp = tl->spec;
     tl->dyn = -1;
-    if (tl->host >= 0 && !tl->released) continue;                   /* follows its host */
-    double rate = moving ? nh_tool_speed(sp, t, h) * h / tau : 0.0; /* travel per τ */
-    for (int i = 0; i < 3; i++) tl->base_v[i] = rate * sp->direction[i], tl->base_v[3 + i] = 0.0;
+    if (tl->host >= 0 && !tl->released) continue; /* follows its host */
+    /* the base translates along `direction` and turns about it (its d1
+     * stays `direction`: the base never bends), by the step's travel and
+     * turn per τ (the step h, or 1 in the quasi-static mode, whose first
+     * iteration moves the base by the whole step; later ones not at all) */
+    double rate = moving ? nh_tool_speed(sp, t, h) * h / tau : 0.0,
+           spin = moving ? (nh_motion_integral(sp, t + h, 1) - nh_motion_integral(sp, t, 1)) / tau
+                         : 0.0;
+    for (int i = 0; i < 3; i++)
+      tl->base_v[i] = rate * sp->direction[i], tl->base_v[3 + i] = spin * sp->direction[i];
     tl->dyn = nd;
     c->blocks[nd] = (nh_coupled_tool){.beam = tl->beam,
                                       .options = {.dt = tau,

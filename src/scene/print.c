@@ -64,9 +64,18 @@ static void print_tool(FILE *f, const nh_scene *s, int i) {
   for (int k = 0; k < t->n_motion; ++k) {
     static const char *const word[] = {"", " (until: target)", " (until: start)"};
     const nh_motion *m = &t->motion[k];
-    fprintf(f, "            %s %g m/s until %.*g s%s%s\n", k == 0 ? "motion" : "      ", m->speed,
-            m->kind == NH_UNTIL_TIME ? 6 : 9, m->until, word[m->kind],
+    fprintf(f, "            %s %g m/s", k == 0 ? "motion" : "      ", m->speed);
+    if (m->spin != 0) fprintf(f, ", spin %g rad/s", m->spin);
+    fprintf(f, " until %.*g s%s%s\n", m->kind == NH_UNTIL_TIME ? 6 : 9, m->until, word[m->kind],
             k + 1 == t->n_motion ? ", then at rest" : "");
+  }
+  if (t->bevel > 0) {
+    fprintf(f, "            bevel %g deg, the tip bends towards ", t->bevel);
+    if (nh_vec3_norm(t->bevel_toward) > 0)
+      fprintf(f, "[%g, %g, %g] at t = 0\n", t->bevel_toward[0], t->bevel_toward[1],
+              t->bevel_toward[2]);
+    else
+      fprintf(f, "the tool's default second director at t = 0\n");
   }
   fprintf(f,
           "            puncture %g N, cutting %g N, friction mu %g (static %g) plus %g N/m, path "

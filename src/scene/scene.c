@@ -1503,7 +1503,7 @@ static nh_until_kind until_word(const nh_yaml_node *n) {
  * times around it then. */
 static int read_motion(const nh_ctx *c, const nh_yaml_node *tool, const char *path,
                        nh_tool_spec *t) {
-  static const char *const keys[] = {"until", "speed", NULL};
+  static const char *const keys[] = {"until", "speed", "spin", NULL};
   char motion[NH_KEY_MAX], item[NH_KEY_MAX], key[NH_KEY_MAX], d[96];
   const nh_yaml_node *list;
   NH_TRY(list_section(c, tool, path, "motion", &list));
@@ -1519,6 +1519,7 @@ static int read_motion(const nh_ctx *c, const nh_yaml_node *tool, const char *pa
       return fail(c, m, item, "expected a segment {until: TIME, speed: SPEED}, got %s",
                   describe(m, d, sizeof d));
     NH_TRY(check_keys(c, m, item, keys));
+    NH_TRY(get_number(c, m, item, "spin", 0, &segment->spin, NULL));
     NH_TRY(field(c, m, item, "until", 1, &at));
     segment->kind = until_word(at);
     if (segment->kind != NH_UNTIL_TIME) {
@@ -1631,12 +1632,52 @@ static int read_trajectory(const nh_ctx *c, const nh_yaml_node *tool, const char
   return NH_OK;
 }
 
+/* PATH.bevel (optional): {angle: DEG, toward: [x, y, z]}; angle in [0, 90),
+ * toward non-zero (checked against the direction by resolve_bevel, once a
+ * trajectory has set it). */
+static int read_bevel(const nh_ctx *c, const nh_yaml_node *tool, const char *path,
+                      nh_tool_spec *t) {
+  static const char *const keys[] = {"angle", "toward", NULL};
+  char sub[NH_KEY_MAX], key[NH_KEY_MAX];
+  const nh_yaml_node *m, *at;
+  NH_TRY(section(c, tool, path, "bevel", 0, &m));
+  if (!m) return NH_OK;
+  join(sub, path, "bevel");
+  NH_TRY(check_keys(c, m, sub, keys));
+  NH_TRY(get_number(c, m, sub, "angle", 1, &t->bevel, &at));
+  if (!(t->bevel >= 0 && t->bevel < 90))
+    return fail(c, at, join(key, sub, "angle"), "must lie in [0, 90) degrees, got %g", t->bevel);
+  NH_TRY(get_vec3(c, m, sub, "toward", 0, t->bevel_toward, &at));
+  if (at && !(nh_vec3_norm(t->bevel_toward) > 0))
+    return fail(c, at, join(key, sub, "toward"), "must not be the zero vector");
+  return NH_OK;
+}
+
+/* tools.i.bevel.toward, once the direction is known: made orthogonal to it
+ * and normalised; an error if (nearly) parallel to it. */
+static int resolve_bevel(const nh_ctx *c, const nh_yaml_node *tool, const char *path,
+                         nh_tool_spec *t) {
+  char key[NH_KEY_MAX];
+  double *b = t->bevel_toward, n = nh_vec3_norm(b), p = nh_vec3_dot(b, t->direction);
+  if (n == 0) return NH_OK;
+  for (int k = 0; k < 3; ++k) b[k] -= p * t->direction[k];
+  double m = nh_vec3_norm(b);
+  if (!(m > 1e-6 * n)) {
+    const nh_yaml_node *bevel = nh_yaml_get(tool, "bevel", NULL);
+    return fail(c, nh_yaml_get(bevel, "toward", NULL), join(key, path, "bevel.toward"),
+                "is parallel to the tool's direction [%g, %g, %g]: give a side across it",
+                t->direction[0], t->direction[1], t->direction[2]);
+  }
+  for (int k = 0; k < 3; ++k) b[k] /= m;
+  return NH_OK;
+}
+
 /* tools[i]: one tool, its defaults and its checks (tools before it are read). */
 static int read_tool(const nh_ctx *c, const nh_yaml_node *list, int i, nh_scene *s) {
   static const char *const keys[] = {"name",      "length",     "radius",  "inner_radius",
                                      "elements",  "material",   "damping", "base",
                                      "direction", "trajectory", "motion",  "interaction",
-                                     "inside",    "release",    NULL};
+                                     "inside",    "release",    "bevel",   NULL};
   static const char *const interaction_keys[] = {
       "puncture_force", "cutting_force",   "friction", "friction_per_length",
       "spacing",        "friction_static", NULL};
@@ -1704,6 +1745,7 @@ static int read_tool(const nh_ctx *c, const nh_yaml_node *list, int i, nh_scene 
     NH_TRY(read_direction(c, node, path, t->direction));
   }
   NH_TRY(read_motion(c, node, path, t));
+  NH_TRY(read_bevel(c, node, path, t));
 
   join(sub, path, "interaction");
   NH_TRY(section(c, node, path, "interaction", 0, &m));
@@ -1911,6 +1953,7 @@ static int read_plans(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
     if (t->planned) NH_TRY(resolve_trajectory(c, tool, path, s, i));
     if (t->release_target) NH_TRY(resolve_release(c, tool, path, s, i));
     NH_TRY(resolve_motion(c, tool, path, s, i));
+    NH_TRY(resolve_bevel(c, tool, path, t));
   }
   return NH_OK;
 }

@@ -97,13 +97,15 @@ typedef enum {
 } nh_until_kind;
 
 /* One segment of a tool's motion: insertion speed (m/s along `direction`;
- * negative: retraction; any finite value) until time `until` (s). The first
+ * negative: retraction; any finite value) and base spin (rad/s about
+ * `direction`) until time `until` (s). The first
  * `until` is > 0 and the following ones increase strictly, so segment k holds
  * from the previous `until` (0 for k = 0) to its own; after the last one the
  * speed is 0. A symbolic `until` (target, start) is a time here, resolved
  * when the scene is read. */
 typedef struct {
   double until, speed;
+  double spin;        /* rad/s about the tool's axis, right-handed (default 0, finite) */
   nh_until_kind kind; /* how `until` was given; a symbolic one is resolved to a time at load */
 } nh_motion;
 
@@ -134,7 +136,7 @@ typedef struct {
   double aim[3];   /* trajectory.aim, m (default: the target's point) */
   int aimed;       /* trajectory.aim was given */
   double depth;    /* the planned depth D = standoff + |aim − entry|, m */
-  int n_motion;    /* tools[i].motion: list of {until, speed} (default: none, at rest) */
+  int n_motion;    /* tools[i].motion: list of {until, speed, spin} (default: none, at rest) */
   nh_motion *motion;
   double puncture_force;  /* tools[i].interaction.puncture_force, N (default 0, >= 0) */
   double cutting_force;   /* tools[i].interaction.cutting_force, N (default 0, >= 0) */
@@ -142,12 +144,15 @@ typedef struct {
   double friction_static; /* tools[i].interaction.friction_static, static μ_s: the threshold
                              to start sliding (default friction, >= friction) */
   double friction_per_length; /* tools[i].interaction.friction_per_length, N/m (default 0, >= 0) */
-  double spacing;     /* tools[i].interaction.spacing: path-point spacing, m (default 0: half the
-                         local cell edge; >= 0) */
-  int inside;         /* tools[i].inside: index of the host tool (-1: none); the host
-                         must be another tool listed before this one, not itself nested */
-  double release;     /* tools[i].release, s (>= 0; default +inf: never; only with inside) */
-  int release_target; /* release: target, resolved to the end of the host's until: target */
+  double spacing; /* tools[i].interaction.spacing: path-point spacing, m (default 0: half the
+                     local cell edge; >= 0) */
+  double bevel;   /* tools[i].bevel.angle ψ, degrees (default 0: symmetric tip; in [0, 90)) */
+  double bevel_toward[3];   /* tools[i].bevel.toward: the side the tip bends to at t = 0, unit and
+                               orthogonal to direction (default: the beam's default d2) */
+  int inside;               /* tools[i].inside: index of the host tool (-1: none); the host
+                               must be another tool listed before this one, not itself nested */
+  double release;           /* tools[i].release, s (>= 0; default +inf: never; only with inside) */
+  int release_target;       /* release: target, resolved to the end of the host's until: target */
   char where[NH_WHERE_MAX]; /* "FILE:LINE: tools.i" */
 } nh_tool_spec;
 
