@@ -40,6 +40,18 @@
  *     vector error (the x, y components from the h/3 mesh, which are two
  *     orders smaller than z); asserted θ ∈ [0.7, 1.5] on the three finest
  *     adaptive meshes (the issue's band).
+ *  3. The tip–target distance (dwr.c "Distance"): a tool tip held 5 mm from
+ *     the probe along the DBS case's trajectory, reversed (the unit vector
+ *     (0.211, 0.529, 0.822): the tool comes from above), and
+ *     D(v) = |tip − (p + J(v))|. In the identity of 1, with n_h the unit
+ *     vector from p + J(u_h) to the tip and z_D the fine dual of
+ *     nh_goal_distance_functional(n_h), D(u_f) − D(u_h) = ρ(u_h; z_D) up to
+ *     the linearisation of the norm, whose remainder is at most
+ *     |J(u_f) − J(u_h)|² / D(u_h) (asserted with that bound added to the
+ *     round-off tolerance; the left side from the distances, the right from
+ *     the residual). In 2, the effectivity |E_D| / |D_ref − D_h| of
+ *     nh_dwr_distance_estimate on the three finest meshes, D_ref from the
+ *     reference vector of 2, in the same band [0.7, 1.5].
  * NH_VERBOSE=1 prints the sequence. */
 #include "check.h"
 #include "adapt/adapt.h"
@@ -56,6 +68,23 @@
 #define RADIUS    5e-4
 
 static const double probe[3] = {0.025, 0.010, 0.015};
+/* A tool tip 5 mm from the probe along (0.211, 0.529, 0.822) (normalised). */
+static void tool_tip(double tip[3]) {
+  const double d[3] = {0.211, 0.529, 0.822};
+  double len = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+  for (int k = 0; k < 3; k++) tip[k] = probe[k] + 0.005 * d[k] / len;
+}
+
+/* D = |tip − (p + J)| for the box means J[3] of a solution; n (may be NULL):
+ * the unit vector from p + J to the tip. */
+static double distance(const double J[3], double n[3]) {
+  double tip[3], d[3];
+  tool_tip(tip);
+  for (int k = 0; k < 3; k++) d[k] = tip[k] - probe[k] - J[k];
+  double len = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+  for (int k = 0; n && k < 3; k++) n[k] = d[k] / len;
+  return len;
+}
 static const double lo[3] = {0, 0, 0}, hi[3] = {0.04, 0.02, 0.02};
 static const int grid[3] = {8, 4, 4};
 
@@ -194,6 +223,24 @@ static void test_identity(void) {
              fabs(lhs - rhs) / fabs(lhs));
     free(Pzh);
   }
+  /* The distance functional: its fine dual and the identity up to the
+   * linearisation's remainder. */
+  double nh_[3], Jf[3], e2 = 0.0;
+  double Dh = distance(Jh, nh_);
+  for (int k = 0; k < 3; k++) {
+    Jf[k] = dot(nfn, p.j + (size_t)nfn * k, p.u);
+    e2 += (Jf[k] - Jh[k]) * (Jf[k] - Jh[k]);
+  }
+  double *jD = malloc(sizeof(double) * nfn), *zD = malloc(sizeof(double) * nfn);
+  CHECK_OK(nh_goal_distance_functional(p.m, probe, nh_, RADIUS, "probe", jD));
+  CHECK_OK(nh_dwr_duals(p.s, 1.0, p.m->n_nodes, 1, jD, zD));
+  double lhs = distance(Jf, NULL) - Dh, rhs = dot(nfn, p.f, zD) - energy_product(&p, Puh, zD);
+  CHECK_CLOSE(rhs, lhs, 1e-9 * fabs(lhs) + e2 / Dh,
+              "distance: D(u_f) - D(u_h) = rho(u_h; z_D) + O(|e|^2 / D)");
+  if (getenv("NH_VERBOSE"))
+    printf("identity distance: D(u_f)-D(u_h) = %.6e, rho(z_D) = %.6e, rel diff %.1e (bound %.1e)\n",
+           lhs, rhs, fabs(lhs - rhs) / fabs(lhs), (1e-9 * fabs(lhs) + e2 / Dh) / fabs(lhs));
+  free(jD), free(zD);
   nh_refine_info_free(&info);
   free(all), free(uh), free(zh), free(Puh), free(zf);
   nh_template_destroy(&t2);
@@ -285,6 +332,25 @@ static void test_effectivity(void) {
         fabs(Jinf - J3[2]), smallest);
   if (getenv("NH_VERBOSE"))
     printf("order %.3f, J_inf %.9e (|J_inf - J(h/3)| = %.3e)\n", order, Jinf, fabs(Jinf - J3[2]));
+  /* The distance: reference from the reference vector (x, y from h/3, z
+   * extrapolated); its uncertainty is that of J_inf along n. */
+  double Jref[3] = {J3[0], J3[1], Jinf}, tip[3], nref[3];
+  tool_tip(tip);
+  double Dref = distance(Jref, nref);
+  for (int s = steps - 3; s < steps; s++) {
+    double x[3] = {probe[0] + Jh[s][0], probe[1] + Jh[s][1], probe[2] + Jh[s][2]};
+    double err = Dref - distance(Jh[s], NULL), est = nh_dwr_distance_estimate(E[s], x, tip);
+    double theta = fabs(est) / fabs(err);
+    if (getenv("NH_VERBOSE"))
+      printf("mesh %d: distance error %.3e, estimate %.3e, effectivity %.3f\n", s, err, est, theta);
+    CHECK(fabs(nref[2] * (Jinf - J3[2])) <= 0.2 * fabs(err),
+          "distance: reference uncertainty %.3e above 1/5 of the error %.3e on mesh %d",
+          fabs(nref[2] * (Jinf - J3[2])), fabs(err), s);
+    CHECK(theta >= 0.7 && theta <= 1.5,
+          "distance effectivity on adaptive mesh %d (%d dofs): expected [0.7, 1.5], got %.3f "
+          "(estimate %.3e, error %.3e)",
+          s, dofs[s], theta, est, err);
+  }
   for (int s = 0; s < steps; s++) {
     double e[3] = {J3[0] - Jh[s][0], J3[1] - Jh[s][1], Jinf - Jh[s][2]};
     double en = sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]);

@@ -41,6 +41,26 @@
  * its sign, J(u) − J(u_h). Per point the estimate of the error vector's
  * length is |E_p| = (Σ_k E_pk²)^½ (m).
  *
+ * Distance. The electrode tip–target distance d = |x_tip − x_T|, with
+ * x_T = X_T + J_T(u) the target's current position (the box mean above)
+ * and x_tip the tool's tip, a node of its beam. Linearised about the
+ * current state, δd = n · (δx_tip − δx_T), n = (x_tip − x_T) / d. The dual
+ * sees the tip as held: the beam is not refined (its own discretisation
+ * error is not estimated), and the tissue's discretisation error reaches
+ * the tip only through the constraint forces, which bend the tool by
+ * (compliance of the beam) × (error of the force) — the constraint rows are
+ * not in A (below), so the dual of the tissue alone has no path to the tip.
+ * Its tissue part is then the functional −n · J_T, whose nodal vector is
+ * −Σ_k n_k j_k (nh_goal_distance_functional) and whose dual, by linearity,
+ * is −Σ_k n_k z_k: no extra solve. The recovery (SPR) and the integrals
+ * are linear in the dual, so its estimate is exactly −Σ_k n_k E_k
+ * (nh_dwr_distance_estimate). The held tip is a good model for a stiff
+ * tool (docs/adaptivity.md gives the numbers for the DBS cannula and
+ * electrode). At d = 0, d is not differentiable; |δd| ≤ |δx_T| there and
+ * everywhere, which is why marking keeps the target's position (3
+ * components) as its goal: controlling it controls the distance from any
+ * direction.
+ *
  * Cell indicators. Local contributions ε_K cancel between cells; a cell
  * whose primal and dual errors happen to be orthogonal would never be
  * refined. Marking uses the Cauchy–Schwarz bound of each cell's term
@@ -82,6 +102,27 @@ int nh_goal_functional(const nh_mesh *m, const double point[3], double radius, i
   unit[k] = 1.0;
   memset(j, 0, sizeof(double) * 3 * (size_t)m->n_nodes);
   return nh_mesh_region_load(m, &box, unit, j);
+}
+
+int nh_goal_distance_functional(const nh_mesh *m, const double target[3], const double n[3],
+                                double radius, const char *where, double *j) {
+  const size_t n3 = 3 * (size_t)m->n_nodes;
+  double *jk = malloc(sizeof(double) * n3);
+  if (!jk) return NH_ERROR(NH_ERR_MEMORY, "out of memory: distance functional");
+  int rc = NH_OK;
+  memset(j, 0, sizeof(double) * n3);
+  for (int k = 0; k < 3 && !rc; k++)
+    if (!(rc = nh_goal_functional(m, target, radius, k, where, jk)))
+      for (size_t i = 0; i < n3; i++) j[i] -= n[k] * jk[i];
+  free(jk);
+  return rc;
+}
+
+double nh_dwr_distance_estimate(const double E[3], const double target[3], const double tip[3]) {
+  double d[3] = {tip[0] - target[0], tip[1] - target[1], tip[2] - target[2]};
+  double len = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+  if (!(len > 0.0)) return sqrt(E[0] * E[0] + E[1] * E[1] + E[2] * E[2]);
+  return -(d[0] * E[0] + d[1] * E[1] + d[2] * E[2]) / len;
 }
 
 int nh_dwr_duals(nh_system *sys, double scale, int n_nodes, int n, const double *j, double *z) {
