@@ -155,6 +155,14 @@ const double *nh_adapt_indicators(const nh_adapt *adapt);
  * mesh may be refined but the fields not transferred. */
 int nh_adapt_step(nh_adapt *adapt, nh_mesh *mesh, int n_fields, double **fields, int *n_refined);
 
+/* Refine the n leaves cells[] by the driver's template (nh_mesh_refine, in
+ * that order) and carry the n_fields nodal fields to the new nodes by
+ * Eq. 17 (fields[f] reallocated); the last estimate no longer applies.
+ * nh_adapt_step's refinement, for given cells. Fails as nh_mesh_refine,
+ * NH_ERR_MEMORY. */
+int nh_adapt_refine_cells(nh_adapt *adapt, nh_mesh *mesh, const int *cells, int n, int n_fields,
+                          double **fields);
+
 /* What ended the last nh_adapt_step (steps.csv `refine_stop`). */
 typedef enum {
   NH_ADAPT_REFINED = 0,   /* every marked cell was refined */

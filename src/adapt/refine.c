@@ -269,6 +269,25 @@ static void nh_adapt_transfer(const nh_mesh *m, const nh_refine_info *info, int 
   }
 }
 
+int nh_adapt_refine_cells(nh_adapt *a, nh_mesh *m, const int *cells, int n, int n_fields,
+                          double **fields) {
+  const int old_nodes = m->n_nodes;
+  nh_refine_info info = {0};
+  int rc = nh_mesh_refine(m, a->tmpl, cells, n, &info);
+  for (int f = 0; f < n_fields && !rc; f++) {
+    double *p = realloc(fields[f], sizeof(double) * 3 * (size_t)(m->n_nodes ? m->n_nodes : 1));
+    if (!p)
+      rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: %d nodes", m->n_nodes);
+    else {
+      fields[f] = p;
+      nh_adapt_transfer(m, &info, old_nodes, p);
+    }
+  }
+  nh_refine_info_free(&info);
+  if (n > 0) a->have_eta = 0;
+  return rc;
+}
+
 int nh_adapt_step(nh_adapt *a, nh_mesh *m, int n_fields, double **fields, int *n_refined) {
   *n_refined = 0;
   NH_CHECK(a->have_eta, NH_ERR_INTERNAL, "refinement without error indicators");
@@ -319,21 +338,8 @@ int nh_adapt_step(nh_adapt *a, nh_mesh *m, int n_fields, double **fields, int *n
     free(marked);
     return rc;
   }
-  const int old_nodes = m->n_nodes, old_cells = m->n_cells;
-  if (n_marked > 0) {
-    nh_refine_info info = {0};
-    rc = nh_mesh_refine(m, a->tmpl, marked, n_marked, &info);
-    for (int f = 0; f < n_fields && !rc; f++) {
-      double *p = realloc(fields[f], sizeof(double) * 3 * (size_t)(m->n_nodes ? m->n_nodes : 1));
-      if (!p)
-        rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: %d nodes", m->n_nodes);
-      else {
-        fields[f] = p;
-        nh_adapt_transfer(m, &info, old_nodes, p);
-      }
-    }
-    nh_refine_info_free(&info);
-  }
+  const int old_cells = m->n_cells;
+  if (n_marked > 0) rc = nh_adapt_refine_cells(a, m, marked, n_marked, n_fields, fields);
   free(marked);
   int n_merged = 0;
   if (!rc && a->coarsen > 0)
