@@ -37,7 +37,11 @@
  * Fuenmayor 2014 do this with an equilibrated SPR):
  *     E_pk = Σ_K ε_K,   ε_K = φ_K ∫_K (σ*_u − σ_h(u))ᵀ D⁻¹ (σ*_z − σ_h(z)) dΩ,
  * (2x2x2 Gauss points; σ_h(z) the tangent stress of z at the state u,
- * nh_hex_rotated_stress of Rᵀz). E_pk is signed: it estimates the error with
+ * nh_hex_rotated_stress of Rᵀz; each cell with its own material (per
+ * label) and its formulation: under B-bar the volumetric part is the
+ * element's mean, κ θ̄ I, with θ̄(z) = Σₐ bₐ·zₐ the linearised mean volume
+ * change, so that the products are those of the assembled tangent; D⁻¹
+ * the cell's compliance). E_pk is signed: it estimates the error with
  * its sign, J(u) − J(u_h). Per point the estimate of the error vector's
  * length is |E_p| = (Σ_k E_pk²)^½ (m).
  *
@@ -91,6 +95,30 @@ static void nh_dwr_corotate(const nh_mesh *m, const double *w, int c, const doub
     const double *v = w + 3 * m->cells[8 * c + a];
     for (int i = 0; i < 3; i++) d[3 * a + i] = R[i] * v[0] + R[3 + i] * v[1] + R[6 + i] * v[2];
   }
+}
+
+/* The element's material and, for B-bar, the derivative b of its mean volume
+ * change at the state (bₐ = cof(F̄) ḡₐ, nh_hex_corot) and the change itself:
+ * *gbar NULL for the full formulation. */
+static void nh_dwr_cell_material(const nh_tissue *t, int c, const double ue[24], double *lambda,
+                                 double *mu, const double **gbar, double b[24], double *theta) {
+  nh_tissue_cell_material(t, c, lambda, mu, NULL);
+  *gbar = nh_tissue_gbar(t, c);
+  *theta = 0.0;
+  if (!*gbar) return;
+  double cof[9];
+  *theta = nh_hex_mean_dilatation(ue, *gbar, cof);
+  for (int a = 0; a < 8; a++) nh_mat3_vec(cof, *gbar + 3 * a, b + 3 * a);
+}
+
+/* θ̄ of an increment w (a dual) of cell c: Σₐ bₐ·wₐ. */
+static double nh_dwr_dilatation(const nh_mesh *m, const double *w, int c, const double b[24]) {
+  double s = 0.0;
+  for (int a = 0; a < 8; a++) {
+    const double *v = w + 3 * m->cells[8 * c + a];
+    s += b[3 * a] * v[0] + b[3 * a + 1] * v[1] + b[3 * a + 2] * v[2];
+  }
+  return s;
 }
 
 int nh_goal_functional(const nh_mesh *m, const double point[3], double radius, int k,
@@ -173,16 +201,18 @@ int nh_dwr_estimate(nh_system *sys, double scale, const nh_mesh *m, const nh_tis
 #pragma omp parallel for schedule(static) if (nl >= NH_DWR_PARALLEL_MIN)
   for (int l = 0; l < nl; l++) {
     int c = m->leaves[l];
-    double Xe[24], ue[24], R[9], d[24];
-    const double *G0 = t->G0 + 24 * t->cell_shape[c];
+    double Xe[24], ue[24], R[9], d[24], lambda, mu, b[24], theta;
+    const double *G0 = t->G0 + 24 * t->cell_shape[c], *gbar;
     double *s = samples + 6 * (size_t)nfld * c;
     nh_mesh_cell_coords(m, m->X, c, Xe);
     nh_mesh_cell_coords(m, u, c, ue);
     nh_hex_corotated(Xe, ue, G0, R, d);
-    nh_hex_rotated_stress(R, d, G0, t->lambda, t->mu, s);
+    nh_dwr_cell_material(t, c, ue, &lambda, &mu, &gbar, b, &theta);
+    nh_hex_rotated_stress(R, d, G0, lambda, mu, gbar ? &theta : NULL, s);
     for (int q = 0; q < nz; q++) {
       nh_dwr_corotate(m, z + n3 * q, c, R, d);
-      nh_hex_rotated_stress(R, d, G0, t->lambda, t->mu, s + 6 * (1 + q));
+      double tz = gbar ? nh_dwr_dilatation(m, z + n3 * q, c, b) : 0.0;
+      nh_hex_rotated_stress(R, d, G0, lambda, mu, gbar ? &tz : NULL, s + 6 * (1 + q));
     }
   }
   if ((rc = nh_spr_recover_fields(m, t, h, nfld, samples, star))) goto done;
@@ -202,9 +232,12 @@ int nh_dwr_estimate(nh_system *sys, double scale, const nh_mesh *m, const nh_tis
     const int *corner = m->cells + 8 * c;
     const double *G0 = t->G0 + 24 * t->cell_shape[c];
     double Xe[24], ue[24], R[9], d[24], g[8][24], detJ[8], eu[48], ceu[48];
+    double lambda, mu, b[24], theta;
+    const double *gbar;
     nh_mesh_cell_coords(m, m->X, c, Xe);
     nh_mesh_cell_coords(m, u, c, ue);
     nh_hex_corotated(Xe, ue, G0, R, d);
+    nh_dwr_cell_material(t, c, ue, &lambda, &mu, &gbar, b, &theta);
     double e2 = 0.0, n2 = 0.0;
     for (int gp = 0; gp < 8; gp++) {
       memcpy(g[gp], G0, sizeof g[gp]);
@@ -214,15 +247,15 @@ int nh_dwr_estimate(nh_system *sys, double scale, const nh_mesh *m, const nh_tis
         bad_cell = c;
       }
       double su[6];
-      nh_hex_rotated_stress(R, d, g[gp], t->lambda, t->mu, su);
+      nh_hex_rotated_stress(R, d, g[gp], lambda, mu, gbar ? &theta : NULL, su);
       for (int k = 0; k < 6; k++) {
         double s = 0.0;
         for (int a = 0; a < 8; a++) s += N[gp][a] * star[6 * ((size_t)nfld * corner[a]) + k];
         eu[6 * gp + k] = s - su[k];
       }
-      nh_voigt_compliance(t->lambda, t->mu, eu + 6 * gp, ceu + 6 * gp);
+      nh_voigt_compliance(lambda, mu, eu + 6 * gp, ceu + 6 * gp);
       double e[6], de = 0.0, dn = 0.0;
-      nh_voigt_compliance(t->lambda, t->mu, su, e);
+      nh_voigt_compliance(lambda, mu, su, e);
       for (int k = 0; k < 6; k++) de += eu[6 * gp + k] * ceu[6 * gp + k], dn += su[k] * e[k];
       e2 += detJ[gp] * de;
       n2 += detJ[gp] * dn;
@@ -235,16 +268,17 @@ int nh_dwr_estimate(nh_system *sys, double scale, const nh_mesh *m, const nh_tis
         int q = 3 * p + k;
         double dz[24], eps = 0.0, ezz = 0.0;
         nh_dwr_corotate(m, z + n3 * q, c, R, dz);
+        double tz = gbar ? nh_dwr_dilatation(m, z + n3 * q, c, b) : 0.0;
         for (int gp = 0; gp < 8; gp++) {
           double sz[6], ez[6], cez[6], a1 = 0.0, a2 = 0.0;
-          nh_hex_rotated_stress(R, dz, g[gp], t->lambda, t->mu, sz);
+          nh_hex_rotated_stress(R, dz, g[gp], lambda, mu, gbar ? &tz : NULL, sz);
           for (int i = 0; i < 6; i++) {
             double s = 0.0;
             for (int a = 0; a < 8; a++)
               s += N[gp][a] * star[6 * ((size_t)nfld * corner[a] + 1 + q) + i];
             ez[i] = s - sz[i];
           }
-          nh_voigt_compliance(t->lambda, t->mu, ez, cez);
+          nh_voigt_compliance(lambda, mu, ez, cez);
           for (int i = 0; i < 6; i++) a1 += ez[i] * ceu[6 * gp + i], a2 += ez[i] * cez[i];
           eps += detJ[gp] * a1;
           ezz += detJ[gp] * a2;
