@@ -18,7 +18,9 @@
  *     are those counted directly from the lattice formula; a load over a
  *     sphere sums to its total force, before and after refining every cell
  *     and after refining every eighth leaf; on the brain, the load of a box
- *     region sums to its force too.
+ *     region sums to its force too, and that of a box smaller than the
+ *     cells' integration samples (a goal point's box) has the box centre as
+ *     its first moment, exactly.
  *  6. Refinement on the brain: children's φ measured on the shape keeps the
  *     volume within 2 % and each parent's φ V within 2 % of its cell volume.
  *  7. A static brain (10x12x8, clamped by a cylinder around the brainstem,
@@ -305,6 +307,26 @@ static void test_regions(void) {
   strcpy(inner.where, "inner sphere");
   load_sum(m, &inner, F, s); /* in the right hemisphere */
   for (int k = 0; k < 3; k++) CHECK_CLOSE(s[k], F[k], 1e-13 * fabs(F[k]), "brain sphere load");
+  /* a box smaller than the 6³ samples' spacing (14 mm / 6) deep in the
+   * tissue (a goal point's box): its load sums to F and its first moment
+   * Σ f_a X_a is F ⊗ the box centre (the mean position of a uniform
+   * density; trilinear shape functions reproduce x), both exactly */
+  nh_region small = {.kind = NH_REGION_BOX};
+  strcpy(small.where, "small box");
+  for (int k = 0; k < 3; k++) {
+    double c = inner.center[k] + 0.0013 * (k + 1);
+    small.min[k] = c - 0.000875, small.max[k] = c + 0.000875;
+  }
+  double *f = calloc(3 * (size_t)m->n_nodes, sizeof(double));
+  CHECK_OK(nh_mesh_region_load(m, &small, F, f));
+  for (int k = 0; k < 3; k++) {
+    double sum = 0.0, moment = 0.0, c = 0.5 * (small.min[k] + small.max[k]);
+    for (int i = 0; i < m->n_nodes; i++)
+      sum += f[3 * i + k], moment += f[3 * i + k] * m->X[3 * i + k];
+    CHECK_CLOSE(sum, F[k], 1e-13 * fabs(F[k]), "brain small box load");
+    CHECK_CLOSE(moment, F[k] * c, 1e-12 * fabs(F[k] * c), "brain small box load: first moment");
+  }
+  free(f);
   nh_template_destroy(&t);
   nh_mesh_destroy(&m);
 }

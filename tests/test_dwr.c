@@ -39,7 +39,30 @@
  *     error it measures. Effectivity θ = |E_p| / |J(u) − J(u_h)| with the
  *     vector error (the x, y components from the h/3 mesh, which are two
  *     orders smaller than z); asserted θ ∈ [0.7, 1.5] on the three finest
- *     adaptive meshes (the issue's band).
+ *     adaptive meshes (the issue's band). Run with the fully integrated
+ *     element and again with B-bar (the scene's default), whose estimate
+ *     carries the mean-dilatation method's own terms (dwr.c, "B-bar"):
+ *     without them it overestimates about twofold on this block.
+ *  3. The tip–target distance (dwr.c "Distance"): a tool tip held 5 mm from
+ *     the probe along the DBS case's trajectory, reversed (the unit vector
+ *     (0.211, 0.529, 0.822): the tool comes from above), and
+ *     D(v) = |tip − (p + J(v))|. In the identity of 1, with n_h the unit
+ *     vector from p + J(u_h) to the tip and z_D the fine dual of
+ *     nh_goal_distance_functional(n_h), D(u_f) − D(u_h) = ρ(u_h; z_D) up to
+ *     the linearisation of the norm, whose remainder is at most
+ *     |J(u_f) − J(u_h)|² / D(u_h) (asserted with that bound added to the
+ *     round-off tolerance; the left side from the distances, the right from
+ *     the residual). In 2, the effectivity |E_D| / |D_ref − D_h| of
+ *     nh_dwr_distance_estimate on the three finest meshes, D_ref from the
+ *     reference vector of 2, in the same band [0.7, 1.5].
+ *  4. The energy product of the estimate is the tangent's: for one distorted
+ *     cell at a rotated and stretched state u, and increments v, w,
+ *     Σ_gauss det J σ(v)ᵀ D⁻¹ σ(w) with the stresses dwr.c forms
+ *     (nh_hex_rotated_stress of Rᵀv; B-bar: θ̄(v) = Σ bₐ·vₐ) equals vᵀ Kt w
+ *     with Kt of nh_hex_corot (full and B-bar, ν = 0.49), to 1e-10
+ *     relative: the two are assembled on different paths (Gauss-point
+ *     stresses and the compliance against the element matrix). Without the
+ *     B-bar term the product differs by O(1) at ν = 0.49.
  * NH_VERBOSE=1 prints the sequence. */
 #include "check.h"
 #include "adapt/adapt.h"
@@ -56,8 +79,28 @@
 #define RADIUS    5e-4
 
 static const double probe[3] = {0.025, 0.010, 0.015};
+/* A tool tip 5 mm from the probe along (0.211, 0.529, 0.822) (normalised). */
+static void tool_tip(double tip[3]) {
+  const double d[3] = {0.211, 0.529, 0.822};
+  double len = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+  for (int k = 0; k < 3; k++) tip[k] = probe[k] + 0.005 * d[k] / len;
+}
+
+/* D = |tip − (p + J)| for the box means J[3] of a solution; n (may be NULL):
+ * the unit vector from p + J to the tip. */
+static double distance(const double J[3], double n[3]) {
+  double tip[3], d[3];
+  tool_tip(tip);
+  for (int k = 0; k < 3; k++) d[k] = tip[k] - probe[k] - J[k];
+  double len = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+  for (int k = 0; n && k < 3; k++) n[k] = d[k] / len;
+  return len;
+}
 static const double lo[3] = {0, 0, 0}, hi[3] = {0.04, 0.02, 0.02};
 static const int grid[3] = {8, 4, 4};
+
+/* The element of the problems built (part 2 runs with both). */
+static nh_formulation formulation = NH_FORMULATION_FULL;
 
 typedef struct {
   nh_mesh *m;
@@ -72,7 +115,7 @@ static void setup(problem *p) {
   nh_mesh *m = p->m;
   int n = 3 * m->n_nodes;
   if (!p->t) {
-    nh_material mat = {1.0e4, 0.3, 1000, NH_FORMULATION_FULL};
+    nh_material mat = {1.0e4, 0.3, 1000, formulation};
     CHECK_OK(nh_tissue_create(m, &mat, &p->t));
   } else {
     CHECK_OK(nh_tissue_update(p->t));
@@ -194,6 +237,24 @@ static void test_identity(void) {
              fabs(lhs - rhs) / fabs(lhs));
     free(Pzh);
   }
+  /* The distance functional: its fine dual and the identity up to the
+   * linearisation's remainder. */
+  double nh_[3], Jf[3], e2 = 0.0;
+  double Dh = distance(Jh, nh_);
+  for (int k = 0; k < 3; k++) {
+    Jf[k] = dot(nfn, p.j + (size_t)nfn * k, p.u);
+    e2 += (Jf[k] - Jh[k]) * (Jf[k] - Jh[k]);
+  }
+  double *jD = malloc(sizeof(double) * nfn), *zD = malloc(sizeof(double) * nfn);
+  CHECK_OK(nh_goal_distance_functional(p.m, probe, nh_, RADIUS, "probe", jD));
+  CHECK_OK(nh_dwr_duals(p.s, 1.0, p.m->n_nodes, 1, jD, zD));
+  double lhs = distance(Jf, NULL) - Dh, rhs = dot(nfn, p.f, zD) - energy_product(&p, Puh, zD);
+  CHECK_CLOSE(rhs, lhs, 1e-9 * fabs(lhs) + e2 / Dh,
+              "distance: D(u_f) - D(u_h) = rho(u_h; z_D) + O(|e|^2 / D)");
+  if (getenv("NH_VERBOSE"))
+    printf("identity distance: D(u_f)-D(u_h) = %.6e, rho(z_D) = %.6e, rel diff %.1e (bound %.1e)\n",
+           lhs, rhs, fabs(lhs - rhs) / fabs(lhs), (1e-9 * fabs(lhs) + e2 / Dh) / fabs(lhs));
+  free(jD), free(zD);
   nh_refine_info_free(&info);
   free(all), free(uh), free(zh), free(Puh), free(zf);
   nh_template_destroy(&t2);
@@ -285,6 +346,25 @@ static void test_effectivity(void) {
         fabs(Jinf - J3[2]), smallest);
   if (getenv("NH_VERBOSE"))
     printf("order %.3f, J_inf %.9e (|J_inf - J(h/3)| = %.3e)\n", order, Jinf, fabs(Jinf - J3[2]));
+  /* The distance: reference from the reference vector (x, y from h/3, z
+   * extrapolated); its uncertainty is that of J_inf along n. */
+  double Jref[3] = {J3[0], J3[1], Jinf}, tip[3], nref[3];
+  tool_tip(tip);
+  double Dref = distance(Jref, nref);
+  for (int s = steps - 3; s < steps; s++) {
+    double x[3] = {probe[0] + Jh[s][0], probe[1] + Jh[s][1], probe[2] + Jh[s][2]};
+    double err = Dref - distance(Jh[s], NULL), est = nh_dwr_distance_estimate(E[s], x, tip);
+    double theta = fabs(est) / fabs(err);
+    if (getenv("NH_VERBOSE"))
+      printf("mesh %d: distance error %.3e, estimate %.3e, effectivity %.3f\n", s, err, est, theta);
+    CHECK(fabs(nref[2] * (Jinf - J3[2])) <= 0.2 * fabs(err),
+          "distance: reference uncertainty %.3e above 1/5 of the error %.3e on mesh %d",
+          fabs(nref[2] * (Jinf - J3[2])), fabs(err), s);
+    CHECK(theta >= 0.7 && theta <= 1.5,
+          "distance effectivity on adaptive mesh %d (%d dofs): expected [0.7, 1.5], got %.3f "
+          "(estimate %.3e, error %.3e)",
+          s, dofs[s], theta, est, err);
+  }
   for (int s = 0; s < steps; s++) {
     double e[3] = {J3[0] - Jh[s][0], J3[1] - Jh[s][1], Jinf - Jh[s][2]};
     double en = sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]);
@@ -301,9 +381,85 @@ static void test_effectivity(void) {
   }
 }
 
+static double tangent_product(const double X[24], const double u[24], const double v[24],
+                              const double w[24], int bbar, int with_volumetric) {
+  const double young = 2509.0, nu = 0.49;
+  const double lambda = young * nu / ((1 + nu) * (1 - 2 * nu)), mu = young / (2 * (1 + nu));
+  double K0[576], G0[24], Gbar[24], V, R[9], d[24], dv[24], dw[24], b[24], cof[9];
+  CHECK_OK(nh_hex_stiffness(X, lambda, mu, bbar, K0, G0, Gbar, &V));
+  nh_hex_corotated(X, u, G0, R, d);
+  nh_hex_mean_dilatation(u, Gbar, cof);
+  for (int a = 0; a < 8; a++) nh_mat3_vec(cof, Gbar + 3 * a, b + 3 * a);
+  double tv = 0.0, tw = 0.0;
+  for (int i = 0; i < 24; i++) tv += b[i] * v[i], tw += b[i] * w[i];
+  for (int a = 0; a < 8; a++)
+    nh_mat3_tvec(R, v + 3 * a, dv + 3 * a), nh_mat3_tvec(R, w + 3 * a, dw + 3 * a);
+  double sum = 0.0;
+  for (int gp = 0; gp < 8; gp++) {
+    double xi[3], g[24], sv[6], sw[6], e[6];
+    for (int k = 0; k < 3; k++) xi[k] = nh_hex_corner[gp][k] / sqrt(3.0);
+    memcpy(g, G0, sizeof g);
+    double detJ = nh_hex_gradients(X, xi, g);
+    const int vol = bbar && with_volumetric;
+    nh_hex_rotated_stress(R, dv, g, lambda, mu, vol ? &tv : NULL, sv);
+    nh_hex_rotated_stress(R, dw, g, lambda, mu, vol ? &tw : NULL, sw);
+    nh_voigt_compliance(lambda, mu, sw, e);
+    for (int k = 0; k < 6; k++) sum += detJ * sv[k] * e[k];
+  }
+  return sum;
+}
+
+static void test_tangent_product(void) {
+  double X[24], u[24], v[24], w[24];
+  unsigned seed = 12345;
+  for (int a = 0; a < 8; a++) /* a distorted 1 cm cell */
+    for (int k = 0; k < 3; k++) {
+      seed = seed * 1103515245u + 12345u;
+      X[3 * a + k] = 0.01 * (nh_hex_corner[a][k] > 0) + 1e-3 * ((seed >> 16) % 1000 / 1000.0 - 0.5);
+    }
+  const double th = 0.4, c = cos(th), s = sin(th); /* rotation about z, 2 % stretch along x */
+  for (int a = 0; a < 8; a++) {
+    const double *x = X + 3 * a;
+    u[3 * a] = c * 1.02 * x[0] - s * x[1] - x[0];
+    u[3 * a + 1] = s * 1.02 * x[0] + c * x[1] - x[1];
+    u[3 * a + 2] = 0.0;
+    for (int k = 0; k < 3; k++) {
+      seed = seed * 1103515245u + 12345u;
+      v[3 * a + k] = 1e-4 * ((seed >> 16) % 1000 / 1000.0 - 0.5);
+      seed = seed * 1103515245u + 12345u;
+      w[3 * a + k] = 1e-4 * ((seed >> 16) % 1000 / 1000.0 - 0.5);
+    }
+  }
+  for (int bbar = 0; bbar < 2; bbar++) {
+    const double young = 2509.0, nu = 0.49;
+    const double lambda = young * nu / ((1 + nu) * (1 - 2 * nu)), mu = young / (2 * (1 + nu));
+    double K0[576], G0[24], Gbar[24], V, R[9], f[24], Kt[576];
+    CHECK_OK(nh_hex_stiffness(X, lambda, mu, bbar, K0, G0, Gbar, &V));
+    nh_hex_volumetric vol = {Gbar, lambda + 2.0 * mu / 3.0, V};
+    nh_hex_corot(X, u, K0, G0, bbar ? &vol : NULL, R, f, Kt);
+    double ref = 0.0;
+    for (int r = 0; r < 24; r++)
+      for (int q = 0; q < 24; q++) ref += v[r] * Kt[24 * r + q] * w[q];
+    double got = tangent_product(X, u, v, w, bbar, 1);
+    CHECK_CLOSE(got, ref, 1e-10 * fabs(ref), "energy product of the estimate's stresses = v Kt w");
+    if (bbar) {
+      double without = tangent_product(X, u, v, w, bbar, 0);
+      CHECK(fabs(without - ref) > 0.1 * fabs(ref),
+            "B-bar: the product without the volumetric term should differ (%.3e vs %.3e)", without,
+            ref);
+    }
+    if (getenv("NH_VERBOSE"))
+      printf("tangent product (%s): %.9e against v Kt w %.9e\n", bbar ? "bbar" : "full", got, ref);
+  }
+}
+
 int main(void) {
   setvbuf(stdout, NULL, _IOLBF, 0);
+  test_tangent_product();
   test_identity();
+  test_effectivity();
+  formulation = NH_FORMULATION_BBAR;
+  if (getenv("NH_VERBOSE")) printf("B-bar:\n");
   test_effectivity();
   TEST_END();
 }

@@ -10,7 +10,23 @@
  * solves the static problem from rest with the case's Newton tolerance.
  * Both are the same computation on the same mesh, so they agree to
  * round-off: asserted 1e-12 of max |u|. The mesh must have been refined
- * (more than the 675 dofs of 8x4x4), else the test proves nothing. */
+ * (more than the 675 dofs of 8x4x4), else the test proves nothing.
+ *
+ * With tools (cases/needle-phantom.yaml: a needle cutting into the block,
+ * dynamic, the tools' state restored for the re-solve): run A adapts only
+ * at step K = 30 (adapt.every 30; the needle's tip is then 5.5 mm deep,
+ * cutting), estimator goal, resolve 2. Run B is the same scene without
+ * re-solves; after its K − 1 steps (the same computation as A's, on the
+ * same mesh) its mesh is refined to A's final mesh through
+ * nh_sim_refine_cells (A's parents in the order their children were
+ * created; the state carried by Eq. 17, the tools' points relocated), then
+ * it solves step K directly on that mesh. A's step K must equal B's: u, v
+ * of the tissue and the needle's tip agree to 1e-9 of their largest values
+ * (the step's constraint solve iterates to solver tolerances from the same
+ * warm start; the state carried to the new nodes by one refinement at a
+ * time in B and by one or two in A differs by round-off on shared faces).
+ * Not restoring the tools' state would advance them twice within the step:
+ * an O(1) difference. */
 #include "sim_util.h"
 
 #include "adapt/adapt.h"
@@ -18,9 +34,67 @@
 #include "mesh/mesh.h"
 #include "solve/solve.h"
 
+#include <math.h>
+#include <stdlib.h>
 #include <string.h>
 
+/* Largest |a_i − b_i| and |a_i| over n values. */
+static void compare(int n, const double *a, const double *b, double *diff, double *scale) {
+  *diff = *scale = 0.0;
+  for (int i = 0; i < n; i++)
+    *diff = fmax(*diff, fabs(a[i] - b[i])), *scale = fmax(*scale, fabs(a[i]));
+}
+
+static void test_tools(void) {
+  enum { K = 30 };
+  const char *sets_a[] = {"adapt.estimator=goal", "adapt.every=30", "adapt.resolve=2",
+                          "time.steps=30", NULL};
+  const char *sets_b[] = {"adapt.estimator=goal", "adapt.every=30", "time.steps=30", NULL};
+  nh_scene *sa, *sb;
+  nh_sim *a, *b;
+  nh_case_open("needle-phantom.yaml", sets_a, &sa, &a);
+  nh_case_open("needle-phantom.yaml", sets_b, &sb, &b);
+  for (int k = 0; k < K; k++) CHECK_OK(nh_sim_step(a));
+  for (int k = 0; k < K - 1; k++) CHECK_OK(nh_sim_step(b));
+  const nh_mesh *ma = nh_sim_mesh(a);
+  CHECK(3 * ma->n_nodes > 675, "the step was not refined (%d dofs)", 3 * ma->n_nodes);
+  for (int next = 0; next < ma->n_cells; next++)
+    for (int c = 0; c < ma->n_cells; c++)
+      if (ma->first_child[c] == next) CHECK_OK(nh_sim_refine_cells(b, &c, 1));
+  const nh_mesh *mb = nh_sim_mesh(b);
+  CHECK(mb->n_nodes == ma->n_nodes && mb->n_cells == ma->n_cells &&
+            !memcmp(mb->X, ma->X, sizeof(double) * 3 * ma->n_nodes),
+        "B's mesh is not A's final mesh (%d nodes, expected %d)", mb->n_nodes, ma->n_nodes);
+  CHECK_OK(nh_sim_step(b));
+  CHECK(3 * nh_sim_mesh(b)->n_nodes == 3 * ma->n_nodes, "B refined after its last step");
+  const int n = 3 * ma->n_nodes;
+  double diff, scale;
+  compare(n, nh_sim_displacements(a), nh_sim_displacements(b), &diff, &scale);
+  CHECK(diff <= 1e-9 * scale,
+        "with tools: u of the re-solved step against the direct solve: max "
+        "|diff| %.3e, expected <= %.3e (1e-9 of max |u| %.3e)",
+        diff, 1e-9 * scale, scale);
+  compare(n, nh_sim_velocities(a), nh_sim_velocities(b), &diff, &scale);
+  CHECK(diff <= 1e-9 * scale,
+        "with tools: v of the re-solved step against the direct solve: max "
+        "|diff| %.3e, expected <= %.3e (1e-9 of max |v| %.3e)",
+        diff, 1e-9 * scale, scale);
+  double xa[3], xb[3], miss_a[3], miss_b[3];
+  nh_sim_target_miss(a, 0, xa, miss_a);
+  nh_sim_target_miss(b, 0, xb, miss_b);
+  double tip_a[3], tip_b[3];
+  for (int k = 0; k < 3; k++) tip_a[k] = xa[k] + miss_a[k], tip_b[k] = xb[k] + miss_b[k];
+  compare(3, tip_a, tip_b, &diff, &scale);
+  CHECK(diff <= 1e-9 * scale, "with tools: the needle's tip: max |diff| %.3e m, expected <= %.3e",
+        diff, 1e-9 * scale);
+  if (getenv("NH_VERBOSE"))
+    printf("with tools: %d dofs, tip (%.9f, %.9f, %.9f) m\n", n, tip_a[0], tip_a[1], tip_a[2]);
+  nh_sim_destroy(&a), nh_sim_destroy(&b);
+  nh_scene_destroy(&sa), nh_scene_destroy(&sb);
+}
+
 int main(void) {
+  test_tools();
   const char *sets[] = {"adapt.estimator=goal", "adapt.resolve=2", "time.steps=1", NULL};
   nh_scene *scene;
   nh_sim *sim;

@@ -155,6 +155,14 @@ const double *nh_adapt_indicators(const nh_adapt *adapt);
  * mesh may be refined but the fields not transferred. */
 int nh_adapt_step(nh_adapt *adapt, nh_mesh *mesh, int n_fields, double **fields, int *n_refined);
 
+/* Refine the n leaves cells[] by the driver's template (nh_mesh_refine, in
+ * that order) and carry the n_fields nodal fields to the new nodes by
+ * Eq. 17 (fields[f] reallocated); the last estimate no longer applies.
+ * nh_adapt_step's refinement, for given cells. Fails as nh_mesh_refine,
+ * NH_ERR_MEMORY. */
+int nh_adapt_refine_cells(nh_adapt *adapt, nh_mesh *mesh, const int *cells, int n, int n_fields,
+                          double **fields);
+
 /* What ended the last nh_adapt_step (steps.csv `refine_stop`). */
 typedef enum {
   NH_ADAPT_REFINED = 0,   /* every marked cell was refined */
@@ -179,6 +187,8 @@ int nh_adapt_estimate_goal(nh_adapt *adapt, nh_system *sys, double scale, const 
                            double *eta, double *eta_rel);
 /* |E_p| per goal of the last goal estimate (m), or NULL (none for this mesh). */
 const double *nh_adapt_goal_errors(const nh_adapt *adapt);
+/* The signed E_pk (3 per goal, m) of the last goal estimate, or NULL. */
+const double *nh_adapt_goal_estimates(const nh_adapt *adapt);
 
 /* ---- goal-oriented estimate: the dual-weighted residual (adapt/dwr.c) ---- */
 
@@ -188,6 +198,19 @@ const double *nh_adapt_goal_errors(const nh_adapt *adapt);
  * messages. Fails with NH_ERR_INPUT (message) if the box holds no tissue. */
 int nh_goal_functional(const nh_mesh *mesh, const double point[3], double radius, int k,
                        const char *where, double *j);
+
+/* The tip–target distance d(v) = |x_tip − x_T(v)|, x_T(v) = X_T + J_T(v)
+ * (J_T the box mean of nh_goal_functional), linearised about the current
+ * state with the tip held (dwr.c, "Distance"): its tissue part is
+ * −n · J_T(v), n = unit(x_tip − x_T). Nodal vector j[3 n_nodes]
+ * (overwritten) = −Σ_k n_k j_k. Fails as nh_goal_functional. */
+int nh_goal_distance_functional(const nh_mesh *mesh, const double target[3], const double n[3],
+                                double radius, const char *where, double *j);
+/* The estimate of d(u) − d(u_h) from the target's signed estimates
+ * E[3] (E_k ≈ J_Tk(u) − J_Tk(u_h)) and the current target and tip
+ * positions: −n · E. When tip and target coincide (d not differentiable)
+ * the bound |E| ≥ |d(u) − d(u_h)| (to first order). */
+double nh_dwr_distance_estimate(const double E[3], const double target[3], const double tip[3]);
 
 /* Dual solutions of n functionals with the system's current factor A:
  * z_q = P A⁻¹ (scale Pᵀ j_q) for j[3 n_nodes n] (q-th at j + 3 n_nodes q),

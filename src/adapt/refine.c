@@ -51,6 +51,7 @@ struct nh_adapt {
   double *goal_points; /* 3 per goal */
   double radius;       /* half-width of the averaging box */
   double *goal_error;  /* per goal: |E_p| of the last estimate, valid when have_eta */
+  double *goal_est;    /* per goal: the signed E_pk (3), valid when have_eta */
   double *goal_ind;    /* n_goals x cap_eta */
   double *eta_all;     /* per cell: Σ over every goal (coarsening: a goal below tolerance still
                           needs its cells) */
@@ -89,6 +90,7 @@ void nh_adapt_destroy(nh_adapt **adapt) {
   free((*adapt)->eta_cell);
   free((*adapt)->goal_points);
   free((*adapt)->goal_error);
+  free((*adapt)->goal_est);
   free((*adapt)->goal_ind);
   free((*adapt)->eta_all);
   free(*adapt);
@@ -109,10 +111,12 @@ int nh_adapt_estimate(nh_adapt *a, const nh_mesh *m, const nh_tissue *tissue, co
 }
 
 int nh_adapt_set_goals(nh_adapt *a, const nh_mesh *m, int n, const double *points) {
-  free(a->goal_points), free(a->goal_error);
+  free(a->goal_points), free(a->goal_error), free(a->goal_est);
   a->goal_points = malloc(sizeof(double) * 3 * (size_t)(n ? n : 1));
   a->goal_error = malloc(sizeof(double) * (size_t)(n ? n : 1));
-  if (!a->goal_points || !a->goal_error) return NH_ERROR(NH_ERR_MEMORY, "out of memory: goals");
+  a->goal_est = malloc(sizeof(double) * 3 * (size_t)(n ? n : 1));
+  if (!a->goal_points || !a->goal_error || !a->goal_est)
+    return NH_ERROR(NH_ERR_MEMORY, "out of memory: goals");
   memcpy(a->goal_points, points, sizeof(double) * 3 * (size_t)n);
   a->n_goals = n;
   double h = fmin(m->spacing[0], fmin(m->spacing[1], m->spacing[2]));
@@ -134,13 +138,10 @@ int nh_adapt_estimate_goal(nh_adapt *a, nh_system *sys, double scale, const nh_m
     if (!e || !g || !all) return NH_ERROR(NH_ERR_MEMORY, "out of memory: error indicators");
     a->cap_eta = m->n_cells;
   }
-  double *est = malloc(sizeof(double) * 3 * (size_t)a->n_goals);
-  if (!est) return NH_ERROR(NH_ERR_MEMORY, "out of memory: goal estimates");
-  nh_dwr_result r = {.estimate = est, .norm = a->goal_error, .indicator = a->goal_ind};
-  int rc = nh_dwr_estimate(sys, scale, m, tissue, hanging, u, a->n_goals, a->goal_points, a->radius,
-                           NULL, &r);
-  free(est);
-  NH_TRY(rc);
+  nh_dwr_result r = {.estimate = a->goal_est, .norm = a->goal_error, .indicator = a->goal_ind};
+  a->have_eta = 0; /* until this estimate is complete */
+  NH_TRY(nh_dwr_estimate(sys, scale, m, tissue, hanging, u, a->n_goals, a->goal_points, a->radius,
+                         NULL, &r));
   /* The marking indicator: the sum over the goals still above tolerance. */
   a->n_active = 0;
   for (int p = 0; p < a->n_goals; p++) a->n_active += !(a->goal_error[p] <= a->tolerance);
@@ -163,6 +164,10 @@ int nh_adapt_estimate_goal(nh_adapt *a, nh_system *sys, double scale, const nh_m
 
 const double *nh_adapt_goal_errors(const nh_adapt *a) {
   return a && a->goal && a->have_eta ? a->goal_error : NULL;
+}
+
+const double *nh_adapt_goal_estimates(const nh_adapt *a) {
+  return a && a->goal && a->have_eta ? a->goal_est : NULL;
 }
 
 nh_adapt_stop nh_adapt_last_stop(const nh_adapt *a) {
@@ -264,6 +269,25 @@ static void nh_adapt_transfer(const nh_mesh *m, const nh_refine_info *info, int 
   }
 }
 
+int nh_adapt_refine_cells(nh_adapt *a, nh_mesh *m, const int *cells, int n, int n_fields,
+                          double **fields) {
+  const int old_nodes = m->n_nodes;
+  nh_refine_info info = {0};
+  int rc = nh_mesh_refine(m, a->tmpl, cells, n, &info);
+  for (int f = 0; f < n_fields && !rc; f++) {
+    double *p = realloc(fields[f], sizeof(double) * 3 * (size_t)(m->n_nodes ? m->n_nodes : 1));
+    if (!p)
+      rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: %d nodes", m->n_nodes);
+    else {
+      fields[f] = p;
+      nh_adapt_transfer(m, &info, old_nodes, p);
+    }
+  }
+  nh_refine_info_free(&info);
+  if (n > 0) a->have_eta = 0;
+  return rc;
+}
+
 int nh_adapt_step(nh_adapt *a, nh_mesh *m, int n_fields, double **fields, int *n_refined) {
   *n_refined = 0;
   NH_CHECK(a->have_eta, NH_ERR_INTERNAL, "refinement without error indicators");
@@ -314,21 +338,8 @@ int nh_adapt_step(nh_adapt *a, nh_mesh *m, int n_fields, double **fields, int *n
     free(marked);
     return rc;
   }
-  const int old_nodes = m->n_nodes, old_cells = m->n_cells;
-  if (n_marked > 0) {
-    nh_refine_info info = {0};
-    rc = nh_mesh_refine(m, a->tmpl, marked, n_marked, &info);
-    for (int f = 0; f < n_fields && !rc; f++) {
-      double *p = realloc(fields[f], sizeof(double) * 3 * (size_t)(m->n_nodes ? m->n_nodes : 1));
-      if (!p)
-        rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: %d nodes", m->n_nodes);
-      else {
-        fields[f] = p;
-        nh_adapt_transfer(m, &info, old_nodes, p);
-      }
-    }
-    nh_refine_info_free(&info);
-  }
+  const int old_cells = m->n_cells;
+  if (n_marked > 0) rc = nh_adapt_refine_cells(a, m, marked, n_marked, n_fields, fields);
   free(marked);
   int n_merged = 0;
   if (!rc && a->coarsen > 0)

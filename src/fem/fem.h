@@ -192,9 +192,13 @@ void nh_hex_stress_at(const double X[24], const double u[24], const double G0[24
  * R[9], corotated nodal values d[24] and shape-function gradients g[24] at a
  * point; s[6] Voigt. With d = Rᵀw (node by node) it is the stress of the
  * tangent R K₀ Rᵀ for nodal values w (an increment, a dual solution): the sum
- * over the 2x2x2 Gauss points of det J σ(w)ᵀ D⁻¹ σ(v) is vᵀ R K₀ Rᵀ w. */
+ * over the 2x2x2 Gauss points of det J σ(w)ᵀ D⁻¹ σ(v) is vᵀ R K₀ Rᵀ w.
+ * B-bar (theta_bar not NULL): σ = κ θ̄ I + R (2 μ dev ε) Rᵀ, κ = λ + ⅔μ,
+ * θ̄ = *theta_bar the element's mean volume change (for an increment w its
+ * linearisation Σₐ bₐ·wₐ, bₐ = cof(F̄) ḡₐ: then the sum above is vᵀ Kt w
+ * with the B-bar tangent of nh_hex_corot). */
 void nh_hex_rotated_stress(const double R[9], const double d[24], const double g[24], double lambda,
-                           double mu, double s[6]);
+                           double mu, const double *theta_bar, double s[6]);
 
 /* Corotational Cauchy stress s[6] (Voigt, Pa) of leaf c at the natural point
  * xi[3] for displacements u (3 per node). ξ = 0 gives nh_tissue_cell_stress. */

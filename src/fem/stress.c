@@ -50,8 +50,8 @@ static void nh_point_stress(const double R[9], const double d[24], const double 
 }
 
 void nh_hex_rotated_stress(const double R[9], const double d[24], const double g[24], double lambda,
-                           double mu, double s[6]) {
-  nh_point_stress(R, d, g, lambda, mu, NULL, s);
+                           double mu, const double *theta_bar, double s[6]) {
+  nh_point_stress(R, d, g, lambda, mu, theta_bar, s);
 }
 
 void nh_hex_stress_at(const double X[24], const double u[24], const double G0[24],

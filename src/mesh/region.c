@@ -18,9 +18,12 @@
  * (every cell of a box grid and of its regular templates) the intersection
  * with a box region is a box in natural coordinates, and since N_a is a
  * product of 1D linear factors the integral factorises into three exact 1D
- * integrals; that path serves box regions on box domains. Everything else
- * (sphere and cylinder regions, immersed domains, the distorted meshes of the
- * tests) is sampled by 6³ sub-cell midpoints.
+ * integrals; that path serves box regions on box domains, and on immersed
+ * domains where the cell's part of the box lies in the tissue (its corners
+ * and centre: a goal point's small box deep in the brain, which 6³ samples
+ * of a coarse cell could miss entirely). Everything else (sphere and
+ * cylinder regions, boxes across the immersed boundary, the distorted
+ * meshes of the tests) is sampled by 6³ sub-cell midpoints.
  *
  * The same sampling gives two more cell quantities: the fraction of a cell's
  * tissue above a fluid level (the drainage of tissue.buoyancy.level) and the
@@ -139,15 +142,41 @@ static void nh_cell_sample(const double Xe[24], int n, int i, int j, int k, doub
   *dv = fabs(nh_mat3_det(J)) * 8.0 / (n * n * n);
 }
 
+/* Immersed domain: true if the box cell [lo, hi] clipped to the box region
+ * is empty or has its 8 corners and centre inside the tissue (level < 0):
+ * then χ = 1 there (the shape's boundary is smooth on the scale of a cell:
+ * a clip whose corners are inside is taken as inside) and the exact box
+ * integrals apply. A region smaller than the samples' spacing (a goal
+ * point's box, docs/theory.md §6.6) would otherwise meet no sample. */
+static int nh_clip_in_tissue(const nh_domain *d, const double lo[3], const double hi[3],
+                             const nh_region *r) {
+  double a[3], b[3];
+  for (int k = 0; k < 3; k++) {
+    a[k] = fmax(lo[k], r->min[k]), b[k] = fmin(hi[k], r->max[k]);
+    if (b[k] <= a[k]) return 1;
+  }
+  double c[3] = {0.5 * (a[0] + b[0]), 0.5 * (a[1] + b[1]), 0.5 * (a[2] + b[2])};
+  if (!(nh_domain_level(d, c) < 0.0)) return 0;
+  for (int q = 0; q < 8; q++) {
+    double x[3];
+    for (int k = 0; k < 3; k++) x[k] = nh_hex_corner[q][k] < 0 ? a[k] : b[k];
+    if (!(nh_domain_level(d, x) < 0.0)) return 0;
+  }
+  return 1;
+}
+
 /* ∫ χ N_a dV over cell ∩ region for the 8 nodes; returns ∫ χ dV. χ is 1 on
  * a box domain (the caller multiplies by φ) and the shape's indicator
- * otherwise. */
+ * otherwise: exact for a box region on a box cell (on an immersed domain
+ * when the clip lies in the tissue, nh_clip_in_tissue), else by 6 × 6 × 6
+ * midpoint samples. */
 static double nh_cell_region_integrals(const nh_domain *d, const double Xe[24], const nh_region *r,
                                        double w[8]) {
   double lo[3], hi[3];
   const int immersed = d->kind != NH_DOMAIN_BOX;
   for (int a = 0; a < 8; a++) w[a] = 0.0;
-  if (!immersed && r->kind == NH_REGION_BOX && nh_cell_is_box(Xe, lo, hi)) {
+  if (r->kind == NH_REGION_BOX && nh_cell_is_box(Xe, lo, hi) &&
+      (!immersed || nh_clip_in_tissue(d, lo, hi, r))) {
     double I[3][2]; /* I[k][0]: ∫ ½(1-ξ) dξ, I[k][1]: ∫ ½(1+ξ) dξ over the clipped interval */
     double jac = 1.0;
     for (int k = 0; k < 3; k++) {

@@ -1347,10 +1347,6 @@ static int read_adapt_goal(const nh_ctx *c, const nh_yaml_node *root, nh_scene *
   if (!s->adapt.enabled || s->adapt.estimator != NH_ESTIMATOR_GOAL) return NH_OK;
   const nh_yaml_node *m = nh_yaml_get(root, "adapt", NULL), *list = NULL;
   if (m && m->kind == NH_YAML_MAP) list = nh_yaml_get(m, "goal", NULL);
-  if (s->adapt.resolve > 0 && s->n_tools > 0)
-    return fail(
-        c, nh_yaml_get(m, "resolve", NULL), "adapt.resolve",
-        "cannot re-solve steps of a scene with tools yet (the tools' state is not rewound)");
   s->adapt.n_goals = 0;
   if (!list) {
     int from = s->n_targets > 0 ? s->n_probes : 0;

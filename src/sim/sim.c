@@ -12,10 +12,13 @@
  * kept per step for the summary. The initial state is frame 0, so a time
  * series always starts at rest.
  *
- * With adapt.resolve (estimator goal, no tools) the step is refined and
- * solved again from its start state, carried to the new mesh, up to N times
- * before its rows are written (nh_sim_resolve), so the written solution is
- * on the mesh its estimate asked for.
+ * With adapt.resolve (estimator goal) the step is refined and solved again
+ * from its start state, carried to the new mesh, up to N times before its
+ * rows are written (nh_sim_resolve), so the written solution is on the mesh
+ * its estimate asked for. The tools' start state (saved at the start of
+ * every step) is restored too, its embedded points relocated on the new
+ * mesh (they are material points); the skull's warm starts and its choice
+ * of candidate rows are those after the first solve.
  *
  * Everything that depends on the mesh (fixed nodes, element data, load
  * vectors, probe cells, hanging nodes, the linear system) is built by
@@ -709,6 +712,21 @@ static int nh_sim_build(nh_sim *s) {
 
 /* ---- adaptivity ---- */
 
+/* After the mesh changed: rebuild everything that depends on it, and make
+ * the n_fields state fields (u, v pairs) consistent with it. */
+static int nh_sim_rebuild(nh_sim *s, int n_fields, double **state) {
+  NH_TRY(nh_sim_setup_mesh(s, 0));
+  /* round-off (refinement) and injection (coarsening): hanging values
+   * exactly their masters' interpolation */
+  for (int f = 0; f < n_fields; f++) {
+    nh_hanging_interpolate(s->hanging, state[f], 3);
+    if (f % 2 == 1)
+      for (int i = 0; i < 3 * s->mesh->n_nodes; i++)
+        if (nh_fixed_component(s->fixed, i / 3, i % 3)) state[f][i] = 0.0;
+  }
+  return NH_OK;
+}
+
 /* Refine from this step's estimate (nh_adapt_step) and rebuild everything
  * that depends on the mesh. */
 static int nh_sim_refine(nh_sim *s, double **start, int *changed) {
@@ -720,16 +738,17 @@ static int nh_sim_refine(nh_sim *s, double **start, int *changed) {
   if (start) start[0] = state[2], start[1] = state[3];
   if (changed) *changed = n_refined > 0;
   if (rc || n_refined == 0) return rc;
-  NH_TRY(nh_sim_setup_mesh(s, 0));
-  /* round-off (refinement) and injection (coarsening): hanging values
-   * exactly their masters' interpolation */
-  for (int f = 0; f < n_fields; f++) {
-    nh_hanging_interpolate(s->hanging, state[f], 3);
-    if (f % 2 == 1)
-      for (int i = 0; i < 3 * s->mesh->n_nodes; i++)
-        if (nh_fixed_component(s->fixed, i / 3, i % 3)) state[f][i] = 0.0;
-  }
-  return NH_OK;
+  return nh_sim_rebuild(s, n_fields, state);
+}
+
+int nh_sim_refine_cells(nh_sim *s, const int *cells, int n) {
+  NH_CHECK(s->adapt, NH_ERR_INPUT, "refining cells needs an adapt section (its template)");
+  double *state[2] = {s->u, s->v};
+  int rc = nh_adapt_refine_cells(s->adapt, s->mesh, cells, n, 2, state);
+  s->u = state[0];
+  s->v = state[1];
+  if (rc || n == 0) return rc;
+  return nh_sim_rebuild(s, 2, state);
 }
 
 /* The outputs of step `step` failed (disk full, folder not writable): the
@@ -805,8 +824,9 @@ static int nh_sim_solve(nh_sim *s, double t_new, nh_step_stats *st) {
 
 /* adapt.resolve: while a goal estimate exceeds the tolerance (or, without
  * tolerance, up to N times), refine and solve the step again from its start
- * state carried to the new mesh (Eq. 17), so the step's written solution is
- * on the mesh its estimate asked for. Times add up in *st. */
+ * state carried to the new mesh (Eq. 17) and the tools' start state, so the
+ * step's written solution is on the mesh its estimate asked for. Times add
+ * up in *st. */
 static int nh_sim_resolve(nh_sim *s, double t_new, double *const start_in[2], nh_step_stats *st,
                           int *resolves) {
   const nh_scene *sc = s->scene;
@@ -824,6 +844,14 @@ static int nh_sim_resolve(nh_sim *s, double t_new, double *const start_in[2], nh
     /* a stop inside the re-solve restores the start state on this mesh */
     memcpy(s->u_start, start[0], sizeof(double) * 3 * s->mesh->n_nodes);
     memcpy(s->v_start, start[1], sizeof(double) * 3 * s->mesh->n_nodes);
+    if (s->contact) { /* the tools' start state, its embedded points on this mesh */
+      if ((rc = nh_contact_state_load(s->contact, s->tools_start, s->tools_start_size)) ||
+          (rc = nh_contact_relocate(s->contact, s->mesh)))
+        break;
+      free(s->tools_start);
+      s->tools_start = NULL;
+      if ((rc = nh_contact_state_save(s->contact, &s->tools_start, &s->tools_start_size))) break;
+    }
     nh_step_stats again = {0};
     if ((rc = nh_sim_solve(s, t_new, &again)) || (rc = nh_sim_estimate(s))) break;
     st->t_assemble += again.t_assemble, st->t_factor += again.t_factor;

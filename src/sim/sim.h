@@ -62,6 +62,18 @@ void nh_sim_probe_displacement(const nh_sim *sim, int i, double u[3]);
  * like a probe) and the miss = tip of its tool − x (m; targets.csv's
  * distance is |miss|). The scene must have tools. */
 void nh_sim_target_miss(const nh_sim *sim, int i, double x[3], double miss[3]);
+/* Under adapt.estimator goal, target i a goal: the estimated error of its
+ * tip–target distance (m, ≥ 0; the magnitude of nh_dwr_distance_estimate
+ * from the target's goal estimate of this step's solution), else NaN
+ * (targets.csv `distance_error_estimate`). */
+double nh_sim_target_distance_error(const nh_sim *sim, int i);
+/* Refine the n leaves cells[] by the scene's adapt.template, as a
+ * refinement after a step would: u and v carried to the new nodes
+ * (Eq. 17), everything that depends on the mesh rebuilt, the tools'
+ * embedded points relocated. For tests that rebuild a mesh a run made.
+ * Fails with NH_ERR_INPUT without an adapt section, as nh_mesh_refine,
+ * NH_ERR_MEMORY. */
+int nh_sim_refine_cells(nh_sim *sim, const int *cells, int n);
 /* Kinetic energy ½ vᵀ M v. */
 double nh_sim_kinetic_energy(const nh_sim *sim);
 /* Median seconds per step of each phase so far (assemble, factor, solve,

@@ -12,8 +12,8 @@
 static const char *const nh_tool_columns[] = {"step",          "time",  "name",  "tip_x",
                                               "tip_y",         "tip_z", "depth", "axial_force",
                                               "lateral_force", "state"};
-static const char *const nh_target_columns[] = {"step", "time", "name",     "x",
-                                                "y",    "z",    "distance", "error_estimate"};
+static const char *const nh_target_columns[] = {
+    "step", "time", "name", "x", "y", "z", "distance", "error_estimate", "distance_error_estimate"};
 
 /* How far the tool's motion has advanced it along its axis at time t. */
 static double nh_tool_advance(const nh_tool_spec *tool, double t) {
@@ -121,7 +121,7 @@ int nh_sim_tools_open(nh_sim *s) {
   if (sc->n_targets > 0) {
     snprintf(path, sizeof path, "%s/targets.csv", sc->output.dir);
     int goal = sc->adapt.enabled && sc->adapt.estimator == NH_ESTIMATOR_GOAL;
-    int nc = goal ? 8 : 7;
+    int nc = goal ? 9 : 7;
     NH_TRY(resume ? nh_csv_resume(path, nc, nh_target_columns, s->step, &s->targets_csv)
                   : nh_csv_create(path, nc, nh_target_columns, &s->targets_csv));
   }
@@ -164,9 +164,10 @@ int nh_sim_tools_rows(nh_sim *s) {
       nh_sim_target_miss(s, i, x, d);
       double dist = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
       if (sc->adapt.enabled && sc->adapt.estimator == NH_ESTIMATOR_GOAL)
-        rc = nh_csv_row(s->targets_csv, "%d,%.17g,%s,%.17g,%.17g,%.17g,%.17g,%.17g", s->step,
-                        s->time, tg->name, x[0], x[1], x[2], dist,
-                        nh_sim_point_error(s, sc->n_probes + i));
+        rc =
+            nh_csv_row(s->targets_csv, "%d,%.17g,%s,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g", s->step,
+                       s->time, tg->name, x[0], x[1], x[2], dist,
+                       nh_sim_point_error(s, sc->n_probes + i), nh_sim_target_distance_error(s, i));
       else
         rc = nh_csv_row(s->targets_csv, "%d,%.17g,%s,%.17g,%.17g,%.17g,%.17g", s->step, s->time,
                         tg->name, x[0], x[1], x[2], dist);
@@ -188,6 +189,16 @@ void nh_sim_target_miss(const nh_sim *s, int i, double x[3], double miss[3]) {
   nh_sim_point_position(s, s->scene->n_probes + i, x);
   nh_contact_report(s->contact, s->scene->targets[i].tool, &r);
   for (int k = 0; k < 3; k++) miss[k] = r.tip[k] - x[k];
+}
+
+double nh_sim_target_distance_error(const nh_sim *s, int i) {
+  const double *E = nh_adapt_goal_estimates(s->adapt);
+  const int g = s->goal_of_point ? s->goal_of_point[s->scene->n_probes + i] : -1;
+  if (!E || g < 0) return NAN;
+  double x[3], miss[3], tip[3];
+  nh_sim_target_miss(s, i, x, miss);
+  for (int k = 0; k < 3; k++) tip[k] = x[k] + miss[k];
+  return fabs(nh_dwr_distance_estimate(E + 3 * g, x, tip));
 }
 
 int nh_sim_tools_frame(nh_sim *s) {
