@@ -29,6 +29,10 @@ settled and held there. Four plans (tolerance 0.01 mm):
  5. max_runs 1: the soft plans are `not converged` (a result, not a
     failure), the rigid one ok; the command exits 1 naming them; run again,
     the three are complete and skipped (same exit and table).
+ 6. The engine's LocalCluster of 2 workers listens on loopback only: every
+    listening TCP socket of this process and its children (scheduler,
+    nannies, workers, and their HTTP servers) is bound to 127.0.0.1 or ::1
+    (/proc/net/tcp, tcp6).
 """
 import csv
 import math
@@ -138,9 +142,67 @@ def check_converged(rows, out):
                  % (v, d, miss))
 
 
+def listening(pids):
+    """[(pid, address)] of the listening TCP sockets of the processes `pids` (hex from /proc)."""
+    inodes = {}
+    for pid in pids:
+        try:
+            for fd in os.listdir("/proc/%d/fd" % pid):
+                link = os.readlink("/proc/%d/fd/%s" % (pid, fd))
+                if link.startswith("socket:["):
+                    inodes[link[8:-1]] = pid
+        except OSError:
+            continue
+    out = []
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+        with open(table) as f:
+            for line in f.readlines()[1:]:
+                col = line.split()
+                if col[3] == "0A" and col[9] in inodes:  # state LISTEN
+                    out.append((inodes[col[9]], col[1].split(":")[0]))
+    return out
+
+
+def descendants(root):
+    children = {}
+    for p in filter(str.isdigit, os.listdir("/proc")):
+        try:
+            with open("/proc/%s/stat" % p) as f:
+                children.setdefault(int(f.read().rsplit(")", 1)[1].split()[1]), []).append(int(p))
+        except OSError:
+            continue
+    todo, seen = [root], []
+    while todo:
+        p = todo.pop()
+        seen.append(p)
+        todo += children.get(p, [])
+    return seen
+
+
+def check_loopback():
+    sys.path.insert(0, os.path.join(SRC, "tools"))
+    import study_engine
+    client, cluster = study_engine._client(2, None)
+    try:
+        client.wait_for_workers(2, timeout=120)
+        socks = listening(descendants(os.getpid()))
+    finally:
+        client.close()
+        cluster.close()
+    loopback = ("0100007F", "00000000000000000000000001000000", "0000000000000000FFFF00000100007F")
+    if len(socks) < 3:
+        fail("loopback: %d listening sockets found, expected the scheduler's and 2 workers'" %
+             len(socks))
+    for pid, addr in socks:
+        if addr not in loopback:
+            fail("loopback: process %d listens on %s (hex, /proc/net), expected 127.0.0.1 or ::1"
+                 % (pid, addr))
+
+
 def main():
     shutil.rmtree(WORK, ignore_errors=True)
     os.makedirs(WORK)
+    check_loopback()
     path = spec("plans", 8)
     rc, err, ref = plan(path, os.path.join(WORK, "serial"), 0)
     if rc != 0 or ref is None:

@@ -25,8 +25,9 @@ its own partial folder.
 
 Each run is single-threaded by default (OMP_NUM_THREADS=1,
 OPENBLAS_NUM_THREADS=1): N workers on N cores then do not compete for
-cores inside one run. The scheduler and LocalCluster listen on 127.0.0.1
-only. Needs Debian's python3-distributed; use /usr/bin/python3.
+cores inside one run. The LocalCluster's scheduler and workers listen on
+127.0.0.1 only, their HTTP servers included (tests/plan_sweep.py checks).
+Needs Debian's python3-distributed; use /usr/bin/python3.
 """
 import ctypes
 import json
@@ -114,8 +115,13 @@ def _client(workers, scheduler):
         client = Client(scheduler)
         client.upload_file(os.path.abspath(__file__))  # the workers import `execute` from it
         return client, None
+    # every listening socket on loopback: host for the scheduler's and workers' TCP, and the HTTP
+    # servers (metrics, health) that scheduler and workers start even without a dashboard,
+    # which otherwise listen on all interfaces (distributed 2022.12)
     cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                           host="127.0.0.1", dashboard_address=None, silence_logs=40)
+                           host="127.0.0.1", dashboard_address=None,
+                           scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
+                           worker_dashboard_address="127.0.0.1:0", silence_logs=40)
     return Client(cluster), cluster
 
 
