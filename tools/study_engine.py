@@ -156,8 +156,9 @@ def run_jobs(jobs, workers=1, scheduler=None, skip_complete=False, same_command=
     from distributed import as_completed
     client, cluster = _client(workers, scheduler)
     try:
-        futures = {client.submit(execute, j.name, j.out, j.cmd, threads, j.accept, key="variant-%s-%s" % (
-            j.name, os.urandom(4).hex()), pure=False): j for j in todo}
+        futures = {client.submit(execute, j.name, j.out, j.cmd, threads, j.accept,
+                                 key="variant-%s-%s" % (j.name, os.urandom(4).hex()), pure=False): j
+                   for j in todo}
         for fut in as_completed(futures):
             j = futures[fut]
             try:
