@@ -17,7 +17,8 @@ A spec (YAML; paths relative to the spec file):
       - {name: tip_uz, file: probes.csv, row: tip, column: uz, at: last}
       - {name: ms_step, file: steps.csv, column: t_step, at: median, scale: 1000}
     plots:                              # y against x, one curve per value of series
-      - {x: tissue.material.young, y: tip_uz, series: tissue.material.poisson}
+      - {x: tissue.material.young, y: tip_uz, series: tissue.material.poisson,
+         xlabel: "Young's modulus (Pa)", ylabel: "tip u_z (m)"}   # labels: optional
 
 Plans instead of runs (`command: plan`): each variant is `needlehex plan`
 (target compensation, docs/dbs.md) with the variant's --set values, e.g.
@@ -242,17 +243,18 @@ def plot(spec, rows):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     for p in spec.get("plots", []):
-        fig, ax = plt.subplots(figsize=(6, 4))
         series = p.get("series")
+        fig, ax = plt.subplots(figsize=(8.5 if series else 6, 4))
         groups = sorted({r[series] for r in rows}, key=str) if series else [None]
-        for g in groups:
+        for k, g in enumerate(groups):
             pts = sorted((float(r[p["x"]]), r[p["y"]]) for r in rows
                          if r["status"] == "ok" and (g is None or r[series] == g))
-            if pts:
-                ax.plot([a for a, _ in pts], [b for _, b in pts], "o-",
+            if pts:  # markers smaller curve by curve: coinciding curves stay visible
+                ax.plot([a for a, _ in pts], [b for _, b in pts], "osD^v<>"[k % 7] + "-",
+                        ms=max(9 - 2 * k, 3), lw=max(2.4 - 0.6 * k, 1),
                         label=("%s = %s" % (series, g)) if g is not None else None)
-        ax.set_xlabel(p["x"])
-        ax.set_ylabel(p["y"])
+        ax.set_xlabel(p.get("xlabel", p["x"]))
+        ax.set_ylabel(p.get("ylabel", p["y"]))
         if p.get("logx"):
             ax.set_xscale("log")
         ax.grid(alpha=0.3)
