@@ -33,7 +33,9 @@ The table then has, per variant, the plan's outcome from OUT/vNNN/plan.yaml:
 plan's wall time: all its runs); `outputs` read the CSVs of the last run
 (OUT/vNNN/final). A plan that does not converge within max_runs is a
 result (status `not converged`, the sweep exits 1), not a failure: it is
-not run again on a restart.
+not run again on a restart; nor is a plan one of whose runs failed (status
+`failed: <needlehex's message>`, the runs before it in the table); --fresh
+runs them again.
 
 An output reads one column of one CSV of the run (steps.csv, probes.csv,
 targets.csv, tools.csv), keeps the rows whose `name` is `row` (probes,
