@@ -401,9 +401,9 @@ def main():
         ax.set_ylabel(ylabel)
         ax.set_title(title, fontsize=10)
         ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=7)
+        ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)
         fig.tight_layout()
-        fig.savefig(os.path.join(img, fname), dpi=110)
+        fig.savefig(os.path.join(img, fname), dpi=110, bbox_inches="tight")
         plt.close(fig)
 
     plot("err", "adapt_error.png", "‖u − u_h‖_E = sqrt(W_∞ − W_h)  (√J)",

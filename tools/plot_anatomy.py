@@ -206,10 +206,11 @@ def plot_shift(img, labels, run, frames, out):
                 h, v = (0, 1) if plane == "axial" else (1, 2)
                 label = f"t = {times.get(step, 0.0):.2f} s" if k == 0 else None
                 kw = {"color": styles[n % len(styles)][-8:]} if n else {"color": "k"}
-                ax.plot(p[:, h], p[:, v], "-" if n else "--", lw=1.2, label=label, **kw)
+                # earlier frames wider, so that a later one drawn over them leaves them visible
+                lw = 1.2 if n in (0, len(frames) - 1) else 3.0
+                ax.plot(p[:, h], p[:, v], "-" if n else "--", lw=lw, label=label, **kw)
     for ax, plane in zip(axes, ("axial", "sagittal")):
         ax.set_aspect("equal")
-        ax.legend(fontsize=8)
         if plane == "axial":
             ax.set(xlabel="x (mm)", ylabel="y (mm)", title="ventricles, axial plane (rest z)")
             ax.invert_xaxis()
@@ -218,7 +219,10 @@ def plot_shift(img, labels, run, frames, out):
     fig.suptitle("lateral ventricles at rest (dashed) and deformed by the brain shift "
                  "(gravity -y)")
     fig.tight_layout()
-    fig.savefig(os.path.join(out, "anatomy_shift.png"), dpi=110)
+    handles, labels = axes[0].get_legend_handles_labels()  # one legend, below the plots
+    fig.legend(handles, labels, fontsize=9, loc="upper center", ncol=len(labels),
+               bbox_to_anchor=(0.5, 0.02), frameon=False)
+    fig.savefig(os.path.join(out, "anatomy_shift.png"), dpi=110, bbox_inches="tight")
     plt.close(fig)
 
 

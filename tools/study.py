@@ -9,6 +9,7 @@ steps.csv / probes.csv / targets.csv and writes plots and a Markdown report.
     tools/study.py cube    [the same options]
     tools/study.py dbs-shift [the same options]
     tools/study.py sweep SPEC.yaml [--out DIR] [--fresh] [--workers N | --scheduler ...]
+    tools/study.py plan SPEC.yaml  [the same]: one `needlehex plan` per variant
 
 Variants run through dask.distributed (study_engine.py): a LocalCluster of
 --workers processes on this machine (default 1 for phantom and dbs, whose
@@ -16,7 +17,8 @@ timings are the point; the number of cores for a sweep), or an existing
 cluster given by --scheduler (docs/performance.md: a SLURM cluster through
 dask-jobqueue). A failed variant is reported and left out; the others go
 on. sweep: study_sweep.py (a base scene, lists of --set values, one table
-and plots).
+and plots); plan: the same with one `needlehex plan` per variant (different
+targets, stiffnesses, ...: one table of aims, misses, runs and times).
 
 cube (docs/adaptivity.md, "Goal-oriented refinement"): the localized-load
 block, probe P's displacement on uniform, SPR-driven and goal-driven meshes
@@ -178,18 +180,20 @@ def read_steps(out):
 
 
 def read_points(out, fname="probes.csv"):
-    """{name: array (steps + 1, 3) of displacement (probes) or position}, steps."""
-    pts, steps = {}, []
+    """{name: array (steps + 1, 4): displacement and error estimate (probes) or position and
+    distance to the tool's tip (targets)}, the steps, their times (s)."""
+    pts, steps, times = {}, [], []
     for r in read_csv(os.path.join(out, fname)):
         s = int(r["step"])
         if not steps or steps[-1] != s:
             steps.append(s)
+            times.append(float(r["time"]))
         if fname == "probes.csv":
             v = [float(r["ux"]), float(r["uy"]), float(r["uz"]), float(r.get("error_estimate", "nan"))]
         else:
             v = [float(r["x"]), float(r["y"]), float(r["z"]), float(r["distance"])]
         pts.setdefault(r["name"], []).append(v)
-    return {k: np.array(v) for k, v in pts.items()}, np.array(steps)
+    return {k: np.array(v) for k, v in pts.items()}, np.array(steps), np.array(times)
 
 
 def speed(st):
@@ -253,10 +257,10 @@ def plot_probes(img, runs, names, fname, title):
     fig, axes = plt.subplots(1, len(names), figsize=(4.2 * len(names), 3.4), sharey=False)
     for ax, n in zip(np.atleast_1d(axes), names):
         for r in runs:
-            ax.plot(r["steps"], 1e6 * np.linalg.norm(r["u"][n][:, :3], axis=1), r.get("style", "-"),
+            ax.plot(r["times"], 1e6 * np.linalg.norm(r["u"][n][:, :3], axis=1), r.get("style", "-"),
                     label="%s (%d dofs)" % (r["label"], r["speed"]["max_dofs"]), lw=1.2)
         ax.set_title("point %s" % n)
-        ax.set_xlabel("step")
+        ax.set_xlabel("time (s)")
         ax.grid(alpha=0.3)
     np.atleast_1d(axes)[0].set_ylabel("|u| (µm)")
     legend_outside(np.atleast_1d(axes)[-1])
@@ -291,8 +295,8 @@ def phantom(a, binary):
     rname, rlabel, rdir, infos = run_with_reference(a, binary, st, out)
     with open(os.path.join(rdir, "run.json")) as f:
         rinfo = json.load(f)
-    ref_u, ref_steps = read_points(rdir)
-    ref = {"name": rname, "label": rlabel, "u": ref_u, "steps": ref_steps,
+    ref_u, ref_steps, ref_times = read_points(rdir)
+    ref = {"name": rname, "label": rlabel, "u": ref_u, "steps": ref_steps, "times": ref_times,
            "speed": speed(read_steps(rdir)), "style": "k--"}
 
     runs = []
@@ -301,11 +305,11 @@ def phantom(a, binary):
             continue
         d = os.path.join(out, name)
         info = infos[name]
-        u, steps = read_points(d)
+        u, steps, times = read_points(d)
         if len(steps) != len(ref_steps):
             raise SystemExit("%s has %d steps, the reference %d: run the reference with the "
                              "same steps (--fresh-reference)" % (name, len(steps), len(ref_steps)))
-        r = {"name": name, "label": label, "kind": kind, "u": u, "steps": steps,
+        r = {"name": name, "label": label, "kind": kind, "u": u, "steps": steps, "times": times,
              "speed": speed(read_steps(d)), "wall": info["wall"], "style": style(name)}
         r["err_max"], r["err_rms"] = probe_error(u, ref_u, names)
         runs.append(r)
@@ -393,9 +397,9 @@ def phantom(a, binary):
         for ax, group, title in ((axes[0], st["axis"], "along the needle"),
                                  (axes[1], st["radial"], "normal to the needle")):
             for n in group:
-                ax.plot(fine["steps"], 1e6 * np.linalg.norm(fine["u"][n][:, :3], axis=1), label=n)
+                ax.plot(fine["times"], 1e6 * np.linalg.norm(fine["u"][n][:, :3], axis=1), label=n)
             ax.set_title("32×16×16: " + title, fontsize=10)
-            ax.set_xlabel("step")
+            ax.set_xlabel("time (s)")
             ax.set_ylabel("|u| (µm)")
             ax.grid(alpha=0.3)
             legend_outside(ax)
@@ -484,7 +488,7 @@ def cube(a, binary):
     os.makedirs(img, exist_ok=True)
 
     def series(d):
-        u, _ = read_points(d)
+        u = read_points(d)[0]
         sr = read_steps(d)
         return {"dofs": sr["dofs"], "uz": u[st["probe"]][1:, 2], "est": u[st["probe"]][1:, 3],
                 "iterations": sr["iterations"], "t_step": sr["t_step"]}
@@ -574,13 +578,17 @@ def dbs(a, binary):
             continue
         d = os.path.join(out, name)
         info = infos[name]
-        pos, steps = read_points(d, "targets.csv")
+        pos, steps, times = read_points(d, "targets.csv")
         tgt = pos[st["target"]]
         tools = read_tools(d, st["cannula"])
         touched = [i for i, s in enumerate(tools["state"]) if s != "outside"]
         i_shift = max(touched[0] - 1, 0) if touched else len(steps) - 1  # last step before contact
-        i_top = int(np.argmax(tools["depth"]))  # the cannula's deepest step: target reached
-        r = {"name": name, "label": label, "kind": kind, "steps": steps, "wall": info["wall"],
+        depth = np.asarray(tools["depth"])  # in the tissue: it stops growing at the target
+        i_top = int(np.nonzero(depth >= depth.max() - 1e-6)[0][0])  # target depth reached (1 µm)
+        back = [i for i, s in enumerate(tools["state"]) if s == "retracting"]
+        i_back = back[0] - 1 if back else len(steps) - 1  # the last step before the retraction
+        r = {"name": name, "label": label, "kind": kind, "steps": steps, "times": times,
+             "wall": info["wall"], "i_back": i_back,
              "distance": tgt[:, 3], "shift": float(np.linalg.norm(tgt[i_shift, :3] - tgt[0, :3])),
              "stn": np.linalg.norm(tgt[:, :3] - tgt[i_shift, :3], axis=1), "i_shift": i_shift,
              "i_top": i_top, "st": read_steps(d), "style": {"coarse": "C0-", "fine": "C2-",
@@ -603,15 +611,16 @@ def dbs(a, binary):
     if A and F and len(A["distance"]) == len(F["distance"]):
         i0 = max(A["i_top"], F["i_top"])
         dd = np.abs(A["distance"][i0:] - F["distance"][i0:])
+        im = i0 + int(np.argmax(dd))
         p("- adaptive vs uniform fine: max dofs %d vs %d (ratio %.2f, goal ≤ 1/3); median ms/step "
           "%.1f vs %.1f (%.1f× faster, goal ≥ 5×); electrode–STN distance after the target is "
-          "reached (step %d on): max difference %.3f mm at step %d, RMS %.3f mm, at the end %.3f mm "
-          "(goal ≤ 0.3 mm)." % (
+          "reached (step %d, t = %.2f s, on): max difference %.3f mm at step %d (t = %.2f s), RMS "
+          "%.3f mm, at the end %.3f mm (goal ≤ 0.3 mm)." % (
               A["speed"]["max_dofs"], F["speed"]["max_dofs"],
               A["speed"]["max_dofs"] / F["speed"]["max_dofs"], A["speed"]["median"],
               F["speed"]["median"], F["speed"]["median"] / A["speed"]["median"], i0,
-              1e3 * dd.max(), i0 + int(np.argmax(dd)), 1e3 * np.sqrt(np.mean(dd ** 2)),
-              1e3 * dd[-1]))
+              A["times"][i0], 1e3 * dd.max(), im, A["times"][im],
+              1e3 * np.sqrt(np.mean(dd ** 2)), 1e3 * dd[-1]))
     G = byname.get("goal")
     if G and F and len(G["distance"]) == len(F["distance"]):
         i0 = max(G["i_top"], F["i_top"])
@@ -625,36 +634,48 @@ def dbs(a, binary):
     if A:
         p("- adaptive whole procedure: %.1f s of steps (%.1f s wall; goal < 30 s)." % (
             A["speed"]["total"], A["wall"]))
+    loads = [x for n in infos for x in infos[n].get("load", [])]
+    if loads:  # timings under load are not those of a quiet machine
+        p("- 1-minute load average at the runs' starts and ends: %.1f–%.1f (2 cores)." % (
+            min(loads), max(loads)))
     write_report(out, lines)
 
     def lines_plot(fname, ylabel, key, title, scale=1e3, vlines=True, from_shift=False,
-                   logy=False):
-        """One curve per run of r[key], or of steps.csv's column `key`."""
-        fig, ax = plt.subplots(figsize=(6.4, 3.8))
-        for r in runs:
-            y = r["st"][key] if key in r["st"] else r[key]
-            x = r["st"]["step"] if key in r["st"] else r["steps"]
-            if from_shift:
-                x, y = x[r["i_shift"]:], y[r["i_shift"]:]
-            ax.plot(x, scale * np.asarray(y), r["style"], lw=1.3,
-                    label="%s (max %d dofs)" % (r["label"], r["speed"]["max_dofs"]))
-        if logy:
-            ax.set_yscale("log")
-        if vlines and runs:
-            ax.axvline(runs[0]["i_top"], color="0.5", ls=":", lw=1)
-            ax.axvline(runs[0]["i_shift"], color="0.5", ls="--", lw=1)
-        ax.set_xlabel("step")
-        ax.set_ylabel(ylabel)
-        ax.set_title(title, fontsize=10)
-        ax.grid(alpha=0.3)
-        legend_outside(ax)
+                   logy=False, zoom=None):
+        """One curve per run of r[key], or of steps.csv's column `key`, against time; zoom: a
+        second panel from that time on (the end of the procedure, on its own scale)."""
+        fig, axes = plt.subplots(1, 2 if zoom else 1, figsize=(10.5 if zoom else 7.5, 3.8),
+                                 squeeze=False)
+        ph = byname.get("adaptive", runs[0])  # the phases: the scene as written
+        for k, ax in enumerate(axes[0]):
+            for r in runs:
+                y = scale * np.asarray(r["st"][key] if key in r["st"] else r[key])
+                x = r["st"]["time"] if key in r["st"] else r["times"]
+                keep = x >= (zoom if k else (x[r["i_shift"]] if from_shift else -1))
+                ax.plot(x[keep], y[keep], r["style"], lw=1.3,
+                        label="%s (max %d dofs)" % (r["label"], r["speed"]["max_dofs"]))
+            if logy:
+                ax.set_yscale("log")
+            for i, ls, what in ((ph["i_shift"], "--", "cannula reaches the brain"),
+                                (ph["i_top"], ":", "cannula at the target depth"),
+                                (ph["i_back"], "-.", "retraction starts")):
+                t = ph["times"][i]
+                if vlines and (not from_shift or i >= ph["i_shift"]) and (not k or t >= zoom):
+                    ax.axvline(t, color="0.45", ls=ls, lw=1, label="%s (%.2f s)" % (what, t))
+            ax.set_xlabel("time (s)")
+            ax.set_ylabel(ylabel)
+            ax.set_title(title if not k else "from %g s on" % zoom, fontsize=10)
+            ax.grid(alpha=0.3)
+        handles, labels = axes[0][0].get_legend_handles_labels()  # every curve and phase
+        axes[0][-1].legend(handles, labels, fontsize=8, loc="center left",
+                           bbox_to_anchor=(1.01, 0.5), frameon=False)
         fig.tight_layout()
         fig.savefig(os.path.join(img, fname), dpi=110, bbox_inches="tight")
         plt.close(fig)
         log("wrote %s" % os.path.join(img, fname))
 
     lines_plot("dbs_distance.png", "electrode tip to STN (mm)", "distance",
-               "electrode tip–STN distance (dashed: shift done; dotted: retraction starts)")
+               "electrode tip–STN distance", zoom=7.6)
     lines_plot("dbs_stn.png", "STN displacement since the shift (mm)", "stn",
                "STN displacement relative to its post-shift position", from_shift=True)
     lines_plot("dbs_dofs.png", "dofs", "dofs", "degrees of freedom", scale=1, vlines=False)
@@ -783,8 +804,9 @@ def dbs_shift(a, binary):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("study", choices=["phantom", "dbs", "dbs-shift", "sweep", "cube"])
-    ap.add_argument("spec", nargs="?", help="sweep: the spec (YAML, see study_sweep.py)")
+    ap.add_argument("study", choices=["phantom", "dbs", "dbs-shift", "sweep", "plan", "cube"])
+    ap.add_argument("spec", nargs="?",
+                    help="sweep, plan: the spec (YAML, see study_sweep.py)")
     ap.add_argument("--binary", default=None, help="needlehex (default build/needlehex)")
     ap.add_argument("--out", default=None, help="run folders and report (default out/study/STUDY)")
     ap.add_argument("--img", default=None, help="where the PNGs go (default OUT/img)")
@@ -800,12 +822,12 @@ def main():
     engine.add_arguments(ap, default_workers=None)
     a = ap.parse_args()
     if a.workers is None:
-        a.workers = (os.cpu_count() or 1) if a.study == "sweep" else 1
+        a.workers = (os.cpu_count() or 1) if a.study in ("sweep", "plan") else 1
     binary = find_binary(a.binary)
-    if a.study == "sweep":
+    if a.study in ("sweep", "plan"):
         if not a.spec:
-            ap.error("sweep needs SPEC.yaml")
-        return study_sweep.sweep(a, binary)
+            ap.error("%s needs SPEC.yaml" % a.study)
+        return study_sweep.sweep(a, binary, "plan" if a.study == "plan" else None)
     return {"phantom": phantom, "dbs": dbs, "dbs-shift": dbs_shift, "cube": cube}[a.study](a, binary)
 
 

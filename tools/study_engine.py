@@ -9,7 +9,8 @@ cluster (docs/performance.md, "Studies on a cluster").
     done = run_jobs(jobs, workers=0)              # serial, in this process, no Dask
 
 Each variant runs in OUT.partial and is renamed to OUT once needlehex exits
-0, with OUT/run.json recording its command, wall time, host and date: a
+0, with OUT/run.json recording its command, wall time, host, date, exit code
+and the machine's 1-minute load average at its start and end: a
 folder OUT with a run.json is a complete variant, anything else is not.
 With skip_complete, a variant whose OUT/run.json records the same command
 is not run again (a restart after an interruption, or a sweep grown by new
@@ -24,8 +25,9 @@ its own partial folder.
 
 Each run is single-threaded by default (OMP_NUM_THREADS=1,
 OPENBLAS_NUM_THREADS=1): N workers on N cores then do not compete for
-cores inside one run. The scheduler and LocalCluster listen on 127.0.0.1
-only. Needs Debian's python3-distributed; use /usr/bin/python3.
+cores inside one run. The LocalCluster's scheduler and workers listen on
+127.0.0.1 only, their HTTP servers included (tests/plan_sweep.py checks).
+Needs Debian's python3-distributed; use /usr/bin/python3.
 """
 import ctypes
 import json
@@ -38,7 +40,9 @@ import sys
 import time
 from collections import namedtuple
 
-Job = namedtuple("Job", "name out cmd")
+# accept: the exit codes that make a variant complete (a plan that did not converge exits 1
+# and is a result, not a failure: tools/study_sweep.py, `command: plan`)
+Job = namedtuple("Job", "name out cmd accept", defaults=((0,),))
 
 
 def _die_with_parent():
@@ -49,22 +53,26 @@ def _die_with_parent():
         pass
 
 
-def execute(name, out, cmd, threads=1):
+def execute(name, out, cmd, threads=1, accept=(0,)):
     """Runs one variant (in a worker, or in this process): needlehex into OUT.partial, then
-    renamed to OUT. Returns its run.json record; raises RuntimeError on a non-zero exit."""
+    renamed to OUT. Returns its run.json record (with the exit code, and the last lines of
+    stderr if it is not 0); raises RuntimeError on an exit code not in `accept`."""
     part = out + ".partial"
     shutil.rmtree(part, ignore_errors=True)
     os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
     env = dict(os.environ, OMP_NUM_THREADS=str(threads), OPENBLAS_NUM_THREADS=str(threads))
     argv = list(cmd) + ["--out", part]
-    t0 = time.time()
+    t0, load0 = time.time(), os.getloadavg()[0]
     p = subprocess.run(argv, env=env, capture_output=True, text=True, preexec_fn=_die_with_parent)
     wall = time.time() - t0
-    if p.returncode != 0:
-        tail = (p.stderr or p.stdout).strip().splitlines()[-3:]
-        raise RuntimeError("needlehex exit %d: %s" % (p.returncode, " / ".join(tail)))
+    tail = " / ".join((p.stderr or p.stdout).strip().splitlines()[-3:])
+    if p.returncode not in accept:
+        raise RuntimeError("needlehex exit %d: %s" % (p.returncode, tail))
     info = {"cmd": list(cmd), "wall": wall, "host": socket.gethostname(), "pid": os.getpid(),
-            "date": time.strftime("%Y-%m-%d %H:%M:%S")}
+            "date": time.strftime("%Y-%m-%d %H:%M:%S"), "returncode": p.returncode,
+            "load": [load0, os.getloadavg()[0]]}  # 1-min load average at the start and end
+    if p.returncode != 0:
+        info["message"] = tail
     with open(os.path.join(part, "run.json"), "w") as f:
         json.dump(info, f)
     shutil.rmtree(out, ignore_errors=True)
@@ -107,8 +115,13 @@ def _client(workers, scheduler):
         client = Client(scheduler)
         client.upload_file(os.path.abspath(__file__))  # the workers import `execute` from it
         return client, None
+    # every listening socket on loopback: host for the scheduler's and workers' TCP, and the HTTP
+    # servers (metrics, health) that scheduler and workers start even without a dashboard,
+    # which otherwise listen on all interfaces (distributed 2022.12)
     cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                           host="127.0.0.1", dashboard_address=None, silence_logs=40)
+                           host="127.0.0.1", dashboard_address=None,
+                           scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
+                           worker_dashboard_address="127.0.0.1:0", silence_logs=40)
     return Client(cluster), cluster
 
 
@@ -134,7 +147,7 @@ def run_jobs(jobs, workers=1, scheduler=None, skip_complete=False, same_command=
     if workers == 0 and not scheduler:
         for j in todo:
             try:
-                done[j.name] = execute(j.name, j.out, j.cmd, threads)
+                done[j.name] = execute(j.name, j.out, j.cmd, threads, j.accept)
                 bar.update(j.name, done[j.name])
             except RuntimeError as e:
                 failed[j.name] = str(e)
@@ -143,8 +156,9 @@ def run_jobs(jobs, workers=1, scheduler=None, skip_complete=False, same_command=
     from distributed import as_completed
     client, cluster = _client(workers, scheduler)
     try:
-        futures = {client.submit(execute, j.name, j.out, j.cmd, threads, key="variant-%s-%s" % (
-            j.name, os.urandom(4).hex()), pure=False): j for j in todo}
+        futures = {client.submit(execute, j.name, j.out, j.cmd, threads, j.accept,
+                                 key="variant-%s-%s" % (j.name, os.urandom(4).hex()), pure=False): j
+                   for j in todo}
         for fut in as_completed(futures):
             j = futures[fut]
             try:

@@ -17,7 +17,25 @@ A spec (YAML; paths relative to the spec file):
       - {name: tip_uz, file: probes.csv, row: tip, column: uz, at: last}
       - {name: ms_step, file: steps.csv, column: t_step, at: median, scale: 1000}
     plots:                              # y against x, one curve per value of series
-      - {x: tissue.material.young, y: tip_uz, series: tissue.material.poisson}
+      - {x: tissue.material.young, y: tip_uz, series: tissue.material.poisson,
+         xlabel: "Young's modulus (Pa)", ylabel: "tip u_z (m)"}   # labels: optional
+
+Plans instead of runs (`command: plan`): each variant is `needlehex plan`
+(target compensation, docs/dbs.md) with the variant's --set values, e.g.
+different targets or brain stiffnesses, and
+
+    command: plan
+    plan: {tolerance: 0.5e-3, max_runs: 6}   # optional: needlehex plan's defaults
+
+The table then has, per variant, the plan's outcome from OUT/vNNN/plan.yaml:
+`converged` (true/false), `runs`, `misses_mm` (|miss| of each run, mm),
+`miss_mm` (the last), `aim_mm` (the compensated aim, mm), `time_s` (the
+plan's wall time: all its runs); `outputs` read the CSVs of the last run
+(OUT/vNNN/final). A plan that does not converge within max_runs is a
+result (status `not converged`, the sweep exits 1), not a failure: it is
+not run again on a restart; nor is a plan one of whose runs failed (status
+`failed: <needlehex's message>`, the runs before it in the table); --fresh
+runs them again.
 
 An output reads one column of one CSV of the run (steps.csv, probes.csv,
 targets.csv, tools.csv), keeps the rows whose `name` is `row` (probes,
@@ -32,6 +50,9 @@ varies fastest); complete variants with the same command are skipped
 more values. Outputs: OUT/sweep.csv (one row per variant: the parameter
 values, status, the outputs), OUT/report.md (the same as a table, also
 printed), OUT/sweep_<y>_<x>.png per plot.
+
+    tools/study.py sweep SPEC.yaml [--out DIR] [--fresh] [--workers N | --scheduler ...]
+    tools/study.py plan SPEC.yaml  [the same]    # the same, `command: plan` implied
 """
 import csv
 import itertools
@@ -44,7 +65,9 @@ import yaml
 import study_engine as engine
 
 
-def load_spec(path):
+def load_spec(path, command=None):
+    """The spec of PATH, checked; command: the command implied by the caller (plan), which the
+    spec's `command` may repeat but not contradict."""
     with open(path) as f:
         spec = yaml.safe_load(f)
     where = os.path.dirname(os.path.abspath(path))
@@ -55,8 +78,19 @@ def load_spec(path):
     if not isinstance(spec, dict) or "scene" not in spec:
         bad("a sweep spec is a mapping with at least `scene`")
     for k in spec:
-        if k not in ("scene", "out", "set", "grid", "combinations", "outputs", "plots"):
+        if k not in ("scene", "out", "set", "grid", "combinations", "outputs", "plots", "command",
+                     "plan"):
             bad("unknown key `%s`" % k)
+    if command and spec.setdefault("command", command) != command:
+        bad("`command: %s`, but run as `%s`" % (spec["command"], command))
+    spec.setdefault("command", "run")
+    if spec["command"] not in ("run", "plan"):
+        bad("`command` is run or plan, got `%s`" % spec["command"])
+    plan = spec.setdefault("plan", {})
+    if not isinstance(plan, dict) or any(k not in ("tolerance", "max_runs") for k in plan):
+        bad("`plan` is a mapping with tolerance (m) and max_runs")
+    if plan and spec["command"] != "plan":
+        bad("`plan` needs `command: plan`")
     if ("grid" in spec) == ("combinations" in spec):
         bad("give exactly one of `grid` and `combinations`")
     spec["scene"] = os.path.normpath(os.path.join(where, spec["scene"]))
@@ -103,12 +137,43 @@ def yaml_value(v):
 
 def jobs_of(spec, binary):
     jobs = []
+    plan = spec["command"] == "plan"
     for i, v in enumerate(spec["variants"]):
-        cmd = [binary, "run", spec["scene"], "--quiet"]
+        cmd = [binary, spec["command"], spec["scene"], "--quiet"]
+        if plan and "tolerance" in spec["plan"]:
+            cmd += ["--tolerance", repr(float(spec["plan"]["tolerance"]))]
+        if plan and "max_runs" in spec["plan"]:
+            cmd += ["--max-runs", str(int(spec["plan"]["max_runs"]))]
         for s in list(spec.get("set", [])) + ["%s=%s" % (k, yaml_value(x)) for k, x in v.items()]:
             cmd += ["--set", s]
-        jobs.append(engine.Job("v%03d" % i, os.path.join(spec["out"], "v%03d" % i), cmd))
+        # a plan that did not converge exits 1 with its plan.yaml: a result
+        jobs.append(engine.Job("v%03d" % i, os.path.join(spec["out"], "v%03d" % i), cmd,
+                               (0, 1) if plan else (0,)))
     return jobs
+
+
+PLAN_COLUMNS = ["converged", "runs", "misses_mm", "miss_mm", "aim_mm", "time_s"]
+
+
+def plan_outcome(out, info):
+    """The plan columns and status of the plan variant in OUT (run.json record `info`)."""
+    try:
+        with open(os.path.join(out, "plan.yaml")) as f:
+            doc = yaml.safe_load(f)
+    except OSError:
+        doc = None
+    if not doc:  # its first run failed: no plan.yaml
+        return {}, "failed: %s" % info.get("message", "no plan.yaml")
+    mm = lambda v: "[%s]" % ", ".join("%.3f" % (1e3 * x) for x in v)  # noqa: E731
+    r = {"converged": "true" if doc["converged"] else "false", "runs": doc["runs"],
+         "misses_mm": "[%s]" % ", ".join("%.4g" % (1e3 * it["miss"]) for it in doc["iterations"]),
+         "miss_mm": 1e3 * float(doc["miss"]), "aim_mm": mm(doc["aim"]),
+         "time_s": float(doc["time"])}
+    if doc["converged"]:
+        return r, "ok"
+    if doc["runs"] < doc["max_runs"]:  # a run failed before max_runs
+        return r, "failed: %s" % info.get("message", "")
+    return r, "not converged"
 
 
 def reduce_output(out, o):
@@ -134,20 +199,31 @@ def reduce_output(out, o):
 
 
 def table(spec, jobs, done, failed):
-    """Rows of the sweep table: parameters, status, outputs."""
+    """Rows of the sweep table: parameters, status, (plan columns,) outputs."""
     rows = []
+    plan = spec["command"] == "plan"
     for j, v in zip(jobs, spec["variants"]):
         r = {"variant": j.name}
         r.update({k: yaml_value(v[k]) if k in v else "" for k in spec["keys"]})
         r["status"] = "ok" if j.name in done else "failed"
+        run_dir = j.out
+        if plan:
+            r.update({k: "" for k in PLAN_COLUMNS})
+            if j.name in done:
+                cols, r["status"] = plan_outcome(j.out, done[j.name])
+                r.update(cols)
+            run_dir = os.path.join(j.out, "final")
         for o in spec.get("outputs", []):
-            r[o["name"]] = reduce_output(j.out, o) if j.name in done else math.nan
+            ok = j.name in done and os.path.isdir(run_dir)
+            r[o["name"]] = reduce_output(run_dir, o) if ok else math.nan
         rows.append(r)
     return rows
 
 
 def write_table(spec, rows):
-    cols = ["variant"] + spec["keys"] + ["status"] + [o["name"] for o in spec.get("outputs", [])]
+    cols = ["variant"] + spec["keys"] + ["status"] + (
+        PLAN_COLUMNS if spec["command"] == "plan" else []) + [o["name"] for o in
+                                                             spec.get("outputs", [])]
     with open(os.path.join(spec["out"], "sweep.csv"), "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=cols)
         w.writeheader()
@@ -157,7 +233,8 @@ def write_table(spec, rows):
     for r in rows:
         lines.append("| " + " | ".join("%.6g" % r[k] if isinstance(r[k], float) else str(r[k])
                                        for k in cols) + " |")
-    report = "\n".join(["Sweep of %s: %d variants." % (spec["scene"], len(rows)), ""] + lines)
+    what = "Plans" if spec["command"] == "plan" else "Sweep"
+    report = "\n".join(["%s of %s: %d variants." % (what, spec["scene"], len(rows)), ""] + lines)
     print(report)
     with open(os.path.join(spec["out"], "report.md"), "w") as f:
         f.write(report + "\n")
@@ -168,32 +245,35 @@ def plot(spec, rows):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     for p in spec.get("plots", []):
-        fig, ax = plt.subplots(figsize=(6, 4))
         series = p.get("series")
+        fig, ax = plt.subplots(figsize=(8.5 if series else 6, 4))
         groups = sorted({r[series] for r in rows}, key=str) if series else [None]
-        for g in groups:
+        for k, g in enumerate(groups):
             pts = sorted((float(r[p["x"]]), r[p["y"]]) for r in rows
                          if r["status"] == "ok" and (g is None or r[series] == g))
-            if pts:
-                ax.plot([a for a, _ in pts], [b for _, b in pts], "o-",
+            if pts:  # markers smaller curve by curve: coinciding curves stay visible
+                ax.plot([a for a, _ in pts], [b for _, b in pts], "osD^v<>"[k % 7] + "-",
+                        ms=max(9 - 2 * k, 3), lw=max(2.4 - 0.6 * k, 1),
                         label=("%s = %s" % (series, g)) if g is not None else None)
-        ax.set_xlabel(p["x"])
-        ax.set_ylabel(p["y"])
+        ax.set_xlabel(p.get("xlabel", p["x"]))
+        ax.set_ylabel(p.get("ylabel", p["y"]))
         if p.get("logx"):
             ax.set_xscale("log")
         ax.grid(alpha=0.3)
-        if series and ax.get_legend_handles_labels()[0]:
-            ax.legend(fontsize=8)
+        if series and ax.get_legend_handles_labels()[0]:  # right of the axes, off the curves
+            ax.legend(fontsize=8, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)
         fig.tight_layout()
         name = os.path.join(spec["out"], "sweep_%s_%s.png" % (p["y"], p["x"].replace(".", "_")))
-        fig.savefig(name, dpi=110)
+        fig.savefig(name, dpi=110, bbox_inches="tight")
         plt.close(fig)
         print("wrote %s" % name, file=sys.stderr)
 
 
-def sweep(a, binary):
-    """Runs the sweep of a.spec with the engine options of a; returns the exit status."""
-    spec = load_spec(a.spec)
+def sweep(a, binary, command=None):
+    """Runs the sweep of a.spec with the engine options of a; returns the exit status (1 if a
+    variant failed or a plan did not converge). command "plan": the spec's `command` must be
+    plan or absent (tools/study.py plan)."""
+    spec = load_spec(a.spec, command)
     if a.out:
         spec["out"] = os.path.abspath(a.out)
     os.makedirs(spec["out"], exist_ok=True)
@@ -203,4 +283,8 @@ def sweep(a, binary):
     rows = table(spec, jobs, done, failed)
     write_table(spec, rows)
     plot(spec, rows)
-    return engine.report_failures(failed)
+    bad = [r for r in rows if r["status"] not in ("ok", "failed")]  # plans: see plan_outcome
+    for r in bad:
+        print("variant %s: %s" % (r["variant"], r["status"]), file=sys.stderr)
+    rc = engine.report_failures(failed)
+    return 1 if rc or bad else 0
