@@ -690,9 +690,9 @@ static int nh_sim_build(nh_sim *s) {
                       .newton_iterations = sc->solver.newton_iterations,
                       .newton_tolerance = sc->solver.newton_tolerance,
                       .lazy_rotation = sc->solver.lazy_rotation};
-  /* --restart: the factor the next step reuses, made again (with `every`
-   * every step factorises: nothing to restore) */
-  if (s->restore_solver && s->integrator.reuse) {
+  /* --restart: the factor the next step reuses, made again, and the last
+   * assembly (the lazy tangents' frames: with `every` too) */
+  if (s->restore_solver) {
     int rc = nh_system_reuse_load(s->system, s->restore_solver, s->restore_solver_size,
                                   s->integrator.threads);
     if (rc == NH_ERR_INPUT)

@@ -180,40 +180,58 @@ void nh_system_reuse_save(const nh_system *s, nh_bytes *b) {
   int32_t steps = s->cycle_steps;
   nh_bytes_put(b, &steps, sizeof steps);
   nh_bytes_put(b, &s->cycle_cost, sizeof s->cycle_cost);
-  if (!s->L) return;
-  nh_bytes_put(b, s->c_factored, sizeof s->c_factored);
-  nh_bytes_put(b, s->u_factored, sizeof(double) * 3 * (size_t)s->n_nodes);
+  if (s->L) {
+    nh_bytes_put(b, s->c_factored, sizeof s->c_factored);
+    nh_bytes_put(b, s->u_factored, sizeof(double) * 3 * (size_t)s->n_nodes);
+  }
+  /* the last assembly (its frames decide which tangents the next one keeps) */
+  int32_t assembled = s->a_valid;
+  nh_bytes_put(b, &assembled, sizeof assembled);
+  if (!assembled) return;
+  nh_bytes_put(b, s->c_assembled, sizeof s->c_assembled);
+  nh_bytes_put(b, s->u_assembled, sizeof(double) * 3 * (size_t)s->n_nodes);
+}
+
+/* Assemble A at a saved u (f_int to scratch): NH_ERR_INPUT if u is not finite. */
+static int nh_reuse_assemble(nh_system *s, nh_byte_reader *r, int threads) {
+  double c[2], *u = malloc(sizeof(double) * 3 * (size_t)s->n_nodes);
+  if (!u) return NH_ERROR(NH_ERR_MEMORY, "out of memory restoring the solver's factor");
+  nh_bytes_get(r, c, sizeof c);
+  nh_bytes_get(r, u, sizeof(double) * 3 * (size_t)s->n_nodes);
+  int bad = r->short_read;
+  for (int i = 0; i < 3 * s->n_nodes && !bad; i++) bad = !isfinite(u[i]);
+  int rc = bad ? NH_ERROR(NH_ERR_INPUT, "the checkpoint's solver state is malformed") : NH_OK;
+  if (!rc) {
+    nh_system_assemble(s, u, NULL, c[0], c[1], s->work[0], NULL, threads);
+    rc = nh_stop_check();
+  }
+  free(u);
+  return rc;
 }
 
 int nh_system_reuse_load(nh_system *s, const unsigned char *data, size_t size, int threads) {
   nh_byte_reader r = {data, data + size, 0};
-  int32_t head[4], steps;
-  double cost, c[2];
+  int32_t head[4], steps, assembled = 0;
+  double cost;
   nh_bytes_get(&r, head, sizeof head);
   nh_bytes_get(&r, &steps, sizeof steps);
   nh_bytes_get(&r, &cost, sizeof cost);
   NH_CHECK(!r.short_read && head[1] == s->n_nodes && head[2] >= 0, NH_ERR_INPUT,
            "the checkpoint's solver state is malformed");
+  /* the factor: A at the u it factorised, factorised again */
   if (head[0]) {
-    nh_bytes_get(&r, c, sizeof c);
-    /* f_int of the assembly goes to scratch (work[0]) */
-    double *u = malloc(sizeof(double) * 3 * (size_t)s->n_nodes);
-    if (!u) return NH_ERROR(NH_ERR_MEMORY, "out of memory restoring the solver's factor");
-    nh_bytes_get(&r, u, sizeof(double) * 3 * (size_t)s->n_nodes);
-    int bad = r.short_read || r.p != r.end;
-    for (int i = 0; i < 3 * s->n_nodes && !bad; i++) bad = !isfinite(u[i]);
-    int rc = bad ? NH_ERROR(NH_ERR_INPUT, "the checkpoint's solver state is malformed") : NH_OK;
-    if (!rc) {
-      nh_system_assemble(s, u, NULL, c[0], c[1], s->work[0], NULL, threads);
-      rc = nh_stop_check();
-    }
-    free(u);
-    NH_TRY(rc);
+    NH_TRY(nh_reuse_assemble(s, &r, threads));
     NH_TRY(nh_system_factor(s));
-    s->factor_current = 0; /* the next step assembles its own A */
-  } else {
-    NH_CHECK(r.p == r.end, NH_ERR_INPUT, "the checkpoint's solver state is malformed");
   }
+  /* then the last assembly, so A, the kept tangents' frames and whether the
+   * factor is A's own are those of the run that wrote the checkpoint */
+  nh_bytes_get(&r, &assembled, sizeof assembled);
+  NH_CHECK(!r.short_read, NH_ERR_INPUT, "the checkpoint's solver state is malformed");
+  if (assembled)
+    NH_TRY(nh_reuse_assemble(s, &r, threads));
+  else
+    s->factor_current = 0;
+  NH_CHECK(r.p == r.end, NH_ERR_INPUT, "the checkpoint's solver state is malformed");
   s->factor_age = head[2];
   s->refactor_due = head[3];
   s->cycle_steps = steps;

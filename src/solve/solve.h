@@ -66,8 +66,9 @@ int nh_system_factor(nh_system *sys);
 void nh_system_reuse_save(const nh_system *sys, nh_bytes *b);
 /* Restore what nh_system_reuse_save wrote, into a system built on the same
  * mesh: a saved factor is made again from the A it factorised (assembled
- * with `threads`), so the continued run renews or reuses factors exactly as
- * the uninterrupted one. NH_ERR_INPUT (malformed), NH_ERR_NUMERIC (as
+ * with `threads`), then A is assembled at the last assembly's u (the lazy
+ * tangents' frames), so the continued run assembles, renews and reuses
+ * factors exactly as the uninterrupted one. NH_ERR_INPUT (malformed), NH_ERR_NUMERIC (as
  * nh_system_factor), NH_ERR_INTERRUPTED, NH_ERR_MEMORY. */
 int nh_system_reuse_load(nh_system *sys, const unsigned char *data, size_t size, int threads);
 
