@@ -32,11 +32,46 @@
 
 #include <errno.h>
 #include <math.h>
+#include <pthread.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
+
+/* SIGINT and SIGTERM ask the run to stop (nh_sim_request_stop). They are
+ * blocked in every thread and taken by one thread of their own (sigwait):
+ * METIS, inside CHOLMOD's analysis, installs handlers of its own for SIGTERM
+ * while it runs and swallowed a signal that arrived then (the run went on to
+ * its end with exit 0). Threads started before this (OpenBLAS's, when
+ * OPENBLAS_NUM_THREADS > 1) keep the handler below as well. */
+static void *nh_signal_thread(void *arg) {
+  const sigset_t *set = arg;
+  for (;;) {
+    int sig = 0;
+    if (sigwait(set, &sig) == 0) nh_sim_request_stop(sig);
+  }
+  return NULL;
+}
+
+static void nh_catch_stop_signals(void) {
+  static sigset_t set;
+  struct sigaction sa;
+  memset(&sa, 0, sizeof sa);
+  sa.sa_handler = nh_sim_request_stop;
+  sigemptyset(&sa.sa_mask);
+  sigaction(SIGINT, &sa, NULL);
+  sigaction(SIGTERM, &sa, NULL);
+  sigemptyset(&set);
+  sigaddset(&set, SIGINT);
+  sigaddset(&set, SIGTERM);
+  pthread_t thread;
+  if (pthread_sigmask(SIG_BLOCK, &set, NULL) == 0 &&
+      pthread_create(&thread, NULL, nh_signal_thread, &set) == 0)
+    pthread_detach(thread);
+  else /* no thread: the handler above, unblocked */
+    pthread_sigmask(SIG_UNBLOCK, &set, NULL);
+}
 
 static const char *nh_usage =
     "usage: needlehex run SCENE.yaml [--out DIR] [--set KEY=VALUE ...] [--restart DIR] "
@@ -240,14 +275,7 @@ int main(int argc, char **argv) {
   }
   if (restart) out_dir = restart; /* a continued run writes where it was written */
   if (out_dir) snprintf(scene->output.dir, sizeof scene->output.dir, "%s", out_dir);
-  if (is_run) {
-    struct sigaction sa;
-    memset(&sa, 0, sizeof sa);
-    sa.sa_handler = nh_sim_request_stop;
-    sigemptyset(&sa.sa_mask);
-    sigaction(SIGINT, &sa, NULL);
-    sigaction(SIGTERM, &sa, NULL);
-  }
+  if (is_run) nh_catch_stop_signals();
 
   nh_sim_options opt = {.dry_run = is_check,
                         .progress = is_run && !quiet,

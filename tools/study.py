@@ -711,19 +711,11 @@ DBS_SHIFT = {
 
 def richardson(h, J):
     """Observed order p and extrapolated value from three values J at spacings h (coarse to
-    fine, unequal ratios): (J1 − J2)/(J2 − J3) = (h1^p − h2^p)/(h2^p − h3^p), by bisection on
-    p in [0.25, 8]; p = None when the differences change sign (no order observed)."""
-    (h1, h2, h3), (J1, J2, J3) = h, J
-    if (J1 - J2) * (J2 - J3) <= 0:
-        return None, J3
-    ratio, lo, hi = (J1 - J2) / (J2 - J3), 0.25, 8.0
-    for _ in range(200):
-        p = 0.5 * (lo + hi)
-        if (h1 ** p - h2 ** p) / (h2 ** p - h3 ** p) < ratio:
-            lo = p
-        else:
-            hi = p
-    return p, J3 + (J3 - J2) * h3 ** p / (h2 ** p - h3 ** p)
+    fine): adapt_study.richardson on k = 1/h; p = None (and J at the finest) when no order is
+    observed."""
+    from adapt_study import richardson as through_three
+    w, _, p = through_three([1.0 / x for x in h], list(J))
+    return (p, w) if np.isfinite(p) else (None, J[2])
 
 
 def dbs_shift(a, binary):
