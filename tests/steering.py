@@ -37,23 +37,16 @@ Derived expectations:
     advance per step: docs/interaction.md, "Bevel tip"), so it is
     reported, not checked.
 """
-import csv
 import math
 import os
-import subprocess
 import sys
 
 import numpy as np
 
-BIN = os.environ["NH_BINARY"]
-WORK = os.path.join(os.environ.get("NH_WORK", "."), "steering")
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from nh_run import fail, finish, run as nh_run, work  # noqa: E402
+
 VERBOSE = "--verbose" in sys.argv
-failures = []
-
-
-def fail(msg):
-    failures.append(msg)
-    print("FAIL:", msg, file=sys.stderr)
 
 
 def say(*a):
@@ -72,25 +65,19 @@ TWO_BEND = [(0.5, 0.02, 0.0), (1.0, 0.0, math.pi / 0.5), (1.5, 0.02, 0.0)]
 def run(name, psi, E=10.0e6, motion=ONE_BEND, toward="[0, 1, 0]", spin=None):
     """cases/needle-phantom.yaml with a bevel, the motion given, tissue
     Young's modulus E and no friction; the tip rows (x, y, z, depth) inside."""
-    os.makedirs(WORK, exist_ok=True)
     segments = []
     for until, speed, sp in motion:
         if spin is not None and speed > 0:
             sp = spin
         segments.append("{until: %r, speed: %r, spin: %r}" % (until, speed, sp))
-    out = os.path.join(WORK, name)
     sets = ["name=" + name, "time.end=%r" % motion[-1][0], "tissue.material.young=%r" % E,
             "tools.0.bevel.angle=%r" % psi, "tools.0.bevel.toward=" + toward,
             "tools.0.motion=[%s]" % ", ".join(segments), "tools.0.interaction.friction=0",
             "tools.0.interaction.friction_per_length=0", "output.every=1000"]
-    cmd = [BIN, "run", PHANTOM, "--out", out, "--quiet", "--overwrite"]
-    for kv in sets:
-        cmd += ["--set", kv]
-    p = subprocess.run(cmd, capture_output=True, text=True)
-    if p.returncode != 0:
-        fail("%s: exit %d, expected 0: %s" % (name, p.returncode, p.stderr.strip()))
+    result = nh_run(PHANTOM, os.path.join(work("steering"), name), sets, tables=("tools",))
+    if result is None:
         return None
-    rows = list(csv.DictReader(open(os.path.join(out, "tools.csv"))))
+    rows = result["tools"]
     tip = np.array([[float(r["tip_x"]), float(r["tip_y"]), float(r["tip_z"]),
                      float(r["depth"])] for r in rows])
     return tip[tip[:, 3] > 0]  # inside the tissue
@@ -197,4 +184,4 @@ two = run("rigid-two", 2.0, E=1.0e9, motion=TWO_BEND)
 if one is not None and two is not None:
     two_bend_checks(one, two, "4. rigid, psi = 2 deg", 0.08)
 
-sys.exit(1 if failures else 0)
+finish()
