@@ -86,6 +86,9 @@ double nh_von_mises(const double s[6]);
 /* Lamé parameters from E and ν. */
 void nh_lame(double young, double poisson, double *lambda, double *mu);
 
+/* Doubles per cell in nh_tissue.cell_material. */
+#define NH_CELL_MATERIAL 9
+
 /* The tissue model: material, per-cell element data and the lumped mass.
  * Element data are shared between cells of identical rest shape (all cells
  * of a uniform grid share one K0), found by hashing the rest corners. */
@@ -98,7 +101,8 @@ typedef struct nh_tissue {
   int *label; /* n_labels image labels */
   nh_material *label_material;
   double *Kl, *Km;       /* 576 per shape: K0 for (λ, μ) = (1, 0) and (0, 1) */
-  double *cell_material; /* 3 per cell: the cell's λ, μ, ρ (λ NaN: not computed yet) */
+  double *cell_material; /* NH_CELL_MATERIAL per cell: the cell's λ, μ, ρ (λ NaN: not computed
+                            yet), then the rest corners 0 and 6 of the cell they were mixed for */
   int n_shapes, cap_shapes;
   double *K0;      /* 576 per shape */
   double *G0;      /* 24 per shape */

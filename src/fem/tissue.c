@@ -126,6 +126,16 @@ static int nh_tissue_shape(nh_tissue *t, const double Xe[24], int *table, int ta
 
 static void nh_tissue_mix(nh_tissue *t, int c);
 
+/* Cell c's stored λ, μ, ρ were mixed for the cell that now has its id: the
+ * same rest corners 0 and 6 (no two cells of a mesh share both). */
+static int nh_tissue_mix_is_own(const nh_tissue *t, int c) {
+  const double *cm = t->cell_material + NH_CELL_MATERIAL * c;
+  const nh_mesh *m = t->mesh;
+  if (isnan(cm[0])) return 0;
+  return !memcmp(cm + 3, m->X + 3 * m->cells[8 * c], 3 * sizeof(double)) &&
+         !memcmp(cm + 6, m->X + 3 * m->cells[8 * c + 6], 3 * sizeof(double));
+}
+
 int nh_tissue_update(nh_tissue *t) {
   const nh_mesh *m = t->mesh;
   if (m->n_cells > t->cap_cells) {
@@ -134,9 +144,10 @@ int nh_tissue_update(nh_tissue *t) {
     for (int c = t->cap_cells; c < m->n_cells; c++) cs[c] = -1;
     t->cell_shape = cs;
     if (t->n_labels) {
-      double *cm = realloc(t->cell_material, sizeof(double) * 3 * (size_t)m->n_cells);
+      double *cm =
+          realloc(t->cell_material, sizeof(double) * NH_CELL_MATERIAL * (size_t)m->n_cells);
       if (!cm) return NH_ERROR(NH_ERR_MEMORY, "out of memory: cell materials");
-      for (int c = t->cap_cells; c < m->n_cells; c++) cm[3 * c] = NAN;
+      for (int c = t->cap_cells; c < m->n_cells; c++) cm[NH_CELL_MATERIAL * c] = NAN;
       t->cell_material = cm;
     }
     t->cap_cells = m->n_cells;
@@ -169,9 +180,9 @@ int nh_tissue_update(nh_tissue *t) {
   }
   free(table);
   if (rc) return rc;
-  if (t->n_labels)
+  if (t->n_labels) /* coarsening renumbers cells: a leaf's mix is kept only if it is its own */
     for (int l = 0; l < m->n_leaves; l++)
-      if (isnan(t->cell_material[3 * m->leaves[l]])) nh_tissue_mix(t, m->leaves[l]);
+      if (!nh_tissue_mix_is_own(t, m->leaves[l])) nh_tissue_mix(t, m->leaves[l]);
   memset(t->mass, 0, sizeof(double) * (size_t)m->n_nodes);
   for (int l = 0; l < m->n_leaves; l++) {
     int c = m->leaves[l];
@@ -209,18 +220,20 @@ static void nh_tissue_mix(nh_tissue *t, int c) {
         sum[0] += lambda, sum[1] += mu, sum[2] += mat->density;
         total += 1.0;
       }
-  double *cm = t->cell_material + 3 * c;
+  double *cm = t->cell_material + NH_CELL_MATERIAL * c;
   if (total > 0) {
     for (int k = 0; k < 3; k++) cm[k] = sum[k] / total;
   } else { /* a cell kept at the fill floor with no sample inside: the default */
     cm[0] = t->lambda, cm[1] = t->mu, cm[2] = t->material.density;
   }
+  memcpy(cm + 3, m->X + 3 * m->cells[8 * c], 3 * sizeof(double));
+  memcpy(cm + 6, m->X + 3 * m->cells[8 * c + 6], 3 * sizeof(double));
 }
 
 void nh_tissue_cell_material(const nh_tissue *t, int c, double *lambda, double *mu,
                              double *density) {
   if (t->n_labels) {
-    const double *cm = t->cell_material + 3 * c;
+    const double *cm = t->cell_material + NH_CELL_MATERIAL * c;
     if (lambda) *lambda = cm[0];
     if (mu) *mu = cm[1];
     if (density) *density = cm[2];
@@ -242,7 +255,8 @@ double nh_tissue_corner_mass(const nh_tissue *t, int c) {
 static const double *nh_cell_K0(const nh_tissue *t, int c, double buf[576]) {
   int s = t->cell_shape[c];
   if (!t->n_labels) return t->K0 + 576 * s;
-  const double *cm = t->cell_material + 3 * c, *Kl = t->Kl + 576 * s, *Km = t->Km + 576 * s;
+  const double *cm = t->cell_material + NH_CELL_MATERIAL * c, *Kl = t->Kl + 576 * s,
+               *Km = t->Km + 576 * s;
   const double lam = t->material.formulation == NH_FORMULATION_BBAR ? -2.0 * cm[1] / 3.0 : cm[0];
   for (int i = 0; i < 576; i++) buf[i] = lam * Kl[i] + cm[1] * Km[i];
   return buf;
@@ -261,7 +275,8 @@ int nh_tissue_set_label_materials(nh_tissue *t, int n, const int *labels,
   size_t cap = t->cap_shapes > 0 ? (size_t)t->cap_shapes : 1;
   t->Kl = malloc(sizeof(double) * 576 * cap);
   t->Km = malloc(sizeof(double) * 576 * cap);
-  t->cell_material = malloc(sizeof(double) * 3 * (size_t)(t->cap_cells > 0 ? t->cap_cells : 1));
+  t->cell_material =
+      malloc(sizeof(double) * NH_CELL_MATERIAL * (size_t)(t->cap_cells > 0 ? t->cap_cells : 1));
   if (!t->label || !t->label_material || !t->Kl || !t->Km || !t->cell_material)
     return NH_ERROR(NH_ERR_MEMORY, "out of memory: materials per label");
   memcpy(t->label, labels, sizeof(int) * (size_t)n);
@@ -272,7 +287,7 @@ int nh_tissue_set_label_materials(nh_tissue *t, int n, const int *labels,
     nh_hex_stiffness(t->key + 24 * s, 1.0, 0.0, 0, t->Kl + 576 * s, G, NULL, &v);
     nh_hex_stiffness(t->key + 24 * s, 0.0, 1.0, 0, t->Km + 576 * s, G, NULL, &v);
   }
-  for (int c = 0; c < t->cap_cells; c++) t->cell_material[3 * c] = NAN;
+  for (int c = 0; c < t->cap_cells; c++) t->cell_material[NH_CELL_MATERIAL * c] = NAN;
   return nh_tissue_update(t);
 }
 
