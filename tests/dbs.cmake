@@ -15,3 +15,7 @@ set_tests_properties(dbs_plan PROPERTIES TIMEOUT 600 LABELS "verify;slow")
 # settling amplitude; coarse 10 x 12 x 9 grid.
 nh_add_py_test(static_skull verify static_skull.py)
 set_tests_properties(static_skull PROPERTIES LABELS "verify;slow")
+
+# The skull's force in steps.csv balances the weight of a brain at rest in
+# its skull (tests/skull_force.py).
+nh_add_py_test(skull_force verify skull_force.py)

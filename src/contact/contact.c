@@ -359,5 +359,8 @@ void nh_contact_stats_get(const nh_contact *c, nh_contact_stats *st) {
   st->cut = c->cut;
   st->path_points = 0;
   for (int g = 0; g < c->n_groups; g++) st->path_points += c->groups[g].n_chan;
+  st->skull_contacts = 0;
+  st->skull_force[0] = st->skull_force[1] = st->skull_force[2] = 0.0;
+  if (c->skull) nh_skull_force(c->skull, st->skull_force, &st->skull_contacts);
   st->solve = c->solve;
 }

@@ -97,6 +97,8 @@ void nh_contact_report(const nh_contact *c, int tool, nh_tool_report *r);
  * and sliding: nh_mcp_stats). */
 typedef struct {
   int rows, cut, path_points;
+  int skull_contacts;    /* skull points pressing (λ > 0) at the end of the step */
+  double skull_force[3]; /* N: the skull's total force on the tissue (nh_skull_force) */
   nh_coupled_stats solve;
 } nh_contact_stats;
 void nh_contact_stats_get(const nh_contact *c, nh_contact_stats *stats);

@@ -68,7 +68,11 @@ static const char *const nh_step_columns[] = {"step",
                                               "error_estimate",
                                               "refine_stop",
                                               "resolves",
-                                              "tangent_updates"};
+                                              "tangent_updates",
+                                              "skull_contacts",
+                                              "skull_fx",
+                                              "skull_fy",
+                                              "skull_fz"};
 static const char *const nh_probe_columns[] = {"step", "time", "name", "x",  "y",
                                                "z",    "ux",   "uy",   "uz", "error_estimate"};
 
@@ -1044,7 +1048,11 @@ int nh_sim_step(nh_sim *s) {
                         goal_max,
                         refine_stop,
                         resolves,
-                        st.tangent_updates};
+                        st.tangent_updates,
+                        cc.skull_contacts,
+                        cc.skull_force[0],
+                        cc.skull_force[1],
+                        cc.skull_force[2]};
   enum { NH_STEP_COLUMNS = sizeof nh_step_columns / sizeof *nh_step_columns };
   _Static_assert(sizeof row / sizeof *row == NH_STEP_COLUMNS, "one value per steps.csv column");
   if (!s->options.dry_run)
