@@ -63,6 +63,7 @@ struct nh_system {
   int a_valid;
   double a_cM, a_cK;
   int lazy_updates; /* leaves whose tangent the last assembly updated */
+  int threads;      /* OpenMP threads of the last assembly (0: all), W's build uses them too */
 
   /* Constraint rows J (m x n_free, stored as Jᵀ: n_free x m) solved through
    * the compliance W = J A⁻¹ Jᵀ (Algorithm 1); W and its Cholesky factor are
