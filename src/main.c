@@ -20,8 +20,9 @@
  * those workers for the two cores: on the 16x8x8 phantom assembly went from
  * 1.8 ms to 58 ms per step. So, unless the user chose otherwise, OpenMP
  * threads sleep when idle (OMP_WAIT_POLICY=passive) and the BLAS runs on
- * one thread (OPENBLAS_NUM_THREADS=1); the cores go to the assembly's
- * OpenMP team. Measured before and after in docs/performance.md ("Threads").
+ * one thread (OPENBLAS_NUM_THREADS=1); the cores go to OpenMP teams: the
+ * assembly's, and the compliance W's, whose tasks call BLAS on one thread
+ * each (solve/compliance.c). Measured in docs/performance.md ("Threads").
  * Both libraries read the variables before main runs, so when the user has
  * set neither we set them and re-execute ourselves once. */
 #include "core/core.h"

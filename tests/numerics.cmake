@@ -32,3 +32,5 @@ nh_add_py_test(traction_patch verify traction_patch.py)
 # Lazy element tangents in whole runs (tests/lazy_run.py): the needle phantom
 # with solver.lazy_rotation 0 and 1e-3, 1 and 2 threads, identical outputs.
 nh_add_py_test(lazy_run verify lazy_run.py)
+# W's OpenMP tasks call BLAS single-threaded, as needlehex runs it (src/main.c)
+set_property(TEST test_compliance APPEND PROPERTY ENVIRONMENT OPENBLAS_NUM_THREADS=1)

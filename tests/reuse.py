@@ -15,7 +15,10 @@ else the comparison says nothing.
 Cases: the needle phantom (cases/phantom/phantom.yaml) uniform 8×4×4 and
 adaptive (hex2), 40 steps of the insertion; a shortened DBS procedure
 (cases/dbs/dbs.yaml: steps of 0.1 s, the shift ramped over 0.5 s, the
-cannula inserted at 6 cm/s from 0.5 s), 25 steps.
+cannula inserted at 6 cm/s from 0.5 s), 25 steps; the brain sinking onto
+the skull (cases/dbs/dbs-skull.yaml on a 10×12×9 grid, uniform, 30 steps:
+up to ~180 skull rows), where the auto run must also have made steps with
+several outer corrections (the renewal rule counts their constraint solves).
 """
 import csv
 import os
@@ -71,11 +74,16 @@ def series(out):
     return {k: np.array(v) for k, v in s.items()}
 
 
-def compare(case, scene, sets):
+def compare(case, scene, sets, corrections=0):
+    """corrections: the auto run must have made a step with at least this many."""
     every, auto = run_both(case, scene, sets)
     if not every:
         return
     steps = read(auto, "steps")
+    most = max((int(float(r["corrections"])) for r in steps), default=0)
+    if most < corrections:
+        fail("%s: the auto run made at most %d outer corrections in a step, expected >= %d"
+             % (case, most, corrections))
     n = len(steps)
     fact = sum(int(float(r["factorised"])) for r in steps)
     if not fact < n:
@@ -108,6 +116,8 @@ def main():
     compare("dbs-short", os.path.join(SRC, "cases", "dbs", "dbs.yaml"),
             ["time.step=0.1", "time.end=2.5", "tissue.buoyancy.schedule=[[0, 0], [0.5, 1]]",
              "tools.0.motion=[{until: 0.5, speed: 0}, {until: target, speed: 0.06}]"])
+    compare("dbs-skull", os.path.join(SRC, "cases", "dbs", "dbs-skull.yaml"),
+            ["tissue.grid=[10,12,9]", "adapt.every=1000000", "time.end=1.5"], corrections=2)
     return 1 if failures else 0
 
 

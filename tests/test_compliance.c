@@ -17,8 +17,16 @@
  *   - a simplicial LDLᵀ factor of the same A (the path small systems
  *     take) equal to W_ref;
  *   - W added to, not overwritten (W += ...: (W + W) − W equals W_ref);
- *   - a row set with every column in its own block (m = 1) and the empty set.
- * NH_VERBOSE=1 prints the agreements and the time of each path. */
+ *   - a row set with every column in its own block (m = 1) and the empty set;
+ *   - each W again on 2 OpenMP threads (s->threads): bitwise equal to the 1
+ *     thread's W (the supernodal path cuts the work of its widest supernodes
+ *     into tasks independently of the threads: here 2 supernodes with 77 %
+ *     of the flops, both halves of W written by the tasks).
+ * NH_VERBOSE=1 prints the agreements and the time of each path.
+ * NH_COMPLIANCE_SIZE=NX,NY,NZ,M: instead, one supernodal run of M rows on an
+ * NX x NY x NZ box (1 cm cells), checked as above, then W timed 5 times on 1
+ * and 2 threads, with each run's CPU split between this thread and the others
+ * (docs/performance.md: 20,25,19,740). */
 #include "check.h"
 #include "fem/fem.h"
 #include "mesh/mesh.h"
@@ -27,7 +35,7 @@
 #include <string.h>
 #include <time.h>
 
-static int verbose = 0;
+static int verbose = 0, repeat = 0;
 static unsigned long long rng = 88172645463325252ULL;
 
 static double uniform(void) { /* xorshift64 in [0, 1) */
@@ -35,8 +43,8 @@ static double uniform(void) { /* xorshift64 in [0, 1) */
   return (double)(rng >> 11) / 9007199254740992.0;
 }
 
-/* Jᵀ (n_free x m) of m point rows in pseudo-random cells. */
-static cholmod_sparse *rows_create(nh_system *s, const nh_mesh *mesh, int m) {
+/* Jᵀ (n_free x m) of m point rows in pseudo-random cells of an nx x ny x nz box. */
+static cholmod_sparse *rows_create(nh_system *s, const nh_mesh *mesh, int m, const int grid[3]) {
   cholmod_sparse *Jt = cholmod_allocate_sparse((size_t)s->n_free, (size_t)m, 24 * (size_t)m + 1, 1,
                                                1, 0, CHOLMOD_REAL, &s->cm);
   int *Jp = Jt->p, *Ji = Jt->i, pos = 0;
@@ -44,7 +52,8 @@ static cholmod_sparse *rows_create(nh_system *s, const nh_mesh *mesh, int m) {
   for (int r = 0; r < m; r++) {
     Jp[r] = pos;
     int l = (int)(uniform() * mesh->n_leaves);
-    if (r % 4 == 0) l = (int)(uniform() * 100) * 14 + 13; /* a cell at x = max: clamped face */
+    if (r % 4 == 0) /* a cell at x = max: clamped face */
+      l = (int)(uniform() * grid[1] * grid[2]) * grid[0] + grid[0] - 1;
     if (l >= mesh->n_leaves) l = mesh->n_leaves - 1;
     const int c = mesh->leaves[l];
     double xi[3], N[8], n[3], len = 0.0;
@@ -81,6 +90,12 @@ static void reference(nh_system *s, cholmod_sparse *Jt, double *W) {
   free(B), free(X);
 }
 
+static double thread_cpu(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
 static double max_abs(const double *a, size_t n) {
   double v = 0.0;
   for (size_t i = 0; i < n; i++) v = fmax(v, fabs(a[i]));
@@ -99,9 +114,9 @@ static void compare(const double *W, const double *ref, int m, const char *what)
   if (bad >= 0) CHECK_CLOSE(W[bad], ref[bad], tol, what);
 }
 
-static void run(int m, int supernodal) {
-  const double lo[3] = {0, 0, 0}, hi[3] = {0.14, 0.1, 0.1};
-  const int grid[3] = {14, 10, 10};
+/* W of m rows on a clamped box of grid[0] x grid[1] x grid[2] cells of 1 cm. */
+static void run(int m, int supernodal, const int grid[3]) {
+  const double lo[3] = {0, 0, 0}, hi[3] = {0.01 * grid[0], 0.01 * grid[1], 0.01 * grid[2]};
   nh_mesh *mesh;
   CHECK_OK(nh_mesh_create_box(lo, hi, grid, &mesh));
   nh_material mat = {3000, 0.45, 1040, NH_FORMULATION_BBAR};
@@ -109,7 +124,7 @@ static void run(int m, int supernodal) {
   CHECK_OK(nh_tissue_create(mesh, &mat, &tissue));
   const int nn = mesh->n_nodes;
   unsigned char *fixed = calloc((size_t)nn, 1);
-  for (int i = 0; i < nn; i++) fixed[i] = mesh->X[3 * i] > 0.14 - 1e-9;
+  for (int i = 0; i < nn; i++) fixed[i] = mesh->X[3 * i] > hi[0] - 1e-9;
   nh_system *s;
   CHECK_OK(nh_system_create(tissue, fixed, NULL, &s));
   double *u = calloc(3 * (size_t)nn, sizeof(double)), *f = calloc(3 * (size_t)nn, sizeof(double));
@@ -119,19 +134,49 @@ static void run(int m, int supernodal) {
   CHECK_OK(nh_system_factor(s));
   CHECK(s->L->is_super == supernodal, "factor supernodal %d, want %d", (int)s->L->is_super,
         supernodal);
-  cholmod_sparse *Jt = rows_create(s, mesh, m);
+  cholmod_sparse *Jt = rows_create(s, mesh, m, grid);
   const size_t mm = m > 0 ? (size_t)m * m : 1;
   double *ref = calloc(mm, sizeof(double)), *W1 = calloc(mm, sizeof(double)),
          *W2 = calloc(mm, sizeof(double));
   reference(s, Jt, ref);
   char what[80];
+  s->threads = 1;
   double t0 = nh_time_now(), c0 = (double)clock() / CLOCKS_PER_SEC;
   CHECK_OK(nh_system_compliance_add(s, Jt, W1));
   double t1 = nh_time_now(), c1 = (double)clock() / CLOCKS_PER_SEC;
-  snprintf(what, sizeof what, "%s, m = %d", supernodal ? "supernodal" : "simplicial", m);
+  snprintf(what, sizeof what, "%s, m = %d, %d free unknowns, 1 thread",
+           supernodal ? "supernodal" : "simplicial", m, s->n_free);
   compare(W1, ref, m, what);
   if (verbose) printf("  %.1f ms (CPU %.1f ms)\n", 1e3 * (t1 - t0), 1e3 * (c1 - c0));
-  if (supernodal) {
+  /* 2 threads: bitwise the same W (the tasks' cut does not depend on them) */
+  s->threads = 2;
+  t0 = nh_time_now(), c0 = (double)clock() / CLOCKS_PER_SEC;
+  CHECK_OK(nh_system_compliance_add(s, Jt, W2));
+  t1 = nh_time_now(), c1 = (double)clock() / CLOCKS_PER_SEC;
+  snprintf(what, sizeof what, "%s, m = %d, 2 threads", supernodal ? "supernodal" : "simplicial", m);
+  compare(W2, ref, m, what);
+  if (verbose) printf("  %.1f ms (CPU %.1f ms)\n", 1e3 * (t1 - t0), 1e3 * (c1 - c0));
+  int differ = 0;
+  for (size_t k = 0; k < (size_t)m * m; k++) differ += W1[k] != W2[k];
+  CHECK(differ == 0, "W with 2 threads differs from 1 thread in %d of %zu entries", differ,
+        (size_t)m * m);
+  for (int rep = 0; rep < repeat; rep++) /* NH_COMPLIANCE_SIZE: the times, least of `repeat` */
+    for (int nt = 1; nt <= 2; nt++) {
+      memset(W2, 0, sizeof(double) * mm);
+      s->threads = nt;
+      double m0 = thread_cpu();
+      t0 = nh_time_now(), c0 = (double)clock() / CLOCKS_PER_SEC;
+      CHECK_OK(nh_system_compliance_add(s, Jt, W2));
+      t1 = nh_time_now(), c1 = (double)clock() / CLOCKS_PER_SEC;
+      double m1 = thread_cpu();
+      /* CPU of this (the master) thread and of the others: on a machine whose
+       * cores are taken by other jobs the wall time says little; the larger
+       * of the two bounds the wall time on idle cores from below */
+      printf("threads %d: wall %.1f ms, CPU %.1f ms (master %.1f, others %.1f)\n", nt,
+             1e3 * (t1 - t0), 1e3 * (c1 - c0), 1e3 * (m1 - m0), 1e3 * (c1 - c0 - (m1 - m0)));
+    }
+  s->threads = 0;
+  if (supernodal && !repeat) {
     int asym = 0;
     for (int i = 0; i < m; i++)
       for (int j = 0; j < i; j++) asym += W1[(size_t)i * m + j] != W1[(size_t)j * m + i];
@@ -159,10 +204,20 @@ static void run(int m, int supernodal) {
 
 int main(void) {
   verbose = getenv("NH_VERBOSE") != NULL;
-  run(203, 1);
-  run(203, 0);
-  run(1, 1);
-  run(0, 1);
+  /* NH_COMPLIANCE_SIZE=nx,ny,nz,m: one supernodal run at that size instead
+   * (docs/performance.md: 20,25,19,740, with NH_VERBOSE=1 for the times) */
+  const char *size = getenv("NH_COMPLIANCE_SIZE");
+  int g[4];
+  if (size && sscanf(size, "%d,%d,%d,%d", &g[0], &g[1], &g[2], &g[3]) == 4) {
+    repeat = 5;
+    run(g[3], 1, g);
+  } else {
+    const int grid[3] = {14, 10, 10};
+    run(203, 1, grid);
+    run(203, 0, grid);
+    run(1, 1, grid);
+    run(0, 1, grid);
+  }
   if (nh_test_failures) fprintf(stderr, "test_compliance: %d failures\n", nh_test_failures);
   return nh_test_failures != 0;
 }

@@ -14,6 +14,11 @@ Cases (--cases, default all but the tissue-only ones):
   needle-16, needle-32   cases/phantom/phantom.yaml (needle inserted) at 16×8×8, 32×16×16
   dbs-coarse, dbs-fine   cases/dbs/dbs.yaml uniform (never refined) at its grid and twice it,
                          the cannula inserted from t = 0.2 s (rows from step ~10)
+  skull-7                cases/dbs/dbs-skull.yaml uniform at its 7 mm grid (20×25×19): the
+                         brain sinks onto the skull (0 → ~750 rows in 20 steps)
+  dbs-adaptive, skull-adaptive
+                         cases/dbs/dbs.yaml and dbs-skull.yaml as written (adaptive), from
+                         the start: steps per second (steps / Σ t_step) is the figure
   tissue-8/16/32         cases/phantom-tissue.yaml (no tool) at 8×4×4, 16×8×8, 32×16×16
 
 Every run has NH_TIME_FACTOR=1: on a step that reuses a factorisation, one
@@ -39,10 +44,11 @@ import tempfile
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PHASES = ["t_assemble", "t_factor", "t_solve", "t_constraints", "t_compliance", "t_mcp",
-          "t_step", "t_factor_reference"]
+          "t_adapt", "t_step", "t_factor_reference"]
 PHANTOM = os.path.join(ROOT, "cases", "phantom", "phantom.yaml")
 DBS = os.path.join(ROOT, "cases", "dbs", "dbs.yaml")
 TISSUE = os.path.join(ROOT, "cases", "phantom-tissue.yaml")
+SKULL = os.path.join(ROOT, "cases", "dbs", "dbs-skull.yaml")
 DBS_SETS = ["adapt.every=1000000", "tools.0.motion=[{until: 0.2, speed: 0}, "
             "{until: target, speed: 0.02}]"]
 CASES = {
@@ -50,6 +56,9 @@ CASES = {
     "needle-32": (PHANTOM, ["tissue.grid=[32,16,16]"]),
     "dbs-coarse": (DBS, DBS_SETS),
     "dbs-fine": (DBS, DBS_SETS + ["tissue.grid=[20,24,16]"]),
+    "skull-7": (SKULL, ["adapt.every=1000000"]),
+    "dbs-adaptive": (DBS, []),
+    "skull-adaptive": (SKULL, []),
     "tissue-8": (TISSUE, ["tissue.grid=[8,4,4]"]),
     "tissue-16": (TISSUE, ["tissue.grid=[16,8,8]"]),
     "tissue-32": (TISSUE, ["tissue.grid=[32,16,16]"]),
@@ -60,8 +69,10 @@ DEFAULT = ["needle-16", "needle-32", "dbs-coarse", "dbs-fine"]
 def run(binary, case, mode, steps, out, extra=()):
     scene, sets = CASES[case]
     sets = list(sets) + list(extra)
-    cmd = [binary, "run", scene, "--quiet", "--overwrite", "--out", out, "--set", "time.steps=%d" % steps,
+    cmd = [binary, "run", scene, "--quiet", "--overwrite", "--out", out,
            "--set", "output.every=0", "--set", "solver.refactor=" + mode]
+    if steps > 0:
+        cmd += ["--set", "time.steps=%d" % steps]
     for s in sets:
         cmd += ["--set", s]
     load0 = os.getloadavg()[0]
@@ -79,7 +90,8 @@ def run(binary, case, mode, steps, out, extra=()):
     # CPU (user + system, all threads) per step of the whole run, the factorisations
     # timed aside included: what the machine's load does not inflate
     cpu = ru1.ru_utime + ru1.ru_stime - ru0.ru_utime - ru0.ru_stime
-    med.update(case=case, mode=mode, steps=len(rows), dofs=int(rows[-1]["dofs"]),
+    med["rate"] = len(rows) / sum(float(r["t_step"]) for r in rows)
+    med.update(case=case, mode=mode, steps=len(rows), dofs=max(int(r["dofs"]) for r in rows),
                cpu=1e3 * cpu / (len(rows) + 1),
                share=statistics.median(float(r["t_assemble"]) / float(r["t_step"]) for r in rows),
                free=int(rows[-1]["free_dofs"]), load=0.5 * (load0 + os.getloadavg()[0]))
@@ -114,7 +126,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--binary", default=os.path.join(ROOT, "build", "needlehex"))
     ap.add_argument("--cases", nargs="*", default=DEFAULT, choices=sorted(CASES))
-    ap.add_argument("--steps", type=int, default=30)
+    ap.add_argument("--steps", type=int, default=30, help="steps per run (0: the scene's own end)")
     ap.add_argument("--modes", nargs="*", default=["every", "auto"], choices=["every", "auto"])
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="a scene override for every run")
@@ -125,31 +137,33 @@ def main():
     results = []
     head = ("case", "mode", "dofs", "rows", "assemble", "factor", "solve", "constr", "W",
             "mcp/corr", "step", "1 factor", "step/factor", "factorisations", "pcg", "asm %",
-            "cpu", "load")
-    print("%-10s %-5s %6s %4s %8s %8s %7s %7s %7s %8s %8s %8s %6s %3s %4s %5s %8s %5s" % head)
+            "cpu", "load", "steps/s", "adapt")
+    print("%-10s %-5s %6s %4s %8s %8s %7s %7s %7s %8s %8s %8s %6s %3s %4s %5s %8s %5s %7s %7s"
+          % head)
     with tempfile.TemporaryDirectory() as tmp:
         for case in a.cases:
             for mode in a.modes:
                 r = run(a.binary, case, mode, a.steps, os.path.join(tmp, case + mode), a.set)
                 results.append(r)
                 print("%-10s %-5s %6d %4.0f %8.2f %8.2f %7.2f %7.2f %7.2f %8.2f %8.2f %8.2f %6.2f "
-                      "%3d %4.0f %5.0f %8.1f %5.1f" % (
+                      "%3d %4.0f %5.0f %8.1f %5.1f %7.2f %7.2f" % (
                           case, mode, r["dofs"], r["rows"], r["t_assemble"], r["t_factor"],
                           r["t_solve"], r["t_constraints"], r["t_compliance"], r["t_mcp"],
                           r["t_step"], r["t_factor_reference"], r["ratio"], r["factorisations"],
-                          r["pcg"], 100 * r["share"], r["cpu"], r["load"]), flush=True)
+                          r["pcg"], 100 * r["share"], r["cpu"], r["load"], r["rate"],
+                          r["t_adapt"]), flush=True)
     if a.markdown:
         print("\n| case | refactor | dofs | rows | assemble | factor | solve | constraints (W, "
               "λ) | step | one factorisation | step / factorisation | factorisations | PCG its "
-              "| assembly share | CPU ms / step | load |")
-        print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+              "| assembly share | CPU ms / step | steps / s | load |")
+        print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
         for r in results:
             print("| %s | %s | %d | %.0f | %.2f | %.2f | %.2f | %.2f (%.2f, %.2f) | %.2f | %.2f | "
-                  "%.2f | %d / %d | %.0f | %.0f %% | %.1f | %.1f |" % (
+                  "%.2f | %d / %d | %.0f | %.0f %% | %.1f | %.2f | %.1f |" % (
                       r["case"], r["mode"], r["dofs"], r["rows"], r["t_assemble"], r["t_factor"],
                       r["t_solve"], r["t_constraints"], r["t_compliance"], r["t_mcp"], r["t_step"],
                       r["t_factor_reference"], r["ratio"], r["factorisations"], r["steps"],
-                      r["pcg"], 100 * r["share"], r["cpu"], r["load"]))
+                      r["pcg"], 100 * r["share"], r["cpu"], r["rate"], r["load"]))
     if a.json:
         with open(a.json, "w") as f:
             json.dump(results, f, indent=1)

@@ -45,11 +45,20 @@ typedef struct {
   int row;      /* its row this step, or −1 */
 } nh_skull_point;
 
+/* A leaf's surface sample as last computed: a function of its corners
+ * only, so a leaf whose corners are bitwise the same gets it again without
+ * the 6³ samples (area < 0: not computed). */
+typedef struct {
+  double Xe[24], P[3], area;
+} nh_skull_cell;
+
 struct nh_skull {
   nh_domain domain;
   double gap;
   nh_skull_point *p;
   int n, cap;
+  nh_skull_cell *cell; /* by cell index of the mesh last built on */
+  int n_cell;
   double force[3]; /* last step's total contact force on the tissue, N */
   int active;      /* rows with λ > 0 in the last step */
 };
@@ -70,6 +79,7 @@ int nh_skull_create(const nh_domain *domain, double gap, nh_skull **out) {
 void nh_skull_destroy(nh_skull **skull) {
   if (!skull || !*skull) return;
   free((*skull)->p);
+  free((*skull)->cell);
   free(*skull);
   *skull = NULL;
 }
@@ -121,12 +131,26 @@ static double nh_cell_surface(const nh_domain *d, const double Xe[24], double P[
 
 int nh_skull_build(nh_skull *s, const nh_mesh *m) {
   s->n = 0;
+  /* each leaf's sample: kept from the last build where its corners are the
+   * same (after a refinement, all but the new leaves), else computed */
+  nh_skull_cell *fresh = malloc(sizeof *fresh * (size_t)(m->n_cells ? m->n_cells : 1));
+  if (!fresh) return NH_ERR_MEMORY;
+  for (int c = 0; c < m->n_cells; c++) fresh[c].area = -1.0;
   for (int l = 0; l < m->n_leaves; l++) {
     int c = m->leaves[l];
     double Xe[24], P[3], xi[3];
     int cell;
     nh_mesh_cell_coords(m, m->X, c, Xe);
-    double area = nh_cell_surface(&s->domain, Xe, P);
+    nh_skull_cell *f = &fresh[c];
+    if (c < s->n_cell && s->cell[c].area >= 0.0 && !memcmp(s->cell[c].Xe, Xe, sizeof Xe)) {
+      *f = s->cell[c];
+    } else {
+      memcpy(f->Xe, Xe, sizeof Xe);
+      f->P[0] = f->P[1] = f->P[2] = 0.0;
+      f->area = nh_cell_surface(&s->domain, Xe, f->P);
+    }
+    double area = f->area;
+    memcpy(P, f->P, sizeof P);
     if (area == 0.0) continue;
     /* The point may lie in a neighbour: locate it (it is on the surface,
      * so inside a kept cell unless round-off puts it just outside). */
@@ -134,8 +158,10 @@ int nh_skull_build(nh_skull *s, const nh_mesh *m) {
       cell = c;
       if (nh_hex_invert(Xe, P, xi) != NH_OK) continue;
     }
-    if (s->n >= s->cap && nh_grow((void **)&s->p, &s->cap, s->n + 1, sizeof *s->p))
+    if (s->n >= s->cap && nh_grow((void **)&s->p, &s->cap, s->n + 1, sizeof *s->p)) {
+      free(fresh);
       return NH_ERR_MEMORY;
+    }
     nh_skull_point *p = &s->p[s->n++];
     memcpy(p->X, P, sizeof P);
     memcpy(p->xi, xi, sizeof xi);
@@ -144,6 +170,8 @@ int nh_skull_build(nh_skull *s, const nh_mesh *m) {
     for (int k = 0; k < 3; k++) edge = fmax(edge, fabs(Xe[18 + k] - Xe[k]));
     p->edge = edge;
   }
+  free(s->cell);
+  s->cell = fresh, s->n_cell = m->n_cells;
   return NH_OK;
 }
 

@@ -118,6 +118,7 @@ void nh_system_assemble(nh_system *s, const double *u, const double *v, double c
   memset(f_int, 0, sizeof(double) * 3 * (size_t)m->n_nodes);
   if (Kv) memset(Kv, 0, sizeof(double) * 3 * (size_t)m->n_nodes);
   int nt = threads > 0 ? threads : omp_get_max_threads();
+  s->threads = threads; /* the compliance W's build (compliance.c) runs on the same team */
 
   /* 1. Forces, frames, which tangents to update, and K̃ v. */
   for (int colour = 0; colour <= s->n_colours; colour++) {

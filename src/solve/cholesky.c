@@ -19,7 +19,8 @@ int nh_system_factor(nh_system *s) {
     /* operation counts for the renewal rule (reuse.c): the analysis reports
      * the factorisation's flops and nnz(L); A is stored as one triangle */
     s->flops_factor = s->cm.fl;
-    s->flops_iteration = 4.0 * s->cm.lnz + 4.0 * (double)cholmod_nnz(s->A, &s->cm);
+    s->flops_solve = 4.0 * s->cm.lnz;
+    s->flops_iteration = s->flops_solve + 4.0 * (double)cholmod_nnz(s->A, &s->cm);
   }
   s->W_valid = 0; /* the compliance belongs to the previous A */
   s->factor_current = 0;

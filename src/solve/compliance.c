@@ -26,6 +26,7 @@
 #include <cblas.h>
 #include <lapacke.h>
 #include <math.h>
+#include <omp.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -179,8 +180,9 @@ int nh_system_compliance_add_spsolve(nh_system *s, cholmod_sparse *Jt, double *W
  * Each supernode is applied once, to every column that needs it, in BLAS-3
  * calls whose width is the number of rows whose paths cross it: the top
  * separators, where most of L and of the work is, are crossed by all rows
- * and run at dense speed (BLAS threads use the cores); near the leaves the
- * calls are small and few columns pay for them. The flops are those of the
+ * and run at dense speed, split into tasks on the OpenMP threads
+ * (nh_super_apply); near the leaves the calls are small and few columns pay
+ * for them. The flops are those of the
  * restricted forward solves and of the pairs of paths that meet, about
  * Σ_s k_s C (nscol² + 2 noff·nscol) + (k_s C)² nscol (C = NH_SUPER_COLUMNS).
  * Measured on a 20 x 25 x 19 box (32760 unknowns) with 740 point rows in
@@ -189,6 +191,10 @@ int nh_system_compliance_add_spsolve(nh_system *s, cholmod_sparse *Jt, double *W
  * column-blocked forward solves with hand-written kernels instead of BLAS,
  * 1.16 s (C = 16) and 0.56 s (C = 32). */
 #define NH_SUPER_COLUMNS 16
+
+/* OpenBLAS's, when the BLAS linked is OpenBLAS (a weak reference: NULL otherwise). */
+#pragma weak openblas_get_num_threads
+int openblas_get_num_threads(void);
 
 typedef struct {
   int nsuper;
@@ -265,44 +271,117 @@ static int nh_column_key_compare(const void *a, const void *b) {
 }
 
 /* Supernode k for its blocks blk[list[0..nk)]: solve, W += Z Zᵀ, update the
- * ancestors' rows. Z, G, U: scratch of kC·nscol, kC², kC·noff doubles. */
-static void nh_super_apply(const nh_super_tree *t, int k, nh_super_block *blk, const int *list,
-                           int nk, double *Z, double *G, double *U, double *W, int m) {
+ * ancestors' rows, on OpenMP threads that each call BLAS single-threaded
+ * (src/main.c runs BLAS on one thread). A supernode whose flops exceed
+ * NH_SUPER_PARALLEL_FLOPS (the top separators: for 740 rows on 31200
+ * unknowns, 22 of the 836 supernodes the rows reach, with 93 % of the
+ * flops) has its kC rows of Z cut
+ * into NH_SUPER_SPLIT chunks of whole blocks, a cut that depends on nk and
+ * the supernode only, never on the number of threads, and its work into
+ * independent tasks, one or two BLAS calls each:
+ *   per chunk a:        Z_a ← Z_a L_ss⁻ᵀ (dtrsm; the rows of Z are independent),
+ *                       U_a = Z_a L_rsᵀ (dgemm) and Y_r of a's blocks −= U_aᵀ;
+ *   per pair b <= a:    G_ab = Z_a Z_bᵀ (dsyrk on the diagonal, dgemm off it)
+ *                       added to W at the pairs of columns (a, b), both halves.
+ * Chunk tasks write only their own blocks' y, pair tasks only their own
+ * pairs of W's entries: the tasks of one phase touch disjoint memory, and
+ * every entry is computed by the same calls whichever thread runs them, so W
+ * is bitwise the same for any number of threads (tests/test_compliance.c).
+ * Other supernodes are one chunk, serial (a parallel region costs tens of
+ * µs). Two chunks, for 2 cores: with 2 the two phases split evenly (chunks
+ * 1 + 1, pairs 1 + 1 + 2 halves); each cut repacks L's panel and adds small
+ * calls, measured 5-10 % more CPU per cut at 740 rows; 4 chunks measured no
+ * faster on 2 cores. Scratch per thread: ws (nh_super_scratch). */
+enum { NH_SUPER_SPLIT = 2, NH_SUPER_PARALLEL_FLOPS = 20000000 };
+
+typedef struct {
+  double *G, *U; /* per thread: a pair's G and a chunk's U (sizes: the widest chunk) */
+} nh_super_scratch;
+
+static void nh_super_chunk(const nh_super_tree *t, int k, nh_super_block *blk, const int *list,
+                           int a0, int a1, double *Z, int kc, double *U) {
   enum { C = NH_SUPER_COLUMNS };
   const int k1 = t->super[k], nscol = t->super[k + 1] - k1, nsrow = t->pi[k + 1] - t->pi[k];
-  const int noff = nsrow - nscol, kc = nk * C, *rows = t->ls + t->pi[k] + nscol;
+  const int noff = nsrow - nscol, rows_a = (a1 - a0) * C, *rows = t->ls + t->pi[k] + nscol;
   const double *Lk = t->lx + t->px[k]; /* column-major, nsrow x nscol */
-  for (int a = 0; a < nk; a++) {       /* Z = [Y_s]ᵀ */
+  double *Za = Z + (size_t)a0 * C;
+  for (int a = a0; a < a1; a++) { /* Z = [Y_s]ᵀ */
     const double *y = blk[list[a]].y + (size_t)blk[list[a]].row0[k] * C;
     for (int r = 0; r < nscol; r++)
       memcpy(Z + (size_t)r * kc + (size_t)a * C, y + (size_t)r * C, sizeof(double) * C);
   }
-  cblas_dtrsm(CblasColMajor, CblasRight, CblasLower, CblasTrans, CblasNonUnit, kc, nscol, 1.0, Lk,
-              nsrow, Z, kc);
-  cblas_dsyrk(CblasColMajor, CblasLower, CblasNoTrans, kc, nscol, 1.0, Z, kc, 0.0, G, kc);
-  for (int q = 0; q < kc; q++) { /* the lower triangle of G into W, both halves */
-    const nh_super_block *bq = &blk[list[q / C]];
+  cblas_dtrsm(CblasColMajor, CblasRight, CblasLower, CblasTrans, CblasNonUnit, rows_a, nscol, 1.0,
+              Lk, nsrow, Za, kc);
+  if (noff == 0) return;
+  cblas_dgemm(CblasColMajor, CblasNoTrans, CblasTrans, rows_a, noff, nscol, 1.0, Za, kc, Lk + nscol,
+              nsrow, 0.0, U, rows_a);
+  for (int i = 0; i < noff; i++) {
+    const int r = rows[i], sn = t->col_super[r];
+    for (int a = a0; a < a1; a++) {
+      nh_super_block *b = &blk[list[a]];
+      double *dst = b->y + (size_t)(b->row0[sn] + r - t->super[sn]) * C;
+      const double *u = U + (size_t)i * rows_a + (size_t)(a - a0) * C;
+      for (int c = 0; c < C; c++) dst[c] -= u[c];
+    }
+  }
+}
+
+static void nh_super_pair(const nh_super_tree *t, int k, const nh_super_block *blk, const int *list,
+                          int a0, int a1, int b0, int b1, const double *Z, int kc, double *G,
+                          double *W, int m) {
+  enum { C = NH_SUPER_COLUMNS };
+  const int nscol = t->super[k + 1] - t->super[k], ra = (a1 - a0) * C, rb = (b1 - b0) * C;
+  const double *Za = Z + (size_t)a0 * C, *Zb = Z + (size_t)b0 * C;
+  if (a0 == b0)
+    cblas_dsyrk(CblasColMajor, CblasLower, CblasNoTrans, ra, nscol, 1.0, Za, kc, 0.0, G, ra);
+  else
+    cblas_dgemm(CblasColMajor, CblasNoTrans, CblasTrans, ra, rb, nscol, 1.0, Za, kc, Zb, kc, 0.0, G,
+                ra);
+  for (int q = 0; q < rb; q++) { /* G(p, q): row p of chunk a, q of chunk b */
+    const nh_super_block *bq = &blk[list[b0 + q / C]];
     if (q % C >= bq->nc) continue;
     const int cq = bq->col[q % C];
-    for (int p = q; p < kc; p++) {
-      const nh_super_block *bp = &blk[list[p / C]];
+    for (int p = a0 == b0 ? q : 0; p < ra; p++) {
+      const nh_super_block *bp = &blk[list[a0 + p / C]];
       if (p % C >= bp->nc) continue;
       const int cp = bp->col[p % C];
-      const double g = G[(size_t)q * kc + p];
+      const double g = G[(size_t)q * ra + p];
       W[(size_t)cq * m + cp] += g;
       if (cp != cq) W[(size_t)cp * m + cq] += g;
     }
   }
-  if (noff == 0) return;
-  cblas_dgemm(CblasColMajor, CblasNoTrans, CblasTrans, kc, noff, nscol, 1.0, Z, kc, Lk + nscol,
-              nsrow, 0.0, U, kc);
-  for (int i = 0; i < noff; i++) {
-    const int r = rows[i], sn = t->col_super[r];
-    for (int a = 0; a < nk; a++) {
-      nh_super_block *b = &blk[list[a]];
-      double *dst = b->y + (size_t)(b->row0[sn] + r - t->super[sn]) * C;
-      const double *u = U + (size_t)i * kc + (size_t)a * C;
-      for (int c = 0; c < C; c++) dst[c] -= u[c];
+}
+
+/* The split of a supernode's nk blocks: into NH_SUPER_SPLIT chunks (fewer
+ * if fewer blocks) when its flops exceed NH_SUPER_PARALLEL_FLOPS, else one;
+ * chunk c holds blocks [c nk / n, (c + 1) nk / n). */
+static int nh_super_split(const nh_super_tree *t, int k, int nk) {
+  const int nscol = t->super[k + 1] - t->super[k], nsrow = t->pi[k + 1] - t->pi[k];
+  const double kc = (double)nk * NH_SUPER_COLUMNS;
+  const double flops = kc * nscol * (nscol + 2.0 * (nsrow - nscol) + kc);
+  if (flops <= NH_SUPER_PARALLEL_FLOPS) return 1;
+  return nk < NH_SUPER_SPLIT ? nk : NH_SUPER_SPLIT;
+}
+
+static void nh_super_apply(const nh_super_tree *t, int k, nh_super_block *blk, const int *list,
+                           int nk, double *Z, nh_super_scratch *ws, int threads, double *W, int m) {
+  enum { C = NH_SUPER_COLUMNS };
+  const int kc = nk * C, nch = nh_super_split(t, k, nk), npair = nch * (nch + 1) / 2;
+  const int nt = nch > 1 ? threads : 1;
+#pragma omp parallel num_threads(nt) if (nt > 1)
+  {
+    const nh_super_scratch *w = &ws[omp_get_thread_num()];
+#pragma omp for schedule(dynamic, 1)
+    for (int c = 0; c < nch; c++)
+      nh_super_chunk(t, k, blk, list, c * nk / nch, (c + 1) * nk / nch, Z, kc, w->U);
+      /* (the implied barrier: every row of Z solved) */
+#pragma omp for schedule(dynamic, 1)
+    for (int q = 0; q < npair; q++) {
+      int a = 0; /* q = a (a + 1) / 2 + b, b <= a */
+      while ((a + 1) * (a + 2) / 2 <= q) a++;
+      const int b = q - a * (a + 1) / 2;
+      nh_super_pair(t, k, blk, list, a * nk / nch, (a + 1) * nk / nch, b * nk / nch,
+                    (b + 1) * nk / nch, Z, kc, w->G, W, m);
     }
   }
 }
@@ -315,8 +394,12 @@ static int nh_compliance_add_supernodal(nh_system *s, cholmod_sparse *Jt, double
   nh_super_block *blk = nh_calloc((size_t)(nb ? nb : 1), sizeof *blk);
   nh_column_key *key = malloc(sizeof *key * (size_t)(m ? m : 1));
   int *count = NULL, *start = NULL, *list = NULL;
+  /* a BLAS with threads of its own (OPENBLAS_NUM_THREADS > 1) gets the cores instead */
+  const int blas_threaded = openblas_get_num_threads && openblas_get_num_threads() > 1;
+  const int nt = blas_threaded ? 1 : s->threads > 0 ? s->threads : omp_get_max_threads();
+  nh_super_scratch *ws = nh_calloc((size_t)nt, sizeof *ws);
   double *Z = NULL, *G = NULL, *U = NULL;
-  int rc = blk && key ? nh_super_tree_build(s->L, &t) : NH_ERR_MEMORY;
+  int rc = blk && key && ws ? nh_super_tree_build(s->L, &t) : NH_ERR_MEMORY;
   if (!rc) {
     /* the first supernode of each column's path: columns of one subtree together */
     for (int j = 0; j < m; j++) {
@@ -336,16 +419,19 @@ static int nh_compliance_add_supernodal(nh_system *s, cholmod_sparse *Jt, double
     for (int c = 0; c < blk[b].nc; c++) blk[b].col[c] = key[b * C + c].col;
     rc = nh_super_block_open(&t, Jt, &blk[b], count);
   }
+  /* scratch: Z of the widest supernode; per thread a chunk's U and a pair's G */
   size_t zmax = 1, gmax = 1, umax = 1;
   if (!rc) { /* the blocks of each supernode, and the scratch the widest needs */
     start[0] = 0;
     for (int k = 0; k < t.nsuper; k++) {
       start[k + 1] = start[k] + count[k];
-      const size_t kc = (size_t)count[k] * C, nscol = (size_t)(t.super[k + 1] - t.super[k]);
+      const size_t nscol = (size_t)(t.super[k + 1] - t.super[k]);
       const size_t noff = (size_t)(t.pi[k + 1] - t.pi[k]) - nscol;
+      const int n = count[k] ? nh_super_split(&t, k, count[k]) : 1;
+      const size_t kc = (size_t)count[k] * C, hc = (size_t)((count[k] + n - 1) / n) * C;
       if (kc * nscol > zmax) zmax = kc * nscol;
-      if (kc * kc > gmax) gmax = kc * kc;
-      if (kc * noff > umax) umax = kc * noff;
+      if (hc * hc > gmax) gmax = hc * hc;
+      if (hc * noff > umax) umax = hc * noff;
       count[k] = 0;
     }
     if (!(list = malloc(sizeof(int) * (size_t)(start[t.nsuper] ? start[t.nsuper] : 1))))
@@ -353,19 +439,21 @@ static int nh_compliance_add_supernodal(nh_system *s, cholmod_sparse *Jt, double
     for (int b = 0; b < nb && !rc; b++)
       for (int k = 0; k < t.nsuper; k++)
         if (blk[b].row0[k] >= 0) list[start[k] + count[k]++] = b;
-    Z = malloc(sizeof(double) * zmax), G = malloc(sizeof(double) * gmax);
-    U = malloc(sizeof(double) * umax);
+    Z = malloc(sizeof(double) * zmax), G = malloc(sizeof(double) * nt * gmax);
+    U = malloc(sizeof(double) * nt * umax);
     if (!Z || !G || !U) rc = NH_ERR_MEMORY;
+    for (int i = 0; i < nt && !rc; i++) ws[i].G = G + i * gmax, ws[i].U = U + i * umax;
   }
   for (int k = 0; k < t.nsuper && !rc; k++) {
     if (count[k] == 0) continue;
-    nh_super_apply(&t, k, blk, list + start[k], count[k], Z, G, U, W, m);
+    nh_super_apply(&t, k, blk, list + start[k], count[k], Z, ws, nt, W, m);
     rc = nh_stop_check();
   }
   if (rc == NH_ERR_MEMORY)
     rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: the compliance of %d rows", m);
   for (int b = 0; blk && b < nb; b++) free(blk[b].row0), free(blk[b].y);
   free(blk), free(key), free(count), free(start), free(list), free(Z), free(G), free(U);
+  free(ws);
   nh_super_tree_free(&t);
   return rc;
 }

@@ -268,7 +268,12 @@ static int nh_corrected_step(nh_system *s, const nh_integrator *in, cholmod_spar
     }
     memcpy(prev, rows->lambda, sizeof(double) * (size_t)m);
     st->step.corrections = k + 1;
-    if ((rc = nh_constraint_solve(m, W, rk, rows, tolerance, accept, max_iterations, &st->mcp))) {
+    rc = nh_constraint_solve(m, W, rk, rows, tolerance, accept, max_iterations, &st->mcp);
+    if (k > 0) { /* the exact path makes one constraint solve: the others are reuse's */
+      st->step.correction_flops += st->mcp.flops;
+      st->step.correction_flops_dense += st->mcp.flops_dense;
+    }
+    if (rc) {
       /* not converged with W₀: the exact path decides (and reports) */
       if (rc == NH_ERR_NUMERIC) nh_error_clear(), rc = 1;
       break;
@@ -539,7 +544,7 @@ int nh_step_coupled(nh_system *s, const nh_integrator *in, const double *f_ext, 
     st.step.residual = b_norm / fmax(f_scale, 1e-300);
     goto done;
   }
-  if (in->reuse) nh_system_account(s, st.step.pcg_iterations);
+  if (in->reuse) nh_system_account(s, &st.step);
   /* The residual of the one linearisation (full still holds the update; col
    * the rows' reaction J_tᵀ λ, which the corrected path left as an increment). */
   if (m) nh_jt_scatter(Jt, rows->lambda, col, nf);

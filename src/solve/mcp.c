@@ -100,6 +100,7 @@ typedef struct {
   int *free_rows;
   int *lf_rows; /* the free set Lf factorises (lf_n rows; −1: none yet) */
   int lf_n, lf_ok;
+  double flops, flops_dense; /* operations so far (nh_mcp_stats) */
 } nh_mcp_work;
 
 static void nh_mcp_work_free(nh_mcp_work *ws) {
@@ -179,6 +180,7 @@ static double nh_mcp_unilateral(double x, double cap) {
 static void nh_mcp_move(nh_mcp_work *ws, int i, double delta) {
   if (delta == 0.0) return;
   const double *c = ws->Wt + (size_t)i * ws->m;
+  ws->flops += 2.0 * ws->m;
   ws->lt[i] += delta;
   for (int k = 0; k < ws->m; k++) ws->wt[k] += delta * c[k];
 }
@@ -189,6 +191,7 @@ static void nh_mcp_recompute_w(nh_mcp_work *ws) {
   for (int j = 0; j < m; j++) {
     double l = ws->lt[j];
     if (l == 0.0) continue;
+    ws->flops += 2.0 * m;
     const double *c = ws->Wt + (size_t)j * m;
     for (int k = 0; k < m; k++) ws->wt[k] += l * c[k];
   }
@@ -280,8 +283,9 @@ static double nh_mcp_residual(const nh_mcp_work *ws, const double *W, const nh_r
  * one keeps W̃'s entries); 0 if it is not numerically positive definite.
  * LAPACK's blocked dpotrf: with hundreds of free skull rows this factor is
  * O(nb³) per subspace step and was most of the step written as a loop. */
-static int nh_mcp_factor(const nh_mcp_work *ws, int nb, const int *idx, double *L) {
+static int nh_mcp_factor(nh_mcp_work *ws, int nb, const int *idx, double *L) {
   int m = ws->m;
+  ws->flops += (double)nb * nb, ws->flops_dense += (double)nb * nb * nb / 3.0;
   for (int j = 0; j < nb; j++)
     for (int i = 0; i < nb; i++) L[(size_t)j * nb + i] = ws->Wt[(size_t)idx[j] * m + idx[i]];
   if (LAPACKE_dpotrf(LAPACK_COL_MAJOR, 'L', nb, L, nb) != 0) return 0;
@@ -296,6 +300,7 @@ static int nh_mcp_factor(const nh_mcp_work *ws, int nb, const int *idx, double *
 static void nh_mcp_solve_block(nh_mcp_work *ws, int nb, const int *idx, const double *L) {
   double *z = ws->tmp;
   for (int j = 0; j < nb; j++) z[j] = ws->wt[idx[j]];
+  ws->flops += 2.0 * nb * nb;
   LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', nb, 1, L, nb, z, nb); /* L Lᵀ δ = w̃_B */
   for (int j = 0; j < nb; j++) nh_mcp_move(ws, idx[j], -z[j]);
 }
@@ -478,7 +483,7 @@ int nh_mcp_solve(int m, const double *W, const double *r, nh_row_law *laws, doub
              i, i, W[(size_t)i * m + i]);
   }
 
-  nh_mcp_work ws = {.m = m};
+  nh_mcp_work ws = {.m = m, .flops = 3.0 * (double)m * m}; /* W checked, scaled */
   size_t mm = (size_t)m * m;
   int nb = 0;
   for (int i = 0; i < m; i++) nb += laws[i].kind == NH_ROW_BILATERAL;
@@ -553,6 +558,7 @@ int nh_mcp_solve(int m, const double *W, const double *r, nh_row_law *laws, doub
   for (int i = 0; i < m; i++) lambda[i] = ws.d[i] * ws.lt[i];
   stats->iterations = it;
   stats->residual = best_res;
+  stats->flops = ws.flops, stats->flops_dense = ws.flops_dense;
   nh_mcp_count(&ws, lw, stats);
   for (int i = 0; i < m; i++)
     if (laws[i].kind == NH_ROW_FRICTION) {

@@ -131,18 +131,33 @@ int nh_system_pcg(nh_system *s, const double *b, double *x, int guess, double to
  * factor, the mean cost per step of a cycle of k steps is
  * (F + Σ_{j<=k} e_j) / k; it is least when cut at the first step whose own
  * extra cost exceeds that mean (marginal above average), so the next step
- * factorises then. A per-step cost common to both paths (W, the constraint
+ * factorises then. A per-step cost common to both paths (W, one constraint
  * solve, one pair of triangular solves) cancels from the comparison.
+ *
+ * A step's extra cost is what it did beyond the exact path (a direct solve,
+ * one constraint solve, one solve for the constraint forces' correction):
+ *   - its PCG iterations, a solve and a product with A each;
+ *   - with constraint rows, each outer correction after the first
+ *     (nh_corrected_step): one more PCG start (a solve and a product), one
+ *     more solve for the correction, and one more constraint solve, whose
+ *     operations nh_mcp_solve counts (streamed over W̃, and in dense
+ *     Cholesky factorisations of free rows). With hundreds of skull rows
+ *     these are 4–5 per reused step.
  *
  * Costs are operation counts, not measured times, so the moment of renewal,
  * and with it every result, is the same on a loaded and an idle machine:
- * F is CHOLMOD's flop count of the factorisation, e_j = its PCG iterations
- * × the flops of one iteration (two triangular solves with L, one product
- * with A) × NH_SOLVE_FLOP_COST, the time of a solve's flop relative to a
+ * F is CHOLMOD's flop count of the factorisation; streamed operations
+ * (triangular solves, products with A, the constraint solver's sweeps) are
+ * weighted by NH_SOLVE_FLOP_COST, the time of such a flop relative to a
  * factorisation's (triangular solves stream L from memory, the supernodal
- * factorisation runs in dense BLAS-3 blocks: docs/performance.md). */
-void nh_system_account(nh_system *s, int pcg_iterations) {
-  double extra = (double)pcg_iterations * s->flops_iteration * NH_SOLVE_FLOP_COST;
+ * factorisation runs in dense BLAS-3 blocks: docs/performance.md); the
+ * constraint solver's dense factorisations (LAPACK) count as factorisation
+ * flops. */
+void nh_system_account(nh_system *s, const nh_step_stats *st) {
+  const double later = st->corrections > 1 ? st->corrections - 1 : 0;
+  const double streamed = (double)st->pcg_iterations * s->flops_iteration +
+                          later * (s->flops_iteration + s->flops_solve) + st->correction_flops;
+  const double extra = streamed * NH_SOLVE_FLOP_COST + st->correction_flops_dense;
   if (s->factor_age == 0) {
     s->cycle_cost = s->flops_factor;
     s->cycle_steps = 1;

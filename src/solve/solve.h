@@ -121,6 +121,10 @@ typedef struct {
    * reused the factor; 0 otherwise. t_aside: the time that aside cost (copy
    * included), excluded from the phases and to be excluded from the step. */
   double t_factor_reference, t_aside;
+  /* the operations of the constraint solves of the corrections after the
+   * first (nh_mcp_stats.flops, flops_dense): what reuse costs on top of the
+   * exact path's one constraint solve */
+  double correction_flops, correction_flops_dense;
 } nh_step_stats;
 
 /* Integrator settings. */
@@ -220,6 +224,10 @@ typedef struct {
   int n_stick;     /* friction rows strictly inside their bound */
   int n_slide;     /* friction rows on their bound (a zero bound counts as sliding) */
   int n_open;      /* unilateral rows with λ = 0 */
+  /* its operations: streamed over the m x m W̃ (setup, Gauss-Seidel moves,
+   * w̃ recomputed, block solves) and in dense Cholesky factorisations (LAPACK,
+   * n³/3 each); counts, not times (the renewal rule of reuse.c uses them) */
+  double flops, flops_dense;
 } nh_mcp_stats;
 
 /* Solve for the constraint forces λ of m rows: w = W λ + r obeys laws[i] for

@@ -38,7 +38,8 @@ struct nh_system {
   double cycle_cost;       /* flops: the last factorisation and the reuse's extra solves since */
   int cycle_steps;         /* steps of the cycle (nh_system_account) */
   double flops_factor;     /* one numeric factorisation (CHOLMOD's count at analysis) */
-  double flops_iteration;  /* one PCG iteration: two triangular solves and a product with A */
+  double flops_solve;      /* one solve: two triangular solves with L */
+  double flops_iteration;  /* one PCG iteration: a solve and a product with A */
   cholmod_factor *L_aside; /* benchmarks: the factor timed aside (NH_TIME_FACTOR) */
   /* What A was assembled from (u, and cM, cK), at the last assembly and at
    * the one the factor L factorises: a continued run assembles and factorises
@@ -63,6 +64,7 @@ struct nh_system {
   int a_valid;
   double a_cM, a_cK;
   int lazy_updates; /* leaves whose tangent the last assembly updated */
+  int threads;      /* OpenMP threads of the last assembly (0: all), W's build uses them too */
 
   /* Constraint rows J (m x n_free, stored as Jᵀ: n_free x m) solved through
    * the compliance W = J A⁻¹ Jᵀ (Algorithm 1); W and its Cholesky factor are
@@ -87,15 +89,16 @@ struct nh_system {
 enum { NH_PCG_MAX = 40, NH_OUTER_MAX = 10, NH_REFACTOR_MAX_AGE = 200 };
 
 /* The time of one flop of a triangular solve or sparse product relative to
- * one flop of CHOLMOD's supernodal factorisation: measured 14 on the needle
- * phantom at 4131 DOFs and 36 at 28611 (docs/performance.md); the mean cost
- * of a cycle is flat near its optimum, so one value between serves both. */
-#define NH_SOLVE_FLOP_COST 20.0
+ * one flop of CHOLMOD's supernodal factorisation: measured 7.4 on the needle
+ * phantom at 28611 DOFs and 7.5 on the skull case at 18786 (one BLAS
+ * thread; docs/performance.md, "When to factorise", where 20 and 5 are
+ * compared); the mean cost of a cycle is flat near its optimum. */
+#define NH_SOLVE_FLOP_COST 8.0
 
-/* After a step with reuse on: the renewal rule, by operation counts.
- * pcg_iterations: the step's PCG iterations with the reused factor (0 on a
- * step that factorised). */
-void nh_system_account(nh_system *s, int pcg_iterations);
+/* After a step with reuse on: the renewal rule, by operation counts, from
+ * the step's PCG iterations with the reused factor, its outer corrections
+ * and their constraint solves (st: 0 on a step that factorised). */
+void nh_system_account(nh_system *s, const nh_step_stats *st);
 
 /* Before a step's solves, after assembly: factorise A unless in->reuse is on
  * and the current factor may still serve (see reuse.c); the time spent is
