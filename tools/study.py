@@ -915,7 +915,7 @@ def dbs_goal(a, binary):
                 "i_shift": i_shift, "i_top": i_top, "i_back": i_back,
                 "load": infos[name].get("load", [])}
 
-    U = [load(n, l, "uniform") for n, l, _, _ in st["uniform"]]
+    U = [dict(load(nm, l, "uniform"), h=h) for nm, l, _, h in st["uniform"]]
     n = len(U[0]["d"])
     if any(len(r["d"]) != n for r in U):
         raise SystemExit("the uniform runs have different numbers of steps")
@@ -924,7 +924,7 @@ def dbs_goal(a, binary):
 
     def reference(R):
         """The per-step reference from three uniform runs R (coarse first)."""
-        h = [float(st["uniform"][[u[0] for u in st["uniform"]].index(r["name"])][3]) for r in R]
+        h = [r["h"] for r in R]
         d = per_step_reference(h, np.array([r["d"] for r in R]), st["order"])
         xs = [per_step_reference(h, np.array([r["x"][:, k] for r in R]), st["order"])
               for k in range(3)]
@@ -1025,6 +1025,9 @@ def dbs_goal(a, binary):
           "%.1f, %.3f of the 7 mm mesh's %.1f (goal ≤ 1/4: %s)." % (
               r["label"], 1e3 * r["max"], "met" if r["max"] <= 3e-4 else "missed",
               r["speed"]["median"], r["ratio"], ref_ms, "met" if r["ratio"] <= 0.25 else "missed"))
+    lost = [nm for nm, *_ in st["adaptive"] if nm not in infos and (not a.only or nm in a.only)]
+    if lost:
+        p("- not complete (the reason above, on stderr): %s." % ", ".join(lost))
     loads = [x for r in runs for x in r["load"]]
     if loads:
         p("- 1-minute load average at the runs' starts and ends: %.1f–%.1f (2 cores)." % (
