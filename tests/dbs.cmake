@@ -19,3 +19,9 @@ set_tests_properties(static_skull PROPERTIES LABELS "verify;slow")
 # The skull's force in steps.csv balances the weight of a brain at rest in
 # its skull (tests/skull_force.py).
 nh_add_py_test(skull_force verify skull_force.py)
+
+# The per-step reference of tools/study.py dbs-goal (tests/study_reference.py):
+# Richardson through three meshes recovers f∞, the order and the error bar of
+# f(h) = f∞ − C h^p; an order outside [1, 6) or differences changing sign fall
+# back to the finest value with the last difference as its error bar.
+nh_add_py_test(study_reference unit study_reference.py)

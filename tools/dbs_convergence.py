@@ -22,15 +22,13 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from adapt_study import richardson  # noqa: E402
-from study import read_points, read_steps, read_tools  # noqa: E402
+from study import phases, read_points, read_steps  # noqa: E402
 
 
 def measure(d, target, cannula):
-    pos, _ = read_points(d, "targets.csv")
+    pos = read_points(d, "targets.csv")[0]
     tgt = pos[target]
-    tools = read_tools(d, cannula)
-    touched = [i for i, s in enumerate(tools["state"]) if s != "outside"]
-    i_shift = max(touched[0] - 1, 0) if touched else len(tgt) - 1
+    i_shift = phases(d, cannula)[0]
     st = read_steps(d)
     return {"dofs": int(st["dofs"].max()), "steps": len(st["dofs"]),
             "shift": 1e3 * float(np.linalg.norm(tgt[i_shift, :3] - tgt[0, :3])),

@@ -1,0 +1,55 @@
+#!/usr/bin/python3
+"""The per-step converged reference of tools/study.py dbs-goal
+(per_step_reference): Richardson through three meshes with a sanity range on
+the observed order, else the finest value with the last difference as its
+error bar. Silent on success, one line per failure, exit 1.
+
+Expected values from the closed form f(h) = f∞ − C h^p at h = 14, 10, 7:
+ 1. p = 2 and p = 4.5 (inside [1, 6)): the extrapolated value is f∞, the
+    order p, the error bar C·7^p = |f∞ − f(7)|.
+ 2. p = 0.5 (outside): the 7 mm value, bar |f(7) − f(10)|, order 0.5
+    reported but not used.
+ 3. Differences changing sign (1.0, 1.2, 1.1): no order, 1.1 ± 0.1.
+ 4. The same value on every mesh (step 0): that value, bar 0, no order.
+"""
+import math
+import os
+import sys
+
+import numpy as np
+
+SRC = os.environ.get("NH_SOURCE_DIR", os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+sys.path.insert(0, os.path.join(SRC, "tools"))
+from study import per_step_reference  # noqa: E402
+
+failures = []
+
+
+def check(what, got, want, tol):
+    if not (abs(got - want) <= tol or (math.isnan(got) and math.isnan(want))):
+        print("FAIL: %s = %.15g, expected %.15g (tolerance %g)" % (what, got, want, tol),
+              file=sys.stderr)
+        failures.append(what)
+
+
+h = [14.0, 10.0, 7.0]
+cols, want = [], []
+for f_inf, C, p in ((2.0, 0.01, 2.0), (1.0, 1e-6, 4.5), (3.0, 0.2, 0.5)):
+    cols.append([f_inf - C * x ** p for x in h])
+    if 1.0 <= p < 6.0:
+        want.append((f_inf, C * 7.0 ** p, p, True))
+    else:
+        want.append((cols[-1][2], abs(cols[-1][2] - cols[-1][1]), p, False))
+cols.append([1.0, 1.2, 1.1])
+want.append((1.1, 0.1, float("nan"), False))
+cols.append([0.5, 0.5, 0.5])
+want.append((0.5, 0.0, float("nan"), False))
+ref, bar, order, sane = per_step_reference(h, np.array(cols).T, (1.0, 5.99))
+for i, (r, b, p, ok) in enumerate(want):
+    check("column %d: reference" % i, ref[i], r, 1e-10)
+    check("column %d: error bar" % i, bar[i], b, 1e-10)
+    check("column %d: order" % i, order[i], p, 1e-8)
+    if bool(sane[i]) != ok:
+        print("FAIL: column %d: sane %s, expected %s" % (i, bool(sane[i]), ok), file=sys.stderr)
+        failures.append("sane %d" % i)
+sys.exit(1 if failures else 0)
