@@ -20,6 +20,7 @@
 """
 import csv
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -216,13 +217,15 @@ def main():
         # refinement, METIS ordering and factorisation (about 1.2 s, 3 x step
         # 1's 0.41 s on a quiet machine), which are library calls that cannot
         # stop inside (up to 1.8 s, docs/outputs.md). The delay scales with
-        # step 1's own time, so a loaded or sanitized run aims at the same
-        # phase; but the load can change between steps 1 and 2, so the aim is
-        # tried up to three times (6, 4.5 and 8 x step 1, inside the W phase of
-        # 3 to 12 x step 1): each try must stop with exit 1 and the checkpoint,
-        # and one that lands in the W build must stop within 1 s.
+        # step 1's own time, so a loaded or sanitized run aims at about the
+        # same phase; but the load can change between steps, and the
+        # sanitizers slow our W build more than the libraries, so the aim is
+        # tried up to three times (4.5, 3.6 and 6 x step 1). Step 3 (the same
+        # 40410-dof mesh, its W built again) is as long a step: a signal in it
+        # counts too. Each try must stop with exit 1 and the checkpoint (or end
+        # before the signal came: a miss), and one must stop within 1 s.
         latencies = []
-        for aim in (6.0, 4.5, 8.0):
+        for aim in (4.5, 3.6, 6.0):
             long_dir = os.path.join(tmp, "long-%g" % aim)
             p = subprocess.Popen([BIN, "run", SCENE, "--quiet", "--out", long_dir, "--set",
                                   "adapt.hanging=lagrange", "--set", "tissue.grid=[24,12,12]", "--set",
@@ -243,19 +246,24 @@ def main():
             t0 = time.monotonic()
             p.send_signal(signal.SIGTERM)
             _, err = p.communicate()
-            latencies.append(time.monotonic() - t0)
-            if p.returncode != 1 or "during step 2, after step 1" not in err:
-                fail("SIGTERM in a long step: expected exit 1 and 'during step 2, after step 1', got "
-                     "%d: %r" % (p.returncode, err))
+            latency = time.monotonic() - t0
+            if p.returncode == 0:
+                print("SIGTERM in a long step: aim %g x step 1 came after the run's end" % aim)
+                continue
+            if p.returncode != 1 or not re.search(r"during step [23], after step [12] of 3", err):
+                fail("SIGTERM in a long step: expected exit 1 and 'during step 2 (or 3), after step 1 "
+                     "(or 2)', got %d: %r" % (p.returncode, err))
+                continue
             if not os.path.exists(os.path.join(long_dir, "checkpoint.nhc")):
-                fail("SIGTERM in a long step: no checkpoint of step 1")
-            if latencies[-1] <= 1.0:
+                fail("SIGTERM in a long step: no checkpoint")
+            latencies.append(latency)
+            if latency <= 1.0:
                 break
         print("SIGTERM in a long step: stopped %s s after the signal"
               % ", ".join("%.2f" % t for t in latencies))
-        if min(latencies) > 1.0:
+        if not latencies or min(latencies) > 1.0:
             fail("SIGTERM in a long step: stopped %s s after the signal, expected within 1 s"
-                 % ", ".join("%.2f" % t for t in latencies))
+                 % (", ".join("%.2f" % t for t in latencies) or "never (every aim missed)"))
 
         # 4: bad checkpoints.
         bad = os.path.join(tmp, "bad")
