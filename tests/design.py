@@ -11,10 +11,15 @@
                        (a function, a type or a table) somewhere in src/, every
                        `src/...` or `<module>/<file>.[ch]` path exists, and in
                        a "`<module>/<file>.c`: `nh_a`, `nh_b`" reference each
-                       function is defined in that very file.
+                       function is defined in that very file; every
+                       `tools/<file>.py` exists, and in a "`tools/<file>.py`:
+                       `a`, `b`" reference (the tools' one home for each
+                       helper) each function is defined (`def` at the top
+                       level) in that file and in no other tools/*.py.
 
 Each first checks the checker on synthetic input (an upward include, a
-private one, a downward one; a page with a wrong file and an unknown name).
+private one, a downward one; a page with a wrong file and an unknown name;
+tools with a helper defined twice, one missing and a missing file).
 Silent on success; on failure one line per offence.
 """
 import glob
@@ -135,6 +140,32 @@ def stale(page, defs, exists):
     return out
 
 
+TOOL_PATH = re.compile(r"`(tools/[a-z0-9_]+\.py)`")
+TOOL_FNS = re.compile(r"`(tools/[a-z0-9_]+\.py)`: ((?:`\w+`(?:, )?)+)")
+PY_DEF = re.compile(r"^def (\w+)\(", re.M)
+
+
+def stale_tools(page, tools):
+    """tools: {path: text} of tools/*.py. The tools/*.py paths the page names that do not exist,
+    and the functions of a "`tools/x.py`: `f`, `g`" reference not defined in x.py or defined
+    in another tool too."""
+    out = [f"{p}: no such file" for p in sorted(set(TOOL_PATH.findall(page))) if p not in tools]
+    defs = {}
+    for path, text in tools.items():
+        for fn in PY_DEF.findall(text):
+            defs.setdefault(fn, set()).add(path)
+    for m in TOOL_FNS.finditer(page):
+        home = m.group(1)
+        for fn in re.findall(r"`(\w+)`", m.group(2)):
+            where = defs.get(fn, set())
+            if home not in where:
+                out.append(f"{home}: {fn} is not defined there")
+            elif len(where) > 1:
+                out.append(f"{fn}: its home is {home}, defined again in "
+                           f"{', '.join(sorted(where - {home}))}")
+    return out
+
+
 def check_refs():
     defs = definitions(ROOT)
     exists = lambda rel: os.path.exists(os.path.join(ROOT, rel))
@@ -146,6 +177,13 @@ def check_refs():
         errors.append(f"self-check: the synthetic page gave {stale(fake, defs, exists)}")
     page = open(DESIGN, encoding="utf-8").read()
     errors += stale(page, defs, exists)
+    fake_tools = {"tools/a.py": "def f(x):\n    pass\n", "tools/b.py": "def f(y):\n    def g():\n"}
+    fake = "`tools/a.py`: `f`, `g`; `tools/c.py`"  # f twice, g not in a.py (nested in b), no c.py
+    if len(stale_tools(fake, fake_tools)) != 3:
+        errors.append(f"self-check: the synthetic tools gave {stale_tools(fake, fake_tools)}")
+    tools = {os.path.relpath(f, ROOT): open(f, encoding="utf-8").read()
+             for f in glob.glob(os.path.join(ROOT, "tools", "*.py"))}
+    errors += stale_tools(page, tools)
     return errors
 
 
