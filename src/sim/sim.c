@@ -220,31 +220,24 @@ void nh_sim_median_times(const nh_sim *s, double t[7]) {
 
 /* ---- outputs ---- */
 
-static int nh_write_frame(nh_sim *s) {
+/* The tissue's frame: current positions (also left in s->x), the hexahedra
+ * of the leaves, displacement, velocity, hanging-node and fixed-node flags,
+ * and per cell von Mises stress, level, fill, indicator and Young's modulus.
+ * One description, written as tissue_NNNNNN.vtu and (output.hdf5) as the
+ * HDF5 frame. */
+static int nh_write_tissue_frame(nh_sim *s) {
   const nh_mesh *m = s->mesh;
-  const nh_scene *sc = s->scene;
-  char name[64], path[NH_PATH_MAX + 64];
-  int rc = NH_OK;
-  int nc = m->n_leaves, np = m->n_nodes;
-  int *conn = malloc(sizeof(int) * 8 * (size_t)(nc ? nc : 1));
-  int *offsets = malloc(sizeof(int) * (size_t)(nc ? nc : 1));
-  int *flags = malloc(sizeof(int) * (size_t)(np ? np : 1));
-  double *cell = malloc(sizeof(double) * 5 * (size_t)(nc ? nc : 1));
-  double *hang = calloc((size_t)(np ? np : 1), sizeof(double));
+  const int nc = m->n_leaves, np = m->n_nodes;
+  int *conn = nh_calloc(8 * (size_t)nc, sizeof *conn);
+  int *offsets = nh_calloc((size_t)nc, sizeof *offsets);
+  int *flags = nh_calloc((size_t)np, sizeof *flags);
+  double *cell = nh_calloc(5 * (size_t)nc, sizeof *cell);
+  double *hang = nh_calloc((size_t)np, sizeof *hang);
   const double *eta = nh_adapt_indicators(s->adapt);
-  int n_pr = sc->n_probes + sc->n_targets;
-  double *pp = malloc(sizeof(double) * 3 * (size_t)(n_pr ? n_pr : 1));
-  double *pu = malloc(sizeof(double) * 3 * (size_t)(n_pr ? n_pr : 1));
-  int *pconn = malloc(sizeof(int) * (size_t)(n_pr ? n_pr : 1));
-  int *poff = malloc(sizeof(int) * (size_t)(n_pr ? n_pr : 1));
-  int *pkind = malloc(sizeof(int) * (size_t)(n_pr ? n_pr : 1));
-  const char **pname = malloc(sizeof(char *) * (size_t)(n_pr ? n_pr : 1));
-  if (!conn || !offsets || !flags || !cell || !hang || !pp || !pu || !pconn || !poff || !pkind ||
-      !pname) {
-    rc = NH_ERROR(NH_ERR_MEMORY, "out of memory writing a frame");
-    goto done;
-  }
-  for (int l = 0; l < nc; l++) {
+  int rc = conn && offsets && flags && cell && hang
+               ? NH_OK
+               : NH_ERROR(NH_ERR_MEMORY, "out of memory writing a frame");
+  for (int l = 0; l < nc && !rc; l++) {
     int c = m->leaves[l];
     memcpy(conn + 8 * l, m->cells + 8 * c, 8 * sizeof(int));
     offsets[l] = 8 * (l + 1);
@@ -258,70 +251,84 @@ static int nh_write_frame(nh_sim *s) {
     nh_tissue_cell_material(s->tissue, c, &lambda, &mu, NULL);
     cell[4 * nc + l] = mu * (3 * lambda + 2 * mu) / (lambda + mu);
   }
-  if (s->hanging)
+  if (!rc && s->hanging)
     for (int k = 0; k < s->hanging->n_hanging; k++) hang[s->hanging->node[k]] = 1.0;
-  for (int i = 0; i < np; i++) {
+  for (int i = 0; i < np && !rc; i++) {
     flags[i] = s->fixed[i];
     for (int k = 0; k < 3; k++) s->x[3 * i + k] = m->X[3 * i + k] + s->u[3 * i + k];
   }
-  nh_field pf[3] = {
+  const nh_field pf[3] = {
       {"displacement", 3, s->u, "m"}, {"velocity", 3, s->v, "m/s"}, {"hanging", 1, hang, "1"}};
-  nh_field cf[5] = {{"von_mises", 1, cell, "Pa"},
-                    {"level", 1, cell + nc, "1"},
-                    {"fill", 1, cell + 2 * nc, "1"},
-                    {"eta", 1, cell + 3 * nc, "J^(1/2)"},
-                    {"young", 1, cell + 4 * nc, "Pa"}};
-  nh_vtu_grid g = {.n_points = np,
-                   .points = s->x,
-                   .n_cells = nc,
-                   .connectivity = conn,
-                   .offsets = offsets,
-                   .type = NH_VTK_HEXAHEDRON,
-                   .n_point_fields = 3,
-                   .point_fields = pf,
-                   .n_cell_fields = 5,
-                   .cell_fields = cf,
-                   .point_int_flags = flags,
-                   .point_flag_name = "fixed"};
-  snprintf(name, sizeof name, "tissue_%06d.vtu", s->step);
-  snprintf(path, sizeof path, "%s/%s", sc->output.dir, name);
-  if ((rc = nh_vtu_write(path, &g)) || (rc = nh_pvd_add(s->tissue_pvd, s->time, name))) goto done;
-  if (s->h5 && (rc = nh_h5_write_frame(s->h5, s->step, s->time, &g))) goto done;
-
-  if (n_pr > 0) {
-    for (int i = 0; i < n_pr; i++) {
-      const double *X =
-          i < sc->n_probes ? sc->probes[i].point : sc->targets[i - sc->n_probes].point;
-      nh_sim_probe_displacement(s, i, pu + 3 * i);
-      for (int k = 0; k < 3; k++) pp[3 * i + k] = X[k] + pu[3 * i + k];
-      pconn[i] = i;
-      poff[i] = i + 1;
-      pkind[i] = i >= sc->n_probes;
-      pname[i] = i < sc->n_probes ? sc->probes[i].name : sc->targets[i - sc->n_probes].name;
-    }
-    nh_field ppf[1] = {{"displacement", 3, pu, "m"}};
-    nh_vtu_grid pg = {.n_points = n_pr,
-                      .points = pp,
-                      .n_cells = n_pr,
-                      .connectivity = pconn,
-                      .offsets = poff,
-                      .type = NH_VTK_VERTEX,
-                      .n_point_fields = 1,
-                      .point_fields = ppf,
-                      .point_int_flags = pkind,
-                      .point_flag_name = "target",
-                      .point_names = pname};
-    snprintf(name, sizeof name, "points_%06d.vtu", s->step);
-    snprintf(path, sizeof path, "%s/%s", sc->output.dir, name);
-    if ((rc = nh_vtu_write(path, &pg)) || (rc = nh_pvd_add(s->points_pvd, s->time, name)))
-      goto done;
-  }
-  if (s->contact && (rc = nh_sim_tools_frame(s))) goto done;
-  s->last_frame = s->step;
-done:
+  const nh_field cf[5] = {{"von_mises", 1, cell, "Pa"},
+                          {"level", 1, cell + nc, "1"},
+                          {"fill", 1, cell + 2 * nc, "1"},
+                          {"eta", 1, cell + 3 * nc, "J^(1/2)"},
+                          {"young", 1, cell + 4 * nc, "Pa"}};
+  const nh_frame frame = {.n_points = np,
+                          .points = s->x,
+                          .n_cells = nc,
+                          .connectivity = conn,
+                          .offsets = offsets,
+                          .type = NH_VTK_HEXAHEDRON,
+                          .n_point_fields = 3,
+                          .point_fields = pf,
+                          .n_cell_fields = 5,
+                          .cell_fields = cf,
+                          .point_int_flags = flags,
+                          .point_flag_name = "fixed"};
+  if (!rc) rc = nh_pvd_write_frame(s->tissue_pvd, s->step, s->time, &frame);
+  if (!rc && s->h5) rc = nh_h5_write_frame(s->h5, s->step, s->time, &frame);
   free(conn), free(offsets), free(flags), free(cell), free(hang);
-  free(pp), free(pu), free(pconn), free(poff), free(pkind), free(pname);
   return rc;
+}
+
+/* The frame of the n embedded points (probes, then targets): vertices at
+ * their current positions, their displacement, a target flag and their
+ * names; written as points_NNNNNN.vtu. */
+static int nh_write_points_frame(nh_sim *s, int n) {
+  const nh_scene *sc = s->scene;
+  double *x = nh_calloc(3 * (size_t)n, sizeof *x), *u = nh_calloc(3 * (size_t)n, sizeof *u);
+  int *conn = nh_calloc((size_t)n, sizeof *conn), *offsets = nh_calloc((size_t)n, sizeof *offsets);
+  int *target = nh_calloc((size_t)n, sizeof *target);
+  const char **names = nh_calloc((size_t)n, sizeof *names);
+  int rc = x && u && conn && offsets && target && names
+               ? NH_OK
+               : NH_ERROR(NH_ERR_MEMORY, "out of memory writing a frame");
+  for (int i = 0; i < n && !rc; i++) {
+    const int probe = i < sc->n_probes;
+    const double *X = probe ? sc->probes[i].point : sc->targets[i - sc->n_probes].point;
+    nh_sim_probe_displacement(s, i, u + 3 * i);
+    for (int k = 0; k < 3; k++) x[3 * i + k] = X[k] + u[3 * i + k];
+    conn[i] = i;
+    offsets[i] = i + 1;
+    target[i] = !probe;
+    names[i] = probe ? sc->probes[i].name : sc->targets[i - sc->n_probes].name;
+  }
+  const nh_field pf[1] = {{"displacement", 3, u, "m"}};
+  const nh_frame frame = {.n_points = n,
+                          .points = x,
+                          .n_cells = n,
+                          .connectivity = conn,
+                          .offsets = offsets,
+                          .type = NH_VTK_VERTEX,
+                          .n_point_fields = 1,
+                          .point_fields = pf,
+                          .point_int_flags = target,
+                          .point_flag_name = "target",
+                          .point_names = names};
+  if (!rc) rc = nh_pvd_write_frame(s->points_pvd, s->step, s->time, &frame);
+  free(x), free(u), free(conn), free(offsets), free(target), free(names);
+  return rc;
+}
+
+/* This step's frames: the tissue, the embedded points, the tools. */
+static int nh_write_frame(nh_sim *s) {
+  const int n_points = s->scene->n_probes + s->scene->n_targets;
+  NH_TRY(nh_write_tissue_frame(s));
+  if (n_points > 0) NH_TRY(nh_write_points_frame(s, n_points));
+  if (s->contact) NH_TRY(nh_sim_tools_frame(s));
+  s->last_frame = s->step;
+  return NH_OK;
 }
 
 static int nh_write_probe_rows(nh_sim *s) {
