@@ -35,8 +35,9 @@ and written by tests/nifti_field_tool. Checks:
    p -> p + d(p) (to 1e-3 mm at mesh nodes).
 5. The scalar writer keeps the reference's type and scaling (int16 with
    scl_slope 2, scl_inter 10: the same values) or writes float32; a write
-   into a missing folder fails with the path named, nothing on stderr, no
-   file left behind.
+   into a missing folder, or on a reference whose file changed since it was
+   read, fails with NH_ERR_IO and the path named, nothing on stderr (libnifti2
+   silent), no file left behind.
 Silent on success; one line per failure, exit 1.
 """
 import os
@@ -260,6 +261,16 @@ def scalar_writer():
     p = subprocess.run([TOOL, "fail", ref, missing], capture_output=True, text=True)
     check(p.returncode == 3 and missing in p.stdout and p.stderr == "",
           "write to a missing folder: exit %d, stdout %r, stderr %r" % (p.returncode, p.stdout, p.stderr))
+    check(not os.path.exists(os.path.dirname(missing)), "a folder was created")
+    # a reference whose file changed size since it was read
+    out = os.path.join(WORK, "changed.nii.gz")
+    small = os.path.join(WORK, "ref_small.nii.gz")
+    nib.save(nib.Nifti1Image(np.zeros((5, 5, 5), np.int16), aff), small)
+    p = subprocess.run([TOOL, "fail", ref, out, small],
+                       capture_output=True, text=True)
+    check(p.returncode == 3 and "changed since it was read" in p.stdout and out in p.stdout
+          and p.stderr == "" and not os.path.exists(out) and not os.path.exists(out + ".tmp"),
+          "changed reference: exit %d, stdout %r, stderr %r" % (p.returncode, p.stdout, p.stderr))
 
 
 def main():

@@ -12,9 +12,11 @@
  *   nifti_field_tool scalar REF OUT [float]
  *       reads REF's voxels (nh_image_read_values) and writes them back as
  *       OUT (nh_nifti_write_scalar, REF's type or float32).
- *   nifti_field_tool fail REF OUT
- *       writes a field of zeros to OUT, which must fail: prints the error
- *       and exits 3 on NH_ERR_IO (anything else: 1).
+ *   nifti_field_tool fail REF OUT [OTHER]
+ *       writes a field of zeros to OUT on REF's grid (read from REF, then
+ *       named OTHER if given: a reference that changed since it was read),
+ *       which must fail: prints the error and exits 3 on NH_ERR_IO
+ *       (anything else: 1).
  * Exit 0 on success, 1 on an error (printed). */
 #include "hanging_mesh.h"
 #include "io/io.h"
@@ -87,6 +89,7 @@ static int scalar(int argc, char **argv) {
 static int fail(char **argv) {
   nh_image *ref;
   CHECK_OK(nh_image_read(argv[2], 0, &ref));
+  if (argv[4]) snprintf(ref->path, sizeof ref->path, "%s", argv[4]);
   size_t nv = (size_t)ref->n[0] * ref->n[1] * ref->n[2];
   double *zero = calloc(3 * nv, sizeof(double));
   int rc = nh_nifti_write_displacement(argv[3], ref, zero);
@@ -100,7 +103,7 @@ int main(int argc, char **argv) {
   (void)nh_test_failures; /* CHECK_OK exits at once */
   if (argc >= 4 && strcmp(argv[1], "field") == 0) return field(argc, argv);
   if (argc >= 4 && strcmp(argv[1], "scalar") == 0) return scalar(argc, argv);
-  if (argc == 4 && strcmp(argv[1], "fail") == 0) return fail(argv);
+  if ((argc == 4 || argc == 5) && strcmp(argv[1], "fail") == 0) return fail(argv);
   fprintf(stderr, "usage: nifti_field_tool field|scalar|fail REF OUT ...\n");
   return 2;
 }

@@ -205,8 +205,8 @@ int nh_markups_write(const char *path, nh_markup_type type, const char *name, in
  * converted). The field maps a point p of the reference (the rest anatomy)
  * to p + u(p), its position after the shift (docs/anatomy.md: which image
  * it moves, and how ANTs, Slicer and transformix apply it). Atomically.
- * Fails with NH_ERR_INPUT naming the reference if its header cannot be read
- * again or no longer matches, NH_ERR_IO naming the path, NH_ERR_MEMORY. */
+ * Fails with NH_ERR_IO naming the path (and the reference, if its header
+ * cannot be read again or no longer matches its size), NH_ERR_MEMORY. */
 int nh_nifti_write_displacement(const char *path, const nh_image *reference, const double *u);
 /* Write a 0/1 mask (uint8, one per voxel) on the reference's grid, as
  * nh_nifti_write_displacement's geometry. */

@@ -120,14 +120,17 @@ static int nh_nifti_header(const char *path, const nh_image *ref, const int64_t 
                            int datatype, nifti_1_header *hdr, nifti_image **ref_nim) {
   nifti_set_debug_level(0);
   nifti_image *nim = nifti_image_read(ref->path, 0);
-  NH_CHECK(nim, NH_ERR_INPUT, "%s: cannot read its header again (for the geometry of %s)",
-           ref->path, path);
+  NH_CHECK(nim, NH_ERR_IO,
+           "cannot write NIfTI file '%s': its reference %s cannot be read again (its geometry "
+           "is copied)",
+           path, ref->path);
   int same = nim->nx == ref->n[0] && nim->ny == ref->n[1] && nim->nz == ref->n[2];
   for (int d = 4; d <= 7; d++) same &= nim->dim[0] < d || nim->dim[d] <= 1;
   if (!same) {
     nifti_image_free(nim);
-    return NH_ERROR(NH_ERR_INPUT, "%s: changed since it was read (for the geometry of %s)",
-                    ref->path, path);
+    return NH_ERROR(NH_ERR_IO,
+                    "cannot write NIfTI file '%s': its reference %s changed since it was read",
+                    path, ref->path);
   }
   for (int d = 1; d <= 3; d++)
     if (dims[d] > 32767) {
@@ -291,8 +294,9 @@ int nh_nifti_write_scalar(const char *path, const nh_image *ref, const double *v
   hdr.intent_code = (short)nim->intent_code;
   memcpy(hdr.intent_name, nim->intent_name, sizeof hdr.intent_name - 1);
   nifti_image_free(nim);
-  NH_CHECK(ok, NH_ERR_INPUT, "%s: data type %s cannot hold an image's values (%s)", ref->path,
-           nifti_datatype_string(datatype), path);
+  NH_CHECK(ok, NH_ERR_IO,
+           "cannot write NIfTI file '%s': the data type %s of %s is not a real number", path,
+           nifti_datatype_string(datatype), ref->path);
   int nbyper, swapsize;
   nifti_datatype_sizes(datatype, &nbyper, &swapsize);
   hdr.datatype = (short)datatype;
