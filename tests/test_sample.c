@@ -23,7 +23,13 @@
  *     the contraction ratio seen is ≤ L; the iterations are at most
  *     1 + ⌈log(tol / ((1 + L) 2 max|u|)) / log L⌉ (the contraction argument:
  *     |X_{k+1} − X_k| ≤ L^k (1 + L) |X_0 − X*|, |X_0 − X*| ≤ 2 max|u|).
- *  5. The warp of a smooth field u = a + ε g(X), g a Gaussian bump
+ *  5. The outcomes on a box translated by t = 3 mm along x, on rows of
+ *     voxel centres through it: x − t in the box: X = x − t in the tissue
+ *     (also for x beyond the box, found by the restart from the box's
+ *     surface); x in the box but x − t not (the iterates cycle across the
+ *     −x face, where u jumps to 0): unconverged, X = x, stopped within 10
+ *     evaluations of u; else outside, X = x.
+ *  6. The warp of a smooth field u = a + ε g(X), g a Gaussian bump
  *     (σ = 8 mm, ε = 1.5 mm), nodal values on a 1 mm mesh: for an image
  *     linear in x (trilinear interpolation exact) the warped value equals
  *     c · X*(x) + d, X* the exact inverse of the closed form (Newton with
@@ -288,6 +294,53 @@ static void inverse_linear(void) {
   nh_mesh_destroy(&m);
 }
 
+/* A box translated by t: the three outcomes of the inverse map. */
+static void inverse_outcomes(void) {
+  const double lo[3] = {0, 0, 0}, hi[3] = {0.02, 0.02, 0.02}, t[3] = {3e-3, 0, 0};
+  const int grid[3] = {4, 4, 4};
+  nh_mesh *m;
+  CHECK_OK(nh_mesh_create_box(lo, hi, grid, &m));
+  double *field = malloc(sizeof(double) * 3 * m->n_nodes);
+  for (int i = 0; i < m->n_nodes; i++) memcpy(field + 3 * i, t, sizeof t);
+  double I[9];
+  nh_mat3_identity(I);
+  /* voxel centres at x = -4.5 .. 25.5 mm (1 mm), y and z inside the box */
+  const int n[3] = {31, 3, 3};
+  const double h[3] = {1e-3, 5e-3, 5e-3}, o[3] = {-4.5e-3, 5e-3, 5e-3};
+  nh_image *im = make_image(n, I, h, o);
+  size_t nv = voxels(im);
+  double *X = malloc(sizeof(double) * 3 * nv);
+  unsigned char *status = malloc(nv);
+  nh_inverse_stats st;
+  CHECK_OK(nh_mesh_inverse_image(m, field, im, NULL, X, status, &st));
+  long count[3] = {0, 0, 0};
+  for (size_t v = 0; v < nv; v++) {
+    double x[3], want[3];
+    voxel_centre(im, v, x);
+    int from_tissue = x[0] - t[0] > lo[0] && x[0] - t[0] < hi[0];
+    int in_box = x[0] > lo[0] && x[0] < hi[0];
+    int expect = from_tissue ? NH_INVERSE_TISSUE
+                 : in_box    ? NH_INVERSE_UNCONVERGED
+                             : NH_INVERSE_OUTSIDE;
+    for (int k = 0; k < 3; k++) want[k] = x[k] - (from_tissue ? t[k] : 0.0);
+    CHECK(status[v] == expect, "x = %g mm: status %d, expected %d", 1e3 * x[0], status[v], expect);
+    for (int k = 0; k < 3; k++) CHECK_CLOSE(X[3 * v + k], want[k], 1e-12, "X of an outcome");
+    count[status[v]]++;
+  }
+  /* 20 centres along x come from the tissue (3 of them beyond the box, x in
+     (20, 23) mm), 3 cycle at the -x face (x in (0, 3) mm), 8 are outside */
+  CHECK(count[NH_INVERSE_TISSUE] == 20 * 9 && count[NH_INVERSE_UNCONVERGED] == 3 * 9,
+        "outcomes: %ld tissue, %ld unconverged, %ld outside", count[1], count[2], count[0]);
+  CHECK(st.iterations_max <= 10, "iterations at most %d", st.iterations_max);
+  if (verbose)
+    printf(
+        "outcomes (box moved 3 mm): %ld tissue, %ld unconverged, %ld outside, iterations max %d\n",
+        count[1], count[2], count[0], st.iterations_max);
+  free(X), free(status), free(field);
+  nh_image_release(&im);
+  nh_mesh_destroy(&m);
+}
+
 /* The smooth field u = a + ε exp(−|X − c|²/σ²) e and its Jacobian. */
 static const double bump_c[3] = {0.012, 0.010, 0.009}, bump_e[3] = {0.6, -0.48, 0.64};
 static const double bump_eps = 1.5e-3, bump_sigma = 8e-3;
@@ -390,6 +443,7 @@ int main(void) {
   sampling();
   ball_mask();
   inverse_linear();
+  inverse_outcomes();
   warp_smooth();
   TEST_END();
 }

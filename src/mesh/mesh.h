@@ -374,10 +374,12 @@ typedef struct {
   long points;        /* voxels */
   long tissue;        /* X(x) in the tissue: x is in the shifted tissue */
   long outside;       /* X(x) outside the tissue (x outside the mesh: X = x) */
-  long unconverged;   /* no convergence in max_iterations: X = x */
+  long unconverged;   /* no convergence (3 steps not shorter, or max_iterations): X = x */
   int iterations_max; /* evaluations of u for one voxel, at most */
   double iterations_mean;
-  double contraction; /* the largest ratio |X_{k+1} − X_k| / |X_k − X_{k−1}| seen */
+  double contraction; /* the largest ratio |X_{k+1} − X_k| / |X_k − X_{k−1}| (steps
+                         above 10 tol) of the voxels that converged in the tissue: an
+                         estimate of L (a path that crossed the mesh's surface can exceed it) */
 } nh_inverse_stats;
 enum { NH_INVERSE_OUTSIDE = 0, NH_INVERSE_TISSUE = 1, NH_INVERSE_UNCONVERGED = 2 };
 /* X(x) at every voxel centre x of `image` into X[3 nvox] (may be NULL),

@@ -55,9 +55,12 @@
  *     (it receded from the skull) takes X from the extension in the cut
  *     cells, up to one cell beyond the surface, else X = x: the image there
  *     is not tissue's, and the simulation says nothing about it;
- *   - not converged in max_iterations (NH_INVERSE_UNCONVERGED; at the mesh's
- *     outer surface, where u jumps from its value to 0, or where L ≥ 1):
- *     X = x, counted in the statistics.
+ *   - not converged (NH_INVERSE_UNCONVERGED): at the mesh's outer surface,
+ *     where u jumps from its value to 0, the iterates cycle between the
+ *     mesh and the outside; where L ≥ 1 they need not converge. A
+ *     contraction shortens every step, so the iteration stops once three
+ *     steps have not (or after max_iterations): X = x, counted in the
+ *     statistics.
  * Tissue that moved beyond the mesh's rest extent (the mesh then ends
  * before the shifted surface) is found from points x outside the lattice's
  * box only within max |u| of it: the iteration is restarted there from x
@@ -237,7 +240,8 @@ static void nh_inverse_init(nh_inverse *inv, const nh_mesh *m, const double *fie
 /* Iterate from X (in: X_0, out: the result) for the point x. Returns the
  * status; *iterations the evaluations of u. */
 static int nh_inverse_iterate(nh_inverse *inv, const double x[3], double X[3], int *iterations) {
-  double u[3], step_prev = 0.0;
+  double u[3], step_prev = 0.0, ratio = 0.0;
+  int stalls = 0;
   for (int it = 1; it <= inv->max_iterations; it++) {
     nh_finder_value(&inv->f, inv->field, X, 0, u);
     double step = 0.0;
@@ -247,13 +251,19 @@ static int nh_inverse_iterate(nh_inverse *inv, const double x[3], double X[3], i
       X[k] = next;
     }
     step = sqrt(step);
-    if (step_prev > 10.0 * inv->tol)
-      inv->st.contraction = fmax(inv->st.contraction, step / step_prev);
+    if (step_prev > 10.0 * inv->tol) ratio = fmax(ratio, step / step_prev);
+    /* a contraction shortens every step: three that do not mean no
+       contraction here (the jump of u at the mesh's surface, or L >= 1) */
+    if (it > 1 && step >= step_prev && ++stalls == 3) {
+      *iterations = it;
+      return NH_INVERSE_UNCONVERGED;
+    }
     step_prev = step;
     if (step <= inv->tol) {
       *iterations = it;
-      return nh_finder_value(&inv->f, inv->field, X, 1, u) == 2 ? NH_INVERSE_TISSUE
-                                                                : NH_INVERSE_OUTSIDE;
+      if (nh_finder_value(&inv->f, inv->field, X, 1, u) != 2) return NH_INVERSE_OUTSIDE;
+      inv->st.contraction = fmax(inv->st.contraction, ratio);
+      return NH_INVERSE_TISSUE;
     }
   }
   *iterations = inv->max_iterations;
