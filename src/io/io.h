@@ -180,4 +180,43 @@ int nh_h5_flush(nh_h5 *h);
  * NH_ERR_IO if the final flush failed (the handle is freed regardless). */
 int nh_h5_close(nh_h5 **h);
 
+/* ---- outputs on the patient's images (io/markups.c, io/nifti.c) ----
+ * For the tools that plan DBS (3D Slicer, ANTs, elastix, Lead-DBS): 3D
+ * Slicer markups and NIfTI images on the grid of a reference image. Points
+ * and vectors come in the scene frame (RAS, metres; anatomy.h). */
+#include "anatomy/anatomy.h"
+
+/* Write a 3D Slicer markups file (.mrk.json, schema v1.0.3) holding one
+ * markup of `type` (NH_MARKUP_CURVE for a tool's axis, points from base to
+ * tip; NH_MARKUP_FIDUCIAL for targets) named `name`, with the n points
+ * points[3n] (scene frame) written in RAS millimetres, labelled labels[i]
+ * (NULL: "NAME-1", "NAME-2", ..., Slicer's default), every point defined,
+ * selected, locked and visible. Atomically. Fails with NH_ERR_IO naming the
+ * path, NH_ERR_MEMORY. */
+int nh_markups_write(const char *path, nh_markup_type type, const char *name, int n,
+                     const double *points, const char *const *labels);
+
+/* Write the displacement u (3 per voxel centre of `reference`, i fastest;
+ * scene frame, metres) as an ITK/ANTs displacement field: NIfTI-1, gzip'ed
+ * when path ends in .gz, dim = [5, nx, ny, nz, 1, 3], intent vector (1007),
+ * float32 components in ITK's physical frame, LPS millimetres
+ * (−u_x, −u_y, u_z) · 1000, on the reference's grid: its sform and qform
+ * with their codes and its pixdim, in mm (a reference in m or µm is
+ * converted). The field maps a point p of the reference (the rest anatomy)
+ * to p + u(p), its position after the shift (docs/anatomy.md: which image
+ * it moves, and how ANTs, Slicer and transformix apply it). Atomically.
+ * Fails with NH_ERR_IO naming the path (and the reference, if its header
+ * cannot be read again or no longer matches its size), NH_ERR_MEMORY. */
+int nh_nifti_write_displacement(const char *path, const nh_image *reference, const double *u);
+/* Write a 0/1 mask (uint8, one per voxel) on the reference's grid, as
+ * nh_nifti_write_displacement's geometry. */
+int nh_nifti_write_mask(const char *path, const nh_image *reference, const unsigned char *mask);
+/* Write one value per voxel on the reference's grid: as float32 (as_float;
+ * scl_slope 0: the values themselves), else in the reference's own data
+ * type and scaling: stored = (value − scl_inter) / scl_slope when its slope
+ * is non-zero, rounded to the nearest integer and clamped to the type's
+ * range for an integer type (NaN as 0). */
+int nh_nifti_write_scalar(const char *path, const nh_image *reference, const double *values,
+                          int as_float);
+
 #endif

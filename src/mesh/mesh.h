@@ -344,4 +344,57 @@ void nh_hanging_destroy(nh_hanging **hanging);
  * interpolation of their masters. */
 void nh_hanging_interpolate(const nh_hanging *hanging, double *field, int components);
 
+/* ---- a nodal field at points and on images; the inverse map (mesh/sample.c) ----
+ * `field` holds 3 values per node (a displacement u, metres). A point X of
+ * the rest configuration is located in its leaf and u(X) = Σₐ Nₐ(ξ) uₐ over
+ * the leaf's 8 corners (hanging corners included: their values are their
+ * masters' interpolation, so u is continuous across refinement faces). */
+
+/* u at n rest points X[3n] into values[3n]; tissue[n] (may be NULL) is 1
+ * where X lies in the tissue: in a leaf and inside the domain's shape (a box
+ * domain: the mesh itself). Elsewhere values are 0. */
+void nh_mesh_sample(const nh_mesh *mesh, const double *field, int n, const double *X,
+                    double *values, unsigned char *tissue);
+/* u at every voxel centre of `image` (i fastest; values[3 nvox]) and the
+ * tissue mask (tissue[nvox], may be NULL), as nh_mesh_sample, located by
+ * walking the lattice (sample.c). NH_ERR_INTERRUPTED when a stop is requested
+ * (polled per slice). */
+int nh_mesh_sample_image(const nh_mesh *mesh, const double *field, const nh_image *image,
+                         double *values, unsigned char *tissue);
+
+/* The inverse map X(x): X + u(X) = x, by the fixed-point iteration
+ * X_{k+1} = x − u(X_k) (sample.c: convergence, stopping, what happens outside
+ * the tissue). */
+typedef struct {
+  double tolerance;   /* stop when |X_{k+1} − X_k| <= tolerance (m); 0: 1e-3 of the
+                         image's smallest voxel spacing */
+  int max_iterations; /* 0: 100 */
+} nh_inverse_options;
+typedef struct {
+  long points;        /* voxels */
+  long tissue;        /* X(x) in the tissue: x is in the shifted tissue */
+  long outside;       /* X(x) outside the tissue (x outside the mesh: X = x) */
+  long unconverged;   /* no convergence (3 steps not shorter, or max_iterations): X = x */
+  int iterations_max; /* evaluations of u for one voxel, at most */
+  double iterations_mean;
+  double contraction; /* the largest ratio |X_{k+1} − X_k| / |X_k − X_{k−1}| (steps
+                         above 10 tol) of the voxels that converged in the tissue: an
+                         estimate of L (a path that crossed the mesh's surface can exceed it) */
+} nh_inverse_stats;
+enum { NH_INVERSE_OUTSIDE = 0, NH_INVERSE_TISSUE = 1, NH_INVERSE_UNCONVERGED = 2 };
+/* X(x) at every voxel centre x of `image` into X[3 nvox] (may be NULL),
+ * status[nvox] (NH_INVERSE_*, may be NULL) and *stats (may be NULL).
+ * NH_ERR_INTERRUPTED as nh_mesh_sample_image. */
+int nh_mesh_inverse_image(const nh_mesh *mesh, const double *field, const nh_image *image,
+                          const nh_inverse_options *options, double *X, unsigned char *status,
+                          nh_inverse_stats *stats);
+/* The image resampled to the shifted anatomy: out[v] = I(X(x_v)) for every
+ * voxel centre x_v, I the interpolation of `values` (given at the voxel
+ * centres of `image`) by nh_image_interpolate (trilinear, or the nearest
+ * label when `nearest`). out may not alias values. NH_ERR_INTERRUPTED as
+ * nh_mesh_sample_image. */
+int nh_mesh_warp_image(const nh_mesh *mesh, const double *field, const nh_image *image,
+                       const double *values, int nearest, const nh_inverse_options *options,
+                       double *out, nh_inverse_stats *stats);
+
 #endif
