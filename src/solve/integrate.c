@@ -18,7 +18,17 @@
  * eps h against a signal of strain × h, and the relative residual cannot go
  * below about 40 eps / peak strain (measured over six decades of strain,
  * docs/theory.md §3; 4e-12 at strain 1e-4): tolerances below
- * that fail to converge, and say so. */
+ * that fail to converge, and say so.
+ *
+ * The tissue's phases of a step live here, named as docs/design.md's "One
+ * step" lists them: begin (nh_step_begin), assemble (nh_step_assemble),
+ * the free solve (nh_step_free_solve), the update (nh_step_update) and the
+ * residual of the implicit-Euler equations (nh_dynamic_residual). The
+ * factorisation between assembly and free solve is reuse.c's
+ * (nh_system_factor_or_reuse). The coupled step (coupled.c) runs them
+ * around its constraint phases; nh_step_dynamic is that step without
+ * rows, then Newton corrections; nh_solve_static runs them per Newton
+ * iteration. */
 #include "solve/system_impl.h"
 
 #include <math.h>
@@ -28,6 +38,85 @@ static double nh_norm(const double *a, int n) {
   double s = 0.0;
   for (int i = 0; i < n; i++) s += a[i] * a[i];
   return sqrt(s);
+}
+
+void nh_step_begin(nh_system *s, const nh_integrator *in) {
+  s->t_constraints = 0.0;
+  nh_system_reset_multipliers(s); /* this step's hanging-node reactions only */
+  nh_system_set_lazy(s, in->lazy_rotation);
+  nh_system_lazy_reset(s);
+}
+
+void nh_step_assemble(nh_system *s, const nh_integrator *in, int statics, const double *f_ext,
+                      const double *u, const double *v, double *b, double *f_scale) {
+  const nh_tissue *t = s->tissue;
+  const int n = 3 * s->n_nodes;
+  const double h = in->dt;
+  double *f_int = s->work[0], *Kv = s->work[1], *rhs = s->work[2];
+  if (statics) { /* a Newton iteration: A = K(u), b = f_ext − f_int(u) */
+    nh_system_assemble(s, u, NULL, 0.0, 1.0, f_int, NULL, in->threads);
+    for (int i = 0; i < n; i++) rhs[i] = f_ext[i] - f_int[i];
+  } else {
+    nh_system_assemble(s, u, v, 1.0 + h * in->alpha, h * in->beta + h * h, f_int, Kv, in->threads);
+    for (int i = 0; i < n; i++) {
+      double Mv = t->mass[i / 3] * v[i];
+      rhs[i] = h * (f_ext[i] - f_int[i] - in->alpha * Mv - in->beta * Kv[i]) - h * h * Kv[i];
+    }
+  }
+  nh_system_gather(s, rhs, b);
+  if (statics) {
+    double fe = 0.0, fi = 0.0;
+    for (int i = 0; i < n; i++) fe += f_ext[i] * f_ext[i], fi += f_int[i] * f_int[i];
+    *f_scale = fmax(sqrt(fe), sqrt(fi));
+  }
+}
+
+int nh_step_free_solve(nh_system *s, const nh_integrator *in, const double *b, double *x,
+                       nh_step_stats *st) {
+  if (s->n_rows > 0) /* hanging-node rows: the factor is current (reuse.c) */
+    return nh_system_solve_constrained(s, b, x);
+  int its = 0, rc = nh_system_solve_reuse(s, b, x, in->tolerance, &its, &st->t_factor);
+  st->pcg_iterations += its;
+  return rc;
+}
+
+void nh_step_update(nh_system *s, int statics, double h, const double *x, double *u, double *v) {
+  const int n = 3 * s->n_nodes;
+  double *full = s->work[3];
+  nh_system_scatter(s, x, full);
+  if (statics) {
+    for (int i = 0; i < n; i++) u[i] += full[i];
+  } else {
+    for (int i = 0; i < n; i++) {
+      v[i] += full[i];
+      u[i] += h * v[i];
+    }
+  }
+}
+
+double nh_dynamic_residual(nh_system *s, const nh_integrator *in, const double *f_ext,
+                           const double *u, const double *v, const double *dv,
+                           const double *reaction, double *b) {
+  const nh_tissue *t = s->tissue;
+  const int n = 3 * s->n_nodes, nf = s->n_free;
+  const double h = in->dt;
+  double *f_int = s->work[0], *Kv = s->work[1], *R = s->work[2];
+  nh_system_assemble(s, u, v, 1.0 + h * in->alpha, h * in->beta + h * h, f_int, Kv, in->threads);
+  double fe = 0.0, fi = 0.0, md = 0.0;
+  for (int i = 0; i < n; i++) {
+    double Mdv = t->mass[i / 3] * dv[i];
+    R[i] = h * (f_ext[i] - f_int[i] - in->alpha * t->mass[i / 3] * v[i] - in->beta * Kv[i]) - Mdv;
+    fe += f_ext[i] * f_ext[i], fi += f_int[i] * f_int[i], md += Mdv * Mdv;
+  }
+  if (nh_stop_requested()) return NAN; /* the assembly was cut short: unknown */
+  nh_system_gather(s, R, b);
+  nh_system_add_reactions(s, b);
+  if (reaction)
+    for (int i = 0; i < nf; i++) b[i] += reaction[i];
+  double r = 0.0;
+  for (int i = 0; i < nf; i++) r += b[i] * b[i];
+  double scale = fmax(fmax(h * sqrt(fe), h * sqrt(fi)), fmax(sqrt(md), 1e-300));
+  return sqrt(r) / scale;
 }
 
 int nh_step_dynamic(nh_system *s, const nh_integrator *in, const double *f_ext, double *u,
@@ -43,9 +132,9 @@ int nh_step_dynamic(nh_system *s, const nh_integrator *in, const double *f_ext, 
        it++) {
     if (nh_stop_requested()) break; /* the step stands as linearised (u, v consistent) */
     double t0 = nh_time_now();
-    if ((rc = nh_system_factor(s))) break;
+    if ((rc = nh_system_factor(s))) break; /* the A the residual assembled (reuse.c) */
     double t1 = nh_time_now();
-    if ((rc = nh_system_solve_constrained(s, b, x))) break;
+    if ((rc = nh_step_free_solve(s, in, b, x, &st.step))) break;
     nh_system_scatter(s, x, delta);
     for (int i = 0; i < n; i++) {
       v[i] += delta[i];
@@ -66,52 +155,38 @@ int nh_step_dynamic(nh_system *s, const nh_integrator *in, const double *f_ext, 
 
 int nh_solve_static(nh_system *s, const nh_integrator *in, const double *f_ext, double *u,
                     nh_step_stats *stats) {
-  const int n = 3 * s->n_nodes;
-  double *f_int = s->work[0], *r = s->work[2];
   double *b = s->fwork[0], *du = s->fwork[1];
-  double t_asm = 0.0, t_fac = 0.0, t_sol = 0.0, rel = INFINITY;
-  int it, n_factor = 0;
-  s->t_constraints = 0.0;
-  nh_system_reset_multipliers(s);
-  nh_system_set_lazy(s, in->lazy_rotation);
-  nh_system_lazy_reset(s);
+  double t_sol = 0.0, rel = INFINITY;
+  nh_step_stats st = {0};
+  int it;
+  nh_step_begin(s, in);
   for (it = 0; it <= in->max_iterations; it++) {
-    double t0 = nh_time_now();
-    nh_system_assemble(s, u, NULL, 0.0, 1.0, f_int, NULL, in->threads);
+    double t0 = nh_time_now(), f_scale;
+    nh_step_assemble(s, in, 1, f_ext, u, NULL, b, &f_scale);
     NH_TRY(nh_stop_check()); /* SIGINT/SIGTERM: between iterations or in the assembly */
-    for (int i = 0; i < n; i++) r[i] = f_ext[i] - f_int[i];
-    nh_system_gather(s, r, b);
     nh_system_add_reactions(s, b);
-    double scale = fmax(fmax(nh_norm(f_ext, n), nh_norm(f_int, n)), 1e-300);
-    rel = nh_norm(b, s->n_free) / scale;
-    double t1 = nh_time_now();
-    t_asm += t1 - t0;
+    rel = nh_norm(b, s->n_free) / fmax(f_scale, 1e-300);
+    st.t_assemble += nh_time_now() - t0;
     if (!isfinite(rel)) return NH_ERROR(NH_ERR_NUMERIC, "the static residual is not finite");
     if (rel <= in->tolerance || nh_norm(b, s->n_free) == 0.0) break;
     if (it == in->max_iterations) break;
-    if (!s->factor_current) { /* lazy tangents may have left A as it was */
-      NH_TRY(nh_system_factor(s));
-      n_factor++;
-    }
+    NH_TRY(nh_system_factor_or_reuse(s, in, NH_FACTOR_NEWTON, &st));
     double t2 = nh_time_now();
-    NH_TRY(nh_system_solve_constrained(s, b, du));
-    nh_system_scatter(s, du, s->work[3]);
-    for (int i = 0; i < n; i++) u[i] += s->work[3][i];
-    double t3 = nh_time_now();
-    t_fac += t2 - t1;
-    t_sol += t3 - t2;
+    NH_TRY(nh_step_free_solve(s, in, b, du, &st));
+    nh_step_update(s, 1, 1.0, du, u, NULL);
+    t_sol += nh_time_now() - t2;
   }
   if (stats) {
-    stats->t_assemble = t_asm;
-    stats->t_factor = t_fac;
+    stats->t_assemble = st.t_assemble;
+    stats->t_factor = st.t_factor;
     stats->t_solve = t_sol - s->t_constraints;
     stats->t_constraints = s->t_constraints;
     stats->iterations = it;
     stats->residual = rel;
-    stats->factorised = n_factor; /* one per Newton iteration unless A was kept */
+    stats->factorised = st.factorised; /* one per Newton iteration unless A was kept */
     stats->pcg_iterations = stats->corrections = 0;
     stats->tangent_updates = nh_system_lazy_updates(s);
-    stats->t_factor_reference = n_factor > 0 ? t_fac / n_factor : 0.0;
+    stats->t_factor_reference = st.factorised > 0 ? st.t_factor / st.factorised : 0.0;
     stats->t_aside = 0.0;
   }
   if (!(rel <= in->tolerance) && rel != 0.0)
