@@ -33,7 +33,7 @@
  * nh_corrected_step, exact at its fixed point (docs/performance.md).
  *
  * nh_step_coupled reads as its phases (docs/design.md, "One step"), on the
- * step's work (nh_step_work): assemble (nh_step_assemble, integrate.c),
+ * step's work (nh_step_work): assemble (nh_step_assemble, step.c),
  * factorise or reuse (nh_system_factor_or_reuse, reuse.c), the free solve of
  * every block (nh_coupled_free_solve), and with rows the constraint phases
  * (nh_coupled_constraints): the compliance W (nh_coupled_compliance), the

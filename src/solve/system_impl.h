@@ -157,7 +157,7 @@ void nh_rows_tissue_force(const cholmod_sparse *Jt, const double *lambda, double
 void nh_rows_tissue_rates(const nh_system *s, const nh_rows *rows, const double *v,
                           const double *dv, const double *base, double *full, double *out);
 
-/* ---- the tissue's phases of one step (integrate.c) ----
+/* ---- the tissue's phases of one step (step.c) ----
  * Shared by the coupled step (coupled.c: dynamic, and each iteration of the
  * quasi-static coupled Newton), the dynamic step's Newton corrections and
  * the static Newton (integrate.c). */
