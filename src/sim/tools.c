@@ -96,13 +96,6 @@ void nh_sim_tools_destroy(nh_sim *s) {
   nh_csv_destroy(&s->targets_csv);
 }
 
-void nh_sim_point_position(const nh_sim *s, int i, double x[3]) {
-  const nh_scene *sc = s->scene;
-  const double *X = i < sc->n_probes ? sc->probes[i].point : sc->targets[i - sc->n_probes].point;
-  nh_sim_probe_displacement(s, i, x);
-  for (int k = 0; k < 3; k++) x[k] += X[k];
-}
-
 int nh_sim_tools_open(nh_sim *s) {
   const nh_scene *sc = s->scene;
   char path[NH_PATH_MAX + 2 * NH_NAME_MAX];
@@ -182,23 +175,6 @@ int nh_sim_tools_rows(nh_sim *s) {
     free(names);
   }
   return rc;
-}
-
-void nh_sim_target_miss(const nh_sim *s, int i, double x[3], double miss[3]) {
-  nh_tool_report r;
-  nh_sim_point_position(s, s->scene->n_probes + i, x);
-  nh_contact_report(s->contact, s->scene->targets[i].tool, &r);
-  for (int k = 0; k < 3; k++) miss[k] = r.tip[k] - x[k];
-}
-
-double nh_sim_target_distance_error(const nh_sim *s, int i) {
-  const double *E = nh_adapt_goal_estimates(s->adapt);
-  const int g = s->goal_of_point ? s->goal_of_point[s->scene->n_probes + i] : -1;
-  if (!E || g < 0) return NAN;
-  double x[3], miss[3], tip[3];
-  nh_sim_target_miss(s, i, x, miss);
-  for (int k = 0; k < 3; k++) tip[k] = x[k] + miss[k];
-  return fabs(nh_dwr_distance_estimate(E + 3 * g, x, tip));
 }
 
 int nh_sim_tools_frame(nh_sim *s) {
