@@ -239,6 +239,56 @@ double nh_mesh_cell_fraction_above(const nh_mesh *mesh, int c, const double poin
  * volume (0: the cell does not meet the region, T all zero). */
 double nh_mesh_region_tie(const nh_mesh *mesh, int c, const nh_region *region, double T[64]);
 
+/* ---- cut cells: the finite cell quadrature (mesh/cutcell.c) ----
+ * The tissue part of a box cell [lo, hi] (natural coordinates ξ ∈ [-1, 1]³,
+ * x = (lo + hi)/2 + (hi − lo)/2 ξ): {level < 0}, intersected with a region
+ * and a half-space if given, each reconstructed piecewise linearly on the
+ * Kuhn tetrahedra of a lattice of sub-boxes (cutcell.c's essay). */
+typedef double (*nh_level_fn)(const void *ctx, const double x[3]);
+typedef struct nh_cut_spec {
+  nh_level_fn level; /* the tissue {level(x) < 0}; nh_cut_spec_domain: nh_domain_level */
+  const void *ctx;   /* level's first argument */
+  double lipschitz;  /* |level(x) − level(y)| <= lipschitz |x − y| (1 for every nh_domain) */
+  int depth;         /* its lattice: 2^depth sub-boxes per cell edge, 0 ..= NH_CUT_DEPTH_MAX */
+  const nh_region *region; /* NULL, or also inside this box, sphere or cylinder */
+  double region_sub;   /* region's lattice: sub-box edge <= nh_region_size / region_sub (0: 8) */
+  const double *plane; /* NULL, or {p[3], n[3]}: also (x − p)·n < 0 */
+} nh_cut_spec;
+#define NH_CUT_DEPTH_MAX 6
+typedef struct nh_cut_moments {
+  double m[27];  /* M_ijk = ∫ ξ^i η^j ζ^k dV over the part, at i + 3 j + 9 k (i, j, k <= 2) */
+  double volume; /* m[0] */
+  double centroid[3];            /* physical (the cell's centre if volume = 0) */
+  long evals, boxes, tets, kuhn; /* work: level calls, sub-boxes visited, clipped tetrahedra
+                                    integrated by quadrature, whole ones in closed form */
+} nh_cut_moments;
+/* A point of a surface quadrature: natural coordinates, outward unit normal
+ * times its weight (physical area), piece -1 for {level = 0}, else the cell face 0..5. */
+typedef struct nh_cut_point {
+  double xi[3], area[3];
+  int piece;
+} nh_cut_point;
+typedef struct nh_cut_surface {
+  int n, cap;
+  nh_cut_point *point;
+} nh_cut_surface;
+/* spec = the domain's tissue on a lattice of the given depth, no region, no plane. */
+void nh_cut_spec_domain(nh_cut_spec *spec, const nh_domain *domain, int depth);
+/* Moments of the part in the box cell [lo, hi]; if surface is not NULL,
+ * appends the quadrature of its boundary {level = 0} and of the cell faces
+ * f with bit f of `faces` set (exact for quadratics in ξ on the
+ * reconstruction; 3 points per triangle). NH_ERR_INPUT (at region->where)
+ * for a label region, NH_ERR_INTERNAL for a depth out of range,
+ * NH_ERR_MEMORY. */
+int nh_cut_cell(const nh_cut_spec *spec, const double lo[3], const double hi[3],
+                nh_cut_moments *out, nh_cut_surface *surface, unsigned faces);
+/* The 27 points ξ_q (3 per point, q = a + 3 b + 9 c at Gauss–Legendre
+ * nodes a, b, c of 3) and the weights w_q with Σ_q w_q p(ξ_q) = ∫ p dV for
+ * every p in Q2 (moment fitting). */
+void nh_cut_points(double xi[81]);
+void nh_cut_fit(const double m[27], double w[27]);
+void nh_cut_surface_free(nh_cut_surface *surface);
+
 /* ---- refinement templates (mesh/template.c) ----
  * A template is a set of nodes in the parent's natural coordinates [-1, 1]³
  * and child cells (8 node indices each, VTK order); format in
