@@ -92,6 +92,7 @@ void nh_sim_destroy(nh_sim **sim) {
   if (!sim || !*sim) return;
   nh_sim *s = *sim;
   nh_sim_tools_destroy(s);
+  nh_sim_patient_close(s);
   nh_system_destroy(&s->system);
   nh_tissue_destroy(&s->tissue);
   nh_mesh_destroy(&s->mesh);
@@ -507,6 +508,7 @@ static int nh_sim_build(nh_sim *s) {
   s->max_goal_point = -1;
   NH_TRY(nh_sim_setup_mesh(s, 1));
   NH_TRY(nh_sim_tools_build(s));
+  NH_TRY(nh_sim_patient_open(s));
   s->integrator =
       (nh_integrator){.dt = sc->time.step,
                       .alpha = sc->tissue.damping_mass,
@@ -822,6 +824,7 @@ static int nh_sim_write_solution(nh_sim *s) {
   int due = (sc->output.every > 0 && s->step % sc->output.every == 0) || s->step == sc->time.steps;
   NH_TRY_OUTPUT(nh_write_probe_rows(s), s->step);
   if (due && s->last_frame != s->step) NH_TRY_OUTPUT(nh_write_frame(s), s->step);
+  NH_TRY_OUTPUT(nh_sim_patient_write(s), s->step);
   return NH_OK;
 }
 
