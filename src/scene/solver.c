@@ -2,6 +2,8 @@
  * section, the outputs and the size limits. */
 #include "scene/scene_impl.h"
 
+#include <string.h>
+
 static const char *const on_invalid[] = {"stop", "warn", NULL};
 static const char *const refactors[] = {"auto", "every", NULL};
 
@@ -66,7 +68,9 @@ static int read_warped_image(const nh_ctx *c, const nh_key_site *k, void *base) 
   return read_output_image(c, k, ((nh_scene *)base)->output.warped.image);
 }
 
-/* .at: a list of at most NH_OUTPUT_AT_MAX times in [0, the end of the run]. */
+/* .at: a list of at most NH_OUTPUT_AT_MAX times >= 0 (one after the end of
+ * the run writes nothing: the last step writes anyway, and a run shortened
+ * by --set time.end keeps its scene valid). */
 static int read_times(const nh_ctx *c, const nh_key_site *k, double *at, int *n_at) {
   char d[96], sub[NH_KEY_MAX];
   const nh_yaml_node *list = k->at;
@@ -76,15 +80,10 @@ static int read_times(const nh_ctx *c, const nh_key_site *k, double *at, int *n_
                         nh_read_describe(list, d, sizeof d));
   if (list->n > NH_OUTPUT_AT_MAX)
     return nh_read_fail(c, list, k->key, "at most %d times, got %d", NH_OUTPUT_AT_MAX, list->n);
-  const nh_scene *s = c->scene;
-  double end = s->time.step * s->time.steps;
   for (int i = 0; i < list->n; ++i) {
     nh_read_index(sub, k->key, i);
     NH_TRY(nh_read_number(c, list->items[i], sub, &at[i]));
-    if (!(at[i] >= 0 && at[i] <= end * (1 + 1e-12)))
-      return nh_read_fail(c, list->items[i], sub,
-                          "must be a time of the run, 0 .. %g s (time.step x steps), got %g", end,
-                          at[i]);
+    NH_TRY(nh_read_at_least(c, list->items[i], k->key, sub + strlen(k->key) + 1, at[i], 0, 0));
   }
   *n_at = list->n;
   return NH_OK;
