@@ -1,18 +1,43 @@
 /* points.c — material points of the tissue: probes (a displacement
  * recorded) and targets (the distance to a tool's tip recorded), and how a
- * point is given: [x, y, z] in metres, or the centre of a voxel of an image
- * (also a trajectory's entry). Names go into probes.csv or targets.csv and
+ * point is given: [x, y, z] in metres, the centre of a voxel of an image, or
+ * a control point of a 3D Slicer markups file (also a trajectory's entry
+ * and aim). Names go into probes.csv or targets.csv and
  * the VTU point data, so each is one plain CSV field. */
 #include "scene/scene_impl.h"
 
 #include <stdio.h>
 #include <string.h>
 
+/* {markups: FILE, label: NAME}: the control point NAME of a 3D Slicer
+ * markups file (anatomy/markups.c: RAS or LPS, mm or um, into the scene
+ * frame); its errors are the file's, at the key's line. */
+static int read_markups_point(const nh_ctx *c, const nh_yaml_node *n, const char *key,
+                              double out[3]) {
+  static const char *const keys[] = {"markups", "label", NULL};
+  char sub[NH_KEY_MAX], file[NH_PATH_MAX], value[NH_PATH_MAX], label[NH_NAME_MAX];
+  const nh_yaml_node *at_file, *at_label;
+  NH_TRY(nh_read_keys(c, n, key, keys));
+  NH_TRY(nh_read_field(c, n, key, "markups", 1, &at_file));
+  NH_TRY(nh_read_string(c, at_file, nh_read_join(sub, key, "markups"), value, sizeof value));
+  int len = nh_read_relative(c, value, file);
+  if (len < 0 || len >= NH_PATH_MAX)
+    return nh_read_fail(c, at_file, sub, "the path is longer than %d characters", NH_PATH_MAX - 1);
+  NH_TRY(nh_read_field(c, n, key, "label", 1, &at_label));
+  NH_TRY(nh_read_string(c, at_label, nh_read_join(sub, key, "label"), label, sizeof label));
+  if (nh_markups_find_point(file, label, out) == NH_OK) return NH_OK;
+  char msg[1024];
+  snprintf(msg, sizeof msg, "%s", nh_error_message());
+  return nh_read_fail(c, n, key, "%s", msg);
+}
+
 int nh_read_point(const nh_ctx *c, const nh_yaml_node *n, const char *key, double out[3]) {
   static const char *const keys[] = {"voxel", "image", NULL};
   char sub[NH_KEY_MAX], file[NH_PATH_MAX], value[NH_PATH_MAX];
   const nh_yaml_node *at_voxel, *at_image;
   if (n->kind != NH_YAML_MAP) return nh_read_vec3(c, n, key, out);
+  if (nh_yaml_get(n, "markups", NULL) || nh_yaml_get(n, "label", NULL))
+    return read_markups_point(c, n, key, out);
   NH_TRY(nh_read_keys(c, n, key, keys));
   NH_TRY(nh_read_field(c, n, key, "voxel", 1, &at_voxel));
   int ijk[3];

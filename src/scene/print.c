@@ -290,6 +290,19 @@ static void print_output(FILE *f, const nh_scene *s) {
   else
     fprintf(f, "output    %s, the last step only, hdf5 %s\n", s->output.dir,
             s->output.hdf5 ? "yes" : "no");
+  static const char *const how[] = {"auto", "linear", "nearest"};
+  const int n_field = s->output.displacement_field.n_at, n_warp = s->output.warped.n_at;
+  if (s->output.displacement_field.reference[0]) {
+    fprintf(f, "          displacement field on %s at", s->output.displacement_field.reference);
+    for (int k = 0; k < n_field; ++k) fprintf(f, " %g s,", s->output.displacement_field.at[k]);
+    fprintf(f, " the last step\n");
+  }
+  if (s->output.warped.image[0]) {
+    fprintf(f, "          warped %s (interpolation %s) at", s->output.warped.image,
+            how[s->output.warped.interpolation]);
+    for (int k = 0; k < n_warp; ++k) fprintf(f, " %g s,", s->output.warped.at[k]);
+    fprintf(f, " the last step\n");
+  }
 }
 
 void nh_scene_print(const nh_scene *s, void *stdio_file) {

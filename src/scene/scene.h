@@ -202,6 +202,14 @@ typedef struct {
   char where_template[NH_WHERE_MAX]; /* "FILE:LINE: adapt.template" */
 } nh_adapt_spec;
 
+/* output.displacement_field.at, output.warped.at: at most this many times */
+#define NH_OUTPUT_AT_MAX 64
+typedef enum {
+  NH_INTERPOLATION_AUTO,
+  NH_INTERPOLATION_LINEAR,
+  NH_INTERPOLATION_NEAREST
+} nh_interpolation;
+
 typedef struct nh_scene {
   char file[NH_PATH_MAX]; /* the scene file as given */
   char name[NH_NAME_MAX]; /* name (required) */
@@ -300,6 +308,18 @@ typedef struct nh_scene {
     int every;             /* output.every: frame every N steps, 0 = last step only (default 1) */
     int hdf5;              /* output.hdf5: results.h5 + results.xdmf (default false) */
     int checkpoint;        /* output.checkpoint: a restart file every N steps, 0 = none (default) */
+    struct {
+      char reference[NH_PATH_MAX]; /* output.displacement_field.reference: a NIfTI image whose
+                                      voxel centres get the field (resolved; "" = none) */
+      int n_at;
+      double at[NH_OUTPUT_AT_MAX]; /* .at: times (s); the last step writes too */
+    } displacement_field;
+    struct {
+      char image[NH_PATH_MAX]; /* output.warped.image: the image to shift (resolved; "" = none) */
+      int n_at;
+      double at[NH_OUTPUT_AT_MAX];    /* .at: times (s); the last step writes too */
+      nh_interpolation interpolation; /* .interpolation: auto (default) | linear | nearest */
+    } warped;
   } output;
 
   char *yaml; /* the scene as run, overrides applied, as YAML text (owned) */

@@ -77,7 +77,7 @@ static const nh_key trajectory_rows[] = {
     {NH_POINT("entry", TL(entry)), .required = 1},
     {NH_CUSTOM("target", NULL), .required = 1},
     {NH_NUMBER("standoff", TL(standoff), 0.005, NH_ABOVE, 0)},
-    {NH_VEC3("aim", TL(aim))},
+    {NH_POINT("aim", TL(aim))},
     {NULL},
 };
 

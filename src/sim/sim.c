@@ -92,6 +92,7 @@ void nh_sim_destroy(nh_sim **sim) {
   if (!sim || !*sim) return;
   nh_sim *s = *sim;
   nh_sim_tools_destroy(s);
+  nh_sim_patient_close(s);
   nh_system_destroy(&s->system);
   nh_tissue_destroy(&s->tissue);
   nh_mesh_destroy(&s->mesh);
@@ -361,21 +362,29 @@ static int nh_write_probe_rows(nh_sim *s) {
 /* Is `name` a file a run writes (docs/outputs.md): the tables, collections,
  * frames NAME_NNNNNN.vtu and results_NNNNNN.h5, results.h5/.xdmf, the
  * checkpoint, scene.yaml, a moved-aside results.h5.damaged*, a *.tmp? */
-static int nh_is_run_output(const char *name) {
-  static const char *const fixed[] = {"scene.yaml",   "steps.csv",      "probes.csv",
-                                      "targets.csv",  "tools.csv",      "results.h5",
-                                      "results.xdmf", "checkpoint.nhc", NULL};
+static int nh_is_run_output(const nh_scene *sc, const char *name) {
+  static const char *const fixed[] = {
+      "scene.yaml", "steps.csv",    "probes.csv",     "targets.csv",      "tools.csv",
+      "results.h5", "results.xdmf", "checkpoint.nhc", "targets.mrk.json", "tissue_mask.nii.gz",
+      NULL};
   for (int i = 0; fixed[i]; i++)
     if (!strcmp(name, fixed[i])) return 1;
   size_t n = strlen(name);
+  for (int k = 0; k < sc->n_tools; k++) /* <tool>.mrk.json */
+    if (n == strlen(sc->tools[k].name) + 9 && !strncmp(name, sc->tools[k].name, n - 9) &&
+        !strcmp(name + n - 9, ".mrk.json"))
+      return 1;
   if (!strncmp(name, "results.h5.damaged", 18)) return 1;
   if (n > 4 && (!strcmp(name + n - 4, ".pvd") || !strcmp(name + n - 4, ".tmp"))) return 1;
-  /* PREFIX_NNNNNN.vtu, results_NNNNNN.h5 */
+  /* PREFIX_NNNNNN.vtu, results_NNNNNN.h5, displacement_ and warped_NNNNNN.nii.gz */
   const char *us = strrchr(name, '_');
   if (!us || us == name) return 0;
   size_t d = strspn(us + 1, "0123456789");
-  return d >= 6 && (!strcmp(us + 1 + d, ".vtu") ||
-                    (!strcmp(us + 1 + d, ".h5") && !strncmp(name, "results_", 8)));
+  const char *ext = us + 1 + d;
+  return d >= 6 &&
+         (!strcmp(ext, ".vtu") || (!strcmp(ext, ".h5") && !strncmp(name, "results_", 8)) ||
+          (!strcmp(ext, ".nii.gz") &&
+           (!strncmp(name, "displacement_", 13) || !strncmp(name, "warped_", 7))));
 }
 
 /* A fresh run's folder: refuse one holding a previous run's outputs, or
@@ -387,7 +396,7 @@ static int nh_claim_folder(const nh_sim *s) {
   int count = 0, rc = NH_OK;
   char first[256] = "";
   for (struct dirent *e; (e = readdir(d)) && !rc;) {
-    if (!nh_is_run_output(e->d_name)) continue;
+    if (!nh_is_run_output(s->scene, e->d_name)) continue;
     if (!count++) snprintf(first, sizeof first, "%s", e->d_name);
     if (s->options.overwrite) {
       char path[NH_PATH_MAX + 300];
@@ -507,6 +516,7 @@ static int nh_sim_build(nh_sim *s) {
   s->max_goal_point = -1;
   NH_TRY(nh_sim_setup_mesh(s, 1));
   NH_TRY(nh_sim_tools_build(s));
+  NH_TRY(nh_sim_patient_open(s));
   s->integrator =
       (nh_integrator){.dt = sc->time.step,
                       .alpha = sc->tissue.damping_mass,
@@ -822,6 +832,7 @@ static int nh_sim_write_solution(nh_sim *s) {
   int due = (sc->output.every > 0 && s->step % sc->output.every == 0) || s->step == sc->time.steps;
   NH_TRY_OUTPUT(nh_write_probe_rows(s), s->step);
   if (due && s->last_frame != s->step) NH_TRY_OUTPUT(nh_write_frame(s), s->step);
+  NH_TRY_OUTPUT(nh_sim_patient_write(s), s->step);
   return NH_OK;
 }
 
