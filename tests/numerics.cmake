@@ -1,6 +1,8 @@
 # Numerics: element, solver and time-integration verification.
 nh_add_c_test(test_polar unit)
 nh_add_c_test(test_rotation verify)
+nh_add_c_test(test_tangent verify)
+nh_add_c_test(test_newton_rate verify)
 nh_add_c_test(test_patch verify)
 nh_add_c_test(test_locking verify)
 nh_add_c_test(test_parallel unit)

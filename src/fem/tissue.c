@@ -329,7 +329,7 @@ static const double *nh_cell_data(const nh_tissue *t, int c, double Kc[576], nh_
 }
 
 void nh_tissue_element_force(const nh_tissue *t, int c, const double *u, double f[24],
-                             double frame[18]) {
+                             double frame[NH_HEX_FRAME]) {
   const nh_mesh *m = t->mesh;
   double Xe[24], ue[24], Kc[576];
   nh_hex_volumetric vol;
@@ -348,12 +348,13 @@ void nh_tissue_element_force(const nh_tissue *t, int c, const double *u, double 
         for (int k = 0; k < 3; k++) f[3 * a + k] += T[8 * a + b] * ue[3 * b + k];
 }
 
-void nh_tissue_element_tangent(const nh_tissue *t, int c, const double frame[18], double Kt[576]) {
+void nh_tissue_element_tangent(const nh_tissue *t, int c, const double frame[NH_HEX_FRAME],
+                               double Kt[576]) {
   double Kc[576];
   nh_hex_volumetric vol;
   const nh_hex_volumetric *vp;
   const double *K0 = nh_cell_data(t, c, Kc, &vol, &vp);
-  nh_hex_corot_tangent(K0, vp, frame, Kt);
+  nh_hex_corot_tangent(K0, t->G0 + 24 * t->cell_shape[c], vp, frame, Kt);
   double phi = t->mesh->fill[c];
   if (phi != 1.0)
     for (int i = 0; i < 576; i++) Kt[i] *= phi;
@@ -364,13 +365,13 @@ void nh_tissue_element_tangent(const nh_tissue *t, int c, const double frame[18]
         for (int k = 0; k < 3; k++) Kt[24 * (3 * a + k) + 3 * b + k] += T[8 * a + b];
 }
 
-void nh_tissue_element_apply(const nh_tissue *t, int c, const double frame[18], const double w[24],
-                             double y[24]) {
+void nh_tissue_element_apply(const nh_tissue *t, int c, const double frame[NH_HEX_FRAME],
+                             const double w[24], double y[24]) {
   double Kc[576];
   nh_hex_volumetric vol;
   const nh_hex_volumetric *vp;
   const double *K0 = nh_cell_data(t, c, Kc, &vol, &vp);
-  nh_hex_corot_apply(K0, vp, frame, w, y);
+  nh_hex_corot_apply(K0, t->G0 + 24 * t->cell_shape[c], vp, frame, w, y);
   double phi = t->mesh->fill[c];
   if (phi != 1.0)
     for (int i = 0; i < 24; i++) y[i] *= phi;
@@ -382,8 +383,9 @@ void nh_tissue_element_apply(const nh_tissue *t, int c, const double frame[18], 
 }
 
 void nh_tissue_element(const nh_tissue *t, int c, const double *u, double f[24], double Kt[576]) {
-  double frame[18];
+  double frame[NH_HEX_FRAME];
   nh_tissue_element_force(t, c, u, f, frame);
+  nh_hex_frame_corotational(frame);
   if (Kt) nh_tissue_element_tangent(t, c, frame, Kt);
 }
 

@@ -55,10 +55,12 @@ struct nh_system {
   int *colour_leaf;  /* leaf indices grouped by colour */
 
   /* Lazy element tangents (assemble.c): the tangent of leaf l in A is that
-   * of frame[18 l ..] (its rotation R and, B-bar, cof F̄ when last updated);
+   * of frame[NH_HEX_FRAME l ..] (its rotation R and, B-bar, cof F̄ when last updated);
    * frame_new and updated: the current assembly's frames and which leaves it
    * updates. A holds cM M + cK K̃ for a_cM, a_cK when a_valid. */
   double lazy_tolerance; /* solver.lazy_rotation (0: exact) */
+  int consistent; /* nh_system_set_tangent: A holds the consistent tangent's symmetric part */
+  double *skew;   /* consistent, when kept: the skew part's upper triangle on A's pattern */
   double *frame, *frame_new;
   unsigned char *updated;
   int a_valid;
@@ -184,5 +186,25 @@ int nh_step_free_solve(nh_system *s, const nh_integrator *in, const double *b, d
  * 3, where the step's nodal update stays): statics, u ← u + P x; dynamic,
  * v ← v + P x, u ← u + h v. */
 void nh_step_update(nh_system *s, int statics, double h, const double *x, double *u, double *v);
+
+/* ---- the consistent tangent (assemble.c) and its LU path (unsymmetric.c) ---- */
+
+/* The element tangent in A: NH_TANGENT_COROTATIONAL (the default of a new
+ * system: dynamic steps, the coupled quasi-static step) R K₀ Rᵀ (+ κ V b bᵀ),
+ * symmetric positive semi-definite; or NH_TANGENT_CONSISTENT (the static
+ * Newton, nh_solve_static), the exact derivative of the internal force with
+ * the variations of R and of B-bar's b (fem/hex.c, docs/theory.md §2), of
+ * which A holds the symmetric part S (and skew, when kept, the rest). A
+ * change starts the next assembly afresh. */
+typedef enum { NH_TANGENT_COROTATIONAL = 0, NH_TANGENT_CONSISTENT = 1 } nh_tangent;
+void nh_system_set_tangent(nh_system *s, nh_tangent tangent);
+
+/* Keep the skew-symmetric part N of the consistent tangent beside A (on A's
+ * upper-triangle pattern) from the next assembly on; A holds the symmetric
+ * part S, so the tangent is S + N. */
+int nh_system_keep_skew(nh_system *s);
+/* x = (S + N)⁻¹ b by UMFPACK's LU of the full matrix (no multiplier rows);
+ * *t_factor (may be NULL) receives the factorisation's time. */
+int nh_system_solve_lu(nh_system *s, const double *b, double *x, double *t_factor);
 
 #endif
