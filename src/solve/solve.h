@@ -217,9 +217,23 @@ typedef struct {
   int sliding;
 } nh_row_law;
 
+/* The method that solved the constraints (nh_mcp_stats.method; steps.csv
+ * constraint_method): none (no rows), the exact semismooth Newton method
+ * alone, the projected sweeps alone, or both (the first method fell short
+ * and the other one finished from its best iterate). */
+typedef enum {
+  NH_MCP_NONE = 0,
+  NH_MCP_EXACT = 1,
+  NH_MCP_SWEEPS = 2,
+  NH_MCP_FALLBACK = 3
+} nh_mcp_method;
+
 /* What one constraint solve did. */
 typedef struct {
-  int iterations;  /* Gauss-Seidel sweeps (0: the warm start was already converged) */
+  int iterations;   /* newton_steps + sweeps (0: the warm start was already converged) */
+  int newton_steps; /* semismooth Newton steps (each one LU of the reduced Jacobian) */
+  int sweeps;       /* projected Gauss-Seidel sweeps */
+  nh_mcp_method method;
   double residual; /* dimensionless law violation of the returned λ (see nh_mcp_solve) */
   int n_stick;     /* friction rows strictly inside their bound */
   int n_slide;     /* friction rows on their bound (a zero bound counts as sliding) */
