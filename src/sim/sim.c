@@ -79,7 +79,10 @@ static const char *const nh_step_columns[] = {"step",
                                               "skull_contacts",
                                               "skull_fx",
                                               "skull_fy",
-                                              "skull_fz"};
+                                              "skull_fz",
+                                              "constraint_newton",
+                                              "constraint_sweeps",
+                                              "constraint_method"};
 static const char *const nh_probe_columns[] = {"step", "time", "name", "x",  "y",
                                                "z",    "ux",   "uy",   "uz", "error_estimate"};
 
@@ -911,7 +914,10 @@ static int nh_sim_write_row(nh_sim *s, const nh_sim_record *r, double t_end) {
                         r->cc.skull_contacts,
                         r->cc.skull_force[0],
                         r->cc.skull_force[1],
-                        r->cc.skull_force[2]};
+                        r->cc.skull_force[2],
+                        cs->mcp.newton_steps,
+                        cs->mcp.sweeps,
+                        cs->mcp.method};
   enum { NH_STEP_COLUMNS = sizeof nh_step_columns / sizeof *nh_step_columns };
   _Static_assert(sizeof row / sizeof *row == NH_STEP_COLUMNS, "one value per steps.csv column");
   if (!s->options.dry_run)
