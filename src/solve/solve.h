@@ -116,6 +116,8 @@ typedef struct {
   int pcg_iterations;  /* PCG iterations of the step's solves with a reused factor */
   int corrections;     /* outer constraint corrections with a reused factor (0: exact W) */
   int tangent_updates; /* leaves whose tangent the step's assemblies rebuilt (solve/assemble.c) */
+  int load_steps;      /* static: the equal load steps the step was solved in (1, or 2, 4, ... after
+                          a split: sim.c, nh_sim_solve_static); 1 dynamic */
   /* s: one numeric factorisation of this step's A — the one done, or with
    * nh_integrator.time_factor one done aside (and discarded) on a step that
    * reused the factor; 0 otherwise. t_aside: the time that aside cost (copy
