@@ -79,7 +79,11 @@ static const char *const nh_step_columns[] = {"step",
                                               "skull_contacts",
                                               "skull_fx",
                                               "skull_fy",
-                                              "skull_fz"};
+                                              "skull_fz",
+                                              "constraint_newton",
+                                              "constraint_sweeps",
+                                              "constraint_method",
+                                              "load_steps"};
 static const char *const nh_probe_columns[] = {"step", "time", "name", "x",  "y",
                                                "z",    "ux",   "uy",   "uz", "error_estimate"};
 
@@ -640,6 +644,7 @@ static int nh_sim_solve_static(nh_sim *s, double t_new, nh_step_stats *st) {
       sum.residual = one.residual;
     }
     sum.t_factor_reference = sum.factorised > 0 ? sum.t_factor / sum.factorised : 0.0;
+    sum.load_steps = parts;
     *st = sum;
     if (rc != NH_ERR_NUMERIC || depth == NH_STATIC_SPLITS) return rc;
     /* back to the step's start, and again in twice as many load steps */
@@ -922,7 +927,11 @@ static int nh_sim_write_row(nh_sim *s, const nh_sim_record *r, double t_end) {
                         r->cc.skull_contacts,
                         r->cc.skull_force[0],
                         r->cc.skull_force[1],
-                        r->cc.skull_force[2]};
+                        r->cc.skull_force[2],
+                        cs->mcp.newton_steps,
+                        cs->mcp.sweeps,
+                        cs->mcp.method,
+                        st->load_steps > 0 ? st->load_steps : 1};
   enum { NH_STEP_COLUMNS = sizeof nh_step_columns / sizeof *nh_step_columns };
   _Static_assert(sizeof row / sizeof *row == NH_STEP_COLUMNS, "one value per steps.csv column");
   if (!s->options.dry_run)

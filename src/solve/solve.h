@@ -116,6 +116,8 @@ typedef struct {
   int pcg_iterations;  /* PCG iterations of the step's solves with a reused factor */
   int corrections;     /* outer constraint corrections with a reused factor (0: exact W) */
   int tangent_updates; /* leaves whose tangent the step's assemblies rebuilt (solve/assemble.c) */
+  int load_steps;      /* static: the equal load steps the step was solved in (1, or 2, 4, ... after
+                          a split: sim.c, nh_sim_solve_static); 1 dynamic */
   /* s: one numeric factorisation of this step's A — the one done, or with
    * nh_integrator.time_factor one done aside (and discarded) on a step that
    * reused the factor; 0 otherwise. t_aside: the time that aside cost (copy
@@ -217,9 +219,23 @@ typedef struct {
   int sliding;
 } nh_row_law;
 
+/* The method that solved the constraints (nh_mcp_stats.method; steps.csv
+ * constraint_method): none (no rows), the exact semismooth Newton method
+ * alone, the projected sweeps alone, or both (the first method fell short
+ * and the other one finished from its best iterate). */
+typedef enum {
+  NH_MCP_NONE = 0,
+  NH_MCP_EXACT = 1,
+  NH_MCP_SWEEPS = 2,
+  NH_MCP_FALLBACK = 3
+} nh_mcp_method;
+
 /* What one constraint solve did. */
 typedef struct {
-  int iterations;  /* Gauss-Seidel sweeps (0: the warm start was already converged) */
+  int iterations;   /* newton_steps + sweeps (0: the warm start was already converged) */
+  int newton_steps; /* semismooth Newton steps (each one LU of the reduced Jacobian) */
+  int sweeps;       /* projected Gauss-Seidel sweeps */
+  nh_mcp_method method;
   double residual; /* dimensionless law violation of the returned λ (see nh_mcp_solve) */
   int n_stick;     /* friction rows strictly inside their bound */
   int n_slide;     /* friction rows on their bound (a zero bound counts as sliding) */
