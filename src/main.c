@@ -80,13 +80,14 @@ static const char *nh_usage =
     "                     [--quiet]\n"
     "       needlehex check SCENE.yaml [--set KEY=VALUE ...]\n"
     "       needlehex plan SCENE.yaml [--out DIR] [--set KEY=VALUE ...] [--tolerance M] "
-    "[--max-runs N]\n"
+    "[--max-runs N] [--workers N]\n"
     "       needlehex keys\n"
     "       needlehex --help | --version\n"
     "\n"
     "  run      simulate the scene; outputs go to output.dir (default out/<name>)\n"
     "  check    validate the scene (and the mesh it builds), print what will be modelled\n"
-    "  plan     find where to aim so that the electrode ends on its target (target compensation)\n"
+    "  plan     find where to aim so that the electrode ends on its target (target compensation),\n"
+    "           or how to steer a bevel-tip needle to its target around obstacles\n"
     "  keys     print every scene key with its type, default, unit and notes (docs/scene.md)\n"
     "\n"
     "needlehex COMMAND --help describes a command and its options.\n"
@@ -124,18 +125,24 @@ static const char *nh_check_usage =
 
 static const char *nh_plan_usage =
     "usage: needlehex plan SCENE.yaml [--out DIR] [--set KEY=VALUE ...] [--tolerance M] "
-    "[--max-runs N] [--quiet]\n"
+    "[--max-runs N] [--workers N] [--quiet]\n"
     "\n"
     "Target compensation (docs/dbs.md): run the procedure again and again, moving the point\n"
     "the planned trajectories aim at (tools[].trajectory.aim; the entry stays) by Broyden's\n"
     "method on the final miss (tip of the target's tool minus the target's position at the\n"
     "last step), until the miss is at most the tolerance.\n"
+    "Steering (docs/cases.md, Planning the steering): when the target's tool has a bevel, plan\n"
+    "the depths of its half turns and its insertion depth so that the tip ends on the target\n"
+    "and its path keeps plan.clearance from plan.obstacles, by Broyden's method from the\n"
+    "bicycle model's plan.\n"
     "\n"
     "  --out DIR          the plan's folder (default out/<name>-plan): DIR/plan.yaml (aim,\n"
     "                     miss per run, runs, time), DIR/run_NN per run, DIR/final -> the last\n"
     "  --set KEY=VALUE    override a scene key by dotted path (as for run)\n"
     "  --tolerance M      stop when the miss is at most M metres (default 0.5e-3)\n"
     "  --max-runs N       at most N runs (default 8)\n"
+    "  --workers N        steering: run N candidates at once, each a process on one thread\n"
+    "                     (default 0: one after another in this process)\n"
     "  --quiet            no line per run\n"
     "\n"
     "exit status: 0 converged, 1 not converged in N runs or a run failed, 2 bad scene or\n"
@@ -228,7 +235,8 @@ int main(int argc, char **argv) {
       free(sets);
       fputs(is_run ? nh_run_usage : is_plan ? nh_plan_usage : nh_check_usage, stdout);
       return 0;
-    } else if (is_plan && (!strcmp(a, "--tolerance") || !strcmp(a, "--max-runs"))) {
+    } else if (is_plan &&
+               (!strcmp(a, "--tolerance") || !strcmp(a, "--max-runs") || !strcmp(a, "--workers"))) {
       double v = 0;
       if (i + 1 >= argc)
         rc = NH_ERROR(NH_ERR_INPUT, "%s needs a value", a);
@@ -239,6 +247,10 @@ int main(int argc, char **argv) {
         rc = NH_ERROR(NH_ERR_INPUT,
                       "--max-runs: expected a whole number of runs from 1 to 99, got %s", argv[i]);
       if (!rc && a[2] == 'm') plan.max_runs = (int)v;
+      if (!rc && a[2] == 'w' && (v != floor(v) || v < 0 || v > 64))
+        rc = NH_ERROR(NH_ERR_INPUT, "--workers: expected a whole number from 0 to 64, got %s",
+                      argv[i]);
+      if (!rc && a[2] == 'w') plan.workers = (int)v;
     } else if (a[0] == '-') {
       rc = NH_ERROR(NH_ERR_INPUT, "unknown option '%s' (try --help)", a);
     } else if (!scene_path) {

@@ -26,6 +26,7 @@
 #include "plan/plan.h"
 
 #include "io/io.h"
+#include "plan/plan_impl.h"
 #include "scene/scene.h"
 #include "sim/sim.h"
 
@@ -67,6 +68,16 @@ static int planned_target(const nh_scene *s, int *target, double aim[3]) {
                     "nothing to aim",
                     s->file);
   return NH_OK;
+}
+
+/* The target whose tool has a bevel (the first such), if any: 1 and *target. */
+static int steered_target(const nh_scene *s, int *target) {
+  for (int i = 0; i < s->n_targets; i++)
+    if (s->tools[s->targets[i].tool].bevel > 0) {
+      *target = i;
+      return 1;
+    }
+  return 0;
 }
 
 /* One run of the procedure aimed at `aim`, outputs in `dir`: its miss. */
@@ -198,17 +209,27 @@ int nh_plan_run(const char *scene_path, int n_sets, const char *const *sets,
            "--tolerance: expected a length > 0 in m, got %g", o->tolerance);
   NH_CHECK(o->max_runs >= 1 && o->max_runs <= 99, NH_ERR_INPUT,
            "--max-runs: expected 1 to 99 runs, got %d", o->max_runs);
+  NH_CHECK(o->workers >= 0 && o->workers <= 64, NH_ERR_INPUT,
+           "--workers: expected 0 to 64 runs at once, got %d", o->workers);
   nh_scene *scene = NULL;
   NH_TRY(nh_scene_load(scene_path, n_sets, sets, &scene));
-  int target;
+  int target = -1;
   double aim[3];
-  int rc = planned_target(scene, &target, aim);
   char out[NH_PATH_MAX];
   if (o->out_dir)
     snprintf(out, sizeof out, "%s", o->out_dir);
   else
     snprintf(out, sizeof out, "out/%s-plan", scene->name);
-  if (!rc && strlen(out) > NH_PATH_MAX - 16) rc = NH_ERROR(NH_ERR_INPUT, "--out: path too long");
+  int rc = strlen(out) > NH_PATH_MAX - 16 ? NH_ERROR(NH_ERR_INPUT, "--out: path too long") : NH_OK;
+  /* a bevel-tip needle is steered: the steering planner (steer.c) */
+  int steer = steered_target(scene, &target);
+  if (!rc && steer) {
+    rc = nh_mkdir_p(out);
+    if (!rc) rc = nh_plan_steer(scene_path, n_sets, sets, scene, target, o, out);
+    nh_scene_destroy(&scene);
+    return rc;
+  }
+  if (!rc) rc = planned_target(scene, &target, aim);
   if (!rc) rc = nh_mkdir_p(out);
   nh_plan_run_record *runs = calloc((size_t)o->max_runs, sizeof *runs);
   if (!rc && !runs) rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: plan");

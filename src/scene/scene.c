@@ -1675,8 +1675,8 @@ static int read_tool(const nh_ctx *c, const nh_yaml_node *list, int i, nh_scene 
                                      "direction", "trajectory", "motion",  "interaction",
                                      "inside",    "release",    "bevel",   NULL};
   static const char *const interaction_keys[] = {
-      "puncture_force", "cutting_force",   "friction", "friction_per_length",
-      "spacing",        "friction_static", NULL};
+      "puncture_force", "cutting_force",   "friction",           "friction_per_length",
+      "spacing",        "friction_static", "torsion_per_length", NULL};
   /* Files the output folder holds besides the tools' own. */
   static const char *const reserved[] = {"tissue", "points", NULL};
   char path[NH_KEY_MAX], sub[NH_KEY_MAX], key[NH_KEY_MAX], d[96];
@@ -1747,17 +1747,25 @@ static int read_tool(const nh_ctx *c, const nh_yaml_node *list, int i, nh_scene 
   NH_TRY(section(c, node, path, "interaction", 0, &m));
   if (m) {
     double *value[] = {&t->puncture_force,      &t->cutting_force, &t->friction,
-                       &t->friction_per_length, &t->spacing,       &t->friction_static};
+                       &t->friction_per_length, &t->spacing,       &t->friction_static,
+                       &t->torsion_per_length};
+    const nh_yaml_node *at_static = NULL;
     NH_TRY(check_keys(c, m, sub, interaction_keys));
     t->friction_static = -1;
     for (int k = 0; interaction_keys[k]; ++k) {
       NH_TRY(get_number(c, m, sub, interaction_keys[k], 0, value[k], &at));
       NH_TRY(at_least(c, at, sub, interaction_keys[k], *value[k], 0, 0));
+      if (value[k] == &t->friction_static) at_static = at;
     }
-    if (at && t->friction_static < t->friction) /* `at`: friction_static, read last */
-      return fail(c, at, join(key, sub, "friction_static"),
+    if (at_static && t->friction_static < t->friction)
+      return fail(c, at_static, join(key, sub, "friction_static"),
                   "the static coefficient must be at least the kinetic one (friction = %g), got %g",
                   t->friction, t->friction_static);
+    /* `at`: torsion_per_length, read last */
+    if (at && t->torsion_per_length > 0 && s->time.mode == NH_MODE_STATIC)
+      return fail(c, at, join(key, sub, "torsion_per_length"),
+                  "needs time.mode: dynamic (the torsional friction resists the needle's spin "
+                  "rate; the quasi-static mode has none)");
   }
   if (t->friction_static < t->friction) t->friction_static = t->friction;
 
@@ -1995,10 +2003,51 @@ static int read_name(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   return NH_OK;
 }
 
+/* plan (optional): what `needlehex plan` steers a bevel-tip needle around
+ * (docs/cases.md, "Planning the steering"): obstacles (regions: box, sphere,
+ * cylinder, or a label of the scene's label image), the clearance from the
+ * tool's axis to their surfaces, and the bicycle model's curvature. */
+static int read_plan(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
+  static const char *const keys[] = {"obstacles", "clearance", "curvature", NULL};
+  static const char *const region_keys[] = {"box", "sphere", "cylinder", "label", NULL};
+  char key[NH_KEY_MAX], path[NH_KEY_MAX];
+  const nh_yaml_node *m, *list, *at;
+  s->plan.clearance = 0.001;
+  s->plan.curvature = 0;
+  NH_TRY(section(c, root, "", "plan", 0, &m));
+  if (!m) return NH_OK;
+  make_where(c, m, "plan", s->plan.where);
+  NH_TRY(check_keys(c, m, "plan", keys));
+  NH_TRY(get_number(c, m, "plan", "clearance", 0, &s->plan.clearance, &at));
+  NH_TRY(at_least(c, at, "plan", "clearance", s->plan.clearance, 0, 0));
+  NH_TRY(get_number(c, m, "plan", "curvature", 0, &s->plan.curvature, &at));
+  NH_TRY(at_least(c, at, "plan", "curvature", s->plan.curvature, 0, 0));
+  NH_TRY(list_section(c, m, "plan", "obstacles", &list));
+  if (!list || list->n == 0) return NH_OK;
+  s->plan.obstacles = nh_calloc((size_t)list->n, sizeof *s->plan.obstacles);
+  if (!s->plan.obstacles) return NH_ERR_MEMORY;
+  for (int i = 0; i < list->n; ++i) {
+    nh_region *r = &s->plan.obstacles[i];
+    s->plan.n_obstacles = i + 1;
+    join_index(path, "plan.obstacles", i);
+    NH_TRY(region_item(c, list->items[i], path, region_keys,
+                       "an obstacle {box: {min, max}}, {sphere: {center, radius}}, "
+                       "{cylinder: {start, end, radius}} or {label: N}",
+                       r));
+    make_where(c, list->items[i], path, r->where);
+    if (r->kind == NH_REGION_LABEL && !c->image)
+      return fail(c, list->items[i], join(key, path, "label"),
+                  "a label obstacle needs the scene's label image (tissue.labels or "
+                  "tissue.domain.mask)");
+  }
+  return NH_OK;
+}
+
 /* The whole schema, in the order of docs/scene.md. */
 static int read_scene(nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
-  static const char *const keys[] = {"name",  "time",   "gravity", "tissue", "adapt",  "solver",
-                                     "tools", "probes", "targets", "output", "limits", NULL};
+  static const char *const keys[] = {"name",   "time",   "gravity", "tissue",  "adapt",
+                                     "solver", "tools",  "probes",  "targets", "plan",
+                                     "output", "limits", NULL};
   NH_TRY(check_keys(c, root, "", keys));
   NH_TRY(read_name(c, root, s));
   NH_TRY(read_time(c, root, s));
@@ -2015,6 +2064,7 @@ static int read_scene(nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   NH_TRY(read_targets(c, root, s));    /* after tools: a target names its tool */
   NH_TRY(read_adapt_goal(c, root, s)); /* after probes and targets: goals name them */
   NH_TRY(read_plans(c, root, s));      /* after targets: a trajectory names its target */
+  NH_TRY(read_plan(c, root, s));       /* after tissue: a label obstacle needs its image */
   NH_TRY(read_output(c, root, s));
   return NH_OK;
 }
@@ -2118,6 +2168,7 @@ void nh_scene_destroy(nh_scene **scene) {
   for (int i = 0; i < s->n_tools; ++i) free(s->tools[i].motion);
   free(s->tools);
   free(s->targets);
+  free(s->plan.obstacles);
   free(s->yaml);
   free(s);
   *scene = NULL;

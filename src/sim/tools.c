@@ -11,7 +11,8 @@
 
 static const char *const nh_tool_columns[] = {"step",          "time",  "name",  "tip_x",
                                               "tip_y",         "tip_z", "depth", "axial_force",
-                                              "lateral_force", "state"};
+                                              "lateral_force", "state", "twist"};
+enum { NH_TOOL_COLUMNS = 11 };
 static const char *const nh_target_columns[] = {
     "step", "time", "name", "x", "y", "z", "distance", "error_estimate", "distance_error_estimate"};
 
@@ -109,8 +110,8 @@ int nh_sim_tools_open(nh_sim *s) {
   const int resume = s->options.restart_dir != NULL; /* keep the rows and frames <= step */
   if (sc->n_tools > 0) {
     snprintf(path, sizeof path, "%s/tools.csv", sc->output.dir);
-    NH_TRY(resume ? nh_csv_resume(path, 10, nh_tool_columns, s->step, &s->tools_csv)
-                  : nh_csv_create(path, 10, nh_tool_columns, &s->tools_csv));
+    NH_TRY(resume ? nh_csv_resume(path, NH_TOOL_COLUMNS, nh_tool_columns, s->step, &s->tools_csv)
+                  : nh_csv_create(path, NH_TOOL_COLUMNS, nh_tool_columns, &s->tools_csv));
     for (int k = 0; k < sc->n_tools; k++) {
       snprintf(path, sizeof path, "%s/%s.pvd", sc->output.dir, sc->tools[k].name);
       NH_TRY(resume ? nh_pvd_resume(sc->output.dir, sc->tools[k].name, sc->time.step, s->step,
@@ -132,25 +133,26 @@ int nh_sim_tools_rows(nh_sim *s) {
   const nh_scene *sc = s->scene;
   int rc = NH_OK;
   if (sc->n_tools > 0) {
-    double *vals = malloc(sizeof(double) * 7 * (size_t)sc->n_tools);
+    double *vals = malloc(sizeof(double) * 8 * (size_t)sc->n_tools);
     const char **names = malloc(sizeof(char *) * (size_t)sc->n_tools);
     if (!vals || !names) rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: tool rows");
     for (int k = 0; k < sc->n_tools && !rc; k++) {
       nh_tool_report r;
       nh_contact_report(s->contact, k, &r);
-      rc = nh_csv_row(s->tools_csv, "%d,%.17g,%s,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%s", s->step,
-                      s->time, sc->tools[k].name, r.tip[0], r.tip[1], r.tip[2], r.depth,
-                      r.axial_force, r.lateral_force, nh_tool_state_name(r.state));
-      double *v = vals + 7 * k;
+      double twist = nh_beam_twist(nh_contact_beam(s->contact, k), NULL);
+      rc = nh_csv_row(s->tools_csv, "%d,%.17g,%s,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%s,%.17g",
+                      s->step, s->time, sc->tools[k].name, r.tip[0], r.tip[1], r.tip[2], r.depth,
+                      r.axial_force, r.lateral_force, nh_tool_state_name(r.state), twist);
+      double *v = vals + 8 * k;
       v[0] = r.tip[0], v[1] = r.tip[1], v[2] = r.tip[2], v[3] = r.depth;
-      v[4] = r.axial_force, v[5] = r.lateral_force, v[6] = r.state;
+      v[4] = r.axial_force, v[5] = r.lateral_force, v[6] = r.state, v[7] = twist;
       names[k] = sc->tools[k].name;
     }
     static const char *const comps[] = {"tip_x",       "tip_y",         "tip_z", "depth",
-                                        "axial_force", "lateral_force", "state"};
+                                        "axial_force", "lateral_force", "state", "twist"};
     if (!rc && s->h5)
       rc =
-          nh_h5_append_series(s->h5, "tools", s->step, s->time, sc->n_tools, names, 7, comps, vals);
+          nh_h5_append_series(s->h5, "tools", s->step, s->time, sc->n_tools, names, 8, comps, vals);
     free(vals);
     free(names);
   }
@@ -210,8 +212,8 @@ int nh_sim_tools_frame(nh_sim *s) {
     /* nn - 1 two-node VTK_LINE cells, base to tip (meshio drops poly-lines) */
     int *conn = malloc(sizeof(int) * 2 * (size_t)nn), *off = malloc(sizeof(int) * (size_t)nn);
     double *f = malloc(sizeof(double) * 3 * (size_t)nn), *vel = malloc(sizeof(double) * 3 * nn);
-    double *arc = malloc(sizeof(double) * (size_t)nn);
-    if (!conn || !off || !f || !vel || !arc)
+    double *arc = malloc(sizeof(double) * (size_t)nn), *twist = malloc(sizeof(double) * nn);
+    if (!conn || !off || !f || !vel || !arc || !twist)
       rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: tool frame");
     if (!rc) {
       const double *v = nh_beam_velocities(b);
@@ -224,16 +226,18 @@ int nh_sim_tools_frame(nh_sim *s) {
         arc[i] = nh_beam_length(b) * i / (nn - 1);
         for (int c = 0; c < 3; c++) vel[3 * i + c] = v[6 * i + c];
       }
-      nh_field pf[3] = {{"constraint_force", 3, f, "N"},
+      nh_beam_twist(b, twist);
+      nh_field pf[4] = {{"constraint_force", 3, f, "N"},
                         {"velocity", 3, vel, "m/s"},
-                        {"arc_length", 1, arc, "m"}};
+                        {"arc_length", 1, arc, "m"},
+                        {"twist", 1, twist, "rad"}};
       nh_vtu_grid g = {.n_points = nn,
                        .points = nh_beam_positions(b),
                        .n_cells = nn - 1,
                        .connectivity = conn,
                        .offsets = off,
                        .type = NH_VTK_LINE,
-                       .n_point_fields = 3,
+                       .n_point_fields = 4,
                        .point_fields = pf};
       char name[NH_NAME_MAX + 16], path[NH_PATH_MAX + NH_NAME_MAX + 32];
       snprintf(name, sizeof name, "%s_%06d.vtu", sc->tools[k].name, s->step);
@@ -241,7 +245,7 @@ int nh_sim_tools_frame(nh_sim *s) {
       rc = nh_vtu_write(path, &g);
       if (!rc) rc = nh_pvd_add(s->tool_pvd[k], s->time, name);
     }
-    free(conn), free(off), free(f), free(vel), free(arc);
+    free(conn), free(off), free(f), free(vel), free(arc), free(twist);
   }
   return rc;
 }
