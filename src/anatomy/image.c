@@ -55,10 +55,8 @@ static char nh_orientation_letter(int code) {
   }
 }
 
-/* Voxel v of the nifti data as a double; 0 and *ok = 0 for an unsupported type. */
-static double nh_nifti_value(const nifti_image *nim, size_t v, int *ok) {
-  const void *d = nim->data;
-  switch (nim->datatype) {
+double nh_image_voxel_value(const void *d, int datatype, size_t v, int *ok) {
+  switch (datatype) {
   case DT_UINT8:
     return ((const uint8_t *)d)[v];
   case DT_INT8:
@@ -153,7 +151,7 @@ static int nh_image_fill(nh_image *im, nifti_image *nim, int read_data) {
   int scaled = isfinite(slope) && slope != 0.0 && !(slope == 1.0 && inter == 0.0);
   for (size_t v = 0; v < nvox; v++) {
     int ok = 1;
-    double value = nh_nifti_value(nim, v, &ok);
+    double value = nh_image_voxel_value(nim->data, nim->datatype, v, &ok);
     NH_CHECK(ok, NH_ERR_INPUT, "%s: data type %s is not a label type (use an integer type)",
              im->path, nifti_datatype_string(nim->datatype));
     if (scaled) value = slope * value + inter;
