@@ -12,11 +12,14 @@ exit 1. `--verbose` prints the measured numbers.
 
 Derived expectations (tools.csv `twist`: the tip's rotation about the axis
 relative to the base's, the sum of the elements' torsion):
- 1. torsion_per_length = 0: nothing resists the spin, the tip turns with the
-    base: |twist| at the end of the spin <= 1e-6 rad. The only torque is the
-    needle's rotary inertia spinning up within a step, I_p * omega / h at
-    most, I_p = rho * J * L (J = pi r^4 / 2): it twists the needle by at most
-    I_p omega / h * L / GJ ~ 1e-8 rad.
+ 0. torsion_per_length = 0: tools.csv has no `twist` column (the outputs
+    of scenes without torsion are as before it existed: docs/outputs.md).
+ 1. torsion_per_length -> 0 (1e-12 N m/m: the column is written, the drag's
+    own lag, 2. below, is ~1e-11 rad): nothing resists the spin, the tip
+    turns with the base: |twist| at the end of the spin <= 1e-6 rad. The
+    only torque is the needle's rotary inertia spinning up within a step,
+    I_p * omega / h at most, I_p = rho * J * L (J = pi r^4 / 2): it twists
+    the needle by at most I_p omega / h * L / GJ ~ 1e-8 rad.
  2. torsion_per_length = tau > 0: in steady spin every channel point slides,
     so point i (arc length s_i from the base, share of length s) carries the
     torque tau * s against the spin. The beam's torsion is GJ/l0 per element
@@ -87,8 +90,13 @@ def closed_lag(tau, depth):
     return tau * depth * (L - depth) / GJ + tau * depth ** 2 / (2 * GJ)
 
 
-# 1. no torsional friction
-rows = run("free", 0.0, 1.0)
+# 0. no torsional friction: no twist column
+rows = run("none", 0.0, 1.0)
+if rows is not None and "twist" in rows[-1]:
+    fail("tau = 0: tools.csv has a twist column, expected none (docs/outputs.md)")
+
+# 1. a vanishing torsional friction
+rows = run("free", 1.0e-12, 1.0)
 if rows is not None:
     twist = float(rows[-1]["twist"])
     bound = RHO * J * L * OMEGA / 0.01 * L / GJ

@@ -171,6 +171,7 @@ int nh_bike_choose(const nh_bike_frame *f, const double T[2], double clearance, 
   nh_bike_plan p;
   /* one turn, the first arc towards the bevel or (after a turn at the entry) away */
   for (int s = 0; s < 2 && !exact; s++) {
+    if (f->side && f->side != (s ? -1 : 1)) continue;
     if (nh_bike_make(f, T, s ? -1.0 : 1.0, 0.0, &p)) continue;
     nh_bike_rate(f, T, &p, &c);
     if (c.clearance >= clearance && c.excursion < best.excursion) best = c;
@@ -186,7 +187,7 @@ int nh_bike_choose(const nh_bike_frame *f, const double T[2], double clearance, 
     for (int i = 0; i <= NH_BIKE_SCAN + 1; i++) {
       nh_bike_choice *e = &scan[s][i];
       e->excursion = INFINITY;
-      if (i == 0 || i > NH_BIKE_SCAN) continue;
+      if (i == 0 || i > NH_BIKE_SCAN || (f->side && f->side != (s ? -1 : 1))) continue;
       if (nh_bike_make(f, T, s ? -1.0 : 1.0, span * i / (NH_BIKE_SCAN + 1), &p)) continue;
       nh_bike_rate(f, T, &p, e);
     }

@@ -57,6 +57,8 @@ typedef struct {
   double entry[3], ex[3], ey[3];
   double kappa[NH_BIKE_MAX_ARCS]; /* κ_j of the plans' arcs j, 1/m */
   const nh_obstacles *obstacles;  /* may be NULL */
+  int side; /* 0: the first arc on either side; ±1: only σ_0 = side (the planner keeps the
+               side its first plan passes the obstacles on) */
 } nh_bike_frame;
 
 /* What the kinematic planner chose for a virtual target a and clearance c*. */
@@ -71,7 +73,8 @@ typedef struct {
  * turns and a model clearance >= `clearance` from the frame's obstacles:
  * the one-turn plan (first arc on either side) of least excursion that
  * keeps it, else the two-turn plan (first arc length scanned, then the
- * two-arc finish) of least excursion; when the clearance decides (the
+ * two-arc finish) of least excursion (with f->side, the first arc on that
+ * side only); when the clearance decides (the
  * scan's neighbour of smaller excursion does not keep it), the first arc is
  * bisected to clearance = `clearance` exactly (active = 1), so the plan is a
  * smooth function of target and clearance. exact: only such plans (two

@@ -45,18 +45,17 @@ int nh_candidate_set(nh_candidate *c, const char *fmt, ...) {
   va_start(ap, fmt);
   int n = vsnprintf(NULL, 0, fmt, ap);
   va_end(ap);
-  char *text = n >= 0 ? malloc((size_t)n + 1) : NULL;
+  char *text = n >= 0 ? nh_calloc((size_t)n + 1, 1) : NULL;
   if (text) {
     va_start(ap, fmt);
     vsnprintf(text, (size_t)n + 1, fmt, ap);
     va_end(ap);
   }
-  char **grown = text ? realloc(c->sets, sizeof(char *) * (size_t)(c->n_sets + 1)) : NULL;
-  if (!grown) {
+  int cap = c->n_sets; /* grown one at a time: the capacity is the count */
+  if (!text || nh_grow((void **)&c->sets, &cap, c->n_sets + 1, sizeof *c->sets)) {
     free(text);
     return NH_ERROR(NH_ERR_MEMORY, "out of memory: plan overrides");
   }
-  c->sets = grown;
   c->sets[c->n_sets++] = text;
   return NH_OK;
 }
@@ -102,26 +101,22 @@ static int nh_read_tools(const char *dir, const char *tool, nh_run_result *r) {
     int n = nh_split(line, f, NH_CSV_FIELDS);
     for (int k = 0; k < 7; k++) col[k] = nh_column(f, n, names[k]);
   }
-  for (int k = 0; k < 7 && !rc; k++)
-    if (col[k] < 0) rc = NH_ERROR(NH_ERR_IO, "plan: %s has no column %s", path, names[k]);
+  for (int k = 0; k < 7 && !rc; k++) /* twist: only with torsion (docs/outputs.md) */
+    if (col[k] < 0 && k != 5) rc = NH_ERROR(NH_ERR_IO, "plan: %s has no column %s", path, names[k]);
   r->n = 0;
   while (!rc && fgets(line, sizeof line, in)) {
     int n = nh_split(line, f, NH_CSV_FIELDS);
-    if (n <= col[5] || n <= col[6] || strcmp(f[col[0]], tool)) continue;
+    if (n <= col[5] || n <= col[6] || n <= col[4] || strcmp(f[col[0]], tool)) continue;
     double x[3] = {atof(f[col[1]]), atof(f[col[2]]), atof(f[col[3]])}, d = atof(f[col[4]]);
     memcpy(r->tip, x, sizeof x);
-    r->twist = atof(f[col[5]]);
+    r->twist = col[5] >= 0 ? atof(f[col[5]]) : 0.0;
     if (!(d > 0)) continue;
-    if (r->n == cap) {
-      cap = cap ? 2 * cap : 256;
-      double *p = realloc(r->path, sizeof(double) * 3 * (size_t)cap);
-      if (p) r->path = p;
-      double *q = realloc(r->depth, sizeof(double) * (size_t)cap);
-      if (q) r->depth = q;
-      double *w = realloc(r->time, sizeof(double) * (size_t)cap);
-      if (w) r->time = w;
-      if (!p || !q || !w) rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: %s", path);
-    }
+    int c1 = cap, c2 = cap, c3 = cap;
+    if (nh_grow((void **)&r->path, &c1, r->n + 1, 3 * sizeof *r->path) ||
+        nh_grow((void **)&r->depth, &c2, r->n + 1, sizeof *r->depth) ||
+        nh_grow((void **)&r->time, &c3, r->n + 1, sizeof *r->time))
+      rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: %s", path);
+    cap = c3;
     if (!rc) {
       memcpy(r->path + 3 * r->n, x, sizeof x);
       r->time[r->n] = atof(f[col[6]]);
@@ -256,8 +251,9 @@ static void nh_last_line(const char *path, char *out, size_t size) {
   char line[1024];
   while (fgets(line, sizeof line, in))
     if (line[0] && line[0] != '\n') {
-      line[strcspn(line, "\n")] = '\0';
-      snprintf(out, size, "%s", line);
+      size_t n = strcspn(line, "\n");
+      if (n >= size) n = size - 1;
+      memcpy(out, line, n), out[n] = '\0';
     }
   fclose(in);
 }
@@ -271,7 +267,7 @@ int nh_runs_execute(const char *scene_path, int n_user, const char *const *user,
     for (int i = 0; i < n && !rc; i++) {
       rc = nh_run_here(scene_path, n_user, user, &c[i], &res[i].seconds);
       if (rc) {
-        char msg[1024];
+        char msg[sizeof res[i].message];
         snprintf(msg, sizeof msg, "%s", nh_error_message());
         if (rc == NH_ERR_NUMERIC) { /* the simulation failed: a result */
           nh_error_clear();

@@ -594,6 +594,9 @@ int nh_plan_steer(const char *scene_path, int n_sets, const char *const *sets,
                   "two turns to the target that keeps %.3g mm from the obstacles",
                   scene->targets[target].where, P.kappa0, 1e3 * P.c_goal);
   P.active = active0;
+  /* Broyden's steps stay in the first plan's homotopy class: on the side of
+     the obstacles it chose (a jump to the other side is no small step) */
+  if (!rc && nh_obstacles_count(P.obstacles) > 0) P.frame.side = plan.sign0 < 0 ? -1 : 1;
   if (!rc && !o->quiet)
     printf("plan: steering %s to %s at [%.6g, %.6g, %.6g] mm, tolerance %.3g mm, clearance %.3g "
            "mm from %d obstacle%s, curvature %.4g 1/m%s, at most %d runs on %d worker%s\n",
