@@ -37,7 +37,7 @@ Derived expectations:
     D and D - d1 that follow.
  (b) the planner without plan.curvature (kappa estimated, then fitted to its
     first run) on T = (18, 3) mm, tolerance 0.1 mm, on 2 workers: it
-    converges within 8 runs, with one turn, at a turn depth within
+    converges within 12 runs, with one turn, at a turn depth within
         |dd1/dkappa| dk + L0 + l1
     of the closed form's with the measured kappa (the curvature's error
     propagated, and the lags at the entry and at the turn, which shift the
@@ -150,7 +150,7 @@ if doc is not None:
 # (b) kappa estimated and fitted: the turn depth against the closed form
 Tb = (0.018, 0.003)
 doc, out = plan("fitted-kappa", ENTRY + [Tb[0], Tb[1], 0], [],
-                ["--tolerance", "1e-4", "--max-runs", "8", "--workers", "2"])
+                ["--tolerance", "1e-4", "--max-runs", "12", "--workers", "2"])
 if doc is not None:
     d1, D = one_turn(kappa, *Tb)
     eps = 1e-6 * kappa

@@ -95,8 +95,20 @@ def plot_plan(args):
         inside = tip[:, 2] > 0
         ax.plot(tip[inside, 0] * 100, (tip[inside, 1] - y0) * 100, "--", color="C1", lw=1.5,
                 label="open loop (bicycle plan by hand)")
+    failed_label = "failed runs (simulation stopped)"
     for k, it in enumerate(doc["iterations"]):
         run = os.path.join(args.plan, "run_%02d" % (k + 1))
+        if "failed" in it:
+            print("run %d (%s): turns %s mm, depth %.2f mm: FAILED: %s" % (
+                k + 1, it["kind"], ["%.2f" % (1e3 * d) for d in it["schedule"]["turns"]],
+                1e3 * it["schedule"]["depth"], it["failed"][:60]))
+            if os.path.exists(os.path.join(run, "tools.csv")):
+                tip = tip_path(run)
+                inside = tip[:, 2] > 0
+                ax.plot(tip[inside, 0] * 100, (tip[inside, 1] - y0) * 100, ":", color="0.5",
+                        lw=0.8, label=failed_label)
+                failed_label = None
+            continue
         tip = tip_path(run)
         inside = tip[:, 2] > 0
         last = k + 1 == final
@@ -106,7 +118,13 @@ def plot_plan(args):
         print("run %d (%s): turns %s mm, depth %.2f mm: miss %.3f mm, clearance %.3f mm" % (
             k + 1, it["kind"], ["%.2f" % (1e3 * d) for d in it["schedule"]["turns"]],
             1e3 * it["schedule"]["depth"], 1e3 * it["miss"], 1e3 * float(it["clearance"])))
-    obstacles(ax, os.path.join(args.plan, "run_%02d" % final, "scene.yaml"), T[2], y0)
+    # the scene as given to the plan (its label images lie next to it), relative to the
+    # folder the plan ran in or to the repository
+    here = os.path.dirname(os.path.abspath(__file__))
+    scene = next((p for p in (doc["scene"], os.path.join(here, "..", doc["scene"]))
+                  if os.path.exists(p)), None)
+    if scene:
+        obstacles(ax, scene, T[2], y0)
     ax.plot(T[0] * 100, (T[1] - y0) * 100, "x", color="k", ms=10, mew=2, label="target")
     ax.axhline(0, color="0.7", lw=0.8, ls=":")
     ax.set_xlabel("x (cm): depth along the insertion line")
@@ -115,10 +133,16 @@ def plot_plan(args):
     ax.grid(alpha=0.3)
     legend_outside(ax)
     n = np.arange(1, len(doc["iterations"]) + 1)
-    bx.semilogy(n, [1e3 * i["miss"] for i in doc["iterations"]], "o-", label="miss")
-    cl = [1e3 * float(i["clearance"]) for i in doc["iterations"]]
-    if all(np.isfinite(cl)):
-        bx.plot(n, np.maximum(cl, 1e-3), "s--", label="clearance")
+    ok = np.array(["failed" not in i for i in doc["iterations"]])
+    miss = np.array([1e3 * float(i["miss"]) for i in doc["iterations"]])
+    bx.semilogy(n[ok], miss[ok], "o-", label="miss")
+    if not ok.all():
+        bx.plot(n[~ok], np.full((~ok).sum(), miss[ok].max() if ok.any() else 1.0), "x",
+                color="0.4", label="failed run")
+    cl = np.array([1e3 * float(i.get("clearance", "nan")) for i in doc["iterations"]])
+    if np.isfinite(cl[ok]).all():
+        bx.plot(n[ok], np.maximum(np.abs(cl[ok]), 1e-3), "s--",
+                label="|clearance| (negative: runs 1, 2)" if (cl[ok] < 0).any() else "clearance")
     bx.axhline(1e3 * doc["tolerance"], color="C0", ls=":", lw=0.8, label="tolerance")
     bx.axhline(1e3 * doc["clearance_required"], color="C1", ls=":", lw=0.8,
                label="clearance required")

@@ -170,7 +170,7 @@ int nh_bike_choose(const nh_bike_frame *f, const double T[2], double clearance, 
   nh_bike_choice best = {.excursion = INFINITY}, c;
   nh_bike_plan p;
   /* one turn, the first arc towards the bevel or (after a turn at the entry) away */
-  for (int s = 0; s < 2 && !exact; s++) {
+  for (int s = 0; s < 2 && !exact && f->turns != 2; s++) {
     if (f->side && f->side != (s ? -1 : 1)) continue;
     if (nh_bike_make(f, T, s ? -1.0 : 1.0, 0.0, &p)) continue;
     nh_bike_rate(f, T, &p, &c);
@@ -180,6 +180,7 @@ int nh_bike_choose(const nh_bike_frame *f, const double T[2], double clearance, 
     *out = best;
     return 0;
   }
+  if (f->turns == 1) return -1;
   /* two turns: scan the first arc */
   const double span = hypot(T[0], T[1]);
   nh_bike_choice scan[2][NH_BIKE_SCAN + 2]; /* a plan exists where .excursion < inf */

@@ -157,8 +157,20 @@ static void broyden_update(double J[9], const nh_plan_run_record *prev,
     for (int j = 0; j < 3; j++) J[3 * i + j] += (dm[i] - Jda[i]) * da[j] / ss;
 }
 
-static void put_vec(FILE *f, const double v[3]) {
+void nh_plan_put_vec(FILE *f, const double v[3]) {
   fprintf(f, "[%.17g, %.17g, %.17g]", v[0], v[1], v[2]);
+}
+
+int nh_plan_yaml_finish(FILE *f, char **text, const char *out) {
+  int failed = ferror(f);
+  if (fclose(f) != 0) failed = 1;
+  char path[NH_PATH_MAX + 16];
+  snprintf(path, sizeof path, "%s/plan.yaml", out);
+  int rc = failed || !*text ? NH_ERROR(NH_ERR_MEMORY, "out of memory: plan.yaml")
+                            : nh_write_text(path, *text);
+  free(*text);
+  *text = NULL;
+  return rc;
 }
 
 /* OUT/plan.yaml, composed in memory and written atomically. */
@@ -178,29 +190,22 @@ static int write_plan_yaml(const char *out, const char *scene_path, const nh_sce
              "# target's position at the last step of the run.\n");
   fprintf(f, "scene: %s\ntarget: %s\ntool: %s\ntarget_point: ", scene_path, g->name,
           s->tools[g->tool].name);
-  put_vec(f, g->point);
+  nh_plan_put_vec(f, g->point);
   fprintf(f, "\nentry: ");
-  put_vec(f, tool->entry);
+  nh_plan_put_vec(f, tool->entry);
   fprintf(f, "\ntolerance: %.17g\nmax_runs: %d\nconverged: %s\nruns: %d\ntime: %.3f\naim: ",
           o->tolerance, o->max_runs, converged ? "true" : "false", n_runs, seconds);
-  put_vec(f, runs[n_runs - 1].aim);
+  nh_plan_put_vec(f, runs[n_runs - 1].aim);
   fprintf(f, "\nmiss: %.17g\nfinal_run: run_%02d\niterations:\n", runs[n_runs - 1].distance,
           n_runs);
   for (int k = 0; k < n_runs; k++) {
     fprintf(f, "  - {run: %d, aim: ", k + 1);
-    put_vec(f, runs[k].aim);
+    nh_plan_put_vec(f, runs[k].aim);
     fprintf(f, ", miss_vector: ");
-    put_vec(f, runs[k].miss);
+    nh_plan_put_vec(f, runs[k].miss);
     fprintf(f, ", miss: %.17g, time: %.3f}\n", runs[k].distance, runs[k].seconds);
   }
-  int failed = ferror(f);
-  if (fclose(f) != 0) failed = 1;
-  char path[NH_PATH_MAX + 16];
-  snprintf(path, sizeof path, "%s/plan.yaml", out);
-  int rc = failed || !text ? NH_ERROR(NH_ERR_MEMORY, "out of memory: plan.yaml")
-                           : nh_write_text(path, text);
-  free(text);
-  return rc;
+  return nh_plan_yaml_finish(f, &text, out);
 }
 
 int nh_plan_run(const char *scene_path, int n_sets, const char *const *sets,

@@ -22,6 +22,8 @@
 #include "plan/plan.h"
 #include "scene/scene.h"
 
+#include <stdio.h>
+
 enum { NH_BIKE_MAX_ARCS = 3 }; /* at most two turns */
 
 /* ---- bicycle.c: the kinematic model in the needle's plane ----
@@ -57,8 +59,9 @@ typedef struct {
   double entry[3], ex[3], ey[3];
   double kappa[NH_BIKE_MAX_ARCS]; /* κ_j of the plans' arcs j, 1/m */
   const nh_obstacles *obstacles;  /* may be NULL */
-  int side; /* 0: the first arc on either side; ±1: only σ_0 = side (the planner keeps the
-               side its first plan passes the obstacles on) */
+  int side;                       /* 0: the first arc on either side; ±1: only σ_0 = side */
+  int turns; /* 0: one or two turns; 1 or 2: only plans with that many (with side, the
+                planner keeps the homotopy class of its first plan around the obstacles) */
 } nh_bike_frame;
 
 /* What the kinematic planner chose for a virtual target a and clearance c*. */
@@ -73,8 +76,8 @@ typedef struct {
  * turns and a model clearance >= `clearance` from the frame's obstacles:
  * the one-turn plan (first arc on either side) of least excursion that
  * keeps it, else the two-turn plan (first arc length scanned, then the
- * two-arc finish) of least excursion (with f->side, the first arc on that
- * side only); when the clearance decides (the
+ * two-arc finish) of least excursion (f->side, f->turns: only plans with
+ * that first side and number of turns); when the clearance decides (the
  * scan's neighbour of smaller excursion does not keep it), the first arc is
  * bisected to clearance = `clearance` exactly (active = 1), so the plan is a
  * smooth function of target and clearance. exact: only such plans (two
@@ -146,6 +149,13 @@ int nh_runs_execute(const char *scene_path, int n_user, const char *const *user_
 void nh_candidate_free(nh_candidate *c);
 /* Append an override (printf format) to a candidate; NH_ERR_MEMORY. */
 int nh_candidate_set(nh_candidate *c, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+
+/* ---- plan.c: plan.yaml, shared by both planners ---- */
+/* "[x, y, z]" to full precision. */
+void nh_plan_put_vec(FILE *f, const double v[3]);
+/* Close the memory stream f (open_memstream's *text, set at the close; freed) and write it to
+ * OUT/plan.yaml; NH_ERR_MEMORY (the stream failed), NH_ERR_IO. */
+int nh_plan_yaml_finish(FILE *f, char **text, const char *out);
 
 /* ---- steer.c ---- */
 /* The steering planner (plan.c calls it when the target's tool has a

@@ -426,10 +426,6 @@ static const char *yaml_num(double x, char buf[32]) {
   return buf;
 }
 
-static void put_vec(FILE *f, const double v[3]) {
-  fprintf(f, "[%.17g, %.17g, %.17g]", v[0], v[1], v[2]);
-}
-
 /* The turn and end depths of a schedule (n values). */
 static void put_depths(FILE *f, const nh_bike_plan *p) {
   double d = 0;
@@ -467,11 +463,11 @@ static int nh_steer_write(const char *out, const char *scene_path, const nh_stee
              "# tissue (planned; realized: read back at the turns and the end); curvature:\n"
              "# the model's per arc (first, after one turn, after two), last fitted.\n");
   fprintf(f, "scene: %s\ntarget: %s\ntool: %s\ntarget_point: ", scene_path, g->name, P->tool->name);
-  put_vec(f, g->point);
+  nh_plan_put_vec(f, g->point);
   fprintf(f, "\nentry: ");
-  put_vec(f, P->frame.entry);
+  nh_plan_put_vec(f, P->frame.entry);
   fprintf(f, "\nbevel_side: ");
-  put_vec(f, P->frame.ey);
+  nh_plan_put_vec(f, P->frame.ey);
   fprintf(f, "\ntolerance: %.17g\nmax_runs: %d\nworkers: %d\nclearance_required: %.17g\n",
           o->tolerance, o->max_runs, o->workers, s->plan.clearance);
   fprintf(f, "curvature: ");
@@ -480,7 +476,7 @@ static int nh_steer_write(const char *out, const char *scene_path, const nh_stee
           P->kappa0, P->delta, converged ? "true" : "false", n_runs, seconds);
   fprintf(f, "aim: ");
   nh_to_world(P, F->q, aim);
-  put_vec(f, aim);
+  nh_plan_put_vec(f, aim);
   fprintf(f, "\nmiss: %s\nclearance: %s\nschedule: ", yaml_num(F->distance, b),
           yaml_num(F->clearance, b2));
   put_depths(f, &F->plan);
@@ -490,7 +486,7 @@ static int nh_steer_write(const char *out, const char *scene_path, const nh_stee
     nh_to_world(P, r->q, aim);
     fprintf(f, "  - {run: %d, round: %d, kind: %s, aim: ", k + 1, r->round + 1,
             r->probe ? "probe" : "step");
-    put_vec(f, aim);
+    nh_plan_put_vec(f, aim);
     if (P->active) fprintf(f, ", clearance_planned: %.17g", r->q[2]);
     fprintf(f, ", schedule: ");
     put_depths(f, &r->plan);
@@ -507,18 +503,11 @@ static int nh_steer_write(const char *out, const char *scene_path, const nh_stee
     fprintf(f, ", realized: ");
     put_depths(f, &r->realized);
     fprintf(f, ", miss_vector: ");
-    put_vec(f, r->miss);
+    nh_plan_put_vec(f, r->miss);
     fprintf(f, ", miss: %.17g, clearance: %s, twist: %.17g, time: %.3f}\n", r->distance,
             yaml_num(r->clearance, b), r->twist, r->seconds);
   }
-  int failed = ferror(f);
-  if (fclose(f) != 0) failed = 1;
-  char path[NH_PATH_MAX + 16];
-  snprintf(path, sizeof path, "%s/plan.yaml", out);
-  int rc = failed || !text ? NH_ERROR(NH_ERR_MEMORY, "out of memory: plan.yaml")
-                           : nh_write_text(path, text);
-  free(text);
-  return rc;
+  return nh_plan_yaml_finish(f, &text, out);
 }
 
 /* One line per run on stdout. */
@@ -594,9 +583,11 @@ int nh_plan_steer(const char *scene_path, int n_sets, const char *const *sets,
                   "two turns to the target that keeps %.3g mm from the obstacles",
                   scene->targets[target].where, P.kappa0, 1e3 * P.c_goal);
   P.active = active0;
-  /* Broyden's steps stay in the first plan's homotopy class: on the side of
-     the obstacles it chose (a jump to the other side is no small step) */
-  if (!rc && nh_obstacles_count(P.obstacles) > 0) P.frame.side = plan.sign0 < 0 ? -1 : 1;
+  /* Broyden's steps stay in the first plan's homotopy class around the
+     obstacles: its first side and number of turns (a jump to another class
+     is no small step, and the secants of one class mislead in another) */
+  if (!rc && nh_obstacles_count(P.obstacles) > 0)
+    P.frame.side = plan.sign0 < 0 ? -1 : 1, P.frame.turns = plan.n - 1;
   if (!rc && !o->quiet)
     printf("plan: steering %s to %s at [%.6g, %.6g, %.6g] mm, tolerance %.3g mm, clearance %.3g "
            "mm from %d obstacle%s, curvature %.4g 1/m%s, at most %d runs on %d worker%s\n",
