@@ -151,7 +151,7 @@ static void test_regions(void) {
 
 static void test_label(void) {
   const char *src = getenv("NH_SOURCE_DIR");
-  char path[sizeof ((nh_scene *)0)->tissue.labels_file];
+  char path[sizeof((nh_scene *)0)->tissue.labels_file];
   snprintf(path, sizeof path, "%s/cases/steering/obstacle.nii.gz", src ? src : ".");
   nh_region lab = {.kind = NH_REGION_LABEL, .label = 2};
   nh_region cyl = {.kind = NH_REGION_CYLINDER,
