@@ -211,6 +211,7 @@ typedef struct nh_scene {
   struct {
     nh_time_mode mode; /* time.mode: dynamic (default) | static */
     double step;       /* time.step, s (default 0.01) */
+    double end;        /* time.end, s, as given (0: not given; steps is what a run uses) */
     int steps; /* number of steps: time.steps, or round(time.end / time.step); default 100 */
   } time;
 
@@ -347,6 +348,12 @@ void nh_scene_gravity(const nh_scene *scene, double t, double g[3]);
 void nh_scene_tissue_gravity(const nh_scene *scene, double t, double g[3]);
 
 /* ---- trajectory planning (trajectory.c) ---- */
+/* The integral over [from, t] of the speed (spin = 0: the distance travelled
+ * along the direction, m) or of the spin (spin = 1: the base's turn about it,
+ * rad) of the tool's first n motion segments (n <= n_motion, untils
+ * resolved; at rest after them). The one definition of a tool's motion: the
+ * contact module moves the tools by it, symbolic untils are resolved by it. */
+double nh_scene_motion_integral(const nh_tool_spec *tool, int n, double from, double t, int spin);
 /* The distance tools[i]'s tip has travelled along its direction by time t,
  * from its first n motion segments (n <= n_motion; untils of those segments
  * resolved): a nested tool moves with its host until its release and by its

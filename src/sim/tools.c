@@ -26,12 +26,7 @@ static int nh_twist_written(const nh_scene *sc) {
 
 /* How far the tool's motion has advanced it along its axis at time t. */
 static double nh_tool_advance(const nh_tool_spec *tool, double t) {
-  double p = 0.0, start = 0.0;
-  for (int k = 0; k < tool->n_motion && start < t; k++) {
-    p += tool->motion[k].speed * (fmin(t, tool->motion[k].until) - start);
-    start = tool->motion[k].until;
-  }
-  return p;
+  return nh_scene_motion_integral(tool, tool->n_motion, 0.0, t, 0);
 }
 
 /* A tool that travels more than a cell per step jumps over the tissue its
