@@ -5,6 +5,7 @@
  *                 [--quiet]
  *   needlehex check SCENE.yaml [--set KEY=VALUE ...]
  *   needlehex plan SCENE.yaml [--out DIR] [--set KEY=VALUE ...] [--tolerance M] [--max-runs N]
+ *                 [--workers N]
  *   needlehex keys
  *   needlehex --help | --version
  *
@@ -80,13 +81,14 @@ static const char *nh_usage =
     "                     [--quiet]\n"
     "       needlehex check SCENE.yaml [--set KEY=VALUE ...]\n"
     "       needlehex plan SCENE.yaml [--out DIR] [--set KEY=VALUE ...] [--tolerance M] "
-    "[--max-runs N]\n"
+    "[--max-runs N] [--workers N]\n"
     "       needlehex keys\n"
     "       needlehex --help | --version\n"
     "\n"
     "  run      simulate the scene; outputs go to output.dir (default out/<name>)\n"
     "  check    validate the scene (and the mesh it builds), print what will be modelled\n"
-    "  plan     find where to aim so that the electrode ends on its target (target compensation)\n"
+    "  plan     find where to aim so that the electrode ends on its target (target compensation),\n"
+    "           or how to steer a bevel-tip needle to its target around obstacles\n"
     "  keys     print every scene key with its type, default, unit and notes (docs/scene.md)\n"
     "\n"
     "needlehex COMMAND --help describes a command and its options.\n"
@@ -124,18 +126,24 @@ static const char *nh_check_usage =
 
 static const char *nh_plan_usage =
     "usage: needlehex plan SCENE.yaml [--out DIR] [--set KEY=VALUE ...] [--tolerance M] "
-    "[--max-runs N] [--quiet]\n"
+    "[--max-runs N] [--workers N] [--quiet]\n"
     "\n"
     "Target compensation (docs/dbs.md): run the procedure again and again, moving the point\n"
     "the planned trajectories aim at (tools[].trajectory.aim; the entry stays) by Broyden's\n"
     "method on the final miss (tip of the target's tool minus the target's position at the\n"
     "last step), until the miss is at most the tolerance.\n"
+    "Steering (docs/cases.md, Planning the steering): when the target's tool has a bevel, plan\n"
+    "the depths of its half turns and its insertion depth so that the tip ends on the target\n"
+    "and its path keeps plan.clearance from plan.obstacles, by Broyden's method from the\n"
+    "bicycle model's plan.\n"
     "\n"
     "  --out DIR          the plan's folder (default out/<name>-plan): DIR/plan.yaml (aim,\n"
     "                     miss per run, runs, time), DIR/run_NN per run, DIR/final -> the last\n"
     "  --set KEY=VALUE    override a scene key by dotted path (as for run)\n"
     "  --tolerance M      stop when the miss is at most M metres (default 0.5e-3)\n"
     "  --max-runs N       at most N runs (default 8)\n"
+    "  --workers N        steering: run N candidates at once, each a process on one thread\n"
+    "                     (default 0: one after another in this process)\n"
     "  --quiet            no line per run\n"
     "\n"
     "exit status: 0 converged, 1 not converged in N runs or a run failed, 2 bad scene or\n"
@@ -190,7 +198,7 @@ typedef struct {
   nh_plan_options plan;
 } nh_args;
 
-/* plan's --tolerance M or --max-runs N at argv[*i] (its value next). */
+/* plan's --tolerance M, --max-runs N or --workers N at argv[*i] (its value next). */
 static int nh_plan_arg(int argc, char **argv, int *i, nh_plan_options *plan) {
   const char *a = argv[*i];
   double v = 0;
@@ -198,6 +206,13 @@ static int nh_plan_arg(int argc, char **argv, int *i, nh_plan_options *plan) {
   NH_TRY(nh_number_arg(a, argv[++*i], &v));
   if (a[2] == 't') {
     plan->tolerance = v;
+    return NH_OK;
+  }
+  if (a[2] == 'w') {
+    if (v != floor(v) || v < 0 || v > 64)
+      return NH_ERROR(NH_ERR_INPUT, "--workers: expected a whole number from 0 to 64, got %s",
+                      argv[*i]);
+    plan->workers = (int)v;
     return NH_OK;
   }
   if (v != floor(v) || v < 1 || v > 99)
@@ -230,7 +245,8 @@ static int nh_parse_args(int argc, char **argv, nh_args *a) {
     } else if (!strcmp(arg, "--help") || !strcmp(arg, "-h")) {
       a->help = 1;
       return NH_OK;
-    } else if (a->is_plan && (!strcmp(arg, "--tolerance") || !strcmp(arg, "--max-runs"))) {
+    } else if (a->is_plan && (!strcmp(arg, "--tolerance") || !strcmp(arg, "--max-runs") ||
+                              !strcmp(arg, "--workers"))) {
       NH_TRY(nh_plan_arg(argc, argv, &i, &a->plan));
     } else if (arg[0] == '-') {
       return NH_ERROR(NH_ERR_INPUT, "unknown option '%s' (try --help)", arg);

@@ -207,6 +207,10 @@ int nh_region_contains(const nh_region *region, const double x[3], double tol);
  * half its length if shorter), a box's smallest half-extent (a label
  * region: +inf). */
 double nh_region_size(const nh_region *region);
+/* Signed distance from x to the surface of a box, sphere or finite cylinder
+ * (its side and its flat ends): negative inside; NAN for a label region
+ * (its voxels are the image's: plan/obstacle.c). */
+double nh_region_distance(const nh_region *region, const double x[3]);
 /* "box [..] - [..]", "sphere centre [..] radius r", "cylinder [..] - [..] radius r", "label N". */
 void nh_region_describe(const nh_region *region, char *buf, size_t cap);
 

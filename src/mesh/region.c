@@ -84,6 +84,32 @@ double nh_region_size(const nh_region *r) {
   return l;
 }
 
+double nh_region_distance(const nh_region *r, const double x[3]) {
+  if (r->kind == NH_REGION_LABEL) return NAN;
+  if (r->kind == NH_REGION_SPHERE) {
+    double d2 = 0.0;
+    for (int k = 0; k < 3; k++) d2 += (x[k] - r->center[k]) * (x[k] - r->center[k]);
+    return sqrt(d2) - r->radius;
+  }
+  double out = 0.0, in = -INFINITY;
+  if (r->kind == NH_REGION_CYLINDER) {
+    /* in the cylinder's axes: t along the axis from start, ρ from it */
+    double axis[3], rel[3], len = 0.0, t = 0.0, rho2 = 0.0;
+    for (int k = 0; k < 3; k++) axis[k] = r->end[k] - r->start[k], len += axis[k] * axis[k];
+    len = sqrt(len);
+    for (int k = 0; k < 3; k++) axis[k] /= len, rel[k] = x[k] - r->start[k], t += rel[k] * axis[k];
+    for (int k = 0; k < 3; k++) rho2 += (rel[k] - t * axis[k]) * (rel[k] - t * axis[k]);
+    double q[2] = {sqrt(rho2) - r->radius, fmax(-t, t - len)}; /* a 2-D box's distance */
+    for (int k = 0; k < 2; k++) out += q[k] > 0 ? q[k] * q[k] : 0.0, in = fmax(in, q[k]);
+  } else {
+    for (int k = 0; k < 3; k++) {
+      double q = fmax(r->min[k] - x[k], x[k] - r->max[k]);
+      out += q > 0 ? q * q : 0.0, in = fmax(in, q);
+    }
+  }
+  return in > 0 ? sqrt(out) : in;
+}
+
 void nh_region_describe(const nh_region *r, char *buf, size_t cap) {
   if (r->kind == NH_REGION_LABEL)
     snprintf(buf, cap, "label %d", r->label);

@@ -255,3 +255,56 @@ int nh_read_tractions(const nh_ctx *c, const nh_key_site *k, void *base) {
     memcpy(s->tissue.tractions[i].where, s->tissue.tractions[i].region.where, NH_WHERE_MAX);
   return NH_OK;
 }
+
+/* plan (optional): what `needlehex plan` steers a bevel-tip needle around
+ * (docs/cases.md, "Planning the steering"): obstacles (regions; a label
+ * needs the scene's label image), the clearance from the tool's axis to
+ * their surfaces, and the bicycle model's curvature. */
+static const nh_key obstacle_rows[] = {
+    {NH_CUSTOM("box", NULL)},
+    {NH_CUSTOM("sphere", NULL)},
+    {NH_CUSTOM("cylinder", NULL)},
+    {NH_CUSTOM("label", NULL)},
+    {NULL},
+};
+
+static int read_obstacles(const nh_ctx *c, const nh_key_site *k, void *base) {
+  nh_scene *s = base;
+  char key[NH_KEY_MAX];
+  const nh_yaml_node *list;
+  NH_TRY(nh_read_list(c, k->map, k->path, "obstacles", &list));
+  if (!list || list->n == 0) return NH_OK;
+  s->plan.obstacles = nh_calloc((size_t)list->n, sizeof *s->plan.obstacles);
+  if (!s->plan.obstacles) return NH_ERR_MEMORY;
+  for (int i = 0; i < list->n; ++i) {
+    nh_region *r = &s->plan.obstacles[i];
+    s->plan.n_obstacles = i + 1;
+    NH_TRY(read_item(c, list->items[i], nh_read_index(key, "plan.obstacles", i),
+                     "an obstacle {box: {min, max}}, {sphere: {center, radius}}, "
+                     "{cylinder: {start, end, radius}} or {label: N}",
+                     obstacle_rows, r, r));
+    if (r->kind == NH_REGION_LABEL && !c->image) {
+      char sub[NH_KEY_MAX];
+      return nh_read_fail(c, list->items[i], nh_read_join(sub, key, "label"),
+                          "a label obstacle needs the scene's label image (tissue.labels or "
+                          "tissue.domain.mask)");
+    }
+  }
+  return NH_OK;
+}
+
+#define P(member) offsetof(nh_scene, plan.member)
+static const nh_key plan_rows[] = {
+    {NH_CUSTOM("obstacles", read_obstacles)},
+    {NH_NUMBER("clearance", P(clearance), 0.001, NH_AT_LEAST, 0)},
+    {NH_NUMBER("curvature", P(curvature), 0, NH_AT_LEAST, 0)},
+    {NULL},
+};
+#undef P
+
+int nh_read_plan(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
+  NH_TRY(nh_read_top(c, root, "plan", 0, plan_rows, s));
+  const nh_yaml_node *m = nh_yaml_get(root, "plan", NULL);
+  if (m) nh_read_where(c, m, "plan", s->plan.where);
+  return NH_OK;
+}

@@ -52,8 +52,9 @@ static int read_name(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
 
 /* The whole schema, each section after those its keys depend on. */
 static int read_scene(nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
-  static const char *const keys[] = {"name",  "time",   "gravity", "tissue", "adapt",  "solver",
-                                     "tools", "probes", "targets", "output", "limits", NULL};
+  static const char *const keys[] = {"name",   "time",   "gravity", "tissue",  "adapt",
+                                     "solver", "tools",  "probes",  "targets", "plan",
+                                     "output", "limits", NULL};
   c->root = root;
   c->scene = s;
   NH_TRY(nh_read_keys(c, root, "", keys));
@@ -72,6 +73,7 @@ static int read_scene(nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   NH_TRY(nh_read_targets(c, root, s));    /* after tools: a target names its tool */
   NH_TRY(nh_read_adapt_goal(c, root, s)); /* after probes and targets: goals name them */
   NH_TRY(nh_read_plans(c, root, s));      /* after targets: a trajectory names its target */
+  NH_TRY(nh_read_plan(c, root, s));       /* after tissue: a label obstacle needs its image */
   NH_TRY(nh_read_output(c, root, s));
   return NH_OK;
 }
@@ -175,6 +177,7 @@ void nh_scene_destroy(nh_scene **scene) {
   for (int i = 0; i < s->n_tools; ++i) free(s->tools[i].motion);
   free(s->tools);
   free(s->targets);
+  free(s->plan.obstacles);
   free(s->yaml);
   free(s);
   *scene = NULL;

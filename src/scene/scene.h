@@ -144,6 +144,8 @@ typedef struct {
   double friction_static; /* tools[i].interaction.friction_static, static μ_s: the threshold
                              to start sliding (default friction, >= friction) */
   double friction_per_length; /* tools[i].interaction.friction_per_length, N/m (default 0, >= 0) */
+  double torsion_per_length;  /* tools[i].interaction.torsion_per_length, N·m/m: the channel's
+                                 torsional friction (default 0, >= 0; dynamic mode only) */
   double spacing; /* tools[i].interaction.spacing: path-point spacing, m (default 0: half the
                      local cell edge; >= 0) */
   double bevel;   /* tools[i].bevel.angle ψ, degrees (default 0: symmetric tip; in [0, 90)) */
@@ -302,6 +304,18 @@ typedef struct nh_scene {
   nh_tool_spec *tools; /* tools: list (absent: tissue only) */
   int n_targets;
   nh_target *targets; /* targets: list of {name, point, tool} */
+
+  /* plan: what `needlehex plan` keeps a bevel-tip needle clear of (docs/cases.md, "Planning
+     the steering") */
+  struct {
+    int n_obstacles;
+    nh_region *obstacles;     /* plan.obstacles: list of {box | sphere | cylinder | label} */
+    double clearance;         /* plan.clearance, m: from the tool's axis to their surfaces (default
+                                 0.001, >= 0) */
+    double curvature;         /* plan.curvature, 1/m: the bicycle model's (default 0: estimated from
+                                 the wheelbase, then fitted to the plan's first run; >= 0) */
+    char where[NH_WHERE_MAX]; /* "FILE:LINE: plan" (empty without the section) */
+  } plan;
 
   struct {
     char dir[NH_PATH_MAX]; /* output.dir (default "out/<name>") */

@@ -230,5 +230,7 @@ int nh_read_box(const nh_ctx *c, const nh_yaml_node *box, const char *path, int 
 int nh_read_fixed(const nh_ctx *c, const nh_key_site *k, void *scene);
 int nh_read_loads(const nh_ctx *c, const nh_key_site *k, void *scene);
 int nh_read_tractions(const nh_ctx *c, const nh_key_site *k, void *scene);
+/* plan: obstacles (regions), clearance, curvature (regions.c), after tissue. */
+int nh_read_plan(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s);
 
 #endif

@@ -219,7 +219,7 @@ static const nh_key bevel_rows[] = {
 };
 
 /* The static friction coefficient is at least the kinetic one, which is
- * its default. */
+ * its default; a torsional friction needs the dynamic mode. */
 static int check_friction(const nh_ctx *c, const nh_key_site *k, void *base) {
   nh_tool_spec *t = base;
   char key[NH_KEY_MAX];
@@ -230,6 +230,12 @@ static int check_friction(const nh_ctx *c, const nh_key_site *k, void *base) {
                         "got %g",
                         t->friction, t->friction_static);
   if (t->friction_static < t->friction) t->friction_static = t->friction;
+  /* the torsional friction resists the spin rate: the dynamic mode's */
+  at = nh_yaml_get(k->at, "torsion_per_length", NULL);
+  if (at && t->torsion_per_length > 0 && c->scene->time.mode == NH_MODE_STATIC)
+    return nh_read_fail(c, at, nh_read_join(key, k->key, "torsion_per_length"),
+                        "needs time.mode: dynamic (the torsional friction resists the needle's "
+                        "spin rate; the quasi-static mode has none)");
   return NH_OK;
 }
 
@@ -240,6 +246,7 @@ static const nh_key interaction_rows[] = {
     {NH_NUMBER("friction_per_length", TL(friction_per_length), 0, NH_AT_LEAST, 0)},
     {NH_NUMBER("spacing", TL(spacing), 0, NH_AT_LEAST, 0)},
     {NH_NUMBER("friction_static", TL(friction_static), 0, NH_AT_LEAST, 0)}, /* check_friction */
+    {NH_NUMBER("torsion_per_length", TL(torsion_per_length), 0, NH_AT_LEAST, 0)},
     {NULL},
 };
 
