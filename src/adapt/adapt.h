@@ -163,6 +163,14 @@ int nh_adapt_step(nh_adapt *adapt, nh_mesh *mesh, int n_fields, double **fields,
 int nh_adapt_refine_cells(nh_adapt *adapt, nh_mesh *mesh, const int *cells, int n, int n_fields,
                           double **fields);
 
+/* The nodal transfer of the last mesh change made by nh_adapt_step or
+ * nh_adapt_refine_cells (refinement's Eq. 17, then coarsening's injection):
+ * how the fields were carried, as a linear map old nodes → new nodes (the
+ * solver's preconditioner across the change uses it: solve/inherit.c).
+ * NULL when the last call changed nothing or failed. Valid until the next
+ * such call. */
+const nh_node_transfer *nh_adapt_last_transfer(const nh_adapt *adapt);
+
 /* What ended the last nh_adapt_step (steps.csv `refine_stop`). */
 typedef enum {
   NH_ADAPT_REFINED = 0,   /* every marked cell was refined */

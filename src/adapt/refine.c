@@ -57,6 +57,10 @@ struct nh_adapt {
                           needs its cells) */
   int n_active;        /* goals above tolerance at the last estimate */
   nh_adapt_stop stop;  /* what ended the last refinement */
+  /* the nodal transfer of the last mesh change (the fields' Eq. 17 and
+   * injection as a map), valid when have_transfer */
+  nh_node_transfer transfer;
+  int have_transfer;
 };
 
 int nh_adapt_create(const nh_adapt_spec *spec, int max_cells, nh_adapt **out) {
@@ -93,6 +97,7 @@ void nh_adapt_destroy(nh_adapt **adapt) {
   free((*adapt)->goal_est);
   free((*adapt)->goal_ind);
   free((*adapt)->eta_all);
+  nh_node_transfer_free(&(*adapt)->transfer);
   free(*adapt);
   *adapt = NULL;
 }
@@ -170,6 +175,10 @@ const double *nh_adapt_goal_estimates(const nh_adapt *a) {
   return a && a->goal && a->have_eta ? a->goal_est : NULL;
 }
 
+const nh_node_transfer *nh_adapt_last_transfer(const nh_adapt *a) {
+  return a && a->have_transfer ? &a->transfer : NULL;
+}
+
 nh_adapt_stop nh_adapt_last_stop(const nh_adapt *a) {
   return a ? a->stop : NH_ADAPT_REFINED;
 }
@@ -226,6 +235,52 @@ static int nh_adapt_close(const nh_adapt *a, const nh_mesh *m, int *marked, int 
   return rc;
 }
 
+/* The transfer of a refinement (before any coarsening of the same step):
+ * the old nodes keep their values, a new node takes Eq. 17's trilinear
+ * weights of its parent's corners (nh_adapt_transfer). */
+static int nh_adapt_transfer_refine(nh_adapt *a, const nh_mesh *m, const nh_refine_info *info,
+                                    int old_nodes) {
+  nh_node_transfer *t = &a->transfer;
+  const int n = old_nodes + info->n_new;
+  int *start = realloc(t->start, sizeof(int) * ((size_t)n + 1));
+  if (!start) return NH_ERROR(NH_ERR_MEMORY, "out of memory: the nodal transfer");
+  t->start = start;
+  NH_TRY(nh_grow((void **)&t->node, &t->cap, old_nodes + 8 * info->n_new, sizeof(int)));
+  int cap = 0;
+  NH_TRY(nh_grow((void **)&t->weight, &cap, t->cap, sizeof(double)));
+  int q = 0;
+  for (int v = 0; v < old_nodes; v++) t->start[v] = q, t->node[q] = v, t->weight[q++] = 1.0;
+  for (int k = 0; k < info->n_new; k++) {
+    double N[8];
+    nh_hex_shape(info->xi + 3 * k, N);
+    const int *e = m->cells + 8 * info->parent[k];
+    t->start[old_nodes + k] = q;
+    for (int c = 0; c < 8; c++)
+      if (N[c] != 0.0) t->node[q] = e[c], t->weight[q++] = N[c];
+  }
+  t->start[n] = q;
+  t->n_old = old_nodes, t->n_new = n;
+  a->have_transfer = 1;
+  return NH_OK;
+}
+
+/* After a coarsening: the transfer's rows of the kept nodes, compacted by
+ * node_map (injection; map is increasing). Without a refinement before it in
+ * the step, the transfer starts as the identity. */
+static void nh_adapt_transfer_compact(nh_adapt *a, int old_nodes, const int *map) {
+  nh_node_transfer *t = &a->transfer;
+  if (!a->have_transfer) return; /* (set up by nh_adapt_step) */
+  int q = 0, w = 0;
+  for (int v = 0; v < old_nodes; v++) {
+    int lo = t->start[v], hi = t->start[v + 1];
+    if (map[v] < 0) continue;
+    t->start[w++] = q;
+    for (int p = lo; p < hi; p++) t->node[q] = t->node[p], t->weight[q++] = t->weight[p];
+  }
+  t->start[w] = q;
+  t->n_new = w;
+}
+
 /* Merge families whose children all have η below fraction x threshold
  * (cells created by this step's refinement have no η and stay), compact the
  * fields. *n_merged: families merged. */
@@ -248,6 +303,7 @@ static int nh_adapt_coarsen(nh_adapt *a, nh_mesh *m, int old_cells, double thres
         for (int v = 0; v < old_nodes; v++)
           if (map[v] >= 0) memmove(fields[f] + 3 * map[v], fields[f] + 3 * v, 3 * sizeof(double));
       *n_merged = n;
+      nh_adapt_transfer_compact(a, old_nodes, map);
     }
   }
   free(below), free(parents), free(map);
@@ -273,7 +329,9 @@ int nh_adapt_refine_cells(nh_adapt *a, nh_mesh *m, const int *cells, int n, int 
                           double **fields) {
   const int old_nodes = m->n_nodes;
   nh_refine_info info = {0};
+  a->have_transfer = 0;
   int rc = nh_mesh_refine(m, a->tmpl, cells, n, &info);
+  if (!rc) rc = nh_adapt_transfer_refine(a, m, &info, old_nodes);
   for (int f = 0; f < n_fields && !rc; f++) {
     double *p = realloc(fields[f], sizeof(double) * 3 * (size_t)(m->n_nodes ? m->n_nodes : 1));
     if (!p)
@@ -339,12 +397,18 @@ int nh_adapt_step(nh_adapt *a, nh_mesh *m, int n_fields, double **fields, int *n
     return rc;
   }
   const int old_cells = m->n_cells;
+  a->have_transfer = 0;
   if (n_marked > 0) rc = nh_adapt_refine_cells(a, m, marked, n_marked, n_fields, fields);
   free(marked);
+  if (!rc && !a->have_transfer && a->coarsen > 0) { /* coarsening alone: from the identity */
+    nh_refine_info none = {0};
+    rc = nh_adapt_transfer_refine(a, m, &none, m->n_nodes);
+  }
   int n_merged = 0;
   if (!rc && a->coarsen > 0)
     rc = nh_adapt_coarsen(a, m, old_cells, threshold, n_fields, fields, &n_merged);
   if (n_marked > 0 || n_merged > 0) a->have_eta = 0; /* the indicators belonged to the old cells */
   if (!rc) *n_refined = n_marked + n_merged;
+  if (rc || *n_refined == 0) a->have_transfer = 0;
   return rc;
 }

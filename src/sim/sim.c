@@ -980,8 +980,13 @@ int nh_sim_step(nh_sim *s) {
   nh_sim_adapt_mesh(s, &r);
   double t3 = nh_time_now();
   s->t_adapt = r.t_estimate + (t3 - t2);
-  /* A checkpoint holds the state the next step starts from: after refinement. */
-  if (nh_sim_checkpoint_due(s, &r)) NH_TRY_OUTPUT(nh_checkpoint_write(s), s->step);
+  /* A checkpoint holds the state the next step starts from: after
+   * refinement; not the old mesh's factor (solve/inherit.c), so the run
+   * drops it there too and continues as a restarted one would. */
+  if (nh_sim_checkpoint_due(s, &r)) {
+    nh_system_inherit_drop(s->system);
+    NH_TRY_OUTPUT(nh_checkpoint_write(s), s->step);
+  }
   double t4 = nh_time_now(); /* the checkpoint counts as output */
   r.t_output = t2 - t1 + (t4 - t3);
   NH_TRY(nh_sim_write_row(s, &r, t4));

@@ -459,6 +459,7 @@ static int nh_compliance_add_supernodal(nh_system *s, cholmod_sparse *Jt, double
 }
 
 int nh_system_compliance_add(nh_system *s, cholmod_sparse *Jt, double *W) {
+  if (!s->L && s->inh) return nh_inherit_compliance_add(s, Jt, W); /* W₀ = J B Jᵀ */
   if (s->L->is_super) return nh_compliance_add_supernodal(s, Jt, W);
   return nh_system_compliance_add_spsolve(s, Jt, W);
 }

@@ -25,6 +25,34 @@ static inline int nh_fixed_component(const unsigned char *fixed, int i, int k) {
   return fixed && fixed[i] && (!(fixed[i] & NH_FIX_AXES) || (fixed[i] >> k) & 1);
 }
 
+/* How the nodes of a changed mesh relate to those before the change (the
+ * refinement's Eq. 17 and the coarsening's injection, adapt/refine.c): the
+ * new node v's values are Σ weight[q] · (old values of node[q]) over q in
+ * start[v] .. start[v+1]. A linear map of nodal fields, old → new. */
+typedef struct {
+  int n_old, n_new;
+  int *start; /* n_new + 1 */
+  int *node;  /* old node indices */
+  double *weight;
+  int cap; /* room of node and weight */
+} nh_node_transfer;
+void nh_node_transfer_free(nh_node_transfer *t);
+
+/* After a mesh change with solver.refactor auto: let the new system `sys`
+ * (created, not yet assembled) precondition with the factor of `old`, the
+ * system of the mesh before the change, through the nodal transfer t
+ * (solve/inherit.c): its first steps solve by PCG instead of factorising.
+ * The factor moves from old to sys (old is then only to be destroyed), with
+ * the renewal rule's state. Does nothing (the first step factorises) when old
+ * has no factor of its own, either system has hanging-node rows, or t does
+ * not fit. NH_ERR_MEMORY. */
+int nh_system_inherit(nh_system *sys, nh_system *old, const nh_node_transfer *t);
+/* Whether sys preconditions with an inherited factor. */
+int nh_system_inherited(const nh_system *sys);
+/* Drop an inherited preconditioner: the next step factorises (a checkpoint
+ * cannot hold the old mesh's factor, so one is not carried past it). */
+void nh_system_inherit_drop(nh_system *sys);
+
 /* Build the DOF map, pattern, scatter maps and colouring of the leaves of
  * `tissue->mesh`; fixed[i] fixes components of node i (above). Hanging
  * nodes (may be NULL) are eliminated: u = P u_free, A = Pᵀ A P.

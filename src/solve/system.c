@@ -44,6 +44,7 @@ void nh_system_destroy(nh_system **sys) {
   free(s->lambda_total);
   cholmod_free_factor(&s->L, &s->cm);
   cholmod_free_factor(&s->L_aside, &s->cm);
+  nh_inherit_free(s);
   for (int i = 0; i < 4; i++) free(s->pcg[i]);
   cholmod_free_dense(&s->B, &s->cm);
   cholmod_free_dense(&s->X, &s->cm);

@@ -33,13 +33,18 @@ struct nh_system {
   /* Reuse across steps (reuse.c): L factorises the assembled A
    * (factor_current), or an earlier A and serves as a preconditioner. */
   int factor_current;
-  int factor_age;          /* steps since the factorisation (0: factorised in this step) */
-  int refactor_due;        /* the renewal rule asks for a factorisation at the next step */
-  double cycle_cost;       /* flops: the last factorisation and the reuse's extra solves since */
-  int cycle_steps;         /* steps of the cycle (nh_system_account) */
-  double flops_factor;     /* one numeric factorisation (CHOLMOD's count at analysis) */
-  double flops_solve;      /* one solve: two triangular solves with L */
-  double flops_iteration;  /* one PCG iteration: a solve and a product with A */
+  int factor_age;         /* steps since the factorisation (0: factorised in this step) */
+  int refactor_due;       /* the renewal rule asks for a factorisation at the next step */
+  double cycle_cost;      /* flops: the last factorisation and the reuse's extra solves since */
+  int cycle_steps;        /* steps of the cycle (nh_system_account) */
+  double flops_factor;    /* one numeric factorisation (CHOLMOD's count at analysis) */
+  double flops_solve;     /* one solve: two triangular solves with L */
+  double flops_iteration; /* one PCG iteration: a solve and a product with A */
+  /* Across a mesh change (inherit.c): the old mesh's factor extended to the
+   * new unknowns, the preconditioner while L is NULL; rows_hint: the
+   * constraint rows of the coming step (coupled.c), whose W₀ it would cost */
+  struct nh_inherited *inh;
+  int rows_hint;
   cholmod_factor *L_aside; /* benchmarks: the factor timed aside (NH_TIME_FACTOR) */
   /* What A was assembled from (u, and cM, cK), at the last assembly and at
    * the one the factor L factorises: a continued run assembles and factorises
@@ -83,6 +88,18 @@ struct nh_system {
   double *work[4];  /* 3 per node each */
   double *fwork[2]; /* n_free each */
 };
+
+/* ---- the preconditioner across a mesh change (inherit.c) ---- */
+typedef struct nh_inherited nh_inherited;
+void nh_inherit_free(nh_system *s);
+/* Before the first solve on the mesh: factorise the new unknowns' block of
+ * the assembled A; a block that is not positive definite drops the
+ * inherited preconditioner (the caller then factorises A). NH_ERR_MEMORY. */
+int nh_inherit_ready(nh_system *s);
+/* z = B r, the two-level preconditioner (inherit.c's header). */
+int nh_inherit_apply(nh_system *s, const double *r, double *z);
+/* W += J B Jᵀ for rows given as Jᵀ (n_free x m): one application per row. */
+int nh_inherit_compliance_add(nh_system *s, cholmod_sparse *Jt, double *W);
 
 /* Reuse of factorisations (reuse.c): a solve that misses its tolerance after
  * NH_PCG_MAX iterations, or constraint forces after NH_OUTER_MAX corrections,
