@@ -232,7 +232,8 @@ void nh_scene_print(const nh_scene *s, void *stdio_file) {
         fprintf(f, "%g m", s->adapt.tolerance);
       else
         fprintf(f, "none");
-      fprintf(f, ", resolve %d, graded (2:1)\n", s->adapt.resolve);
+      fprintf(f, ", resolve %d, separate duals every %d estimates, graded (2:1)\n",
+              s->adapt.resolve, s->adapt.separate_every);
     }
     if (s->adapt.coarsen > 0)
       fprintf(f, "          coarsen below %g of the marking threshold\n", s->adapt.coarsen);

@@ -1228,9 +1228,9 @@ static int resolve_template(const nh_ctx *c, const nh_yaml_node *at, const nh_ya
 
 /* adapt: present (even empty) means the mesh adapts. */
 static int read_adapt(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
-  static const char *const keys[] = {"estimator", "marking",  "max_level", "min_size", "max_dofs",
-                                     "every",     "template", "hanging",   "goal",     "tolerance",
-                                     "resolve",   "coarsen",  NULL};
+  static const char *const keys[] = {
+      "estimator", "marking", "max_level", "min_size", "max_dofs", "every",          "template",
+      "hanging",   "goal",    "tolerance", "resolve",  "coarsen",  "separate_every", NULL};
   static const char *const marking_keys[] = {"strategy", "theta", "fraction", NULL};
   static const char *const coarsen_keys[] = {"fraction", NULL};
   static const char *const estimators[] = {"spr", "goal", NULL};
@@ -1251,6 +1251,7 @@ static int read_adapt(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   s->adapt.n_goals = 0;
   s->adapt.tolerance = 0;
   s->adapt.resolve = 0;
+  s->adapt.separate_every = 10;
   s->adapt.coarsen = 0;
   n = nh_yaml_get(root, "adapt", &key);
   if (!n) return NH_OK;
@@ -1330,6 +1331,9 @@ static int read_adapt(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   NH_TRY(at_least(c, at, "adapt", "resolve", s->adapt.resolve, 0, 0));
   if (at && s->adapt.resolve > 0 && !goal)
     return fail(c, at, "adapt.resolve", "applies to estimator goal only");
+  NH_TRY(get_int(c, m, "adapt", "separate_every", &s->adapt.separate_every, &at));
+  NH_TRY(at_least(c, at, "adapt", "separate_every", s->adapt.separate_every, 1, 0));
+  if (at && !goal) return fail(c, at, "adapt.separate_every", "applies to estimator goal only");
   const nh_yaml_node *coarsen;
   NH_TRY(section(c, m, "adapt", "coarsen", 0, &coarsen));
   if (coarsen) {
