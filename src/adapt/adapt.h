@@ -137,8 +137,8 @@ int nh_adapt_estimate(nh_adapt *adapt, const nh_mesh *mesh, const nh_tissue *tis
 const double *nh_adapt_indicators(const nh_adapt *adapt);
 
 /* One refinement from the last estimate: mark (nh_mark_cells; under
- * estimator goal by the goal indicators among the cells that can still be
- * refined, nothing when every goal is below tolerance),
+ * estimator goal by the goal indicators, in tolerance mode among the cells
+ * that can still be refined, nothing when every goal is below tolerance),
  * keep the cells of largest ηₑ within the DOF budget, close the set under
  * the 2:1 rule (estimator goal), refine them by the template
  * (nh_mesh_refine), carry each of the n_fields nodal fields (3 values per

@@ -17,9 +17,10 @@
  *     at the node's reference coordinates in the parent.
  * Under adapt.estimator goal (nh_adapt_estimate_goal, adapt/dwr.c) the
  * indicators are the goal indicators summed over the goals above
- * adapt.tolerance (between separate estimates: the combined dual's),
- * marking looks only at cells that can still be refined (so the goal error
- * is chased where refinement can still reduce it), and the marked
+ * adapt.tolerance (between separate estimates: the combined dual's); with
+ * a tolerance, marking looks only at cells that can still be refined (so
+ * the goal error is chased below it; without one, that would refine every
+ * cell near the goals to max_level: docs/adaptivity.md), and the marked
  * set is closed under the 2:1 rule (mesh/grade.c; with a budget the sorted
  * prefix is shortened until the closed set fits). With adapt.coarsen,
  *  5. families whose children all have an indicator (under goal: summed
@@ -343,13 +344,13 @@ int nh_adapt_step(nh_adapt *a, nh_mesh *m, int n_fields, double **fields, int *n
   if (a->goal && a->n_active == 0) {
     a->stop = NH_ADAPT_TOLERANCE;
   } else {
-    /* Estimator goal: θ and the fraction refer to the cells that can still
-     * be refined, so that the goal error is chased where refinement can
-     * reduce it (mark.c applies the limits after selection: a goal whose
-     * largest contributions sit at max_level would refine nothing more). */
+    /* Tolerance mode: θ and the fraction refer to the cells that can still
+     * be refined, so that the goal error is chased below the tolerance
+     * (mark.c applies the limits after selection: a goal whose largest
+     * contributions sit at max_level would refine nothing more). */
     const double *eta = a->eta_cell;
     double *eligible = NULL;
-    if (a->goal) {
+    if (a->goal && a->tolerance > 0) {
       eligible = malloc(sizeof(double) * (size_t)m->n_cells);
       if (!eligible) {
         free(marked);
