@@ -1251,7 +1251,7 @@ static int read_adapt(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   s->adapt.n_goals = 0;
   s->adapt.tolerance = 0;
   s->adapt.resolve = 0;
-  s->adapt.separate_every = 10;
+  s->adapt.separate_every = 1;
   s->adapt.coarsen = 0;
   n = nh_yaml_get(root, "adapt", &key);
   if (!n) return NH_OK;

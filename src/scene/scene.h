@@ -198,7 +198,7 @@ typedef struct {
   double tolerance;       /* adapt.tolerance, m, on each goal's estimate (>= 0; 0: none) */
   int resolve;            /* adapt.resolve: re-solves of a step on its refined mesh (>= 0) */
   int separate_every; /* adapt.separate_every: every N-th goal estimate solves each goal's duals,
-                         the others one combined dual (>= 1, default 10) */
+                         the others one combined dual (>= 1, default 1) */
   double coarsen;     /* adapt.coarsen.fraction (0: no coarsening; in (0, 1)) */
   char where[NH_WHERE_MAX];          /* "FILE:LINE: adapt" */
   char where_template[NH_WHERE_MAX]; /* "FILE:LINE: adapt.template" */
