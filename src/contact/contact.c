@@ -354,6 +354,10 @@ int nh_contact_relocate(nh_contact *c, const nh_mesh *m) {
   return NH_OK;
 }
 
+const nh_rows *nh_contact_rows(const nh_contact *c) {
+  return c ? &c->rows : NULL;
+}
+
 void nh_contact_stats_get(const nh_contact *c, nh_contact_stats *st) {
   st->rows = c->rows.m;
   st->cut = c->cut;

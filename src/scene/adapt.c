@@ -123,6 +123,12 @@ static int check_resolve(const nh_ctx *c, const nh_key_site *k, void *base) {
   return NH_OK;
 }
 
+static int check_separate_every(const nh_ctx *c, const nh_key_site *k, void *base) {
+  if (!goal(base))
+    return nh_read_fail(c, k->at, "adapt.separate_every", "applies to estimator goal only");
+  return NH_OK;
+}
+
 static int check_coarsen(const nh_ctx *c, const nh_key_site *k, void *base) {
   const nh_scene *s = base;
   if (!(s->adapt.coarsen > 0 && s->adapt.coarsen < 1))
@@ -162,6 +168,7 @@ static const nh_key adapt_rows[] = {
     {NH_CUSTOM("goal", check_goal_given)}, /* its names: nh_read_adapt_goal */
     {NH_NUMBER("tolerance", A(tolerance), 0, NH_ABOVE, 0), .check = check_tolerance},
     {NH_INT("resolve", A(resolve), 0, NH_AT_LEAST, 0), .check = check_resolve},
+    {NH_INT("separate_every", A(separate_every), 1, NH_AT_LEAST, 1), .check = check_separate_every},
     {NH_MAP("coarsen", coarsen_rows)},
     {NULL},
 };

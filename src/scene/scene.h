@@ -195,12 +195,14 @@ typedef struct {
   nh_hanging_method hanging;       /* adapt.hanging: eliminate (default) | lagrange */
   nh_estimator estimator;          /* adapt.estimator: spr (default) | goal */
   int n_goals;                     /* goal: the embedded points adapt.goal names ... */
-  int goal[NH_MAX_GOALS];   /* ... as indices into probes, then targets (default: every target,
-                               else every probe) */
-  double tolerance;         /* adapt.tolerance, m, on each goal's estimate (>= 0; 0: none) */
-  int resolve;              /* adapt.resolve: re-solves of a step on its refined mesh (>= 0) */
-  double coarsen;           /* adapt.coarsen.fraction (0: no coarsening; in (0, 1)) */
-  char where[NH_WHERE_MAX]; /* "FILE:LINE: adapt" */
+  int goal[NH_MAX_GOALS]; /* ... as indices into probes, then targets (default: every target,
+                             else every probe) */
+  double tolerance;       /* adapt.tolerance, m, on each goal's estimate (>= 0; 0: none) */
+  int resolve;            /* adapt.resolve: re-solves of a step on its refined mesh (>= 0) */
+  int separate_every; /* adapt.separate_every: every N-th goal estimate solves each goal's duals,
+                         the others one combined dual (>= 1, default 1) */
+  double coarsen;     /* adapt.coarsen.fraction (0: no coarsening; in (0, 1)) */
+  char where[NH_WHERE_MAX];          /* "FILE:LINE: adapt" */
   char where_template[NH_WHERE_MAX]; /* "FILE:LINE: adapt.template" */
 } nh_adapt_spec;
 

@@ -611,8 +611,8 @@ static int nh_sim_estimate(nh_sim *s) {
     return nh_adapt_estimate(s->adapt, s->mesh, s->tissue, s->u, s->hanging, &s->eta, &s->eta_rel);
   const double h = sc->time.step;
   double scale = sc->time.mode == NH_MODE_STATIC ? 1.0 : h * sc->tissue.damping_stiffness + h * h;
-  return nh_adapt_estimate_goal(s->adapt, s->system, scale, s->mesh, s->tissue, s->u, s->hanging,
-                                &s->eta, &s->eta_rel);
+  return nh_adapt_estimate_goal(s->adapt, s->system, nh_contact_rows(s->contact), scale, s->mesh,
+                                s->tissue, s->u, s->hanging, &s->eta, &s->eta_rel);
 }
 
 /* Static mode: a step that does not converge is solved again from its

@@ -329,6 +329,19 @@ void nh_rows_free(nh_rows *rows);
  * −1 when out of memory. The caller fills the fields of row i. */
 int nh_rows_add(nh_rows *rows);
 
+/* The dual of a constrained step: ncol problems
+ *     A x + J_tᵀ μ = b,   J_t x = 0
+ * with the current factor of A and J_t the tissue part of the rows with
+ * active[i] != 0 (active NULL: every row); the tools' parts are held (a
+ * rigid tool). x = A⁻¹ b − A⁻¹ J_tᵀ μ with W μ = J_t A⁻¹ b,
+ * W = J_t A⁻¹ J_tᵀ (nh_system_compliance_add), solved by a pivoted
+ * Cholesky factorisation of the diagonally scaled W truncated at relative
+ * pivots below 1e-12 (dependent rows: J_tᵀ μ is still unique). b, x:
+ * column-major n_free x ncol. *n_used (may be NULL): the active rows.
+ * NH_ERR_MEMORY, NH_ERR_NUMERIC. */
+int nh_system_solve_rows(nh_system *sys, const nh_rows *rows, const unsigned char *active, int ncol,
+                         const double *b, double *x, int *n_used);
+
 /* A tool in the coupled step: its beam and the prescribed base velocity at
  * the end of the step (linear, angular). */
 typedef struct {
