@@ -792,7 +792,7 @@ static int read_data_file(const nh_ctx *c, const nh_yaml_node *map, const char *
 /* The header of the NIfTI file `path` named at `at` (key `key`). */
 static int read_image_header(const nh_ctx *c, const nh_yaml_node *at, const char *key,
                              const char *path, nh_image **out) {
-  if (nh_image_read(path, 0, out) == NH_OK) return NH_OK;
+  if (nh_image_read(path, 0, NULL, out) == NH_OK) return NH_OK;
   char msg[1024];
   snprintf(msg, sizeof msg, "%s", nh_error_message());
   return fail(c, at, key, "%s", msg);
@@ -859,7 +859,7 @@ static int read_surface(const nh_ctx *c, const nh_yaml_node *node, nh_scene *s) 
   join(key, path, "file");
   make_where(c, at_file, key, s->tissue.where_domain);
   nh_surface *surface;
-  if (nh_surface_read(s->tissue.surface_file, s->tissue.surface_unit, &surface)) {
+  if (nh_surface_read(s->tissue.surface_file, s->tissue.surface_unit, 0, NULL, &surface)) {
     char msg[1024];
     snprintf(msg, sizeof msg, "%s", nh_error_message());
     return fail(c, at_file, key, "%s", msg);
