@@ -31,8 +31,10 @@ add_test(NAME fuzz_corpus COMMAND ${NH_PYTHON} ${NH_SRC}/tests/bad/files/make_ba
 set_tests_properties(fuzz_corpus PROPERTIES FIXTURES_SETUP fuzz_corpus)
 add_test(NAME fuzz_replay_nifti COMMAND replay_nifti ${NH_SRC}/cases/dbs-mri/ventricles.nii.gz
   ${NH_SRC}/cases/steering/obstacle.nii.gz ${NH_CORPUS}/nifti)
-add_test(NAME fuzz_replay_stl COMMAND replay_stl ${NH_CORPUS}/stl)
-add_test(NAME fuzz_replay_checkpoint COMMAND replay_checkpoint ${NH_CORPUS}/checkpoint)
+add_test(NAME fuzz_replay_stl COMMAND replay_stl ${NH_CORPUS}/stl
+  ${NH_SRC}/tests/fuzz/regressions/stl)
+add_test(NAME fuzz_replay_checkpoint COMMAND replay_checkpoint ${NH_CORPUS}/checkpoint
+  ${NH_SRC}/tests/fuzz/regressions/checkpoint)
 set_tests_properties(fuzz_replay_nifti fuzz_replay_stl fuzz_replay_checkpoint PROPERTIES
   FIXTURES_REQUIRED fuzz_corpus)
 set_tests_properties(fuzz_corpus fuzz_replay_scene fuzz_replay_template fuzz_replay_nifti

@@ -35,6 +35,10 @@
  *       that of the ellipsoid is within 0.2 % of its divergence-theorem
  *       volume on a 1024² grid (the rule's error is that of the silhouette
  *       cells, O(h) relative: 3 × 1/1024 ≈ 0.3 % at most, and of mixed sign);
+ *       a 2 x 2 x 100 mm rod along the (y, z) diagonal (400 mm³ exactly)
+ *       is read and its 256² rays are within 0.5 % (half the refusal
+ *       bound: the silhouette runs at 45°, where unshifted cell centres
+ *       err systematically);
  *     - limits given as a parameter: the ellipsoid's 36672-triangle binary
  *       file under max_triangles 1000 and under max_file_bytes 1000, the
  *       ASCII tetrahedron under max_triangles 3, nibabel's image under
@@ -292,21 +296,33 @@ static int says(const char *want) {
   return strstr(nh_error_message(), want) != NULL;
 }
 
-static void write_cube(const char *path) {
+/* ASCII STL of the parallelepiped corner + b0 e[0] + b1 e[1] + b2 e[2]
+ * (b in {0, 1}, e right-handed: the faces point outwards). */
+static void write_box(const char *path, const double corner[3], const double e[3][3]) {
   FILE *f = fopen(path, "w");
   static const int quads[6][4] = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4},
                                   {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
-  fputs("solid cube\n", f);
+  fputs("solid box\n", f);
   for (int q = 0; q < 6; q++)
     for (int t = 0; t < 2; t++) {
       int c[3] = {quads[q][0], quads[q][t + 1], quads[q][t + 2]};
       fputs("facet normal 0 0 0\n outer loop\n", f);
-      for (int k = 0; k < 3; k++)
-        fprintf(f, "  vertex %d %d %d\n", c[k] & 1, c[k] >> 1 & 1, c[k] >> 2 & 1);
+      for (int k = 0; k < 3; k++) {
+        double x[3];
+        for (int a = 0; a < 3; a++)
+          x[a] = corner[a] + (c[k] & 1) * e[0][a] + (c[k] >> 1 & 1) * e[1][a] +
+                 (c[k] >> 2 & 1) * e[2][a];
+        fprintf(f, "  vertex %.17g %.17g %.17g\n", x[0], x[1], x[2]);
+      }
       fputs(" endloop\nendfacet\n", f);
     }
-  fputs("endsolid cube\n", f);
+  fputs("endsolid box\n", f);
   fclose(f);
+}
+
+static void write_cube(const char *path) {
+  static const double zero[3], unit[3][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  write_box(path, zero, unit);
 }
 
 static void test_contract(const char *dir) {
@@ -326,6 +342,21 @@ static void test_contract(const char *dir) {
   if (verbose)
     printf("ellipsoid: inside volume by rays %.6e vs %.6e (%.3g)\n", rays, div, rays / div - 1);
   CHECK_CLOSE(rays / div, 1.0, 2e-3, "ellipsoid: inside volume by rays vs divergence");
+  nh_surface_release(&s);
+  /* A straight rod across the ray grid's diagonal: 2 x 2 x 100 mm along
+   * (0, 1, 1)/sqrt 2, 400 mm^3. Its silhouette edges run at 45 degrees, along
+   * a grid of cell centres; the shifted columns must keep the reader's
+   * 256^2 rays within half the 1 % refusal bound of the exact volume. */
+  char rod_path[1024];
+  snprintf(rod_path, sizeof rod_path, "%s/rod.stl", dir);
+  const double r2 = sqrt(2.0), corner[3] = {0, 0, 0};
+  const double rod[3][3] = {{2, 0, 0}, {0, r2, -r2}, {0, 50 * r2, 50 * r2}};
+  write_box(rod_path, corner, rod);
+  CHECK_OK(nh_surface_read(rod_path, 1e-3, 0, NULL, &s));
+  rays = nh_surface_inside_volume(s, 256, 256);
+  if (verbose) printf("diagonal rod: inside volume by rays %.6e vs 4e-7 m^3\n", rays);
+  CHECK_CLOSE(rays / 4e-7, 1.0, 5e-3, "diagonal rod: inside volume by 256^2 rays");
+  CHECK_CLOSE(nh_surface_volume(s) / 4e-7, 1.0, 1e-9, "diagonal rod: divergence volume");
   nh_surface_release(&s);
 
   /* Limits as a parameter. */

@@ -220,6 +220,15 @@ static void nh_checkpoint_check(const nh_mesh *m, const nh_checkpoint *ck, char 
   if (!why[0] && (double)m->grid[0] * m->grid[1] * m->grid[2] > (double)nc)
     snprintf(why, n, "a %d x %d x %d grid with %zu cells", m->grid[0], m->grid[1], m->grid[2], nc);
   if (!why[0] && !nh_finite_all(m->X, 3 * nn)) snprintf(why, n, "a node position is not finite");
+  /* Every node lies in the grid's box (refinement only adds nodes inside
+   * its cells): what lets the lattice index of a root cell be computed. */
+  for (size_t i = 0; i < nn && !why[0]; i++)
+    for (int k = 0; k < 3 && !why[0]; k++) {
+      double lo = m->origin[k], len = m->grid[k] * m->spacing[k], x = m->X[3 * i + k];
+      if (!(x >= lo - 1e-6 * len && x <= lo + len * (1 + 1e-6)))
+        snprintf(why, n, "node %zu at %g outside the grid's [%g, %g] along axis %d", i, x, lo,
+                 lo + len, k);
+    }
   if (!why[0] && !(nh_finite_all(ck->u, 3 * nn) && nh_finite_all(ck->v, 3 * nn)))
     snprintf(why, n, "a displacement or velocity is not finite");
   for (size_t i = 0; i < 8 * nc && !why[0]; i++)
