@@ -20,7 +20,7 @@ set_tests_properties(static_skull PROPERTIES LABELS "verify;slow")
 # its skull (tests/skull_force.py).
 nh_add_py_test(skull_force verify skull_force.py)
 
-# The per-step reference of tools/study.py dbs-goal (tests/study_reference.py):
+# The per-step reference of tools/study.py dbs-goal (tools/richardson.py; tests/study_reference.py):
 # Richardson through three meshes recovers f∞, the order and the error bar of
 # f(h) = f∞ − C h^p; an order outside [1, 6) or differences changing sign fall
 # back to the finest value with the last difference as its error bar.

@@ -6,15 +6,24 @@
                        above its own, or any header of another module but its
                        public "<other>/<other>.h"; also if a directory of src/
                        is missing from the order or the order names a module
-                       that does not exist.
+                       that does not exist. Then the file orders within a
+                       module: a line `files <module>: a, b < c < d` fails if
+                       a file calls a function (not static) defined in a file
+                       of its own group or a later one (no circles), or if a
+                       .c file of the module is missing from the line.
   design.py refs       The page's references: every `nh_...` name is defined
                        (a function, a type or a table) somewhere in src/, every
                        `src/...` or `<module>/<file>.[ch]` path exists, and in
                        a "`<module>/<file>.c`: `nh_a`, `nh_b`" reference each
-                       function is defined in that very file.
+                       function is defined in that very file; every
+                       `tools/<file>.py` exists, and in a "`tools/<file>.py`:
+                       `a`, `b`" reference (the tools' one home for each
+                       helper) each function is defined (`def` at the top
+                       level) in that file and in no other tools/*.py.
 
 Each first checks the checker on synthetic input (an upward include, a
-private one, a downward one; a page with a wrong file and an unknown name).
+private one, a downward one; a page with a wrong file and an unknown name;
+tools with a helper defined twice, one missing and a missing file).
 Silent on success; on failure one line per offence.
 """
 import glob
@@ -91,6 +100,68 @@ def check_layering():
     if not files:
         errors.append("no source files found under src/")
     errors += violations(rank, files)
+    errors += check_file_orders()
+    return errors
+
+
+# ---- file order within a module ----
+FILES = re.compile(r"^files ([a-z0-9_]+): (.+)$", re.M)
+CALL = re.compile(r"\b(nh_\w+)\s*\(")
+
+
+def strip_c(text):
+    """C text without comments and string literals (names there are no calls)."""
+    text = re.sub(r"/\*.*?\*/", " ", text, flags=re.S)
+    text = re.sub(r"//[^\n]*", " ", text)
+    return re.sub(r'"(?:\\.|[^"\\\n])*"', '""', text)
+
+
+def call_violations(rank, sources):
+    """rank: file -> group; sources: file -> C text. A file may call only the
+    external functions of files in earlier groups. One message per call."""
+    owner = {}
+    for f, text in sources.items():
+        for m in DEF.finditer(text):
+            if not text[m.start():m.end()].lstrip().startswith(("return", "if", "else", "static")):
+                owner[m.group(1)] = f
+    out = []
+    for f, text in sorted(sources.items()):
+        for name in sorted(set(CALL.findall(strip_c(text)))):
+            g = owner.get(name)
+            if g and g != f and rank[g] >= rank[f]:
+                out.append(f"{f} calls {name} ({g}), which is not before it in the file order")
+    return out
+
+
+def check_file_orders():
+    errors = []
+    # The checker itself: a call up the order and one within a group must be
+    # caught, a call down it not; a comment or a string is no call.
+    a = "int nh_a(void) { return nh_b(); }"
+    b = 'int nh_b(void) { /* nh_a() */ return puts("nh_a()"); }'
+    if not call_violations({"a.c": 0, "b.c": 1}, {"a.c": a, "b.c": b}):
+        errors.append("self-check: a call up the file order was not reported")
+    if not call_violations({"a.c": 0, "b.c": 0}, {"a.c": a, "b.c": b}):
+        errors.append("self-check: a call within a group was not reported")
+    if call_violations({"a.c": 1, "b.c": 0}, {"a.c": a, "b.c": b}):
+        errors.append("self-check: a call down the file order (or a comment) was reported")
+    page = open(DESIGN, encoding="utf-8").read()
+    for m in FILES.finditer(page):
+        mod = m.group(1)
+        rank = {}
+        for i, group in enumerate(m.group(2).split("<")):
+            for name in group.split(","):
+                rank[name.strip() + ".c"] = i
+        paths = glob.glob(os.path.join(ROOT, "src", mod, "*.c"))
+        if not paths:
+            errors.append(f"docs/design.md: files {mod}: no src/{mod}/*.c")
+        sources = {os.path.basename(p): open(p, encoding="utf-8").read() for p in paths}
+        for f in sorted(set(sources) - set(rank)):
+            errors.append(f"src/{mod}/{f}: missing from the line 'files {mod}: ...' of docs/design.md")
+        for f in sorted(set(rank) - set(sources)):
+            errors.append(f"docs/design.md: files {mod}: names {f}, which is not in src/{mod}/")
+        known = {f: t for f, t in sources.items() if f in rank}
+        errors += [f"src/{mod}/" + e for e in call_violations(rank, known)]
     return errors
 
 
@@ -135,6 +206,32 @@ def stale(page, defs, exists):
     return out
 
 
+TOOL_PATH = re.compile(r"`(tools/[a-z0-9_]+\.py)`")
+TOOL_FNS = re.compile(r"`(tools/[a-z0-9_]+\.py)`: ((?:`\w+`(?:, )?)+)")
+PY_DEF = re.compile(r"^def (\w+)\(", re.M)
+
+
+def stale_tools(page, tools):
+    """tools: {path: text} of tools/*.py. The tools/*.py paths the page names that do not exist,
+    and the functions of a "`tools/x.py`: `f`, `g`" reference not defined in x.py or defined
+    in another tool too."""
+    out = [f"{p}: no such file" for p in sorted(set(TOOL_PATH.findall(page))) if p not in tools]
+    defs = {}
+    for path, text in tools.items():
+        for fn in PY_DEF.findall(text):
+            defs.setdefault(fn, set()).add(path)
+    for m in TOOL_FNS.finditer(page):
+        home = m.group(1)
+        for fn in re.findall(r"`(\w+)`", m.group(2)):
+            where = defs.get(fn, set())
+            if home not in where:
+                out.append(f"{home}: {fn} is not defined there")
+            elif len(where) > 1:
+                out.append(f"{fn}: its home is {home}, defined again in "
+                           f"{', '.join(sorted(where - {home}))}")
+    return out
+
+
 def check_refs():
     defs = definitions(ROOT)
     exists = lambda rel: os.path.exists(os.path.join(ROOT, rel))
@@ -146,6 +243,13 @@ def check_refs():
         errors.append(f"self-check: the synthetic page gave {stale(fake, defs, exists)}")
     page = open(DESIGN, encoding="utf-8").read()
     errors += stale(page, defs, exists)
+    fake_tools = {"tools/a.py": "def f(x):\n    pass\n", "tools/b.py": "def f(y):\n    def g():\n"}
+    fake = "`tools/a.py`: `f`, `g`; `tools/c.py`"  # f twice, g not in a.py (nested in b), no c.py
+    if len(stale_tools(fake, fake_tools)) != 3:
+        errors.append(f"self-check: the synthetic tools gave {stale_tools(fake, fake_tools)}")
+    tools = {os.path.relpath(f, ROOT): open(f, encoding="utf-8").read()
+             for f in glob.glob(os.path.join(ROOT, "tools", "*.py"))}
+    errors += stale_tools(page, tools)
     return errors
 
 

@@ -4,3 +4,8 @@
 nh_add_c_test(test_domain verify)
 # Brain shift: drainage level, fixed-region ties (tests/test_brainshift.c).
 nh_add_c_test(test_brainshift verify)
+# Cut cells: the finite cell quadrature (tests/test_cutcell.c): exactness on
+# planes and boxes, moment fitting, additivity, ball/ellipsoid/brain/mask/STL
+# volumes and moments against closed forms and Monte Carlo, closed surfaces.
+file(MAKE_DIRECTORY ${CMAKE_CURRENT_BINARY_DIR}/cutcell_scratch)
+nh_add_c_test(test_cutcell "unit;verify" ${CMAKE_CURRENT_BINARY_DIR}/cutcell_scratch)

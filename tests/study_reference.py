@@ -1,8 +1,9 @@
 #!/usr/bin/python3
 """The per-step converged reference of tools/study.py dbs-goal
-(per_step_reference): Richardson through three meshes with a sanity range on
-the observed order, else the finest value with the last difference as its
-error bar. Silent on success, one line per failure, exit 1.
+(per_step_reference, tools/richardson.py): Richardson through three meshes
+with a sanity range on the observed order, else the finest value with the
+last difference as its error bar. Silent on success, one line per failure,
+exit 1.
 
 Expected values from the closed form f(h) = f∞ − C h^p at h = 14, 10, 7:
  1. p = 2 and p = 4.5 (inside [1, 6)): the extrapolated value is f∞, the
@@ -20,7 +21,7 @@ import numpy as np
 
 SRC = os.environ.get("NH_SOURCE_DIR", os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 sys.path.insert(0, os.path.join(SRC, "tools"))
-from study import per_step_reference  # noqa: E402
+from richardson import per_step_reference  # noqa: E402
 
 failures = []
 

@@ -70,7 +70,7 @@ typedef struct {
   double *points, *disp, *vel, *cell;
   int *conn, *offsets, *fixed;
   nh_field pf[2], cf[3];
-  nh_vtu_grid grid;
+  nh_frame grid;
 } frame_data;
 
 static void frame_build(frame_data *d, int f, int nx, int ny, int nz) {
@@ -121,18 +121,18 @@ static void frame_build(frame_data *d, int f, int nx, int ny, int nz) {
   d->cf[0] = (nh_field){"von_mises", 1, von_mises, "Pa"};
   d->cf[1] = (nh_field){"level", 1, level, "1"};
   d->cf[2] = (nh_field){"stress", 6, stress, "Pa"};
-  d->grid = (nh_vtu_grid){.n_points = d->np,
-                          .points = d->points,
-                          .n_cells = d->nc,
-                          .connectivity = d->conn,
-                          .offsets = d->offsets,
-                          .type = NH_VTK_HEXAHEDRON,
-                          .n_point_fields = 2,
-                          .point_fields = d->pf,
-                          .n_cell_fields = 3,
-                          .cell_fields = d->cf,
-                          .point_int_flags = d->fixed,
-                          .point_flag_name = "fixed"};
+  d->grid = (nh_frame){.n_points = d->np,
+                       .points = d->points,
+                       .n_cells = d->nc,
+                       .connectivity = d->conn,
+                       .offsets = d->offsets,
+                       .type = NH_VTK_HEXAHEDRON,
+                       .n_point_fields = 2,
+                       .point_fields = d->pf,
+                       .n_cell_fields = 3,
+                       .cell_fields = d->cf,
+                       .point_int_flags = d->fixed,
+                       .point_flag_name = "fixed"};
 }
 
 static void frame_free(frame_data *d) {

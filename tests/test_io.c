@@ -38,6 +38,11 @@
  *     series_%06d.vtu with step 5 k; each is hex.vtu with every displacement
  *     component multiplied by (k + 1) (after computing it as above).
  *   escape.pvd: one frame, time 1.5, file "odd &<name>.vtu" (= hex.vtu).
+ *   framed.pvd: series.pvd again, its frames written by nh_pvd_write_frame
+ *     (steps 0, 5, 10): checked here to equal series.pvd and its frames byte
+ *     for byte but for the prefix (the names DIR/PREFIX_NNNNNN.vtu built by
+ *     hand for series.pvd); notpvd.xml: a collection not named *.pvd, whose
+ *     nh_pvd_write_frame is refused (NH_ERR_INTERNAL).
  *   table.csv: header step,time,name,x,"note, quoted"; rows i < 5:
  *     i, 0.01 i, p<i>, 1 / (i + 3), n<i>  (doubles with %.17g).
  *   long.csv: header "long"; one row of 3000 'x'.
@@ -64,11 +69,13 @@ static const char *in_dir(const char *name) {
 }
 
 static const char *const written[] = {
-    "hex.vtu",           "empty_cells.vtu", "empty.vtu",         "lines.vtu",
-    "vertices.vtu",      "series.pvd",      "series_000000.vtu", "series_000005.vtu",
-    "series_000010.vtu", "escape.pvd",      "odd &<name>.vtu",   "table.csv",
-    "long.csv",          "hello.txt",       "bad.vtu",           "full.vtu",
-    "full.txt",          "named.vtu",       "named3.vtu",        "single.vtu",
+    "hex.vtu",           "empty_cells.vtu",   "empty.vtu",         "lines.vtu",
+    "vertices.vtu",      "series.pvd",        "series_000000.vtu", "series_000005.vtu",
+    "series_000010.vtu", "escape.pvd",        "odd &<name>.vtu",   "table.csv",
+    "long.csv",          "hello.txt",         "bad.vtu",           "full.vtu",
+    "full.txt",          "named.vtu",         "named3.vtu",        "single.vtu",
+    "framed.pvd",        "framed_000000.vtu", "framed_000005.vtu", "framed_000010.vtu",
+    "notpvd.xml",
 };
 enum { N_WRITTEN = sizeof written / sizeof written[0] };
 
@@ -109,7 +116,7 @@ typedef struct {
   int connectivity[8 * HC], offsets[HC];
   double von_mises[HC], level[HC];
   nh_field point_fields[2], cell_fields[2];
-  nh_vtu_grid grid;
+  nh_frame grid;
 } hex_data;
 
 static void hex_build(hex_data *h, int frame) {
@@ -141,19 +148,19 @@ static void hex_build(hex_data *h, int frame) {
   h->point_fields[1] = (nh_field){"velocity", 3, h->velocity, "m/s"};
   h->cell_fields[0] = (nh_field){"von_mises", 1, h->von_mises, "Pa"};
   h->cell_fields[1] = (nh_field){"level", 1, h->level, NULL};
-  h->grid = (nh_vtu_grid){.n_points = HN,
-                          .points = h->points,
-                          .n_cells = HC,
-                          .connectivity = h->connectivity,
-                          .offsets = h->offsets,
-                          .types = NULL,
-                          .type = NH_VTK_HEXAHEDRON,
-                          .n_point_fields = 2,
-                          .point_fields = h->point_fields,
-                          .n_cell_fields = 2,
-                          .cell_fields = h->cell_fields,
-                          .point_int_flags = h->fixed,
-                          .point_flag_name = "fixed"};
+  h->grid = (nh_frame){.n_points = HN,
+                       .points = h->points,
+                       .n_cells = HC,
+                       .connectivity = h->connectivity,
+                       .offsets = h->offsets,
+                       .types = NULL,
+                       .type = NH_VTK_HEXAHEDRON,
+                       .n_point_fields = 2,
+                       .point_fields = h->point_fields,
+                       .n_cell_fields = 2,
+                       .cell_fields = h->cell_fields,
+                       .point_int_flags = h->fixed,
+                       .point_flag_name = "fixed"};
 }
 
 static void write_vtus(void) {
@@ -169,22 +176,22 @@ static void write_vtus(void) {
   }
   nh_field pf4 = {"displacement", 3, d4, "m"};
   nh_field cf0 = {"von_mises", 1, NULL, "Pa"};
-  nh_vtu_grid g4 = {.n_points = 4,
-                    .points = p4,
-                    .type = NH_VTK_HEXAHEDRON,
-                    .n_point_fields = 1,
-                    .point_fields = &pf4,
-                    .n_cell_fields = 1,
-                    .cell_fields = &cf0};
+  nh_frame g4 = {.n_points = 4,
+                 .points = p4,
+                 .type = NH_VTK_HEXAHEDRON,
+                 .n_point_fields = 1,
+                 .point_fields = &pf4,
+                 .n_cell_fields = 1,
+                 .cell_fields = &cf0};
   EXPECT_OK(nh_vtu_write(in_dir("empty_cells.vtu"), &g4));
 
   /* 0 points, 0 cells */
   nh_field pf0 = {"displacement", 3, NULL, "m"};
-  nh_vtu_grid g0 = {.type = NH_VTK_HEXAHEDRON,
-                    .n_point_fields = 1,
-                    .point_fields = &pf0,
-                    .n_cell_fields = 1,
-                    .cell_fields = &cf0};
+  nh_frame g0 = {.type = NH_VTK_HEXAHEDRON,
+                 .n_point_fields = 1,
+                 .point_fields = &pf0,
+                 .n_cell_fields = 1,
+                 .cell_fields = &cf0};
   EXPECT_OK(nh_vtu_write(in_dir("empty.vtu"), &g0));
 
   /* mixed poly-line, lines and a vertex */
@@ -200,16 +207,16 @@ static void write_vtus(void) {
   for (int c = 0; c < 4; ++c) vm6[c] = 1500.0 * (c + 1);
   nh_field pf6 = {"displacement", 3, d6, "m"};
   nh_field cf6 = {"von_mises", 1, vm6, "Pa"};
-  nh_vtu_grid g6 = {.n_points = 6,
-                    .points = p6,
-                    .n_cells = 4,
-                    .connectivity = conn6,
-                    .offsets = off6,
-                    .types = types6,
-                    .n_point_fields = 1,
-                    .point_fields = &pf6,
-                    .n_cell_fields = 1,
-                    .cell_fields = &cf6};
+  nh_frame g6 = {.n_points = 6,
+                 .points = p6,
+                 .n_cells = 4,
+                 .connectivity = conn6,
+                 .offsets = off6,
+                 .types = types6,
+                 .n_point_fields = 1,
+                 .point_fields = &pf6,
+                 .n_cell_fields = 1,
+                 .cell_fields = &cf6};
   EXPECT_OK(nh_vtu_write(in_dir("lines.vtu"), &g6));
 
   /* vertices, one cell type for all (types == NULL) */
@@ -222,27 +229,27 @@ static void write_vtus(void) {
     off3[i] = i + 1;
   }
   nh_field pf3 = {"displacement", 3, d3, "m"};
-  nh_vtu_grid g3 = {.n_points = 3,
-                    .points = p3,
-                    .n_cells = 3,
-                    .connectivity = conn3,
-                    .offsets = off3,
-                    .type = NH_VTK_VERTEX,
-                    .n_point_fields = 1,
-                    .point_fields = &pf3};
+  nh_frame g3 = {.n_points = 3,
+                 .points = p3,
+                 .n_cells = 3,
+                 .connectivity = conn3,
+                 .offsets = off3,
+                 .type = NH_VTK_VERTEX,
+                 .n_point_fields = 1,
+                 .point_fields = &pf3};
   EXPECT_OK(nh_vtu_write(in_dir("vertices.vtu"), &g3));
 
   /* One vertex with only a displacement: appended in document order, meshio
      could not read it (its offset rewriting hit the types' offset). */
   nh_field pf1 = {"displacement", 3, d3 + 3, "m"};
-  nh_vtu_grid g1 = {.n_points = 1,
-                    .points = p3 + 3,
-                    .n_cells = 1,
-                    .connectivity = conn3,
-                    .offsets = off3,
-                    .type = NH_VTK_VERTEX,
-                    .n_point_fields = 1,
-                    .point_fields = &pf1};
+  nh_frame g1 = {.n_points = 1,
+                 .points = p3 + 3,
+                 .n_cells = 1,
+                 .connectivity = conn3,
+                 .offsets = off3,
+                 .type = NH_VTK_VERTEX,
+                 .n_point_fields = 1,
+                 .point_fields = &pf1};
   EXPECT_OK(nh_vtu_write(in_dir("single.vtu"), &g1));
   /* The same, named and with a flag (a points_NNNNNN.vtu with one target). */
   const char *names1[] = {"STN"};
@@ -264,6 +271,43 @@ static void write_vtus(void) {
   EXPECT(!file_exists(in_dir("bad.vtu")), "bad.vtu exists after a refused write");
 }
 
+/* Whole file of `path` (NUL-terminated; caller frees), *n bytes; NULL if
+ * unreadable. */
+static char *read_file(const char *path, size_t *n) {
+  FILE *f = fopen(path, "rb");
+  if (!f) return NULL;
+  char *s = NULL;
+  size_t cap = 0;
+  *n = 0;
+  for (;;) {
+    if (*n + 4096 + 1 > cap) {
+      char *p = realloc(s, cap = 2 * cap + 8192);
+      if (!p) break;
+      s = p;
+    }
+    size_t got = fread(s + *n, 1, 4096, f);
+    *n += got;
+    if (got < 4096) break;
+  }
+  fclose(f);
+  if (s) s[*n] = '\0';
+  return s;
+}
+
+/* Are files a and b equal, b after replacing every `from` of a by `to`
+ * (same length; NULL: none)? */
+static int same_bytes(const char *a, const char *b, const char *from, const char *to) {
+  size_t na = 0, nb = 0;
+  char *x = read_file(a, &na), *y = read_file(b, &nb);
+  int same = x && y && na == nb;
+  for (char *p = x; same && from && (p = strstr(p, from)); p += strlen(from))
+    memcpy(p, to, strlen(to));
+  same = same && memcmp(x, y, na) == 0;
+  free(x);
+  free(y);
+  return same;
+}
+
 static void write_pvds(void) {
   const double times[3] = {0.0, 0.05, 0.1 + 0.2};
   nh_pvd *pvd = NULL;
@@ -281,6 +325,32 @@ static void write_pvds(void) {
   nh_pvd_destroy(&pvd);
   EXPECT(pvd == NULL, "nh_pvd_destroy did not null the pointer");
   nh_pvd_destroy(&pvd); /* harmless twice */
+
+  /* The same collection through nh_pvd_write_frame. */
+  EXPECT_OK(nh_pvd_create(in_dir("framed.pvd"), &pvd));
+  for (int k = 0; pvd && k < 3; ++k) {
+    hex_data h;
+    hex_build(&h, k);
+    EXPECT_OK(nh_pvd_write_frame(pvd, 5 * k, times[k], &h.grid));
+  }
+  nh_pvd_destroy(&pvd);
+  for (int k = 0; k < 3; ++k) {
+    char a[64], b[64];
+    snprintf(a, sizeof a, "series_%06d.vtu", 5 * k);
+    snprintf(b, sizeof b, "framed_%06d.vtu", 5 * k);
+    EXPECT(same_bytes(in_dir(a), in_dir(b), NULL, NULL),
+           "%s differs from %s (the same frame, written by nh_pvd_write_frame)", b, a);
+  }
+  EXPECT(same_bytes(in_dir("series.pvd"), in_dir("framed.pvd"), "series_", "framed_"),
+         "framed.pvd does not list framed_NNNNNN.vtu as series.pvd lists series_NNNNNN.vtu");
+  EXPECT_OK(nh_pvd_create(in_dir("notpvd.xml"), &pvd));
+  if (pvd) {
+    hex_data h;
+    hex_build(&h, 0);
+    int rc = nh_pvd_write_frame(pvd, 0, 0.0, &h.grid);
+    EXPECT(rc == NH_ERR_INTERNAL, "frame of notpvd.xml: got %d, expected NH_ERR_INTERNAL", rc);
+  }
+  nh_pvd_destroy(&pvd);
 
   hex_data h;
   hex_build(&h, 0);

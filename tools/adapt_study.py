@@ -51,7 +51,6 @@ CACHE/img/ unless --img is given). Needs numpy and matplotlib (Debian's
 python3-numpy, python3-matplotlib); use /usr/bin/python3.
 """
 import argparse
-import csv
 import json
 import math
 import os
@@ -61,10 +60,11 @@ import sys
 import time
 
 import numpy as np
-import matplotlib
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
+from outputs import read_rows
+from plotstyle import FIGSIZE, plt, save
+from richardson import richardson
+from study_engine import find_binary
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CASE = os.path.join(ROOT, "cases", "adapt-localized.yaml")
@@ -79,14 +79,6 @@ ELEMENT = ["tissue.material.formulation=full"]
 
 def log(msg):
     print(msg, file=sys.stderr, flush=True)
-
-
-def read_steps(path):
-    rows = []
-    with open(path) as f:
-        for r in csv.DictReader(f):
-            rows.append({k: (float(v) if k not in ("step",) else int(v)) for k, v in r.items()})
-    return rows
 
 
 def drop_repeat(rows):
@@ -109,7 +101,7 @@ def run_case(binary, cache, name, sets, steps, force=False, stop_when_static=Fal
         with open(stamp) as f:
             info = json.load(f)
         if info.get("cmd") == key:
-            return drop_repeat(read_steps(os.path.join(out, "steps.csv"))), info
+            return drop_repeat(read_rows(os.path.join(out, "steps.csv"))), info
     os.makedirs(out, exist_ok=True)
     log("run %s: %s" % (name, " ".join(cmd)))
     t0 = time.time()
@@ -120,7 +112,7 @@ def run_case(binary, cache, name, sets, steps, force=False, stop_when_static=Fal
         time.sleep(0.1)
         if stop_when_static and os.path.exists(csv_path):
             try:
-                rows = read_steps(csv_path)
+                rows = read_rows(csv_path)
             except (ValueError, KeyError):
                 continue  # a row being written
             if len(rows) >= 2 and rows[-1]["dofs"] == rows[-2]["dofs"]:
@@ -130,32 +122,11 @@ def run_case(binary, cache, name, sets, steps, force=False, stop_when_static=Fal
     wall = time.time() - t0
     if p.returncode != 0 and not stopped:
         raise SystemExit("needlehex failed (exit %d): %s" % (p.returncode, " ".join(cmd)))
-    rows = drop_repeat(read_steps(csv_path))
+    rows = drop_repeat(read_rows(csv_path))
     info = {"cmd": key, "wall": wall, "stopped": stopped}
     with open(stamp, "w") as f:
         json.dump(info, f)
     return rows, info
-
-
-def richardson(ks, ws):
-    """W(k) = W∞ − C k^(−p) through three points (k increasing)."""
-    (k1, k2, k3), (w1, w2, w3) = ks, ws
-
-    def g(p):  # zero when the ratio of differences matches
-        return (w2 - w1) * (k2 ** -p - k3 ** -p) - (w3 - w2) * (k1 ** -p - k2 ** -p)
-
-    lo, hi = 0.05, 6.0
-    if g(lo) * g(hi) > 0:
-        return float("nan"), float("nan"), float("nan")
-    for _ in range(200):
-        mid = 0.5 * (lo + hi)
-        if g(lo) * g(mid) <= 0:
-            hi = mid
-        else:
-            lo = mid
-    p = 0.5 * (lo + hi)
-    C = (w3 - w2) / (k2 ** -p - k3 ** -p)
-    return w3 + C * k3 ** -p, C, p
 
 
 def fmt_e(x, d=3):
@@ -175,10 +146,7 @@ def main():
     ap.add_argument("--force", action="store_true", help="run everything again")
     ap.add_argument("--no-bench", action="store_true", help="skip the lagrange/eliminate timing")
     a = ap.parse_args()
-    binary = a.binary or os.path.join(ROOT, "build", "needlehex")
-    if not os.path.exists(binary):
-        raise SystemExit("no needlehex binary; build it and pass --binary")
-    binary = os.path.abspath(binary)
+    binary = find_binary(a.binary)
     cache = os.path.join(a.cache, "quick") if a.quick else a.cache
     img = a.img or (os.path.join(cache, "img") if a.quick else os.path.join(ROOT, "docs", "img"))
     os.makedirs(cache, exist_ok=True)
@@ -247,7 +215,6 @@ def main():
         P("| uniform %d×%d×%d%s | %d | %.10e | %.2f | %.2f |" % (
             8 * k, 4 * k, 4 * k, " (reference)" if k == ref_k else "", r["dofs"], r["work"],
             info["wall"], r["t_factor"]))
-    ref_time = os.path.join(cache, "uniform-k%d" % ref_k, "time.txt")
     P("")
     P("- W_ref (uniform k = %d): %.10e J" % (ref_k, W_ref))
     P("- Richardson through k = %s: W_∞ = %.10e J, order p = %.3f in k (W_∞ − W_ref = %.3e, "
@@ -376,7 +343,7 @@ def main():
     styles = {"max": "-o", "dorfler": "--s"}
 
     def plot(ykey, fname, ylabel, title, ylog=True):
-        fig, ax = plt.subplots(figsize=(7.2, 5.2))
+        fig, ax = plt.subplots(figsize=FIGSIZE)
         if ykey == "err":
             yu = uni_err
         elif ykey == "eta":
@@ -411,10 +378,7 @@ def main():
         ax.set_ylabel(ylabel)
         ax.set_title(title, fontsize=10)
         ax.grid(True, which="both", alpha=0.3)
-        fig.tight_layout()  # before the legend, which would otherwise squeeze the axes
-        ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)
-        fig.savefig(os.path.join(img, fname), dpi=110, bbox_inches="tight")
-        plt.close(fig)
+        save(fig, os.path.join(img, fname), legend=ax)
 
     plot("err", "adapt_error.png", "‖u − u_h‖_E = sqrt(W_∞ − W_h)  (√J)",
          "adapt-localized: energy-norm error vs DOFs")

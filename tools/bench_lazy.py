@@ -23,7 +23,6 @@ one); `cpu` is the run's CPU time (user + system, all threads) per step, which
 the machine's load does not inflate. The load average is printed.
 """
 import argparse
-import csv
 import os
 import resource
 import statistics
@@ -33,15 +32,9 @@ import tempfile
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from bench_step import CASES  # noqa: E402
+from outputs import read_csv  # noqa: E402
 
 DEFAULT = ["needle-16", "needle-32", "dbs-coarse", "dbs-fine"]
-
-
-def rows(path):
-    if not os.path.exists(path):
-        return []
-    with open(path) as f:
-        return list(csv.DictReader(f))
 
 
 def motion(table, cols):
@@ -73,7 +66,7 @@ def run(binary, case, tol, steps, out):
     subprocess.run(cmd, check=True)
     ru1 = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = ru1.ru_utime + ru1.ru_stime - ru0.ru_utime - ru0.ru_stime
-    st = rows(os.path.join(out, "steps.csv"))[1:]
+    st = read_csv(os.path.join(out, "steps.csv"), missing=True)[1:]
     med = lambda k: 1e3 * statistics.median(float(r[k]) for r in st)  # noqa: E731
     res = dict(case=case, tol=tol, dofs=int(st[-1]["dofs"]), cells=int(st[-1]["cells"]),
                updates=statistics.mean(float(r["tangent_updates"]) for r in st),
@@ -85,9 +78,10 @@ def run(binary, case, tol, steps, out):
                min_step=1e3 * min(float(r["t_step"]) for r in st), cpu=1e3 * cpu / (len(st) + 1),
                share=statistics.median(float(r["t_assemble"]) / float(r["t_step"]) for r in st),
                load=0.5 * (load0 + os.getloadavg()[0]))
-    probes = motion(rows(os.path.join(out, "probes.csv")), ["ux", "uy", "uz"])
-    probes.update(motion(rows(os.path.join(out, "targets.csv")), ["x", "y", "z"]))
-    tools = rows(os.path.join(out, "tools.csv"))
+    table = lambda name: read_csv(os.path.join(out, name + ".csv"), missing=True)  # noqa: E731
+    probes = motion(table("probes"), ["ux", "uy", "uz"])
+    probes.update(motion(table("targets"), ["x", "y", "z"]))
+    tools = table("tools")
     res["_probe"] = probes
     res["_tip"] = motion(tools, ["tip_x", "tip_y", "tip_z"])
     res["_force"] = {(r["name"], r["step"]): [float(r["axial_force"]), float(r["lateral_force"])]

@@ -33,7 +33,6 @@ Runs are one after another, each with the default threads; the load average
 is printed with each run, since the machine may be shared.
 """
 import argparse
-import csv
 import json
 import os
 import resource
@@ -41,6 +40,8 @@ import statistics
 import subprocess
 import sys
 import tempfile
+
+from outputs import read_csv
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PHASES = ["t_assemble", "t_factor", "t_solve", "t_constraints", "t_compliance", "t_mcp",
@@ -79,8 +80,7 @@ def run(binary, case, mode, steps, out, extra=()):
     ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     subprocess.run(cmd, check=True, env=dict(os.environ, NH_TIME_FACTOR="1"))
     ru1 = resource.getrusage(resource.RUSAGE_CHILDREN)
-    with open(os.path.join(out, "steps.csv")) as f:
-        rows = list(csv.DictReader(f))[1:]
+    rows = read_csv(os.path.join(out, "steps.csv"))[1:]
     med = {p: 1e3 * statistics.median(float(r[p]) for r in rows) for p in PHASES}
     med["ratio"] = statistics.median(float(r["t_step"]) / float(r["t_factor_reference"])
                                      for r in rows)
@@ -99,10 +99,8 @@ def run(binary, case, mode, steps, out, extra=()):
 
 
 def plot(results, path):
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    fig, ax = plt.subplots(figsize=(6.2, 4.2))
+    from plotstyle import FIGSIZE, plt, save
+    fig, ax = plt.subplots(figsize=FIGSIZE)
     for mode, mk, label in (("every", "o", "factorise every step"), ("auto", "s", "reuse (auto)")):
         for fam, ls in (("needle", "-"), ("dbs", "--"), ("tissue", ":")):
             pts = sorted((r["free"], r["t_step"]) for r in results
@@ -115,11 +113,7 @@ def plot(results, path):
     ax.set_xlabel("free DOFs")
     ax.set_ylabel("median ms per step")
     ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    print("wrote %s" % path, file=sys.stderr)
+    save(fig, path, legend=ax)
 
 
 def main():

@@ -6,23 +6,23 @@
 Each RUN_DIR is the output of one `needlehex run` of the whole procedure on
 a uniform mesh of cell size H (mm). Per run: the dofs, the STN shift
 |x(t_s) − X| (t_s the last step before the cannula touches the brain, as in
-tools/study.py) and the final electrode–STN distance (targets.csv, last
-step). For three runs, the observed order p of each quantity from
-f(h) = f∞ − C h^p through the three (h, f) (tools/adapt_study.py's
-richardson, bisection on p in (0.05, 6): the spacings need not have a
-constant ratio) and the extrapolated f∞; no order when the differences
-change sign (not in the asymptotic range).
+tools/study.py dbs: study_dbs.phases) and the final electrode–STN distance
+(targets.csv, last step). For three runs, the observed order p of each
+quantity from f(h) = f∞ − C h^p through the three (h, f) (tools/richardson.py,
+bisection on p in (0.05, 6): the spacings need not have a constant ratio)
+and the extrapolated f∞; no order when the differences change sign (not in
+the asymptotic range).
 """
 import argparse
-import math
 import os
 import sys
 
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from adapt_study import richardson  # noqa: E402
-from study import phases, read_points, read_steps  # noqa: E402
+from outputs import read_points, read_steps  # noqa: E402
+from richardson import observed  # noqa: E402
+from study_dbs import phases  # noqa: E402
 
 
 def measure(d, target, cannula):
@@ -60,10 +60,10 @@ def main():
         cells = []
         for key in ("shift", "final"):
             f = [r[key] for r in last]
-            f_inf, p = float("nan"), float("nan")
+            p, f_inf = None, None
             if (f[1] - f[0]) * (f[2] - f[1]) > 0:  # monotone: an order can be observed
-                f_inf, _, p = richardson([1.0 / v for v in h], f)  # f(h) = f∞ − C h^p
-            cells.append("**%.3f** (observed order %.2f)" % (f_inf, p) if math.isfinite(p) else
+                p, f_inf = observed(h, f)  # f(h) = f∞ − C h^p
+            cells.append("**%.3f** (observed order %.2f)" % (f_inf, p) if p is not None else
                          "no order (differences %+.3f, %+.3f)" % (f[1] - f[0], f[2] - f[1]))
         print("| Richardson (h = %s) | | | | %s | %s | |" % (
             ", ".join("%g" % v for v in h), cells[0], cells[1]))

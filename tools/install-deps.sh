@@ -1,14 +1,16 @@
 #!/usr/bin/env bash
 # Install every Debian package needlehex needs: build, tests, plots, pictures
-# (xvfb: a virtual display for tools/render.py; ffmpeg: its MP4).
+# (xvfb: a virtual display for tools/render.py; ffmpeg: its MP4; elastix: its
+# transformix applies the exported displacement fields in tests/nifti_field.py).
 # Idempotent; run as root (or with sudo available).
 set -euo pipefail
 pkgs=(
   build-essential cmake pkg-config clang-format clang libclang-rt-14-dev
   libsuitesparse-dev libopenblas-dev liblapacke-dev
-  libyaml-dev libhdf5-dev zlib1g-dev libnifti2-dev
+  libyaml-dev libhdf5-dev zlib1g-dev libnifti2-dev libjson-c-dev
   python3 python3-numpy python3-matplotlib python3-vtk9 python3-meshio python3-h5py python3-nibabel python3-scipy
   python3-distributed python3-yaml
+  elastix
   xvfb ffmpeg git
 )
 sudo=""

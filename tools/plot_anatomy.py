@@ -23,16 +23,15 @@ Needs numpy, matplotlib, nibabel and vtk (Debian's python3-vtk9).
 import argparse
 import os
 
-import matplotlib
 import nibabel as nib
 import numpy as np
+from matplotlib.collections import PolyCollection
+from vtkmodules.util.numpy_support import numpy_to_vtk, vtk_to_numpy
+from vtkmodules.vtkCommonCore import vtkPoints
+from vtkmodules.vtkIOXML import vtkXMLUnstructuredGridReader
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-from matplotlib.collections import PolyCollection  # noqa: E402
-from vtkmodules.util.numpy_support import numpy_to_vtk, vtk_to_numpy  # noqa: E402
-from vtkmodules.vtkCommonCore import vtkPoints  # noqa: E402
-from vtkmodules.vtkIOXML import vtkXMLUnstructuredGridReader  # noqa: E402
+from outputs import read_steps
+from plotstyle import plt, save
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 T1 = os.path.join(os.path.dirname(nib.__file__), "tests", "data", "anatomical.nii")
@@ -135,9 +134,7 @@ def plot_slices(img, labels, out):
             ax.set(xlabel="y (mm, anterior +)", ylabel="z (mm, superior +)",
                    title=f"sagittal, x = {world(img, [SAGITTAL_I, 0, 0])[0]:.0f} mm")
     fig.suptitle("anatomical.nii (T1) with the lateral ventricles: label 4 (orange), 43 (cyan)")
-    fig.tight_layout()
-    fig.savefig(os.path.join(out, "anatomy_slices.png"), dpi=110)
-    plt.close(fig)
+    save(fig, os.path.join(out, "anatomy_slices.png"))
 
 
 def plot_mesh(img, grid, out):
@@ -171,9 +168,7 @@ def plot_mesh(img, grid, out):
         else:
             ax.set(xlabel="y (mm)", ylabel="z (mm)", title=f"cells cut by x = {x0 * 1e3:.0f} mm")
     fig.suptitle("dbs-mri mesh at t = 0 (red dashes: the image's extent)")
-    fig.tight_layout()
-    fig.savefig(os.path.join(out, "anatomy_mesh.png"), dpi=110)
-    plt.close(fig)
+    save(fig, os.path.join(out, "anatomy_mesh.png"))
 
 
 def plot_shift(img, labels, run, frames, out):
@@ -183,12 +178,8 @@ def plot_shift(img, labels, run, frames, out):
     voxels = world(img, ijk) * 1e-3
     print("| frame | t (s) | mean displacement of the ventricle voxels (mm) | spread (mm) |")
     print("|---|---|---|---|")
-    times = {}
-    with open(os.path.join(run, "steps.csv")) as f:
-        head = f.readline().strip().split(",")
-        for line in f:
-            r = dict(zip(head, line.split(",")))
-            times[int(r["step"])] = float(r["time"])
+    st = read_steps(run)
+    times = {int(s): float(t) for s, t in zip(st["step"], st["time"])}
     for n, step in enumerate(frames):
         grid = read_frame(run, step)
         u = probe(grid, voxels)
@@ -222,8 +213,7 @@ def plot_shift(img, labels, run, frames, out):
     handles, labels = axes[0].get_legend_handles_labels()  # one legend, below the plots
     fig.legend(handles, labels, fontsize=9, loc="upper center", ncol=len(labels),
                bbox_to_anchor=(0.5, 0.02), frameon=False)
-    fig.savefig(os.path.join(out, "anatomy_shift.png"), dpi=110, bbox_inches="tight")
-    plt.close(fig)
+    save(fig, os.path.join(out, "anatomy_shift.png"), layout=False)
 
 
 def main():

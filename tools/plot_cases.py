@@ -15,19 +15,18 @@ It also prints the numbers behind the plots as Markdown tables. Needs numpy
 and matplotlib (Debian's python3-numpy, python3-matplotlib).
 """
 import argparse
-import csv
 import math
 import os
 import subprocess
 import sys
 import tempfile
 
+import matplotlib.ticker
 import numpy as np
-import matplotlib
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import matplotlib.ticker  # noqa: E402
+from outputs import read_series
+from plotstyle import FIGSIZE, plt, save
+from richardson import richardson
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -41,12 +40,8 @@ def run(binary, case, out, sets=()):
 
 def read_probes(out):
     """{name: (t[], ux[], uy[], uz[])} from probes.csv."""
-    series = {}
-    with open(os.path.join(out, "probes.csv")) as f:
-        for r in csv.DictReader(f):
-            series.setdefault(r["name"], []).append(
-                (float(r["time"]), float(r["ux"]), float(r["uy"]), float(r["uz"])))
-    return {k: tuple(np.array(c) for c in zip(*v)) for k, v in series.items()}
+    series = read_series(out, "probes.csv", ["time", "ux", "uy", "uz"])
+    return {k: tuple(v.T) for k, v in series.items()}
 
 
 def timoshenko_tip():
@@ -75,8 +70,7 @@ def cantilever(binary, tmp, img):
     d = np.array(d)
     h = 0.01 / np.array(ns)  # cell edge: 0.1 m / 10n = 0.01 m / n
     err = np.abs(d - beam) / beam
-    p = math.log2((d[2] - d[1]) / (d[3] - d[2]))
-    extrap = d[3] + (d[3] - d[2]) / (2 ** p - 1)
+    extrap, _, p = richardson(ns[1:], d[1:])  # d(n) = d∞ − C n^(−p)
 
     print("Timoshenko tip deflection %.6e m (Euler-Bernoulli %.6e m)" % (beam, eb))
     print("\n| grid | cell size (mm) | tip deflection (m) | error vs Timoshenko | order from errors |"
@@ -90,7 +84,7 @@ def cantilever(binary, tmp, img):
     print("\nRichardson (last three grids): order %.3f, extrapolated %.6e m (%+.3f %% vs Timoshenko)"
           % (p, extrap, 100 * (extrap - beam) / beam))
 
-    fig, ax = plt.subplots(figsize=(6.4, 4.8))
+    fig, ax = plt.subplots(figsize=FIGSIZE)
     ax.loglog(1e3 * h, err, "o-", label="needlehex, tip deflection error")
     ref = err[-1] * (h / h[-1]) ** 2
     ax.loglog(1e3 * h, ref, "k--", label="slope 2 reference")
@@ -104,10 +98,7 @@ def cantilever(binary, tmp, img):
     ax.set_ylabel("|δ − δ_Timoshenko| / δ_Timoshenko  (–)")
     ax.set_title("cantilever: tip deflection vs Timoshenko beam theory (ν = 0)")
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend()
-    fig.tight_layout()
-    fig.savefig(os.path.join(img, "cantilever_convergence.png"), dpi=120)
-    plt.close(fig)
+    save(fig, os.path.join(img, "cantilever_convergence.png"), legend=ax)
 
 
 def phantom(binary, tmp, img):
@@ -115,7 +106,7 @@ def phantom(binary, tmp, img):
     run(binary, "phantom-tissue.yaml", out)
     pr = read_probes(out)
     names = [str(i) for i in range(1, 8)]
-    fig, ax = plt.subplots(figsize=(8.0, 4.8))
+    fig, ax = plt.subplots(figsize=FIGSIZE)
     cmap = plt.get_cmap("viridis")
     for i, nm in enumerate(names):
         t, ux, uy, uz = pr[nm]
@@ -127,10 +118,7 @@ def phantom(binary, tmp, img):
     ax.set_ylabel("displacement uₓ (µm)")
     ax.set_title("phantom-tissue (8×4×4): probe displacement along the axis")
     ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8, loc="center left", bbox_to_anchor=(1.01, 0.5))
-    fig.tight_layout()
-    fig.savefig(os.path.join(img, "phantom_probes.png"), dpi=120)
-    plt.close(fig)
+    save(fig, os.path.join(img, "phantom_probes.png"), legend=ax)
 
     print("\n| probe | x (mm) | ux at t = 0.1 s (µm) | ux at t = 0.5 s (µm) |")
     print("|---|---|---|---|")
@@ -141,7 +129,7 @@ def phantom(binary, tmp, img):
 
     # Final profile along the probe line on three grids.
     grids = [(8, 4, 4), (16, 8, 8), (32, 16, 16)]
-    fig, ax = plt.subplots(figsize=(6.4, 4.8))
+    fig, ax = plt.subplots(figsize=FIGSIZE)
     rows = []
     for g, mk in zip(grids, "os^"):
         o = os.path.join(tmp, "phantom_%d" % g[0])
@@ -150,15 +138,12 @@ def phantom(binary, tmp, img):
         x = np.array([5 * (i + 1) for i in range(7)])
         ux = np.array([p[nm][1][-1] for nm in names])
         rows.append(ux)
-        ax.plot(x, 1e6 * ux, mk + "-", label="%d×%d×%d" % g)
+        ax.plot(x, 1e6 * ux, mk + "-", label="grid %d×%d×%d" % g)
     ax.set_xlabel("probe position x (mm), on the axis y = z = 10 mm")
     ax.set_ylabel("displacement uₓ at t = 0.5 s (µm)")
     ax.set_title("phantom-tissue: axial displacement profile by grid")
     ax.grid(True, alpha=0.3)
-    ax.legend(title="grid")
-    fig.tight_layout()
-    fig.savefig(os.path.join(img, "phantom_profile.png"), dpi=120)
-    plt.close(fig)
+    save(fig, os.path.join(img, "phantom_profile.png"), legend=ax)
 
     print("\n| probe | x (mm) | " + " | ".join("ux %d×%d×%d (µm)" % g for g in grids) + " |")
     print("|---|---|" + "---|" * len(grids))

@@ -26,16 +26,14 @@ retracting, the steps per state, and the largest probe displacements.
 Needs numpy and matplotlib (Debian's python3-numpy, python3-matplotlib).
 """
 import argparse
-import csv
 import os
 import sys
 
 import numpy as np
-import matplotlib
+from matplotlib.patches import Patch
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-from matplotlib.patches import Patch  # noqa: E402
+from outputs import read_series, read_steps, read_tools
+from plotstyle import FIGSIZE, plt, save
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 STATES = ["outside", "contact", "punctured", "cutting", "retracting"]
@@ -53,47 +51,6 @@ STATE_MARKERS = {
     "cutting": "#de2d26",
     "retracting": "#31a354",
 }
-
-
-def read_csv(path):
-    with open(path, newline="") as f:
-        return list(csv.DictReader(f))
-
-
-def read_tools(run, tool):
-    rows = read_csv(os.path.join(run, "tools.csv"))
-    names = sorted({r["name"] for r in rows})
-    if not names:
-        sys.exit("%s: tools.csv has no rows" % run)
-    if tool is None:
-        tool = rows[0]["name"]
-    if tool not in names:
-        sys.exit("%s: no tool named '%s' in tools.csv (have %s)" % (run, tool, ", ".join(names)))
-    rows = [r for r in rows if r["name"] == tool]
-    d = {k: np.array([float(r[k]) for r in rows]) for k in
-         ("step", "time", "tip_x", "tip_y", "tip_z", "depth", "axial_force", "lateral_force")}
-    d["state"] = [r["state"] for r in rows]
-    d["name"] = tool
-    return d
-
-
-def read_probes(run):
-    path = os.path.join(run, "probes.csv")
-    if not os.path.exists(path):
-        return {}
-    out = {}
-    for r in read_csv(path):
-        out.setdefault(r["name"], []).append(
-            (float(r["time"]), float(r["ux"]), float(r["uy"]), float(r["uz"])))
-    return {k: np.array(v) for k, v in out.items()}
-
-
-def read_steps(run):
-    path = os.path.join(run, "steps.csv")
-    if not os.path.exists(path):
-        return None
-    rows = read_csv(path)
-    return {k: np.array([float(r[k]) for r in rows]) for k in rows[0]} if rows else None
 
 
 def segments(states, t):
@@ -219,22 +176,12 @@ def report(run, tl, m):
     print()
 
 
-def save(fig, out, filename):
-    """Write the figure to out/filename, close it, return the path."""
-    fig.tight_layout()
-    path = os.path.join(out, filename)
-    fig.savefig(path, dpi=110, bbox_inches="tight")
-    plt.close(fig)
-    return path
-
-
 def plot_run(run, tl, probes, m, out, name, states):
-    files = []
     f, d, t = tl["axial_force"], tl["depth"], tl["time"]
     st = np.array(tl["state"])
 
     # force versus depth, coloured by state
-    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    fig, ax = plt.subplots(figsize=FIGSIZE)
     for s in STATES:
         k = st == s
         if k.any():
@@ -249,11 +196,10 @@ def plot_run(run, tl, probes, m, out, name, states):
     ax.set_ylabel("axial force on the tool (N)")
     ax.set_title("%s: insertion force versus depth" % os.path.basename(run))
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)
-    files.append(save(fig, out, "%s_force_depth.png" % name))
+    save(fig, os.path.join(out, "%s_force_depth.png" % name), legend=ax)
 
     # force and depth versus time, states shaded
-    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    fig, ax = plt.subplots(figsize=FIGSIZE)
     handles = shade(ax, tl) if states else []
     (l1,) = ax.plot(t, f, "-", color="#b2182b", lw=1.2, label="axial force")
     ax.axhline(0, color="#888888", lw=0.5)
@@ -266,7 +212,7 @@ def plot_run(run, tl, probes, m, out, name, states):
     ax.legend(handles=[l1, l2] + handles, fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.14),
               ncol=3, frameon=False)  # below: the right axis is the depth's
     ax.set_xlim(t[0], t[-1])
-    files.append(save(fig, out, "%s_force_time.png" % name))
+    save(fig, os.path.join(out, "%s_force_time.png" % name))
 
     # probes
     if probes:
@@ -284,9 +230,7 @@ def plot_run(run, tl, probes, m, out, name, states):
         for a in (a1, a2):
             a.grid(alpha=0.3)
             a.set_xlim(t[0], t[-1])
-        a1.legend(fontsize=8, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)
-        files.append(save(fig, out, "%s_probes.png" % name))
-    return files
+        save(fig, os.path.join(out, "%s_probes.png" % name), legend=a1)
 
 
 def main():
@@ -298,30 +242,27 @@ def main():
     ap.add_argument("--tool", help="the tool to plot (default: the first in tools.csv)")
     a = ap.parse_args()
     os.makedirs(a.out, exist_ok=True)
-    written, all_tl = [], []
+    all_tl = []
     for run in a.runs:
         run = os.path.normpath(run)
         if not os.path.exists(os.path.join(run, "tools.csv")):
             sys.exit("%s: no tools.csv (not the output folder of a run with tools)" % run)
         tl = read_tools(run, a.tool)
-        probes = read_probes(run)
-        m = measure(tl, read_steps(run), probes)
+        probes = read_series(run, "probes.csv", ["time", "ux", "uy", "uz"])
+        m = measure(tl, read_steps(run, missing=True), probes)
         name = os.path.basename(run).replace("-", "_")
         report(run, tl, m)
-        written += plot_run(run, tl, probes, m, a.out, name, a.states)
+        plot_run(run, tl, probes, m, a.out, name, a.states)
         all_tl.append((run, tl))
     if len(all_tl) > 1:
-        fig, ax = plt.subplots(figsize=(6.4, 4.2))
+        fig, ax = plt.subplots(figsize=FIGSIZE)
         for run, tl in all_tl:
             ax.plot(tl["time"], tl["axial_force"], label=os.path.basename(run))
         ax.axhline(0, color="#888888", lw=0.5)
         ax.set_xlabel("time (s)")
         ax.set_ylabel("axial force on the tool (N)")
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=8, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)
-        written.append(save(fig, a.out, "needle_force_compare.png"))
-    for p in written:
-        print("wrote", os.path.relpath(p))
+        save(fig, os.path.join(a.out, "needle_force_compare.png"), legend=ax)
 
 
 if __name__ == "__main__":

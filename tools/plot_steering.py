@@ -13,23 +13,20 @@ insertion and (obstacle) the final distance to the target and the closest
 approach of the path to the obstacle's axis.
 """
 import argparse
-import csv
 import glob
-import math
 import os
 
-import matplotlib
+import meshio
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import meshio  # noqa: E402
-import numpy as np  # noqa: E402
+from outputs import read_csv
+from plotstyle import plt, save
 
 OBSTACLE = (0.06, 0.04, 0.004)  # x, y of the axis, radius (tools/make_steering_obstacle.py)
 
 
 def tip_path(run):
-    rows = list(csv.DictReader(open(os.path.join(run, "tools.csv"))))
+    rows = read_csv(os.path.join(run, "tools.csv"))
     return np.array([[float(r["tip_x"]), float(r["tip_y"]), float(r["depth"])] for r in rows])
 
 
@@ -39,10 +36,7 @@ def needle(run):
 
 
 def target(run):
-    path = os.path.join(run, "targets.csv")
-    if not os.path.exists(path):
-        return None
-    rows = list(csv.DictReader(open(path)))
+    rows = read_csv(os.path.join(run, "targets.csv"), missing=True)
     return rows[-1] if rows else None
 
 
@@ -93,9 +87,7 @@ def main():
         ax.set_aspect("equal")
         ax.grid(alpha=0.3)
         ax.legend(loc="upper left", fontsize=8)
-    fig.tight_layout()
-    fig.savefig(args.out, dpi=110)
-    print("wrote", args.out)
+    save(fig, args.out)
 
 
 if __name__ == "__main__":

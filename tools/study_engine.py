@@ -1,12 +1,20 @@
-"""The execution engine of tools/study.py: runs the variants of a study (each
-one `needlehex run` into its own folder) through dask.distributed, on a
+"""The engine of tools/study.py: runs the variants of a study (each one
+`needlehex run` into its own folder) through dask.distributed, on a
 LocalCluster of N worker processes on this machine or on an existing
-cluster (docs/performance.md, "Studies on a cluster").
+cluster (docs/performance.md, "Studies on a cluster"), and gives the
+studies (tools/study_*.py) their folders and report.
 
     jobs = [Job(name, out, cmd), ...]
     done = run_jobs(jobs, workers=2)              # LocalCluster of 2 workers
     done = run_jobs(jobs, scheduler="tcp://127.0.0.1:8786")
     done = run_jobs(jobs, workers=0)              # serial, in this process, no Dask
+
+A study, with the parsed options `a` of tools/study.py:
+
+    out = out_dir(a, "phantom")                   # --out, else out/study/phantom
+    img = plot_dir(a, out)                        # --img, docs/img with --docs, else OUT/img
+    infos = run_variants(a, binary, scene, out, [(name, sets), ...])
+    write_report(out, lines)                      # printed and OUT/report.md
 
 Each variant runs in OUT.partial and is renamed to OUT once needlehex exits
 0, with OUT/run.json recording its command, wall time, host, date, exit code
@@ -27,7 +35,9 @@ Each run is single-threaded by default (OMP_NUM_THREADS=1,
 OPENBLAS_NUM_THREADS=1): N workers on N cores then do not compete for
 cores inside one run. The LocalCluster's scheduler and workers listen on
 127.0.0.1 only, their HTTP servers included (tests/plan_sweep.py checks).
-Needs Debian's python3-distributed; use /usr/bin/python3.
+Only the standard library at import (the engine uploads itself to a
+cluster's workers); needs Debian's python3-distributed for Dask; use
+/usr/bin/python3.
 """
 import ctypes
 import json
@@ -43,6 +53,7 @@ from collections import namedtuple
 # accept: the exit codes that make a variant complete (a plan that did not converge exits 1
 # and is a result, not a failure: tools/study_sweep.py, `command: plan`)
 Job = namedtuple("Job", "name out cmd accept", defaults=((0,),))
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def _die_with_parent():
@@ -194,3 +205,73 @@ def add_arguments(ap, default_workers):
                    help="OpenMP/BLAS threads per run (default 1)")
     g.add_argument("--restart", action="store_true",
                    help="skip variants already complete in OUT (same command)")
+
+
+# ---- the studies' side: folders, variants from the options, the report ----
+
+def find_binary(given):
+    """The needlehex binary: GIVEN (--binary), else build/needlehex of the source tree."""
+    for b in ([given] if given else [os.path.join(ROOT, "build", "needlehex")]):
+        if b and os.path.exists(b):
+            return os.path.abspath(b)
+    raise SystemExit("no needlehex binary (build it: tools/run-case.sh, or pass --binary)")
+
+
+def out_dir(a, study):
+    """The study's folder: --out, else out/study/STUDY of the source tree."""
+    return a.out or os.path.join(ROOT, "out", "study", study)
+
+
+def plot_dir(a, out):
+    """Where the PNGs go: --img, else docs/img with --docs, else OUT/img."""
+    img = a.img or (os.path.join(ROOT, "docs", "img") if a.docs else os.path.join(out, "img"))
+    os.makedirs(img, exist_ok=True)
+    return img
+
+
+def run_variants(a, binary, scene, out, variants):
+    """Runs the variants [(name, sets)] of a study into OUT/NAME through the engine
+    (--workers, --scheduler, --threads; --steps: time.steps for every variant); with --reuse
+    a variant already complete in OUT is reported on, not run again (--restart: only if its
+    command is the same). Returns {name: run.json record} of the complete ones; failed ones
+    are reported."""
+    jobs = []
+    for name, sets in variants:
+        cmd = [binary, "run", scene, "--quiet"]
+        for s in sets + (["time.steps=%d" % a.steps] if a.steps else []):
+            cmd += ["--set", s]
+        jobs.append(Job(name, os.path.join(out, name), cmd))
+    done, failed = run_jobs(jobs, workers=a.workers, scheduler=a.scheduler,
+                            skip_complete=a.reuse or a.restart, same_command=not a.reuse,
+                            threads=a.threads)
+    report_failures(failed)
+    return done
+
+
+def run_with_reference(a, binary, st, out):
+    """Runs the study's selected variants (--only) of st["variants"] [(name, label, sets,
+    kind)] and, when missing or with --fresh-reference, its reference st["reference"] (name,
+    label, sets) first (the longest run); returns the reference's name, label and folder and
+    the runs' records."""
+    rname, rlabel, rsets = st["reference"]
+    rdir = os.path.join(out, rname)
+    selected = [(name, sets) for name, _, sets, _ in st["variants"] if not a.only or name in a.only]
+    if a.fresh_reference or not os.path.exists(os.path.join(rdir, "run.json")):
+        selected.insert(0, (rname, rsets))  # the longest run first
+    infos = run_variants(a, binary, st["scene"], out, selected)
+    if not os.path.exists(os.path.join(rdir, "run.json")):
+        raise SystemExit("no reference run in %s" % rdir)
+    return rname, rlabel, rdir, infos
+
+
+def table_head(*columns):
+    """The first two lines of a Markdown table of the report: the columns' names and the rule."""
+    return ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+
+
+def write_report(out, lines):
+    """Prints the report and writes it to OUT/report.md."""
+    report = "\n".join(lines)
+    print(report)
+    with open(os.path.join(out, "report.md"), "w") as f:
+        f.write(report + "\n")

@@ -63,6 +63,12 @@ import sys
 import yaml
 
 import study_engine as engine
+from outputs import read_csv
+
+# tools/study.py: sweeps run as many variants at once as there are cores (--workers), and
+# take a spec
+WORKERS = os.cpu_count() or 1
+POSITIONAL = ("SPEC.yaml", "the spec (YAML, see study_sweep.py)")
 
 
 def load_spec(path, command=None):
@@ -178,9 +184,8 @@ def plan_outcome(out, info):
 
 def reduce_output(out, o):
     """The value of output `o` for the run in OUT (nan if the run has no such rows)."""
-    path = os.path.join(out, o["file"])
-    with open(path) as f:
-        rows = [r for r in csv.DictReader(f) if "row" not in o or r.get("name") == str(o["row"])]
+    rows = [r for r in read_csv(os.path.join(out, o["file"]))
+            if "row" not in o or r.get("name") == str(o["row"])]
     vals = [float(r[o["column"]]) for r in rows]
     if not vals:
         return math.nan
@@ -229,7 +234,7 @@ def write_table(spec, rows):
         w.writeheader()
         for r in rows:
             w.writerow({k: repr(r[k]) if isinstance(r[k], float) else r[k] for k in cols})
-    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+    lines = engine.table_head(*cols)
     for r in rows:
         lines.append("| " + " | ".join("%.6g" % r[k] if isinstance(r[k], float) else str(r[k])
                                        for k in cols) + " |")
@@ -241,12 +246,10 @@ def write_table(spec, rows):
 
 
 def plot(spec, rows):
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from plotstyle import FIGSIZE, plt, save
     for p in spec.get("plots", []):
         series = p.get("series")
-        fig, ax = plt.subplots(figsize=(8.5 if series else 6, 4))
+        fig, ax = plt.subplots(figsize=FIGSIZE)
         groups = sorted({r[series] for r in rows}, key=str) if series else [None]
         for k, g in enumerate(groups):
             pts = sorted((float(r[p["x"]]), r[p["y"]]) for r in rows
@@ -260,20 +263,15 @@ def plot(spec, rows):
         if p.get("logx"):
             ax.set_xscale("log")
         ax.grid(alpha=0.3)
-        if series and ax.get_legend_handles_labels()[0]:  # right of the axes, off the curves
-            ax.legend(fontsize=8, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)
-        fig.tight_layout()
-        name = os.path.join(spec["out"], "sweep_%s_%s.png" % (p["y"], p["x"].replace(".", "_")))
-        fig.savefig(name, dpi=110, bbox_inches="tight")
-        plt.close(fig)
-        print("wrote %s" % name, file=sys.stderr)
+        save(fig, os.path.join(spec["out"], "sweep_%s_%s.png" % (p["y"], p["x"].replace(".", "_"))),
+             legend=ax if series and ax.get_legend_handles_labels()[0] else None)
 
 
-def sweep(a, binary, command=None):
+def run(a, binary):
     """Runs the sweep of a.spec with the engine options of a; returns the exit status (1 if a
-    variant failed or a plan did not converge). command "plan": the spec's `command` must be
-    plan or absent (tools/study.py plan)."""
-    spec = load_spec(a.spec, command)
+    variant failed or a plan did not converge). `tools/study.py plan`: the spec's `command`
+    must be plan or absent."""
+    spec = load_spec(a.spec, "plan" if a.study == "plan" else None)
     if a.out:
         spec["out"] = os.path.abspath(a.out)
     os.makedirs(spec["out"], exist_ok=True)

@@ -179,4 +179,99 @@ int nh_surface_ray_entry(const nh_surface *surface, const double base[3], const 
 /* 1 if some triangle's bounding box meets the box [lo, hi]. */
 int nh_surface_meets_box(const nh_surface *surface, const double lo[3], const double hi[3]);
 
+/* ---- 3D Slicer markups (anatomy/markups.c) ----
+ * Points planned in 3D Slicer: a `.mrk.json` file (Slicer's markups schema
+ * v1.0.3: markups[] of type Fiducial, Line, Angle, Curve, ClosedCurve, Plane
+ * or ROI, each with its coordinateSystem RAS or LPS, coordinateUnits mm or
+ * um, and controlPoints[] with label and position) or a legacy `.fcsv` (one
+ * fiducial list; "# CoordinateSystem = RAS | LPS | 0 | 1"; always mm). Every
+ * point is converted to the scene frame: RAS (LPS: x and y negated), metres.
+ * The markups are in the world frame of the images they were placed on,
+ * which for a NIfTI image is its sform/qform frame: the scene's frame. */
+#define NH_MARKUPS_MAX_BYTES      (16L << 20) /* larger files are refused unread */
+#define NH_MARKUPS_MAX_COORDINATE 10.0        /* m: a farther point is not a coordinate */
+
+typedef enum {
+  NH_MARKUP_FIDUCIAL,
+  NH_MARKUP_LINE,
+  NH_MARKUP_ANGLE,
+  NH_MARKUP_CURVE,
+  NH_MARKUP_CLOSED_CURVE,
+  NH_MARKUP_PLANE,
+  NH_MARKUP_ROI
+} nh_markup_type;
+
+typedef struct {
+  char *label; /* the control point's label ("" if none) */
+  double x[3]; /* scene frame: RAS, metres */
+  int defined; /* its position is set (positionStatus "defined" or absent) */
+  int markup;  /* index of the markup holding it */
+} nh_markup_point;
+
+typedef struct {
+  char *name; /* the markup's name ("" if none; .fcsv: the file's stem) */
+  nh_markup_type type;
+  int first, n; /* its control points: point[first .. first + n) */
+} nh_markup;
+
+typedef struct nh_markups {
+  char path[NH_ANATOMY_PATH_MAX];
+  int n_markups, n_points;
+  nh_markup *markup;
+  nh_markup_point *point;
+} nh_markups;
+
+/* Read a markups file: `.fcsv` when its first line is Slicer's fiducial
+ * header ("# Markups fiducial file version = ..."), else JSON. Output *out.
+ * Fails with NH_ERR_INPUT, message "PATH: reason" (JSON syntax errors
+ * "PATH:LINE:COLUMN: ..."; .fcsv rows "PATH:LINE: ..."): a missing or
+ * unreadable file, one above NH_MARKUPS_MAX_BYTES (refused before it is
+ * read), not JSON and not .fcsv, JSON without a "markups" array, an unknown
+ * type, coordinateSystem or coordinateUnits, a position that is not three
+ * numbers, a non-finite one or one farther than NH_MARKUPS_MAX_COORDINATE
+ * from the origin. NH_ERR_MEMORY. */
+int nh_markups_read(const char *path, nh_markups **out);
+void nh_markups_destroy(nh_markups **markups); /* sets *markups = NULL */
+/* "Fiducial", "Line", ... (the schema's names). */
+const char *nh_markup_type_name(nh_markup_type type);
+
+/* The control point labelled `label`, in the scene frame. It must be the
+ * only point of that label in the file, of a Fiducial or a Line markup, with
+ * a defined position. Fails with NH_ERR_INPUT, "PATH: reason": no such label
+ * (the labels there are listed, at most 8), a label on several points of one
+ * markup, a label in more than one markup, a point of a Curve, ClosedCurve,
+ * Angle, Plane or ROI, an undefined position. */
+int nh_markups_point(const nh_markups *markups, const char *label, double x[3]);
+/* The two points of the Line markup named `name` (NULL: the file's only Line
+ * markup), in file order. Fails with NH_ERR_INPUT, "PATH: reason": no such
+ * Line (the Lines there are listed), several of that name, a Line without
+ * two defined points. */
+int nh_markups_line(const nh_markups *markups, const char *name, double a[3], double b[3]);
+/* Read `path` and return the point labelled `label` (nh_markups_read, then
+ * nh_markups_point). */
+int nh_markups_find_point(const char *path, const char *label, double x[3]);
+
+/* ---- voxel values of any scalar image (read by anatomy/image.c, interpolated by anatomy/volume.c)
+ * ---- */
+/* Voxel v of raw NIfTI data of type `datatype` (a NIfTI DT_* code) as a
+ * double; 0 and *ok = 0 for a type that is not a real number (complex, RGB). */
+double nh_image_voxel_value(const void *data, int datatype, size_t v, int *ok);
+/* Read the header of `path` as nh_image_read(path, 0, limits, out) and its
+ * voxels as doubles, intensities or labels: values[n0 n1 n2], i fastest
+ * (the caller frees), scl_slope · stored + scl_inter when the slope is
+ * finite and non-zero (NIfTI's rule), else the stored values. The voxels
+ * are read as nh_image_read's labels (bounded, the file's length checked)
+ * and must be finite. Fails as nh_image_read, and with NH_ERR_INPUT for a
+ * voxel that is not finite (named); NH_ERR_MEMORY. */
+int nh_image_read_values(const char *path, const nh_read_limits *limits, nh_image **out,
+                         double **values);
+/* The value at world point x of `values` given at the voxel centres of
+ * `image`: trilinear between centres (nearest = 0), or the nearest centre's
+ * (nearest = 1, for labels). 0 outside the image's voxels (index outside
+ * [-1/2, n - 1/2)); in the outer half voxel the edge centres' values (the
+ * rule of ITK's interpolators, so an image resampled here and by ITK agree
+ * there too). */
+double nh_image_interpolate(const nh_image *image, const double *values, const double x[3],
+                            int nearest);
+
 #endif

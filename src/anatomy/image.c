@@ -268,11 +268,10 @@ static int nh_nifti_header_limits(const char *path, const nh_nifti_header *h,
 
 /* ---- the voxels ---- */
 
-/* Voxel v of a chunk of raw data (native order) as a double. */
-static double nh_voxel_value(int datatype, const unsigned char *d, size_t v) {
+double nh_image_voxel_value(const void *d, int datatype, size_t v, int *ok) {
   switch (datatype) {
   case DT_UINT8:
-    return d[v];
+    return ((const uint8_t *)d)[v];
   case DT_INT8:
     return ((const int8_t *)d)[v];
   case DT_INT16:
@@ -289,28 +288,33 @@ static double nh_voxel_value(int datatype, const unsigned char *d, size_t v) {
     return (double)((const uint64_t *)d)[v];
   case DT_FLOAT32:
     return ((const float *)d)[v];
-  default: /* DT_FLOAT64: nh_label_type admits no other */
+  case DT_FLOAT64:
     return ((const double *)d)[v];
+  default:
+    *ok = 0;
+    return 0.0;
   }
 }
 
 /* Read the voxels from `file` (znzlib, plain or gzip'd; `where` names it in
- * messages) into im->label,
- * chunk by chunk: exactly nvox × nbyper bytes after vox_offset, then the end
- * of the file. Values go through scl_slope/scl_inter and must be whole
- * numbers in int's range (NaN and 2.5 are refused, naming the voxel).
- * The labels' pages are touched only as data arrive, so a file shorter than
- * its header says costs what it holds, not what it claims. */
+ * messages) chunk by chunk: exactly nvox × nbyper bytes after vox_offset,
+ * then the end of the file. Values go through scl_slope/scl_inter. With
+ * values == NULL they are labels, into im->label: whole numbers in int's
+ * range (NaN and 2.5 are refused, naming the voxel); else intensities, into
+ * values[nvox]: finite numbers. The output's pages are touched only as data
+ * arrive (calloc maps a large block without writing it), so a file
+ * shorter than its header says costs what it holds, not what it claims. */
 static int nh_nifti_voxels(nh_image *im, const char *file, const char *where,
-                           const nh_nifti_header *h) {
+                           const nh_nifti_header *h, double *values) {
   const size_t nvox = (size_t)im->n[0] * im->n[1] * im->n[2];
   const double total = (double)nvox * h->nbyper;
-  im->label = malloc(sizeof(int) * nvox);
+  if (!values) im->label = nh_calloc(nvox, sizeof(int));
   enum { CHUNK = 1 << 20 };
-  unsigned char *buf = malloc(CHUNK);
+  unsigned char *buf = nh_calloc(CHUNK, 1);
   znzFile fp = znzopen(file, "rb", nifti_is_gzfile(file));
   int rc = NH_OK, damaged = 0;
-  if (!im->label || !buf) rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: voxels of %s", where);
+  if ((!values && !im->label) || !buf)
+    rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: voxels of %s", where);
   if (!rc && znz_isnull(fp)) rc = NH_ERROR(NH_ERR_INPUT, "%s: cannot open the voxel data", where);
   /* Skip to vox_offset by reading: the same for gzip'd and plain files. */
   for (double skipped = 0; !rc && skipped < h->vox_offset;) {
@@ -336,18 +340,23 @@ static int nh_nifti_voxels(nh_image *im, const char *file, const char *where,
     }
     if (h->swapped && h->swapsize > 1) nifti_swap_Nbytes((int64_t)n, h->swapsize, buf);
     for (size_t i = 0; i < n; i++) {
-      double value = nh_voxel_value(h->datatype, buf, i);
+      int ok = 1; /* nh_label_type admitted the type */
+      double value = nh_image_voxel_value(buf, h->datatype, i, &ok);
       if (slope != 0) value = slope * value + inter;
-      if (!(value == floor(value) && fabs(value) <= (double)INT_MAX)) {
+      int good = values ? isfinite(value) : value == floor(value) && fabs(value) <= (double)INT_MAX;
+      if (!good) {
         size_t v = v0 + i, a = v % (size_t)im->n[0], b = v / (size_t)im->n[0] % (size_t)im->n[1],
                c = v / ((size_t)im->n[0] * im->n[1]);
-        rc = NH_ERROR(NH_ERR_INPUT,
-                      "%s: voxel [%zu, %zu, %zu] holds %g, not an integer label (a label image "
-                      "holds whole numbers; segment an intensity image first)",
-                      where, a, b, c, value);
+        rc = NH_ERROR(NH_ERR_INPUT, "%s: voxel [%zu, %zu, %zu] holds %g, %s", where, a, b, c, value,
+                      values ? "not a finite intensity"
+                             : "not an integer label (a label image holds whole numbers; "
+                               "segment an intensity image first)");
         break;
       }
-      im->label[v0 + i] = (int)value;
+      if (values)
+        values[v0 + i] = value;
+      else
+        im->label[v0 + i] = (int)value;
     }
   }
   if (!rc && nh_znz_read(buf, 1, fp, &damaged) == 1)
@@ -431,9 +440,10 @@ static int nh_image_file_size(const char *file, const nh_read_limits *limits, do
 }
 
 /* Header, checks and voxels of the image im->path, whose header is in
- * hdr_file (the .nii itself, or the .hdr of a pair). */
+ * hdr_file (the .nii itself, or the .hdr of a pair): the voxels as labels
+ * when read_data, as intensities into *values when values != NULL. */
 static int nh_image_load(nh_image *im, const char *hdr_file, int read_data,
-                         const nh_read_limits *limits) {
+                         const nh_read_limits *limits, double **values) {
   const char *path = im->path;
   double hdr_size, img_size;
   NH_TRY(nh_image_file_size(hdr_file, limits, &hdr_size));
@@ -467,13 +477,22 @@ static int nh_image_load(nh_image *im, const char *hdr_file, int read_data,
                     where, img_size, need, h.vox_offset, im->n[0], im->n[1], im->n[2], h.nbyper,
                     img_size < need ? "truncated" : "longer than its header says");
   }
-  if (!rc && read_data) rc = nh_nifti_voxels(im, img_file, where, &h);
+  if (!rc && read_data) rc = nh_nifti_voxels(im, img_file, where, &h, NULL);
+  if (!rc && values) {
+    *values = nh_calloc((size_t)im->n[0] * im->n[1] * im->n[2], sizeof(double));
+    rc = *values ? nh_nifti_voxels(im, img_file, where, &h, *values)
+                 : NH_ERROR(NH_ERR_MEMORY, "out of memory: voxels of %s", where);
+  }
   free(img_file);
   return rc;
 }
 
-int nh_image_read(const char *path, int read_data, const nh_read_limits *limits, nh_image **out) {
+/* nh_image_read, and the voxels as intensities into *values when values
+ * != NULL. */
+static int nh_image_open(const char *path, int read_data, const nh_read_limits *limits,
+                         nh_image **out, double **values) {
   *out = NULL;
+  if (values) *values = NULL;
   limits = nh_read_limits_or_default(limits);
   size_t len = strlen(path);
   NH_CHECK(len < NH_ANATOMY_PATH_MAX, NH_ERR_INPUT, "%s: path too long", path);
@@ -492,15 +511,25 @@ int nh_image_read(const char *path, int read_data, const nh_read_limits *limits,
     memcpy(im->path, path, len + 1);
     im->refs = 1;
     im->lo[0] = 1, im->hi[0] = 0;
-    rc = nh_image_load(im, hdr_file, read_data, limits);
+    rc = nh_image_load(im, hdr_file, read_data, limits, values);
   }
   free(hdr_file);
   if (rc) {
     nh_image_release(&im);
+    if (values) free(*values), *values = NULL;
     return rc;
   }
   *out = im;
   return NH_OK;
+}
+
+int nh_image_read(const char *path, int read_data, const nh_read_limits *limits, nh_image **out) {
+  return nh_image_open(path, read_data, limits, out, NULL);
+}
+
+int nh_image_read_values(const char *path, const nh_read_limits *limits, nh_image **out,
+                         double **values) {
+  return nh_image_open(path, 0, limits, out, values);
 }
 
 void nh_image_retain(nh_image *im) {

@@ -10,7 +10,13 @@
  * that does not lock near incompressibility (docs/theory.md §2b).
  * Lumped mass ρ Vₑ / 8 per node; an immersed cell scales stiffness and mass
  * by its fill fraction φ. Matrices are row-major, 24x24, row 3a+i is node a,
- * component i. Voigt order for stresses: xx, yy, zz, yz, xz, xy. */
+ * component i. Voigt order for stresses: xx, yy, zz, yz, xz, xy.
+ *
+ * Files, each using only those before it: hex.c (one element: K₀, the
+ * rotation, force and tangent) < stress.c (the stress anywhere inside one
+ * element, compliance, von Mises) < tissue.c (every leaf of the mesh: the
+ * element data cache, materials, mass, ties, forces, cell stresses);
+ * traction.c (surface loads) uses only the mesh. */
 #ifndef NH_FEM_H
 #define NH_FEM_H
 
@@ -21,6 +27,8 @@ typedef struct {
   double young, poisson, density;
   nh_formulation formulation; /* scene/scene.h; default (0): B-bar */
 } nh_material;
+
+/* ---- one element (fem/hex.c) ---- */
 
 /* Rest stiffness K0 (24x24), the shape-function gradients G0[8][3] = ∇_X N_a
  * at the centre, their volume averages Gbar[8][3] = (1/V) ∫ ∇_X N_a dV (may
@@ -76,15 +84,49 @@ void nh_hex_corot_tangent(const double K0[576], const nh_hex_volumetric *vol,
 void nh_hex_corot_apply(const double K0[576], const nh_hex_volumetric *vol, const double frame[18],
                         const double w[24], double y[24]);
 
-/* Cauchy stress at the centre: nh_hex_stress_at at ξ = 0; s[6] Voigt. */
-void nh_hex_center_stress(const double X[24], const double u[24], const double G0[24],
-                          const double *Gbar, double lambda, double mu, double s[6]);
+/* Lamé parameters from E and ν. */
+void nh_lame(double young, double poisson, double *lambda, double *mu);
+
+/* ---- stresses inside an element, compliance, von Mises (fem/stress.c) ----
+ * Above the element (hex.c), below the tissue (tissue.c evaluates them for
+ * its cells). */
+
+/* Cauchy stress at n natural points xi[3n] of one element: s[6n] (Voigt),
+ * σ = R (λ tr ε I + 2 μ ε) Rᵀ with R the element's rotation (polar of F at
+ * the centre, as nh_hex_corot) and ε the symmetric gradient of the corotated
+ * displacements d = Rᵀu + (Rᵀ − I)(X − X̄) with the rest gradients at ξ;
+ * with Gbar (B-bar) the volumetric part is the element's mean,
+ * σ = κ θ̄ I + R (2μ dev ε) Rᵀ, θ̄ = det F̄ − 1 (nh_hex_mean_dilatation),
+ * κ = λ + ⅔μ.
+ * detJ[n] (may be NULL) receives the rest Jacobian determinant at each point.
+ * Cannot fail: a point where det J <= 0 (outside a valid cell) uses the
+ * centre gradients G0, so s is finite for finite input; callers that need
+ * det J > 0 check detJ. */
+void nh_hex_stress_at(const double X[24], const double u[24], const double G0[24],
+                      const double *Gbar, double lambda, double mu, int n, const double *xi,
+                      double *s, double *detJ);
+
+/* σ = R (λ tr ε I + 2 μ ε) Rᵀ, ε = sym(Σₐ dₐ ⊗ gₐ), for element rotation
+ * R[9], corotated nodal values d[24] and shape-function gradients g[24] at a
+ * point; s[6] Voigt. With d = Rᵀw (node by node) it is the stress of the
+ * tangent R K₀ Rᵀ for nodal values w (an increment, a dual solution): the sum
+ * over the 2x2x2 Gauss points of det J σ(w)ᵀ D⁻¹ σ(v) is vᵀ R K₀ Rᵀ w.
+ * B-bar (theta_bar not NULL): σ = κ θ̄ I + R (2 μ dev ε) Rᵀ, κ = λ + ⅔μ,
+ * θ̄ = *theta_bar the element's mean volume change (for an increment w its
+ * linearisation Σₐ bₐ·wₐ, bₐ = cof(F̄) ḡₐ: then the sum above is vᵀ Kt w
+ * with the B-bar tangent of nh_hex_corot). */
+void nh_hex_rotated_stress(const double R[9], const double d[24], const double g[24], double lambda,
+                           double mu, const double *theta_bar, double s[6]);
+
+/* Isotropic compliance e = D⁻¹ s: s[6] Voigt stresses (xx, yy, zz, yz, xz,
+ * xy), e[6] engineering strains (εxx, εyy, εzz, γyz, γxz, γxy with γ = 2ε),
+ * so that sᵀe = σ : ε and ½ sᵀe is the strain-energy density. */
+void nh_voigt_compliance(double lambda, double mu, const double s[6], double e[6]);
 
 /* von Mises equivalent stress of s[6] (Voigt). */
 double nh_von_mises(const double s[6]);
 
-/* Lamé parameters from E and ν. */
-void nh_lame(double young, double poisson, double *lambda, double *mu);
+/* ---- the tissue: element data cache, mass, forces (fem/tissue.c) ---- */
 
 /* Doubles per cell in nh_tissue.cell_material. */
 #define NH_CELL_MATERIAL 9
@@ -172,47 +214,13 @@ void nh_tissue_element_apply(const nh_tissue *tissue, int c, const double frame[
  * term for B-bar only) at displacements u. */
 double nh_tissue_energy(const nh_tissue *tissue, const double *u);
 
-/* Centre stress of leaf c at displacements u (Voigt, Pa). */
-void nh_tissue_cell_stress(const nh_tissue *tissue, int c, const double *u, double s[6]);
-
-/* ---- stresses inside an element, compliance (fem/stress.c) ---- */
-
-/* Cauchy stress at n natural points xi[3n] of one element: s[6n] (Voigt),
- * σ = R (λ tr ε I + 2 μ ε) Rᵀ with R the element's rotation (polar of F at
- * the centre, as nh_hex_corot) and ε the symmetric gradient of the corotated
- * displacements d = Rᵀu + (Rᵀ − I)(X − X̄) with the rest gradients at ξ;
- * with Gbar (B-bar) the volumetric part is the element's mean,
- * σ = κ θ̄ I + R (2μ dev ε) Rᵀ, θ̄ = det F̄ − 1 (nh_hex_mean_dilatation),
- * κ = λ + ⅔μ.
- * detJ[n] (may be NULL) receives the rest Jacobian determinant at each point.
- * Cannot fail: a point where det J <= 0 (outside a valid cell) uses the
- * centre gradients G0, so s is finite for finite input; callers that need
- * det J > 0 check detJ. At ξ = 0 the result equals nh_hex_center_stress. */
-void nh_hex_stress_at(const double X[24], const double u[24], const double G0[24],
-                      const double *Gbar, double lambda, double mu, int n, const double *xi,
-                      double *s, double *detJ);
-
-/* σ = R (λ tr ε I + 2 μ ε) Rᵀ, ε = sym(Σₐ dₐ ⊗ gₐ), for element rotation
- * R[9], corotated nodal values d[24] and shape-function gradients g[24] at a
- * point; s[6] Voigt. With d = Rᵀw (node by node) it is the stress of the
- * tangent R K₀ Rᵀ for nodal values w (an increment, a dual solution): the sum
- * over the 2x2x2 Gauss points of det J σ(w)ᵀ D⁻¹ σ(v) is vᵀ R K₀ Rᵀ w.
- * B-bar (theta_bar not NULL): σ = κ θ̄ I + R (2 μ dev ε) Rᵀ, κ = λ + ⅔μ,
- * θ̄ = *theta_bar the element's mean volume change (for an increment w its
- * linearisation Σₐ bₐ·wₐ, bₐ = cof(F̄) ḡₐ: then the sum above is vᵀ Kt w
- * with the B-bar tangent of nh_hex_corot). */
-void nh_hex_rotated_stress(const double R[9], const double d[24], const double g[24], double lambda,
-                           double mu, const double *theta_bar, double s[6]);
-
 /* Corotational Cauchy stress s[6] (Voigt, Pa) of leaf c at the natural point
- * xi[3] for displacements u (3 per node). ξ = 0 gives nh_tissue_cell_stress. */
+ * xi[3] for displacements u (3 per node): nh_hex_stress_at with the cell's
+ * element data and material. */
 void nh_tissue_gauss_stress(const nh_tissue *tissue, int c, const double *u, const double xi[3],
                             double s[6]);
-
-/* Isotropic compliance e = D⁻¹ s: s[6] Voigt stresses (xx, yy, zz, yz, xz,
- * xy), e[6] engineering strains (εxx, εyy, εzz, γyz, γxz, γxy with γ = 2ε),
- * so that sᵀe = σ : ε and ½ sᵀe is the strain-energy density. */
-void nh_voigt_compliance(double lambda, double mu, const double s[6], double e[6]);
+/* Centre stress of leaf c: nh_tissue_gauss_stress at ξ = 0. */
+void nh_tissue_cell_stress(const nh_tissue *tissue, int c, const double *u, double s[6]);
 
 /* ---- surface tractions (traction.c; docs/theory.md "Surface tractions") ----
  * Consistent nodal forces of the traction tr at schedule factor 1: adds

@@ -205,14 +205,3 @@ void nh_hex_corot(const double X[24], const double u[24], const double K0[576], 
   memcpy(R, frame, 9 * sizeof(double));
   if (Kt) nh_hex_corot_tangent(K0, vol, frame, Kt);
 }
-
-void nh_hex_center_stress(const double X[24], const double u[24], const double G0[24],
-                          const double *Gbar, double lambda, double mu, double s[6]) {
-  const double centre[3] = {0, 0, 0};
-  nh_hex_stress_at(X, u, G0, Gbar, lambda, mu, 1, centre, s, NULL);
-}
-
-double nh_von_mises(const double s[6]) {
-  double a = s[0] - s[1], b = s[1] - s[2], c = s[2] - s[0];
-  return sqrt(0.5 * (a * a + b * b + c * c) + 3.0 * (s[3] * s[3] + s[4] * s[4] + s[5] * s[5]));
-}

@@ -1,6 +1,12 @@
-/* stress.c — the corotational stress anywhere inside an element, and the
- * isotropic compliance D⁻¹ in Voigt form (used by the SPR error estimator,
- * adapt/spr.c, docs/theory.md §2 and the seed's Eq. 15).
+/* stress.c — the corotational stress anywhere inside an element, the
+ * isotropic compliance D⁻¹ in Voigt form and the von Mises stress (used by
+ * the frames' von_mises, the SPR error estimator, adapt/spr.c, and the
+ * goal-oriented one, adapt/dwr.c; docs/theory.md §2 and the seed's Eq. 15).
+ *
+ * Place in fem: above the element (hex.c gives the rotation, the corotated
+ * displacements, the gradients and θ̄), below the tissue (tissue.c
+ * evaluates these stresses for its cells: nh_tissue_gauss_stress,
+ * nh_tissue_cell_stress). One element's numbers in, no mesh, no cache.
  *
  * The element is the one of hex.c: one rotation R per element, the polar
  * rotation of the deformation gradient at the centre
@@ -13,7 +19,7 @@
  * R stays the centre's (it is not re-evaluated at ξ): this is the stress
  * field whose energy the element's K₀ integrates, so ∫ σᵀD⁻¹σ over the
  * 2x2x2 Gauss points is twice the element's corotational strain energy. At
- * ξ = 0, gₐ(0) = G0ₐ and σ equals nh_hex_center_stress.
+ * ξ = 0, gₐ(0) = G0ₐ: the centre stress of the frames and of SPR.
  *
  * B-bar (mean dilatation, docs/theory.md §2b): the volumetric part is the
  * element's mean, σ(ξ) = κ θ̄ I + R (2 μ dev ε(ξ)) Rᵀ with κ = λ + ⅔μ and
@@ -23,7 +29,10 @@
  * Compliance. With Voigt stresses s = (σxx, σyy, σzz, σyz, σxz, σxy) and
  * engineering strains e = (εxx, εyy, εzz, γyz, γxz, γxy), γ = 2ε:
  *   εᵢᵢ = (σᵢᵢ − λ / (3λ + 2μ) tr σ) / (2μ),   γᵢⱼ = σᵢⱼ / μ,
- * so that sᵀe = σ : ε and ½ sᵀ D⁻¹ s is the strain-energy density. */
+ * so that sᵀe = σ : ε and ½ sᵀ D⁻¹ s is the strain-energy density.
+ *
+ * von Mises: σ_vM = √(½((σxx−σyy)² + (σyy−σzz)² + (σzz−σxx)²)
+ *                    + 3(σyz² + σxz² + σxy²)). */
 #include "fem/fem.h"
 
 #include <math.h>
@@ -71,20 +80,13 @@ void nh_hex_stress_at(const double X[24], const double u[24], const double G0[24
   }
 }
 
-void nh_tissue_gauss_stress(const nh_tissue *t, int c, const double *u, const double xi[3],
-                            double s[6]) {
-  const nh_mesh *m = t->mesh;
-  double Xe[24], ue[24];
-  nh_mesh_cell_coords(m, m->X, c, Xe);
-  nh_mesh_cell_coords(m, u, c, ue);
-  double lambda, mu;
-  nh_tissue_cell_material(t, c, &lambda, &mu, NULL);
-  nh_hex_stress_at(Xe, ue, t->G0 + 24 * t->cell_shape[c], nh_tissue_gbar(t, c), lambda, mu, 1, xi,
-                   s, NULL);
-}
-
 void nh_voigt_compliance(double lambda, double mu, const double s[6], double e[6]) {
   double tr = s[0] + s[1] + s[2], k = lambda / (3.0 * lambda + 2.0 * mu) * tr;
   for (int i = 0; i < 3; i++) e[i] = (s[i] - k) / (2.0 * mu);
   for (int i = 3; i < 6; i++) e[i] = s[i] / mu;
+}
+
+double nh_von_mises(const double s[6]) {
+  double a = s[0] - s[1], b = s[1] - s[2], c = s[2] - s[0];
+  return sqrt(0.5 * (a * a + b * b + c * c) + 3.0 * (s[3] * s[3] + s[4] * s[4] + s[5] * s[5]));
 }

@@ -24,7 +24,11 @@
  * run that built them across its refinements. The rounding moves a corner
  * by at most 2⁻⁴¹ of the cell size; two cells that differ by less but round
  * to different keys simply get two entries. Every update looks up every
- * leaf (a hash of 24 numbers), since coarsening renumbers the cells. */
+ * leaf (a hash of 24 numbers), since coarsening renumbers the cells.
+ *
+ * Place in fem: the top. The per-cell entry points (force, tangent, energy,
+ * stresses) look up the cell's data and material here and call the element
+ * (hex.c) and the stresses inside it (stress.c), which know no mesh. */
 #include "fem/fem.h"
 
 #include <math.h>
@@ -453,14 +457,21 @@ double nh_tissue_energy(const nh_tissue *t, const double *u) {
   return energy;
 }
 
-void nh_tissue_cell_stress(const nh_tissue *t, int c, const double *u, double s[6]) {
+void nh_tissue_gauss_stress(const nh_tissue *t, int c, const double *u, const double xi[3],
+                            double s[6]) {
   const nh_mesh *m = t->mesh;
   double Xe[24], ue[24];
   nh_mesh_cell_coords(m, m->X, c, Xe);
   nh_mesh_cell_coords(m, u, c, ue);
   double lambda, mu;
   nh_tissue_cell_material(t, c, &lambda, &mu, NULL);
-  nh_hex_center_stress(Xe, ue, t->G0 + 24 * t->cell_shape[c], nh_tissue_gbar(t, c), lambda, mu, s);
+  nh_hex_stress_at(Xe, ue, t->G0 + 24 * t->cell_shape[c], nh_tissue_gbar(t, c), lambda, mu, 1, xi,
+                   s, NULL);
+}
+
+void nh_tissue_cell_stress(const nh_tissue *t, int c, const double *u, double s[6]) {
+  const double centre[3] = {0, 0, 0};
+  nh_tissue_gauss_stress(t, c, u, centre, s);
 }
 
 const double *nh_tissue_gbar(const nh_tissue *t, int c) {

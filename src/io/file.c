@@ -16,7 +16,7 @@
  *
  * nh_mkdir_p creates every missing component of a path (mode 0777 minus the
  * umask) and accepts components that already exist as directories. */
-#include "io/io.h"
+#include "io/io_impl.h"
 
 #include <errno.h>
 #include <stdio.h>
@@ -26,17 +26,11 @@
 #include <sys/types.h>
 #include <unistd.h>
 
-static char *copy_string(const char *s) {
-  char *c = nh_calloc(strlen(s) + 1, 1);
-  if (c) strcpy(c, s);
-  return c;
-}
-
 int nh_atomic_open(const char *path, const char *what, int sync, nh_atomic_file *a) {
   NH_CHECK(path && what && a, NH_ERR_INTERNAL, "nh_atomic_open: NULL argument");
   *a = (nh_atomic_file){.what = what, .sync = sync};
   size_t tmp_len = strlen(path) + 5;
-  a->path = copy_string(path);
+  a->path = nh_text_copy(path);
   a->tmp = nh_calloc(tmp_len, 1);
   if (!a->path || !a->tmp) {
     free(a->path), free(a->tmp);
@@ -97,7 +91,7 @@ static int is_directory(const char *path) {
 int nh_mkdir_p(const char *path) {
   NH_CHECK(path, NH_ERR_INTERNAL, "nh_mkdir_p: NULL path");
   NH_CHECK(path[0] != '\0', NH_ERR_IO, "cannot create directory '': empty path");
-  char *p = copy_string(path);
+  char *p = nh_text_copy(path);
   if (!p) return NH_ERR_MEMORY;
   int rc = NH_OK;
   /* Create each prefix that ends at a '/' (skipping a leading one), then the whole path. */

@@ -1,5 +1,6 @@
-/* io — VTU (XML UnstructuredGrid, appended raw binary), PVD collections and
- * CSV tables. Writers take plain arrays; they know nothing of the mesh or the
+/* io — VTU (XML UnstructuredGrid, appended raw binary), PVD collections,
+ * CSV tables and HDF5 + XDMF results. Writers take plain arrays (frames: one
+ * nh_frame for every format); they know nothing of the mesh or the
  * simulation. Every file but the append-only CSV tables is written to
  * "<path>.tmp" and renamed into place (io/file.c), so a reader (or a killed
  * run) never sees a half-written file. The resume functions continue the
@@ -10,10 +11,18 @@
 #include "core/core.h"
 #include <stdio.h>
 
+/* ---- frames: one description, every writer ----
+ * A frame is a snapshot of one object (the tissue mesh, the embedded points,
+ * a tool) at one step: its points, its cells and named fields on either. The
+ * caller fills one nh_frame per object and step; every writer of frames
+ * takes it as it is: nh_vtu_write (one .vtu file), nh_pvd_write_frame (a
+ * .vtu frame of a collection) and nh_h5_write_frame (an HDF5 snapshot and
+ * its XDMF entry; hexahedral frames only). The writers only read it. */
+
 /* A field of n tuples of `components` doubles (row-major, tuple i at
  * data[i * components]). Written as Float64; `unit` (SI, e.g. "m", "Pa";
  * "1" for a dimensionless number; NULL: none written) goes into the VTU as
- * the array's UNITS_LABEL (vtkDataArray information key). */
+ * the array's UNITS_LABEL (vtkDataArray information key; HDF5 omits it). */
 typedef struct {
   const char *name;
   int components;
@@ -38,13 +47,13 @@ typedef struct {
   const nh_field *cell_fields;
   const int *point_int_flags; /* optional: n_points ints written as Int32 "point_flag_name" */
   const char *point_flag_name;
-  const char *const *point_names; /* optional: n_points names, written as the field data array
-                                     "names" (UInt8: the names, each followed by '\n') */
-} nh_vtu_grid;
+  const char *const *point_names; /* optional: n_points names; VTU only, as the field data
+                                     array "names" (UInt8: the names, each followed by '\n') */
+} nh_frame;
 
-/* Write `grid` to `path` as a VTU file (UInt64 headers, raw appended data,
+/* Write `frame` to `path` as a VTU file (UInt64 headers, raw appended data,
  * little-endian), atomically. Fails with NH_ERR_IO naming the path. */
-int nh_vtu_write(const char *path, const nh_vtu_grid *grid);
+int nh_vtu_write(const char *path, const nh_frame *frame);
 
 /* A PVD collection: the list of (time, file) frames of one object. */
 typedef struct nh_pvd nh_pvd;
@@ -53,6 +62,11 @@ int nh_pvd_create(const char *path, nh_pvd **out);
 /* Add a frame (file relative to the PVD's folder) and rewrite the PVD
  * atomically, so that it always lists exactly the frames already written. */
 int nh_pvd_add(nh_pvd *pvd, double time, const char *file);
+/* Write the frame of step `step` of the collection DIR/PREFIX.pvd: `frame`
+ * as DIR/PREFIX_NNNNNN.vtu (NNNNNN = step, zero padded to six digits;
+ * nh_vtu_write), then add it at `time` (nh_pvd_add). Fails as those two;
+ * NH_ERR_INTERNAL if the collection's path does not end in ".pvd". */
+int nh_pvd_write_frame(nh_pvd *pvd, int step, double time, const nh_frame *frame);
 /* Continue the collection DIR/PREFIX.pvd of an interrupted run at step
  * `step`: a new collection listing, in step order, the frames
  * PREFIX_NNNNNN.vtu found in DIR with NNNNNN <= step, at time NNNNNN * dt.
@@ -100,7 +114,8 @@ int nh_atomic_open(const char *path, const char *what, int sync, nh_atomic_file 
  * place. Frees *a in both cases. */
 int nh_atomic_commit(nh_atomic_file *a, int failed);
 
-/* ---- HDF5 results: results.h5 + results.xdmf (io/hdf5.c) ----
+/* ---- HDF5 results: results.h5 + results.xdmf (io/hdf5.c, the XDMF index
+ * io/xdmf.c, the resume io/hdf5_resume.c) ----
  * One HDF5 file per run with the per-step table, time series of named items
  * (probes, targets, tools) and hexahedral mesh snapshots, plus an XDMF file
  * describing the snapshots as a time series (ParaView, meshio). Layout and
@@ -152,10 +167,11 @@ int nh_h5_append_series(nh_h5 *h, const char *group, int step, double time, int 
 
 /* Write the snapshot /frames/NNNNNN (NNNNNN = step, zero padded to six
  * digits; attributes step, time): points, connectivity [n_cells x 8] and the
- * grid's point fields, Int32 point flag and cell fields. All cells must be
- * 8-node hexahedra (VTK order). Then flush the file (everything appended so
- * far is on disk) and rewrite results.xdmf atomically to list every frame. */
-int nh_h5_write_frame(nh_h5 *h, int step, double time, const nh_vtu_grid *grid);
+ * frame's point fields, Int32 point flag and cell fields (not its point
+ * names). All cells must be 8-node hexahedra (VTK order). Then flush the
+ * file (everything appended so far is on disk) and rewrite results.xdmf
+ * atomically to list every frame. */
+int nh_h5_write_frame(nh_h5 *h, int step, double time, const nh_frame *frame);
 
 /* Flush everything written so far to the file (H5Fflush). */
 int nh_h5_flush(nh_h5 *h);
@@ -163,5 +179,44 @@ int nh_h5_flush(nh_h5 *h);
 /* Flush and close the file, free *h and set it to NULL; NULL-safe. Returns
  * NH_ERR_IO if the final flush failed (the handle is freed regardless). */
 int nh_h5_close(nh_h5 **h);
+
+/* ---- outputs on the patient's images (io/markups.c, io/nifti.c) ----
+ * For the tools that plan DBS (3D Slicer, ANTs, elastix, Lead-DBS): 3D
+ * Slicer markups and NIfTI images on the grid of a reference image. Points
+ * and vectors come in the scene frame (RAS, metres; anatomy.h). */
+#include "anatomy/anatomy.h"
+
+/* Write a 3D Slicer markups file (.mrk.json, schema v1.0.3) holding one
+ * markup of `type` (NH_MARKUP_CURVE for a tool's axis, points from base to
+ * tip; NH_MARKUP_FIDUCIAL for targets) named `name`, with the n points
+ * points[3n] (scene frame) written in RAS millimetres, labelled labels[i]
+ * (NULL: "NAME-1", "NAME-2", ..., Slicer's default), every point defined,
+ * selected, locked and visible. Atomically. Fails with NH_ERR_IO naming the
+ * path, NH_ERR_MEMORY. */
+int nh_markups_write(const char *path, nh_markup_type type, const char *name, int n,
+                     const double *points, const char *const *labels);
+
+/* Write the displacement u (3 per voxel centre of `reference`, i fastest;
+ * scene frame, metres) as an ITK/ANTs displacement field: NIfTI-1, gzip'ed
+ * when path ends in .gz, dim = [5, nx, ny, nz, 1, 3], intent vector (1007),
+ * float32 components in ITK's physical frame, LPS millimetres
+ * (−u_x, −u_y, u_z) · 1000, on the reference's grid: its sform and qform
+ * with their codes and its pixdim, in mm (a reference in m or µm is
+ * converted). The field maps a point p of the reference (the rest anatomy)
+ * to p + u(p), its position after the shift (docs/anatomy.md: which image
+ * it moves, and how ANTs, Slicer and transformix apply it). Atomically.
+ * Fails with NH_ERR_IO naming the path (and the reference, if its header
+ * cannot be read again or no longer matches its size), NH_ERR_MEMORY. */
+int nh_nifti_write_displacement(const char *path, const nh_image *reference, const double *u);
+/* Write a 0/1 mask (uint8, one per voxel) on the reference's grid, as
+ * nh_nifti_write_displacement's geometry. */
+int nh_nifti_write_mask(const char *path, const nh_image *reference, const unsigned char *mask);
+/* Write one value per voxel on the reference's grid: as float32 (as_float;
+ * scl_slope 0: the values themselves), else in the reference's own data
+ * type and scaling: stored = (value − scl_inter) / scl_slope when its slope
+ * is non-zero, rounded to the nearest integer and clamped to the type's
+ * range for an integer type (NaN as 0). */
+int nh_nifti_write_scalar(const char *path, const nh_image *reference, const double *values,
+                          int as_float);
 
 #endif

@@ -19,8 +19,11 @@
  *   would leave the closing tags missing whenever a run is killed; rewriting
  *   keeps the file always valid and listing exactly the frames written so
  *   far. The cost is O(frames) per add, negligible next to a VTU frame.
- * - nh_pvd_resume rebuilds the list of a restarted run from the frame files
- *   on disk (the PVD itself may list frames after the checkpoint).
+ * - The frames of DIR/PREFIX.pvd are DIR/PREFIX_NNNNNN.vtu, NNNNNN the step
+ *   (six digits or more): nh_pvd_write_frame writes them, nh_pvd_resume
+ *   finds them. The resume rebuilds the list of a restarted run from the
+ *   frame files on disk (the PVD itself may list frames after the
+ *   checkpoint).
  * - nh_pvd_create writes the empty collection at once, so an unwritable
  *   folder fails before the first step rather than after it.
  * - Times are printed with %.17g, which reproduces the double exactly, so a
@@ -104,6 +107,23 @@ int nh_pvd_add(nh_pvd *pvd, double time, const char *file) {
     pvd->n_frames--;
     free(copy);
   }
+  return rc;
+}
+
+int nh_pvd_write_frame(nh_pvd *pvd, int step, double time, const nh_frame *frame) {
+  NH_CHECK(pvd && frame, NH_ERR_INTERNAL, "nh_pvd_write_frame: NULL argument");
+  size_t base = strlen(pvd->path);
+  NH_CHECK(base > 4 && !strcmp(pvd->path + base - 4, ".pvd"), NH_ERR_INTERNAL,
+           "nh_pvd_write_frame: collection '%s' is not a .pvd file", pvd->path);
+  base -= 4;
+  size_t size = base + 32;
+  char *path = nh_calloc(size, 1);
+  if (!path) return NH_ERR_MEMORY;
+  snprintf(path, size, "%.*s_%06d.vtu", (int)base, pvd->path, step);
+  const char *slash = strrchr(path, '/');
+  int rc = nh_vtu_write(path, frame);
+  if (rc == NH_OK) rc = nh_pvd_add(pvd, time, slash ? slash + 1 : path);
+  free(path);
   return rc;
 }
 

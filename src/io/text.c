@@ -1,10 +1,12 @@
-/* text.c — a growing text buffer for the XML files of the io module. The
- * buffer doubles; one vsnprintf sizes each append. */
+/* text.c — a growing text buffer for the XML files of the io module (the
+ * buffer doubles; one vsnprintf sizes each append), and the copies of
+ * strings and paths the writers keep. */
 #include "io/io_impl.h"
 
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
 
 int nh_text_printf(nh_text *b, const char *fmt, ...) {
   va_list ap;
@@ -47,4 +49,17 @@ int nh_text_put_xml(nh_text *b, const char *s) {
     }
   }
   return NH_OK;
+}
+
+char *nh_text_copy(const char *s) {
+  char *c = nh_calloc(strlen(s) + 1, 1);
+  if (c) strcpy(c, s);
+  return c;
+}
+
+char *nh_text_join_path(const char *dir, const char *name) {
+  size_t n = strlen(dir) + strlen(name) + 2;
+  char *p = nh_calloc(n, 1);
+  if (p) snprintf(p, n, "%s/%s", dir, name);
+  return p;
 }

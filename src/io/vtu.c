@@ -163,7 +163,7 @@ static void put_array_xml(FILE *f, const vtu_array *a) {
 }
 
 /* Check what the writer relies on; a failure is a bug in the caller. */
-static int check_grid(const char *path, const nh_vtu_grid *g) {
+static int check_grid(const char *path, const nh_frame *g) {
   NH_CHECK(g->n_points >= 0 && g->n_cells >= 0, NH_ERR_INTERNAL,
            "VTU '%s': negative size (%d points, %d cells)", path, g->n_points, g->n_cells);
   NH_CHECK(g->n_points == 0 || g->points, NH_ERR_INTERNAL, "VTU '%s': points missing", path);
@@ -207,47 +207,55 @@ static int check_grid(const char *path, const nh_vtu_grid *g) {
   return NH_OK;
 }
 
-int nh_vtu_write(const char *path, const nh_vtu_grid *grid) {
-  NH_CHECK(path && grid, NH_ERR_INTERNAL, "nh_vtu_write: NULL argument");
-  NH_TRY(check_grid(path, grid));
+/* The arrays of one frame, in the order the XML declares them (they are
+ * appended in reverse), with their offsets, and the two buffers of
+ * converted data they point into. */
+typedef struct {
+  vtu_array *arrays;
+  int n_arrays;
+  int first_point_field, first_cell_field, points_index; /* ranges of arrays */
+  int has_names;
+  unsigned char *types; /* the cell types as UInt8 */
+  char *names;          /* the point names, each followed by '\n' */
+} vtu_layout;
 
+static void vtu_layout_free(vtu_layout *v) {
+  free(v->arrays);
+  free(v->names);
+  free(v->types);
+}
+
+static int vtu_layout_build(const nh_frame *grid, vtu_layout *v) {
+  *v = (vtu_layout){0};
   const size_t np = (size_t)grid->n_points, nc = (size_t)grid->n_cells;
   const size_t nconn = nc ? (size_t)grid->offsets[nc - 1] : 0;
 
   /* The types array is the only one that needs converting. */
-  unsigned char *types = nh_calloc(nc ? nc : 1, 1);
-  if (!types) return NH_ERR_MEMORY;
+  v->types = nh_calloc(nc ? nc : 1, 1);
+  if (!v->types) return NH_ERR_MEMORY;
   for (size_t c = 0; c < nc; ++c)
-    types[c] = (unsigned char)(grid->types ? grid->types[c] : grid->type);
+    v->types[c] = (unsigned char)(grid->types ? grid->types[c] : grid->type);
 
   /* The names as one text: each followed by '\n'. */
   size_t names_len = 0;
   for (size_t i = 0; grid->point_names && i < np; ++i)
     names_len += strlen(grid->point_names[i]) + 1;
-  char *names = nh_calloc(names_len + 1, 1);
-  if (!names) {
-    free(types);
-    return NH_ERR_MEMORY;
-  }
+  v->names = nh_calloc(names_len + 1, 1);
+  if (!v->names) return NH_ERR_MEMORY;
   for (size_t i = 0, at = 0; grid->point_names && i < np; ++i)
-    at += (size_t)sprintf(names + at, "%s\n", grid->point_names[i]);
+    at += (size_t)sprintf(v->names + at, "%s\n", grid->point_names[i]);
 
-  /* Arrays in the order they appear in the XML (appended in reverse). */
-  const int has_names = grid->point_names != NULL;
-  const int n_arrays =
-      has_names + grid->n_point_fields + (grid->point_int_flags ? 1 : 0) + grid->n_cell_fields + 4;
-  vtu_array *arrays = nh_calloc((size_t)n_arrays, sizeof *arrays);
-  if (!arrays) {
-    free(names);
-    free(types);
-    return NH_ERR_MEMORY;
-  }
+  v->has_names = grid->point_names != NULL;
+  v->n_arrays = v->has_names + grid->n_point_fields + (grid->point_int_flags ? 1 : 0) +
+                grid->n_cell_fields + 4;
+  vtu_array *arrays = v->arrays = nh_calloc((size_t)v->n_arrays, sizeof *arrays);
+  if (!arrays) return NH_ERR_MEMORY;
   int k = 0;
-  if (has_names) {
-    arrays[k] = make_array("UInt8", "names", 1, names, 1, names_len);
+  if (v->has_names) {
+    arrays[k] = make_array("UInt8", "names", 1, v->names, 1, names_len);
     arrays[k++].field_data = 1;
   }
-  const int first_point_field = k;
+  v->first_point_field = k;
   for (int i = 0; i < grid->n_point_fields; ++i) {
     const nh_field *fld = &grid->point_fields[i];
     arrays[k] = make_array("Float64", fld->name, fld->components, fld->data, 8,
@@ -259,69 +267,78 @@ int nh_vtu_write(const char *path, const nh_vtu_grid *grid) {
                            grid->point_int_flags, 4, np);
     arrays[k++].unit = "1";
   }
-  const int first_cell_field = k;
+  v->first_cell_field = k;
   for (int i = 0; i < grid->n_cell_fields; ++i) {
     const nh_field *fld = &grid->cell_fields[i];
     arrays[k] = make_array("Float64", fld->name, fld->components, fld->data, 8,
                            nc * (size_t)fld->components);
     arrays[k++].unit = fld->unit;
   }
-  const int points_index = k;
+  v->points_index = k;
   arrays[k] = make_array("Float64", "Points", 3, grid->points, 8, 3 * np);
   arrays[k++].unit = "m";
   arrays[k++] = make_array("Int32", "connectivity", 1, grid->connectivity, 4, nconn);
   arrays[k++] = make_array("Int32", "offsets", 1, grid->offsets, 4, nc);
-  arrays[k++] = make_array("UInt8", "types", 1, types, 1, nc);
+  arrays[k++] = make_array("UInt8", "types", 1, v->types, 1, nc);
   uint64_t offset = 0;
-  for (int i = n_arrays - 1; i >= 0; --i) {
+  for (int i = v->n_arrays - 1; i >= 0; --i) {
     arrays[i].offset = offset;
     offset += sizeof(uint64_t) + arrays[i].elem_size * arrays[i].count;
   }
+  return NH_OK;
+}
 
-  nh_atomic_file af;
-  int rc = nh_atomic_open(path, "VTU file", 0, &af);
-  if (rc) goto done;
-  FILE *f = af.file;
-
+/* The XML part, up to the '_' that starts the appended data. */
+static void vtu_put_xml(FILE *f, const nh_frame *grid, const vtu_layout *v) {
   fputs("<?xml version=\"1.0\"?>\n"
         "<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" byte_order=\"LittleEndian\""
         " header_type=\"UInt64\">\n"
         "  <UnstructuredGrid>\n",
         f);
-  if (has_names) {
+  if (v->has_names) {
     fputs("    <FieldData>\n", f);
-    put_array_xml(f, &arrays[0]);
+    put_array_xml(f, &v->arrays[0]);
     fputs("    </FieldData>\n", f);
   }
   fprintf(f, "    <Piece NumberOfPoints=\"%d\" NumberOfCells=\"%d\">\n", grid->n_points,
           grid->n_cells);
   fputs("      <PointData>\n", f);
-  for (int i = first_point_field; i < first_cell_field; ++i) put_array_xml(f, &arrays[i]);
+  for (int i = v->first_point_field; i < v->first_cell_field; ++i) put_array_xml(f, &v->arrays[i]);
   fputs("      </PointData>\n      <CellData>\n", f);
-  for (int i = first_cell_field; i < points_index; ++i) put_array_xml(f, &arrays[i]);
+  for (int i = v->first_cell_field; i < v->points_index; ++i) put_array_xml(f, &v->arrays[i]);
   fputs("      </CellData>\n      <Points>\n", f);
-  put_array_xml(f, &arrays[points_index]);
+  put_array_xml(f, &v->arrays[v->points_index]);
   fputs("      </Points>\n      <Cells>\n", f);
-  for (int i = points_index + 1; i < n_arrays; ++i) put_array_xml(f, &arrays[i]);
+  for (int i = v->points_index + 1; i < v->n_arrays; ++i) put_array_xml(f, &v->arrays[i]);
   fputs("      </Cells>\n    </Piece>\n  </UnstructuredGrid>\n"
         "  <AppendedData encoding=\"raw\">\n   _",
         f);
+}
 
+int nh_vtu_write(const char *path, const nh_frame *grid) {
+  NH_CHECK(path && grid, NH_ERR_INTERNAL, "nh_vtu_write: NULL argument");
+  NH_TRY(check_grid(path, grid));
+  vtu_layout v;
+  int rc = vtu_layout_build(grid, &v);
+  nh_atomic_file af;
+  if (rc == NH_OK) rc = nh_atomic_open(path, "VTU file", 0, &af);
+  if (rc) {
+    vtu_layout_free(&v);
+    return rc;
+  }
+  FILE *f = af.file;
+  vtu_put_xml(f, grid, &v);
   int failed = ferror(f);
-  for (int i = n_arrays - 1; i >= 0 && !failed; --i) {
-    uint64_t bytes = (uint64_t)(arrays[i].elem_size * arrays[i].count);
+  for (int i = v.n_arrays - 1; i >= 0 && !failed; --i) {
+    uint64_t bytes = (uint64_t)(v.arrays[i].elem_size * v.arrays[i].count);
     failed = write_le(f, &bytes, sizeof bytes, 1) ||
-             write_le(f, arrays[i].data, arrays[i].elem_size, arrays[i].count);
+             write_le(f, v.arrays[i].data, v.arrays[i].elem_size, v.arrays[i].count);
   }
   if (!failed) {
     fputs("\n  </AppendedData>\n</VTKFile>\n", f);
     failed = ferror(f);
   }
   rc = nh_atomic_commit(&af, failed);
-
-done:
-  free(arrays);
-  free(names);
-  free(types);
+  vtu_layout_free(&v);
   return rc;
 }

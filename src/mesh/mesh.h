@@ -239,6 +239,56 @@ double nh_mesh_cell_fraction_above(const nh_mesh *mesh, int c, const double poin
  * volume (0: the cell does not meet the region, T all zero). */
 double nh_mesh_region_tie(const nh_mesh *mesh, int c, const nh_region *region, double T[64]);
 
+/* ---- cut cells: the finite cell quadrature (mesh/cutcell.c) ----
+ * The tissue part of a box cell [lo, hi] (natural coordinates ξ ∈ [-1, 1]³,
+ * x = (lo + hi)/2 + (hi − lo)/2 ξ): {level < 0}, intersected with a region
+ * and a half-space if given, each reconstructed piecewise linearly on the
+ * Kuhn tetrahedra of a lattice of sub-boxes (cutcell.c's essay). */
+typedef double (*nh_level_fn)(const void *ctx, const double x[3]);
+typedef struct nh_cut_spec {
+  nh_level_fn level; /* the tissue {level(x) < 0}; nh_cut_spec_domain: nh_domain_level */
+  const void *ctx;   /* level's first argument */
+  double lipschitz;  /* |level(x) − level(y)| <= lipschitz |x − y| (1 for every nh_domain) */
+  int depth;         /* its lattice: 2^depth sub-boxes per cell edge, 0 ..= NH_CUT_DEPTH_MAX */
+  const nh_region *region; /* NULL, or also inside this box, sphere or cylinder */
+  double region_sub;   /* region's lattice: sub-box edge <= nh_region_size / region_sub (0: 8) */
+  const double *plane; /* NULL, or {p[3], n[3]}: also (x − p)·n < 0 */
+} nh_cut_spec;
+#define NH_CUT_DEPTH_MAX 6
+typedef struct nh_cut_moments {
+  double m[27];  /* M_ijk = ∫ ξ^i η^j ζ^k dV over the part, at i + 3 j + 9 k (i, j, k <= 2) */
+  double volume; /* m[0] */
+  double centroid[3];            /* physical (the cell's centre if volume = 0) */
+  long evals, boxes, tets, kuhn; /* work: level calls, sub-boxes visited, clipped tetrahedra
+                                    integrated by quadrature, whole ones in closed form */
+} nh_cut_moments;
+/* A point of a surface quadrature: natural coordinates, outward unit normal
+ * times its weight (physical area), piece -1 for {level = 0}, else the cell face 0..5. */
+typedef struct nh_cut_point {
+  double xi[3], area[3];
+  int piece;
+} nh_cut_point;
+typedef struct nh_cut_surface {
+  int n, cap;
+  nh_cut_point *point;
+} nh_cut_surface;
+/* spec = the domain's tissue on a lattice of the given depth, no region, no plane. */
+void nh_cut_spec_domain(nh_cut_spec *spec, const nh_domain *domain, int depth);
+/* Moments of the part in the box cell [lo, hi]; if surface is not NULL,
+ * appends the quadrature of its boundary {level = 0} and of the cell faces
+ * f with bit f of `faces` set (exact for quadratics in ξ on the
+ * reconstruction; 3 points per triangle). NH_ERR_INPUT (at region->where)
+ * for a label region, NH_ERR_INTERNAL for a depth out of range,
+ * NH_ERR_MEMORY. */
+int nh_cut_cell(const nh_cut_spec *spec, const double lo[3], const double hi[3],
+                nh_cut_moments *out, nh_cut_surface *surface, unsigned faces);
+/* The 27 points ξ_q (3 per point, q = a + 3 b + 9 c at Gauss–Legendre
+ * nodes a, b, c of 3) and the weights w_q with Σ_q w_q p(ξ_q) = ∫ p dV for
+ * every p in Q2 (moment fitting). */
+void nh_cut_points(double xi[81]);
+void nh_cut_fit(const double m[27], double w[27]);
+void nh_cut_surface_free(nh_cut_surface *surface);
+
 /* ---- refinement templates (mesh/template.c) ----
  * A template is a set of nodes in the parent's natural coordinates [-1, 1]³
  * and child cells (8 node indices each, VTK order); format in
@@ -343,5 +393,58 @@ void nh_hanging_destroy(nh_hanging **hanging);
 /* Set the hanging entries of a nodal field (3 per node) to the
  * interpolation of their masters. */
 void nh_hanging_interpolate(const nh_hanging *hanging, double *field, int components);
+
+/* ---- a nodal field at points and on images; the inverse map (mesh/sample.c) ----
+ * `field` holds 3 values per node (a displacement u, metres). A point X of
+ * the rest configuration is located in its leaf and u(X) = Σₐ Nₐ(ξ) uₐ over
+ * the leaf's 8 corners (hanging corners included: their values are their
+ * masters' interpolation, so u is continuous across refinement faces). */
+
+/* u at n rest points X[3n] into values[3n]; tissue[n] (may be NULL) is 1
+ * where X lies in the tissue: in a leaf and inside the domain's shape (a box
+ * domain: the mesh itself). Elsewhere values are 0. */
+void nh_mesh_sample(const nh_mesh *mesh, const double *field, int n, const double *X,
+                    double *values, unsigned char *tissue);
+/* u at every voxel centre of `image` (i fastest; values[3 nvox]) and the
+ * tissue mask (tissue[nvox], may be NULL), as nh_mesh_sample, located by
+ * walking the lattice (sample.c). NH_ERR_INTERRUPTED when a stop is requested
+ * (polled per slice). */
+int nh_mesh_sample_image(const nh_mesh *mesh, const double *field, const nh_image *image,
+                         double *values, unsigned char *tissue);
+
+/* The inverse map X(x): X + u(X) = x, by the fixed-point iteration
+ * X_{k+1} = x − u(X_k) (sample.c: convergence, stopping, what happens outside
+ * the tissue). */
+typedef struct {
+  double tolerance;   /* stop when |X_{k+1} − X_k| <= tolerance (m); 0: 1e-3 of the
+                         image's smallest voxel spacing */
+  int max_iterations; /* 0: 100 */
+} nh_inverse_options;
+typedef struct {
+  long points;        /* voxels */
+  long tissue;        /* X(x) in the tissue: x is in the shifted tissue */
+  long outside;       /* X(x) outside the tissue (x outside the mesh: X = x) */
+  long unconverged;   /* no convergence (3 steps not shorter, or max_iterations): X = x */
+  int iterations_max; /* evaluations of u for one voxel, at most */
+  double iterations_mean;
+  double contraction; /* the largest ratio |X_{k+1} − X_k| / |X_k − X_{k−1}| (steps
+                         above 10 tol) of the voxels that converged in the tissue: an
+                         estimate of L (a path that crossed the mesh's surface can exceed it) */
+} nh_inverse_stats;
+enum { NH_INVERSE_OUTSIDE = 0, NH_INVERSE_TISSUE = 1, NH_INVERSE_UNCONVERGED = 2 };
+/* X(x) at every voxel centre x of `image` into X[3 nvox] (may be NULL),
+ * status[nvox] (NH_INVERSE_*, may be NULL) and *stats (may be NULL).
+ * NH_ERR_INTERRUPTED as nh_mesh_sample_image. */
+int nh_mesh_inverse_image(const nh_mesh *mesh, const double *field, const nh_image *image,
+                          const nh_inverse_options *options, double *X, unsigned char *status,
+                          nh_inverse_stats *stats);
+/* The image resampled to the shifted anatomy: out[v] = I(X(x_v)) for every
+ * voxel centre x_v, I the interpolation of `values` (given at the voxel
+ * centres of `image`) by nh_image_interpolate (trilinear, or the nearest
+ * label when `nearest`). out may not alias values. NH_ERR_INTERRUPTED as
+ * nh_mesh_sample_image. */
+int nh_mesh_warp_image(const nh_mesh *mesh, const double *field, const nh_image *image,
+                       const double *values, int nearest, const nh_inverse_options *options,
+                       double *out, nh_inverse_stats *stats);
 
 #endif

@@ -5,7 +5,8 @@
  * terminal (CI, logs), a plain line every 10 % of the run or every 10 s.
  * At the end a summary: steps, DOFs, median ms/step by phase, output folder.
  * A continued run (--restart) counts, times and medians only the steps this
- * process computed. */
+ * process computed. sim.c feeds it: it reads the run's state and the
+ * medians it is given, and calls nothing of sim.c. */
 #include "sim/sim_impl.h"
 
 #include <stdio.h>
@@ -38,10 +39,8 @@ void nh_progress_update(nh_sim *s) {
   s->progress.t_last_print = now;
 }
 
-void nh_progress_finish(nh_sim *s) {
+void nh_progress_finish(nh_sim *s, const double t[NH_PHASES]) {
   if (s->progress.is_tty && s->progress.printed) fputc('\n', stderr);
-  double t[NH_PHASES];
-  nh_sim_median_times(s, t);
   int done = s->step - s->first_step;
   if (s->first_step > 0)
     fprintf(stderr, "%s: continued from step %d: %d steps now, to step %d\n", s->scene->name,

@@ -1,16 +1,27 @@
 /* sim.c — the step loop (docs/theory.md; docs/interaction.md for the tools).
  *
- * One step: external forces at the new time (loads by their schedules,
- * gravity), then either a backward-Euler step (dynamic) or a Newton solve to
- * equilibrium under the loads of that pseudo-time (static); with `adapt`,
- * the error of that solution is estimated (SPR); then rows of steps.csv and
- * probes.csv, and a frame when due, so a frame shows a solution on the mesh
- * it was computed on, with its error indicators; last, adapt marks and
- * refines cells and carries the state to the new nodes (nh_adapt_step,
- * Eq. 17), sim rebuilds what depends on the mesh, and the next step
- * continues on the new mesh. Every phase is timed and the times are
- * kept per step for the summary. The initial state is frame 0, so a time
- * series always starts at rest.
+ * One step (nh_sim_step) is a sequence of phases, each a function
+ * (docs/design.md, "One step"):
+ *   predict (nh_sim_predict): the prescribed motion at the new time, and
+ *     the step's start state saved (for a stop inside it, and re-solves);
+ *   solve (nh_sim_solve): external forces at the new time (loads by their
+ *     schedules, gravity), then a backward-Euler step (dynamic; with tools
+ *     the contact module's coupled step) or a Newton solve to equilibrium
+ *     under the loads of that pseudo-time (static);
+ *   guards (nh_sim_guard, guard.c): nothing implausible is written;
+ *   estimate (nh_sim_estimate_step): with `adapt`, the error of that
+ *     solution (SPR, or goal-oriented), and the re-solves (below);
+ *   output of the solution (nh_sim_write_solution): rows of probes.csv
+ *     and of the tools, and a frame when due, so a frame shows a solution on
+ *     the mesh it was computed on, with its error indicators;
+ *   adapt (nh_sim_adapt_mesh): adapt marks and refines cells and carries
+ *     the state to the new nodes (nh_adapt_step, Eq. 17), setup.c rebuilds
+ *     what depends on the mesh, and the next step continues on the new mesh;
+ *   output of the step: a checkpoint when due (the state the next step
+ *     starts from), the step's times and its row of steps.csv
+ *     (nh_sim_write_row).
+ * Every phase is timed and the times are kept per step for the summary.
+ * The initial state is frame 0, so a time series always starts at rest.
  *
  * With adapt.resolve (estimator goal) the step is refined and solved again
  * from its start state, carried to the new mesh, up to N times before its
@@ -18,11 +29,7 @@
  * its estimate asked for. The tools' start state (saved at the start of
  * every step) is restored too, its embedded points relocated on the new
  * mesh (they are material points); the skull's warm starts and its choice
- * of candidate rows are those after the first solve.
- *
- * Everything that depends on the mesh (fixed nodes, element data, load
- * vectors, probe cells, hanging nodes, the linear system) is built by
- * nh_sim_setup_mesh, at creation and after every refinement. */
+ * of candidate rows are those after the first solve. */
 #include "sim/sim_impl.h"
 
 #include <dirent.h>
@@ -79,12 +86,6 @@ static const char *const nh_probe_columns[] = {"step", "time", "name", "x",  "y"
 /* probes.csv has error_estimate under estimator goal only. */
 static int nh_probe_column_count(const nh_scene *sc) {
   return sc->adapt.enabled && sc->adapt.estimator == NH_ESTIMATOR_GOAL ? 10 : 9;
-}
-
-double nh_sim_point_error(const nh_sim *s, int i) {
-  const double *e = nh_adapt_goal_errors(s->adapt);
-  if (!e || !s->goal_of_point || s->goal_of_point[i] < 0) return NAN;
-  return e[s->goal_of_point[i]];
 }
 
 void nh_sim_destroy(nh_sim **sim) {
@@ -183,15 +184,6 @@ static void nh_sim_prescribe(nh_sim *s, double t) {
   }
 }
 
-void nh_sim_probe_displacement(const nh_sim *s, int i, double u[3]) {
-  double N[8];
-  nh_hex_shape(s->probe_xi + 3 * i, N);
-  const int *e = s->mesh->cells + 8 * s->probe_cell[i];
-  u[0] = u[1] = u[2] = 0.0;
-  for (int a = 0; a < 8; a++)
-    for (int k = 0; k < 3; k++) u[k] += N[a] * s->u[3 * e[a] + k];
-}
-
 double nh_sim_kinetic_energy(const nh_sim *s) {
   double e = 0.0;
   for (int i = 0; i < 3 * s->mesh->n_nodes; i++)
@@ -220,31 +212,24 @@ void nh_sim_median_times(const nh_sim *s, double t[7]) {
 
 /* ---- outputs ---- */
 
-static int nh_write_frame(nh_sim *s) {
+/* The tissue's frame: current positions (also left in s->x), the hexahedra
+ * of the leaves, displacement, velocity, hanging-node and fixed-node flags,
+ * and per cell von Mises stress, level, fill, indicator and Young's modulus.
+ * One description, written as tissue_NNNNNN.vtu and (output.hdf5) as the
+ * HDF5 frame. */
+static int nh_write_tissue_frame(nh_sim *s) {
   const nh_mesh *m = s->mesh;
-  const nh_scene *sc = s->scene;
-  char name[64], path[NH_PATH_MAX + 64];
-  int rc = NH_OK;
-  int nc = m->n_leaves, np = m->n_nodes;
-  int *conn = malloc(sizeof(int) * 8 * (size_t)(nc ? nc : 1));
-  int *offsets = malloc(sizeof(int) * (size_t)(nc ? nc : 1));
-  int *flags = malloc(sizeof(int) * (size_t)(np ? np : 1));
-  double *cell = malloc(sizeof(double) * 5 * (size_t)(nc ? nc : 1));
-  double *hang = calloc((size_t)(np ? np : 1), sizeof(double));
+  const int nc = m->n_leaves, np = m->n_nodes;
+  int *conn = nh_calloc(8 * (size_t)nc, sizeof *conn);
+  int *offsets = nh_calloc((size_t)nc, sizeof *offsets);
+  int *flags = nh_calloc((size_t)np, sizeof *flags);
+  double *cell = nh_calloc(5 * (size_t)nc, sizeof *cell);
+  double *hang = nh_calloc((size_t)np, sizeof *hang);
   const double *eta = nh_adapt_indicators(s->adapt);
-  int n_pr = sc->n_probes + sc->n_targets;
-  double *pp = malloc(sizeof(double) * 3 * (size_t)(n_pr ? n_pr : 1));
-  double *pu = malloc(sizeof(double) * 3 * (size_t)(n_pr ? n_pr : 1));
-  int *pconn = malloc(sizeof(int) * (size_t)(n_pr ? n_pr : 1));
-  int *poff = malloc(sizeof(int) * (size_t)(n_pr ? n_pr : 1));
-  int *pkind = malloc(sizeof(int) * (size_t)(n_pr ? n_pr : 1));
-  const char **pname = malloc(sizeof(char *) * (size_t)(n_pr ? n_pr : 1));
-  if (!conn || !offsets || !flags || !cell || !hang || !pp || !pu || !pconn || !poff || !pkind ||
-      !pname) {
-    rc = NH_ERROR(NH_ERR_MEMORY, "out of memory writing a frame");
-    goto done;
-  }
-  for (int l = 0; l < nc; l++) {
+  int rc = conn && offsets && flags && cell && hang
+               ? NH_OK
+               : NH_ERROR(NH_ERR_MEMORY, "out of memory writing a frame");
+  for (int l = 0; l < nc && !rc; l++) {
     int c = m->leaves[l];
     memcpy(conn + 8 * l, m->cells + 8 * c, 8 * sizeof(int));
     offsets[l] = 8 * (l + 1);
@@ -258,70 +243,84 @@ static int nh_write_frame(nh_sim *s) {
     nh_tissue_cell_material(s->tissue, c, &lambda, &mu, NULL);
     cell[4 * nc + l] = mu * (3 * lambda + 2 * mu) / (lambda + mu);
   }
-  if (s->hanging)
+  if (!rc && s->hanging)
     for (int k = 0; k < s->hanging->n_hanging; k++) hang[s->hanging->node[k]] = 1.0;
-  for (int i = 0; i < np; i++) {
+  for (int i = 0; i < np && !rc; i++) {
     flags[i] = s->fixed[i];
     for (int k = 0; k < 3; k++) s->x[3 * i + k] = m->X[3 * i + k] + s->u[3 * i + k];
   }
-  nh_field pf[3] = {
+  const nh_field pf[3] = {
       {"displacement", 3, s->u, "m"}, {"velocity", 3, s->v, "m/s"}, {"hanging", 1, hang, "1"}};
-  nh_field cf[5] = {{"von_mises", 1, cell, "Pa"},
-                    {"level", 1, cell + nc, "1"},
-                    {"fill", 1, cell + 2 * nc, "1"},
-                    {"eta", 1, cell + 3 * nc, "J^(1/2)"},
-                    {"young", 1, cell + 4 * nc, "Pa"}};
-  nh_vtu_grid g = {.n_points = np,
-                   .points = s->x,
-                   .n_cells = nc,
-                   .connectivity = conn,
-                   .offsets = offsets,
-                   .type = NH_VTK_HEXAHEDRON,
-                   .n_point_fields = 3,
-                   .point_fields = pf,
-                   .n_cell_fields = 5,
-                   .cell_fields = cf,
-                   .point_int_flags = flags,
-                   .point_flag_name = "fixed"};
-  snprintf(name, sizeof name, "tissue_%06d.vtu", s->step);
-  snprintf(path, sizeof path, "%s/%s", sc->output.dir, name);
-  if ((rc = nh_vtu_write(path, &g)) || (rc = nh_pvd_add(s->tissue_pvd, s->time, name))) goto done;
-  if (s->h5 && (rc = nh_h5_write_frame(s->h5, s->step, s->time, &g))) goto done;
-
-  if (n_pr > 0) {
-    for (int i = 0; i < n_pr; i++) {
-      const double *X =
-          i < sc->n_probes ? sc->probes[i].point : sc->targets[i - sc->n_probes].point;
-      nh_sim_probe_displacement(s, i, pu + 3 * i);
-      for (int k = 0; k < 3; k++) pp[3 * i + k] = X[k] + pu[3 * i + k];
-      pconn[i] = i;
-      poff[i] = i + 1;
-      pkind[i] = i >= sc->n_probes;
-      pname[i] = i < sc->n_probes ? sc->probes[i].name : sc->targets[i - sc->n_probes].name;
-    }
-    nh_field ppf[1] = {{"displacement", 3, pu, "m"}};
-    nh_vtu_grid pg = {.n_points = n_pr,
-                      .points = pp,
-                      .n_cells = n_pr,
-                      .connectivity = pconn,
-                      .offsets = poff,
-                      .type = NH_VTK_VERTEX,
-                      .n_point_fields = 1,
-                      .point_fields = ppf,
-                      .point_int_flags = pkind,
-                      .point_flag_name = "target",
-                      .point_names = pname};
-    snprintf(name, sizeof name, "points_%06d.vtu", s->step);
-    snprintf(path, sizeof path, "%s/%s", sc->output.dir, name);
-    if ((rc = nh_vtu_write(path, &pg)) || (rc = nh_pvd_add(s->points_pvd, s->time, name)))
-      goto done;
-  }
-  if (s->contact && (rc = nh_sim_tools_frame(s))) goto done;
-  s->last_frame = s->step;
-done:
+  const nh_field cf[5] = {{"von_mises", 1, cell, "Pa"},
+                          {"level", 1, cell + nc, "1"},
+                          {"fill", 1, cell + 2 * nc, "1"},
+                          {"eta", 1, cell + 3 * nc, "J^(1/2)"},
+                          {"young", 1, cell + 4 * nc, "Pa"}};
+  const nh_frame frame = {.n_points = np,
+                          .points = s->x,
+                          .n_cells = nc,
+                          .connectivity = conn,
+                          .offsets = offsets,
+                          .type = NH_VTK_HEXAHEDRON,
+                          .n_point_fields = 3,
+                          .point_fields = pf,
+                          .n_cell_fields = 5,
+                          .cell_fields = cf,
+                          .point_int_flags = flags,
+                          .point_flag_name = "fixed"};
+  if (!rc) rc = nh_pvd_write_frame(s->tissue_pvd, s->step, s->time, &frame);
+  if (!rc && s->h5) rc = nh_h5_write_frame(s->h5, s->step, s->time, &frame);
   free(conn), free(offsets), free(flags), free(cell), free(hang);
-  free(pp), free(pu), free(pconn), free(poff), free(pkind), free(pname);
   return rc;
+}
+
+/* The frame of the n embedded points (probes, then targets): vertices at
+ * their current positions, their displacement, a target flag and their
+ * names; written as points_NNNNNN.vtu. */
+static int nh_write_points_frame(nh_sim *s, int n) {
+  const nh_scene *sc = s->scene;
+  double *x = nh_calloc(3 * (size_t)n, sizeof *x), *u = nh_calloc(3 * (size_t)n, sizeof *u);
+  int *conn = nh_calloc((size_t)n, sizeof *conn), *offsets = nh_calloc((size_t)n, sizeof *offsets);
+  int *target = nh_calloc((size_t)n, sizeof *target);
+  const char **names = nh_calloc((size_t)n, sizeof *names);
+  int rc = x && u && conn && offsets && target && names
+               ? NH_OK
+               : NH_ERROR(NH_ERR_MEMORY, "out of memory writing a frame");
+  for (int i = 0; i < n && !rc; i++) {
+    const int probe = i < sc->n_probes;
+    const double *X = probe ? sc->probes[i].point : sc->targets[i - sc->n_probes].point;
+    nh_sim_probe_displacement(s, i, u + 3 * i);
+    for (int k = 0; k < 3; k++) x[3 * i + k] = X[k] + u[3 * i + k];
+    conn[i] = i;
+    offsets[i] = i + 1;
+    target[i] = !probe;
+    names[i] = probe ? sc->probes[i].name : sc->targets[i - sc->n_probes].name;
+  }
+  const nh_field pf[1] = {{"displacement", 3, u, "m"}};
+  const nh_frame frame = {.n_points = n,
+                          .points = x,
+                          .n_cells = n,
+                          .connectivity = conn,
+                          .offsets = offsets,
+                          .type = NH_VTK_VERTEX,
+                          .n_point_fields = 1,
+                          .point_fields = pf,
+                          .point_int_flags = target,
+                          .point_flag_name = "target",
+                          .point_names = names};
+  if (!rc) rc = nh_pvd_write_frame(s->points_pvd, s->step, s->time, &frame);
+  free(x), free(u), free(conn), free(offsets), free(target), free(names);
+  return rc;
+}
+
+/* This step's frames: the tissue, the embedded points, the tools. */
+static int nh_write_frame(nh_sim *s) {
+  const int n_points = s->scene->n_probes + s->scene->n_targets;
+  NH_TRY(nh_write_tissue_frame(s));
+  if (n_points > 0) NH_TRY(nh_write_points_frame(s, n_points));
+  if (s->contact) NH_TRY(nh_sim_tools_frame(s));
+  s->last_frame = s->step;
+  return NH_OK;
 }
 
 static int nh_write_probe_rows(nh_sim *s) {
@@ -459,178 +458,6 @@ static int nh_open_outputs(nh_sim *s) {
 }
 
 /* ---- construction ---- */
-
-/* Resize a per-node array of `comps` doubles to the mesh's node count. */
-static int nh_resize(double **a, int n_nodes, int comps) {
-  double *p = realloc(*a, sizeof(double) * (size_t)comps * (size_t)(n_nodes ? n_nodes : 1));
-  if (!p) return NH_ERROR(NH_ERR_MEMORY, "out of memory: %d nodes", n_nodes);
-  *a = p;
-  return NH_OK;
-}
-
-/* Everything that depends on the mesh, built at creation (first = 1, which
- * also reports scene errors only the mesh reveals) and after refinement. */
-/* A fixed region's tie stiffness is NH_TIE_STIFFNESS E / ℓ², ℓ its smallest
- * size (nh_region_size): the tissue inside moves by about 1/NH_TIE_STIFFNESS
- * of what an elastic body of size ℓ would (docs/theory.md §5). */
-#define NH_TIE_STIFFNESS 1.0e3
-
-/* tissue.fixed[r] on an immersed domain is a volumetric tie (all components
- * clamped, no prescribed motion, a geometric region), not a node set. */
-static int nh_sim_fixed_is_tie(const nh_scene *sc, int immersed, int r) {
-  const nh_fix *fx = &sc->tissue.fix[r];
-  return immersed && sc->tissue.fixed[r].kind != NH_REGION_LABEL && fx->axes == 7 &&
-         fx->displacement[0] == 0.0 && fx->displacement[1] == 0.0 && fx->displacement[2] == 0.0;
-}
-
-static int nh_sim_setup_mesh(nh_sim *s, int first) {
-  const nh_scene *sc = s->scene;
-  nh_mesh *m = s->mesh;
-  const int nn = m->n_nodes, n = 3 * nn;
-  unsigned char *fixed = realloc(s->fixed, (size_t)(nn ? nn : 1));
-  if (!fixed) return NH_ERROR(NH_ERR_MEMORY, "out of memory: %d nodes", nn);
-  s->fixed = fixed;
-  memset(s->fixed, 0, (size_t)nn);
-  NH_TRY(nh_resize(&s->x, nn, 3));
-  NH_TRY(nh_resize(&s->u_start, nn, 3));
-  NH_TRY(nh_resize(&s->v_start, nn, 3));
-  NH_TRY(nh_resize(&s->f_ext, nn, 3));
-  NH_TRY(nh_resize(&s->drained, nn, 1));
-  const int n_unit = sc->tissue.n_loads + sc->tissue.n_tractions;
-  NH_TRY(nh_resize(&s->load_unit, nn, 3 * (n_unit ? n_unit : 1)));
-  int *moved = realloc(s->moved, sizeof(int) * (size_t)(nn ? nn : 1));
-  unsigned char *in = calloc((size_t)(nn ? nn : 1), 1);
-  if (moved) s->moved = moved;
-  if (!moved || !in) {
-    free(in);
-    return NH_ERROR(NH_ERR_MEMORY, "out of memory: %d nodes", nn);
-  }
-  for (int i = 0; i < nn; i++) s->moved[i] = -1;
-  /* Fixed regions (docs/theory.md §5, "Fixed regions"): on a box domain the
-   * nodes inside; on an immersed one a clamp of all components is a stiff
-   * volumetric tie over the region's tissue, which converges to the region
-   * under refinement (per-axis and prescribed regions stay node sets). */
-  const int immersed = m->domain.kind != NH_DOMAIN_BOX;
-  for (int r = 0; r < sc->tissue.n_fixed; r++) {
-    const nh_region *reg = &sc->tissue.fixed[r];
-    const nh_fix *fx = &sc->tissue.fix[r];
-    if (nh_sim_fixed_is_tie(sc, immersed, r)) continue; /* tied below */
-    memset(in, 0, (size_t)nn);
-    int count = nh_mesh_nodes_in_region(m, reg, in);
-    const int prescribed =
-        fx->displacement[0] != 0.0 || fx->displacement[1] != 0.0 || fx->displacement[2] != 0.0;
-    for (int i = 0; i < nn; i++) {
-      if (!in[i]) continue;
-      /* merge with the components fixed so far; all three: 1 */
-      int mask = (s->fixed[i] == 0              ? 0
-                  : (s->fixed[i] & NH_FIX_AXES) ? s->fixed[i] & 7
-                                                : 7) |
-                 fx->axes;
-      s->fixed[i] = mask == 7 ? 1 : (unsigned char)(NH_FIX_AXES | mask);
-      if (prescribed) s->moved[i] = r;
-    }
-    char what[256];
-    nh_region_describe(reg, what, sizeof what);
-    if (!(count > 0 || !first)) free(in);
-    NH_CHECK(count > 0 || !first, NH_ERR_INPUT, "%s: the %s contains no node of the mesh",
-             reg->where, what);
-  }
-  /* Hanging nodes: every node not fixed in all three components (a node
-   * fixed in some axes keeps the hanging constraint on all three: its
-   * masters lie on the same fixed face); the Lagrange variant's rows take
-   * whole nodes: there every fixed node is left out. */
-  const int lagrange = sc->adapt.hanging == NH_HANGING_LAGRANGE;
-  for (int i = 0; i < nn; i++) in[i] = s->fixed[i] == 1 || (lagrange && s->fixed[i]);
-  nh_hanging_destroy(&s->hanging);
-  int rc_h = sc->adapt.enabled ? nh_hanging_detect(m, in, &s->hanging) : NH_OK;
-  free(in);
-  NH_TRY(rc_h);
-  if (first) {
-    nh_material mat = {sc->tissue.young, sc->tissue.poisson, sc->tissue.density,
-                       sc->tissue.formulation};
-    NH_TRY(nh_tissue_create(m, &mat, &s->tissue));
-    if (sc->tissue.n_materials) {
-      int n = sc->tissue.n_materials, *labels = malloc(sizeof(int) * (size_t)n);
-      nh_material *mats = malloc(sizeof(nh_material) * (size_t)n);
-      int rc = labels && mats ? NH_OK : NH_ERROR(NH_ERR_MEMORY, "out of memory: materials");
-      for (int i = 0; i < n && !rc; i++) {
-        const nh_label_material *lm = &sc->tissue.materials[i];
-        labels[i] = lm->label;
-        mats[i] = (nh_material){lm->young, lm->poisson, lm->density, sc->tissue.formulation};
-      }
-      if (!rc) rc = nh_tissue_set_label_materials(s->tissue, n, labels, mats);
-      free(labels), free(mats);
-      NH_TRY(rc);
-    }
-  } else {
-    NH_TRY(nh_tissue_update(s->tissue));
-  }
-  if (immersed && sc->tissue.n_fixed > 0) {
-    int nr = sc->tissue.n_fixed;
-    double *k = malloc(sizeof(double) * 2 * (size_t)nr), *vol = k + nr;
-    if (!k) return NH_ERROR(NH_ERR_MEMORY, "out of memory: ties");
-    for (int r = 0; r < nr; r++) {
-      double l = nh_region_size(&sc->tissue.fixed[r]);
-      k[r] = nh_sim_fixed_is_tie(sc, immersed, r) && l > 0.0 && isfinite(l)
-                 ? NH_TIE_STIFFNESS * sc->tissue.young / (l * l)
-                 : 0.0;
-    }
-    int rc = nh_tissue_set_ties(s->tissue, nr, sc->tissue.fixed, k, vol);
-    for (int r = 0; r < nr && !rc; r++)
-      if (nh_sim_fixed_is_tie(sc, immersed, r) && !(vol[r] > 0.0)) {
-        char what[256];
-        nh_region_describe(&sc->tissue.fixed[r], what, sizeof what);
-        rc = NH_ERROR(first ? NH_ERR_INPUT : NH_ERR_INTERNAL,
-                      "%s: the %s holds no tissue (on an immersed domain a fixed region ties the "
-                      "tissue inside it, so it needs a volume inside the shape)",
-                      sc->tissue.fixed[r].where, what);
-      }
-    free(k);
-    NH_TRY(rc);
-  }
-  /* The drained mass: all of it, or the part above the fluid level. */
-  memcpy(s->drained, s->tissue->mass, sizeof(double) * (size_t)nn);
-  if (sc->tissue.buoyant && sc->tissue.buoyancy_has_level) {
-    const double *g = sc->gravity;
-    double gn = sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]),
-           up[3] = {-g[0] / gn, -g[1] / gn, -g[2] / gn};
-    memset(s->drained, 0, sizeof(double) * (size_t)nn);
-    for (int l = 0; l < m->n_leaves; l++) {
-      int c = m->leaves[l];
-      double above = nh_mesh_cell_fraction_above(m, c, sc->tissue.buoyancy_level, up);
-      double rho;
-      nh_tissue_cell_material(s->tissue, c, NULL, NULL, &rho);
-      double mc = rho * m->fill[c] * s->tissue->volume[s->tissue->cell_shape[c]] / 8.0 * above;
-      for (int a = 0; a < 8; a++) s->drained[m->cells[8 * c + a]] += mc;
-    }
-  }
-  memset(s->load_unit, 0, sizeof(double) * (size_t)n * (size_t)n_unit);
-  for (int l = 0; l < sc->tissue.n_loads; l++)
-    NH_TRY(nh_mesh_region_load(m, &sc->tissue.loads[l].region, sc->tissue.loads[l].force,
-                               s->load_unit + (size_t)l * n));
-  for (int l = 0; l < sc->tissue.n_tractions; l++)
-    NH_TRY(nh_traction_load(m, &sc->tissue.tractions[l],
-                            s->load_unit + (size_t)(sc->tissue.n_loads + l) * n, NULL));
-  for (int i = 0; i < sc->n_probes + sc->n_targets; i++) {
-    /* outside at creation: the scene's fault; later: ours */
-    const int pr = i < sc->n_probes;
-    const double *X = pr ? sc->probes[i].point : sc->targets[i - sc->n_probes].point;
-    NH_CHECK(nh_mesh_locate(m, X, &s->probe_cell[i], s->probe_xi + 3 * i) == NH_OK,
-             first ? NH_ERR_INPUT : NH_ERR_INTERNAL,
-             "%s: the point [%g, %g, %g] lies outside the tissue%s",
-             pr ? sc->probes[i].where : sc->targets[i - sc->n_probes].where, X[0], X[1], X[2],
-             first ? "" : " of the refined mesh");
-  }
-  if (!first && s->contact) NH_TRY(nh_contact_relocate(s->contact, m));
-  nh_system_destroy(&s->system);
-  int rc = nh_system_create(s->tissue, s->fixed, lagrange ? NULL : s->hanging, &s->system);
-  if (rc == NH_ERR_INPUT)
-    return NH_ERROR(NH_ERR_INPUT, "%s: every node of the tissue is fixed: nothing to simulate",
-                    sc->tissue.where_fixed);
-  NH_TRY(rc);
-  if (lagrange) NH_TRY(nh_system_set_hanging_rows(s->system, s->hanging));
-  return NH_OK;
-}
 
 static int nh_sim_build(nh_sim *s) {
   const nh_scene *sc = s->scene;
@@ -892,22 +719,47 @@ int nh_sim_create(const nh_scene *scene, const nh_sim_options *options, nh_sim *
     if (nh_out_rc_) return nh_output_failed(nh_out_rc_, (step));                                   \
   } while (0)
 
-int nh_sim_step(nh_sim *s) {
-  const nh_scene *sc = s->scene;
-  if (s->step >= s->cap_steps) {
-    int cap = 2 * s->cap_steps + 16;
-    double *pt = realloc(s->phase_times, sizeof(double) * NH_PHASES * (size_t)cap);
-    if (!pt) return NH_ERROR(NH_ERR_MEMORY, "out of memory: timing table");
-    s->phase_times = pt;
-    s->cap_steps = cap;
-  }
-  double t0 = nh_time_now();
-  double t_new = (s->step + 1) * sc->time.step;
-  nh_sim_prescribe(s, t_new); /* (the loads at t_new: nh_sim_solve) */
-  nh_step_stats st = {0};
-  memcpy(s->u_start, s->u, sizeof(double) * 3 * (size_t)s->mesh->n_nodes);
-  memcpy(s->v_start, s->v, sizeof(double) * 3 * (size_t)s->mesh->n_nodes);
-  if (s->contact) { /* a few kB: beams and channels, for a stop inside the step */
+/* One step as its phases hand it on (nh_sim_step). */
+typedef struct {
+  double t_new;           /* the time the step solves for */
+  int adapt_now, resolve; /* estimate (and refine) at this step; re-solve on the refined mesh */
+  double *start[2];       /* re-solves: u, v at the step's start */
+  nh_step_stats st;       /* the solve's (the re-solves' phases added) */
+  int resolves;
+  double t0;         /* the clock at the step's start */
+  double t_estimate; /* s: estimate and re-solves, their solves not counted */
+  double t_output;   /* s: rows, frame and checkpoint */
+  /* steps.csv: the mesh the step was solved on (before any refinement) */
+  int dofs, free_dofs, cells, hanging, rows;
+  nh_contact_stats cc; /* all zero without tools */
+  double work;         /* f_ext · u */
+  double goal_max;     /* the largest goal estimate of the written solution */
+  double refine_stop;  /* what ended the step's last refinement (NaN: none) */
+  int refine_rc;       /* a failed refinement still leaves the step's row */
+  char refine_reason[1024];
+} nh_sim_record;
+
+/* Room for this step's row of the timing table. */
+static int nh_sim_timing_reserve(nh_sim *s) {
+  if (s->step < s->cap_steps) return NH_OK;
+  int cap = 2 * s->cap_steps + 16;
+  double *pt = realloc(s->phase_times, sizeof(double) * NH_PHASES * (size_t)cap);
+  if (!pt) return NH_ERROR(NH_ERR_MEMORY, "out of memory: timing table");
+  s->phase_times = pt;
+  s->cap_steps = cap;
+  return NH_OK;
+}
+
+/* Predict: the prescribed motion at t_new (the loads at t_new: nh_sim_solve),
+ * and the step's start state saved: u, v, the tools' (a few kB: beams and
+ * channels) and the factor reuse's, for a stop inside the step; a copy of
+ * u, v for the re-solves. */
+static int nh_sim_predict(nh_sim *s, nh_sim_record *r) {
+  const size_t n = 3 * (size_t)s->mesh->n_nodes;
+  nh_sim_prescribe(s, r->t_new);
+  memcpy(s->u_start, s->u, sizeof(double) * n);
+  memcpy(s->v_start, s->v, sizeof(double) * n);
+  if (s->contact) {
     free(s->tools_start);
     s->tools_start = NULL;
     NH_TRY(nh_contact_state_save(s->contact, &s->tools_start, &s->tools_start_size));
@@ -918,141 +770,148 @@ int nh_sim_step(nh_sim *s) {
     if (s->solver_start.failed)
       return NH_ERROR(NH_ERR_MEMORY, "out of memory: step %d start state", s->step + 1);
   }
-  int adapt_now = sc->adapt.enabled && (s->step + 1) % sc->adapt.every == 0;
-  int resolve = adapt_now && sc->adapt.resolve > 0;
-  double *start[2] = {NULL, NULL}; /* the step's start state, for re-solves */
-  if (resolve) {
-    const size_t n = 3 * (size_t)s->mesh->n_nodes;
-    start[0] = malloc(sizeof(double) * n), start[1] = malloc(sizeof(double) * n);
-    if (!start[0] || !start[1]) {
-      free(start[0]), free(start[1]);
-      return NH_ERROR(NH_ERR_MEMORY, "out of memory: step %d start state", s->step + 1);
-    }
-    memcpy(start[0], s->u, sizeof(double) * n), memcpy(start[1], s->v, sizeof(double) * n);
+  if (!r->resolve) return NH_OK;
+  r->start[0] = malloc(sizeof(double) * n), r->start[1] = malloc(sizeof(double) * n);
+  if (!r->start[0] || !r->start[1]) {
+    free(r->start[0]), free(r->start[1]);
+    return NH_ERROR(NH_ERR_MEMORY, "out of memory: step %d start state", s->step + 1);
   }
-  int rc = nh_sim_solve(s, t_new, &st);
-  /* A stop that cut the residual's assembly short left u and v updated but
-   * the step's residual unknown (NaN): the step is not complete, and goes
-   * back to its start like one stopped earlier, so that a continued run
-   * computes it again and reports what the uninterrupted run reports. */
-  if (!rc && isnan(st.residual) && nh_stop_requested()) rc = nh_stop_check();
-  if (!rc && (rc = nh_sim_guard(s, s->u_start))) { /* its message names the step */
-    free(start[0]), free(start[1]);
-    return rc;
-  }
-  adapt_now = adapt_now && !rc;
+  memcpy(r->start[0], s->u, sizeof(double) * n), memcpy(r->start[1], s->v, sizeof(double) * n);
+  return NH_OK;
+}
+
+/* Estimate (every adapt.every steps) the error of the step's solution and,
+ * with adapt.resolve, refine and solve the step again (nh_sim_resolve). The
+ * re-solves' phases add up in r->st; r->t_estimate is the rest. */
+static int nh_sim_estimate_step(nh_sim *s, nh_sim_record *r) {
   double ta = nh_time_now();
   s->eta = s->eta_rel = NAN; /* nan in steps.csv: not estimated at this step */
-  if (adapt_now) rc = nh_sim_estimate(s);
-  int resolves = 0;
-  if (!rc && resolve) {
-    double t_solves = st.t_assemble + st.t_factor + st.t_solve + st.t_constraints;
-    rc = nh_sim_resolve(s, t_new, start, &st, &resolves);
-    ta += st.t_assemble + st.t_factor + st.t_solve + st.t_constraints - t_solves;
+  int rc = r->adapt_now ? nh_sim_estimate(s) : NH_OK;
+  if (!rc && r->resolve) {
+    const nh_step_stats *st = &r->st;
+    double t_solves = st->t_assemble + st->t_factor + st->t_solve + st->t_constraints;
+    rc = nh_sim_resolve(s, r->t_new, r->start, &r->st, &r->resolves);
+    ta += st->t_assemble + st->t_factor + st->t_solve + st->t_constraints - t_solves;
   }
-  free(start[0]), free(start[1]);
-  double t_estimate = nh_time_now() - ta;
-  if (rc) {
-    char reason[1024];
-    snprintf(reason, sizeof reason, "%s", nh_error_message());
-    return NH_ERROR(rc, "step %d (t = %g s): %s", s->step + 1, t_new, reason);
-  }
-  s->step++;
-  s->time = t_new;
-  /* Counts of the mesh the step was solved on (before any refinement). */
+  free(r->start[0]), free(r->start[1]);
+  r->start[0] = r->start[1] = NULL;
+  r->t_estimate = nh_time_now() - ta;
+  return rc;
+}
+
+/* The counts of steps.csv, of the mesh the step was solved on. */
+static void nh_sim_count(const nh_sim *s, nh_sim_record *r) {
   const nh_mesh *m = s->mesh;
-  int dofs = 3 * m->n_nodes, free_dofs = nh_system_free_dofs(s->system), cells = m->n_leaves;
-  int hanging = s->hanging ? s->hanging->n_hanging : 0;
-  nh_contact_stats cc = {0}; /* all zero without tools */
-  if (s->contact) nh_contact_stats_get(s->contact, &cc);
-  const nh_coupled_stats *cs = &cc.solve;
-  int rows = nh_system_constraint_rows(s->system) + cc.rows;
+  r->dofs = 3 * m->n_nodes, r->free_dofs = nh_system_free_dofs(s->system);
+  r->cells = m->n_leaves;
+  r->hanging = s->hanging ? s->hanging->n_hanging : 0;
+  if (s->contact) nh_contact_stats_get(s->contact, &r->cc);
+  r->rows = nh_system_constraint_rows(s->system) + r->cc.rows;
   /* f_ext · u: at a static equilibrium of a linear problem, the energy norm
    * squared of the solution (‖u_h‖²_E = f·u_h), which the adaptivity study
    * uses: for conforming Galerkin solutions ‖u − u_h‖²_E = ‖u‖²_E − ‖u_h‖²_E. */
-  double work = 0.0;
-  for (int i = 0; i < dofs; i++) work += s->f_ext[i] * s->u[i];
-  double t1 = nh_time_now();
-  if (!s->options.dry_run) {
-    int due =
-        (sc->output.every > 0 && s->step % sc->output.every == 0) || s->step == sc->time.steps;
-    NH_TRY_OUTPUT(nh_write_probe_rows(s), s->step);
-    if (due && s->last_frame != s->step) NH_TRY_OUTPUT(nh_write_frame(s), s->step);
-  }
-  double t2 = nh_time_now();
-  /* A failed refinement still leaves this step's row (written below). */
-  /* The estimate of the written solution (before it is refined away). */
-  double goal_max = NAN;
+  r->work = 0.0;
+  for (int i = 0; i < r->dofs; i++) r->work += s->f_ext[i] * s->u[i];
+}
+
+/* Output of the solution: the rows of the probes and tools, and a frame
+ * when due (on the mesh it was solved on, with its indicators). */
+static int nh_sim_write_solution(nh_sim *s) {
+  const nh_scene *sc = s->scene;
+  if (s->options.dry_run) return NH_OK;
+  int due = (sc->output.every > 0 && s->step % sc->output.every == 0) || s->step == sc->time.steps;
+  NH_TRY_OUTPUT(nh_write_probe_rows(s), s->step);
+  if (due && s->last_frame != s->step) NH_TRY_OUTPUT(nh_write_frame(s), s->step);
+  return NH_OK;
+}
+
+/* Adapt: the estimate of the written solution (before it is refined away),
+ * then the refinement for the next step (the last step refines only in its
+ * re-solves). A failed refinement is kept in r: the step's row comes first. */
+static void nh_sim_adapt_mesh(nh_sim *s, nh_sim_record *r) {
+  const nh_scene *sc = s->scene;
+  r->goal_max = NAN;
   for (int i = 0; s->goal_of_point && i < sc->n_probes + sc->n_targets; i++) {
     double e = nh_sim_point_error(s, i);
-    if (e == e && !(e <= goal_max)) goal_max = e;
+    if (e == e && !(e <= r->goal_max)) r->goal_max = e;
     if (e == e && !(e <= s->max_goal_error) && (i >= sc->n_probes || sc->n_targets == 0))
       s->max_goal_error = e, s->max_goal_point = i;
   }
-  int refine_rc = adapt_now && s->step < sc->time.steps ? nh_sim_refine(s, NULL, NULL) : NH_OK;
-  /* What ended this step's last refinement (the last step refines only in
-   * its re-solves). */
-  double refine_stop = adapt_now && (s->step < sc->time.steps || resolve)
-                           ? (double)nh_adapt_last_stop(s->adapt)
-                           : NAN;
-  char refine_reason[1024] = "";
-  if (refine_rc) snprintf(refine_reason, sizeof refine_reason, "%s", nh_error_message());
-  double t3 = nh_time_now();
-  s->t_adapt = t_estimate + (t3 - t2);
-  /* A checkpoint holds the state the next step starts from: after refinement. */
-  if (!refine_rc && !s->options.dry_run && sc->output.checkpoint > 0 &&
-      s->step % sc->output.checkpoint == 0)
-    NH_TRY_OUTPUT(nh_checkpoint_write(s), s->step);
-  double t_checkpoint = nh_time_now() - t3; /* counted as output */
-  t3 += t_checkpoint;
+  int last = s->step >= sc->time.steps;
+  r->refine_rc = r->adapt_now && !last ? nh_sim_refine(s, NULL, NULL) : NH_OK;
+  r->refine_stop =
+      r->adapt_now && (!last || r->resolve) ? (double)nh_adapt_last_stop(s->adapt) : NAN;
+  if (r->refine_rc) snprintf(r->refine_reason, sizeof r->refine_reason, "%s", nh_error_message());
+}
+
+/* A checkpoint is due after this step (and then its rows must be on disk). */
+static int nh_sim_checkpoint_due(const nh_sim *s, const nh_sim_record *r) {
+  const nh_scene *sc = s->scene;
+  return !r->refine_rc && !s->options.dry_run && sc->output.checkpoint > 0 &&
+         s->step % sc->output.checkpoint == 0;
+}
+
+/* The step's row of the timing table (the summary's medians); t_end: the
+ * clock after its checkpoint. */
+static double *nh_sim_record_times(nh_sim *s, const nh_sim_record *r, double t_end) {
+  const nh_step_stats *st = &r->st;
   double *pt = s->phase_times + NH_PHASES * (size_t)(s->step - 1);
-  pt[NH_PHASE_ASSEMBLE] = st.t_assemble;
-  pt[NH_PHASE_FACTOR] = st.t_factor;
-  pt[NH_PHASE_SOLVE] = st.t_solve;
-  pt[NH_PHASE_CONSTRAINTS] = st.t_constraints;
+  pt[NH_PHASE_ASSEMBLE] = st->t_assemble;
+  pt[NH_PHASE_FACTOR] = st->t_factor;
+  pt[NH_PHASE_SOLVE] = st->t_solve;
+  pt[NH_PHASE_CONSTRAINTS] = st->t_constraints;
   pt[NH_PHASE_ADAPT] = s->t_adapt;
-  pt[NH_PHASE_OUTPUT] = t2 - t1 + t_checkpoint;
-  pt[NH_PHASE_STEP] = t3 - t0 - st.t_aside;
+  pt[NH_PHASE_OUTPUT] = r->t_output;
+  pt[NH_PHASE_STEP] = t_end - r->t0 - st->t_aside;
+  return pt;
+}
+
+/* Output of the step: its times and its row of steps.csv and of
+ * results.h5. */
+static int nh_sim_write_row(nh_sim *s, const nh_sim_record *r, double t_end) {
+  const nh_step_stats *st = &r->st;
+  const nh_coupled_stats *cs = &r->cc.solve;
+  const double *pt = nh_sim_record_times(s, r, t_end);
   const double row[] = {s->step,
                         s->time,
-                        dofs,
-                        free_dofs,
-                        cells,
-                        hanging,
-                        rows,
+                        r->dofs,
+                        r->free_dofs,
+                        r->cells,
+                        r->hanging,
+                        r->rows,
                         s->eta,
                         s->eta_rel,
-                        st.iterations,
-                        st.residual,
-                        st.t_assemble,
-                        st.t_factor,
-                        st.t_solve,
-                        st.t_constraints,
+                        st->iterations,
+                        st->residual,
+                        st->t_assemble,
+                        st->t_factor,
+                        st->t_solve,
+                        st->t_constraints,
                         s->t_adapt,
-                        pt[NH_PHASE_OUTPUT],
+                        r->t_output,
                         pt[NH_PHASE_STEP],
-                        work,
+                        r->work,
                         cs->mcp.iterations,
                         cs->mcp.residual,
                         cs->mcp.n_stick,
                         cs->mcp.n_slide,
-                        cc.cut,
-                        cc.path_points,
+                        r->cc.cut,
+                        r->cc.path_points,
                         cs->t_compliance,
                         cs->t_mcp,
-                        st.factorised,
-                        st.pcg_iterations,
-                        st.corrections,
-                        st.t_factor_reference,
+                        st->factorised,
+                        st->pcg_iterations,
+                        st->corrections,
+                        st->t_factor_reference,
                         s->inverted,
-                        goal_max,
-                        refine_stop,
-                        resolves,
-                        st.tangent_updates,
-                        cc.skull_contacts,
-                        cc.skull_force[0],
-                        cc.skull_force[1],
-                        cc.skull_force[2]};
+                        r->goal_max,
+                        r->refine_stop,
+                        r->resolves,
+                        st->tangent_updates,
+                        r->cc.skull_contacts,
+                        r->cc.skull_force[0],
+                        r->cc.skull_force[1],
+                        r->cc.skull_force[2]};
   enum { NH_STEP_COLUMNS = sizeof nh_step_columns / sizeof *nh_step_columns };
   _Static_assert(sizeof row / sizeof *row == NH_STEP_COLUMNS, "one value per steps.csv column");
   if (!s->options.dry_run)
@@ -1060,15 +919,57 @@ int nh_sim_step(nh_sim *s) {
   if (s->h5) {
     NH_TRY_OUTPUT(nh_h5_append_steps(s->h5, row), s->step);
     /* The checkpoint of this step is on disk: so must be its rows. */
-    if (!refine_rc && !s->options.dry_run && sc->output.checkpoint > 0 &&
-        s->step % sc->output.checkpoint == 0)
-      NH_TRY_OUTPUT(nh_h5_flush(s->h5), s->step);
+    if (nh_sim_checkpoint_due(s, r)) NH_TRY_OUTPUT(nh_h5_flush(s->h5), s->step);
   }
+  return NH_OK;
+}
+
+/* A failed step: the message names it (exit 1). */
+static int nh_sim_step_failed(const nh_sim *s, int rc, double t_new) {
+  char reason[1024];
+  snprintf(reason, sizeof reason, "%s", nh_error_message());
+  return NH_ERROR(rc, "step %d (t = %g s): %s", s->step + 1, t_new, reason);
+}
+
+int nh_sim_step(nh_sim *s) {
+  const nh_scene *sc = s->scene;
+  NH_TRY(nh_sim_timing_reserve(s));
+  nh_sim_record r = {.t0 = nh_time_now(), .t_new = (s->step + 1) * sc->time.step};
+  r.adapt_now = sc->adapt.enabled && (s->step + 1) % sc->adapt.every == 0;
+  r.resolve = r.adapt_now && sc->adapt.resolve > 0;
+  NH_TRY(nh_sim_predict(s, &r));
+  int rc = nh_sim_solve(s, r.t_new, &r.st);
+  /* A stop that cut the residual's assembly short left u and v updated but
+   * the step's residual unknown (NaN): the step is not complete, and goes
+   * back to its start like one stopped earlier, so that a continued run
+   * computes it again and reports what the uninterrupted run reports. */
+  if (!rc && isnan(r.st.residual) && nh_stop_requested()) rc = nh_stop_check();
+  if (!rc && (rc = nh_sim_guard(s, s->u_start))) { /* its message names the step */
+    free(r.start[0]), free(r.start[1]);
+    return rc;
+  }
+  r.adapt_now = r.adapt_now && !rc, r.resolve = r.resolve && !rc;
+  int rc_estimate = nh_sim_estimate_step(s, &r);
+  if (rc || (rc = rc_estimate)) return nh_sim_step_failed(s, rc, r.t_new);
+  s->step++;
+  s->time = r.t_new;
+  nh_sim_count(s, &r);
+  double t1 = nh_time_now();
+  NH_TRY(nh_sim_write_solution(s));
+  double t2 = nh_time_now();
+  nh_sim_adapt_mesh(s, &r);
+  double t3 = nh_time_now();
+  s->t_adapt = r.t_estimate + (t3 - t2);
+  /* A checkpoint holds the state the next step starts from: after refinement. */
+  if (nh_sim_checkpoint_due(s, &r)) NH_TRY_OUTPUT(nh_checkpoint_write(s), s->step);
+  double t4 = nh_time_now(); /* the checkpoint counts as output */
+  r.t_output = t2 - t1 + (t4 - t3);
+  NH_TRY(nh_sim_write_row(s, &r, t4));
   /* The scene was validated at creation: nothing refinement meets later is
    * the scene's fault (exit 1, not 2). */
-  if (refine_rc)
-    return NH_ERROR(refine_rc == NH_ERR_INPUT ? NH_ERR_INTERNAL : refine_rc,
-                    "step %d (t = %g s): refinement: %s", s->step, t_new, refine_reason);
+  if (r.refine_rc)
+    return NH_ERROR(r.refine_rc == NH_ERR_INPUT ? NH_ERR_INTERNAL : r.refine_rc,
+                    "step %d (t = %g s): refinement: %s", s->step, r.t_new, r.refine_reason);
   return NH_OK;
 }
 
@@ -1119,6 +1020,10 @@ int nh_sim_run(nh_sim *s) {
   /* results.h5 holds the rows since its last frame in memory: writing them
    * is an output like any other, and can fail like any other. */
   if (!rc && s->h5 && (rc = nh_h5_close(&s->h5))) rc = nh_output_failed(rc, s->step);
-  if (s->options.progress) nh_progress_finish(s);
+  if (s->options.progress) {
+    double median[NH_PHASES];
+    nh_sim_median_times(s, median);
+    nh_progress_finish(s, median);
+  }
   return rc;
 }

@@ -1,5 +1,9 @@
-/* sim_impl.h — private to the sim module: the simulation state and the
- * progress reporter shared by sim.c and progress.c. */
+/* sim_impl.h — private to the sim module: the simulation state (sim.c owns
+ * it) and the functions of the module's other files, in their dependency
+ * order (docs/design.md, "Modules", sim): probes.c, guard.c, checkpoint.c and
+ * progress.c call none of the others, setup.c and tools.c call probes.c,
+ * sim.c calls them all. The files below sim.c read the state they are given; none calls
+ * back into sim.c. */
 #ifndef NH_SIM_IMPL_H
 #define NH_SIM_IMPL_H
 
@@ -82,6 +86,7 @@ struct nh_sim {
                                  past the last complete step, a checkpoint takes solver_start */
 };
 
+/* ---- checkpoints (sim/checkpoint.c) ---- */
 /* A checkpoint read back: the mesh (owned), u, v (owned), step and time,
  * the tools' state (owned; NULL without tools) and the solver's. */
 typedef struct {
@@ -103,15 +108,11 @@ int nh_checkpoint_write(const nh_sim *sim);
  * corrupted or other-scene file. */
 int nh_checkpoint_read(const char *dir, const nh_scene *scene, nh_checkpoint *ck);
 
-/* ---- tools (sim/tools.c) ---- */
-/* Create the tools (NULL contact without tools) and their outputs' handles. */
-int nh_sim_tools_build(nh_sim *sim);
-void nh_sim_tools_destroy(nh_sim *sim);
-/* Outputs: open tools.csv, targets.csv and the tool PVDs; rows of this step;
- * the tool frames of this step. */
-int nh_sim_tools_open(nh_sim *sim);
-int nh_sim_tools_rows(nh_sim *sim);
-int nh_sim_tools_frame(nh_sim *sim);
+/* ---- embedded points: probes, then targets (sim/probes.c) ---- */
+/* Locate every embedded point in the mesh (its cell and natural
+ * coordinates). A point outside the tissue: NH_ERR_INPUT naming the scene's
+ * key at creation (first), NH_ERR_INTERNAL after a refinement. */
+int nh_sim_locate_points(nh_sim *sim, int first);
 /* Current position of embedded point i (probes, then targets). */
 void nh_sim_point_position(const nh_sim *sim, int i, double x[3]);
 /* Estimated error of embedded point i's displacement (m): the goal estimate
@@ -128,8 +129,27 @@ int nh_sim_count_inverted(const nh_sim *sim, int *first);
  * reason, or with solver.on_invalid: warn a warning and NH_OK. */
 int nh_sim_guard(nh_sim *sim, const double *u_start);
 
+/* ---- the progress line and the summary (sim/progress.c) ---- */
 void nh_progress_start(nh_sim *sim);
 void nh_progress_update(nh_sim *sim);
-void nh_progress_finish(nh_sim *sim);
+/* The summary; median: seconds per step of each phase (nh_sim_median_times). */
+void nh_progress_finish(nh_sim *sim, const double median[NH_PHASES]);
+
+/* ---- what depends on the mesh (sim/setup.c) ---- */
+/* Build everything that depends on the mesh: at creation (first = 1, which
+ * also reports scene errors only the mesh reveals, NH_ERR_INPUT) and after
+ * refinement (the tools' embedded points relocated too). Fails as the
+ * builders it calls, NH_ERR_MEMORY. */
+int nh_sim_setup_mesh(nh_sim *sim, int first);
+
+/* ---- tools (sim/tools.c) ---- */
+/* Create the tools (NULL contact without tools) and their outputs' handles. */
+int nh_sim_tools_build(nh_sim *sim);
+void nh_sim_tools_destroy(nh_sim *sim);
+/* Outputs: open tools.csv, targets.csv and the tool PVDs; rows of this step;
+ * the tool frames of this step. */
+int nh_sim_tools_open(nh_sim *sim);
+int nh_sim_tools_rows(nh_sim *sim);
+int nh_sim_tools_frame(nh_sim *sim);
 
 #endif

@@ -96,13 +96,6 @@ void nh_sim_tools_destroy(nh_sim *s) {
   nh_csv_destroy(&s->targets_csv);
 }
 
-void nh_sim_point_position(const nh_sim *s, int i, double x[3]) {
-  const nh_scene *sc = s->scene;
-  const double *X = i < sc->n_probes ? sc->probes[i].point : sc->targets[i - sc->n_probes].point;
-  nh_sim_probe_displacement(s, i, x);
-  for (int k = 0; k < 3; k++) x[k] += X[k];
-}
-
 int nh_sim_tools_open(nh_sim *s) {
   const nh_scene *sc = s->scene;
   char path[NH_PATH_MAX + 2 * NH_NAME_MAX];
@@ -184,33 +177,15 @@ int nh_sim_tools_rows(nh_sim *s) {
   return rc;
 }
 
-void nh_sim_target_miss(const nh_sim *s, int i, double x[3], double miss[3]) {
-  nh_tool_report r;
-  nh_sim_point_position(s, s->scene->n_probes + i, x);
-  nh_contact_report(s->contact, s->scene->targets[i].tool, &r);
-  for (int k = 0; k < 3; k++) miss[k] = r.tip[k] - x[k];
-}
-
-double nh_sim_target_distance_error(const nh_sim *s, int i) {
-  const double *E = nh_adapt_goal_estimates(s->adapt);
-  const int g = s->goal_of_point ? s->goal_of_point[s->scene->n_probes + i] : -1;
-  if (!E || g < 0) return NAN;
-  double x[3], miss[3], tip[3];
-  nh_sim_target_miss(s, i, x, miss);
-  for (int k = 0; k < 3; k++) tip[k] = x[k] + miss[k];
-  return fabs(nh_dwr_distance_estimate(E + 3 * g, x, tip));
-}
-
 int nh_sim_tools_frame(nh_sim *s) {
-  const nh_scene *sc = s->scene;
   int rc = NH_OK;
-  for (int k = 0; k < sc->n_tools && !rc; k++) {
+  for (int k = 0; k < s->scene->n_tools && !rc; k++) {
     nh_beam *b = nh_contact_beam(s->contact, k);
     const int nn = nh_beam_nodes(b);
     /* nn - 1 two-node VTK_LINE cells, base to tip (meshio drops poly-lines) */
-    int *conn = malloc(sizeof(int) * 2 * (size_t)nn), *off = malloc(sizeof(int) * (size_t)nn);
-    double *f = malloc(sizeof(double) * 3 * (size_t)nn), *vel = malloc(sizeof(double) * 3 * nn);
-    double *arc = malloc(sizeof(double) * (size_t)nn);
+    int *conn = nh_calloc(2 * (size_t)nn, sizeof *conn), *off = nh_calloc((size_t)nn, sizeof *off);
+    double *f = nh_calloc(3 * (size_t)nn, sizeof *f), *vel = nh_calloc(3 * (size_t)nn, sizeof *vel);
+    double *arc = nh_calloc((size_t)nn, sizeof *arc);
     if (!conn || !off || !f || !vel || !arc)
       rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: tool frame");
     if (!rc) {
@@ -224,22 +199,18 @@ int nh_sim_tools_frame(nh_sim *s) {
         arc[i] = nh_beam_length(b) * i / (nn - 1);
         for (int c = 0; c < 3; c++) vel[3 * i + c] = v[6 * i + c];
       }
-      nh_field pf[3] = {{"constraint_force", 3, f, "N"},
-                        {"velocity", 3, vel, "m/s"},
-                        {"arc_length", 1, arc, "m"}};
-      nh_vtu_grid g = {.n_points = nn,
-                       .points = nh_beam_positions(b),
-                       .n_cells = nn - 1,
-                       .connectivity = conn,
-                       .offsets = off,
-                       .type = NH_VTK_LINE,
-                       .n_point_fields = 3,
-                       .point_fields = pf};
-      char name[NH_NAME_MAX + 16], path[NH_PATH_MAX + NH_NAME_MAX + 32];
-      snprintf(name, sizeof name, "%s_%06d.vtu", sc->tools[k].name, s->step);
-      snprintf(path, sizeof path, "%s/%s", sc->output.dir, name);
-      rc = nh_vtu_write(path, &g);
-      if (!rc) rc = nh_pvd_add(s->tool_pvd[k], s->time, name);
+      const nh_field pf[3] = {{"constraint_force", 3, f, "N"},
+                              {"velocity", 3, vel, "m/s"},
+                              {"arc_length", 1, arc, "m"}};
+      const nh_frame frame = {.n_points = nn,
+                              .points = nh_beam_positions(b),
+                              .n_cells = nn - 1,
+                              .connectivity = conn,
+                              .offsets = off,
+                              .type = NH_VTK_LINE,
+                              .n_point_fields = 3,
+                              .point_fields = pf};
+      rc = nh_pvd_write_frame(s->tool_pvd[k], s->step, s->time, &frame);
     }
     free(conn), free(off), free(f), free(vel), free(arc);
   }

@@ -18,11 +18,14 @@
  * eps h against a signal of strain × h, and the relative residual cannot go
  * below about 40 eps / peak strain (measured over six decades of strain,
  * docs/theory.md §3; 4e-12 at strain 1e-4): tolerances below
- * that fail to converge, and say so. */
+ * that fail to converge, and say so.
+ *
+ * nh_step_dynamic is the coupled step (coupled.c) without rows, then
+ * Newton corrections; nh_solve_static runs the tissue's phases of a step
+ * (step.c) and the factorisation (reuse.c) per Newton iteration. */
 #include "solve/system_impl.h"
 
 #include <math.h>
-#include <string.h>
 
 static double nh_norm(const double *a, int n) {
   double s = 0.0;
@@ -43,9 +46,9 @@ int nh_step_dynamic(nh_system *s, const nh_integrator *in, const double *f_ext, 
        it++) {
     if (nh_stop_requested()) break; /* the step stands as linearised (u, v consistent) */
     double t0 = nh_time_now();
-    if ((rc = nh_system_factor(s))) break;
+    if ((rc = nh_system_factor(s))) break; /* the A the residual assembled (reuse.c) */
     double t1 = nh_time_now();
-    if ((rc = nh_system_solve_constrained(s, b, x))) break;
+    if ((rc = nh_step_free_solve(s, in, b, x, &st.step))) break;
     nh_system_scatter(s, x, delta);
     for (int i = 0; i < n; i++) {
       v[i] += delta[i];
@@ -66,52 +69,38 @@ int nh_step_dynamic(nh_system *s, const nh_integrator *in, const double *f_ext, 
 
 int nh_solve_static(nh_system *s, const nh_integrator *in, const double *f_ext, double *u,
                     nh_step_stats *stats) {
-  const int n = 3 * s->n_nodes;
-  double *f_int = s->work[0], *r = s->work[2];
   double *b = s->fwork[0], *du = s->fwork[1];
-  double t_asm = 0.0, t_fac = 0.0, t_sol = 0.0, rel = INFINITY;
-  int it, n_factor = 0;
-  s->t_constraints = 0.0;
-  nh_system_reset_multipliers(s);
-  nh_system_set_lazy(s, in->lazy_rotation);
-  nh_system_lazy_reset(s);
+  double t_sol = 0.0, rel = INFINITY;
+  nh_step_stats st = {0};
+  int it;
+  nh_step_begin(s, in);
   for (it = 0; it <= in->max_iterations; it++) {
-    double t0 = nh_time_now();
-    nh_system_assemble(s, u, NULL, 0.0, 1.0, f_int, NULL, in->threads);
+    double t0 = nh_time_now(), f_scale;
+    nh_step_assemble(s, in, 1, f_ext, u, NULL, b, &f_scale);
     NH_TRY(nh_stop_check()); /* SIGINT/SIGTERM: between iterations or in the assembly */
-    for (int i = 0; i < n; i++) r[i] = f_ext[i] - f_int[i];
-    nh_system_gather(s, r, b);
     nh_system_add_reactions(s, b);
-    double scale = fmax(fmax(nh_norm(f_ext, n), nh_norm(f_int, n)), 1e-300);
-    rel = nh_norm(b, s->n_free) / scale;
-    double t1 = nh_time_now();
-    t_asm += t1 - t0;
+    rel = nh_norm(b, s->n_free) / fmax(f_scale, 1e-300);
+    st.t_assemble += nh_time_now() - t0;
     if (!isfinite(rel)) return NH_ERROR(NH_ERR_NUMERIC, "the static residual is not finite");
     if (rel <= in->tolerance || nh_norm(b, s->n_free) == 0.0) break;
     if (it == in->max_iterations) break;
-    if (!s->factor_current) { /* lazy tangents may have left A as it was */
-      NH_TRY(nh_system_factor(s));
-      n_factor++;
-    }
+    NH_TRY(nh_system_factor_or_reuse(s, in, NH_FACTOR_NEWTON, &st));
     double t2 = nh_time_now();
-    NH_TRY(nh_system_solve_constrained(s, b, du));
-    nh_system_scatter(s, du, s->work[3]);
-    for (int i = 0; i < n; i++) u[i] += s->work[3][i];
-    double t3 = nh_time_now();
-    t_fac += t2 - t1;
-    t_sol += t3 - t2;
+    NH_TRY(nh_step_free_solve(s, in, b, du, &st));
+    nh_step_update(s, 1, 1.0, du, u, NULL);
+    t_sol += nh_time_now() - t2;
   }
   if (stats) {
-    stats->t_assemble = t_asm;
-    stats->t_factor = t_fac;
+    stats->t_assemble = st.t_assemble;
+    stats->t_factor = st.t_factor;
     stats->t_solve = t_sol - s->t_constraints;
     stats->t_constraints = s->t_constraints;
     stats->iterations = it;
     stats->residual = rel;
-    stats->factorised = n_factor; /* one per Newton iteration unless A was kept */
+    stats->factorised = st.factorised; /* one per Newton iteration unless A was kept */
     stats->pcg_iterations = stats->corrections = 0;
     stats->tangent_updates = nh_system_lazy_updates(s);
-    stats->t_factor_reference = n_factor > 0 ? t_fac / n_factor : 0.0;
+    stats->t_factor_reference = st.factorised > 0 ? st.t_factor / st.factorised : 0.0;
     stats->t_aside = 0.0;
   }
   if (!(rel <= in->tolerance) && rel != 0.0)

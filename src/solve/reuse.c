@@ -16,16 +16,27 @@
  * and one pair of triangular solves with L₀ (a fraction of a factorisation:
  * measured in docs/performance.md).
  *
- * When to factorise (nh_system_prepare):
- *   - no factor yet, or the pattern changed: a mesh change builds a new
- *     system, whose first step factorises;
+ * When to factorise (nh_system_factor_or_reuse): THE place where a step
+ * decides, after its assembly, whether A is factorised. A step of
+ * nh_step_coupled (dynamic, or an iteration of the quasi-static coupled
+ * Newton) factorises at every call unless solver.refactor is auto
+ * (in->reuse); then a factor of this very A is kept as it is (lazy tangents
+ * may leave A unchanged), and an earlier one is kept as a preconditioner
+ * unless
+ *   - there is no factor yet, or the pattern changed: a mesh change builds a
+ *     new system, whose first step factorises;
  *   - the renewal rule of nh_system_account asks for it;
  *   - the factor is NH_REFACTOR_MAX_AGE steps old (a schedule that bounds
  *     drift on long quiet runs);
  *   - hanging-node rows are enforced by multipliers (compliance.c builds
  *     their W from the factor, exactly).
- * A solve that still misses the tolerance after NH_PCG_MAX iterations
- * factorises at once and solves directly (nh_system_solve_reuse), so a step
+ * An iteration of the static Newton (nh_solve_static, NH_FACTOR_NEWTON)
+ * factorises unless the factor is already this A's. Three more places
+ * factorise, each because a reused factor did not serve or A just changed:
+ * a solve that still misses the tolerance after NH_PCG_MAX iterations
+ * (nh_system_solve_reuse), constraint corrections that do not converge with
+ * W₀ (coupled.c, nh_coupled_reused), and each Newton correction of a
+ * dynamic step (nh_step_dynamic, on the A its residual assembled). So a step
  * never returns a less accurate answer than asked for.
  *
  * The constraint rows of the coupled step (coupled.c) use W₀ = J A₀⁻¹ Jᵀ from
@@ -64,17 +75,24 @@ static int nh_time_aside(nh_system *s, nh_step_stats *st) {
   return NH_OK;
 }
 
-int nh_system_prepare(nh_system *s, const nh_integrator *in, nh_step_stats *st) {
+int nh_system_factor_or_reuse(nh_system *s, const nh_integrator *in, nh_factor_rule rule,
+                              nh_step_stats *st) {
   double t0 = nh_time_now();
-  int need = !in->reuse || !s->L || s->n_rows > 0 || s->refactor_due ||
-             s->factor_age >= NH_REFACTOR_MAX_AGE;
-  /* already the factor of this A (lazy tangents may keep A): reuse takes it;
-   * `every` factorises at every step, as asked */
-  if (s->factor_current && in->reuse) need = 0;
+  int need;
+  if (rule == NH_FACTOR_NEWTON) {
+    need = !s->factor_current; /* lazy tangents may have left A as it was */
+  } else {
+    need = !in->reuse || !s->L || s->n_rows > 0 || s->refactor_due ||
+           s->factor_age >= NH_REFACTOR_MAX_AGE;
+    /* already the factor of this A (lazy tangents may keep A): reuse takes it;
+     * `every` factorises at every step, as asked */
+    if (s->factor_current && in->reuse) need = 0;
+  }
   if (need) {
     NH_TRY(nh_system_factor(s));
     st->t_factor_reference = nh_time_now() - t0;
-  } else {
+    st->factorised++;
+  } else if (rule == NH_FACTOR_STEP) {
     s->factor_age++;
     if (in->time_factor) NH_TRY(nh_time_aside(s, st));
   }

@@ -100,11 +100,17 @@ enum { NH_PCG_MAX = 40, NH_OUTER_MAX = 10, NH_REFACTOR_MAX_AGE = 200 };
  * and their constraint solves (st: 0 on a step that factorised). */
 void nh_system_account(nh_system *s, const nh_step_stats *st);
 
-/* Before a step's solves, after assembly: factorise A unless in->reuse is on
- * and the current factor may still serve (see reuse.c); the time spent is
- * added to st->t_factor, and st->t_factor_reference (and t_aside) set.
+/* Factorise or reuse (reuse.c): THE place where a step decides, after its
+ * assembly, whether A is factorised (the rules: reuse.c's header).
+ * NH_FACTOR_STEP: a step of nh_step_coupled, every time or, with in->reuse
+ * (solver.refactor: auto), while a recent factor may serve; NH_FACTOR_NEWTON:
+ * an iteration of the static Newton, unless the factor is already this A's.
+ * The time spent is added to st->t_factor, a factorisation counted in
+ * st->factorised and timed in st->t_factor_reference (and t_aside set).
  * Fails as nh_system_factor. */
-int nh_system_prepare(nh_system *s, const nh_integrator *in, nh_step_stats *st);
+typedef enum { NH_FACTOR_STEP, NH_FACTOR_NEWTON } nh_factor_rule;
+int nh_system_factor_or_reuse(nh_system *s, const nh_integrator *in, nh_factor_rule rule,
+                              nh_step_stats *st);
 
 /* Solve A x = b: directly when the factor is current, else by PCG with the
  * factor as preconditioner to `tolerance` (relative, in the M⁻¹-norm), and if
@@ -129,5 +135,54 @@ int nh_system_compliance_add(nh_system *s, cholmod_sparse *Jt, double *W);
  * factor: the path of a simplicial factor, and an independent one for the
  * tests (tests/test_compliance.c). */
 int nh_system_compliance_add_spsolve(nh_system *s, cholmod_sparse *Jt, double *W);
+
+/* ---- constraint rows, their tissue and tool parts (rows.c) ---- */
+
+/* Row i's tool part as 12 coefficients on the element's DOFs: −nᵀ J. */
+void nh_row_tool_coef(const nh_rows *rows, int i, double c[12]);
+/* The tool's part of row i applied to the tool's velocities v (all DOFs). */
+double nh_row_tool_rate(const nh_rows *rows, int i, const double *v);
+/* Add row i's tool coefficients to a free-DOF column of the tool (base
+ * dropped). */
+void nh_row_tool_column(const nh_rows *rows, int i, double *col);
+/* The tissue part of the rows as J_tᵀ over the unknowns (CSC, n_free x m,
+ * sorted); mark: n_free ints, all −1 on entry and on return. NULL when out
+ * of memory. */
+cholmod_sparse *nh_rows_tissue_jt(nh_system *s, const nh_rows *rows, int *mark);
+/* col = J_tᵀ λ (n_free values): the rows' forces on the tissue's unknowns. */
+void nh_rows_tissue_force(const cholmod_sparse *Jt, const double *lambda, double *col, int n_free);
+/* The tissue's end-of-step rates of the rows for a velocity update dv (free
+ * DOFs), plus `base` (the tools' rates and g/h): out_i = base_i +
+ * n_i · Σ_a N_a (v + P dv)_a; full: 3 per node scratch. */
+void nh_rows_tissue_rates(const nh_system *s, const nh_rows *rows, const double *v,
+                          const double *dv, const double *base, double *full, double *out);
+
+/* ---- the tissue's phases of one step (step.c) ----
+ * Shared by the coupled step (coupled.c: dynamic, and each iteration of the
+ * quasi-static coupled Newton), the dynamic step's Newton corrections and
+ * the static Newton (integrate.c). */
+
+/* Begin: this step's hanging-node reactions, constraint time and lazy
+ * tangents' count start from zero; the lazy tolerance is in->lazy_rotation. */
+void nh_step_begin(nh_system *s, const nh_integrator *in);
+/* Assemble A and the right-hand side b over the unknowns at (u, v):
+ * dynamic, A = (1 + hα) M + (hβ + h²) K(u) and
+ * b = Pᵀ [h (f_ext − f_int(u) − α M v − β K v) − h² K v] (the seed's Eq. 13);
+ * statics (v unused, may be NULL), A = K(u), b = Pᵀ (f_ext − f_int(u)) and
+ * *f_scale = max(|f_ext|, |f_int|) (the residual's scale). Uses the
+ * system's work vectors 0-2. A stop request leaves A partial: callers ask
+ * nh_stop_check. */
+void nh_step_assemble(nh_system *s, const nh_integrator *in, int statics, const double *f_ext,
+                      const double *u, const double *v, double *b, double *f_scale);
+/* Free solve: x = A⁻¹ b with the step's factor (PCG when it is an earlier
+ * A's; the hanging-node rows' multipliers, Algorithm 1, when the system
+ * carries them). Adds the PCG iterations and any factorisation time to st.
+ * Fails as nh_system_solve_reuse / nh_system_solve_constrained. */
+int nh_step_free_solve(nh_system *s, const nh_integrator *in, const double *b, double *x,
+                       nh_step_stats *st);
+/* Update the tissue by x over the unknowns (prolonged into the work vector
+ * 3, where the step's nodal update stays): statics, u ← u + P x; dynamic,
+ * v ← v + P x, u ← u + h v. */
+void nh_step_update(nh_system *s, int statics, double h, const double *x, double *u, double *v);
 
 #endif

@@ -38,7 +38,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
       fprintf(stderr, "fuzz: the target's scene does not load: %s\n", nh_error_message());
       abort();
     }
-    snprintf(dir, sizeof dir, "%s.d", yaml);
+    if (snprintf(dir, sizeof dir, "%s.d", yaml) >= (int)sizeof dir) abort();
     mkdir(dir, 0700);
   }
   uint64_t hash = nh_fuzz_fnv1a(scene->yaml, strlen(scene->yaml), seed);

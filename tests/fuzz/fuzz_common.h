@@ -51,7 +51,7 @@ static void nh_fuzz_check_prefix(int rc, const char *prefix, int line) {
 }
 
 /* An input error's message: "PATH:LINE: ..." on one line, printable. */
-static void nh_fuzz_check_message(int rc, const char *path) {
+static inline void nh_fuzz_check_message(int rc, const char *path) {
   nh_fuzz_check_prefix(rc, path, 1);
 }
 

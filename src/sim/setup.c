@@ -1,0 +1,225 @@
+/* setup.c — everything that depends on the mesh, built at creation and
+ * after every refinement (nh_sim_setup_mesh), in named parts: the per-node
+ * arrays, the fixed nodes and the ties of fixed regions (docs/theory.md §5,
+ * "Fixed regions"), the hanging nodes (docs/theory.md §6.4), the tissue's
+ * element data (fem), the drained mass under buoyancy, the load vectors,
+ * the embedded points (probes.c), the tools' embedded points and the
+ * linear system (solve). At creation, errors only the mesh reveals are the
+ * scene's (NH_ERR_INPUT, naming the key); after a refinement, ours. */
+#include "sim/sim_impl.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* Resize a per-node array of `comps` doubles to the mesh's node count. */
+static int nh_resize(double **a, int n_nodes, int comps) {
+  double *p = realloc(*a, sizeof(double) * (size_t)comps * (size_t)(n_nodes ? n_nodes : 1));
+  if (!p) return NH_ERROR(NH_ERR_MEMORY, "out of memory: %d nodes", n_nodes);
+  *a = p;
+  return NH_OK;
+}
+
+/* A fixed region's tie stiffness is NH_TIE_STIFFNESS E / ℓ², ℓ its smallest
+ * size (nh_region_size): the tissue inside moves by about 1/NH_TIE_STIFFNESS
+ * of what an elastic body of size ℓ would (docs/theory.md §5). */
+#define NH_TIE_STIFFNESS 1.0e3
+
+/* tissue.fixed[r] on an immersed domain is a volumetric tie (all components
+ * clamped, no prescribed motion, a geometric region), not a node set. */
+static int nh_sim_fixed_is_tie(const nh_scene *sc, int immersed, int r) {
+  const nh_fix *fx = &sc->tissue.fix[r];
+  return immersed && sc->tissue.fixed[r].kind != NH_REGION_LABEL && fx->axes == 7 &&
+         fx->displacement[0] == 0.0 && fx->displacement[1] == 0.0 && fx->displacement[2] == 0.0;
+}
+
+/* The per-node arrays at the mesh's node count: none fixed, none moved. */
+static int nh_sim_resize_nodes(nh_sim *s) {
+  const nh_scene *sc = s->scene;
+  const int nn = s->mesh->n_nodes;
+  unsigned char *fixed = realloc(s->fixed, (size_t)(nn ? nn : 1));
+  if (!fixed) return NH_ERROR(NH_ERR_MEMORY, "out of memory: %d nodes", nn);
+  s->fixed = fixed;
+  memset(s->fixed, 0, (size_t)nn);
+  NH_TRY(nh_resize(&s->x, nn, 3));
+  NH_TRY(nh_resize(&s->u_start, nn, 3));
+  NH_TRY(nh_resize(&s->v_start, nn, 3));
+  NH_TRY(nh_resize(&s->f_ext, nn, 3));
+  NH_TRY(nh_resize(&s->drained, nn, 1));
+  const int n_unit = sc->tissue.n_loads + sc->tissue.n_tractions;
+  NH_TRY(nh_resize(&s->load_unit, nn, 3 * (n_unit ? n_unit : 1)));
+  int *moved = realloc(s->moved, sizeof(int) * (size_t)(nn ? nn : 1));
+  if (!moved) return NH_ERROR(NH_ERR_MEMORY, "out of memory: %d nodes", nn);
+  s->moved = moved;
+  for (int i = 0; i < nn; i++) s->moved[i] = -1;
+  return NH_OK;
+}
+
+/* Fixed regions (docs/theory.md §5, "Fixed regions"): on a box domain the
+ * nodes inside; on an immersed one a clamp of all components is a stiff
+ * volumetric tie over the region's tissue (nh_sim_ties), which converges
+ * to the region under refinement (per-axis and prescribed regions stay node
+ * sets). A region without a node is the scene's fault at creation. */
+static int nh_sim_fixed_nodes(nh_sim *s, int first) {
+  const nh_scene *sc = s->scene;
+  const nh_mesh *m = s->mesh;
+  const int nn = m->n_nodes, immersed = m->domain.kind != NH_DOMAIN_BOX;
+  unsigned char *in = calloc((size_t)(nn ? nn : 1), 1);
+  if (!in) return NH_ERROR(NH_ERR_MEMORY, "out of memory: %d nodes", nn);
+  for (int r = 0; r < sc->tissue.n_fixed; r++) {
+    const nh_region *reg = &sc->tissue.fixed[r];
+    const nh_fix *fx = &sc->tissue.fix[r];
+    if (nh_sim_fixed_is_tie(sc, immersed, r)) continue; /* tied: nh_sim_ties */
+    memset(in, 0, (size_t)nn);
+    int count = nh_mesh_nodes_in_region(m, reg, in);
+    const int prescribed =
+        fx->displacement[0] != 0.0 || fx->displacement[1] != 0.0 || fx->displacement[2] != 0.0;
+    for (int i = 0; i < nn; i++) {
+      if (!in[i]) continue;
+      /* merge with the components fixed so far; all three: 1 */
+      int mask = (s->fixed[i] == 0              ? 0
+                  : (s->fixed[i] & NH_FIX_AXES) ? s->fixed[i] & 7
+                                                : 7) |
+                 fx->axes;
+      s->fixed[i] = mask == 7 ? 1 : (unsigned char)(NH_FIX_AXES | mask);
+      if (prescribed) s->moved[i] = r;
+    }
+    char what[256];
+    nh_region_describe(reg, what, sizeof what);
+    if (!(count > 0 || !first)) free(in);
+    NH_CHECK(count > 0 || !first, NH_ERR_INPUT, "%s: the %s contains no node of the mesh",
+             reg->where, what);
+  }
+  free(in);
+  return NH_OK;
+}
+
+/* Hanging nodes: every node not fixed in all three components (a node
+ * fixed in some axes keeps the hanging constraint on all three: its
+ * masters lie on the same fixed face); the Lagrange variant's rows take
+ * whole nodes: there every fixed node is left out. */
+static int nh_sim_hanging_nodes(nh_sim *s) {
+  const nh_scene *sc = s->scene;
+  const int nn = s->mesh->n_nodes, lagrange = sc->adapt.hanging == NH_HANGING_LAGRANGE;
+  unsigned char *in = calloc((size_t)(nn ? nn : 1), 1);
+  if (!in) return NH_ERROR(NH_ERR_MEMORY, "out of memory: %d nodes", nn);
+  for (int i = 0; i < nn; i++) in[i] = s->fixed[i] == 1 || (lagrange && s->fixed[i]);
+  nh_hanging_destroy(&s->hanging);
+  int rc = sc->adapt.enabled ? nh_hanging_detect(s->mesh, in, &s->hanging) : NH_OK;
+  free(in);
+  return rc;
+}
+
+/* The tissue's element data: created at the first build (with the label
+ * images' materials), updated after a refinement. */
+static int nh_sim_tissue_build(nh_sim *s, int first) {
+  const nh_scene *sc = s->scene;
+  if (!first) return nh_tissue_update(s->tissue);
+  nh_material mat = {sc->tissue.young, sc->tissue.poisson, sc->tissue.density,
+                     sc->tissue.formulation};
+  NH_TRY(nh_tissue_create(s->mesh, &mat, &s->tissue));
+  if (!sc->tissue.n_materials) return NH_OK;
+  int n = sc->tissue.n_materials, *labels = malloc(sizeof(int) * (size_t)n);
+  nh_material *mats = malloc(sizeof(nh_material) * (size_t)n);
+  int rc = labels && mats ? NH_OK : NH_ERROR(NH_ERR_MEMORY, "out of memory: materials");
+  for (int i = 0; i < n && !rc; i++) {
+    const nh_label_material *lm = &sc->tissue.materials[i];
+    labels[i] = lm->label;
+    mats[i] = (nh_material){lm->young, lm->poisson, lm->density, sc->tissue.formulation};
+  }
+  if (!rc) rc = nh_tissue_set_label_materials(s->tissue, n, labels, mats);
+  free(labels), free(mats);
+  return rc;
+}
+
+/* The ties of the fixed regions on an immersed domain: stiffness
+ * NH_TIE_STIFFNESS E / ℓ² over the tissue inside each; a tie without
+ * tissue is the scene's fault at creation. */
+static int nh_sim_ties(nh_sim *s, int first) {
+  const nh_scene *sc = s->scene;
+  const int immersed = s->mesh->domain.kind != NH_DOMAIN_BOX, nr = sc->tissue.n_fixed;
+  if (!immersed || nr == 0) return NH_OK;
+  double *k = malloc(sizeof(double) * 2 * (size_t)nr), *vol = k + nr;
+  if (!k) return NH_ERROR(NH_ERR_MEMORY, "out of memory: ties");
+  for (int r = 0; r < nr; r++) {
+    double l = nh_region_size(&sc->tissue.fixed[r]);
+    k[r] = nh_sim_fixed_is_tie(sc, immersed, r) && l > 0.0 && isfinite(l)
+               ? NH_TIE_STIFFNESS * sc->tissue.young / (l * l)
+               : 0.0;
+  }
+  int rc = nh_tissue_set_ties(s->tissue, nr, sc->tissue.fixed, k, vol);
+  for (int r = 0; r < nr && !rc; r++)
+    if (nh_sim_fixed_is_tie(sc, immersed, r) && !(vol[r] > 0.0)) {
+      char what[256];
+      nh_region_describe(&sc->tissue.fixed[r], what, sizeof what);
+      rc = NH_ERROR(first ? NH_ERR_INPUT : NH_ERR_INTERNAL,
+                    "%s: the %s holds no tissue (on an immersed domain a fixed region ties the "
+                    "tissue inside it, so it needs a volume inside the shape)",
+                    sc->tissue.fixed[r].where, what);
+    }
+  free(k);
+  return rc;
+}
+
+/* The drained mass: all of it, or the part above the fluid level. */
+static void nh_sim_drained_mass(nh_sim *s) {
+  const nh_scene *sc = s->scene;
+  const nh_mesh *m = s->mesh;
+  memcpy(s->drained, s->tissue->mass, sizeof(double) * (size_t)m->n_nodes);
+  if (!sc->tissue.buoyant || !sc->tissue.buoyancy_has_level) return;
+  const double *g = sc->gravity;
+  double gn = sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]),
+         up[3] = {-g[0] / gn, -g[1] / gn, -g[2] / gn};
+  memset(s->drained, 0, sizeof(double) * (size_t)m->n_nodes);
+  for (int l = 0; l < m->n_leaves; l++) {
+    int c = m->leaves[l];
+    double above = nh_mesh_cell_fraction_above(m, c, sc->tissue.buoyancy_level, up);
+    double rho;
+    nh_tissue_cell_material(s->tissue, c, NULL, NULL, &rho);
+    double mc = rho * m->fill[c] * s->tissue->volume[s->tissue->cell_shape[c]] / 8.0 * above;
+    for (int a = 0; a < 8; a++) s->drained[m->cells[8 * c + a]] += mc;
+  }
+}
+
+/* The nodal forces of each load, then each traction, at factor 1. */
+static int nh_sim_load_vectors(nh_sim *s) {
+  const nh_scene *sc = s->scene;
+  const nh_mesh *m = s->mesh;
+  const int n = 3 * m->n_nodes, n_unit = sc->tissue.n_loads + sc->tissue.n_tractions;
+  memset(s->load_unit, 0, sizeof(double) * (size_t)n * (size_t)n_unit);
+  for (int l = 0; l < sc->tissue.n_loads; l++)
+    NH_TRY(nh_mesh_region_load(m, &sc->tissue.loads[l].region, sc->tissue.loads[l].force,
+                               s->load_unit + (size_t)l * n));
+  for (int l = 0; l < sc->tissue.n_tractions; l++)
+    NH_TRY(nh_traction_load(m, &sc->tissue.tractions[l],
+                            s->load_unit + (size_t)(sc->tissue.n_loads + l) * n, NULL));
+  return NH_OK;
+}
+
+/* The tissue's linear system (fixed DOFs and, under adapt.hanging:
+ * eliminate, hanging nodes eliminated; under lagrange, their rows). */
+static int nh_sim_system_build(nh_sim *s) {
+  const nh_scene *sc = s->scene;
+  const int lagrange = sc->adapt.hanging == NH_HANGING_LAGRANGE;
+  nh_system_destroy(&s->system);
+  int rc = nh_system_create(s->tissue, s->fixed, lagrange ? NULL : s->hanging, &s->system);
+  if (rc == NH_ERR_INPUT)
+    return NH_ERROR(NH_ERR_INPUT, "%s: every node of the tissue is fixed: nothing to simulate",
+                    sc->tissue.where_fixed);
+  NH_TRY(rc);
+  if (lagrange) NH_TRY(nh_system_set_hanging_rows(s->system, s->hanging));
+  return NH_OK;
+}
+
+int nh_sim_setup_mesh(nh_sim *s, int first) {
+  NH_TRY(nh_sim_resize_nodes(s));
+  NH_TRY(nh_sim_fixed_nodes(s, first));
+  NH_TRY(nh_sim_hanging_nodes(s));
+  NH_TRY(nh_sim_tissue_build(s, first));
+  NH_TRY(nh_sim_ties(s, first));
+  nh_sim_drained_mass(s);
+  NH_TRY(nh_sim_load_vectors(s));
+  NH_TRY(nh_sim_locate_points(s, first));
+  if (!first && s->contact) NH_TRY(nh_contact_relocate(s->contact, s->mesh));
+  return nh_sim_system_build(s);
+}

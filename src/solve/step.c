@@ -1,0 +1,91 @@
+/* step.c — the tissue's phases of one step (docs/design.md, "One step"),
+ * shared by the coupled step (coupled.c: dynamic, and each iteration of the
+ * quasi-static coupled Newton), the dynamic step's Newton corrections and
+ * the static Newton (integrate.c): begin (nh_step_begin), assemble A and b
+ * (nh_step_assemble: the seed's Eq. 13, or K and f_ext − f_int), the free
+ * solve (nh_step_free_solve), the update (nh_step_update) and the residual
+ * of the implicit-Euler equations (nh_dynamic_residual, docs/theory.md §3).
+ * Between assembly and free solve the step factorises or reuses a factor:
+ * reuse.c (nh_system_factor_or_reuse). */
+#include "solve/system_impl.h"
+
+#include <math.h>
+
+void nh_step_begin(nh_system *s, const nh_integrator *in) {
+  s->t_constraints = 0.0;
+  nh_system_reset_multipliers(s); /* this step's hanging-node reactions only */
+  nh_system_set_lazy(s, in->lazy_rotation);
+  nh_system_lazy_reset(s);
+}
+
+void nh_step_assemble(nh_system *s, const nh_integrator *in, int statics, const double *f_ext,
+                      const double *u, const double *v, double *b, double *f_scale) {
+  const nh_tissue *t = s->tissue;
+  const int n = 3 * s->n_nodes;
+  const double h = in->dt;
+  double *f_int = s->work[0], *Kv = s->work[1], *rhs = s->work[2];
+  if (statics) { /* a Newton iteration: A = K(u), b = f_ext − f_int(u) */
+    nh_system_assemble(s, u, NULL, 0.0, 1.0, f_int, NULL, in->threads);
+    for (int i = 0; i < n; i++) rhs[i] = f_ext[i] - f_int[i];
+  } else {
+    nh_system_assemble(s, u, v, 1.0 + h * in->alpha, h * in->beta + h * h, f_int, Kv, in->threads);
+    for (int i = 0; i < n; i++) {
+      double Mv = t->mass[i / 3] * v[i];
+      rhs[i] = h * (f_ext[i] - f_int[i] - in->alpha * Mv - in->beta * Kv[i]) - h * h * Kv[i];
+    }
+  }
+  nh_system_gather(s, rhs, b);
+  if (statics) {
+    double fe = 0.0, fi = 0.0;
+    for (int i = 0; i < n; i++) fe += f_ext[i] * f_ext[i], fi += f_int[i] * f_int[i];
+    *f_scale = fmax(sqrt(fe), sqrt(fi));
+  }
+}
+
+int nh_step_free_solve(nh_system *s, const nh_integrator *in, const double *b, double *x,
+                       nh_step_stats *st) {
+  if (s->n_rows > 0) /* hanging-node rows: the factor is current (reuse.c) */
+    return nh_system_solve_constrained(s, b, x);
+  int its = 0, rc = nh_system_solve_reuse(s, b, x, in->tolerance, &its, &st->t_factor);
+  st->pcg_iterations += its;
+  return rc;
+}
+
+void nh_step_update(nh_system *s, int statics, double h, const double *x, double *u, double *v) {
+  const int n = 3 * s->n_nodes;
+  double *full = s->work[3];
+  nh_system_scatter(s, x, full);
+  if (statics) {
+    for (int i = 0; i < n; i++) u[i] += full[i];
+  } else {
+    for (int i = 0; i < n; i++) {
+      v[i] += full[i];
+      u[i] += h * v[i];
+    }
+  }
+}
+
+double nh_dynamic_residual(nh_system *s, const nh_integrator *in, const double *f_ext,
+                           const double *u, const double *v, const double *dv,
+                           const double *reaction, double *b) {
+  const nh_tissue *t = s->tissue;
+  const int n = 3 * s->n_nodes, nf = s->n_free;
+  const double h = in->dt;
+  double *f_int = s->work[0], *Kv = s->work[1], *R = s->work[2];
+  nh_system_assemble(s, u, v, 1.0 + h * in->alpha, h * in->beta + h * h, f_int, Kv, in->threads);
+  double fe = 0.0, fi = 0.0, md = 0.0;
+  for (int i = 0; i < n; i++) {
+    double Mdv = t->mass[i / 3] * dv[i];
+    R[i] = h * (f_ext[i] - f_int[i] - in->alpha * t->mass[i / 3] * v[i] - in->beta * Kv[i]) - Mdv;
+    fe += f_ext[i] * f_ext[i], fi += f_int[i] * f_int[i], md += Mdv * Mdv;
+  }
+  if (nh_stop_requested()) return NAN; /* the assembly was cut short: unknown */
+  nh_system_gather(s, R, b);
+  nh_system_add_reactions(s, b);
+  if (reaction)
+    for (int i = 0; i < nf; i++) b[i] += reaction[i];
+  double r = 0.0;
+  for (int i = 0; i < nf; i++) r += b[i] * b[i];
+  double scale = fmax(fmax(h * sqrt(fe), h * sqrt(fi)), fmax(sqrt(md), 1e-300));
+  return sqrt(r) / scale;
+}

@@ -1,0 +1,277 @@
+"""tools/study.py dbs-goal (docs/dbs.md, "Goal-oriented refinement of the whole
+procedure"): the whole procedure of cases/dbs/dbs-skull.yaml (270 steps) on
+uniform 14, 10, 7, 5 mm grids, whose per-step Richardson extrapolation
+through the finest three (observed order per step; the 5 mm value with the
+7 → 5 mm difference as its error bar where the order is not sane; the 14,
+10, 7 mm triple reported beside it) is the reference, and on goal-driven and
+SPR-driven meshes from 14 mm: the electrode tip–STN distance's error at every
+step after the target is reached, the effectivity of error_estimate and
+distance_error_estimate, median ms/step against the 7 mm mesh's;
+dbs_goal_error.png, dbs_goal_cost.png, dbs_goal_effectivity.png.
+"""
+import os
+
+import numpy as np
+
+import study_engine as engine
+from outputs import read_csv, read_points, read_steps, speed
+from plotstyle import FIGSIZE, MARKER, plt, save, save_loglog
+from richardson import observed, per_step_reference
+from study_dbs import phase_lines, phases
+
+ROOT = engine.ROOT
+
+DBS_GOAL = {
+    "scene": os.path.join(ROOT, "cases", "dbs", "dbs-skull.yaml"),
+    "common": ["output.every=0"],  # no frames: the cost is the steps'
+    # name, label, overrides, h (mm): the reference's three meshes, coarse first
+    "uniform": [
+        ("uniform-14mm", "uniform 10×12×9 (14 mm)",
+         ["adapt.every=1000000", "tissue.grid=[10,12,9]"], 14.0),
+        ("uniform-10mm", "uniform 14×17×13 (10 mm)",
+         ["adapt.every=1000000", "tissue.grid=[14,17,13]"], 10.0),
+        ("uniform-7mm", "uniform 20×25×19 (7 mm)",
+         ["adapt.every=1000000", "tissue.grid=[20,25,19]"], 7.0),
+        ("uniform-5mm", "uniform 28×34×26 (5 mm)",
+         ["adapt.every=1000000", "tissue.grid=[28,34,26]"], 5.0),
+    ],
+    "baseline": "uniform-7mm",  # the goal's cost is measured against this mesh's ms/step
+    # name, label, overrides, kind: adaptive runs from the 14 mm grid (hex2, max θ = 0.6 as the
+    # scene; the goal is the scene's target, the STN)
+    "adaptive": [
+        ("spr-l1", "SPR from 14 mm, 1 level", ["tissue.grid=[10,12,9]", "adapt.max_level=1"],
+         "spr"),
+        ("spr-l2", "SPR from 14 mm, 2 levels", ["tissue.grid=[10,12,9]", "adapt.max_level=2"],
+         "spr"),
+        ("spr-l1-4300", "SPR from 14 mm, 1 level, ≤ 4300 dofs",
+         ["tissue.grid=[10,12,9]", "adapt.max_level=1", "adapt.max_dofs=4300"], "spr"),
+        ("goal-l1", "goal from 14 mm, 1 level",
+         ["adapt.estimator=goal", "tissue.grid=[10,12,9]", "adapt.max_level=1"], "goal"),
+        ("goal-l1-theta0.3", "goal from 14 mm, 1 level, θ = 0.3",
+         ["adapt.estimator=goal", "tissue.grid=[10,12,9]", "adapt.max_level=1",
+          "adapt.marking={strategy: max, theta: 0.3}"], "goal"),
+        # tolerance mode: marks among the cells that can still be refined (θ = 0.6 alone stops
+        # at 4236 dofs: its marked cells are all at max_level), until the budget
+        ("goal-l1-tol", "goal from 14 mm, 1 level, tolerance 2 µm, ≤ 8000 dofs",
+         ["adapt.estimator=goal", "tissue.grid=[10,12,9]", "adapt.max_level=1",
+          "adapt.tolerance=2e-6", "adapt.max_dofs=8000"], "goal"),
+        # fails at step 163 (t = 8.15 s, the retraction's first steps): a 3.5 mm cell at the
+        # channel inverts (docs/dbs.md; so does the same with tolerance 2 µm and ≤ 8000 dofs);
+        # kept so that the study shows it
+        ("goal-l2", "goal from 14 mm, 2 levels",
+         ["adapt.estimator=goal", "tissue.grid=[10,12,9]", "adapt.max_level=2"], "goal"),
+    ],
+    "target": "STN",
+    "cannula": "cannula",
+    "order": (1.0, 5.99),  # a per-step order is used inside [1, 6): per_step_reference
+    "resolved": 3.0,  # effectivity only where the true error exceeds 3× the reference's bar
+}
+
+
+def run(a, binary):
+    """The whole procedure of cases/dbs/dbs-skull.yaml (docs/dbs.md, "Goal-oriented
+    refinement of the whole procedure"): the electrode tip–STN distance and the STN's
+    position at every step on goal-driven, SPR-driven and uniform meshes against the per-step
+    Richardson reference of the finest three uniform meshes; effectivity of the goal
+    estimates; cost per step against the 7 mm mesh's."""
+    st = DBS_GOAL
+    out = engine.out_dir(a, "dbs-goal")
+    img = engine.plot_dir(a, out)
+    sel = [(n, sets + st["common"]) for n, _, sets, *_ in st["uniform"] + st["adaptive"]
+           if not a.only or n in a.only or n in [u[0] for u in st["uniform"]]]
+    infos = engine.run_variants(a, binary, st["scene"], out, sel)
+    if any(n not in infos for n, *_ in st["uniform"]):
+        raise SystemExit("dbs-goal needs every uniform run (the reference)")
+
+    def load(name, label, kind):
+        d = os.path.join(out, name)
+        pos, steps, times = read_points(d, "targets.csv")
+        rows = [r for r in read_csv(os.path.join(d, "targets.csv")) if r["name"] == st["target"]]
+        sr = read_steps(d)
+        i_shift, i_top, i_back = phases(d, st["cannula"])
+        return {"name": name, "label": label, "kind": kind, "times": times, "steps": steps,
+                "x": pos[st["target"]][:, :3], "d": pos[st["target"]][:, 3],
+                "est": np.array([float(r.get("error_estimate", "nan")) for r in rows]),
+                "dest": np.array([float(r.get("distance_error_estimate", "nan")) for r in rows]),
+                "speed": speed(sr), "rows": int(sr["constraints"].max()), "st": sr,
+                "i_shift": i_shift, "i_top": i_top, "i_back": i_back,
+                "load": infos[name].get("load", [])}
+
+    U = [dict(load(nm, l, "uniform"), h=h) for nm, l, _, h in st["uniform"]]
+    n = len(U[0]["d"])
+    if any(len(r["d"]) != n for r in U):
+        raise SystemExit("the uniform runs have different numbers of steps")
+    i0 = max(r["i_top"] for r in U)  # the target reached on every uniform mesh
+    after = np.arange(n) >= i0
+
+    def reference(R):
+        """The per-step reference from three uniform runs R (coarse first)."""
+        h = [r["h"] for r in R]
+        d = per_step_reference(h, np.array([r["d"] for r in R]), st["order"])
+        xs = [per_step_reference(h, np.array([r["x"][:, k] for r in R]), st["order"])
+              for k in range(3)]
+        return {"h": h, "d": d[0], "d_bar": d[1], "d_p": d[2], "d_ok": d[3],
+                "x": np.array([c[0] for c in xs]).T,
+                "x_bar": np.linalg.norm(np.array([c[1] for c in xs]).T, axis=1),
+                "x_ok": xs[0][3] & xs[1][3] & xs[2][3]}
+
+    ref = reference(U[-3:])  # the finest three
+    prev = reference(U[:3]) if len(U) > 3 else None  # the coarser triple, for comparison
+    d_ref, d_bar, x_ref, x_bar = ref["d"], ref["d_bar"], ref["x"], ref["x_bar"]
+    runs = U + [load(nm, l, k) for nm, l, _, k in st["adaptive"] if nm in infos]
+    base = [r for r in U if r["name"] == st["baseline"]][0]
+    ref_ms = base["speed"]["median"]
+    for r in runs:
+        if len(r["d"]) != n:
+            raise SystemExit("%s has %d steps, the reference %d" % (r["name"], len(r["d"]), n))
+        r["err"] = np.abs(r["d"] - d_ref)
+        r["xerr"] = np.linalg.norm(r["x"] - x_ref, axis=1)
+        e = r["err"][after]
+        r["max"], r["at"] = float(e.max()), i0 + int(np.argmax(e))
+        r["rms"] = float(np.sqrt(np.mean(e ** 2)))
+        r["ratio"] = r["speed"]["median"] / ref_ms
+
+    def eff(est, err, bar):
+        """Effectivity est / err over the steps ≥ 1 with an estimate whose true error the
+        reference resolves (err > st["resolved"] × its bar): (median, min, max, steps, of)."""
+        ok = np.isfinite(est) & (np.arange(n) >= 1)
+        use = ok & (err > st["resolved"] * bar)
+        if not use.any():
+            return None
+        v = est[use] / err[use]
+        return float(np.median(v)), float(v.min()), float(v.max()), int(use.sum()), int(ok.sum())
+
+    lines = []
+    p = lines.append
+    for R, what in ((ref, "the reference"), (prev, "the coarser triple")):
+        if R is None:
+            continue
+        pa = R["d_p"][after & R["d_ok"]]
+        q = (np.median(pa), *np.percentile(pa, [25, 75]), pa.min(), pa.max()) if len(pa) else \
+            (np.nan,) * 5
+        p("%s: per step, Richardson through the uniform %s mm meshes (richardson.py, "
+          "observed order; used where it lies in [%g, 6), else the finest mesh's value with its "
+          "difference to the middle one as its error bar). Electrode tip–STN distance after the "
+          "target is reached (step %d, t = %.2f s, on; %d steps): order sane at %d steps "
+          "(median %.2f, quartiles %.2f–%.2f, range %.2f–%.2f), fallback at %d (%d with "
+          "differences changing sign); error bar median %.4f mm, max %.4f mm. STN position: "
+          "%d steps of %d with all three components' orders sane; error bar (norm) median "
+          "%.4f mm, max %.4f mm." % (
+              what[0].upper() + what[1:], ", ".join("%g" % h for h in R["h"]), st["order"][0],
+              i0, U[0]["times"][i0], after.sum(), len(pa), *q,
+              int((after & ~R["d_ok"]).sum()), int((after & ~np.isfinite(R["d_p"])).sum()),
+              1e3 * np.median(R["d_bar"][after]), 1e3 * R["d_bar"][after].max(),
+              int(R["x_ok"][1:].sum()), n - 1, 1e3 * np.median(R["x_bar"][1:]),
+              1e3 * R["x_bar"][1:].max()))
+        p("")
+    if prev is not None:
+        dd = np.abs(prev["d"] - d_ref)[after]
+        p("The coarser triple's distance reference against the finest three's after the target: "
+          "max difference %.4f mm (t = %.2f s), median %.4f mm." % (
+              1e3 * dd.max(), U[0]["times"][i0 + int(np.argmax(dd))], 1e3 * np.median(dd)))
+        p("")
+    i_s = base["i_shift"]
+    shift = [float(np.linalg.norm(r["x"][i_s] - r["x"][0])) for r in U]
+    ps, s_ref = observed(ref["h"], shift[-3:])  # of the magnitude, as dbs_convergence.py
+    p("Whole procedure (tools/dbs_convergence.py's quantities): final distance %s mm on %s mm "
+      "→ %.4f mm (%s); STN shift |x(t_s) − X| at t_s = %.2f s %s mm → %.4f mm (%s)." % (
+          ", ".join("%.4f" % (1e3 * r["d"][-1]) for r in U),
+          ", ".join("%g" % h for *_, h in st["uniform"]), 1e3 * d_ref[-1],
+          "order %.2f" % ref["d_p"][-1] if ref["d_ok"][-1] else
+          "fallback, bar %.4f mm" % (1e3 * d_bar[-1]), base["times"][i_s],
+          ", ".join("%.4f" % (1e3 * v) for v in shift), 1e3 * s_ref,
+          "order %.2f" % ps if ps else "no order"))
+    p("")
+    lines += engine.table_head(
+        "run", "max dofs", "max rows", "median ms/step", "/ 7 mm", "total s",
+        "max \\|d − d_ref\\| mm (t s)", "RMS mm", "final d mm",
+        "effectivity of error_estimate: median (range; steps)", "of distance_error_estimate")
+    for r in runs:
+        s = r["speed"]
+        cells = []
+        for est, err, bar in ((r["est"], r["xerr"], x_bar), (r["dest"], r["err"], d_bar)):
+            e = eff(est, err, bar)
+            r.setdefault("eff", []).append(e)
+            cells.append("%.2f (%.2f–%.2f; %d of %d)" % e if e else "–")
+        p("| %s | %d | %d | %.1f | %.3f | %.1f | %.4f (%.2f) | %.4f | %.4f | %s | %s |" % (
+            r["label"], s["max_dofs"], r["rows"], s["median"], r["ratio"], s["total"],
+            1e3 * r["max"], r["times"][r["at"]], 1e3 * r["rms"], 1e3 * r["d"][-1], *cells))
+    p("")
+    p("(d: the electrode tip–STN distance; max and RMS over the steps from %d on, t ≥ %.2f s; "
+      "rows: constraint rows, skull and tools; effectivity: the estimate over the true error "
+      "|run − reference| at the steps where that error exceeds %g× the reference's bar.)" % (
+          i0, U[0]["times"][i0], st["resolved"]))
+    p("")
+    for r in runs[len(U):]:
+        p("- %s: max |d − d_ref| %.4f mm after the target (goal ≤ 0.3 mm: %s); median ms/step "
+          "%.1f, %.3f of the 7 mm mesh's %.1f (goal ≤ 1/4: %s)." % (
+              r["label"], 1e3 * r["max"], "met" if r["max"] <= 3e-4 else "missed",
+              r["speed"]["median"], r["ratio"], ref_ms, "met" if r["ratio"] <= 0.25 else "missed"))
+    lost = [nm for nm, *_ in st["adaptive"] if nm not in infos and (not a.only or nm in a.only)]
+    if lost:
+        p("- not complete (the reason above, on stderr): %s." % ", ".join(lost))
+    loads = [x for r in runs for x in r["load"]]
+    if loads:
+        p("- 1-minute load average at the runs' starts and ends: %.1f–%.1f (2 cores)." % (
+            min(loads), max(loads)))
+    engine.write_report(out, lines)
+
+    def band(ax, bar):
+        """The reference's error bar (mm) as a grey band from 1 nm up."""
+        ax.fill_between(t, 1e-6, np.maximum(1e3 * bar, 1e-6), color="0.85", step="mid",
+                        label="reference's error bar")
+
+    colors = {r["name"]: "C%d" % k for k, r in enumerate(runs)}
+    t = U[0]["times"]
+    fig, ax = plt.subplots(figsize=(11, 4.8))
+    band(ax, d_bar)
+    for r in runs:  # goal solid and thick, SPR dashed, uniform thin
+        ax.semilogy(t[1:], np.maximum(1e3 * r["err"][1:], 1e-6),
+                    {"uniform": "-", "spr": "--", "goal": "-"}[r["kind"]], color=colors[r["name"]],
+                    lw={"uniform": 0.9, "spr": 1.1, "goal": 1.6}[r["kind"]],
+                    label="%s: %.1f ms/step" % (r["label"], r["speed"]["median"]))
+    ax.axhline(0.3, color="k", ls="--", lw=1, label="goal 0.3 mm")
+    phase_lines(ax, base, t)
+    ax.set_ylim(1e-4, None)
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("|d − d_ref| (mm)")
+    ax.set_title("dbs-skull: error of the electrode tip–STN distance against the per-step "
+                 "Richardson reference", fontsize=9)
+    ax.grid(alpha=0.3, which="both")
+    save(fig, os.path.join(img, "dbs_goal_error.png"), legend=ax)
+
+    fig, ax = plt.subplots(figsize=FIGSIZE)
+    for r in runs:
+        ax.loglog(r["speed"]["median"], 1e3 * r["max"], MARKER[r["kind"]], color=colors[r["name"]],
+                  ms=8,
+                  label="%s (%d dofs)" % (r["label"], r["speed"]["max_dofs"]))
+    ax.loglog([r["speed"]["median"] for r in U], [1e3 * r["max"] for r in U], "k:", lw=1)
+    ax.axhline(0.3, color="k", ls="--", lw=1, label="goal: 0.3 mm")
+    ax.axvline(0.25 * ref_ms, color="0.4", ls="-.", lw=1,
+               label="goal: 1/4 of %s's ms/step" % base["label"])
+    save_loglog(fig, ax, os.path.join(img, "dbs_goal_cost.png"), "median time per step (ms)",
+                "max |d − d_ref| after the target (mm)",
+                "dbs-skull, whole procedure: error against cost")
+
+    gor = [r for r in runs if r["kind"] == "goal"]
+    if gor:
+        fig, axes = plt.subplots(1, 2, figsize=(13, 4.2))
+        for ax, key, ekey, bar, title in (
+                (axes[0], "xerr", "est", x_bar,
+                 "STN displacement: |x − x_ref| and error_estimate"),
+                (axes[1], "err", "dest", d_bar,
+                 "tip–STN distance: |d − d_ref| and distance_error_estimate")):
+            band(ax, bar)
+            for r in gor:
+                c = colors[r["name"]]
+                ax.semilogy(t[1:], np.maximum(1e3 * r[key][1:], 1e-6), "-", color=c, lw=1.1,
+                            label="%s: true error" % r["label"])
+                ax.semilogy(t[1:], 1e3 * r[ekey][1:], ":", color=c, lw=1.4,
+                            label="%s: its estimate" % r["label"])
+            ax.set_ylim(1e-4, None)
+            ax.set_xlabel("time (s)")
+            ax.set_ylabel("mm")
+            ax.set_title(title, fontsize=10)
+            ax.grid(alpha=0.3, which="both")
+        save(fig, os.path.join(img, "dbs_goal_effectivity.png"), legend=axes[1])
+    return 0
