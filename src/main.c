@@ -151,6 +151,23 @@ static int nh_number_arg(const char *option, const char *text, double *out) {
   return NH_OK;
 }
 
+/* The value of `option`, argv[*i + 1]: present and not itself an option
+ * (a word that starts with '-' and is not a number), else NH_ERR_INPUT
+ * naming the option, with the command's usage line. */
+static int nh_option_value(const char *option, int argc, char **argv, int *i, const char *usage,
+                           const char **value) {
+  const char *v = *i + 1 < argc ? argv[*i + 1] : NULL;
+  char *end = NULL;
+  if (v && v[0] == '-') strtod(v, &end);
+  if (!v || (v[0] == '-' && (end == v || *end)))
+    return NH_ERROR(NH_ERR_INPUT, "%s needs a value%s%s%s (%.*s)", option,
+                    v ? ", got the option '" : "", v ? v : "", v ? "'" : "",
+                    (int)strcspn(usage, "\n"), usage);
+  *value = v;
+  ++*i;
+  return NH_OK;
+}
+
 static int nh_fail(int code) {
   fprintf(stderr, "needlehex: %s\n", nh_error_message());
   return nh_error_exit_status(code);
@@ -198,6 +215,7 @@ int main(int argc, char **argv) {
     return nh_fail(NH_ERROR(NH_ERR_INPUT, "unknown command '%s' (try --help)", command));
 
   const char *scene_path = NULL, *out_dir = NULL, *restart = NULL;
+  const char *usage = is_run ? nh_run_usage : is_plan ? nh_plan_usage : nh_check_usage;
   int quiet = 0, n_set = 0, overwrite = 0;
   nh_plan_options plan = {.tolerance = 0.5e-3, .max_runs = 8};
   const char **sets = calloc((size_t)argc + 1, sizeof(char *));
@@ -206,16 +224,15 @@ int main(int argc, char **argv) {
   for (int i = 2; i < argc && !rc; i++) {
     const char *a = argv[i];
     if (!strcmp(a, "--set") || !strcmp(a, "--out") || !strcmp(a, "--restart")) {
-      if (i + 1 >= argc) {
-        rc = NH_ERROR(NH_ERR_INPUT, "%s needs a value", a);
-        break;
-      }
+      const char *v = NULL;
+      rc = nh_option_value(a, argc, argv, &i, usage, &v);
+      if (rc) break;
       if (a[2] == 's')
-        sets[n_set++] = argv[++i];
+        sets[n_set++] = v;
       else if (a[2] == 'o')
-        out_dir = argv[++i];
+        out_dir = v;
       else
-        restart = argv[++i];
+        restart = v;
     } else if (!strncmp(a, "--set=", 6)) {
       sets[n_set++] = a + 6;
     } else if (!strncmp(a, "--out=", 6)) {
@@ -226,21 +243,21 @@ int main(int argc, char **argv) {
       overwrite = 1;
     } else if (!strcmp(a, "--help") || !strcmp(a, "-h")) {
       free(sets);
-      fputs(is_run ? nh_run_usage : is_plan ? nh_plan_usage : nh_check_usage, stdout);
+      fputs(usage, stdout);
       return 0;
     } else if (is_plan && (!strcmp(a, "--tolerance") || !strcmp(a, "--max-runs"))) {
       double v = 0;
-      if (i + 1 >= argc)
-        rc = NH_ERROR(NH_ERR_INPUT, "%s needs a value", a);
-      else
-        rc = nh_number_arg(a, argv[++i], &v);
+      const char *text = NULL;
+      rc = nh_option_value(a, argc, argv, &i, usage, &text);
+      if (!rc) rc = nh_number_arg(a, text, &v);
       if (!rc && a[2] == 't') plan.tolerance = v;
       if (!rc && a[2] == 'm' && (v != floor(v) || v < 1 || v > 99))
         rc = NH_ERROR(NH_ERR_INPUT,
                       "--max-runs: expected a whole number of runs from 1 to 99, got %s", argv[i]);
       if (!rc && a[2] == 'm') plan.max_runs = (int)v;
     } else if (a[0] == '-') {
-      rc = NH_ERROR(NH_ERR_INPUT, "unknown option '%s' (try --help)", a);
+      rc =
+          NH_ERROR(NH_ERR_INPUT, "unknown option '%s' (%.*s)", a, (int)strcspn(usage, "\n"), usage);
     } else if (!scene_path) {
       scene_path = a;
     } else {
