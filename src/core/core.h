@@ -124,6 +124,11 @@ void nh_log_warn(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
  * component) into out[size]. Returns 0, or -1 if it cannot be read or does
  * not fit. */
 int nh_exe_dir(char *out, size_t size);
+/* `path` as an absolute path: itself if it starts with '/', else the
+ * current folder, '/', path (not normalised: "a/../b" stays). Returns out,
+ * or path itself if the current folder cannot be read or out[size] is too
+ * small. */
+const char *nh_path_absolute(const char *path, char *out, size_t size);
 /* The refinement templates folder: $NH_TEMPLATES_DIR if set and not empty,
  * else EXE/../share/needlehex/templates or EXE/share/needlehex/templates (the
  * first that exists; EXE from nh_exe_dir), else "templates". The result is

@@ -59,6 +59,101 @@ static void nh_put_i32(nh_bytes *b, int v) {
   nh_bytes_put(b, &x, 4);
 }
 
+/* ---- the scene as run ---- */
+
+/* Append n bytes of t to the text *out of length *len (capacity *cap). */
+static int nh_text_put(char **out, int *len, int *cap, const char *t, size_t n) {
+  NH_TRY(nh_grow((void **)out, cap, *len + (int)n + 1, 1));
+  memcpy(*out + *len, t, n);
+  *len += (int)n;
+  (*out)[*len] = '\0';
+  return NH_OK;
+}
+
+/* The file a scene key names, resolved by the scene reader, for the dotted
+ * keys whose value is a file (NULL: not such a key; adapt.template only when
+ * it is a path, not a template's name). */
+static const char *nh_scene_file_of(const nh_scene *sc, const char *key, const char *value) {
+  if (!strcmp(key, "tissue.domain.mask.file")) return sc->tissue.mask_file;
+  if (!strcmp(key, "tissue.domain.surface.file")) return sc->tissue.surface_file;
+  if (!strcmp(key, "tissue.labels.file")) return sc->tissue.labels_file;
+  size_t n = strlen(value);
+  if (!strcmp(key, "adapt.template") &&
+      (strchr(value, '/') || (n >= 5 && !strcmp(value + n - 5, ".tmpl"))))
+    return sc->adapt.template_path;
+  return NULL;
+}
+
+int nh_scene_text_absolute(const nh_scene *sc, char **out) {
+  const char *y = sc->yaml ? sc->yaml : "";
+  char *text = NULL;
+  int len = 0, cap = 0, depth = 0, rc = NH_OK;
+  struct {
+    int indent;
+    char key[64];
+  } stack[32];
+  NH_TRY(nh_text_put(&text, &len, &cap, "", 0));
+  while (*y && !rc) {
+    size_t n = strcspn(y, "\n");
+    const char *line = y, *at = y;
+    y += n + (y[n] == '\n');
+    /* A block-style line of the scene's own emitter: INDENT [- ]KEY: [VALUE]. */
+    while (at < line + n && *at == ' ') at++;
+    while (at + 1 < line + n && at[0] == '-' && at[1] == ' ') at += 2; /* sequence item */
+    int indent = (int)(at - line);
+    const char *colon = at;
+    while (colon < line + n && *colon != ':') colon++;
+    int is_key = colon < line + n && (colon + 1 == line + n || colon[1] == ' ');
+    const char *file = NULL;
+    if (is_key) {
+      while (depth > 0 && stack[depth - 1].indent >= indent) depth--;
+      char key[512] = "";
+      for (int d = 0; d < depth; d++)
+        snprintf(key + strlen(key), sizeof key - strlen(key), "%s.", stack[d].key);
+      snprintf(key + strlen(key), sizeof key - strlen(key), "%.*s", (int)(colon - at), at);
+      const char *v = colon + 1 + (colon + 1 < line + n);
+      char value[NH_PATH_MAX];
+      snprintf(value, sizeof value, "%.*s", (int)(line + n - v), v);
+      if (colon + 1 >= line + n - 0 && depth < 32) { /* KEY: alone opens a mapping */
+        stack[depth].indent = indent;
+        snprintf(stack[depth].key, sizeof stack[depth].key, "%.*s", (int)(colon - at), at);
+        depth++;
+      } else {
+        file = nh_scene_file_of(sc, key, value);
+      }
+    }
+    if (!file || !file[0]) {
+      rc = nh_text_put(&text, &len, &cap, line, (size_t)(y - line));
+      continue;
+    }
+    char abs[2 * NH_PATH_MAX];
+    const char *path = nh_path_absolute(file, abs, sizeof abs);
+    rc = nh_text_put(&text, &len, &cap, line, (size_t)(colon + 1 - line));
+    if (!rc) rc = nh_text_put(&text, &len, &cap, " \"", 2);
+    for (const char *c = path; *c && !rc; c++) {
+      if (*c == '"' || *c == '\\') rc = nh_text_put(&text, &len, &cap, "\\", 1);
+      if (!rc) rc = nh_text_put(&text, &len, &cap, c, 1);
+    }
+    if (!rc) rc = nh_text_put(&text, &len, &cap, "\"\n", 2);
+  }
+  if (rc) {
+    free(text);
+    return rc;
+  }
+  *out = text;
+  return NH_OK;
+}
+
+/* The hash a checkpoint carries of the scene as run (its absolute form: the
+ * same for the scene first run and for DIR/scene.yaml run again). */
+static int nh_scene_hash(const nh_scene *sc, uint64_t *hash) {
+  char *text;
+  NH_TRY(nh_scene_text_absolute(sc, &text));
+  *hash = nh_fnv1a(text, strlen(text), NH_FNV_SEED);
+  free(text);
+  return NH_OK;
+}
+
 void nh_checkpoint_path(const char *dir, char *path, size_t size) {
   snprintf(path, size, "%s/checkpoint.nhc", dir);
 }
@@ -66,8 +161,8 @@ void nh_checkpoint_path(const char *dir, char *path, size_t size) {
 int nh_checkpoint_write(const nh_sim *s) {
   const nh_mesh *m = s->mesh;
   nh_bytes b = {0};
-  uint64_t scene_hash = nh_fnv1a(s->scene->yaml ? s->scene->yaml : "",
-                                 strlen(s->scene->yaml ? s->scene->yaml : ""), NH_FNV_SEED);
+  uint64_t scene_hash;
+  NH_TRY(nh_scene_hash(s->scene, &scene_hash));
   nh_bytes_put(&b, &scene_hash, 8);
   nh_put_i32(&b, s->step);
   nh_bytes_put(&b, &s->time, 8);
@@ -291,8 +386,11 @@ int nh_checkpoint_read(const char *dir, const nh_scene *scene, nh_checkpoint *ck
   nh_byte_reader c = {data, data + size, 0};
   uint64_t scene_hash;
   nh_bytes_get(&c, &scene_hash, 8);
-  uint64_t want =
-      nh_fnv1a(scene->yaml ? scene->yaml : "", strlen(scene->yaml ? scene->yaml : ""), NH_FNV_SEED);
+  uint64_t want = 0;
+  if ((rc = nh_scene_hash(scene, &want))) {
+    free(data);
+    return rc;
+  }
   if (scene_hash != want) {
     free(data);
     return NH_ERROR(
