@@ -159,6 +159,23 @@ static int nh_number_arg(const char *option, const char *text, double *out) {
   return NH_OK;
 }
 
+/* The value of `option`, argv[*i + 1]: present and not itself an option
+ * (a word that starts with '-' and is not a number), else NH_ERR_INPUT
+ * naming the option, with the command's usage line. */
+static int nh_option_value(const char *option, int argc, char **argv, int *i, const char *usage,
+                           const char **value) {
+  const char *v = *i + 1 < argc ? argv[*i + 1] : NULL;
+  char *end = NULL;
+  if (v && v[0] == '-') strtod(v, &end);
+  if (!v || (v[0] == '-' && (end == v || *end)))
+    return NH_ERROR(NH_ERR_INPUT, "%s needs a value%s%s%s (%.*s)", option,
+                    v ? ", got the option '" : "", v ? v : "", v ? "'" : "",
+                    (int)strcspn(usage, "\n"), usage);
+  *value = v;
+  ++*i;
+  return NH_OK;
+}
+
 static int nh_fail(int code) {
   fprintf(stderr, "needlehex: %s\n", nh_error_message());
   return nh_error_exit_status(code);
@@ -200,10 +217,10 @@ typedef struct {
 
 /* plan's --tolerance M, --max-runs N or --workers N at argv[*i] (its value next). */
 static int nh_plan_arg(int argc, char **argv, int *i, nh_plan_options *plan) {
-  const char *a = argv[*i];
+  const char *a = argv[*i], *text = NULL;
   double v = 0;
-  if (*i + 1 >= argc) return NH_ERROR(NH_ERR_INPUT, "%s needs a value", a);
-  NH_TRY(nh_number_arg(a, argv[++*i], &v));
+  NH_TRY(nh_option_value(a, argc, argv, i, nh_plan_usage, &text));
+  NH_TRY(nh_number_arg(a, text, &v));
   if (a[2] == 't') {
     plan->tolerance = v;
     return NH_OK;
@@ -224,16 +241,17 @@ static int nh_plan_arg(int argc, char **argv, int *i, nh_plan_options *plan) {
 
 /* argv[2..] of run, check or plan into *a, up to the first error or --help. */
 static int nh_parse_args(int argc, char **argv, nh_args *a) {
+  const char *usage = a->is_run ? nh_run_usage : a->is_plan ? nh_plan_usage : nh_check_usage;
   for (int i = 2; i < argc; i++) {
-    const char *arg = argv[i];
+    const char *arg = argv[i], *v = NULL;
     if (!strcmp(arg, "--set") || !strcmp(arg, "--out") || !strcmp(arg, "--restart")) {
-      if (i + 1 >= argc) return NH_ERROR(NH_ERR_INPUT, "%s needs a value", arg);
+      NH_TRY(nh_option_value(arg, argc, argv, &i, usage, &v));
       if (arg[2] == 's')
-        a->sets[a->n_set++] = argv[++i];
+        a->sets[a->n_set++] = v;
       else if (arg[2] == 'o')
-        a->out_dir = argv[++i];
+        a->out_dir = v;
       else
-        a->restart = argv[++i];
+        a->restart = v;
     } else if (!strncmp(arg, "--set=", 6)) {
       a->sets[a->n_set++] = arg + 6;
     } else if (!strncmp(arg, "--out=", 6)) {
@@ -249,7 +267,8 @@ static int nh_parse_args(int argc, char **argv, nh_args *a) {
                               !strcmp(arg, "--workers"))) {
       NH_TRY(nh_plan_arg(argc, argv, &i, &a->plan));
     } else if (arg[0] == '-') {
-      return NH_ERROR(NH_ERR_INPUT, "unknown option '%s' (try --help)", arg);
+      return NH_ERROR(NH_ERR_INPUT, "unknown option '%s' (%.*s)", arg, (int)strcspn(usage, "\n"),
+                      usage);
     } else if (!a->scene_path) {
       a->scene_path = arg;
     } else {

@@ -149,7 +149,7 @@ int nh_obstacles_create(const nh_scene *s, nh_obstacles **out) {
     o->region = r;
     if (r->kind != NH_REGION_LABEL) continue;
     o->label = r->label;
-    if (!ob->image && nh_image_read(file, 1, &ob->image)) {
+    if (!ob->image && nh_image_read(file, 1, NULL, &ob->image)) {
       char why[512];
       snprintf(why, sizeof why, "%s", nh_error_message());
       rc = NH_ERROR(NH_ERR_INPUT, "%s: %s", r->where, why);

@@ -61,7 +61,7 @@ static int read_scene(nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   NH_TRY(read_name(c, root, s));
   NH_TRY(nh_read_time(c, root, s));
   NH_TRY(nh_read_gravity(c, root, s));
-  NH_TRY(nh_read_limits(c, root, s)); /* before tissue: the grid is checked against them */
+  NH_TRY(nh_read_section_limits(c, root, s)); /* before tissue: the grid is checked against them */
   NH_TRY(nh_read_tissue(c, root, s));
   c->image = s->tissue.mask_file[0]     ? s->tissue.mask_file
              : s->tissue.labels_file[0] ? s->tissue.labels_file

@@ -206,15 +206,15 @@ int nh_read_top(const nh_ctx *c, const nh_yaml_node *root, const char *name, int
 
 /* ---- sections: one file each, called by read_scene (scene.c) in this order ---- */
 
-int nh_read_time(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s);    /* time.c */
-int nh_read_gravity(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s); /* time.c */
-int nh_read_limits(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s);  /* solver.c */
-int nh_read_tissue(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s);  /* tissue.c */
-int nh_read_adapt(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s);   /* adapt.c */
-int nh_read_solver(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s);  /* solver.c */
-int nh_read_tools(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s);   /* tools.c */
-int nh_read_probes(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s);  /* points.c */
-int nh_read_targets(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s); /* points.c */
+int nh_read_time(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s);           /* time.c */
+int nh_read_gravity(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s);        /* time.c */
+int nh_read_section_limits(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s); /* solver.c */
+int nh_read_tissue(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s);         /* tissue.c */
+int nh_read_adapt(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s);          /* adapt.c */
+int nh_read_solver(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s);         /* solver.c */
+int nh_read_tools(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s);          /* tools.c */
+int nh_read_probes(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s);         /* points.c */
+int nh_read_targets(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s);        /* points.c */
 /* adapt.goal, once probes and targets are read (adapt.c). */
 int nh_read_adapt_goal(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s);
 /* Trajectories, release: target and symbolic untils, once targets are read (trajectory.c). */

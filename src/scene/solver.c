@@ -135,6 +135,6 @@ static const nh_key limits_rows[] = {
     {NULL},
 };
 
-int nh_read_limits(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
+int nh_read_section_limits(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   return nh_read_top(c, root, "limits", 0, limits_rows, s);
 }

@@ -453,7 +453,11 @@ static int nh_open_outputs(nh_sim *s) {
   const char *dir = sc->output.dir;
   NH_TRY(nh_mkdir_p(dir));
   snprintf(path, sizeof path, "%s/scene.yaml", dir);
-  NH_TRY(nh_write_text(path, sc->yaml ? sc->yaml : ""));
+  char *text;
+  NH_TRY(nh_scene_text_absolute(sc, &text));
+  int rc = nh_write_text(path, text);
+  free(text);
+  NH_TRY(rc);
   snprintf(path, sizeof path, "%s/steps.csv", dir);
   NH_TRY(nh_csv_create(path, (int)(sizeof nh_step_columns / sizeof *nh_step_columns),
                        nh_step_columns, &s->steps_csv));
@@ -1032,13 +1036,16 @@ int nh_sim_run(nh_sim *s) {
         snprintf(when, sizeof when, "during step %d, after", s->step + 1);
       else
         snprintf(when, sizeof when, "after");
-      /* The scene as run (overrides applied) is DIR/scene.yaml: the command
-       * continues exactly this run, whatever --set made it. */
+      /* The scene as run (overrides applied, files by absolute path) is
+       * DIR/scene.yaml: the command continues exactly this run, whatever
+       * --set made it, from any folder (DIR absolute too). */
+      char abs[2 * NH_PATH_MAX];
+      const char *dir = nh_path_absolute(s->scene->output.dir, abs, sizeof abs);
       rc = NH_ERROR(NH_ERR_INTERRUPTED,
                     "stopped by signal %d %s step %d of %d (t = %g s); the last frame and a "
                     "checkpoint are in %s; continue with: needlehex run %s/scene.yaml --restart %s",
                     nh_stop_requested(), when, s->step, s->scene->time.steps, s->time,
-                    s->scene->output.dir, s->scene->output.dir, s->scene->output.dir);
+                    s->scene->output.dir, dir, dir);
       break;
     }
   }

@@ -105,6 +105,13 @@ typedef struct {
   size_t solver_size;
 } nh_checkpoint;
 
+/* The scene as run (sc->yaml) with every file it names (tissue mask,
+ * surface and labels files, adapt.template when a path) replaced by the
+ * absolute path of the file the reader resolved, as a double-quoted
+ * string: what DIR/scene.yaml holds, so that the printed continue command
+ * works from any folder, and what a checkpoint's scene hash is taken of
+ * (docs/outputs.md, "Restart"). Output *out (the caller frees). */
+int nh_scene_text_absolute(const nh_scene *sc, char **out);
 /* DIR/checkpoint.nhc */
 void nh_checkpoint_path(const char *dir, char *path, size_t size);
 /* Write the run's state to <output.dir>/checkpoint.nhc, atomically. */
