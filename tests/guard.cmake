@@ -8,3 +8,11 @@ nh_add_py_test(invalid_steps hard invalid_steps.py)
 # flagged in steps.csv (`unsolved`) and warned about (dbs.yaml at nu 0.4999:
 # every step; at 0.45 none; a body at rest after the needle left: none).
 nh_add_py_test(unsolved verify unsolved.py $<TARGET_FILE:needlehex>)
+
+# cholmod_memory.py: a factorisation larger than the memory limit is named
+# ("CHOLMOD ran out of memory in the factorisation of N unknowns"), exit 1.
+# Not under the sanitizers: ASan reserves terabytes of address space for its
+# shadow memory, so an address-space limit stops the process before main.
+if(NOT NH_SANITIZE)
+  nh_add_py_test(cholmod_memory verify cholmod_memory.py $<TARGET_FILE:needlehex>)
+endif()

@@ -11,11 +11,25 @@
 
 #include <string.h>
 
+/* A CHOLMOD failure in `what`, by its status: out of memory and too large
+ * named as such (NH_ERR_MEMORY), anything else by its number. */
+static int nh_cholmod_failed(const nh_system *s, const char *what) {
+  if (s->cm.status == CHOLMOD_OUT_OF_MEMORY)
+    return NH_ERROR(NH_ERR_MEMORY,
+                    "CHOLMOD ran out of memory in the %s of %d unknowns (the factor needs "
+                    "about %.3g MB)",
+                    what, s->n_free, s->L ? 8e-6 * s->cm.lnz : 0.0);
+  if (s->cm.status == CHOLMOD_TOO_LARGE)
+    return NH_ERROR(NH_ERR_MEMORY, "CHOLMOD: the %s of %d unknowns is too large for its integers",
+                    what, s->n_free);
+  return NH_ERROR(NH_ERR_NUMERIC, "CHOLMOD %s failed (status %d)", what, s->cm.status);
+}
+
 int nh_system_factor(nh_system *s) {
   if (!s->L) {
     s->L = cholmod_analyze(s->A, &s->cm);
     if (!s->L || s->cm.status < CHOLMOD_OK)
-      return NH_ERROR(NH_ERR_NUMERIC, "CHOLMOD symbolic analysis failed (status %d)", s->cm.status);
+      return nh_cholmod_failed(s, "symbolic analysis");
     /* operation counts for the renewal rule (reuse.c): the analysis reports
      * the factorisation's flops and nnz(L); A is stored as one triangle */
     s->flops_factor = s->cm.fl;
@@ -31,7 +45,7 @@ int nh_system_factor(nh_system *s) {
         "the system matrix is not positive definite (CHOLMOD stopped at column %d of %d)",
         (int)s->L->minor, s->n_free);
   if (!ok || s->cm.status < CHOLMOD_OK)
-    return NH_ERROR(NH_ERR_NUMERIC, "CHOLMOD factorisation failed (status %d)", s->cm.status);
+    return nh_cholmod_failed(s, "factorisation");
   s->factor_current = 1;
   nh_inherit_free(s); /* the system's own factor from now on */
   memcpy(s->u_factored, s->u_assembled, sizeof(double) * 3 * (size_t)s->n_nodes);
@@ -49,7 +63,7 @@ int nh_system_solve(nh_system *s, const double *b, double *x) {
   }
   memcpy(s->B->x, b, sizeof(double) * (size_t)s->n_free);
   if (!cholmod_solve2(CHOLMOD_A, s->L, s->B, NULL, &s->X, NULL, &s->Y, &s->E, &s->cm))
-    return NH_ERROR(NH_ERR_NUMERIC, "CHOLMOD solve failed (status %d)", s->cm.status);
+    return nh_cholmod_failed(s, "solve");
   memcpy(x, s->X->x, sizeof(double) * (size_t)s->n_free);
   return NH_OK;
 }
@@ -66,7 +80,7 @@ int nh_system_solve_many(nh_system *s, int ncol, const double *b, double *x) {
   memcpy(B->x, b, sizeof(double) * n * (size_t)ncol);
   cholmod_dense *X = cholmod_solve(CHOLMOD_A, s->L, B, &s->cm);
   cholmod_free_dense(&B, &s->cm);
-  if (!X) return NH_ERROR(NH_ERR_NUMERIC, "CHOLMOD solve failed (status %d)", s->cm.status);
+  if (!X) return nh_cholmod_failed(s, "solve");
   memcpy(x, X->x, sizeof(double) * n * (size_t)ncol);
   cholmod_free_dense(&X, &s->cm);
   return NH_OK;
