@@ -165,6 +165,13 @@ CASES = [
     ("control_bytes.yaml", [], 5, None),
     ("set_base.yaml", ["tissue.grid=[16,\x1b[31m,8]"], "--set:1", "tissue.grid"),
     ("set_base.yaml", ["limits.max_cells=0"], "--set:1", "limits.max_cells"),
+    # A material's label: whole numbers >= 0 written in digits (not -2, 2.0, +2);
+    # the same fixture with label 2 (held by the image) is valid (VALID).
+    ("materials_negative_label.yaml", [], 10, "tissue.materials.-2"),
+    ("materials_negative_label.yaml", ["tissue.materials={2.0: {young: 1e6}}"], "--set:1",
+     "tissue.materials.2.0"),
+    ("materials_negative_label.yaml", ["tissue.materials={+2: {young: 1e6}}"], "--set:1",
+     "tissue.materials.+2"),
 ]
 
 # Sizes far beyond the machine: refused by `check` within 1 s, naming the
@@ -187,7 +194,8 @@ VALID = [("set_base.yaml", []), ("set_base.yaml", ["tissue.damping.mass=0.5", "t
          ("trajectory_base.yaml", ["gravity=[0, 0, -9.81]", "tools.0.trajectory.standoff=0.001",
                                    "tools.1.release=1.5", "tissue.buoyancy.schedule=[]"]),
          ("tools_base.yaml", ["tools.0.interaction.friction=0.1", "tools.1.release=0.75",
-                              "targets.0.tool=cannula"])]
+                              "targets.0.tool=cannula"]),
+         ("materials_negative_label.yaml", ["tissue.materials={2: {young: 2.0e6}}"])]
 
 SANITIZER_WORDS = ("AddressSanitizer", "LeakSanitizer", "runtime error", "UndefinedBehaviorSanitizer")
 
