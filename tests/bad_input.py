@@ -168,7 +168,24 @@ CASES = [
     ("control_bytes.yaml", [], 5, None),
     ("set_base.yaml", ["tissue.grid=[16,\x1b[31m,8]"], "--set:1", "tissue.grid"),
     ("set_base.yaml", ["limits.max_cells=0"], "--set:1", "limits.max_cells"),
+    # A material's label: whole numbers >= 0 written in digits (not -2, 2.0, +2);
+    # the same fixture with label 2 (held by the image) is valid (VALID).
+    ("materials_negative_label.yaml", [], 10, "tissue.materials.-2"),
+    ("materials_negative_label.yaml", ["tissue.materials={2.0: {young: 1e6}}"], "--set:1",
+     "tissue.materials.2.0"),
+    ("materials_negative_label.yaml", ["tissue.materials={+2: {young: 1e6}}"], "--set:1",
+     "tissue.materials.+2"),
+    # A tool shorter than its planned depth D = standoff + |aim - entry|: its
+    # base would end past the entry point (D by hand: 0.022, 0.033 and
+    # 0.005 + |STN - entry| = 0.025199 m against lengths 0.02, 0.032, 0.025).
+    ("tool_shorter_than_depth.yaml", [], 11, "tools.0.length"),
+    ("trajectory_base.yaml", ["tools.0.trajectory.aim=[0.031, 0.01, 0.01]"], 12,
+     "tools.0.length"),
+    ("trajectory_base.yaml", ["tools.1.length=0.025"], "--set:1", "tools.1.length"),
 ]
+
+# Scenes that `needlehex plan` must refuse as `check` does, before any run.
+PLAN_CASES = [("tool_shorter_than_depth.yaml", [], 11, "tools.0.length")]
 
 # Sizes far beyond the machine: refused by `check` within 1 s, naming the
 # grid and the estimated memory (the unchecked 400^3 grid took 35 s and
@@ -190,7 +207,10 @@ VALID = [("set_base.yaml", []), ("set_base.yaml", ["tissue.damping.mass=0.5", "t
          ("trajectory_base.yaml", ["gravity=[0, 0, -9.81]", "tools.0.trajectory.standoff=0.001",
                                    "tools.1.release=1.5", "tissue.buoyancy.schedule=[]"]),
          ("tools_base.yaml", ["tools.0.interaction.friction=0.1", "tools.1.release=0.75",
-                              "targets.0.tool=cannula"])]
+                              "targets.0.tool=cannula"]),
+         ("materials_negative_label.yaml", ["tissue.materials={2: {young: 2.0e6}}"]),
+         # a tool exactly as long as its planned depth (0.022 m)
+         ("tool_shorter_than_depth.yaml", ["tools.0.length=0.022"])]
 
 # Command lines (argv after the binary; SCENE is tests/bad/set_base.yaml),
 # each refused with exit 2 and one line naming the option and holding the
@@ -209,8 +229,8 @@ COMMAND_LINES = [
 SANITIZER_WORDS = ("AddressSanitizer", "LeakSanitizer", "runtime error", "UndefinedBehaviorSanitizer")
 
 
-def run(binary, path, overrides):
-    args = [binary, "check", path]
+def run(binary, path, overrides, command=("check",)):
+    args = [binary, command[0], path] + list(command[1:])
     for o in overrides:
         args += ["--set", o]
     try:
@@ -220,12 +240,12 @@ def run(binary, path, overrides):
     return p.returncode, p.stdout, p.stderr, args
 
 
-def check_case(binary, bad_dir, fixture, overrides, where, key):
+def check_case(binary, bad_dir, fixture, overrides, where, key, command=("check",)):
     path = os.path.join(bad_dir, fixture)
     problems = []
     if not os.path.isfile(path):
         return ["fixture %s does not exist" % path]
-    status, _, err, args = run(binary, path, overrides)
+    status, _, err, args = run(binary, path, overrides, command)
     shown = " ".join(args)
     if status != 2:
         problems.append("exit status: expected 2, got %s" % status)
@@ -292,6 +312,17 @@ def main():
             print("FAILED %s %s" % (fixture, overrides), file=sys.stderr)
             for p in problems:
                 print("  " + p, file=sys.stderr)
+    with tempfile.TemporaryDirectory() as out:
+        for fixture, overrides, where, key in PLAN_CASES:
+            command = ("plan", "--out", os.path.join(out, "plan"), "--quiet")
+            problems = check_case(binary, bad_dir, fixture, overrides, where, key, command)
+            if os.path.exists(os.path.join(out, "plan")):
+                problems.append("plan: wrote its folder before refusing the scene")
+            if problems:
+                failed += 1
+                print("FAILED plan %s %s" % (fixture, overrides), file=sys.stderr)
+                for p in problems:
+                    print("  " + p, file=sys.stderr)
     for fixture, overrides in VALID:
         status, _, err, args = run(binary, os.path.join(bad_dir, fixture), overrides)
         if status != 0 or err.strip():

@@ -312,11 +312,16 @@ static int read_materials(const nh_ctx *c, const nh_key_site *k, void *base) {
   for (int i = 0; i < m->n; ++i) {
     nh_label_material *lm = &s->tissue.materials[i];
     nh_read_join(key, "tissue.materials", m->keys[i]->text);
-    char *end;
-    double v = strtod(m->keys[i]->text, &end);
-    if (end == m->keys[i]->text || *end || v != floor(v) || fabs(v) > INT_MAX)
-      return nh_read_fail(c, m->keys[i], key, "a material's key is an integer label, got %s",
-                          nh_read_describe(m->keys[i], d, sizeof d));
+    /* Digits only: a label is a whole number >= 0 (as the key table's N),
+     * not -2, +2, 2.0 or 2e0. */
+    const char *text = m->keys[i]->text;
+    size_t digits = strspn(text, "0123456789");
+    double v = digits ? strtod(text, NULL) : -1;
+    if (!digits || text[digits] || v > INT_MAX)
+      return nh_read_fail(c, m->keys[i], key,
+                          "a material's key is a label, a whole number from 0 to %d in digits, "
+                          "got %s",
+                          INT_MAX, nh_read_describe(m->keys[i], d, sizeof d));
     lm->label = (int)v;
     for (int j = 0; j < i; ++j)
       if (s->tissue.materials[j].label == lm->label)

@@ -61,6 +61,23 @@ int nh_scene_trajectory_line(nh_tool_spec *t, const double target[3]) {
   return NH_OK;
 }
 
+/* tools.i.length against the planned depth D: at the end of an until:
+ * target segment the base is at entry + (D − length) · direction, so a tool
+ * shorter than D would have its base past the entry point, inside the
+ * tissue. */
+static int check_reach(const nh_ctx *c, const nh_yaml_node *tool, const char *path,
+                       const nh_tool_spec *t) {
+  char key[NH_KEY_MAX];
+  if (!(t->depth > t->length)) return NH_OK;
+  return nh_read_fail(c, nh_yaml_get(tool, "length", NULL), nh_read_join(key, path, "length"),
+                      "%g m is shorter than the planned depth %g m (standoff %g m + |%s - entry| "
+                      "%g m): at the %s the base would be %g m past the entry point, inside the "
+                      "tissue; give a length of at least %g m",
+                      t->length, t->depth, t->standoff, t->aimed ? "aim" : "target",
+                      t->depth - t->standoff, t->aimed ? "aim" : "target", t->depth - t->length,
+                      t->depth);
+}
+
 /* tools.i.trajectory (the target's name, now that targets are read): base,
  * direction and planned depth. */
 static int resolve_trajectory(const nh_ctx *c, const nh_yaml_node *tool, const char *path,
@@ -93,7 +110,7 @@ static int resolve_trajectory(const nh_ctx *c, const nh_yaml_node *tool, const c
   const nh_yaml_node *aim_at = nh_yaml_get(traj, "aim", NULL);
   t->aimed = aim_at != NULL;
   if (!t->aimed) memcpy(t->aim, s->targets[t->target].point, sizeof t->aim);
-  if (nh_scene_trajectory_line(t, t->aim) == NH_OK) return NH_OK;
+  if (nh_scene_trajectory_line(t, t->aim) == NH_OK) return check_reach(c, tool, path, t);
   if (aim_at)
     return nh_read_fail(c, aim_at, nh_read_join(key, sub, "aim"),
                         "the aim is the entry point [%g, %g, %g]: no direction", t->entry[0],
