@@ -28,8 +28,7 @@ static int nh_cholmod_failed(const nh_system *s, const char *what) {
 int nh_system_factor(nh_system *s) {
   if (!s->L) {
     s->L = cholmod_analyze(s->A, &s->cm);
-    if (!s->L || s->cm.status < CHOLMOD_OK)
-      return nh_cholmod_failed(s, "symbolic analysis");
+    if (!s->L || s->cm.status < CHOLMOD_OK) return nh_cholmod_failed(s, "symbolic analysis");
     /* operation counts for the renewal rule (reuse.c): the analysis reports
      * the factorisation's flops and nnz(L); A is stored as one triangle */
     s->flops_factor = s->cm.fl;
@@ -44,8 +43,7 @@ int nh_system_factor(nh_system *s) {
         NH_ERR_NUMERIC,
         "the system matrix is not positive definite (CHOLMOD stopped at column %d of %d)",
         (int)s->L->minor, s->n_free);
-  if (!ok || s->cm.status < CHOLMOD_OK)
-    return nh_cholmod_failed(s, "factorisation");
+  if (!ok || s->cm.status < CHOLMOD_OK) return nh_cholmod_failed(s, "factorisation");
   s->factor_current = 1;
   nh_inherit_free(s); /* the system's own factor from now on */
   memcpy(s->u_factored, s->u_assembled, sizeof(double) * 3 * (size_t)s->n_nodes);
