@@ -8,9 +8,11 @@
  *   Kₑ  ≈ R K₀ Rᵀ                 tangent (the variation of R is dropped)
  * K₀ is either the fully integrated one or the B-bar (mean-dilatation) one
  * that does not lock near incompressibility (docs/theory.md §2b).
- * Lumped mass ρ Vₑ / 8 per node; an immersed cell scales stiffness and mass
- * by its fill fraction φ. Matrices are row-major, 24x24, row 3a+i is node a,
- * component i. Voigt order for stresses: xx, yy, zz, yz, xz, xy.
+ * Lumped mass ρ Vₑ / 8 per node; a cut cell of an immersed domain has K₀,
+ * mean gradients and mass ρ ∫ N_a integrated over its tissue part by the
+ * finite cell quadrature, plus α K_cell on its fictitious part
+ * (docs/theory.md §5c); a cell that is not a box scales by its fill φ. Matrices are row-major,
+ * 24x24, row 3a+i is node a, component i. Voigt order for stresses: xx, yy, zz, yz, xz, xy.
  *
  * Files, each using only those before it: hex.c (one element: K₀, the
  * rotation, force and tangent) < stress.c (the stress anywhere inside one
@@ -39,6 +41,10 @@ typedef struct {
  * cell) if the Jacobian is not positive at a Gauss point. */
 int nh_hex_stiffness(const double X[24], double lambda, double mu, int bbar, double K0[576],
                      double G0[24], double Gbar[24], double *volume);
+
+/* K += w [λ gₐ ⊗ g_b + μ g_b ⊗ gₐ + μ (gₐ·g_b) I] (blocks a, b): one point
+ * of ∫ BᵀDB with gradients g[24] and weight w (det J times the rule's). */
+void nh_hex_point_stiffness(const double g[24], double w, double lambda, double mu, double K[576]);
 
 /* Rest shape-function gradients g[8][3] = ∇_X Nₐ at ξ; returns det J.
  * g is written only when det J > 0 and J is invertible; otherwise g is left

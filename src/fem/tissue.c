@@ -557,15 +557,7 @@ static int nh_cut_data(const nh_tissue *t, int c, const double Xe[24], const nh_
     if (w[q] == 0.0 || !(nh_hex_gradients(Xe, xi + 3 * q, g) > 0.0)) continue;
     const double wq = (1.0 - a) * w[q];
     for (int i = 0; i < 24; i++) e->Gbar[i] += w[q] * g[i];
-    for (int p = 0; p < 8; p++)
-      for (int r = 0; r < 8; r++) {
-        const double *ga = g + 3 * p, *gb = g + 3 * r;
-        double dot = ga[0] * gb[0] + ga[1] * gb[1] + ga[2] * gb[2];
-        for (int i = 0; i < 3; i++)
-          for (int j = 0; j < 3; j++)
-            e->K0[24 * (3 * p + i) + 3 * r + j] +=
-                wq * (lam_q * ga[i] * gb[j] + mu * gb[i] * ga[j] + (i == j ? mu * dot : 0.0));
-      }
+    nh_hex_point_stiffness(g, wq, lam_q, mu, e->K0);
   }
   double lo[3], hi[3];
   nh_hex_is_box(Xe, lo, hi);

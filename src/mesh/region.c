@@ -23,7 +23,11 @@
  * and centre: a goal point's small box deep in the brain, which 6³ samples
  * of a coarse cell could miss entirely). Everything else (sphere and
  * cylinder regions, boxes across the immersed boundary, the distorted
- * meshes of the tests) is sampled by 6³ sub-cell midpoints.
+ * meshes of the tests) is sampled by 6³ sub-cell midpoints, except on an
+ * immersed domain's box cells: there loads and ties of box, sphere and
+ * cylinder regions use the finite cell quadrature of tissue ∩ region
+ * (cutcell.c, nh_cut_domain_cell; the region on its own finer lattice), so
+ * a region smaller than a cell ties exactly the tissue inside it.
  *
  * The same sampling gives two more cell quantities: the fraction of a cell's
  * tissue above a fluid level (the drainage of tissue.buoyancy.level) and the
