@@ -5,6 +5,7 @@
  *                 [--quiet]
  *   needlehex check SCENE.yaml [--set KEY=VALUE ...]
  *   needlehex plan SCENE.yaml [--out DIR] [--set KEY=VALUE ...] [--tolerance M] [--max-runs N]
+ *                 [--workers N]
  *   needlehex keys
  *   needlehex --help | --version
  *
@@ -80,13 +81,14 @@ static const char *nh_usage =
     "                     [--quiet]\n"
     "       needlehex check SCENE.yaml [--set KEY=VALUE ...]\n"
     "       needlehex plan SCENE.yaml [--out DIR] [--set KEY=VALUE ...] [--tolerance M] "
-    "[--max-runs N]\n"
+    "[--max-runs N] [--workers N]\n"
     "       needlehex keys\n"
     "       needlehex --help | --version\n"
     "\n"
     "  run      simulate the scene; outputs go to output.dir (default out/<name>)\n"
     "  check    validate the scene (and the mesh it builds), print what will be modelled\n"
-    "  plan     find where to aim so that the electrode ends on its target (target compensation)\n"
+    "  plan     find where to aim so that the electrode ends on its target (target compensation),\n"
+    "           or how to steer a bevel-tip needle to its target around obstacles\n"
     "  keys     print every scene key with its type, default, unit and notes (docs/scene.md)\n"
     "\n"
     "needlehex COMMAND --help describes a command and its options.\n"
@@ -124,18 +126,24 @@ static const char *nh_check_usage =
 
 static const char *nh_plan_usage =
     "usage: needlehex plan SCENE.yaml [--out DIR] [--set KEY=VALUE ...] [--tolerance M] "
-    "[--max-runs N] [--quiet]\n"
+    "[--max-runs N] [--workers N] [--quiet]\n"
     "\n"
     "Target compensation (docs/dbs.md): run the procedure again and again, moving the point\n"
     "the planned trajectories aim at (tools[].trajectory.aim; the entry stays) by Broyden's\n"
     "method on the final miss (tip of the target's tool minus the target's position at the\n"
     "last step), until the miss is at most the tolerance.\n"
+    "Steering (docs/cases.md, Planning the steering): when the target's tool has a bevel, plan\n"
+    "the depths of its half turns and its insertion depth so that the tip ends on the target\n"
+    "and its path keeps plan.clearance from plan.obstacles, by Broyden's method from the\n"
+    "bicycle model's plan.\n"
     "\n"
     "  --out DIR          the plan's folder (default out/<name>-plan): DIR/plan.yaml (aim,\n"
     "                     miss per run, runs, time), DIR/run_NN per run, DIR/final -> the last\n"
     "  --set KEY=VALUE    override a scene key by dotted path (as for run)\n"
     "  --tolerance M      stop when the miss is at most M metres (default 0.5e-3)\n"
     "  --max-runs N       at most N runs (default 8)\n"
+    "  --workers N        steering: run N candidates at once, each a process on one thread\n"
+    "                     (default 0: one after another in this process)\n"
     "  --quiet            no line per run\n"
     "\n"
     "exit status: 0 converged, 1 not converged in N runs or a run failed, 2 bad scene or\n"
@@ -148,6 +156,23 @@ static int nh_number_arg(const char *option, const char *text, double *out) {
   *out = strtod(text, &end);
   if (end == text || *end || errno || !isfinite(*out))
     return NH_ERROR(NH_ERR_INPUT, "%s: expected a number, got '%s'", option, text);
+  return NH_OK;
+}
+
+/* The value of `option`, argv[*i + 1]: present and not itself an option
+ * (a word that starts with '-' and is not a number), else NH_ERR_INPUT
+ * naming the option, with the command's usage line. */
+static int nh_option_value(const char *option, int argc, char **argv, int *i, const char *usage,
+                           const char **value) {
+  const char *v = *i + 1 < argc ? argv[*i + 1] : NULL;
+  char *end = NULL;
+  if (v && v[0] == '-') strtod(v, &end);
+  if (!v || (v[0] == '-' && (end == v || *end)))
+    return NH_ERROR(NH_ERR_INPUT, "%s needs a value%s%s%s (%.*s)", option,
+                    v ? ", got the option '" : "", v ? v : "", v ? "'" : "",
+                    (int)strcspn(usage, "\n"), usage);
+  *value = v;
+  ++*i;
   return NH_OK;
 }
 
@@ -166,6 +191,152 @@ static void nh_thread_policy(char **argv) {
   if (changed) execv("/proc/self/exe", argv);
 }
 
+/* needlehex keys [--help]. */
+static int nh_keys_command(int argc, char **argv) {
+  if (argc > 2 && (!strcmp(argv[2], "--help") || !strcmp(argv[2], "-h"))) {
+    puts("usage: needlehex keys\n\nPrint every scene key with its type, default, unit and notes\n"
+         "(the key tables of docs/scene.md, compiled in; the reader accepts no other key).");
+    return 0;
+  }
+  if (argc > 2) return nh_fail(NH_ERROR(NH_ERR_INPUT, "keys takes no argument, got '%s'", argv[2]));
+  nh_scene_keys_print(stdout);
+  return 0;
+}
+
+/* The command line of run, check and plan. */
+typedef struct {
+  const char *command;
+  int is_run, is_check, is_plan;
+  const char *scene_path, *out_dir, *restart;
+  int quiet, overwrite;
+  int help;          /* --help was given: print the command's usage, nothing else */
+  int n_set;         /* the --set overrides, in order */
+  const char **sets; /* argc slots */
+  nh_plan_options plan;
+} nh_args;
+
+/* plan's --tolerance M, --max-runs N or --workers N at argv[*i] (its value next). */
+static int nh_plan_arg(int argc, char **argv, int *i, nh_plan_options *plan) {
+  const char *a = argv[*i], *text = NULL;
+  double v = 0;
+  NH_TRY(nh_option_value(a, argc, argv, i, nh_plan_usage, &text));
+  NH_TRY(nh_number_arg(a, text, &v));
+  if (a[2] == 't') {
+    plan->tolerance = v;
+    return NH_OK;
+  }
+  if (a[2] == 'w') {
+    if (v != floor(v) || v < 0 || v > 64)
+      return NH_ERROR(NH_ERR_INPUT, "--workers: expected a whole number from 0 to 64, got %s",
+                      argv[*i]);
+    plan->workers = (int)v;
+    return NH_OK;
+  }
+  if (v != floor(v) || v < 1 || v > 99)
+    return NH_ERROR(NH_ERR_INPUT,
+                    "--max-runs: expected a whole number of runs from 1 to 99, got %s", argv[*i]);
+  plan->max_runs = (int)v;
+  return NH_OK;
+}
+
+/* argv[2..] of run, check or plan into *a, up to the first error or --help. */
+static int nh_parse_args(int argc, char **argv, nh_args *a) {
+  const char *usage = a->is_run ? nh_run_usage : a->is_plan ? nh_plan_usage : nh_check_usage;
+  for (int i = 2; i < argc; i++) {
+    const char *arg = argv[i], *v = NULL;
+    if (!strcmp(arg, "--set") || !strcmp(arg, "--out") || !strcmp(arg, "--restart")) {
+      NH_TRY(nh_option_value(arg, argc, argv, &i, usage, &v));
+      if (arg[2] == 's')
+        a->sets[a->n_set++] = v;
+      else if (arg[2] == 'o')
+        a->out_dir = v;
+      else
+        a->restart = v;
+    } else if (!strncmp(arg, "--set=", 6)) {
+      a->sets[a->n_set++] = arg + 6;
+    } else if (!strncmp(arg, "--out=", 6)) {
+      a->out_dir = arg + 6;
+    } else if (!strcmp(arg, "--quiet") || !strcmp(arg, "-q")) {
+      a->quiet = 1;
+    } else if (!strcmp(arg, "--overwrite")) {
+      a->overwrite = 1;
+    } else if (!strcmp(arg, "--help") || !strcmp(arg, "-h")) {
+      a->help = 1;
+      return NH_OK;
+    } else if (a->is_plan && (!strcmp(arg, "--tolerance") || !strcmp(arg, "--max-runs") ||
+                              !strcmp(arg, "--workers"))) {
+      NH_TRY(nh_plan_arg(argc, argv, &i, &a->plan));
+    } else if (arg[0] == '-') {
+      return NH_ERROR(NH_ERR_INPUT, "unknown option '%s' (%.*s)", arg, (int)strcspn(usage, "\n"),
+                      usage);
+    } else if (!a->scene_path) {
+      a->scene_path = arg;
+    } else {
+      return NH_ERROR(NH_ERR_INPUT, "unexpected argument '%s': one scene file per run", arg);
+    }
+  }
+  if (!a->scene_path)
+    return NH_ERROR(NH_ERR_INPUT, "%s needs a scene file (try --help)", a->command);
+  if (a->out_dir && strlen(a->out_dir) >= NH_PATH_MAX)
+    return NH_ERROR(NH_ERR_INPUT, "--out: path too long");
+  return NH_OK;
+}
+
+/* needlehex plan: target compensation (plan/plan.c). */
+static int nh_plan_command(nh_args *a) {
+  if (a->restart) return nh_fail(NH_ERROR(NH_ERR_INPUT, "--restart goes with run"));
+  a->plan.out_dir = a->out_dir;
+  a->plan.quiet = a->quiet;
+  int rc = nh_plan_run(a->scene_path, a->n_set, a->sets, &a->plan);
+  return rc ? nh_fail(rc) : 0;
+}
+
+/* check's summary: the scene, the mesh built and the domain it covers. */
+static int nh_check_print(const nh_scene *scene, nh_sim *sim) {
+  const nh_mesh *m = nh_sim_mesh(sim);
+  const nh_domain *d = &m->domain;
+  nh_scene_print(scene, stdout);
+  printf("mesh: %d nodes (%d dofs, %d free), %d cells\n", m->n_nodes, 3 * m->n_nodes,
+         nh_system_free_dofs(nh_sim_system(sim)), m->n_leaves);
+  int lattice = m->grid[0] * m->grid[1] * m->grid[2], kept = 0;
+  for (int c = 0; c < m->n_cells; c++) kept += m->parent[c] < 0;
+  printf("domain: %s of size [%g, %g, %g] m, %d of %d grid cells kept (fill floor %g), "
+         "volume %.6g m^3 (sum of fill x cell volume) vs %.6g m^3 (the shape's)\n",
+         nh_domain_name(d), d->max[0] - d->min[0], d->max[1] - d->min[1], d->max[2] - d->min[2],
+         kept, lattice, NH_FILL_MIN, nh_mesh_fill_volume(m), nh_domain_volume(d));
+  if (d->labels) NH_TRY(nh_image_print(d->labels, stdout));
+  if (d->surface) nh_surface_print(d->surface, stdout);
+  return NH_OK;
+}
+
+/* needlehex run or check: load the scene, build the simulation, then run it
+ * or print what it models. */
+static int nh_scene_command(const nh_args *a) {
+  nh_scene *scene = NULL;
+  nh_sim *sim = NULL;
+  int rc = nh_scene_load(a->scene_path, a->n_set, a->sets, &scene);
+  if (rc) return nh_fail(rc);
+  if (a->restart && !a->is_run) {
+    nh_scene_destroy(&scene);
+    return nh_fail(NH_ERROR(NH_ERR_INPUT, "--restart goes with run"));
+  }
+  /* A continued run writes where it was written. */
+  const char *out_dir = a->restart ? a->restart : a->out_dir;
+  if (out_dir) snprintf(scene->output.dir, sizeof scene->output.dir, "%s", out_dir);
+  if (a->is_run) nh_catch_stop_signals();
+  nh_sim_options opt = {.dry_run = a->is_check,
+                        .progress = a->is_run && !a->quiet,
+                        .restart_dir = a->restart,
+                        .overwrite = a->overwrite};
+  rc = nh_sim_create(scene, &opt, &sim);
+  if (!rc && a->is_check) rc = nh_check_print(scene, sim);
+  if (!rc && a->is_run) rc = nh_sim_run(sim);
+  int status = rc ? nh_fail(rc) : 0;
+  nh_sim_destroy(&sim);
+  nh_scene_destroy(&scene);
+  return status;
+}
+
 int main(int argc, char **argv) {
   nh_thread_policy(argv);
   if (argc < 2) {
@@ -180,129 +351,24 @@ int main(int argc, char **argv) {
     printf("needlehex %s (git %s)\n", NH_VERSION, NH_GIT_REVISION);
     return 0;
   }
-  const char *command = argv[1];
-  if (!strcmp(command, "keys")) {
-    if (argc > 2 && (!strcmp(argv[2], "--help") || !strcmp(argv[2], "-h"))) {
-      puts("usage: needlehex keys\n\nPrint every scene key with its type, default, unit and notes\n"
-           "(the key tables of docs/scene.md, compiled in; the reader accepts no other key).");
-      return 0;
-    }
-    if (argc > 2)
-      return nh_fail(NH_ERROR(NH_ERR_INPUT, "keys takes no argument, got '%s'", argv[2]));
-    nh_scene_keys_print(stdout);
-    return 0;
+  nh_args a = {.command = argv[1], .plan = {.tolerance = 0.5e-3, .max_runs = 8}};
+  if (!strcmp(a.command, "keys")) return nh_keys_command(argc, argv);
+  a.is_run = !strcmp(a.command, "run"), a.is_check = !strcmp(a.command, "check");
+  a.is_plan = !strcmp(a.command, "plan");
+  if (!a.is_run && !a.is_check && !a.is_plan)
+    return nh_fail(NH_ERROR(NH_ERR_INPUT, "unknown command '%s' (try --help)", a.command));
+  a.sets = calloc((size_t)argc + 1, sizeof(char *));
+  if (!a.sets) return nh_fail(NH_ERROR(NH_ERR_MEMORY, "out of memory"));
+  int status, rc = nh_parse_args(argc, argv, &a);
+  if (a.help) {
+    fputs(a.is_run ? nh_run_usage : a.is_plan ? nh_plan_usage : nh_check_usage, stdout);
+    status = 0;
+  } else if (rc) {
+    status = nh_fail(rc);
+  } else {
+    if (a.quiet) nh_log_set_level(NH_LOG_QUIET);
+    status = a.is_plan ? nh_plan_command(&a) : nh_scene_command(&a);
   }
-  int is_run = !strcmp(command, "run"), is_check = !strcmp(command, "check");
-  int is_plan = !strcmp(command, "plan");
-  if (!is_run && !is_check && !is_plan)
-    return nh_fail(NH_ERROR(NH_ERR_INPUT, "unknown command '%s' (try --help)", command));
-
-  const char *scene_path = NULL, *out_dir = NULL, *restart = NULL;
-  int quiet = 0, n_set = 0, overwrite = 0;
-  nh_plan_options plan = {.tolerance = 0.5e-3, .max_runs = 8};
-  const char **sets = calloc((size_t)argc + 1, sizeof(char *));
-  if (!sets) return nh_fail(NH_ERROR(NH_ERR_MEMORY, "out of memory"));
-  int rc = NH_OK;
-  for (int i = 2; i < argc && !rc; i++) {
-    const char *a = argv[i];
-    if (!strcmp(a, "--set") || !strcmp(a, "--out") || !strcmp(a, "--restart")) {
-      if (i + 1 >= argc) {
-        rc = NH_ERROR(NH_ERR_INPUT, "%s needs a value", a);
-        break;
-      }
-      if (a[2] == 's')
-        sets[n_set++] = argv[++i];
-      else if (a[2] == 'o')
-        out_dir = argv[++i];
-      else
-        restart = argv[++i];
-    } else if (!strncmp(a, "--set=", 6)) {
-      sets[n_set++] = a + 6;
-    } else if (!strncmp(a, "--out=", 6)) {
-      out_dir = a + 6;
-    } else if (!strcmp(a, "--quiet") || !strcmp(a, "-q")) {
-      quiet = 1;
-    } else if (!strcmp(a, "--overwrite")) {
-      overwrite = 1;
-    } else if (!strcmp(a, "--help") || !strcmp(a, "-h")) {
-      free(sets);
-      fputs(is_run ? nh_run_usage : is_plan ? nh_plan_usage : nh_check_usage, stdout);
-      return 0;
-    } else if (is_plan && (!strcmp(a, "--tolerance") || !strcmp(a, "--max-runs"))) {
-      double v = 0;
-      if (i + 1 >= argc)
-        rc = NH_ERROR(NH_ERR_INPUT, "%s needs a value", a);
-      else
-        rc = nh_number_arg(a, argv[++i], &v);
-      if (!rc && a[2] == 't') plan.tolerance = v;
-      if (!rc && a[2] == 'm' && (v != floor(v) || v < 1 || v > 99))
-        rc = NH_ERROR(NH_ERR_INPUT,
-                      "--max-runs: expected a whole number of runs from 1 to 99, got %s", argv[i]);
-      if (!rc && a[2] == 'm') plan.max_runs = (int)v;
-    } else if (a[0] == '-') {
-      rc = NH_ERROR(NH_ERR_INPUT, "unknown option '%s' (try --help)", a);
-    } else if (!scene_path) {
-      scene_path = a;
-    } else {
-      rc = NH_ERROR(NH_ERR_INPUT, "unexpected argument '%s': one scene file per run", a);
-    }
-  }
-  if (!rc && !scene_path)
-    rc = NH_ERROR(NH_ERR_INPUT, "%s needs a scene file (try --help)", command);
-  if (!rc && out_dir && strlen(out_dir) >= NH_PATH_MAX)
-    rc = NH_ERROR(NH_ERR_INPUT, "--out: path too long");
-  if (rc) {
-    free(sets);
-    return nh_fail(rc);
-  }
-  if (quiet) nh_log_set_level(NH_LOG_QUIET);
-  if (is_plan) {
-    if (restart) rc = NH_ERROR(NH_ERR_INPUT, "--restart goes with run");
-    plan.out_dir = out_dir;
-    plan.quiet = quiet;
-    if (!rc) rc = nh_plan_run(scene_path, n_set, sets, &plan);
-    free(sets);
-    return rc ? nh_fail(rc) : 0;
-  }
-
-  nh_scene *scene = NULL;
-  nh_sim *sim = NULL;
-  rc = nh_scene_load(scene_path, n_set, sets, &scene);
-  free(sets);
-  if (rc) return nh_fail(rc);
-  if (restart && !is_run) {
-    nh_scene_destroy(&scene);
-    return nh_fail(NH_ERROR(NH_ERR_INPUT, "--restart goes with run"));
-  }
-  if (restart) out_dir = restart; /* a continued run writes where it was written */
-  if (out_dir) snprintf(scene->output.dir, sizeof scene->output.dir, "%s", out_dir);
-  if (is_run) nh_catch_stop_signals();
-
-  nh_sim_options opt = {.dry_run = is_check,
-                        .progress = is_run && !quiet,
-                        .restart_dir = restart,
-                        .overwrite = overwrite};
-  rc = nh_sim_create(scene, &opt, &sim);
-  if (!rc && is_check) nh_scene_print(scene, stdout);
-  if (!rc && is_check)
-    printf("mesh: %d nodes (%d dofs, %d free), %d cells\n", nh_sim_mesh(sim)->n_nodes,
-           3 * nh_sim_mesh(sim)->n_nodes, nh_system_free_dofs(nh_sim_system(sim)),
-           nh_sim_mesh(sim)->n_leaves);
-  if (!rc && is_check) {
-    const nh_mesh *m = nh_sim_mesh(sim);
-    const nh_domain *d = &m->domain;
-    int lattice = m->grid[0] * m->grid[1] * m->grid[2], kept = 0;
-    for (int c = 0; c < m->n_cells; c++) kept += m->parent[c] < 0;
-    printf("domain: %s of size [%g, %g, %g] m, %d of %d grid cells kept (fill floor %g), "
-           "volume %.6g m^3 (sum of fill x cell volume) vs %.6g m^3 (the shape's)\n",
-           nh_domain_name(d), d->max[0] - d->min[0], d->max[1] - d->min[1], d->max[2] - d->min[2],
-           kept, lattice, NH_FILL_MIN, nh_mesh_fill_volume(m), nh_domain_volume(d));
-    if (d->labels) rc = nh_image_print(d->labels, stdout);
-    if (d->surface) nh_surface_print(d->surface, stdout);
-  }
-  if (!rc && is_run) rc = nh_sim_run(sim);
-  int status = rc ? nh_fail(rc) : 0;
-  nh_sim_destroy(&sim);
-  nh_scene_destroy(&scene);
+  free(a.sets);
   return status;
 }

@@ -12,7 +12,9 @@ name and ":LINE:", or "--set:K:") and the dotted key (" KEY:"); no sanitizer
 report. The expected line and key of each case were written by hand from the
 fixture's text (each fixture says in its first comment what it contains), not
 copied from a run. A valid scene must pass `check` with status 0 and an
-empty stderr.
+empty stderr. Bad command lines (COMMAND_LINES: an option where a value is
+expected, a missing value, an unknown option) exit 2 with one line naming
+the option and the command's usage line, and write nothing.
 
 Environment: NH_BINARY (the needlehex executable), NH_SOURCE_DIR (the source
 tree). Silent on success; prints every failing case and exits 1 otherwise.
@@ -21,6 +23,7 @@ import os
 import resource
 import subprocess
 import sys
+import tempfile
 import time
 
 # (fixture, overrides, expected line or "--set:K", expected dotted key or None)
@@ -189,6 +192,20 @@ VALID = [("set_base.yaml", []), ("set_base.yaml", ["tissue.damping.mass=0.5", "t
          ("tools_base.yaml", ["tools.0.interaction.friction=0.1", "tools.1.release=0.75",
                               "targets.0.tool=cannula"])]
 
+# Command lines (argv after the binary; SCENE is tests/bad/set_base.yaml),
+# each refused with exit 2 and one line naming the option and holding the
+# command's usage line: an option where a value is expected, a missing
+# value, an unknown option. Run in an empty folder, which must stay empty
+# (the run must not start writing into a folder named after an option).
+COMMAND_LINES = [
+    (["run", "SCENE", "--out", "--quiet"], "--out needs a value, got the option '--quiet'"),
+    (["run", "SCENE", "--set", "--overwrite"], "--set needs a value, got the option '--overwrite'"),
+    (["run", "SCENE", "--restart", "-q"], "--restart needs a value, got the option '-q'"),
+    (["run", "SCENE", "--out"], "--out needs a value"),
+    (["plan", "SCENE", "--tolerance", "--quiet"], "--tolerance needs a value, got the option"),
+    (["check", "SCENE", "--frobnicate"], "unknown option '--frobnicate'"),
+]
+
 SANITIZER_WORDS = ("AddressSanitizer", "LeakSanitizer", "runtime error", "UndefinedBehaviorSanitizer")
 
 
@@ -281,6 +298,26 @@ def main():
             failed += 1
             print("FAILED valid scene: %s\n  expected status 0 and no stderr, got %s, %r"
                   % (" ".join(args), status, err), file=sys.stderr)
+    scene = os.path.join(bad_dir, "set_base.yaml")
+    for argv, want in COMMAND_LINES:
+        args = [binary] + [scene if a == "SCENE" else a for a in argv]
+        with tempfile.TemporaryDirectory() as cwd:
+            p = subprocess.run(args, capture_output=True, text=True, timeout=60, cwd=cwd)
+            left = os.listdir(cwd)
+        lines = p.stderr.split("\n")
+        problems = []
+        if p.returncode != 2:
+            problems.append("exit status: expected 2, got %s" % p.returncode)
+        if not (len(lines) == 2 and lines[1] == ""):
+            problems.append("stderr: expected exactly one line")
+        if want not in p.stderr or "usage: needlehex %s SCENE.yaml" % argv[0] not in p.stderr:
+            problems.append("message: expected %r and the usage line" % want)
+        if left:
+            problems.append("the folder it ran in is not empty: %s" % left)
+        if problems:
+            failed += 1
+            print("FAILED %s\n  stderr: %r\n  %s" % (" ".join(args), p.stderr,
+                                                     "\n  ".join(problems)), file=sys.stderr)
     # Every fixture in tests/bad/ must be exercised by a case above.
     used = {c[0] for c in CASES} | {v[0] for v in VALID}
     for name in sorted(os.listdir(bad_dir)):

@@ -2,3 +2,5 @@
 nh_add_c_test(test_dwr "verify;slow")
 # adapt.resolve: a re-solved step equals the direct solve on its final mesh (tests/test_resolve.c).
 nh_add_c_test(test_resolve verify)
+# The constrained dual (active skull/tool/tie rows) and the combined dual of several goals (tests/test_dwr_rows.c).
+nh_add_c_test(test_dwr_rows verify)

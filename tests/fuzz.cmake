@@ -1,11 +1,14 @@
-# Fuzz targets (tests/fuzz/): the scene reader and the template loader.
+# Fuzz targets (tests/fuzz/): the scene reader, the template loader, and the
+# readers of the files a scene names: NIfTI images, STL surfaces,
+# checkpoints (docs/reliability.md).
 #
-# In every build, replay_scene and replay_template run each target's entry
-# point over its seed corpus (cases/, tests/bad/, tests/data/, templates/)
-# and over the inputs the fuzzer once crashed on (tests/fuzz/regressions/),
-# label bad-input. With -DNH_FUZZ=ON (clang, tools/fuzz.sh) the libFuzzer
-# binaries fuzz_scene and fuzz_template are built as well.
-foreach(target scene template)
+# In every build, replay_TARGET runs each target's entry point over its seed
+# corpus (cases/, tests/bad/, tests/data/, templates/; for the file readers
+# the files tests/bad/files/make_bad_files.py writes, made by the fixture
+# test fuzz_corpus) and over the inputs the fuzzer once crashed on
+# (tests/fuzz/regressions/TARGET/), label bad-input. With -DNH_FUZZ=ON
+# (clang, tools/fuzz.sh) the libFuzzer binaries fuzz_TARGET are built as well.
+foreach(target scene template nifti stl checkpoint)
   add_executable(replay_${target} fuzz/replay.c fuzz/fuzz_${target}.c)
   target_link_libraries(replay_${target} PRIVATE needlehex_lib)
   if(NH_FUZZ)
@@ -15,10 +18,24 @@ foreach(target scene template)
   endif()
 endforeach()
 set(NH_SRC ${PROJECT_SOURCE_DIR})
+set(NH_CORPUS ${CMAKE_CURRENT_BINARY_DIR}/fuzz_corpus)
 add_test(NAME fuzz_replay_scene COMMAND replay_scene ${NH_SRC}/cases ${NH_SRC}/cases/dbs
   ${NH_SRC}/cases/phantom ${NH_SRC}/tests/bad ${NH_SRC}/tests/data)
 # (no scene input has crashed the reader yet: the first one found goes to
 # tests/fuzz/regressions/scene/, and that folder into the list above)
 add_test(NAME fuzz_replay_template COMMAND replay_template ${NH_SRC}/templates
   ${NH_SRC}/templates/bad ${NH_SRC}/tests/fuzz/regressions/template)
-set_tests_properties(fuzz_replay_scene fuzz_replay_template PROPERTIES LABELS bad-input)
+add_test(NAME fuzz_corpus COMMAND ${NH_PYTHON} ${NH_SRC}/tests/bad/files/make_bad_files.py
+  ${CMAKE_CURRENT_BINARY_DIR}/fuzz_corpus_cases --binary $<TARGET_FILE:needlehex>
+  --corpus ${NH_CORPUS})
+set_tests_properties(fuzz_corpus PROPERTIES FIXTURES_SETUP fuzz_corpus)
+add_test(NAME fuzz_replay_nifti COMMAND replay_nifti ${NH_SRC}/cases/dbs-mri/ventricles.nii.gz
+  ${NH_SRC}/cases/steering/obstacle.nii.gz ${NH_CORPUS}/nifti)
+add_test(NAME fuzz_replay_stl COMMAND replay_stl ${NH_CORPUS}/stl
+  ${NH_SRC}/tests/fuzz/regressions/stl)
+add_test(NAME fuzz_replay_checkpoint COMMAND replay_checkpoint ${NH_CORPUS}/checkpoint
+  ${NH_SRC}/tests/fuzz/regressions/checkpoint)
+set_tests_properties(fuzz_replay_nifti fuzz_replay_stl fuzz_replay_checkpoint PROPERTIES
+  FIXTURES_REQUIRED fuzz_corpus)
+set_tests_properties(fuzz_corpus fuzz_replay_scene fuzz_replay_template fuzz_replay_nifti
+  fuzz_replay_stl fuzz_replay_checkpoint PROPERTIES LABELS bad-input)

@@ -41,7 +41,7 @@ static int field(int argc, char **argv) {
   }
   double eps = arg(argv, 16), sigma = arg(argv, 20);
   nh_image *ref;
-  CHECK_OK(nh_image_read(ref_path, 0, &ref));
+  CHECK_OK(nh_image_read(ref_path, 0, NULL, &ref));
   nh_mesh *m;
   CHECK_OK(nh_mesh_create_box(lo, hi, grid, &m));
   nh_template *tmpl = regular_template(2);
@@ -79,7 +79,7 @@ static int field(int argc, char **argv) {
 static int scalar(int argc, char **argv) {
   nh_image *ref;
   double *values;
-  CHECK_OK(nh_image_read_values(argv[2], &ref, &values));
+  CHECK_OK(nh_image_read_values(argv[2], NULL, &ref, &values));
   CHECK_OK(nh_nifti_write_scalar(argv[3], ref, values, argc > 4 && strcmp(argv[4], "float") == 0));
   free(values);
   nh_image_release(&ref);
@@ -88,7 +88,7 @@ static int scalar(int argc, char **argv) {
 
 static int fail(char **argv) {
   nh_image *ref;
-  CHECK_OK(nh_image_read(argv[2], 0, &ref));
+  CHECK_OK(nh_image_read(argv[2], 0, NULL, &ref));
   if (argv[4]) snprintf(ref->path, sizeof ref->path, "%s", argv[4]);
   size_t nv = (size_t)ref->n[0] * ref->n[1] * ref->n[2];
   double *zero = calloc(3 * nv, sizeof(double));

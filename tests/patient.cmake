@@ -28,3 +28,11 @@ nh_add_c_test(test_sample verify)
 add_executable(nifti_field_tool nifti_field_tool.c)
 target_link_libraries(nifti_field_tool PRIVATE needlehex_lib)
 nh_add_py_test(nifti_field "io;verify" nifti_field.py $<TARGET_FILE:nifti_field_tool>)
+
+# dbs_mri_outputs.py: cases/dbs-mri's brain shift (3 s) end to end: the plan
+# from an LPS .mrk.json equals the same points as a RAS .fcsv and the
+# analytic conversion; the displacement field's header is the T1's (ITK),
+# its value at the STN is targets.csv's displacement (0.1 mm); a 5 mm ball
+# warped with the tissue moves with the STN (half a voxel) and agrees with an
+# independent resampler; the markups written match targets.csv and tools.csv.
+nh_add_py_test(dbs_mri_outputs "io;verify" dbs_mri_outputs.py $<TARGET_FILE:needlehex>)

@@ -4,10 +4,12 @@ cannula with the electrode nested inside, released at the target, the
 cannula retracted), without and with skull contact, stopped and continued,
 equal the uninterrupted run.
 
-usage: restart_tools.py [needle | dbs | skull]
+usage: restart_tools.py [needle | dbs | skull | mri]
 
-For each scene: a reference run; a run stopped by SIGTERM mid-way and
-continued with the command its message prints; a run SIGKILLed mid-way and
+For each scene: a reference run; a run stopped by SIGTERM mid-way (started
+in a temporary folder, the scene and the output folder given as relative
+paths) and continued from / with the command its message prints (mri: the
+DBS case whose label image the scene names by a relative path); a run SIGKILLed mid-way and
 continued with `--restart` from its last periodic checkpoint. Every row of
 steps.csv (timings aside: so the factorisations and PCG iterations too),
 tools.csv, targets.csv and probes.csv, and the last tissue frame, must equal
@@ -95,10 +97,13 @@ def check_scene(name, scene, sets, stop_after, tol):
         if r.returncode != 0:
             failures.append(f"{name}: reference run failed ({r.returncode}): {r.stderr}")
             return
-        # SIGTERM, then the printed command.
+        # SIGTERM, then the printed command, run from another folder (/): the
+        # run is started in tmp with the scene and the output folder named by
+        # relative paths, so the command and DIR/scene.yaml must name every
+        # file (the scene's images, the output folder) by an absolute path.
         term = os.path.join(tmp, "term")
-        p = subprocess.Popen([BIN, "run", scene, "--quiet", "--out", term] + args,
-                             stderr=subprocess.PIPE, text=True)
+        p = subprocess.Popen([BIN, "run", os.path.relpath(scene, tmp), "--quiet", "--out", "term"]
+                             + args, stderr=subprocess.PIPE, text=True, cwd=tmp)
         if not wait_rows(term, stop_after, p):
             failures.append(f"{name}: the run ended before step {stop_after}")
             return
@@ -108,7 +113,8 @@ def check_scene(name, scene, sets, stop_after, tol):
         if p.returncode != 1 or printed[:2] != ["needlehex", "run"]:
             failures.append(f"{name}: SIGTERM: exit {p.returncode}, message {err!r}")
             return
-        r = subprocess.run([BIN] + printed[1:] + ["--quiet"], capture_output=True, text=True)
+        r = subprocess.run([BIN] + printed[1:] + ["--quiet"], capture_output=True, text=True,
+                           cwd="/")
         if r.returncode != 0:
             failures.append(f"{name}: the printed command failed ({r.returncode}): {r.stderr}")
             return
@@ -169,8 +175,16 @@ def main():
         check_scene("dbs (refactor auto)", dbs, sets, 25, 1e-12)
         check_scene("dbs (refactor every)", dbs, sets + ["solver.refactor=every"], 25, 1e-12)
         return report()
+    if which == "mri":
+        # The DBS procedure on the MRI-derived ventricles: the scene names its
+        # label image by a relative path (ventricles.nii.gz, beside the scene).
+        mri = os.path.join(SRC, "cases", "dbs-mri", "dbs-mri.yaml")
+        check_scene("dbs-mri", mri, ["time.end=2.0", "output.checkpoint=10", "output.every=10"],
+                    20, 1e-12)
+        return report()
     if which != "skull":
-        print(f"usage: restart_tools.py [needle | dbs | skull] (not {which!r})", file=sys.stderr)
+        print(f"usage: restart_tools.py [needle | dbs | skull | mri] (not {which!r})",
+              file=sys.stderr)
         return 2
     # The DBS procedure with skull contact, small: a 6 x 7 x 6 grid, 20 steps
     # of 0.1 s; the brain sags onto the skull from step 2 (16 to 320

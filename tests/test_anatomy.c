@@ -27,12 +27,38 @@
  *     (32 − 2i, −40 + 2j, −16 + 2k) mm (its header's sform); labels of an
  *     intensity image with fractional values are refused; a missing file
  *     and a non-NIfTI file are refused with the file's name.
+ *  6. The readers' contract (docs/reliability.md, "File readers"):
+ *     - the inside volume by rays (nh_surface_inside_volume) of a unit cube
+ *       is 1 to 1e-9 on any ray grid (the inside length is 1 on every ray
+ *       through the square, 0 elsewhere: the midpoint rule is exact; the
+ *       sum of n² terms rounds by ≤ n² ε ≈ 2e-10 at n = 1024), and
+ *       that of the ellipsoid is within 0.2 % of its divergence-theorem
+ *       volume on a 1024² grid (the rule's error is that of the silhouette
+ *       cells, O(h) relative: 3 × 1/1024 ≈ 0.3 % at most, and of mixed sign);
+ *       a 2 x 2 x 100 mm rod along the (y, z) diagonal (400 mm³ exactly)
+ *       is read and its 256² rays are within 0.5 % (half the refusal
+ *       bound: the silhouette runs at 45°, where unshifted cell centres
+ *       err systematically);
+ *     - limits given as a parameter: the ellipsoid's 36672-triangle binary
+ *       file under max_triangles 1000 and under max_file_bytes 1000, the
+ *       ASCII tetrahedron under max_triangles 3, nibabel's image under
+ *       max_voxels 1000, each refused naming the limit and its value;
+ *     - a stream: an ASCII STL from a FIFO that never ends ("solid" then
+ *       spaces, written by a child process) is refused at max_file_bytes =
+ *       4096; /dev/zero read as a binary STL announces 0 triangles and is
+ *       refused as longer than 84 bytes;
+ *     - the cell size: the ellipsoid (largest extent 60 mm) is refused for a
+ *       cell of 0.1 m and accepted for 0.05 m.
  * Silent on success; NH_TEST_VERBOSE=1 prints the measured numbers. */
 #include "check.h"
 #include "mesh/mesh.h"
 
+#include <signal.h>
 #include <stdint.h>
 #include <string.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 static int verbose;
 static const double ax[3] = {0.030, 0.020, 0.015};
@@ -93,7 +119,7 @@ static void test_ellipsoid(const char *dir) {
   snprintf(path, sizeof path, "%s/ellipsoid.stl", dir);
   CHECK(write_ellipsoid(path, -1, 0) == 0, "cannot write %s", path);
   nh_surface *s;
-  CHECK_OK(nh_surface_read(path, 1e-3, &s));
+  CHECK_OK(nh_surface_read(path, 1e-3, 0, NULL, &s));
   const double exact = 4.0 / 3.0 * M_PI * ax[0] * ax[1] * ax[2];
   double v = nh_surface_volume(s);
   if (verbose)
@@ -174,12 +200,12 @@ static void test_ellipsoid(const char *dir) {
 
   /* Errors. */
   CHECK(write_ellipsoid(path, 1234, 0) == 0, "cannot write");
-  CHECK(nh_surface_read(path, 1e-3, &s) == NH_ERR_INPUT && strstr(nh_error_message(), path) &&
-            strstr(nh_error_message(), "not a closed surface"),
+  CHECK(nh_surface_read(path, 1e-3, 0, NULL, &s) == NH_ERR_INPUT &&
+            strstr(nh_error_message(), path) && strstr(nh_error_message(), "not a closed surface"),
         "open surface: %s", nh_error_message());
   CHECK(write_ellipsoid(path, -1, 30) == 0, "cannot write");
-  CHECK(nh_surface_read(path, 1e-3, &s) == NH_ERR_INPUT && strstr(nh_error_message(), path) &&
-            strstr(nh_error_message(), "not 84 + 50"),
+  CHECK(nh_surface_read(path, 1e-3, 0, NULL, &s) == NH_ERR_INPUT &&
+            strstr(nh_error_message(), path) && strstr(nh_error_message(), "not 84 + 50"),
         "truncated: %s", nh_error_message());
   remove(path);
 }
@@ -205,7 +231,7 @@ static void test_ascii(const char *dir) {
   strcat(text, "endsolid tet\n");
   write_text(path, text);
   nh_surface *s;
-  CHECK_OK(nh_surface_read(path, 1.0, &s));
+  CHECK_OK(nh_surface_read(path, 1.0, 0, NULL, &s));
   CHECK_CLOSE(nh_surface_volume(s), 1.0 / 6.0, 1e-15, "tetrahedron volume");
   double in[3] = {0.1, 0.1, 0.1}, out[3] = {0.5, 0.5, 0.5};
   CHECK(nh_surface_inside(s, in) && !nh_surface_inside(s, out), "tetrahedron inside test");
@@ -218,14 +244,14 @@ static void test_ascii(const char *dir) {
   memcpy(p, "outer lop ", 10);
   write_text(path, bad);
   snprintf(want, sizeof want, "%s:3: expected 'loop', got 'lop'", path);
-  CHECK(nh_surface_read(path, 1.0, &s) == NH_ERR_INPUT && strstr(nh_error_message(), want),
+  CHECK(nh_surface_read(path, 1.0, 0, NULL, &s) == NH_ERR_INPUT && strstr(nh_error_message(), want),
         "misspelt keyword: %s", nh_error_message());
   snprintf(bad, sizeof bad, "%s", text);
   p = strstr(bad, "vertex 0 1 0");
   memcpy(p, "vertex 0 x 0", 12);
   write_text(path, bad);
   snprintf(want, sizeof want, "%s:5: vertex: expected a finite number, got 'x'", path);
-  CHECK(nh_surface_read(path, 1.0, &s) == NH_ERR_INPUT && strstr(nh_error_message(), want),
+  CHECK(nh_surface_read(path, 1.0, 0, NULL, &s) == NH_ERR_INPUT && strstr(nh_error_message(), want),
         "non-number: %s", nh_error_message());
   remove(path);
 }
@@ -233,7 +259,7 @@ static void test_ascii(const char *dir) {
 static void test_nifti(const char *dir) {
   const char *file = "/usr/lib/python3/dist-packages/nibabel/tests/data/anatomical.nii";
   nh_image *im;
-  CHECK_OK(nh_image_read(file, 0, &im));
+  CHECK_OK(nh_image_read(file, 0, NULL, &im));
   CHECK(im->n[0] == 33 && im->n[1] == 41 && im->n[2] == 25, "size %d %d %d", im->n[0], im->n[1],
         im->n[2]);
   CHECK(!strcmp(im->orientation, "LAS"), "orientation %s", im->orientation);
@@ -249,20 +275,142 @@ static void test_nifti(const char *dir) {
   nh_image_release(&im);
   /* The T1 intensities are integers (int16): read as labels they are
    * accepted; the image is then not a segmentation but reads. */
-  CHECK_OK(nh_image_read(file, 1, &im));
+  CHECK_OK(nh_image_read(file, 1, NULL, &im));
   CHECK(im->label[0] != 0 || im->label[1] != 0, "the data were read");
   nh_image_release(&im);
 
   char path[1024];
   snprintf(path, sizeof path, "%s/missing.nii.gz", dir);
-  CHECK(nh_image_read(path, 1, &im) == NH_ERR_INPUT && strstr(nh_error_message(), path),
+  CHECK(nh_image_read(path, 1, NULL, &im) == NH_ERR_INPUT && strstr(nh_error_message(), path),
         "missing: %s", nh_error_message());
   snprintf(path, sizeof path, "%s/not.nii", dir);
   write_text(path, "this is not a NIfTI file, but it is long enough to hold a header? no.\n");
-  CHECK(nh_image_read(path, 1, &im) == NH_ERR_INPUT && strstr(nh_error_message(), path) &&
+  CHECK(nh_image_read(path, 1, NULL, &im) == NH_ERR_INPUT && strstr(nh_error_message(), path) &&
             strstr(nh_error_message(), "not a NIfTI"),
         "not NIfTI: %s", nh_error_message());
   remove(path);
+}
+
+/* True if the last error message holds `want`. */
+static int says(const char *want) {
+  return strstr(nh_error_message(), want) != NULL;
+}
+
+/* ASCII STL of the parallelepiped corner + b0 e[0] + b1 e[1] + b2 e[2]
+ * (b in {0, 1}, e right-handed: the faces point outwards). */
+static void write_box(const char *path, const double corner[3], const double e[3][3]) {
+  FILE *f = fopen(path, "w");
+  static const int quads[6][4] = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4},
+                                  {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
+  fputs("solid box\n", f);
+  for (int q = 0; q < 6; q++)
+    for (int t = 0; t < 2; t++) {
+      int c[3] = {quads[q][0], quads[q][t + 1], quads[q][t + 2]};
+      fputs("facet normal 0 0 0\n outer loop\n", f);
+      for (int k = 0; k < 3; k++) {
+        double x[3];
+        for (int a = 0; a < 3; a++)
+          x[a] = corner[a] + (c[k] & 1) * e[0][a] + (c[k] >> 1 & 1) * e[1][a] +
+                 (c[k] >> 2 & 1) * e[2][a];
+        fprintf(f, "  vertex %.17g %.17g %.17g\n", x[0], x[1], x[2]);
+      }
+      fputs(" endloop\nendfacet\n", f);
+    }
+  fputs("endsolid box\n", f);
+  fclose(f);
+}
+
+static void write_cube(const char *path) {
+  static const double zero[3], unit[3][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  write_box(path, zero, unit);
+}
+
+static void test_contract(const char *dir) {
+  char path[1024];
+  nh_surface *s;
+  /* Inside volume by rays. */
+  snprintf(path, sizeof path, "%s/cube.stl", dir);
+  write_cube(path);
+  CHECK_OK(nh_surface_read(path, 1.0, 0, NULL, &s));
+  for (int n = 16; n <= 1024; n *= 4)
+    CHECK_CLOSE(nh_surface_inside_volume(s, n, n + 3), 1.0, 1e-9, "unit cube by rays");
+  nh_surface_release(&s);
+  snprintf(path, sizeof path, "%s/ellipsoid.stl", dir);
+  CHECK(write_ellipsoid(path, -1, 0) == 0, "cannot write %s", path);
+  CHECK_OK(nh_surface_read(path, 1e-3, 0, NULL, &s));
+  double div = nh_surface_volume(s), rays = nh_surface_inside_volume(s, 1024, 1024);
+  if (verbose)
+    printf("ellipsoid: inside volume by rays %.6e vs %.6e (%.3g)\n", rays, div, rays / div - 1);
+  CHECK_CLOSE(rays / div, 1.0, 2e-3, "ellipsoid: inside volume by rays vs divergence");
+  nh_surface_release(&s);
+  /* A straight rod across the ray grid's diagonal: 2 x 2 x 100 mm along
+   * (0, 1, 1)/sqrt 2, 400 mm^3. Its silhouette edges run at 45 degrees, along
+   * a grid of cell centres; the shifted columns must keep the reader's
+   * 256^2 rays within half the 1 % refusal bound of the exact volume. */
+  char rod_path[1024];
+  snprintf(rod_path, sizeof rod_path, "%s/rod.stl", dir);
+  const double r2 = sqrt(2.0), corner[3] = {0, 0, 0};
+  const double rod[3][3] = {{2, 0, 0}, {0, r2, -r2}, {0, 50 * r2, 50 * r2}};
+  write_box(rod_path, corner, rod);
+  CHECK_OK(nh_surface_read(rod_path, 1e-3, 0, NULL, &s));
+  rays = nh_surface_inside_volume(s, 256, 256);
+  if (verbose) printf("diagonal rod: inside volume by rays %.6e vs 4e-7 m^3\n", rays);
+  CHECK_CLOSE(rays / 4e-7, 1.0, 5e-3, "diagonal rod: inside volume by 256^2 rays");
+  CHECK_CLOSE(nh_surface_volume(s) / 4e-7, 1.0, 1e-9, "diagonal rod: divergence volume");
+  nh_surface_release(&s);
+
+  /* Limits as a parameter. */
+  nh_read_limits lim = nh_read_limits_default;
+  lim.max_triangles = 1000;
+  CHECK(nh_surface_read(path, 1e-3, 0, &lim, &s) == NH_ERR_INPUT &&
+            says("limits.max_triangles = 1000") && says(path),
+        "max_triangles: %s", nh_error_message());
+  lim = nh_read_limits_default, lim.max_file_bytes = 1000;
+  CHECK(nh_surface_read(path, 1e-3, 0, &lim, &s) == NH_ERR_INPUT &&
+            says("limits.max_file_bytes = 1000"),
+        "max_file_bytes: %s", nh_error_message());
+  /* The cell size. */
+  CHECK(nh_surface_read(path, 1e-3, 0.1, NULL, &s) == NH_ERR_INPUT &&
+            says("smaller than one cell of 0.1 m"),
+        "cell 0.1 m: %s", nh_error_message());
+  CHECK_OK(nh_surface_read(path, 1e-3, 0.05, NULL, &s));
+  nh_surface_release(&s);
+  remove(path);
+  snprintf(path, sizeof path, "%s/cube.stl", dir);
+  lim = nh_read_limits_default, lim.max_triangles = 3;
+  CHECK(nh_surface_read(path, 1.0, 0, &lim, &s) == NH_ERR_INPUT &&
+            says("more than limits.max_triangles = 3 facets"),
+        "ASCII max_triangles: %s", nh_error_message());
+  remove(path);
+  const char *image = "/usr/lib/python3/dist-packages/nibabel/tests/data/anatomical.nii";
+  nh_image *im;
+  lim = nh_read_limits_default, lim.max_voxels = 1000;
+  CHECK(nh_image_read(image, 0, &lim, &im) == NH_ERR_INPUT &&
+            says("33 x 41 x 25 = 33825 voxels exceed limits.max_voxels = 1000"),
+        "max_voxels: %s", nh_error_message());
+
+  /* Streams: a FIFO that never ends, /dev/zero. */
+  snprintf(path, sizeof path, "%s/endless.stl", dir);
+  remove(path);
+  CHECK(mkfifo(path, 0600) == 0, "mkfifo %s", path);
+  pid_t child = fork();
+  if (child == 0) {
+    signal(SIGPIPE, SIG_DFL);
+    FILE *f = fopen(path, "w");
+    fputs("solid endless\n", f);
+    for (int i = 0; i < 1 << 20; i++) fputs("    ", f);
+    _exit(0);
+  }
+  lim = nh_read_limits_default, lim.max_file_bytes = 4096;
+  CHECK(nh_surface_read(path, 1.0, 0, &lim, &s) == NH_ERR_INPUT &&
+            says("goes on past limits.max_file_bytes = 4096"),
+        "endless FIFO: %s", nh_error_message());
+  kill(child, SIGKILL);
+  waitpid(child, NULL, 0);
+  remove(path);
+  CHECK(nh_surface_read("/dev/zero", 1.0, 0, NULL, &s) == NH_ERR_INPUT &&
+            says("goes on after the 84 + 50 x 0 = 84 bytes"),
+        "/dev/zero: %s", nh_error_message());
 }
 
 int main(int argc, char **argv) {
@@ -271,5 +419,6 @@ int main(int argc, char **argv) {
   test_ellipsoid(dir);
   test_ascii(dir);
   test_nifti(dir);
+  test_contract(dir);
   return nh_test_failures ? 1 : 0;
 }

@@ -647,11 +647,11 @@ static void test_image_and_surface(const char *dir) {
   nh_domain mask, surf, ball;
   memset(&mask, 0, sizeof mask), memset(&surf, 0, sizeof surf);
   mask.kind = NH_DOMAIN_MASK, surf.kind = NH_DOMAIN_SURFACE;
-  CHECK_OK(nh_image_read(nii, 1, &mask.image));
+  CHECK_OK(nh_image_read(nii, 1, NULL, &mask.image));
   const int label = 1;
   CHECK_OK(nh_image_select(mask.image, &label, 1));
   set_box(&mask, mask.image->box_min, mask.image->box_max);
-  CHECK_OK(nh_surface_read(stl, 1e-3, &surf.surface));
+  CHECK_OK(nh_surface_read(stl, 1e-3, 0, NULL, &surf.surface));
   set_box(&surf, surf.surface->min, surf.surface->max);
   surf.cap = 0.25 * R;
   nh_domain_sphere(c, R, &ball);

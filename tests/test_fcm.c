@@ -33,7 +33,7 @@ static void internal_force(const nh_tissue *t, const double *u, double *f) {
   memset(f, 0, sizeof(double) * 3 * (size_t)m->n_nodes);
   for (int l = 0; l < m->n_leaves; l++) {
     int c = m->leaves[l];
-    double fe[24], frame[18];
+    double fe[24], frame[NH_HEX_FRAME];
     nh_tissue_element_force(t, c, u, fe, frame);
     for (int a = 0; a < 8; a++)
       for (int k = 0; k < 3; k++) f[3 * m->cells[8 * c + a] + k] += fe[3 * a + k];
@@ -107,6 +107,7 @@ static void tie_test(int g) {
   const double c0[3] = {0.0013, -0.0021, 0.0007}, R = 0.03;
   nh_domain d;
   nh_domain_sphere(c0, R, &d);
+  d.cut_cells = NH_CUT_CELLS_INTEGRATED;
   nh_mesh *m = NULL;
   nh_tissue *t = NULL;
   const int grid[3] = {g, g, g};
@@ -130,7 +131,7 @@ static void tie_test(int g) {
          *u = calloc((size_t)n, sizeof(double));
   for (int l = 0; l < m->n_leaves; l++) {
     int c = m->leaves[l];
-    double fe[24], frame[18], Kt[576];
+    double fe[24], frame[NH_HEX_FRAME], Kt[576];
     nh_tissue_element_force(t, c, u, fe, frame);
     nh_tissue_element_tangent(t, c, frame, Kt);
     for (int i = 0; i < 24; i++)
@@ -193,6 +194,7 @@ int main(void) {
   nh_domain_sphere(c0, 0.03, &ball);
   const double bc[3] = {0, 0, 0}, bs[3] = {0.14, 0.17, 0.12};
   nh_domain_brain(bc, bs, &brain);
+  ball.cut_cells = brain.cut_cells = NH_CUT_CELLS_INTEGRATED;
   const nh_domain *doms[2] = {&ball, &brain};
   const char *names[2] = {"ball", "brain"};
   const int grids[4] = {5, 6, 8, 11};

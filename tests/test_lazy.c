@@ -173,9 +173,11 @@ static void run(int bbar) {
     int lagging = 0;
     for (int l = 0; l < S.m->n_leaves; l++) {
       int c = S.m->leaves[l];
-      double fr0[18], fr1[18], fe[24], K0[576], K1[576], pe[24];
+      double fr0[NH_HEX_FRAME], fr1[NH_HEX_FRAME], fe[24], K0[576], K1[576], pe[24];
       nh_tissue_element_force(S.t, c, S.u0, fe, fr0);
       nh_tissue_element_force(S.t, c, S.u1, fe, fr1);
+      nh_hex_frame_corotational(fr0); /* the system's tangent: corotational */
+      nh_hex_frame_corotational(fr1);
       double dr = 0.0, dc = 0.0;
       for (int i = 0; i < 9; i++)
         dr += (fr1[i] - fr0[i]) * (fr1[i] - fr0[i]),

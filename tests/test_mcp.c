@@ -20,6 +20,7 @@
 
 #include "check.h"
 
+#include <float.h>
 #include <string.h>
 
 #define MAXM 64
@@ -321,9 +322,13 @@ static void test_failures(void) {
   nh_row_law lw[M];
   stiffness_problem(M, Wb, rb, lw);
   nh_mcp_stats st;
-  CHECK(nh_mcp_solve(M, Wb, rb, lw, 1e-14, 1, lb, &st) == NH_ERR_NUMERIC, "1 sweep converged?");
-  CHECK(st.iterations == 1 && st.residual > 1e-14 && isfinite(st.residual),
-        "non-converged stats: %d sweeps, residual %g", st.iterations, st.residual);
+  CHECK(nh_mcp_solve(M, Wb, rb, lw, 1e-14, 1, lb, &st) == NH_ERR_NUMERIC,
+        "1 Newton step and 1 sweep converged?");
+  CHECK(st.sweeps == 1 && st.newton_steps >= 1 && st.method == NH_MCP_FALLBACK &&
+            st.iterations == st.sweeps + st.newton_steps && st.residual > 1e-14 &&
+            isfinite(st.residual),
+        "non-converged stats: %d Newton steps, %d sweeps, method %d, residual %g", st.newton_steps,
+        st.sweeps, (int)st.method, st.residual);
   for (int i = 0; i < M; i++) CHECK(isfinite(lb[i]), "best iterate not finite");
   CHECK_OK(nh_mcp_solve(0, NULL, NULL, NULL, 1e-10, 10, NULL, &st));
 }
@@ -472,6 +477,243 @@ static void test_static_kinetic(void) {
   }
 }
 
+/* ---- 8. problems with a known solution (built from it) ----
+ * A problem is built from its solution: rows grouped as the contact module
+ * writes them (a bilateral row; a unilateral row, with or without a cap; a
+ * needle point: two bilateral lateral rows and an axial friction row
+ * bounded by μ|(λ1, λ2)| + c; a contact: a unilateral normal and a 1-D
+ * friction row on it; a puncture: a unilateral normal and a disc pair),
+ * each row given a state (open / active / at its cap; stick / slide) with a
+ * margin, λ* and w* chosen to obey the law in that state, then r = w* − W λ*
+ * (in long double). W = Q diag(σ) Qᵀ, Q a random orthogonal matrix (Gram-
+ * Schmidt twice), σ log-spaced from 1 down to 1/κ, then S W S with a
+ * diagonal S (a stiffness ratio, which the solver's scaling removes). With
+ * `blocked` the normal rows (bilateral, unilateral) and the friction rows
+ * get independent Q's (W has no normal-friction coupling): the normal forces
+ * are then the unique solution of an LCP with a positive definite matrix,
+ * the bounds are fixed by them, and the friction forces are the unique
+ * minimiser of a strictly convex quadratic over the bounds — λ* is the only
+ * solution. The same holds fully coupled when every bound is a constant
+ * (μ = 0: a Tresca problem, a strictly convex QP). */
+enum { ROW_B, ROW_U, ROW_CAP, ROW_POINT, ROW_CONTACT, ROW_DISC, ROW_TYPES };
+
+typedef struct {
+  int m;
+  double W[MAXM * MAXM], r[MAXM], lstar[MAXM], wstar[MAXM];
+  nh_row_law laws[MAXM];
+} known_problem;
+
+static double urand(void) {
+  return 0.5 * (nh_rand() + 1.0);
+}
+
+/* Random orthogonal Q (n×n, column-major) into Q. */
+static void random_orthogonal(int n, double *Q) {
+  for (int k = 0; k < n * n; k++) Q[k] = nh_rand();
+  for (int j = 0; j < n; j++)
+    for (int pass = 0; pass < 2; pass++) {
+      for (int k = 0; k < j; k++) {
+        double d = 0.0;
+        for (int i = 0; i < n; i++) d += Q[k * n + i] * Q[j * n + i];
+        for (int i = 0; i < n; i++) Q[j * n + i] -= d * Q[k * n + i];
+      }
+      double nn = 0.0;
+      for (int i = 0; i < n; i++) nn += Q[j * n + i] * Q[j * n + i];
+      for (int i = 0; i < n; i++) Q[j * n + i] /= sqrt(nn);
+    }
+}
+
+/* W(idx, idx) = Q diag(σ) Qᵀ over the rows idx (n of them), σ_k = κ^(−k/(n−1)). */
+static void conditioned_block(int m, double *W, int n, const int *idx, double kappa) {
+  double Q[MAXM * MAXM], sg[MAXM];
+  random_orthogonal(n, Q);
+  for (int k = 0; k < n; k++) sg[k] = n > 1 ? pow(kappa, -(double)k / (n - 1)) : 1.0;
+  for (int a = 0; a < n; a++)
+    for (int b = 0; b < n; b++) {
+      long double v = 0.0L;
+      for (int k = 0; k < n; k++) v += (long double)Q[k * n + a] * sg[k] * Q[k * n + b];
+      W[idx[b] * m + idx[a]] = (double)v;
+    }
+}
+
+/* Build a problem of about m rows from the group types allowed in `types`
+ * (a bit mask of 1 << ROW_*), condition κ, stiffness ratio `ratio` (S from
+ * 1/√ratio to √ratio), friction μ (0: Tresca), normal-friction coupling. */
+static void known_build(known_problem *p, int m, unsigned types, double kappa, double ratio,
+                        double mu, int blocked) {
+  nh_row_law *L = p->laws;
+  int n = 0, grp[MAXM], groups = 0;
+  while (n < m) {
+    const int n0 = n;
+    int t;
+    do t = (int)(urand() * ROW_TYPES) % ROW_TYPES;
+    while (!(types >> t & 1));
+    int need = t == ROW_POINT || t == ROW_DISC ? 3 : t == ROW_CONTACT ? 2 : 1;
+    if (n + need > MAXM) break;
+    if (n + need > m && n > 0) break;
+    if (t == ROW_B) {
+      L[n] = law(NH_ROW_BILATERAL), p->lstar[n] = nh_rand(), p->wstar[n] = 0.0, n++;
+    } else if (t == ROW_U || t == ROW_CAP) {
+      L[n] = law(NH_ROW_UNILATERAL);
+      double c = t == ROW_CAP ? 0.5 + urand() : 0.0, pick = urand();
+      L[n].threshold = c;
+      if (pick < 0.33) /* open */
+        p->lstar[n] = 0.0, p->wstar[n] = 0.2 + urand();
+      else if (t == ROW_CAP && pick > 0.67) /* yields at its cap */
+        p->lstar[n] = c, p->wstar[n] = -(0.2 + urand());
+      else /* active inside */
+        p->lstar[n] = (0.2 + 0.6 * urand()) * (c > 0.0 ? c : 1.0), p->wstar[n] = 0.0;
+      n++;
+    } else {
+      /* the normal(s), then the friction row(s) */
+      int nn = t == ROW_POINT ? 2 : 1, f = n + nn;
+      double N2 = 0.0;
+      for (int k = 0; k < nn; k++) {
+        L[n + k] = law(t == ROW_POINT ? NH_ROW_BILATERAL : NH_ROW_UNILATERAL);
+        if (t == ROW_POINT) {
+          p->lstar[n + k] = nh_rand(), p->wstar[n + k] = 0.0;
+        } else if (urand() < 0.25) { /* open contact: the bound is the threshold */
+          p->lstar[n + k] = 0.0, p->wstar[n + k] = 0.2 + urand();
+        } else {
+          p->lstar[n + k] = 0.2 + urand(), p->wstar[n + k] = 0.0;
+        }
+        N2 += p->lstar[n + k] * p->lstar[n + k];
+      }
+      double c = t == ROW_DISC ? 0.0 : 0.05 + 0.2 * urand(), b = mu * sqrt(N2) + c;
+      int nf = t == ROW_DISC ? 2 : 1;
+      for (int k = 0; k < nf; k++) {
+        L[f + k] = law(NH_ROW_FRICTION);
+        L[f + k].normal = n, L[f + k].normal2 = t == ROW_POINT ? n + 1 : -1;
+        L[f + k].mu = mu, L[f + k].threshold = c, L[f + k].group = nf == 2 ? f : -1;
+        L[f + k].sliding = 1;
+      }
+      if (b == 0.0) b = 0.0; /* an open puncture contact: no friction at all */
+      int slide = urand() < 0.5 && b > 0.0;
+      if (nf == 1) {
+        double sg = nh_rand() < 0 ? -1.0 : 1.0;
+        p->lstar[f] = slide ? sg * b : (0.8 * nh_rand()) * b;
+        p->wstar[f] = slide ? -sg * (0.2 + urand()) : 0.0;
+        L[f].sliding = slide || urand() < 0.5; /* a sticking row may have stuck before */
+        if (!L[f].sliding) L[f].mu_static = 2.0 * mu;
+      } else {
+        double a = 2.0 * M_PI * urand(), rho = slide ? 1.0 : 0.8 * urand(), nu = 0.2 + urand();
+        p->lstar[f] = rho * b * cos(a), p->lstar[f + 1] = rho * b * sin(a);
+        p->wstar[f] = slide ? -nu * cos(a) : 0.0, p->wstar[f + 1] = slide ? -nu * sin(a) : 0.0;
+        if (b == 0.0) p->wstar[f] = nh_rand(), p->wstar[f + 1] = nh_rand(); /* free to slip */
+      }
+      n = f + nf;
+    }
+    for (int i = n0; i < n; i++) grp[i] = groups;
+    groups++;
+  }
+  p->m = m = n;
+  memset(p->W, 0, sizeof p->W);
+  int idx[MAXM], k = 0;
+  if (blocked) {
+    for (int i = 0; i < m; i++)
+      if (L[i].kind != NH_ROW_FRICTION) idx[k++] = i;
+    conditioned_block(m, p->W, k, idx, kappa);
+    int nf = 0;
+    for (int i = 0; i < m; i++)
+      if (L[i].kind == NH_ROW_FRICTION) idx[nf++] = i;
+    if (nf) conditioned_block(m, p->W, nf, idx, kappa);
+  } else {
+    for (int i = 0; i < m; i++) idx[i] = i;
+    conditioned_block(m, p->W, m, idx, kappa);
+  }
+  /* stiffness ratio: the rows of a group (which share a point) scaled by one
+   * S, so its law keeps μ: W → S W S, λ* → S⁻¹ λ*, w* → S w*, thresholds → S⁻¹ */
+  double S[MAXM], Sg[MAXM];
+  for (int g = 0; g < groups; g++) Sg[g] = pow(ratio, 0.5 * nh_rand());
+  for (int i = 0; i < m; i++) S[i] = Sg[grp[i]];
+  for (int j = 0; j < m; j++)
+    for (int i = 0; i < m; i++) p->W[j * m + i] *= S[i] * S[j];
+  for (int i = 0; i < m; i++) {
+    p->lstar[i] /= S[i], p->wstar[i] *= S[i];
+    if (L[i].kind != NH_ROW_BILATERAL) L[i].threshold /= S[i];
+  }
+  for (int i = 0; i < m; i++) {
+    long double v = p->wstar[i];
+    for (int j = 0; j < m; j++) v -= (long double)p->W[j * m + i] * p->lstar[j];
+    p->r[i] = (double)v;
+  }
+}
+
+/* Relative error max|λ − λ*| / max|λ*| of the solver on p from a cold start. */
+static double known_error(const known_problem *p, double tol, nh_mcp_stats *st, int *rc) {
+  nh_row_law laws[MAXM];
+  double lam[MAXM] = {0};
+  memcpy(laws, p->laws, sizeof(nh_row_law) * (size_t)p->m);
+  *rc = nh_mcp_solve(p->m, p->W, p->r, laws, tol, 2000, lam, st);
+  if (*rc) nh_error_clear();
+  double e = 0.0, s = 0.0;
+  for (int i = 0; i < p->m; i++)
+    e = fmax(e, fabs(lam[i] - p->lstar[i])), s = fmax(s, fabs(p->lstar[i]));
+  return s > 0.0 ? e / s : e;
+}
+
+/* Every problem of test_known's grid: (set, κ, variant, trial) → its seed
+ * position in the random stream is fixed by the order below. Asserted:
+ *  - unique solutions (μ = 0: a strictly convex QP; or W without
+ *    normal-friction coupling): converged (residual ≤ tol) and
+ *    max|λ − λ*| / max|λ*| ≤ 10 m κ ε, the perturbation bound of a linear
+ *    system of condition κ (the active pieces, once right, make the problem
+ *    one) with ε the double precision unit round-off;
+ *  - Coulomb friction coupled to the normals (solutions need not be
+ *    unique): converged, for κ ≤ 1e4.
+ * Not asserted, counted (NH_TEST_VERBOSE prints them): Coulomb problems at
+ * larger κ, where the Tresca fixed point may stall (docs/theory.md, The
+ * constraint solve). */
+static void test_known(void) {
+  static const unsigned sets[] = {1u << ROW_B | 1u << ROW_U | 1u << ROW_CAP, 1u << ROW_POINT,
+                                  1u << ROW_CONTACT, 1u << ROW_DISC, (1u << ROW_TYPES) - 1};
+  static const double kappas[] = {1.0, 1e4, 1e8, 1e12};
+  const double tol = 1e-14;
+  const int verbose = getenv("NH_TEST_VERBOSE") != NULL;
+  int unasserted = 0, unasserted_failed = 0, newton_max = 0;
+  double worst[4] = {0};
+  for (int si = 0; si < 5; si++)
+    for (int ki = 0; ki < 4; ki++)
+      for (int v = 0; v < 8; v++) {
+        int blocked = v & 1, m = (v >> 1 & 1) ? 40 : 12;
+        double ratio = (v >> 2 & 1) ? 1e6 : 1.0, mu = 0.3;
+        for (int trial = 0; trial < 10; trial++) {
+          known_problem p;
+          int coulomb = trial % 2;
+          known_build(&p, m, sets[si], kappas[ki], ratio, coulomb ? mu : 0.0, blocked);
+          nh_mcp_stats st;
+          int rc;
+          double e = known_error(&p, tol, &st, &rc);
+          int unique = !coulomb || blocked;
+          if (verbose)
+            printf("set %d kappa %.0e m %d blocked %d ratio %.0e coulomb %d: rc %d method %d "
+                   "newton %d sweeps %d res %.2e err %.2e\n",
+                   si, kappas[ki], p.m, blocked, ratio, coulomb, rc, (int)st.method,
+                   st.newton_steps, st.sweeps, st.residual, e);
+          if (unique && !(coulomb && kappas[ki] > 1e8)) {
+            double bound = 10.0 * p.m * fmax(kappas[ki], 1.0) * DBL_EPSILON;
+            CHECK(rc == NH_OK && e <= bound,
+                  "known solution, set %d, kappa %g, m %d, blocked %d, ratio %g, mu %g: rc %d "
+                  "(residual %g, tolerance %g), relative error %g > %g",
+                  si, kappas[ki], p.m, blocked, ratio, coulomb ? mu : 0.0, rc, st.residual, tol, e,
+                  bound);
+            worst[ki] = fmax(worst[ki], e / bound);
+            if (st.method == NH_MCP_EXACT)
+              newton_max = st.newton_steps > newton_max ? st.newton_steps : newton_max;
+          } else if (!unique && kappas[ki] <= 1e4) {
+            CHECK(rc == NH_OK, "coupled Coulomb, set %d, kappa %g, m %d: rc %d, residual %g", si,
+                  kappas[ki], p.m, rc, st.residual);
+          } else {
+            unasserted++, unasserted_failed += rc != NH_OK;
+          }
+        }
+      }
+  if (verbose)
+    printf("worst error / bound per kappa: %.2g %.2g %.2g %.2g; most Newton steps %d; "
+           "not asserted %d (%d did not converge)\n",
+           worst[0], worst[1], worst[2], worst[3], newton_max, unasserted, unasserted_failed);
+}
+
 int main(void) {
   test_bilateral();
   test_unilateral();
@@ -482,5 +724,6 @@ int main(void) {
   test_two_normals();
   test_static_kinetic();
   test_failures();
+  test_known();
   TEST_END();
 }

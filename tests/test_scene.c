@@ -824,6 +824,26 @@ static void check_plans(const nh_scene *s, const char *what) {
   }
 }
 
+/* nh_scene_motion_integral, the one integral of a tool's motion: segments
+ * (until 1, speed 2, spin 0.5), (until 3, speed -1, spin 0), (until 4, speed
+ * 0.5, spin 1), at rest after. Expected values are the areas under the
+ * piecewise-constant speed (spin), summed by hand; all are exact in binary. */
+static void test_motion_integral(void) {
+  nh_motion m[3] = {{.until = 1, .speed = 2, .spin = 0.5},
+                    {.until = 3, .speed = -1, .spin = 0},
+                    {.until = 4, .speed = 0.5, .spin = 1}};
+  nh_tool_spec t = {.n_motion = 3, .motion = m};
+  EXPECT_NUM(nh_scene_motion_integral(&t, 3, 0, 0, 0), 0);
+  EXPECT_NUM(nh_scene_motion_integral(&t, 3, 0, 0.5, 0), 1);      /* 2 x 0.5 */
+  EXPECT_NUM(nh_scene_motion_integral(&t, 3, 0, 2, 0), 1);        /* 2 x 1 - 1 x 1 */
+  EXPECT_NUM(nh_scene_motion_integral(&t, 3, 0, 10, 0), 0.5);     /* 2 - 2 + 0.5, then at rest */
+  EXPECT_NUM(nh_scene_motion_integral(&t, 1, 0, 10, 0), 2);       /* the first segment only */
+  EXPECT_NUM(nh_scene_motion_integral(&t, 3, 2, 3.5, 0), -0.75);  /* -1 x 1 + 0.5 x 0.5 */
+  EXPECT_NUM(nh_scene_motion_integral(&t, 3, 5, 4, 0), 0);        /* an empty interval */
+  EXPECT_NUM(nh_scene_motion_integral(&t, 3, 0, 10, 1), 1.5);     /* spin: 0.5 x 1 + 1 x 1 */
+  EXPECT_NUM(nh_scene_motion_integral(&t, 3, 0.5, 3.5, 1), 0.75); /* 0.5 x 0.5 + 1 x 0.5 */
+}
+
 static void test_plans(void) {
   char text[4096];
   snprintf(text, sizeof text, "%s%s", minimal, plans_text);
@@ -1245,6 +1265,7 @@ int main(void) {
   test_schedule();
   test_adapt();
   test_tools();
+  test_motion_integral();
   test_plans();
   test_errors(); /* after test_adapt, which creates DIR/sub for adapt_template_dir.yaml */
   if (nh_test_failures == 0) {

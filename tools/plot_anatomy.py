@@ -15,6 +15,10 @@ Writes to --out:
   deformed by the computed displacement at the listed frames (brain shift
   done at t = 3 s, end of the procedure), the displacement interpolated
   trilinearly in the leaf of the tissue VTU's rest mesh that holds the point.
+- anatomy_warped.png: a coronal slice of the T1 through the STN before the
+  shift and the run's warped T1 (warped_<last>.nii.gz) after it, the
+  electrode's final axis (electrode.mrk.json, projected) and the STN
+  (targets.mrk.json) drawn on the second, the planned STN on both.
 Prints, per frame, the mean and the spread of the ventricle voxels'
 displacement (spread = the largest distance of a voxel's displacement from
 the mean: what deformation, not translation, does to them).
@@ -216,6 +220,46 @@ def plot_shift(img, labels, run, frames, out):
     save(fig, os.path.join(out, "anatomy_shift.png"), layout=False)
 
 
+def markups_points(path):
+    """Control points (RAS mm) of the one markup of a .mrk.json we write."""
+    import json
+    with open(path) as f:
+        markup = json.load(f)["markups"][0]
+    return np.array([p["position"] for p in markup["controlPoints"]])
+
+
+def plot_warped(img, run, out):
+    """The T1 before and after the shift in the coronal plane through the STN."""
+    warped = sorted(f for f in os.listdir(run) if f.startswith("warped_"))
+    if not warped:
+        raise SystemExit(f"{run}: no warped_*.nii.gz (the case's output.warped)")
+    after = nib.load(os.path.join(run, warped[-1]))
+    stn = markups_points(os.path.join(run, "targets.mrk.json"))[0]
+    electrode = markups_points(os.path.join(run, "electrode.mrk.json"))
+    planned = np.array([12.0, -5.0, -10.0])  # cases/dbs-mri/plan.mrk.json, RAS mm
+    j = int(round(np.linalg.solve(img.affine, np.r_[planned, 1])[1]))
+    n = img.shape
+    first, last = world(img, [-0.5, j, -0.5]), world(img, [n[0] - 0.5, j, n[2] - 0.5])
+    extent = [first[0], last[0], first[2], last[2]]
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4.6))
+    for ax, image, title in ((axes[0], img, "T1 before the shift"),
+                             (axes[1], after, f"{warped[-1]}: shifted with the tissue")):
+        data = np.asarray(image.dataobj, dtype=float)[:, j, :].T
+        ax.imshow(data, origin="lower", cmap="gray", extent=extent)
+        ax.plot(planned[0], planned[2], "o", mfc="none", mec="tab:orange", ms=9, label="STN planned")
+        ax.set(xlabel="x (mm, right +)", ylabel="z (mm, superior +)",
+               title=f"{title}, y = {world(img, [0, j, 0])[1]:.0f} mm")
+        ax.set_xlim(extent[0], extent[1]), ax.set_ylim(extent[2], extent[3])
+    axes[1].plot(electrode[:, 0], electrode[:, 2], "-", color="tab:red", lw=2,
+                 label="electrode (final, projected)")
+    axes[1].plot(stn[0], stn[2], "x", color="tab:cyan", ms=9, mew=2, label="STN after the shift")
+    handles, labels = axes[1].get_legend_handles_labels()
+    fig.legend(handles, labels, fontsize=9, loc="upper center", ncol=3,
+               bbox_to_anchor=(0.5, 0.02), frameon=False)
+    save(fig, os.path.join(out, "anatomy_warped.png"), layout=False)
+    print(f"STN moved {np.round(stn - planned, 2)} mm (targets.mrk.json)")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("run")
@@ -227,6 +271,7 @@ def main():
     plot_slices(img, labels, args.out)
     plot_mesh(img, read_frame(args.run, frames[0]), args.out)
     plot_shift(img, labels, args.run, frames, args.out)
+    plot_warped(img, args.run, args.out)
 
 
 if __name__ == "__main__":

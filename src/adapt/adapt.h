@@ -163,6 +163,14 @@ int nh_adapt_step(nh_adapt *adapt, nh_mesh *mesh, int n_fields, double **fields,
 int nh_adapt_refine_cells(nh_adapt *adapt, nh_mesh *mesh, const int *cells, int n, int n_fields,
                           double **fields);
 
+/* The nodal transfer of the last mesh change made by nh_adapt_step or
+ * nh_adapt_refine_cells (refinement's Eq. 17, then coarsening's injection):
+ * how the fields were carried, as a linear map old nodes → new nodes (the
+ * solver's preconditioner across the change uses it: solve/inherit.c).
+ * NULL when the last call changed nothing or failed. Valid until the next
+ * such call. */
+const nh_node_transfer *nh_adapt_last_transfer(const nh_adapt *adapt);
+
 /* What ended the last nh_adapt_step (steps.csv `refine_stop`). */
 typedef enum {
   NH_ADAPT_REFINED = 0,   /* every marked cell was refined */
@@ -178,13 +186,19 @@ nh_adapt_stop nh_adapt_last_stop(const nh_adapt *adapt);
  * template's child ratio to the power max_level). NH_ERR_MEMORY. */
 int nh_adapt_set_goals(nh_adapt *adapt, const nh_mesh *mesh, int n, const double *points);
 /* Goal-oriented estimate of the solution u with the factor `sys` holds
- * (nh_dwr_estimate; scale as there). Keeps each goal's |E_p| and, as the
- * marking indicator, Σ η_K^p over the goals whose estimate exceeds
- * adapt.tolerance (all goals without tolerance). *eta, *eta_rel: the
- * primal's SPR estimate. Fails as nh_dwr_estimate, NH_ERR_MEMORY. */
-int nh_adapt_estimate_goal(nh_adapt *adapt, nh_system *sys, double scale, const nh_mesh *mesh,
-                           const nh_tissue *tissue, const double *u, const nh_hanging *hanging,
-                           double *eta, double *eta_rel);
+ * and the step's constraint rows (may be NULL) (nh_dwr_estimate; scale as
+ * there). Every adapt.separate_every-th call (and while no goal has a
+ * non-zero estimate) solves each goal's duals, keeps each goal's |E_p|
+ * and E_pk, sets the combined functional's weights ω_pk = E_pk / |E_p|
+ * and marks by Σ η_K^p over the goals whose estimate exceeds
+ * adapt.tolerance (all goals without tolerance); the calls between solve
+ * one dual (nh_dwr_estimate_combined), mark by its indicator and scale the
+ * last separate E_pk by E_c / Σ_p |E_p| (dwr.c, docs/theory.md §6.6).
+ * *eta, *eta_rel: the primal's SPR estimate. Fails as nh_dwr_estimate,
+ * NH_ERR_MEMORY. */
+int nh_adapt_estimate_goal(nh_adapt *adapt, nh_system *sys, const nh_rows *rows, double scale,
+                           const nh_mesh *mesh, const nh_tissue *tissue, const double *u,
+                           const nh_hanging *hanging, double *eta, double *eta_rel);
 /* |E_p| per goal of the last goal estimate (m), or NULL (none for this mesh). */
 const double *nh_adapt_goal_errors(const nh_adapt *adapt);
 /* The signed E_pk (3 per goal, m) of the last goal estimate, or NULL. */
@@ -212,12 +226,22 @@ int nh_goal_distance_functional(const nh_mesh *mesh, const double target[3], con
  * the bound |E| ≥ |d(u) − d(u_h)| (to first order). */
 double nh_dwr_distance_estimate(const double E[3], const double target[3], const double tip[3]);
 
-/* Dual solutions of n functionals with the system's current factor A:
- * z_q = P A⁻¹ (scale Pᵀ j_q) for j[3 n_nodes n] (q-th at j + 3 n_nodes q),
- * z likewise (fixed DOFs 0, hanging nodes their masters' interpolation).
+/* Which rows of a constrained step the dual keeps (dwr.c, "Constraints"):
+ * active[i] = 1 for a bilateral row, a unilateral row that presses
+ * (λ > 0) and a friction row that sticks (law.sliding 0); 0 otherwise. */
+void nh_dwr_active_rows(const nh_rows *rows, unsigned char *active);
+
+/* Dual solutions of n functionals with the system's current factor A and
+ * the active rows (nh_dwr_active_rows) of the step's constraint rows
+ * `rows` (may be NULL: the tissue alone):
+ *   A z_q + J_tᵀ μ_q = scale Pᵀ j_q,  J_t z_q = 0  (nh_system_solve_rows),
+ * z_q = P (the free part) for j[3 n_nodes n] (q-th at j + 3 n_nodes q), z
+ * likewise (fixed DOFs 0, hanging nodes their masters' interpolation).
+ * *n_rows (may be NULL): the active rows used.
  * Fails with NH_ERR_INPUT (message) if the system carries constraint rows
  * (hanging nodes by Lagrange multipliers), NH_ERR_MEMORY, NH_ERR_NUMERIC. */
-int nh_dwr_duals(nh_system *sys, double scale, int n_nodes, int n, const double *j, double *z);
+int nh_dwr_duals(nh_system *sys, const nh_rows *rows, double scale, int n_nodes, int n,
+                 const double *j, double *z, int *n_rows);
 
 /* What nh_dwr_estimate returns (arrays allocated by the caller). */
 typedef struct {
@@ -226,17 +250,32 @@ typedef struct {
   double *indicator;   /* n_points x n_cells (may be NULL): η_K^p at [n_cells p + c], m */
   double *eta_cell;    /* n_cells (may be NULL): the primal's SPR indicators ηₑ */
   double eta, eta_rel; /* the primal's SPR estimate (as nh_spr_estimate) */
+  int n_rows;          /* constraint rows in the duals (nh_dwr_duals) */
 } nh_dwr_result;
 
 /* Goal-oriented estimate of the displacement at n_points points[3 each]
  * (regularised over boxes of half-width radius) for the solution u of the
- * system whose factor `sys` holds; scale = the coefficient of K in the
- * factorised matrix (1 static, hβ + h² dynamic). dwr.c gives the formulas.
+ * system whose factor `sys` holds, with the step's constraint rows (may be
+ * NULL; nh_dwr_duals); scale = the coefficient of K in the factorised
+ * matrix (1 static, hβ + h² dynamic). dwr.c gives the formulas.
  * where[p] (may be NULL) names point p in messages. Fails as
  * nh_goal_functional, nh_dwr_duals and nh_spr_recover, and with
  * NH_ERR_NUMERIC if an estimate is not finite. Thread-count independent. */
-int nh_dwr_estimate(nh_system *sys, double scale, const nh_mesh *mesh, const nh_tissue *tissue,
-                    const nh_hanging *hanging, const double *u, int n_points, const double *points,
-                    double radius, char (*where)[NH_WHERE_MAX], nh_dwr_result *out);
+int nh_dwr_estimate(nh_system *sys, const nh_rows *rows, double scale, const nh_mesh *mesh,
+                    const nh_tissue *tissue, const nh_hanging *hanging, const double *u,
+                    int n_points, const double *points, double radius, char (*where)[NH_WHERE_MAX],
+                    nh_dwr_result *out);
+
+/* The same for the one combined functional J_c = Σ_pk weights[3p+k] J_pk
+ * (dwr.c, "Several goals in one dual"): one dual solve. out->estimate[0] =
+ * E_c (= Σ_pk weights_pk E_pk of nh_dwr_estimate, to round-off, for a
+ * linear problem), out->norm[0] (if not NULL) = |E_c|, out->indicator (if
+ * not NULL) n_cells values ‖e*_u‖_K ‖e*_{z_c}‖_K; eta_cell, eta, eta_rel,
+ * n_rows as there. Fails as nh_dwr_estimate. */
+int nh_dwr_estimate_combined(nh_system *sys, const nh_rows *rows, double scale, const nh_mesh *mesh,
+                             const nh_tissue *tissue, const nh_hanging *hanging, const double *u,
+                             int n_points, const double *points, double radius,
+                             char (*where)[NH_WHERE_MAX], const double *weights,
+                             nh_dwr_result *out);
 
 #endif

@@ -23,9 +23,18 @@
  * all of them in one multi-column pass (nh_system_solve_many); no new
  * factorisation. Fixed DOFs carry z = 0, hanging nodes their masters'
  * interpolation (z lies in the discrete space). The hanging-node rows of
- * `adapt.hanging: lagrange` and the tools' constraint rows are not part of
- * A; the dual is that of the tissue alone (a documented approximation:
- * docs/adaptivity.md).
+ * `adapt.hanging: lagrange` are not supported (use elimination).
+ *
+ * Constraints. A step with constraint rows (skull, the tools' puncture, tip
+ * and shaft rows) solves A u + Jᵀλ = f, J u = g on its active rows
+ * (nh_dwr_active_rows: bilateral, pressing unilateral, sticking friction
+ * rows). Its dual is the saddle point A z + Jᵀμ = c_K j, J z = 0, solved
+ * with the step's factor and the rows' compliance W = J A⁻¹ Jᵀ
+ * (nh_system_solve_rows: z = z₀ − A⁻¹Jᵀμ, W μ = J z₀, z₀ = A⁻¹ c_K j); the
+ * tools' parts of the rows are held. With u_f, u_h constrained solutions
+ * on nested meshes, J(u_f − P u_h) = 0 and then J(u_f) − J(u_h) =
+ * (A z + Jᵀμ)ᵀ(u_f − P u_h) = zᵀ(f − Jᵀλ_f − A P u_h) = f(z) − a(P u_h, z):
+ * the DWR identity holds with the constrained dual (docs/theory.md §6.6).
  *
  * Error representation. For a linear problem a(u, v) = f(v) and conforming
  * Galerkin u_h, z_h: J(u) − J(u_h) = a(u − u_h, z) = f(z) − a(u_h, z) =:
@@ -89,6 +98,13 @@
  * (‖·‖_K the cell's energy norm of the recovered error), so Σ_K η_K^p ≥
  * |E_p| up to the recovery's accuracy. As a by-product the primal's SPR
  * indicators ηₑ, η and η_rel of nh_spr_estimate are returned too.
+ *
+ * Several goals in one dual (Hartmann & Houston, "Goal-oriented a
+ * posteriori error estimation for multiple target functionals"): for
+ * weights ω_pk, the dual of J_c = Σ ω_pk J_pk is Σ ω_pk z_pk and, the
+ * recovery and the integrals being linear in the dual, its estimate is
+ * Σ ω_pk E_pk: nh_dwr_estimate_combined solves one dual instead of 3 per
+ * point (adapt/refine.c sets the weights from the last separate estimate).
  *
  * Workspace: the duals (3 per point, 3 per node each), the centre samples
  * and recovered nodal stresses of the 1 + 3 n_points fields (6 per cell or
@@ -178,31 +194,50 @@ double nh_dwr_distance_estimate(const double E[3], const double target[3], const
   return -(d[0] * E[0] + d[1] * E[1] + d[2] * E[2]) / len;
 }
 
-int nh_dwr_duals(nh_system *sys, double scale, int n_nodes, int n, const double *j, double *z) {
+void nh_dwr_active_rows(const nh_rows *rows, unsigned char *active) {
+  for (int i = 0; i < rows->m; i++) {
+    const nh_row_law *law = rows->law + i;
+    active[i] = law->kind == NH_ROW_BILATERAL ||
+                (law->kind == NH_ROW_UNILATERAL && rows->lambda[i] > 0.0) ||
+                (law->kind == NH_ROW_FRICTION && !law->sliding);
+  }
+}
+
+int nh_dwr_duals(nh_system *sys, const nh_rows *rows, double scale, int n_nodes, int n,
+                 const double *j, double *z, int *n_rows) {
   const int nf = nh_system_free_dofs(sys);
+  if (n_rows) *n_rows = 0;
   NH_CHECK(nh_system_constraint_rows(sys) == 0, NH_ERR_INPUT,
            "the goal-oriented estimate needs hanging nodes eliminated (adapt.hanging: eliminate)");
   double *b = malloc(sizeof(double) * (size_t)nf * (size_t)(n ? n : 1));
   double *x = malloc(sizeof(double) * (size_t)nf * (size_t)(n ? n : 1));
-  int rc = b && x ? NH_OK : NH_ERROR(NH_ERR_MEMORY, "out of memory: %d dual problems", n);
+  unsigned char *active = rows && rows->m > 0 ? malloc((size_t)rows->m) : NULL;
+  int rc = b && x && (active || !rows || rows->m == 0)
+               ? NH_OK
+               : NH_ERROR(NH_ERR_MEMORY, "out of memory: %d dual problems", n);
   for (int q = 0; q < n && !rc; q++) {
     nh_system_gather(sys, j + 3 * (size_t)n_nodes * q, b + (size_t)nf * q);
     for (int i = 0; i < nf; i++) b[(size_t)nf * q + i] *= scale;
   }
-  if (!rc) rc = nh_system_solve_many(sys, n, b, x);
+  if (!rc && active) nh_dwr_active_rows(rows, active);
+  if (!rc) rc = nh_system_solve_rows(sys, active ? rows : NULL, active, n, b, x, n_rows);
   for (int q = 0; q < n && !rc; q++)
     nh_system_scatter(sys, x + (size_t)nf * q, z + 3 * (size_t)n_nodes * q);
   free(b);
   free(x);
+  free(active);
   return rc;
 }
 
-int nh_dwr_estimate(nh_system *sys, double scale, const nh_mesh *m, const nh_tissue *t,
-                    const nh_hanging *h, const double *u, int n_points, const double *points,
-                    double radius, char (*where)[NH_WHERE_MAX], nh_dwr_result *out) {
-  const int nn = m->n_nodes, nl = m->n_leaves, nz = 3 * n_points, nfld = 1 + nz;
+/* The estimates E_q of nz functionals j (3 n_nodes each) and, for each group
+ * of `group` consecutive functionals, the marking indicator
+ * ‖e*_u‖_K (Σ_{q in group} ‖e*_{z_q}‖²_K)^½ (out->indicator, n_cells per
+ * group); out->estimate receives the nz E_q, out->norm is not touched. */
+static int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale, const nh_mesh *m,
+                              const nh_tissue *t, const nh_hanging *h, const double *u, int nz,
+                              int group, const double *j, nh_dwr_result *out) {
+  const int nn = m->n_nodes, nl = m->n_leaves, nfld = 1 + nz, ng = nz / group;
   const size_t n3 = 3 * (size_t)nn;
-  double *j = malloc(sizeof(double) * n3 * (size_t)(nz ? nz : 1));
   double *z = malloc(sizeof(double) * n3 * (size_t)(nz ? nz : 1));
   double *samples =
       malloc(sizeof(double) * 6 * (size_t)nfld * (size_t)(m->n_cells ? m->n_cells : 1));
@@ -211,16 +246,12 @@ int nh_dwr_estimate(nh_system *sys, double scale, const nh_mesh *m, const nh_tis
   double *cell_err2 = malloc(sizeof(double) * (size_t)(nl ? nl : 1));
   double *cell_norm2 = malloc(sizeof(double) * (size_t)(nl ? nl : 1));
   int rc = NH_OK;
-  if (!j || !z || !samples || !star || !cell_eps || !cell_err2 || !cell_norm2) {
-    rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: goal-oriented estimate (%d points, %d nodes)",
-                  n_points, nn);
+  if (!z || !samples || !star || !cell_eps || !cell_err2 || !cell_norm2) {
+    rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: goal-oriented estimate (%d duals, %d nodes)", nz,
+                  nn);
     goto done;
   }
-  for (int p = 0; p < n_points && !rc; p++)
-    for (int k = 0; k < 3 && !rc; k++)
-      rc = nh_goal_functional(m, points + 3 * p, radius, k, where ? where[p] : NULL,
-                              j + n3 * (size_t)(3 * p + k));
-  if (rc || (rc = nh_dwr_duals(sys, scale, nn, nz, j, z))) goto done;
+  if ((rc = nh_dwr_duals(sys, rows, scale, nn, nz, j, z, &out->n_rows))) goto done;
 
     /* Centre samples: the primal's corotational stress, each dual's tangent stress. */
 #pragma omp parallel for schedule(static) if (nl >= NH_DWR_PARALLEL_MIN)
@@ -249,7 +280,7 @@ int nh_dwr_estimate(nh_system *sys, double scale, const nh_mesh *m, const nh_tis
     nh_hex_shape(xi + 3 * g, N[g]);
   }
   for (int c = 0; c < m->n_cells && out->indicator; c++)
-    for (int p = 0; p < n_points; p++) out->indicator[(size_t)m->n_cells * p + c] = 0.0;
+    for (int p = 0; p < ng; p++) out->indicator[(size_t)m->n_cells * p + c] = 0.0;
   int bad_cell = -1;
 #pragma omp parallel for schedule(static) if (nl >= NH_DWR_PARALLEL_MIN)
   for (int l = 0; l < nl; l++) {
@@ -288,10 +319,10 @@ int nh_dwr_estimate(nh_system *sys, double scale, const nh_mesh *m, const nh_tis
     }
     cell_err2[l] = m->fill[c] * e2;
     cell_norm2[l] = m->fill[c] * n2;
-    for (int p = 0; p < n_points; p++) {
+    for (int p = 0; p < ng; p++) {
       double zn2 = 0.0;
-      for (int k = 0; k < 3; k++) {
-        int q = 3 * p + k;
+      for (int k = 0; k < group; k++) {
+        int q = group * p + k;
         double dz[24], eps = 0.0, ezz = 0.0;
         nh_dwr_corotate(m, z + n3 * q, c, R, dz);
         double tz = gbar ? nh_dwr_dilatation(m, z + n3 * q, c, b) : 0.0;
@@ -333,14 +364,11 @@ int nh_dwr_estimate(nh_system *sys, double scale, const nh_mesh *m, const nh_tis
     if (out->eta_cell) out->eta_cell[m->leaves[l]] = sqrt(fmax(cell_err2[l], 0.0));
     for (int q = 0; q < nz; q++) out->estimate[q] += cell_eps[(size_t)nz * l + q];
   }
-  for (int p = 0; p < n_points; p++) {
-    const double *e = out->estimate + 3 * p;
-    out->norm[p] = sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]);
-    if (!isfinite(out->norm[p])) {
-      rc = NH_ERROR(NH_ERR_NUMERIC, "goal estimate of point %d is not finite", p);
+  for (int q = 0; q < nz; q++)
+    if (!isfinite(out->estimate[q])) {
+      rc = NH_ERROR(NH_ERR_NUMERIC, "goal estimate of functional %d is not finite", q);
       goto done;
     }
-  }
   if (!isfinite(sum_err) || !isfinite(sum_norm)) {
     rc =
         NH_ERROR(NH_ERR_NUMERIC, "SPR: the error estimate is not finite (eta^2 = %g, |u|_E^2 = %g)",
@@ -351,6 +379,54 @@ int nh_dwr_estimate(nh_system *sys, double scale, const nh_mesh *m, const nh_tis
   out->eta_rel = sum_err + sum_norm > 0.0 ? sqrt(sum_err / (sum_norm + sum_err)) : 0.0;
 
 done:
-  free(j), free(z), free(samples), free(star), free(cell_eps), free(cell_err2), free(cell_norm2);
+  free(z), free(samples), free(star), free(cell_eps), free(cell_err2), free(cell_norm2);
+  return rc;
+}
+
+/* The point functionals j_pk (3 per point) of the goals. */
+static int nh_dwr_point_functionals(const nh_mesh *m, int n_points, const double *points,
+                                    double radius, char (*where)[NH_WHERE_MAX], double *j) {
+  const size_t n3 = 3 * (size_t)m->n_nodes;
+  for (int p = 0; p < n_points; p++)
+    for (int k = 0; k < 3; k++)
+      NH_TRY(nh_goal_functional(m, points + 3 * p, radius, k, where ? where[p] : NULL,
+                                j + n3 * (size_t)(3 * p + k)));
+  return NH_OK;
+}
+
+int nh_dwr_estimate(nh_system *sys, const nh_rows *rows, double scale, const nh_mesh *m,
+                    const nh_tissue *t, const nh_hanging *h, const double *u, int n_points,
+                    const double *points, double radius, char (*where)[NH_WHERE_MAX],
+                    nh_dwr_result *out) {
+  const int nz = 3 * n_points;
+  double *j = malloc(sizeof(double) * 3 * (size_t)m->n_nodes * (size_t)(nz ? nz : 1));
+  if (!j) return NH_ERROR(NH_ERR_MEMORY, "out of memory: %d goal functionals", nz);
+  int rc = nh_dwr_point_functionals(m, n_points, points, radius, where, j);
+  if (!rc) rc = nh_dwr_functionals(sys, rows, scale, m, t, h, u, nz, 3, j, out);
+  for (int p = 0; p < n_points && !rc; p++) {
+    const double *e = out->estimate + 3 * p;
+    out->norm[p] = sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]);
+  }
+  free(j);
+  return rc;
+}
+
+int nh_dwr_estimate_combined(nh_system *sys, const nh_rows *rows, double scale, const nh_mesh *m,
+                             const nh_tissue *t, const nh_hanging *h, const double *u, int n_points,
+                             const double *points, double radius, char (*where)[NH_WHERE_MAX],
+                             const double *weights, nh_dwr_result *out) {
+  const size_t n3 = 3 * (size_t)m->n_nodes;
+  double *jk = malloc(sizeof(double) * n3), *jc = calloc(n3, sizeof(double));
+  int rc = jk && jc ? NH_OK : NH_ERROR(NH_ERR_MEMORY, "out of memory: combined goal functional");
+  for (int p = 0; p < n_points && !rc; p++)
+    for (int k = 0; k < 3 && !rc; k++) {
+      double w = weights[3 * p + k];
+      if (w == 0.0) continue;
+      rc = nh_goal_functional(m, points + 3 * p, radius, k, where ? where[p] : NULL, jk);
+      for (size_t i = 0; i < n3 && !rc; i++) jc[i] += w * jk[i];
+    }
+  if (!rc) rc = nh_dwr_functionals(sys, rows, scale, m, t, h, u, 1, 1, jc, out);
+  if (!rc && out->norm) out->norm[0] = fabs(out->estimate[0]);
+  free(jk), free(jc);
   return rc;
 }

@@ -17,8 +17,10 @@
  *     at the node's reference coordinates in the parent.
  * Under adapt.estimator goal (nh_adapt_estimate_goal, adapt/dwr.c) the
  * indicators are the goal indicators summed over the goals above
- * adapt.tolerance; with a tolerance, marking looks only at cells that can
- * still be refined (so the goal error is chased below it), and the marked
+ * adapt.tolerance (between separate estimates: the combined dual's); with
+ * a tolerance, marking looks only at cells that can still be refined (so
+ * the goal error is chased below it; without one, that would refine every
+ * cell near the goals to max_level: docs/adaptivity.md), and the marked
  * set is closed under the 2:1 rule (mesh/grade.c; with a budget the sorted
  * prefix is shortened until the closed set fits). With adapt.coarsen,
  *  5. families whose children all have an indicator (under goal: summed
@@ -57,6 +59,16 @@ struct nh_adapt {
                           needs its cells) */
   int n_active;        /* goals above tolerance at the last estimate */
   nh_adapt_stop stop;  /* what ended the last refinement */
+  /* the nodal transfer of the last mesh change (the fields' Eq. 17 and
+   * injection as a map), valid when have_transfer */
+  nh_node_transfer transfer;
+  int have_transfer;
+  /* several goals in one dual (dwr.c): every separate_every-th estimate
+   * solves each goal's duals and sets the weights, the others one dual */
+  int separate_every, since_separate, have_weights;
+  double *weight;  /* 3 per goal: ω_pk = E_pk / |E_p| of the last separate estimate */
+  double *sep_est; /* 3 per goal: E_pk of the last separate estimate */
+  double sep_sum;  /* Σ_p |E_p| of the last separate estimate (= Σ ω E there) */
 };
 
 int nh_adapt_create(const nh_adapt_spec *spec, int max_cells, nh_adapt **out) {
@@ -80,6 +92,7 @@ int nh_adapt_create(const nh_adapt_spec *spec, int max_cells, nh_adapt **out) {
   a->grade = a->goal;
   a->tolerance = spec->tolerance;
   a->coarsen = spec->coarsen;
+  a->separate_every = spec->separate_every > 0 ? spec->separate_every : 1;
   *out = a;
   return NH_OK;
 }
@@ -93,6 +106,9 @@ void nh_adapt_destroy(nh_adapt **adapt) {
   free((*adapt)->goal_est);
   free((*adapt)->goal_ind);
   free((*adapt)->eta_all);
+  nh_node_transfer_free(&(*adapt)->transfer);
+  free((*adapt)->weight);
+  free((*adapt)->sep_est);
   free(*adapt);
   *adapt = NULL;
 }
@@ -111,12 +127,15 @@ int nh_adapt_estimate(nh_adapt *a, const nh_mesh *m, const nh_tissue *tissue, co
 }
 
 int nh_adapt_set_goals(nh_adapt *a, const nh_mesh *m, int n, const double *points) {
-  free(a->goal_points), free(a->goal_error), free(a->goal_est);
+  free(a->goal_points), free(a->goal_error), free(a->goal_est), free(a->weight), free(a->sep_est);
   a->goal_points = malloc(sizeof(double) * 3 * (size_t)(n ? n : 1));
   a->goal_error = malloc(sizeof(double) * (size_t)(n ? n : 1));
   a->goal_est = malloc(sizeof(double) * 3 * (size_t)(n ? n : 1));
-  if (!a->goal_points || !a->goal_error || !a->goal_est)
+  a->weight = malloc(sizeof(double) * 3 * (size_t)(n ? n : 1));
+  a->sep_est = malloc(sizeof(double) * 3 * (size_t)(n ? n : 1));
+  if (!a->goal_points || !a->goal_error || !a->goal_est || !a->weight || !a->sep_est)
     return NH_ERROR(NH_ERR_MEMORY, "out of memory: goals");
+  a->have_weights = 0;
   memcpy(a->goal_points, points, sizeof(double) * 3 * (size_t)n);
   a->n_goals = n;
   double h = fmin(m->spacing[0], fmin(m->spacing[1], m->spacing[2]));
@@ -124,9 +143,9 @@ int nh_adapt_set_goals(nh_adapt *a, const nh_mesh *m, int n, const double *point
   return NH_OK;
 }
 
-int nh_adapt_estimate_goal(nh_adapt *a, nh_system *sys, double scale, const nh_mesh *m,
-                           const nh_tissue *tissue, const double *u, const nh_hanging *hanging,
-                           double *eta, double *eta_rel) {
+int nh_adapt_estimate_goal(nh_adapt *a, nh_system *sys, const nh_rows *rows, double scale,
+                           const nh_mesh *m, const nh_tissue *tissue, const double *u,
+                           const nh_hanging *hanging, double *eta, double *eta_rel) {
   NH_CHECK(a->goal && a->n_goals > 0, NH_ERR_INTERNAL, "goal estimate without goals");
   if (m->n_cells > a->cap_eta) {
     double *e = realloc(a->eta_cell, sizeof(double) * (size_t)m->n_cells);
@@ -138,20 +157,50 @@ int nh_adapt_estimate_goal(nh_adapt *a, nh_system *sys, double scale, const nh_m
     if (!e || !g || !all) return NH_ERROR(NH_ERR_MEMORY, "out of memory: error indicators");
     a->cap_eta = m->n_cells;
   }
-  nh_dwr_result r = {.estimate = a->goal_est, .norm = a->goal_error, .indicator = a->goal_ind};
   a->have_eta = 0; /* until this estimate is complete */
-  NH_TRY(nh_dwr_estimate(sys, scale, m, tissue, hanging, u, a->n_goals, a->goal_points, a->radius,
-                         NULL, &r));
-  /* The marking indicator: the sum over the goals still above tolerance. */
+  const int combined = a->have_weights && a->since_separate + 1 < a->separate_every;
+  nh_dwr_result r = {.estimate = a->goal_est, .norm = a->goal_error, .indicator = a->goal_ind};
+  if (!combined) {
+    NH_TRY(nh_dwr_estimate(sys, rows, scale, m, tissue, hanging, u, a->n_goals, a->goal_points,
+                           a->radius, NULL, &r));
+    /* the weights of the combined functional: each goal's error direction */
+    a->sep_sum = 0.0;
+    for (int p = 0; p < a->n_goals; p++) {
+      double e = a->goal_error[p];
+      for (int k = 0; k < 3; k++) {
+        a->sep_est[3 * p + k] = a->goal_est[3 * p + k];
+        a->weight[3 * p + k] = e > 0.0 ? a->goal_est[3 * p + k] / e : 0.0;
+      }
+      a->sep_sum += e;
+    }
+    a->have_weights = a->sep_sum > 0.0 && isfinite(a->sep_sum);
+    a->since_separate = 0;
+  } else {
+    double Ec = 0.0;
+    r.estimate = &Ec, r.norm = NULL;
+    NH_TRY(nh_dwr_estimate_combined(sys, rows, scale, m, tissue, hanging, u, a->n_goals,
+                                    a->goal_points, a->radius, NULL, a->weight, &r));
+    /* each goal's estimate carried from the last separate one by the
+     * combined functional's ratio ρ = E_c / Σ_p |E_p| */
+    const double rho = Ec / a->sep_sum;
+    for (int p = 0; p < a->n_goals; p++) {
+      double *e = a->goal_est + 3 * p;
+      for (int k = 0; k < 3; k++) e[k] = rho * a->sep_est[3 * p + k];
+      a->goal_error[p] = sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]);
+    }
+    a->since_separate++;
+  }
+  /* The marking indicator: the sum over the goals still above tolerance
+   * (combined: the one dual's, over every goal). */
   a->n_active = 0;
   for (int p = 0; p < a->n_goals; p++) a->n_active += !(a->goal_error[p] <= a->tolerance);
   for (int l = 0; l < m->n_leaves; l++) {
     int c = m->leaves[l];
     double sum = 0.0, all = 0.0;
-    for (int p = 0; p < a->n_goals; p++) {
+    for (int p = 0; p < (combined ? 1 : a->n_goals); p++) {
       double v = a->goal_ind[(size_t)m->n_cells * p + c];
       all += v;
-      if (!(a->goal_error[p] <= a->tolerance)) sum += v;
+      if (combined || !(a->goal_error[p] <= a->tolerance)) sum += v;
     }
     a->eta_cell[c] = sum;
     a->eta_all[c] = all;
@@ -168,6 +217,10 @@ const double *nh_adapt_goal_errors(const nh_adapt *a) {
 
 const double *nh_adapt_goal_estimates(const nh_adapt *a) {
   return a && a->goal && a->have_eta ? a->goal_est : NULL;
+}
+
+const nh_node_transfer *nh_adapt_last_transfer(const nh_adapt *a) {
+  return a && a->have_transfer ? &a->transfer : NULL;
 }
 
 nh_adapt_stop nh_adapt_last_stop(const nh_adapt *a) {
@@ -226,6 +279,52 @@ static int nh_adapt_close(const nh_adapt *a, const nh_mesh *m, int *marked, int 
   return rc;
 }
 
+/* The transfer of a refinement (before any coarsening of the same step):
+ * the old nodes keep their values, a new node takes Eq. 17's trilinear
+ * weights of its parent's corners (nh_adapt_transfer). */
+static int nh_adapt_transfer_refine(nh_adapt *a, const nh_mesh *m, const nh_refine_info *info,
+                                    int old_nodes) {
+  nh_node_transfer *t = &a->transfer;
+  const int n = old_nodes + info->n_new;
+  int *start = realloc(t->start, sizeof(int) * ((size_t)n + 1));
+  if (!start) return NH_ERROR(NH_ERR_MEMORY, "out of memory: the nodal transfer");
+  t->start = start;
+  NH_TRY(nh_grow((void **)&t->node, &t->cap, old_nodes + 8 * info->n_new, sizeof(int)));
+  int cap = 0;
+  NH_TRY(nh_grow((void **)&t->weight, &cap, t->cap, sizeof(double)));
+  int q = 0;
+  for (int v = 0; v < old_nodes; v++) t->start[v] = q, t->node[q] = v, t->weight[q++] = 1.0;
+  for (int k = 0; k < info->n_new; k++) {
+    double N[8];
+    nh_hex_shape(info->xi + 3 * k, N);
+    const int *e = m->cells + 8 * info->parent[k];
+    t->start[old_nodes + k] = q;
+    for (int c = 0; c < 8; c++)
+      if (N[c] != 0.0) t->node[q] = e[c], t->weight[q++] = N[c];
+  }
+  t->start[n] = q;
+  t->n_old = old_nodes, t->n_new = n;
+  a->have_transfer = 1;
+  return NH_OK;
+}
+
+/* After a coarsening: the transfer's rows of the kept nodes, compacted by
+ * node_map (injection; map is increasing). Without a refinement before it in
+ * the step, the transfer starts as the identity. */
+static void nh_adapt_transfer_compact(nh_adapt *a, int old_nodes, const int *map) {
+  nh_node_transfer *t = &a->transfer;
+  if (!a->have_transfer) return; /* (set up by nh_adapt_step) */
+  int q = 0, w = 0;
+  for (int v = 0; v < old_nodes; v++) {
+    int lo = t->start[v], hi = t->start[v + 1];
+    if (map[v] < 0) continue;
+    t->start[w++] = q;
+    for (int p = lo; p < hi; p++) t->node[q] = t->node[p], t->weight[q++] = t->weight[p];
+  }
+  t->start[w] = q;
+  t->n_new = w;
+}
+
 /* Merge families whose children all have η below fraction x threshold
  * (cells created by this step's refinement have no η and stay), compact the
  * fields. *n_merged: families merged. */
@@ -248,6 +347,7 @@ static int nh_adapt_coarsen(nh_adapt *a, nh_mesh *m, int old_cells, double thres
         for (int v = 0; v < old_nodes; v++)
           if (map[v] >= 0) memmove(fields[f] + 3 * map[v], fields[f] + 3 * v, 3 * sizeof(double));
       *n_merged = n;
+      nh_adapt_transfer_compact(a, old_nodes, map);
     }
   }
   free(below), free(parents), free(map);
@@ -273,7 +373,9 @@ int nh_adapt_refine_cells(nh_adapt *a, nh_mesh *m, const int *cells, int n, int 
                           double **fields) {
   const int old_nodes = m->n_nodes;
   nh_refine_info info = {0};
+  a->have_transfer = 0;
   int rc = nh_mesh_refine(m, a->tmpl, cells, n, &info);
+  if (!rc) rc = nh_adapt_transfer_refine(a, m, &info, old_nodes);
   for (int f = 0; f < n_fields && !rc; f++) {
     double *p = realloc(fields[f], sizeof(double) * 3 * (size_t)(m->n_nodes ? m->n_nodes : 1));
     if (!p)
@@ -339,12 +441,18 @@ int nh_adapt_step(nh_adapt *a, nh_mesh *m, int n_fields, double **fields, int *n
     return rc;
   }
   const int old_cells = m->n_cells;
+  a->have_transfer = 0;
   if (n_marked > 0) rc = nh_adapt_refine_cells(a, m, marked, n_marked, n_fields, fields);
   free(marked);
+  if (!rc && !a->have_transfer && a->coarsen > 0) { /* coarsening alone: from the identity */
+    nh_refine_info none = {0};
+    rc = nh_adapt_transfer_refine(a, m, &none, m->n_nodes);
+  }
   int n_merged = 0;
   if (!rc && a->coarsen > 0)
     rc = nh_adapt_coarsen(a, m, old_cells, threshold, n_fields, fields, &n_merged);
   if (n_marked > 0 || n_merged > 0) a->have_eta = 0; /* the indicators belonged to the old cells */
   if (!rc) *n_refined = n_marked + n_merged;
+  if (rc || *n_refined == 0) a->have_transfer = 0;
   return rc;
 }

@@ -53,16 +53,23 @@ typedef struct nh_image {
 } nh_image;
 
 /* Read the NIfTI-1 or NIfTI-2 file `path` (.nii, .nii.gz, or a .hdr/.img
- * pair) through libnifti2: its size, world transform (sform if its code is
- * non-zero, else qform if non-zero, else the pixdim diagonal) in metres
- * (xyz_units mm, m or µm; unknown units are taken as mm, as NIfTI readers
- * do), and if `read_data` its voxels as integer labels (after scl_slope /
- * scl_inter when the slope is non-zero). Output *out with one owner.
- * Fails with NH_ERR_INPUT, message "PATH: reason": missing or unreadable
- * file, not NIfTI, corrupt header or data (short or bad gzip), not 3D (a 4th
- * dimension above 1), a singular transform, a complex/RGB data type, a
- * voxel that is not an integer. NH_ERR_MEMORY. */
-int nh_image_read(const char *path, int read_data, nh_image **out);
+ * pair): its size, world transform (sform if its code is non-zero, else
+ * qform if non-zero, else the pixdim diagonal) in metres (xyz_units mm, m or
+ * µm; unknown units are taken as mm, as NIfTI readers do), and if
+ * `read_data` its voxels as integer labels (after scl_slope / scl_inter
+ * when the slope is finite and non-zero). The header is read and checked
+ * first (docs/anatomy.md, "Reading"), its implied size against `limits`
+ * (NULL: nh_read_limits_default) before anything is allocated or
+ * decompressed, and the voxels are read with that bound. libnifti2 prints
+ * nothing. Output *out with one owner.
+ * Fails with NH_ERR_INPUT, message "PATH: what is wrong (the value, the
+ * field)": missing, unreadable or not a regular file; not NIfTI; a header
+ * field out of range (dim, pixdim, quaternion of norm > 1, non-finite or
+ * singular sform, codes, vox_offset); not 3D; not a label data type; more
+ * voxels or bytes than the limits; a file shorter or longer than its header
+ * says (gzip'd: found as it is read); a voxel that is not a whole number
+ * (NaN, 2.5), named by its index. NH_ERR_MEMORY. */
+int nh_image_read(const char *path, int read_data, const nh_read_limits *limits, nh_image **out);
 void nh_image_retain(nh_image *image);
 void nh_image_release(nh_image **image); /* sets *image = NULL */
 
@@ -125,13 +132,23 @@ typedef struct nh_surface {
  * header, a triangle count and 50 bytes per triangle, the size matching the
  * count exactly). Coordinates are in `unit` metres per file unit (1e-3 for
  * millimetres). Zero-area triangles are dropped. The file's normals are
- * ignored (the inside test does not need an orientation).
+ * ignored. The count a binary header announces is checked against `limits`
+ * (NULL: defaults) before anything is allocated, and the file is read with a
+ * bound (a stream such as a FIFO too: it must end where its header says, an
+ * ASCII one within max_file_bytes and max_triangles). The geometry must be
+ * what the file says (docs/anatomy.md, "Surface meshes"): closed, largest
+ * extent between `cell` (m, the caller's cell size; 0: no lower bound) and
+ * 10 m, a non-zero volume, and the volume inside by nh_surface_inside
+ * within 1 % of the volume enclosed by the divergence theorem (else
+ * overlapping shells, self-intersection or inconsistent orientation).
  * Fails with NH_ERR_INPUT, "PATH:LINE: reason" (ASCII) or "PATH: reason"
- * (binary: triangle number): missing file, a keyword out of place, a
- * non-number or non-finite coordinate, a truncated file, no triangles, an
- * open surface (an edge not shared by an even number of triangles).
- * NH_ERR_MEMORY. */
-int nh_surface_read(const char *path, double unit, nh_surface **out);
+ * (binary: triangle number; geometry: both volumes and a hint): missing
+ * file, a keyword out of place, a non-number or non-finite coordinate, a
+ * binary byte in an ASCII file, a truncated or overlong file, more than the
+ * limits, no triangles, an open surface (an edge not shared by an even
+ * number of triangles), the geometry. NH_ERR_MEMORY. */
+int nh_surface_read(const char *path, double unit, double cell, const nh_read_limits *limits,
+                    nh_surface **out);
 void nh_surface_retain(nh_surface *surface);
 void nh_surface_release(nh_surface **surface);
 
@@ -151,6 +168,10 @@ double nh_surface_level(const nh_surface *surface, const double x[3], double cap
 void nh_surface_print(const nh_surface *surface, FILE *f);
 /* Volume enclosed, by the divergence theorem (orientation-free: |Σ|). */
 double nh_surface_volume(const nh_surface *surface);
+/* Volume inside by the inside test: the parity rule's inside length along
+ * ny x nz rays in +x at the centres of a grid over the (y, z) extent, times
+ * the ray's cell area (NaN if out of memory). */
+double nh_surface_inside_volume(const nh_surface *surface, int ny, int nz);
 /* First crossing of the ray base + τ dir (τ > 0) with a triangle: τ, point
  * and the unit normal of that triangle facing the ray's origin. 1 if hit. */
 int nh_surface_ray_entry(const nh_surface *surface, const double base[3], const double dir[3],
@@ -230,17 +251,20 @@ int nh_markups_line(const nh_markups *markups, const char *name, double a[3], do
  * nh_markups_point). */
 int nh_markups_find_point(const char *path, const char *label, double x[3]);
 
-/* ---- voxel values of any scalar image (anatomy/volume.c) ---- */
+/* ---- voxel values of any scalar image (read by anatomy/image.c, interpolated by anatomy/volume.c)
+ * ---- */
 /* Voxel v of raw NIfTI data of type `datatype` (a NIfTI DT_* code) as a
  * double; 0 and *ok = 0 for a type that is not a real number (complex, RGB). */
 double nh_image_voxel_value(const void *data, int datatype, size_t v, int *ok);
-/* Read the header of `path` as nh_image_read(path, 0, out) and its voxels as
- * doubles, intensities or labels: values[n0 n1 n2], i fastest (malloc'ed,
- * the caller frees), scl_slope · stored + scl_inter when the slope is finite
- * and non-zero (NIfTI's rule), else the stored values. Fails as
- * nh_image_read, and with NH_ERR_INPUT for a data type that is not a real
- * number; NH_ERR_MEMORY. */
-int nh_image_read_values(const char *path, nh_image **out, double **values);
+/* Read the header of `path` as nh_image_read(path, 0, limits, out) and its
+ * voxels as doubles, intensities or labels: values[n0 n1 n2], i fastest
+ * (the caller frees), scl_slope · stored + scl_inter when the slope is
+ * finite and non-zero (NIfTI's rule), else the stored values. The voxels
+ * are read as nh_image_read's labels (bounded, the file's length checked)
+ * and must be finite. Fails as nh_image_read, and with NH_ERR_INPUT for a
+ * voxel that is not finite (named); NH_ERR_MEMORY. */
+int nh_image_read_values(const char *path, const nh_read_limits *limits, nh_image **out,
+                         double **values);
 /* The value at world point x of `values` given at the voxel centres of
  * `image`: trilinear between centres (nearest = 0), or the nearest centre's
  * (nearest = 1, for labels). 0 outside the image's voxels (index outside

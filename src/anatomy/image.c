@@ -29,9 +29,10 @@
  * test relies on (docs/theory.md §5b). Inside, F = (1/2 − χ) s < 0. */
 #include "anatomy/anatomy.h"
 
-#include <errno.h>
+#include <limits.h>
 #include <math.h>
 #include <nifti2_io.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -54,6 +55,218 @@ static char nh_orientation_letter(int code) {
     return '?';
   }
 }
+
+/* ---- the header ---- */
+
+/* What the reader uses of a NIfTI-1 or NIfTI-2 header, in native byte order
+ * and wide types. */
+typedef struct {
+  int version; /* 1 or 2 */
+  int swapped; /* the file's byte order is not this machine's */
+  int onefile; /* magic n+1 / n+2: header and voxels in one .nii */
+  long long dim[8];
+  double pixdim[8];
+  int datatype, nbyper, swapsize;
+  double vox_offset, scl_slope, scl_inter;
+  int qform_code, sform_code, xyzt_units;
+  double quatern[3], qoffset[3], srow[3][4];
+} nh_nifti_header;
+
+/* The fields of a raw NIfTI-1 or NIfTI-2 header h (already in native order). */
+#define NH_NIFTI_FIELDS(out, h)                                                                    \
+  do {                                                                                             \
+    for (int i_ = 0; i_ < 8; i_++)                                                                 \
+      (out)->dim[i_] = (h).dim[i_], (out)->pixdim[i_] = (h).pixdim[i_];                            \
+    (out)->datatype = (h).datatype, (out)->vox_offset = (double)(h).vox_offset;                    \
+    (out)->scl_slope = (h).scl_slope, (out)->scl_inter = (h).scl_inter;                            \
+    (out)->qform_code = (h).qform_code, (out)->sform_code = (h).sform_code;                        \
+    (out)->xyzt_units = (h).xyzt_units;                                                            \
+    (out)->quatern[0] = (h).quatern_b, (out)->quatern[1] = (h).quatern_c;                          \
+    (out)->quatern[2] = (h).quatern_d;                                                             \
+    (out)->qoffset[0] = (h).qoffset_x, (out)->qoffset[1] = (h).qoffset_y;                          \
+    (out)->qoffset[2] = (h).qoffset_z;                                                             \
+    for (int c_ = 0; c_ < 4; c_++)                                                                 \
+      (out)->srow[0][c_] = (h).srow_x[c_], (out)->srow[1][c_] = (h).srow_y[c_],                    \
+      (out)->srow[2][c_] = (h).srow_z[c_];                                                         \
+    (out)->onefile = NIFTI_ONEFILE(h);                                                             \
+  } while (0)
+
+/* znzread of n bytes; a gzip error (which znzread returns as (size_t)-1)
+ * reads as nothing, and sets *damaged. */
+static size_t nh_znz_read(void *buf, size_t n, znzFile fp, int *damaged) {
+  size_t got = znzread(buf, 1, n, fp);
+  if (got <= n) return got;
+  *damaged = 1;
+  return 0;
+}
+
+/* Read the header of `path` (through znzlib: plain or gzip'd) into h. Only
+ * libnifti2's silent calls are used (header version, byte swap): nothing is
+ * printed. Fails with NH_ERR_INPUT: unreadable, too short, not NIfTI. */
+static int nh_nifti_header_read(const char *path, nh_nifti_header *h) {
+  union {
+    nifti_1_header n1;
+    nifti_2_header n2;
+    char bytes[sizeof(nifti_2_header)];
+  } raw;
+  memset(&raw, 0, sizeof raw);
+  znzFile fp = znzopen(path, "rb", nifti_is_gzfile(path));
+  if (znz_isnull(fp)) return NH_ERROR(NH_ERR_INPUT, "%s: cannot open the image", path);
+  int damaged = 0;
+  size_t got = nh_znz_read(raw.bytes, sizeof(nifti_1_header), fp, &damaged);
+  int version =
+      got == sizeof(nifti_1_header) ? nifti_header_version(raw.bytes, sizeof(nifti_1_header)) : -1;
+  if (version == 2) got += nh_znz_read(raw.bytes + got, sizeof(nifti_2_header) - got, fp, &damaged);
+  znzclose(fp);
+  NH_CHECK(!damaged, NH_ERR_INPUT, "%s: a damaged gzip stream (zlib fails in its first %zu bytes)",
+           path, version == 2 ? sizeof(nifti_2_header) : sizeof(nifti_1_header));
+  NH_CHECK(got >= sizeof(nifti_1_header), NH_ERR_INPUT,
+           "%s: not a NIfTI file (it ends after %zu bytes: a NIfTI header alone has 348)", path,
+           got);
+  NH_CHECK(version == 1 || version == 2, NH_ERR_INPUT,
+           "%s: not a NIfTI file (no valid NIfTI-1 or NIfTI-2 header%s)", path,
+           version == 0 ? ": an Analyze 7.5 header without the NIfTI magic" : "");
+  NH_CHECK(got == (version == 2 ? sizeof(nifti_2_header) : sizeof(nifti_1_header)), NH_ERR_INPUT,
+           "%s: the NIfTI-2 header is truncated (%zu of 540 bytes)", path, got);
+  memset(h, 0, sizeof *h);
+  h->version = version;
+  if (version == 1) {
+    h->swapped = raw.n1.sizeof_hdr != (int)sizeof(nifti_1_header);
+    if (h->swapped) swap_nifti_header(&raw.n1, 1);
+    NH_NIFTI_FIELDS(h, raw.n1);
+  } else {
+    h->swapped = raw.n2.sizeof_hdr != (int)sizeof(nifti_2_header);
+    if (h->swapped) swap_nifti_header(&raw.n2, 2);
+    NH_NIFTI_FIELDS(h, raw.n2);
+  }
+  return NH_OK;
+}
+
+/* The voxel types a label image may have. */
+static int nh_label_type(int datatype) {
+  switch (datatype) {
+  case DT_UINT8:
+  case DT_INT8:
+  case DT_INT16:
+  case DT_UINT16:
+  case DT_INT32:
+  case DT_UINT32:
+  case DT_INT64:
+  case DT_UINT64:
+  case DT_FLOAT32:
+  case DT_FLOAT64:
+    return 1;
+  default:
+    return 0;
+  }
+}
+
+static int nh_finite3(const double *v) {
+  return isfinite(v[0]) && isfinite(v[1]) && isfinite(v[2]);
+}
+
+/* Every field the reader uses, in range (docs/anatomy.md, "Reading"). */
+static int nh_nifti_header_check(const char *path, nh_nifti_header *h) {
+  NH_CHECK(h->dim[0] >= 1 && h->dim[0] <= 7, NH_ERR_INPUT,
+           "%s: dim[0] = %lld: the number of dimensions must be 1 to 7", path, h->dim[0]);
+  for (int d = 1; d <= 7; d++) {
+    if (d > h->dim[0]) {
+      h->dim[d] = 1; /* beyond dim[0]: not a dimension of the image */
+      continue;
+    }
+    NH_CHECK(h->dim[d] >= 1, NH_ERR_INPUT,
+             "%s: dim[%d] = %lld: every dimension must hold at least one voxel", path, d,
+             h->dim[d]);
+    NH_CHECK(d <= 3 || h->dim[d] == 1, NH_ERR_INPUT,
+             "%s: not a 3D image: dimension %d has %lld entries (time series and vector images "
+             "are not label images)",
+             path, d, h->dim[d]);
+  }
+  for (int d = 1; d <= 3; d++)
+    NH_CHECK(isfinite(h->pixdim[d]) && h->pixdim[d] > 0, NH_ERR_INPUT,
+             "%s: pixdim[%d] = %g: a voxel size must be a positive finite number", path, d,
+             h->pixdim[d]);
+  NH_CHECK(isfinite(h->pixdim[0]), NH_ERR_INPUT, "%s: pixdim[0] (qfac) = %g: must be 1 or -1", path,
+           h->pixdim[0]);
+  NH_CHECK(nh_label_type(h->datatype), NH_ERR_INPUT,
+           "%s: data type %s (%d) is not a label type (use an integer type, or float with whole "
+           "numbers)",
+           path, nifti_datatype_string(h->datatype), h->datatype);
+  nifti_datatype_sizes(h->datatype, &h->nbyper, &h->swapsize);
+  int space = XYZT_TO_SPACE(h->xyzt_units);
+  NH_CHECK(space <= NIFTI_UNITS_MICRON, NH_ERR_INPUT,
+           "%s: xyzt_units = %d: its spatial code %d is none of NIfTI's (0 unknown, 1 m, 2 mm, "
+           "3 um)",
+           path, h->xyzt_units, space);
+  NH_CHECK(h->qform_code >= 0 && h->qform_code <= NIFTI_XFORM_TEMPLATE_OTHER, NH_ERR_INPUT,
+           "%s: qform_code = %d is not a NIfTI transform code (0 to 5)", path, h->qform_code);
+  NH_CHECK(h->sform_code >= 0 && h->sform_code <= NIFTI_XFORM_TEMPLATE_OTHER, NH_ERR_INPUT,
+           "%s: sform_code = %d is not a NIfTI transform code (0 to 5)", path, h->sform_code);
+  if (h->qform_code > 0) {
+    const double *q = h->quatern;
+    NH_CHECK(nh_finite3(q), NH_ERR_INPUT,
+             "%s: the qform's quaternion (quatern_b, c, d) = (%g, %g, %g) is not finite", path,
+             q[0], q[1], q[2]);
+    /* b² + c² + d² ≤ 1 makes a = √(1 − b² − c² − d²) a rotation's; the
+     * float32 fields of a unit quaternion with a = 0 round to 1 + 1e-7. */
+    double norm = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]);
+    NH_CHECK(norm <= 1 + 1e-6, NH_ERR_INPUT,
+             "%s: the qform's quaternion (quatern_b, c, d) = (%g, %g, %g) has norm %.9g > 1: not "
+             "a rotation",
+             path, q[0], q[1], q[2], norm);
+    NH_CHECK(nh_finite3(h->qoffset), NH_ERR_INPUT,
+             "%s: the qform's offset (qoffset_x, y, z) = (%g, %g, %g) is not finite", path,
+             h->qoffset[0], h->qoffset[1], h->qoffset[2]);
+  }
+  if (h->sform_code > 0) {
+    int finite = 1;
+    for (int r = 0; r < 3; r++) finite &= nh_finite3(h->srow[r]) && isfinite(h->srow[r][3]);
+    NH_CHECK(finite, NH_ERR_INPUT,
+             "%s: the sform (srow_x, srow_y, srow_z) holds a value that is not finite", path);
+    double M[9], scale = 1.0;
+    for (int r = 0; r < 3; r++) {
+      for (int c = 0; c < 3; c++) M[3 * r + c] = h->srow[r][c];
+      scale *= nh_vec3_norm(M + 3 * r);
+    }
+    NH_CHECK(fabs(nh_mat3_det(M)) > 1e-12 * scale, NH_ERR_INPUT,
+             "%s: the sform's 3 x 3 part is singular (determinant %g): voxels of no volume", path,
+             nh_mat3_det(M));
+  }
+  if (isfinite(h->scl_slope) && h->scl_slope != 0) {
+    if (isnan(h->scl_inter)) h->scl_inter = 0; /* as nibabel reads it */
+    NH_CHECK(isfinite(h->scl_inter), NH_ERR_INPUT, "%s: scl_inter = %g is not finite", path,
+             h->scl_inter);
+  } else {
+    h->scl_slope = 0; /* 0, NaN or infinite: no scaling (NIfTI-1, "scl_slope") */
+  }
+  double header = h->version == 2 ? sizeof(nifti_2_header) : sizeof(nifti_1_header);
+  NH_CHECK(isfinite(h->vox_offset) && h->vox_offset == floor(h->vox_offset) &&
+               h->vox_offset >= (h->onefile ? header : 0),
+           NH_ERR_INPUT, "%s: vox_offset = %g: the voxels must start at a whole byte%s", path,
+           h->vox_offset, h->onefile ? " after the header" : "");
+  return NH_OK;
+}
+
+/* The size limits, before anything is allocated: voxels, and the bytes the
+ * header implies (for a gzip'd file, the bytes it must expand to). */
+static int nh_nifti_header_limits(const char *path, const nh_nifti_header *h,
+                                  const nh_read_limits *limits) {
+  double nvox = (double)h->dim[1] * (double)h->dim[2] * (double)h->dim[3];
+  NH_CHECK(nvox <= limits->max_voxels, NH_ERR_INPUT,
+           "%s: %lld x %lld x %lld = %.0f voxels exceed limits.max_voxels = %.0f", path, h->dim[1],
+           h->dim[2], h->dim[3], nvox, limits->max_voxels);
+  NH_CHECK(nvox <= INT_MAX, NH_ERR_INPUT,
+           "%s: %lld x %lld x %lld = %.0f voxels: more than %d are not supported", path, h->dim[1],
+           h->dim[2], h->dim[3], nvox, INT_MAX);
+  double bytes = h->vox_offset + nvox * h->nbyper;
+  NH_CHECK(bytes <= limits->max_file_bytes, NH_ERR_INPUT,
+           "%s: its header implies %.0f bytes (vox_offset %.0f + %.0f voxels x %d bytes), more "
+           "than limits.max_file_bytes = %.0f",
+           path, bytes, h->vox_offset, nvox, h->nbyper, limits->max_file_bytes);
+  return NH_OK;
+}
+
+/* ---- the voxels ---- */
 
 double nh_image_voxel_value(const void *d, int datatype, size_t v, int *ok) {
   switch (datatype) {
@@ -83,19 +296,85 @@ double nh_image_voxel_value(const void *d, int datatype, size_t v, int *ok) {
   }
 }
 
-static int nh_image_fill(nh_image *im, nifti_image *nim, int read_data) {
-  for (int d = 4; d <= 7; d++)
-    NH_CHECK(nim->dim[0] < d || nim->dim[d] <= 1, NH_ERR_INPUT,
-             "%s: not a 3D image: dimension %d has %lld entries (time series and vector images "
-             "are not label images)",
-             im->path, d, (long long)nim->dim[d]);
-  NH_CHECK(nim->nx >= 1 && nim->ny >= 1 && nim->nz >= 1 && nim->nx < (1 << 20) &&
-               nim->ny < (1 << 20) && nim->nz < (1 << 20) &&
-               (double)nim->nx * nim->ny * nim->nz < 1e9,
-           NH_ERR_INPUT, "%s: unsupported size %lld x %lld x %lld", im->path, (long long)nim->nx,
-           (long long)nim->ny, (long long)nim->nz);
-  im->n[0] = (int)nim->nx, im->n[1] = (int)nim->ny, im->n[2] = (int)nim->nz;
-  switch (nim->xyz_units) {
+/* Read the voxels from `file` (znzlib, plain or gzip'd; `where` names it in
+ * messages) chunk by chunk: exactly nvox × nbyper bytes after vox_offset,
+ * then the end of the file. Values go through scl_slope/scl_inter. With
+ * values == NULL they are labels, into im->label: whole numbers in int's
+ * range (NaN and 2.5 are refused, naming the voxel); else intensities, into
+ * values[nvox]: finite numbers. The output's pages are touched only as data
+ * arrive (calloc maps a large block without writing it), so a file
+ * shorter than its header says costs what it holds, not what it claims. */
+static int nh_nifti_voxels(nh_image *im, const char *file, const char *where,
+                           const nh_nifti_header *h, double *values) {
+  const size_t nvox = (size_t)im->n[0] * im->n[1] * im->n[2];
+  const double total = (double)nvox * h->nbyper;
+  if (!values) im->label = nh_calloc(nvox, sizeof(int));
+  enum { CHUNK = 1 << 20 };
+  unsigned char *buf = nh_calloc(CHUNK, 1);
+  znzFile fp = znzopen(file, "rb", nifti_is_gzfile(file));
+  int rc = NH_OK, damaged = 0;
+  if ((!values && !im->label) || !buf)
+    rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: voxels of %s", where);
+  if (!rc && znz_isnull(fp)) rc = NH_ERROR(NH_ERR_INPUT, "%s: cannot open the voxel data", where);
+  /* Skip to vox_offset by reading: the same for gzip'd and plain files. */
+  for (double skipped = 0; !rc && skipped < h->vox_offset;) {
+    size_t want = (size_t)fmin(CHUNK, h->vox_offset - skipped);
+    size_t got = nh_znz_read(buf, want, fp, &damaged);
+    if (got < want)
+      rc = NH_ERROR(NH_ERR_INPUT, "%s: the file ends at byte %.0f, before vox_offset = %.0f", where,
+                    skipped + got, h->vox_offset);
+    skipped += got;
+  }
+  const size_t per_chunk = CHUNK / (size_t)h->nbyper;
+  const double slope = h->scl_slope, inter = h->scl_inter;
+  for (size_t v0 = 0; !rc && v0 < nvox; v0 += per_chunk) {
+    size_t n = nvox - v0 < per_chunk ? nvox - v0 : per_chunk;
+    size_t got = nh_znz_read(buf, n * (size_t)h->nbyper, fp, &damaged);
+    if (got < n * (size_t)h->nbyper) {
+      rc = NH_ERROR(NH_ERR_INPUT,
+                    "%s: %s after %.0f of the %.0f bytes of voxels the header announces (%d x %d "
+                    "x %d voxels of %d bytes)",
+                    where, damaged ? "a damaged gzip stream" : "the file ends (truncated)",
+                    (double)v0 * h->nbyper + got, total, im->n[0], im->n[1], im->n[2], h->nbyper);
+      break;
+    }
+    if (h->swapped && h->swapsize > 1) nifti_swap_Nbytes((int64_t)n, h->swapsize, buf);
+    for (size_t i = 0; i < n; i++) {
+      int ok = 1; /* nh_label_type admitted the type */
+      double value = nh_image_voxel_value(buf, h->datatype, i, &ok);
+      if (slope != 0) value = slope * value + inter;
+      int good = values ? isfinite(value) : value == floor(value) && fabs(value) <= (double)INT_MAX;
+      if (!good) {
+        size_t v = v0 + i, a = v % (size_t)im->n[0], b = v / (size_t)im->n[0] % (size_t)im->n[1],
+               c = v / ((size_t)im->n[0] * im->n[1]);
+        rc = NH_ERROR(NH_ERR_INPUT, "%s: voxel [%zu, %zu, %zu] holds %g, %s", where, a, b, c, value,
+                      values ? "not a finite intensity"
+                             : "not an integer label (a label image holds whole numbers; "
+                               "segment an intensity image first)");
+        break;
+      }
+      if (values)
+        values[v0 + i] = value;
+      else
+        im->label[v0 + i] = (int)value;
+    }
+  }
+  if (!rc && nh_znz_read(buf, 1, fp, &damaged) == 1)
+    rc = NH_ERROR(NH_ERR_INPUT,
+                  "%s: the file goes on after the %.0f bytes of voxels its header announces "
+                  "(%d x %d x %d of %d bytes after vox_offset %.0f): a wrong dimension or data "
+                  "type?",
+                  where, total, im->n[0], im->n[1], im->n[2], h->nbyper, h->vox_offset);
+  if (!znz_isnull(fp)) znzclose(fp);
+  free(buf);
+  return rc;
+}
+
+/* ---- the image ---- */
+
+/* The world transform, spacing and orientation from a checked header. */
+static int nh_image_frame(nh_image *im, const nh_nifti_header *h) {
+  switch (XYZT_TO_SPACE(h->xyzt_units)) {
   case NIFTI_UNITS_METER:
     im->unit = 1.0;
     break;
@@ -106,20 +385,24 @@ static int nh_image_fill(nh_image *im, nifti_image *nim, int read_data) {
     im->unit = 1e-3;
     break; /* mm, or unknown (taken as mm) */
   }
-  const nifti_dmat44 *M;
-  if (nim->sform_code > 0)
-    M = &nim->sto_xyz, im->xform = "sform";
-  else if (nim->qform_code > 0)
-    M = &nim->qto_xyz, im->xform = "qform";
-  else
-    M = NULL, im->xform = "pixdim";
+  nifti_dmat44 Q;
+  if (h->sform_code > 0)
+    im->xform = "sform";
+  else if (h->qform_code > 0) {
+    im->xform = "qform";
+    Q = nifti_quatern_to_dmat44(h->quatern[0], h->quatern[1], h->quatern[2], h->qoffset[0],
+                                h->qoffset[1], h->qoffset[2], h->pixdim[1], h->pixdim[2],
+                                h->pixdim[3], h->pixdim[0] < 0 ? -1.0 : 1.0);
+  } else
+    im->xform = "pixdim";
   for (int r = 0; r < 3; r++) {
     for (int c = 0; c < 3; c++) {
-      double a = M ? M->m[r][c] : (r == c ? fabs(nim->pixdim[r + 1]) : 0.0);
-      if (!M && r == c && !(a > 0)) a = 1.0; /* pixdim 0: NIfTI's default spacing of 1 */
+      double a = h->sform_code > 0   ? h->srow[r][c]
+                 : h->qform_code > 0 ? Q.m[r][c]
+                                     : (r == c ? h->pixdim[r + 1] : 0.0);
       im->A[3 * r + c] = a * im->unit;
     }
-    im->t[r] = M ? M->m[r][3] * im->unit : 0.0;
+    im->t[r] = (h->sform_code > 0 ? h->srow[r][3] : h->qform_code > 0 ? Q.m[r][3] : 0.0) * im->unit;
   }
   int finite = 1;
   for (int i = 0; i < 9; i++) finite &= isfinite(im->A[i]);
@@ -141,71 +424,112 @@ static int nh_image_fill(nh_image *im, nifti_image *nim, int read_data) {
   nifti_dmat44_to_orientation(R, &code[0], &code[1], &code[2]);
   for (int c = 0; c < 3; c++) im->orientation[c] = nh_orientation_letter(code[c]);
   im->orientation[3] = '\0';
-  if (!read_data) return NH_OK;
-
-  NH_CHECK(nim->data, NH_ERR_INPUT, "%s: the voxel data could not be read", im->path);
-  size_t nvox = (size_t)im->n[0] * im->n[1] * im->n[2];
-  im->label = malloc(sizeof(int) * nvox);
-  if (!im->label) return NH_ERROR(NH_ERR_MEMORY, "out of memory: %s", im->path);
-  double slope = nim->scl_slope, inter = nim->scl_inter;
-  int scaled = isfinite(slope) && slope != 0.0 && !(slope == 1.0 && inter == 0.0);
-  for (size_t v = 0; v < nvox; v++) {
-    int ok = 1;
-    double value = nh_image_voxel_value(nim->data, nim->datatype, v, &ok);
-    NH_CHECK(ok, NH_ERR_INPUT, "%s: data type %s is not a label type (use an integer type)",
-             im->path, nifti_datatype_string(nim->datatype));
-    if (scaled) value = slope * value + inter;
-    if (!(value == floor(value) && fabs(value) <= 2147483647.0)) {
-      size_t i = v % (size_t)im->n[0], j = v / (size_t)im->n[0] % (size_t)im->n[1],
-             k = v / ((size_t)im->n[0] * im->n[1]);
-      return NH_ERROR(NH_ERR_INPUT,
-                      "%s: voxel [%zu, %zu, %zu] holds %g, not an integer label (a label image "
-                      "holds whole numbers; segment an intensity image first)",
-                      im->path, i, j, k, value);
-    }
-    im->label[v] = (int)value;
-  }
   return NH_OK;
 }
 
-int nh_image_read(const char *path, int read_data, nh_image **out) {
-  *out = NULL;
-  FILE *f = fopen(path, "rb");
-  if (!f) return NH_ERROR(NH_ERR_INPUT, "%s: cannot open: %s", path, strerror(errno));
+/* The size of `file` (a regular file within max_file_bytes: an image is
+ * opened twice, for its header and for its voxels, which a stream cannot
+ * be), into *size. */
+static int nh_image_file_size(const char *file, const nh_read_limits *limits, double *size) {
+  FILE *f;
+  NH_TRY(nh_file_open_limited(file, "image", limits, &f, size));
   fclose(f);
+  NH_CHECK(*size >= 0, NH_ERR_INPUT,
+           "%s: not a regular file (a FIFO or a device): an image is read from a file", file);
+  return NH_OK;
+}
+
+/* Header, checks and voxels of the image im->path, whose header is in
+ * hdr_file (the .nii itself, or the .hdr of a pair): the voxels as labels
+ * when read_data, as intensities into *values when values != NULL. */
+static int nh_image_load(nh_image *im, const char *hdr_file, int read_data,
+                         const nh_read_limits *limits, double **values) {
+  const char *path = im->path;
+  double hdr_size, img_size;
+  NH_TRY(nh_image_file_size(hdr_file, limits, &hdr_size));
+  nh_nifti_header h;
+  NH_TRY(nh_nifti_header_read(hdr_file, &h));
+  const char *ext = nifti_find_file_extension(path);
+  int nii = ext && !strncmp(ext, ".nii", 4);
+  NH_CHECK(nii == h.onefile, NH_ERR_INPUT,
+           "%s: a %s file with a %s header (magic '%.3s'): rename it %s", path,
+           nii ? ".nii" : ".hdr/.img", h.onefile ? "one-file" : "two-file",
+           h.onefile ? (h.version == 2 ? "n+2" : "n+1") : (h.version == 2 ? "ni2" : "ni1"),
+           nii ? "to a .hdr/.img pair" : "to .nii");
+  NH_TRY(nh_nifti_header_check(path, &h));
+  NH_TRY(nh_nifti_header_limits(path, &h, limits));
+  for (int k = 0; k < 3; k++) im->n[k] = (int)h.dim[k + 1];
+  NH_TRY(nh_image_frame(im, &h));
+  char *img_file = nifti_findimgname(path, h.onefile ? NIFTI_FTYPE_NIFTI1_1 : NIFTI_FTYPE_NIFTI1_2);
+  NH_CHECK(img_file, NH_ERR_INPUT, "%s: cannot find its voxel (.img) file", path);
+  char where[2 * NH_ANATOMY_PATH_MAX + 32]; /* the file named, and the .img of a pair */
+  if (strcmp(img_file, path))
+    snprintf(where, sizeof where, "%s: its voxel file %s", path, img_file);
+  else
+    snprintf(where, sizeof where, "%s", path);
+  int rc = nh_image_file_size(img_file, limits, &img_size);
+  if (!rc && !nifti_is_gzfile(img_file)) { /* the size is known: both ways, before reading */
+    double need = h.vox_offset + (double)im->n[0] * im->n[1] * im->n[2] * h.nbyper;
+    if (img_size != need)
+      rc = NH_ERROR(NH_ERR_INPUT,
+                    "%s: %.0f bytes, but its header announces %.0f (vox_offset %.0f + %d x %d x "
+                    "%d voxels of %d bytes): %s",
+                    where, img_size, need, h.vox_offset, im->n[0], im->n[1], im->n[2], h.nbyper,
+                    img_size < need ? "truncated" : "longer than its header says");
+  }
+  if (!rc && read_data) rc = nh_nifti_voxels(im, img_file, where, &h, NULL);
+  if (!rc && values) {
+    *values = nh_calloc((size_t)im->n[0] * im->n[1] * im->n[2], sizeof(double));
+    rc = *values ? nh_nifti_voxels(im, img_file, where, &h, *values)
+                 : NH_ERROR(NH_ERR_MEMORY, "out of memory: voxels of %s", where);
+  }
+  free(img_file);
+  return rc;
+}
+
+/* nh_image_read, and the voxels as intensities into *values when values
+ * != NULL. */
+static int nh_image_open(const char *path, int read_data, const nh_read_limits *limits,
+                         nh_image **out, double **values) {
+  *out = NULL;
+  if (values) *values = NULL;
+  limits = nh_read_limits_or_default(limits);
   size_t len = strlen(path);
   NH_CHECK(len < NH_ANATOMY_PATH_MAX, NH_ERR_INPUT, "%s: path too long", path);
   /* libnifti2 looks for PATH.nii, PATH.hdr, ... when PATH itself has no
    * NIfTI extension: refuse that, so the file read is the file named. */
+  nifti_set_debug_level(0); /* libnifti2 prints nothing (its default level, 1, does) */
   NH_CHECK(nifti_is_complete_filename(path), NH_ERR_INPUT,
            "%s: not a NIfTI file name (expected .nii, .nii.gz, .hdr or .img)", path);
-  nifti_set_debug_level(0);
-  int version = 0; /* a NIfTI-1 or NIfTI-2 header that passes libnifti2's checks */
-  void *header = nifti_read_header(path, &version, 1);
-  int is_nifti = header && (version == 1 || version == 2);
-  free(header);
-  NH_CHECK(is_nifti, NH_ERR_INPUT, "%s: not a NIfTI file (no valid NIfTI-1 or NIfTI-2 header)",
-           path);
-  nifti_image *nim = nifti_image_read(path, read_data);
-  NH_CHECK(nim, NH_ERR_INPUT,
-           "%s: libnifti2 could not read it (corrupt or truncated header, data or gzip stream)",
-           path);
+  double size;
+  NH_TRY(nh_image_file_size(path, limits, &size));
+  char *hdr_file = nifti_findhdrname(path);
+  NH_CHECK(hdr_file, NH_ERR_INPUT, "%s: cannot find its header (.hdr) file", path);
   nh_image *im = nh_calloc(1, sizeof *im);
-  if (!im) {
-    nifti_image_free(nim);
-    return NH_ERR_MEMORY;
+  int rc = im ? NH_OK : NH_ERR_MEMORY;
+  if (!rc) {
+    memcpy(im->path, path, len + 1);
+    im->refs = 1;
+    im->lo[0] = 1, im->hi[0] = 0;
+    rc = nh_image_load(im, hdr_file, read_data, limits, values);
   }
-  memcpy(im->path, path, len + 1);
-  im->refs = 1;
-  im->lo[0] = 1, im->hi[0] = 0;
-  int rc = nh_image_fill(im, nim, read_data);
-  nifti_image_free(nim);
+  free(hdr_file);
   if (rc) {
     nh_image_release(&im);
+    if (values) free(*values), *values = NULL;
     return rc;
   }
   *out = im;
   return NH_OK;
+}
+
+int nh_image_read(const char *path, int read_data, const nh_read_limits *limits, nh_image **out) {
+  return nh_image_open(path, read_data, limits, out, NULL);
+}
+
+int nh_image_read_values(const char *path, const nh_read_limits *limits, nh_image **out,
+                         double **values) {
+  return nh_image_open(path, 0, limits, out, values);
 }
 
 void nh_image_retain(nh_image *im) {

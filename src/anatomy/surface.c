@@ -34,7 +34,7 @@
 #include "anatomy/anatomy.h"
 
 #include <ctype.h>
-#include <errno.h>
+#include <limits.h>
 #include <math.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -56,95 +56,166 @@ void nh_surface_release(nh_surface **surface) {
 }
 
 /* Append triangle (9 doubles, file units) unless its area is zero. */
-static int nh_add_triangle(nh_surface *s, int *cap, const double t[9]) {
-  double e1[3], e2[3], n[3];
-  for (int k = 0; k < 3; k++) e1[k] = t[3 + k] - t[k], e2[k] = t[6 + k] - t[k];
+static int nh_add_triangle(nh_surface *s, int *cap, const double t[9], const char *where) {
+  double e1[3], e2[3], n[3], m[9];
+  for (int k = 0; k < 9; k++) {
+    m[k] = t[k] * s->unit;
+    NH_CHECK(isfinite(m[k]), NH_ERR_INPUT,
+             "%s: coordinate %g times unit %g m is not a finite length", where, t[k], s->unit);
+  }
+  for (int k = 0; k < 3; k++) e1[k] = m[3 + k] - m[k], e2[k] = m[6 + k] - m[k];
   nh_vec3_cross(e1, e2, n);
   if (n[0] == 0 && n[1] == 0 && n[2] == 0) return NH_OK;
+  NH_CHECK(s->n_tri < INT_MAX / 9, NH_ERR_INPUT, "%s: more than %d triangles are not supported",
+           where, INT_MAX / 9);
   if (nh_grow((void **)&s->v, cap, 9 * (s->n_tri + 1), sizeof(double)))
     return NH_ERROR(NH_ERR_MEMORY, "out of memory: %s", s->path);
-  for (int k = 0; k < 9; k++) s->v[9 * s->n_tri + k] = t[k] * s->unit;
+  memcpy(s->v + 9 * (size_t)s->n_tri, m, sizeof m);
   s->n_tri++;
   return NH_OK;
 }
 
-/* ---- ASCII STL ---- */
+/* ---- the file, read through a buffer with a bound ---- */
 typedef struct {
   const char *path;
-  char *text, *p;
-  int line;
-} nh_stl_lexer;
+  FILE *f;
+  unsigned char buf[65536];
+  size_t pos, len;
+  double used, max_bytes; /* bytes consumed, and at most this many */
+  int over;               /* a byte beyond max_bytes was asked for */
+  int line;               /* ASCII: the line of the last byte consumed */
+  int eol;                /* ASCII: the last word ended its line (or the file) */
+  int newline;            /* ASCII: ... with a newline, counted when the next word starts */
+} nh_stl_stream;
 
-/* Next whitespace-separated word into buf; "" at the end of the file. */
-static void nh_stl_word(nh_stl_lexer *lx, char *buf, size_t cap) {
-  while (*lx->p && isspace((unsigned char)*lx->p)) {
-    if (*lx->p == '\n') lx->line++;
-    lx->p++;
+/* The next byte, or EOF at the end of the file or past the bound (then over = 1). */
+static int nh_stl_getc(nh_stl_stream *r) {
+  if (r->pos == r->len) {
+    r->len = fread(r->buf, 1, sizeof r->buf, r->f), r->pos = 0;
+    if (r->len == 0) return EOF;
   }
-  size_t n = 0;
-  while (*lx->p && !isspace((unsigned char)*lx->p)) {
-    if (n + 1 < cap) buf[n++] = *lx->p;
-    lx->p++;
+  if (r->used + 1 > r->max_bytes) {
+    r->over = 1;
+    return EOF;
   }
-  buf[n] = '\0';
+  r->used++;
+  return r->buf[r->pos++];
 }
 
-static int nh_stl_expect(nh_stl_lexer *lx, const char *want) {
-  char w[64];
-  nh_stl_word(lx, w, sizeof w);
-  NH_CHECK(!strcmp(w, want), NH_ERR_INPUT, "%s:%d: expected '%s', got '%s'", lx->path, lx->line,
-           want, w[0] ? w : "the end of the file");
+/* Up to n bytes into out; how many. */
+static size_t nh_stl_read(nh_stl_stream *r, unsigned char *out, size_t n) {
+  size_t got = 0;
+  int c;
+  while (got < n && (c = nh_stl_getc(r)) != EOF) out[got++] = (unsigned char)c;
+  return got;
+}
+
+/* ---- ASCII STL ---- */
+
+/* A byte that no text file holds (a control byte other than white space). */
+static int nh_stl_binary_byte(int c) {
+  return c == 0 || (c < 0x20 && !strchr("\t\n\v\f\r", c)) || c == 0x7f;
+}
+
+static int nh_stl_text_error(nh_stl_stream *r, int c) {
+  if (r->over)
+    return NH_ERROR(NH_ERR_INPUT,
+                    "%s:%d: the file goes on past limits.max_file_bytes = %.0f bytes (a stream "
+                    "that does not end?)",
+                    r->path, r->line, r->max_bytes);
+  return NH_ERROR(NH_ERR_INPUT,
+                  "%s:%d: byte 0x%02x: binary data in an ASCII STL (a binary STL whose size is "
+                  "not 84 + 50 x its triangle count?)",
+                  r->path, r->line, (unsigned)c);
+}
+
+/* Next whitespace-separated word into buf (at most cap - 1 bytes); "" at the end. */
+static int nh_stl_word(nh_stl_stream *r, char *buf, size_t cap) {
+  int c;
+  r->line += r->newline, r->newline = 0;
+  while ((c = nh_stl_getc(r)) != EOF && isspace(c)) r->line += c == '\n';
+  size_t n = 0;
+  while (c != EOF && !isspace(c)) {
+    if (nh_stl_binary_byte(c)) return nh_stl_text_error(r, c);
+    if (n + 1 == cap) {
+      buf[n] = '\0';
+      return NH_ERROR(NH_ERR_INPUT, "%s:%d: a word longer than %zu bytes ('%.24s...')", r->path,
+                      r->line, cap - 1, buf);
+    }
+    buf[n++] = (char)c;
+    c = nh_stl_getc(r);
+  }
+  buf[n] = '\0';
+  if (r->over) return nh_stl_text_error(r, 0);
+  r->newline = c == '\n', r->eol = c == '\n' || c == EOF;
   return NH_OK;
 }
 
-static int nh_stl_number(nh_stl_lexer *lx, const char *what, double *out) {
-  char w[128], *end;
-  nh_stl_word(lx, w, sizeof w);
-  errno = 0;
-  *out = strtod(w, &end);
-  NH_CHECK(w[0] && *end == '\0' && isfinite(*out), NH_ERR_INPUT,
-           "%s:%d: %s: expected a finite number, got '%s'", lx->path, lx->line, what,
+static int nh_stl_expect(nh_stl_stream *r, const char *want) {
+  char w[64];
+  NH_TRY(nh_stl_word(r, w, sizeof w));
+  NH_CHECK(!strcmp(w, want), NH_ERR_INPUT, "%s:%d: expected '%s', got '%s'", r->path, r->line, want,
            w[0] ? w : "the end of the file");
   return NH_OK;
 }
 
-/* The rest of the current line (the solid's name). */
-static void nh_stl_skip_line(nh_stl_lexer *lx) {
-  while (*lx->p && *lx->p != '\n') lx->p++;
-}
-
-static int nh_stl_ascii(nh_surface *s, char *text, int *cap) {
-  nh_stl_lexer lx = {s->path, text, text, 1};
-  char w[64];
-  NH_TRY(nh_stl_expect(&lx, "solid"));
-  nh_stl_skip_line(&lx);
-  for (;;) {
-    nh_stl_word(&lx, w, sizeof w);
-    if (!strcmp(w, "endsolid")) break;
-    NH_CHECK(strcmp(w, ""), NH_ERR_INPUT, "%s:%d: the file ends before 'endsolid'", s->path,
-             lx.line);
-    NH_CHECK(!strcmp(w, "facet"), NH_ERR_INPUT, "%s:%d: expected 'facet' or 'endsolid', got '%s'",
-             s->path, lx.line, w);
-    double n[3], t[9];
-    NH_TRY(nh_stl_expect(&lx, "normal"));
-    for (int k = 0; k < 3; k++) NH_TRY(nh_stl_number(&lx, "facet normal", &n[k]));
-    NH_TRY(nh_stl_expect(&lx, "outer"));
-    NH_TRY(nh_stl_expect(&lx, "loop"));
-    for (int c = 0; c < 3; c++) {
-      NH_TRY(nh_stl_expect(&lx, "vertex"));
-      for (int k = 0; k < 3; k++) NH_TRY(nh_stl_number(&lx, "vertex", &t[3 * c + k]));
-    }
-    NH_TRY(nh_stl_expect(&lx, "endloop"));
-    NH_TRY(nh_stl_expect(&lx, "endfacet"));
-    NH_TRY(nh_add_triangle(s, cap, t));
-  }
-  nh_stl_skip_line(&lx);
-  nh_stl_word(&lx, w, sizeof w);
-  NH_CHECK(!w[0], NH_ERR_INPUT, "%s:%d: unexpected '%s' after 'endsolid' (one solid per file)",
-           s->path, lx.line, w);
+static int nh_stl_number(nh_stl_stream *r, const char *what, double *out) {
+  char w[128], *end;
+  NH_TRY(nh_stl_word(r, w, sizeof w));
+  *out = strtod(w, &end);
+  NH_CHECK(w[0] && *end == '\0' && isfinite(*out), NH_ERR_INPUT,
+           "%s:%d: %s: expected a finite number, got '%s'", r->path, r->line, what,
+           w[0] ? w : "the end of the file");
   return NH_OK;
 }
 
+/* The rest of the current line (the solid's name), unless the last word ended it. */
+static int nh_stl_skip_line(nh_stl_stream *r) {
+  int c;
+  if (r->eol) return NH_OK;
+  while ((c = nh_stl_getc(r)) != EOF && c != '\n')
+    if (nh_stl_binary_byte(c)) return nh_stl_text_error(r, c);
+  if (r->over) return nh_stl_text_error(r, 0);
+  r->newline = c == '\n', r->eol = 1;
+  return NH_OK;
+}
+
+static int nh_stl_ascii(nh_surface *s, nh_stl_stream *r, double max_triangles, int *cap) {
+  char w[64], where[NH_ANATOMY_PATH_MAX + 32];
+  NH_TRY(nh_stl_expect(r, "solid"));
+  NH_TRY(nh_stl_skip_line(r));
+  for (double facets = 0;; facets++) {
+    NH_TRY(nh_stl_word(r, w, sizeof w));
+    if (!strcmp(w, "endsolid")) break;
+    NH_CHECK(strcmp(w, ""), NH_ERR_INPUT, "%s:%d: the file ends before 'endsolid'", s->path,
+             r->line);
+    NH_CHECK(!strcmp(w, "facet"), NH_ERR_INPUT, "%s:%d: expected 'facet' or 'endsolid', got '%s'",
+             s->path, r->line, w);
+    NH_CHECK(facets < max_triangles, NH_ERR_INPUT,
+             "%s:%d: more than limits.max_triangles = %.0f facets", s->path, r->line,
+             max_triangles);
+    double n[3], t[9];
+    NH_TRY(nh_stl_expect(r, "normal"));
+    for (int k = 0; k < 3; k++) NH_TRY(nh_stl_number(r, "facet normal", &n[k]));
+    NH_TRY(nh_stl_expect(r, "outer"));
+    NH_TRY(nh_stl_expect(r, "loop"));
+    for (int c = 0; c < 3; c++) {
+      NH_TRY(nh_stl_expect(r, "vertex"));
+      for (int k = 0; k < 3; k++) NH_TRY(nh_stl_number(r, "vertex", &t[3 * c + k]));
+    }
+    NH_TRY(nh_stl_expect(r, "endloop"));
+    NH_TRY(nh_stl_expect(r, "endfacet"));
+    snprintf(where, sizeof where, "%s:%d", s->path, r->line);
+    NH_TRY(nh_add_triangle(s, cap, t, where));
+  }
+  NH_TRY(nh_stl_skip_line(r));
+  NH_TRY(nh_stl_word(r, w, sizeof w));
+  NH_CHECK(!w[0], NH_ERR_INPUT, "%s:%d: unexpected '%s' after 'endsolid' (one solid per file)",
+           s->path, r->line, w);
+  return NH_OK;
+}
+
+/* ---- binary STL ---- */
 static float nh_le_float(const unsigned char *b) {
   uint32_t u = (uint32_t)b[0] | (uint32_t)b[1] << 8 | (uint32_t)b[2] << 16 | (uint32_t)b[3] << 24;
   float f;
@@ -152,17 +223,30 @@ static float nh_le_float(const unsigned char *b) {
   return f;
 }
 
-static int nh_stl_binary(nh_surface *s, const unsigned char *data, uint32_t count, int *cap) {
+/* `count` records of 50 bytes after the 84-byte header (consumed already),
+ * then the end of the file. */
+static int nh_stl_binary(nh_surface *s, nh_stl_stream *r, uint32_t count, int *cap) {
+  char where[NH_ANATOMY_PATH_MAX + 32];
   for (uint32_t i = 0; i < count; i++) {
-    const unsigned char *rec = data + 84 + 50 * (size_t)i;
+    unsigned char rec[50];
+    size_t got = nh_stl_read(r, rec, sizeof rec);
+    NH_CHECK(got == sizeof rec, NH_ERR_INPUT,
+             "%s: the file ends in triangle %u of the %u its header announces (%.0f of %.0f "
+             "bytes): truncated",
+             s->path, i, count, r->used, 84 + 50.0 * count);
     double t[9];
     for (int k = 0; k < 9; k++) {
       t[k] = nh_le_float(rec + 12 + 4 * k);
       NH_CHECK(isfinite(t[k]), NH_ERR_INPUT, "%s: triangle %u: a corner coordinate is not finite",
                s->path, i);
     }
-    NH_TRY(nh_add_triangle(s, cap, t));
+    snprintf(where, sizeof where, "%s: triangle %u", s->path, i);
+    NH_TRY(nh_add_triangle(s, cap, t, where));
   }
+  NH_CHECK(nh_stl_getc(r) == EOF && !r->over, NH_ERR_INPUT,
+           "%s: the file goes on after the 84 + 50 x %u = %.0f bytes its header announces "
+           "(a wrong triangle count, or not STL)",
+           s->path, count, 84 + 50.0 * count);
   return NH_OK;
 }
 
@@ -324,78 +408,6 @@ static int nh_surface_index(nh_surface *s) {
   return rc;
 }
 
-int nh_surface_read(const char *path, double unit, nh_surface **out) {
-  *out = NULL;
-  size_t len = strlen(path);
-  NH_CHECK(len < NH_ANATOMY_PATH_MAX, NH_ERR_INPUT, "%s: path too long", path);
-  FILE *f = fopen(path, "rb");
-  if (!f) return NH_ERROR(NH_ERR_INPUT, "%s: cannot open: %s", path, strerror(errno));
-  unsigned char *data = NULL;
-  size_t size = 0, cap = 0;
-  for (;;) {
-    if (size + 65536 + 1 > cap) {
-      cap = 2 * cap + 65536 + 1;
-      unsigned char *d = realloc(data, cap);
-      if (!d) {
-        free(data), fclose(f);
-        return NH_ERROR(NH_ERR_MEMORY, "out of memory: %s", path);
-      }
-      data = d;
-    }
-    size_t got = fread(data + size, 1, 65536, f);
-    size += got;
-    if (got < 65536) break;
-  }
-  int read_error = ferror(f);
-  fclose(f);
-  if (read_error) {
-    free(data);
-    return NH_ERROR(NH_ERR_INPUT, "%s: read error", path);
-  }
-  data[size] = '\0';
-  nh_surface *s = nh_calloc(1, sizeof *s);
-  if (!s) {
-    free(data);
-    return NH_ERR_MEMORY;
-  }
-  memcpy(s->path, path, len + 1);
-  s->refs = 1;
-  s->unit = unit;
-  int tcap = 0, rc;
-  uint32_t count = 0;
-  if (size >= 84)
-    count = (uint32_t)data[80] | (uint32_t)data[81] << 8 | (uint32_t)data[82] << 16 |
-            (uint32_t)data[83] << 24;
-  if (size >= 84 && size == 84 + 50 * (size_t)count)
-    rc = nh_stl_binary(s, data, count, &tcap);
-  else if (size >= 5 && !memcmp(data, "solid", 5)) {
-    rc = memchr(data, '\0', size) ? NH_ERROR(NH_ERR_INPUT,
-                                             "%s: starts with 'solid' but holds binary bytes, and "
-                                             "its size %zu is not 84 + 50 x %u (a truncated "
-                                             "binary STL?)",
-                                             path, size, count)
-                                  : nh_stl_ascii(s, (char *)data, &tcap);
-  } else if (size < 84)
-    rc = NH_ERROR(NH_ERR_INPUT, "%s: %zu bytes: too short for an STL file", path, size);
-  else
-    rc = NH_ERROR(NH_ERR_INPUT,
-                  "%s: not an ASCII STL (no 'solid') and its size %zu is not 84 + 50 x %u as a "
-                  "binary STL of %u triangles needs (truncated or not STL)",
-                  path, size, count, count);
-  free(data);
-  if (!rc && s->n_tri < 4)
-    rc = NH_ERROR(NH_ERR_INPUT, "%s: %d triangle%s of non-zero area: not a closed surface", path,
-                  s->n_tri, s->n_tri == 1 ? "" : "s");
-  if (!rc) rc = nh_surface_check_closed(s);
-  if (!rc) rc = nh_surface_index(s);
-  if (rc) {
-    nh_surface_release(&s);
-    return rc;
-  }
-  *out = s;
-  return NH_OK;
-}
-
 /* ---- queries ---- */
 
 /* Sign (never 0) of the edge function of u → v at p in the (y, z) plane,
@@ -413,28 +425,39 @@ static int nh_edge_sign(const double *u, const double *v, double py, double pz) 
   return swap ? -s : s;
 }
 
+/* Whether the ray (·, y, z) + s e_x crosses triangle t (by the rule of the
+ * file's header comment), and at which x. */
+static int nh_ray_crossing(const double *t, double y, double z, double *hit) {
+  int s0 = nh_edge_sign(t, t + 3, y, z);
+  int s1 = nh_edge_sign(t + 3, t + 6, y, z);
+  int s2 = nh_edge_sign(t + 6, t, y, z);
+  if (!s0 || s0 != s1 || s1 != s2) return 0;
+  /* Where the ray meets the triangle's plane: barycentric weights from the
+   * (y, z) areas (the projection has non-zero area here). */
+  double e0 = (t[4] - t[1]) * (z - t[2]) - (t[5] - t[2]) * (y - t[1]);
+  double e1 = (t[7] - t[4]) * (z - t[5]) - (t[8] - t[5]) * (y - t[4]);
+  double e2 = (t[1] - t[7]) * (z - t[8]) - (t[2] - t[8]) * (y - t[7]);
+  double sum = e0 + e1 + e2;
+  *hit = sum != 0 ? (e1 * t[0] + e2 * t[3] + e0 * t[6]) / sum : (t[0] + t[3] + t[6]) / 3.0;
+  return 1;
+}
+
+/* The (y, z) grid cell of a point inside the (y, z) extent. */
+static size_t nh_yz_cell(const nh_surface *s, double y, double z) {
+  int j = nh_clampi((int)floor((y - s->min[1]) / s->yz_cell[0]), 0, s->yz_g[0] - 1);
+  int k = nh_clampi((int)floor((z - s->min[2]) / s->yz_cell[1]), 0, s->yz_g[1] - 1);
+  return (size_t)j + (size_t)s->yz_g[0] * k;
+}
+
 int nh_surface_inside(const nh_surface *s, const double x[3]) {
   if (!(x[1] >= s->min[1] && x[1] <= s->max[1] && x[2] >= s->min[2] && x[2] <= s->max[2] &&
         x[0] <= s->max[0]))
     return 0;
-  int j = nh_clampi((int)floor((x[1] - s->min[1]) / s->yz_cell[0]), 0, s->yz_g[0] - 1);
-  int k = nh_clampi((int)floor((x[2] - s->min[2]) / s->yz_cell[1]), 0, s->yz_g[1] - 1);
-  size_t c = (size_t)j + (size_t)s->yz_g[0] * k;
+  size_t c = nh_yz_cell(s, x[1], x[2]);
   int crossings = 0;
   for (int q = s->yz_start[c]; q < s->yz_start[c + 1]; q++) {
-    const double *t = s->v + 9 * s->yz_tri[q];
-    int s0 = nh_edge_sign(t, t + 3, x[1], x[2]);
-    int s1 = nh_edge_sign(t + 3, t + 6, x[1], x[2]);
-    int s2 = nh_edge_sign(t + 6, t, x[1], x[2]);
-    if (!s0 || s0 != s1 || s1 != s2) continue;
-    /* Where the ray meets the triangle's plane: barycentric weights from the
-     * (y, z) areas (the projection has non-zero area here). */
-    double e0 = (t[4] - t[1]) * (x[2] - t[2]) - (t[5] - t[2]) * (x[1] - t[1]);
-    double e1 = (t[7] - t[4]) * (x[2] - t[5]) - (t[8] - t[5]) * (x[1] - t[4]);
-    double e2 = (t[1] - t[7]) * (x[2] - t[8]) - (t[2] - t[8]) * (x[1] - t[7]);
-    double sum = e0 + e1 + e2;
-    double hit = sum != 0 ? (e1 * t[0] + e2 * t[3] + e0 * t[6]) / sum : (t[0] + t[3] + t[6]) / 3.0;
-    if (hit > x[0]) crossings++;
+    double hit;
+    if (nh_ray_crossing(s->v + 9 * s->yz_tri[q], x[1], x[2], &hit) && hit > x[0]) crossings++;
   }
   return crossings & 1;
 }
@@ -532,7 +555,8 @@ void nh_surface_print(const nh_surface *s, FILE *f) {
           nh_surface_volume(s));
 }
 
-double nh_surface_volume(const nh_surface *s) {
+/* Signed volume by the divergence theorem, Σ a · (b × c) / 6. */
+static double nh_surface_signed_volume(const nh_surface *s) {
   double v = 0.0;
   for (int t = 0; t < s->n_tri; t++) {
     const double *a = s->v + 9 * t;
@@ -540,7 +564,11 @@ double nh_surface_volume(const nh_surface *s) {
     nh_vec3_cross(a + 3, a + 6, bc);
     v += nh_vec3_dot(a, bc);
   }
-  return fabs(v) / 6.0;
+  return v / 6.0;
+}
+
+double nh_surface_volume(const nh_surface *s) {
+  return fabs(nh_surface_signed_volume(s));
 }
 
 int nh_surface_ray_entry(const nh_surface *s, const double base[3], const double dir[3],
@@ -594,4 +622,180 @@ int nh_surface_meets_box(const nh_surface *s, const double lo[3], const double h
         }
       }
   return 0;
+}
+
+/* ---- what the geometry must be ---- */
+
+/* The volume inside by the inside test: the lengths of the ray segments the
+ * parity rule puts inside, integrated over an n[0] x n[1] midpoint grid of
+ * rays along +x over the (y, z) extent. The length is continuous and
+ * piecewise linear in (y, z) away from faces parallel to x, so the rule's
+ * error is that of the silhouette and fold lines it cuts: O(h) on their
+ * length, with signs that cancel when the samples are equidistributed
+ * across the lines (the golden-ratio shift below). */
+double nh_surface_inside_volume(const nh_surface *s, int ny, int nz) {
+  int most = 0;
+  for (int c = 0; c < s->yz_g[0] * s->yz_g[1]; c++)
+    if (s->yz_start[c + 1] - s->yz_start[c] > most) most = s->yz_start[c + 1] - s->yz_start[c];
+  double *hit = nh_calloc((size_t)most + 1, sizeof *hit);
+  if (!hit) return NAN;
+  double hy = (s->max[1] - s->min[1]) / ny, hz = (s->max[2] - s->min[2]) / nz, volume = 0.0;
+  for (int j = 0; j < ny; j++) {
+    /* One ray per cell, its column shifted along z by the golden ratio's
+     * multiples: no straight edge runs along the samples (a grid of cell
+     * centres errs systematically along an edge at 45°). */
+    double y = s->min[1] + (j + 0.5) * hy, shift = fmod(0.5 + 0.6180339887498949 * j, 1.0);
+    for (int k = 0; k < nz; k++) {
+      double z = s->min[2] + (k + shift) * hz;
+      size_t c = nh_yz_cell(s, y, z);
+      int m = 0;
+      for (int q = s->yz_start[c]; q < s->yz_start[c + 1]; q++) {
+        double x;
+        if (!nh_ray_crossing(s->v + 9 * s->yz_tri[q], y, z, &x)) continue;
+        int i = m++; /* insertion: a ray meets a few triangles */
+        for (; i > 0 && hit[i - 1] > x; i--) hit[i] = hit[i - 1];
+        hit[i] = x;
+      }
+      for (int i = 1; i < m; i += 2) volume += (hit[i] - hit[i - 1]) * hy * hz;
+    }
+  }
+  free(hit);
+  return volume;
+}
+
+/* The ray grid for nh_surface_inside_volume: about n rays across the larger
+ * of the (y, z) extents (at least 16 across the smaller), fewer if the
+ * triangles per (y, z) grid cell would make it cost more than ~2e8 crossing
+ * tests. */
+static void nh_volume_rays(const nh_surface *s, int n, int *ny, int *nz) {
+  int cells = s->yz_g[0] * s->yz_g[1];
+  double per_ray = (double)s->yz_start[cells] / cells + 1.0;
+  double budget = sqrt(2e8 / per_ray);
+  if (n > budget) n = (int)fmax(budget, 64.0);
+  double ey = s->max[1] - s->min[1], ez = s->max[2] - s->min[2], e = fmax(ey, ez);
+  *ny = nh_clampi((int)ceil(n * ey / e), 16, n);
+  *nz = nh_clampi((int)ceil(n * ez / e), 16, n);
+}
+
+/* The shape is what the file says: a size between `cell` and 10 m, a
+ * volume, and the same volume by the inside test and by the divergence
+ * theorem (docs/anatomy.md, "Surface meshes"). */
+static int nh_surface_check_geometry(const nh_surface *s, double cell) {
+  double ext[3], big = 0.0;
+  for (int k = 0; k < 3; k++) ext[k] = s->max[k] - s->min[k], big = fmax(big, ext[k]);
+  NH_CHECK(big <= 10.0, NH_ERR_INPUT,
+           "%s: the surface measures %g x %g x %g m with unit %g m per file unit: larger than "
+           "10 m (is `unit` right? 0.001 reads millimetres)",
+           s->path, ext[0], ext[1], ext[2], s->unit);
+  NH_CHECK(big >= cell, NH_ERR_INPUT,
+           "%s: the surface measures %g x %g x %g m with unit %g m per file unit: smaller than "
+           "one cell of %g m (is `unit` right? 0.001 reads millimetres)",
+           s->path, ext[0], ext[1], ext[2], s->unit, cell);
+  double enclosed = nh_surface_signed_volume(s);
+  NH_CHECK(fabs(enclosed) > 1e-9 * big * big * big, NH_ERR_INPUT,
+           "%s: the surface encloses no volume (%g m^3 in a box of %g x %g x %g m): a flat or "
+           "doubled sheet, not the boundary of a solid",
+           s->path, fabs(enclosed), ext[0], ext[1], ext[2]);
+  /* A coarse ray grid first; a difference is measured again on a finer one
+   * before it is believed (the rule's error falls with the spacing, a
+   * defect's does not). */
+  double inside = 0.0, diff = 0.0;
+  for (int pass = 0; pass < 2; pass++) {
+    int ny, nz;
+    nh_volume_rays(s, pass ? 512 : 256, &ny, &nz);
+    inside = nh_surface_inside_volume(s, ny, nz);
+    if (isnan(inside)) return NH_ERROR(NH_ERR_MEMORY, "out of memory: %s", s->path);
+    diff = fabs(inside - fabs(enclosed)) / fmax(inside, fabs(enclosed));
+    if (diff <= 0.01) return NH_OK;
+  }
+  return NH_ERROR(NH_ERR_INPUT,
+                  "%s: the volume inside the surface (%.6g m^3 by the inside test) and the "
+                  "volume it encloses (%.6g m^3 by the divergence theorem) differ by %.3g %% "
+                  "(at most 1 %%): %s",
+                  s->path, inside, fabs(enclosed), 100 * diff,
+                  fabs(enclosed) > inside
+                      ? "overlapping shells or a self-intersecting surface count some volume "
+                        "twice (merge the shells into one closed surface)"
+                      : "shells or triangles facing the wrong way subtract volume (inconsistent "
+                        "orientation: make every shell face outwards, a cavity inwards), or "
+                        "the surface intersects itself");
+}
+
+int nh_surface_read(const char *path, double unit, double cell, const nh_read_limits *limits,
+                    nh_surface **out) {
+  *out = NULL;
+  limits = nh_read_limits_or_default(limits);
+  size_t len = strlen(path);
+  NH_CHECK(len < NH_ANATOMY_PATH_MAX, NH_ERR_INPUT, "%s: path too long", path);
+  NH_CHECK(unit > 0 && isfinite(unit), NH_ERR_INPUT, "%s: unit %g is not a positive length", path,
+           unit);
+  FILE *f;
+  double size;
+  NH_TRY(nh_file_open_limited(path, "surface", limits, &f, &size));
+  nh_stl_stream *r = nh_calloc(1, sizeof *r);
+  nh_surface *s = nh_calloc(1, sizeof *s);
+  if (!r || !s) {
+    fclose(f), free(r), free(s);
+    return NH_ERR_MEMORY;
+  }
+  *r = (nh_stl_stream){.path = path, .f = f, .max_bytes = limits->max_file_bytes, .line = 1};
+  memcpy(s->path, path, len + 1);
+  s->refs = 1;
+  s->unit = unit;
+  /* The first buffer holds the 84-byte header of a binary file (a stream
+   * shorter than that holds neither form). */
+  r->len = fread(r->buf, 1, sizeof r->buf, f);
+  const unsigned char *head = r->buf;
+  size_t got = r->len;
+  uint32_t count = 0;
+  if (got >= 84)
+    count = (uint32_t)head[80] | (uint32_t)head[81] << 8 | (uint32_t)head[82] << 16 |
+            (uint32_t)head[83] << 24;
+  int solid = got >= 5 && !memcmp(head, "solid", 5);
+  int text = solid && !memchr(head, '\0', got < 84 ? got : 84);
+  /* Binary: a regular file whose size is 84 + 50 N for the count N in bytes
+   * 80-83 (some begin with "solid" too), or a stream that is not text. */
+  int binary = got >= 84 && (size >= 0 ? size == 84 + 50.0 * count : !text);
+  int tcap = 0, rc;
+  if (binary && count > limits->max_triangles)
+    rc = NH_ERROR(NH_ERR_INPUT,
+                  "%s: its header announces %u triangles, more than limits.max_triangles = %.0f",
+                  path, count, limits->max_triangles);
+  else if (binary && count > INT_MAX / 9)
+    rc = NH_ERROR(NH_ERR_INPUT, "%s: its header announces %u triangles, more than %d", path, count,
+                  INT_MAX / 9);
+  else if (binary) {
+    unsigned char skip[84];
+    nh_stl_read(r, skip, sizeof skip);
+    rc = nh_stl_binary(s, r, count, &tcap);
+  } else if (text)
+    rc = nh_stl_ascii(s, r, limits->max_triangles, &tcap);
+  else if (solid)
+    rc = NH_ERROR(NH_ERR_INPUT,
+                  "%s: starts with 'solid' but holds binary bytes, and its size %.0f is not "
+                  "84 + 50 x %u (a truncated binary STL?)",
+                  path, size, count);
+  else if (got < 84)
+    rc = NH_ERROR(NH_ERR_INPUT, "%s: %zu bytes: too short for an STL file", path, got);
+  else
+    rc = NH_ERROR(NH_ERR_INPUT,
+                  "%s: not an ASCII STL (no 'solid') and its size %.0f is not 84 + 50 x %u as a "
+                  "binary STL of %u triangles needs (truncated or not STL)",
+                  path, size, count, count);
+  int read_error = ferror(f);
+  fclose(f);
+  free(r);
+  if (!rc && read_error) rc = NH_ERROR(NH_ERR_INPUT, "%s: read error", path);
+  if (!rc && s->n_tri < 4)
+    rc = NH_ERROR(NH_ERR_INPUT, "%s: %d triangle%s of non-zero area: not a closed surface", path,
+                  s->n_tri, s->n_tri == 1 ? "" : "s");
+  if (!rc) rc = nh_surface_check_closed(s);
+  if (!rc) rc = nh_surface_index(s);
+  if (!rc) rc = nh_surface_check_geometry(s, cell);
+  if (rc) {
+    nh_surface_release(&s);
+    return rc;
+  }
+  *out = s;
+  return NH_OK;
 }

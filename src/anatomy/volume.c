@@ -1,10 +1,7 @@
-/* volume.c — voxel values of any scalar NIfTI image (an MRI's intensities as
- * well as labels) and their interpolation at world points: what resampling
- * an image to the shifted anatomy needs (docs/anatomy.md, "The shifted
- * image"). The header and world transform are image.c's (nh_image_read
- * without data); this file reads the data as doubles after NIfTI's scaling
- * y = scl_slope x + scl_inter (applied when the slope is finite and
- * non-zero, the standard's rule).
+/* volume.c — the interpolation at world points of the voxel values of any
+ * scalar NIfTI image (an MRI's intensities as well as labels; image.c reads
+ * them, nh_image_read_values): what resampling an image to the shifted
+ * anatomy needs (docs/anatomy.md, "The shifted image").
  *
  * Interpolation follows ITK's interpolators, so that an image resampled here
  * and one resampled by ANTs or transformix with the exported field agree:
@@ -17,47 +14,6 @@
 #include "anatomy/anatomy.h"
 
 #include <math.h>
-#include <nifti2_io.h>
-#include <stdlib.h>
-#include <string.h>
-
-int nh_image_read_values(const char *path, nh_image **out, double **values) {
-  *values = NULL;
-  NH_TRY(nh_image_read(path, 0, out));
-  nh_image *im = *out;
-  nifti_set_debug_level(0);
-  nifti_image *nim = nifti_image_read(path, 1);
-  int rc = NH_OK;
-  size_t nvox = (size_t)im->n[0] * im->n[1] * im->n[2];
-  if (!nim || !nim->data || nim->nx != im->n[0] || nim->ny != im->n[1] || nim->nz != im->n[2]) {
-    rc =
-        NH_ERROR(NH_ERR_INPUT, "%s: the voxel data could not be read (corrupt or truncated)", path);
-    goto done;
-  }
-  double *v = malloc(sizeof(double) * nvox);
-  if (!v) {
-    rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: the voxels of %s", path);
-    goto done;
-  }
-  double slope = nim->scl_slope, inter = nim->scl_inter;
-  int scaled = isfinite(slope) && slope != 0.0;
-  for (size_t i = 0; i < nvox; i++) {
-    int ok = 1;
-    double x = nh_image_voxel_value(nim->data, nim->datatype, i, &ok);
-    if (!ok) {
-      free(v);
-      rc = NH_ERROR(NH_ERR_INPUT, "%s: data type %s is not a real number", path,
-                    nifti_datatype_string(nim->datatype));
-      goto done;
-    }
-    v[i] = scaled ? slope * x + inter : x;
-  }
-  *values = v;
-done:
-  nifti_image_free(nim);
-  if (rc) nh_image_release(out);
-  return rc;
-}
 
 double nh_image_interpolate(const nh_image *im, const double *values, const double x[3],
                             int nearest) {

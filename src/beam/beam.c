@@ -196,6 +196,17 @@ void nh_beam_element_local(const nh_beam *b, int e, double d[7], double E[9]) {
                 b->section.young, d, E, NULL, NULL);
 }
 
+double nh_beam_twist(const nh_beam *b, double *twist) {
+  double sum = 0.0, d[7];
+  if (twist) twist[0] = 0.0;
+  for (int e = 0; e < b->n; e++) {
+    nh_beam_element_local(b, e, d, NULL);
+    sum += d[4] - d[1]; /* θ̄₂ₓ − θ̄₁ₓ: the element's torsion */
+    if (twist) twist[e + 1] = sum;
+  }
+  return sum;
+}
+
 double nh_beam_internal_force(const nh_beam *b, double *f_int, double *K, int symmetric) {
   const int N = 6 * (b->n + 1);
   double U = 0.0, fe[12], Ke[144];

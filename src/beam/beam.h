@@ -111,6 +111,13 @@ double nh_beam_element_force(const nh_beam *beam, int e, double f[12], double K[
  * (columns e1 along the chord, e2, e3; may be NULL). */
 void nh_beam_element_local(const nh_beam *beam, int e, double d[7], double E[9]);
 
+/* The elastic twist along the tool: twist[a] (n + 1 values; may be NULL) is
+ * the rotation of node a's section about the axis relative to the base's,
+ * Σ_{e < a} (θ̄₂ₓ − θ̄₁ₓ) over the elements (their torsion, whose moment is
+ * GJ/l₀ times it, nh_beam_element_local); returns the tip's, rad. A tip
+ * that lags a base turned in the positive sense has a negative twist. */
+double nh_beam_twist(const nh_beam *beam, double *twist);
+
 /* ---- whole tool ---- */
 
 /* Internal force f_int (6 per node, all nodes) and strain energy (returned)

@@ -15,6 +15,10 @@
  *                it sticks, or slides as the tool moves in or out; a point
  *                that stuck in the last step needs μ_s |(λ1, λ2)| + ... to
  *                start sliding (friction_static; nh_cpoint.slid);
+ *                With interaction.torsion_per_length > 0 (dynamic mode) a
+ *                fourth, torsional friction row on the tool's spin at s, bound
+ *                torsion_per_length × spacing × τ: the tissue resists a turn
+ *                of the base, which reaches the tip with a lag;
  *   tip          the same at the front with bound μ |(λ1, λ2)| + cutting
  *                force × τ and g = t · (x_P − x_tip).
  * τ is the rows' time scale: the step h (dynamic: λ are impulses), or 1
@@ -80,10 +84,38 @@ static void nh_tip_bevel_direction(nh_beam *beam, const double t[3], double b[3]
   nh_frame_normal(nh_beam_directors(beam) + 9 * (nh_beam_nodes(beam) - 1), t, b);
 }
 
-/* Three rows tying P to tool k's point at s (shaft or tip); returns the
- * first row or −1 (memory). */
+/* The torsion row of a shaft point (docs/interaction.md, "Torsional
+ * friction"): a friction row on the tool's rate of rotation about its
+ * tangent t at s, ω_t(s) = t · ((1 − ξ) ω_e + ξ ω_{e+1}) (the rotations of
+ * the element's nodes interpolated as the torsion field of the beam,
+ * linear), with bound `threshold` = torsion_per_length × len × τ and g = 0:
+ * w = −ω_t(s), so the channel resists the needle's spin and nothing else.
+ * The tissue has no rotational DOFs: its reaction couple is not applied (a
+ * row without a tissue part). Returns the row or −1 (memory). */
+static int nh_torsion_row(nh_rows *rows, const nh_tool *tl, const nh_cpoint *p, int e, double xi,
+                          const double t[3], double threshold) {
+  int r = nh_rows_add(rows);
+  if (r < 0) return -1;
+  memcpy(rows->dir + 3 * r, t, 3 * sizeof(double));
+  rows->tool[r] = tl->dyn, rows->elem[r] = e;
+  double *J = rows->J + 36 * r; /* row-major 3 x 12: (δx1, δw1, δx2, δw2) -> ω(s) */
+  for (int i = 0; i < 3; i++) J[12 * i + 3 + i] = 1.0 - xi, J[12 * i + 9 + i] = xi;
+  rows->lambda[r] = p->lam[3];
+  rows->law[r] = (nh_row_law){NH_ROW_FRICTION, -1, -1, 0.0, threshold, -1, 0.0, 1};
+  return r;
+}
+
+/* The torsion rows' bound of a shaft point of tool tl (0: none). */
+static double nh_torsion_threshold(const nh_contact *c, const nh_tool *tl, const nh_cpoint *p,
+                                   double tau) {
+  return c->statics ? 0.0 : tl->spec->torsion_per_length * p->len * tau;
+}
+
+/* Three rows tying P to tool k's point at s (shaft or tip), and a fourth,
+ * the torsion row, when `torsion` > 0; returns the first row or −1
+ * (memory). */
 static int nh_tie_rows(nh_contact *c, const nh_mesh *m, const double *u, nh_cpoint *p, int k,
-                       double s, double threshold, int tip) {
+                       double s, double threshold, double torsion, int tip) {
   nh_tool *tl = &c->tools[k];
   nh_rows *rows = &c->rows;
   double xb[3], t[3], J[36], xi, xp[3];
@@ -115,6 +147,7 @@ static int nh_tie_rows(nh_contact *c, const nh_mesh *m, const double *u, nh_cpoi
                                   tl->spec->friction,        threshold, -1,
                                   tl->spec->friction_static, p->slid};
   }
+  if (torsion > 0.0 && nh_torsion_row(rows, tl, p, e, xi, t, torsion) < 0) return -1;
   p->row = first, p->tool = k, p->s = s;
   return first;
 }
@@ -179,7 +212,7 @@ int nh_tip_rows(nh_contact *c, nh_group *G, const nh_mesh *m, const double *u, d
   if (ahead <= 0.05 * sp_f) {
     G->tip_tool = lead;
     if (nh_tie_rows(c, m, u, &G->front, lead, nh_beam_length(tl->beam),
-                    tl->spec->cutting_force * tau, 1) < 0)
+                    tl->spec->cutting_force * tau, 0.0, 1) < 0)
       return NH_ERR_MEMORY;
   }
   return NH_OK;
@@ -244,7 +277,9 @@ int nh_shaft_rows(nh_contact *c, nh_group *G, const nh_mesh *m, const double *u,
       memset(p->lam, 0, sizeof p->lam);
       continue;
     }
-    if (nh_tie_rows(c, m, u, p, k, s, c->tools[k].spec->friction_per_length * p->len * tau, 0) < 0)
+    const nh_tool *tl = &c->tools[k];
+    if (nh_tie_rows(c, m, u, p, k, s, tl->spec->friction_per_length * p->len * tau,
+                    nh_torsion_threshold(c, tl, p, tau), 0) < 0)
       return NH_ERR_MEMORY;
   }
   return NH_OK;
@@ -260,5 +295,8 @@ void nh_shaft_update(nh_contact *c, nh_group *G, double h, nh_group_events *ev) 
       nh_tool_add_force(&c->tools[p->tool], &c->rows, p->row + q, h, p->s);
     }
     p->slid = c->rows.law[p->row + 2].sliding;
+    /* the torsion row follows the three: a moment, kept as the next warm start */
+    if (nh_torsion_threshold(c, &c->tools[p->tool], p, 1.0) > 0.0)
+      p->lam[3] = c->rows.lambda[p->row + 3];
   }
 }

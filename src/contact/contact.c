@@ -192,7 +192,7 @@ int nh_contact_step(nh_contact *c, nh_system *sys, const nh_integrator *in, cons
                            NH_MCP_ACCEPT, NH_MCP_SWEEPS, &c->solve);
   *stats = c->solve.step;
   if (rc) {
-    if (c->rows.m > 0 && c->solve.mcp.iterations >= NH_MCP_SWEEPS) { /* above NH_MCP_ACCEPT */
+    if (c->rows.m > 0 && c->solve.mcp.sweeps >= NH_MCP_SWEEPS) { /* above NH_MCP_ACCEPT */
       char why[512];
       snprintf(why, sizeof why, "%s", nh_error_message());
       return NH_ERROR(rc, "constraint solve (%d rows): %s", c->rows.m, why);
@@ -284,7 +284,7 @@ int nh_contact_solve_static(nh_contact *c, nh_system *sys, const nh_integrator *
     sum.t_solve += c->solve.step.t_solve, sum.t_constraints += c->solve.step.t_constraints;
     sum.factorised += c->solve.step.factorised;
     if (rc) {
-      if (c->rows.m > 0 && c->solve.mcp.iterations >= NH_MCP_SWEEPS) {
+      if (c->rows.m > 0 && c->solve.mcp.sweeps >= NH_MCP_SWEEPS) {
         char why[512];
         snprintf(why, sizeof why, "%s", nh_error_message());
         rc = NH_ERROR(rc, "quasi-static iteration %d: constraint solve (%d rows): %s", iter + 1,
@@ -352,6 +352,10 @@ int nh_contact_relocate(nh_contact *c, const nh_mesh *m) {
   }
   if (c->skull) NH_TRY(nh_skull_relocate(c->skull, m));
   return NH_OK;
+}
+
+const nh_rows *nh_contact_rows(const nh_contact *c) {
+  return c ? &c->rows : NULL;
 }
 
 void nh_contact_stats_get(const nh_contact *c, nh_contact_stats *st) {

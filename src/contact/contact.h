@@ -102,6 +102,9 @@ typedef struct {
   nh_coupled_stats solve;
 } nh_contact_stats;
 void nh_contact_stats_get(const nh_contact *c, nh_contact_stats *stats);
+/* The constraint rows of the last step with their forces (the goal
+ * estimate's constrained dual, adapt/dwr.c); NULL for c = NULL. */
+const nh_rows *nh_contact_rows(const nh_contact *c);
 
 /* Force per row of a tool's points for output: for each node of tool k,
  * the sum of the constraint forces (N, on the tool) distributed to its

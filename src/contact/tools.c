@@ -20,15 +20,10 @@
 #include <string.h>
 
 /* Insertion distance d(t) = ∫₀ᵗ speed (spin = 0), or base turn angle
- * ∫₀ᵗ spin (spin = 1), of a motion list (0 after the last segment). */
+ * ∫₀ᵗ spin (spin = 1), of the tool's motion list (the scene's definition,
+ * by which its symbolic untils were resolved). */
 static double nh_motion_integral(const nh_tool_spec *sp, double t, int spin) {
-  double d = 0.0, t0 = 0.0;
-  for (int i = 0; i < sp->n_motion && t0 < t; i++) {
-    double t1 = fmin(sp->motion[i].until, t);
-    if (t1 > t0) d += (spin ? sp->motion[i].spin : sp->motion[i].speed) * (t1 - t0);
-    t0 = sp->motion[i].until;
-  }
-  return d;
+  return nh_scene_motion_integral(sp, sp->n_motion, 0.0, t, spin);
 }
 
 static double nh_motion_distance(const nh_tool_spec *sp, double t) {

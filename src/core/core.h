@@ -9,6 +9,7 @@
 #define NH_CORE_H
 
 #include <stddef.h>
+#include <stdio.h>
 
 #ifndef NH_VERSION
 #define NH_VERSION "0.0.0"
@@ -84,6 +85,31 @@ typedef struct {
 /* Read n bytes into out. */
 void nh_bytes_get(nh_byte_reader *r, void *out, size_t n);
 
+/* ---- limits on the files a scene names (limits.c) ----
+ * Every reader of a user's file (NIfTI images, STL surfaces, refinement
+ * templates, checkpoints) checks what a file's header implies against these
+ * before it allocates or decompresses anything, and reads with a bound, so a
+ * malformed or hostile file is refused in milliseconds instead of filling
+ * the memory. Counts are doubles (whole numbers; 4e9 exceeds an int). */
+typedef struct nh_read_limits {
+  double max_voxels;     /* voxels of a label image, nx ny nz (default 2e8) */
+  double max_triangles;  /* triangles of a surface (default 2e7) */
+  double max_file_bytes; /* bytes of a file, and the bytes a compressed one expands to (4e9) */
+} nh_read_limits;
+/* The defaults: they admit a 0.5 mm whole-head image (512³ = 1.3e8 voxels,
+ * 1.07 GB as float64) and a 0.5 mm marching-cubes cortex (~2e6 triangles)
+ * with margin (docs/reliability.md). */
+extern const nh_read_limits nh_read_limits_default;
+/* `limits`, or the defaults when it is NULL. */
+const nh_read_limits *nh_read_limits_or_default(const nh_read_limits *limits);
+/* Open `path` for binary reading: *f, and *size its size in bytes when it is
+ * a regular file (-1 for a stream: a FIFO or a device, whose reader must
+ * bound what it reads itself). Fails with NH_ERR_INPUT, "PATH: reason":
+ * cannot open (the system's reason), a folder, more bytes than
+ * max_file_bytes. `what` names the file's kind in messages ("image"). */
+int nh_file_open_limited(const char *path, const char *what, const nh_read_limits *limits, FILE **f,
+                         double *size);
+
 /* ---- logging ---- */
 typedef enum { NH_LOG_QUIET = 0, NH_LOG_INFO = 1, NH_LOG_DEBUG = 2 } nh_log_level;
 void nh_log_set_level(nh_log_level level);
@@ -98,6 +124,11 @@ void nh_log_warn(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
  * component) into out[size]. Returns 0, or -1 if it cannot be read or does
  * not fit. */
 int nh_exe_dir(char *out, size_t size);
+/* `path` as an absolute path: itself if it starts with '/', else the
+ * current folder, '/', path (not normalised: "a/../b" stays). Returns out,
+ * or path itself if the current folder cannot be read or out[size] is too
+ * small. */
+const char *nh_path_absolute(const char *path, char *out, size_t size);
 /* The refinement templates folder: $NH_TEMPLATES_DIR if set and not empty,
  * else EXE/../share/needlehex/templates or EXE/share/needlehex/templates (the
  * first that exists; EXE from nh_exe_dir), else "templates". The result is

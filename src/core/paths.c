@@ -47,3 +47,11 @@ const char *nh_templates_dir(char *buf, size_t size) {
     }
   return "templates";
 }
+
+const char *nh_path_absolute(const char *path, char *out, size_t size) {
+  if (path[0] == '/' || !getcwd(out, size)) return path;
+  size_t n = strlen(out);
+  if (n + 1 + strlen(path) + 1 > size) return path;
+  snprintf(out + n, size - n, "/%s", path);
+  return out;
+}

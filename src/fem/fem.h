@@ -5,7 +5,8 @@
  *   F   = I + Σₐ uₐ ⊗ ∇N_a(0)    deformation gradient at the centre
  *   R   = polar rotation of F     (robust to det F <= 0, core/mat3.c)
  *   fₑ  = R K₀ (Rᵀ x − X)         internal force (blockwise R per node)
- *   Kₑ  ≈ R K₀ Rᵀ                 tangent (the variation of R is dropped)
+ *   Kₑ  = R K₀ Rᵀ + G Ω           tangent: corotational, or consistent with
+ *                                 the variation G Ω of R (and, B-bar, of b)
  * K₀ is either the fully integrated one or the B-bar (mean-dilatation) one
  * that does not lock near incompressibility (docs/theory.md §2b).
  * Lumped mass ρ Vₑ / 8 per node; a cut cell of an immersed domain has K₀,
@@ -67,28 +68,57 @@ typedef struct {
  * without cancellation against 1; cof[9] (may be NULL) receives cof F̄. */
 double nh_hex_mean_dilatation(const double u[24], const double Gbar[24], double cof[9]);
 
-/* Corotational internal force f[24] and (if Kt != NULL) tangent R K0 Rᵀ, and
- * the rotation R[9] of the element, at nodal displacements u[24]. With vol
+/* The state an element's tangent depends on (its "frame"), NH_HEX_FRAME
+ * doubles written by nh_hex_corot_force:
+ *   R    [NH_FRAME_R ..+9]     the rotation (polar of F at the centre)
+ *   C    [NH_FRAME_COF ..+9]   cof F̄ (B-bar; zero without vol)
+ *   F̄    [NH_FRAME_FBAR ..+9]  the mean deformation gradient (B-bar; else zero)
+ *   θ̄    [NH_FRAME_THETA]      det F̄ − 1 (B-bar; else zero)
+ *   Y    [NH_FRAME_SPIN ..+9]  the spin operator (tr V I − V)⁻¹, V = F Rᵀ the
+ *                              left stretch (zero at the polar decomposition's
+ *                              singularity: the variation of R is then dropped)
+ *   d    [NH_FRAME_D ..+24]    the corotated displacements
+ * F̄, θ̄, Y and d (from NH_FRAME_FBAR on) carry only the geometric part of the
+ * tangent: nh_hex_frame_corotational zeroes them, and the tangent of such a
+ * frame is the corotational R K0 Rᵀ (+ κ V bₐ ⊗ b_b). */
+enum {
+  NH_FRAME_R = 0,
+  NH_FRAME_COF = 9,
+  NH_FRAME_FBAR = 18,
+  NH_FRAME_THETA = 27,
+  NH_FRAME_SPIN = 28,
+  NH_FRAME_D = 37,
+  NH_HEX_FRAME = 61
+};
+
+/* Corotational internal force f[24], the rotation R[9] and (if Kt != NULL)
+ * the corotational tangent R K0 Rᵀ at nodal displacements u[24]. With vol
  * (B-bar; K0 then deviatoric) f gains κ V θ̄ cof(F̄) ḡₐ and Kt gains
  * κ V bₐ ⊗ b_b, bₐ = cof(F̄) ḡₐ; vol = NULL for the fully integrated one.
- * nh_hex_corot_force and nh_hex_corot_tangent below, in one call. */
+ * nh_hex_corot_force, nh_hex_frame_corotational and nh_hex_corot_tangent in
+ * one call (the consistent tangent: the first and the last). */
 void nh_hex_corot(const double X[24], const double u[24], const double K0[576], const double G0[24],
                   const nh_hex_volumetric *vol, double R[9], double f[24], double Kt[576]);
 
-/* The two halves of nh_hex_corot, for tangents kept from an earlier state
- * (lazy updates, solve/assemble.c). The tangent depends on u only through
- * the element's frame[18]: its rotation R (frame[0..8]) and, with vol,
- * C = cof F̄ (frame[9..17]; zero without vol).
+/* The parts of nh_hex_corot, for tangents kept from an earlier state (lazy
+ * updates, solve/assemble.c) and for the consistent tangent. The tangent
+ * depends on u only through the element's frame (above).
  * nh_hex_corot_force: f[24] at u[24] and the frame there.
- * nh_hex_corot_tangent: Kt = R K0 Rᵀ (+ κ V bₐ ⊗ b_b, b = C ḡ) of a frame.
- * nh_hex_corot_apply: y = Kt w without forming Kt (R (K0 (Rᵀ w)) + κ V b (b·w)). */
+ * nh_hex_corot_tangent: Kt[576] of a frame (row-major, generally not
+ *   symmetric): the consistent tangent ∂f/∂u (docs/theory.md §2, "Consistent
+ *   tangent"; §2b),
+ *     Kt = R K0 Rᵀ + G Ω + κ V (b bᵀ + θ̄ H)
+ *   with G Ω the variation of R and θ̄ H that of b (B-bar), or, for a frame
+ *   through nh_hex_frame_corotational, R K0 Rᵀ (+ κ V b bᵀ).
+ * nh_hex_corot_apply: y = Kt w without forming Kt. */
 void nh_hex_corot_force(const double X[24], const double u[24], const double K0[576],
-                        const double G0[24], const nh_hex_volumetric *vol, double frame[18],
-                        double f[24]);
-void nh_hex_corot_tangent(const double K0[576], const nh_hex_volumetric *vol,
-                          const double frame[18], double Kt[576]);
-void nh_hex_corot_apply(const double K0[576], const nh_hex_volumetric *vol, const double frame[18],
-                        const double w[24], double y[24]);
+                        const double G0[24], const nh_hex_volumetric *vol,
+                        double frame[NH_HEX_FRAME], double f[24]);
+void nh_hex_frame_corotational(double frame[NH_HEX_FRAME]);
+void nh_hex_corot_tangent(const double K0[576], const double G0[24], const nh_hex_volumetric *vol,
+                          const double frame[NH_HEX_FRAME], double Kt[576]);
+void nh_hex_corot_apply(const double K0[576], const double G0[24], const nh_hex_volumetric *vol,
+                        const double frame[NH_HEX_FRAME], const double w[24], double y[24]);
 
 /* Lamé parameters from E and ν. */
 void nh_lame(double young, double poisson, double *lambda, double *mu);
@@ -249,17 +279,19 @@ int nh_tissue_set_ties(nh_tissue *tissue, int n_regions, const nh_region *region
                        double *volume);
 
 /* The element of leaf c at nodal displacements u (3 per node): force f[24]
- * and tangent Kt[576] (may be NULL), both scaled by φ, plus the cell's tie. */
+ * and corotational tangent Kt[576] (may be NULL), both scaled by φ, plus the
+ * cell's tie. */
 void nh_tissue_element(const nh_tissue *tissue, int c, const double *u, double f[24],
                        double Kt[576]);
-/* The same in parts (lazy tangents, solve/assemble.c; frame as nh_hex_corot_force):
- * the force f[24] at u and the frame there; the tangent Kt[576] of a frame;
- * y[24] = Kt w[24] of a frame without forming Kt. All scaled by φ, tie included. */
+/* The same in parts (lazy and consistent tangents, solve/assemble.c; frame
+ * as nh_hex_corot_force): the force f[24] at u and the frame there; the
+ * tangent Kt[576] of a frame (nh_hex_corot_tangent); y[24] = Kt w[24] of a
+ * frame without forming Kt. All scaled by φ, tie included. */
 void nh_tissue_element_force(const nh_tissue *tissue, int c, const double *u, double f[24],
-                             double frame[18]);
-void nh_tissue_element_tangent(const nh_tissue *tissue, int c, const double frame[18],
+                             double frame[NH_HEX_FRAME]);
+void nh_tissue_element_tangent(const nh_tissue *tissue, int c, const double frame[NH_HEX_FRAME],
                                double Kt[576]);
-void nh_tissue_element_apply(const nh_tissue *tissue, int c, const double frame[18],
+void nh_tissue_element_apply(const nh_tissue *tissue, int c, const double frame[NH_HEX_FRAME],
                              const double w[24], double y[24]);
 
 /* Elastic energy Σₑ φ (½ dₑᵀ K0 dₑ + ½ κ V θ̄²) (dₑ = Rᵀxₑ − Xₑ; the second

@@ -90,9 +90,8 @@ int nh_hex_stiffness(const double X[24], double lambda, double mu, int bbar, dou
 
 /* F = I + Σ uₐ ⊗ gₐ, its polar rotation R, and the corotated displacement
  * d = Rᵀ uₐ + (Rᵀ − I)(Xₐ − X̄) of every node. */
-void nh_hex_corotated(const double X[24], const double u[24], const double G0[24], double R[9],
-                      double d[24]) {
-  double F[9];
+static void nh_hex_corotated_F(const double X[24], const double u[24], const double G0[24],
+                               double F[9], double R[9], double d[24]) {
   nh_mat3_identity(F);
   for (int a = 0; a < 8; a++)
     for (int i = 0; i < 3; i++)
@@ -107,6 +106,12 @@ void nh_hex_corotated(const double X[24], const double u[24], const double G0[24
     nh_mat3_tvec(R, rel, rr);
     for (int i = 0; i < 3; i++) d[3 * a + i] += rr[i] - rel[i];
   }
+}
+
+void nh_hex_corotated(const double X[24], const double u[24], const double G0[24], double R[9],
+                      double d[24]) {
+  double F[9];
+  nh_hex_corotated_F(X, u, G0, F, R, d);
 }
 
 double nh_hex_mean_dilatation(const double u[24], const double Gbar[24], double cof[9]) {
@@ -146,28 +151,78 @@ static void nh_rotated_k0(const double K0[576], const double R[9], const double 
   for (int a = 0; a < 8; a++) nh_mat3_vec(R, kx + 3 * a, y + 3 * a);
 }
 
+static void nh_cross(const double a[3], const double b[3], double c[3]) {
+  c[0] = a[1] * b[2] - a[2] * b[1];
+  c[1] = a[2] * b[0] - a[0] * b[2];
+  c[2] = a[0] * b[1] - a[1] * b[0];
+}
+
+/* S = [v]×, the matrix of v × ·. */
+static void nh_skew(const double v[3], double S[9]) {
+  S[0] = 0.0, S[1] = -v[2], S[2] = v[1];
+  S[3] = v[2], S[4] = 0.0, S[5] = -v[0];
+  S[6] = -v[1], S[7] = v[0], S[8] = 0.0;
+}
+
+/* The spin operator Y = (tr V I − V)⁻¹, V = sym(F Rᵀ) the left stretch: the
+ * polar rotation's variation is δR = [δω]× R with δω = Y axial(δF Rᵀ − R δFᵀ)
+ * (docs/theory.md §2, "Consistent tangent"). tr V I − V has the eigenvalues
+ * σᵢ + σⱼ (i ≠ j) of the singular values, one of which carries the sign of
+ * det F (core/mat3.c): where the smallest of them falls below 10⁻³ of their
+ * mean (a flattened or inverted element, at the polar decomposition's
+ * singularity) Y is 0 and the element's tangent drops the variation of R. */
+static void nh_spin_operator(const double F[9], const double R[9], double Y[9]) {
+  double FRt[9], Z[9];
+  nh_mat3_mul_nt(F, R, FRt);
+  const double tr = FRt[0] + FRt[4] + FRt[8];
+  for (int i = 0; i < 3; i++)
+    for (int j = 0; j < 3; j++)
+      Z[3 * i + j] = (i == j ? tr : 0.0) - 0.5 * (FRt[3 * i + j] + FRt[3 * j + i]);
+  const double mean = (Z[0] + Z[4] + Z[8]) / 3.0;
+  if (!(mean > 0.0) || !(nh_mat3_det(Z) > 1e-3 * mean * mean * mean) || nh_mat3_inverse(Z, Y))
+    memset(Y, 0, 9 * sizeof(double));
+}
+
 void nh_hex_corot_force(const double X[24], const double u[24], const double K0[576],
-                        const double G0[24], const nh_hex_volumetric *vol, double frame[18],
-                        double f[24]) {
-  double d[24], *R = frame, *cof = frame + 9;
-  nh_hex_corotated(X, u, G0, R, d);
+                        const double G0[24], const nh_hex_volumetric *vol,
+                        double frame[NH_HEX_FRAME], double f[24]) {
+  double F[9], *R = frame + NH_FRAME_R, *cof = frame + NH_FRAME_COF, *d = frame + NH_FRAME_D;
+  nh_hex_corotated_F(X, u, G0, F, R, d);
+  nh_spin_operator(F, R, frame + NH_FRAME_SPIN);
   nh_rotated_k0(K0, R, d, f);
   /* B-bar's volumetric part: U = ½ κ V θ̄², θ̄ = det F̄ − 1, F̄ = I + Σ uₐ ⊗ ḡₐ;
    * f = κ V θ̄ bₐ with bₐ = ∂θ̄/∂uₐ = cof(F̄) ḡₐ. */
   if (vol) {
     double theta = nh_hex_mean_dilatation(u, vol->Gbar, cof), kv = vol->kappa * vol->volume, b[3];
+    double *Fb = frame + NH_FRAME_FBAR;
+    nh_mat3_identity(Fb);
+    for (int a = 0; a < 8; a++)
+      for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++) Fb[3 * i + j] += u[3 * a + i] * vol->Gbar[3 * a + j];
+    frame[NH_FRAME_THETA] = theta;
     for (int a = 0; a < 8; a++) {
       nh_mat3_vec(cof, vol->Gbar + 3 * a, b);
       for (int i = 0; i < 3; i++) f[3 * a + i] += kv * theta * b[i];
     }
   } else {
-    memset(cof, 0, 9 * sizeof(double));
+    memset(cof, 0, 19 * sizeof(double)); /* C, F̄ and θ̄ */
   }
 }
 
-void nh_hex_corot_tangent(const double K0[576], const nh_hex_volumetric *vol,
-                          const double frame[18], double Kt[576]) {
-  const double *R = frame;
+void nh_hex_frame_corotational(double frame[NH_HEX_FRAME]) {
+  memset(frame + NH_FRAME_FBAR, 0, (NH_HEX_FRAME - NH_FRAME_FBAR) * sizeof(double));
+}
+
+/* Whether the frame carries the variation of R (Y ≠ 0). */
+static int nh_frame_spins(const double frame[NH_HEX_FRAME]) {
+  for (int i = 0; i < 9; i++)
+    if (frame[NH_FRAME_SPIN + i] != 0.0) return 1;
+  return 0;
+}
+
+void nh_hex_corot_tangent(const double K0[576], const double G0[24], const nh_hex_volumetric *vol,
+                          const double frame[NH_HEX_FRAME], double Kt[576]) {
+  const double *R = frame + NH_FRAME_R;
   for (int a = 0; a < 8; a++)
     for (int c = 0; c < 8; c++) {
       double B[9], T[9];
@@ -178,34 +233,124 @@ void nh_hex_corot_tangent(const double K0[576], const nh_hex_volumetric *vol,
       for (int i = 0; i < 3; i++)
         for (int j = 0; j < 3; j++) Kt[24 * (3 * a + i) + 3 * c + j] = B[3 * i + j];
     }
-  /* B-bar: κ V bₐ ⊗ b_b (the term κ V θ̄ ∂b/∂u, of the order of the
-   * pressure, dropped as the variation of R is). */
+  /* The variation of R: Kₐ_b += Gₐ Ω_b with δω = Σ_b Ω_b δu_b,
+   * Ω_b = Y [R g_b]×, and Gₐ = ∂fₐ/∂ω = −[fₐ]× + R (Σ_c K0ₐ_c [d_c]×) Rᵀ,
+   * fₐ = R (K0 d)ₐ (docs/theory.md §2, "Consistent tangent"). */
+  if (nh_frame_spins(frame)) {
+    const double *Y = frame + NH_FRAME_SPIN, *d = frame + NH_FRAME_D;
+    double Om[72], G[72], q[24];
+    for (int b = 0; b < 8; b++) { /* Ω_b = Y [R g_b]× */
+      double Rg[3], S[9];
+      nh_mat3_vec(R, G0 + 3 * b, Rg);
+      nh_skew(Rg, S);
+      nh_mat3_mul(Y, S, Om + 9 * b);
+    }
+    for (int r = 0; r < 24; r++) {
+      double s = 0.0;
+      for (int c = 0; c < 24; c++) s += K0[24 * r + c] * d[c];
+      q[r] = s;
+    }
+    for (int a = 0; a < 8; a++) {
+      double M[9] = {0}, T[9], fa[3], S[9];
+      for (int c = 0; c < 8; c++) { /* M += K0ₐ_c [d_c]× */
+        const double *dc = d + 3 * c;
+        for (int i = 0; i < 3; i++) {
+          const double *k = K0 + 24 * (3 * a + i) + 3 * c;
+          M[3 * i] += k[1] * dc[2] - k[2] * dc[1];
+          M[3 * i + 1] += k[2] * dc[0] - k[0] * dc[2];
+          M[3 * i + 2] += k[0] * dc[1] - k[1] * dc[0];
+        }
+      }
+      nh_mat3_mul(R, M, T);
+      nh_mat3_mul_nt(T, R, G + 9 * a);
+      nh_mat3_vec(R, q + 3 * a, fa);
+      nh_skew(fa, S);
+      for (int i = 0; i < 9; i++) G[9 * a + i] -= S[i];
+    }
+    for (int a = 0; a < 8; a++)
+      for (int c = 0; c < 8; c++) {
+        double T[9];
+        nh_mat3_mul(G + 9 * a, Om + 9 * c, T);
+        for (int i = 0; i < 3; i++)
+          for (int j = 0; j < 3; j++) Kt[24 * (3 * a + i) + 3 * c + j] += T[3 * i + j];
+      }
+  }
+  /* B-bar: κ V (bₐ ⊗ b_b + θ̄ Hₐ_b), Hₐ_b = ∂bₐ/∂u_b = [F̄ (ḡ_b × ḡₐ)]×. */
   if (vol) {
-    double b[24], kv = vol->kappa * vol->volume;
-    for (int a = 0; a < 8; a++) nh_mat3_vec(frame + 9, vol->Gbar + 3 * a, b + 3 * a);
+    double b[24], kv = vol->kappa * vol->volume, theta = frame[NH_FRAME_THETA];
+    for (int a = 0; a < 8; a++) nh_mat3_vec(frame + NH_FRAME_COF, vol->Gbar + 3 * a, b + 3 * a);
     for (int r = 0; r < 24; r++)
       for (int c = 0; c < 24; c++) Kt[24 * r + c] += kv * b[r] * b[c];
+    if (theta != 0.0)
+      for (int a = 0; a < 8; a++)
+        for (int c = 0; c < 8; c++) {
+          double n[3], w[3], S[9];
+          nh_cross(vol->Gbar + 3 * c, vol->Gbar + 3 * a, n);
+          nh_mat3_vec(frame + NH_FRAME_FBAR, n, w);
+          nh_skew(w, S);
+          for (int i = 0; i < 3; i++)
+            for (int j = 0; j < 3; j++)
+              Kt[24 * (3 * a + i) + 3 * c + j] += kv * theta * S[3 * i + j];
+        }
   }
 }
 
-void nh_hex_corot_apply(const double K0[576], const nh_hex_volumetric *vol, const double frame[18],
-                        const double w[24], double y[24]) {
-  const double *R = frame;
+void nh_hex_corot_apply(const double K0[576], const double G0[24], const nh_hex_volumetric *vol,
+                        const double frame[NH_HEX_FRAME], const double w[24], double y[24]) {
+  const double *R = frame + NH_FRAME_R;
   double rw[24];
   for (int a = 0; a < 8; a++) nh_mat3_tvec(R, w + 3 * a, rw + 3 * a);
+  /* the variation of R: δω = Σ_b Y (R g_b × w_b); Gₐ δω = −fₐ × δω +
+   * R (K0 z)ₐ with z_b = d_b × Rᵀδω, added to Rᵀw before K0 */
+  double om[3] = {0, 0, 0};
+  const int spins = nh_frame_spins(frame);
+  if (spins) {
+    const double *d = frame + NH_FRAME_D;
+    double s[3] = {0, 0, 0}, Rg[3], c[3], rom[3];
+    for (int b = 0; b < 8; b++) {
+      nh_mat3_vec(R, G0 + 3 * b, Rg);
+      nh_cross(Rg, w + 3 * b, c);
+      for (int k = 0; k < 3; k++) s[k] += c[k];
+    }
+    nh_mat3_vec(frame + NH_FRAME_SPIN, s, om);
+    nh_mat3_tvec(R, om, rom);
+    for (int b = 0; b < 8; b++) {
+      nh_cross(d + 3 * b, rom, c);
+      for (int k = 0; k < 3; k++) rw[3 * b + k] += c[k];
+    }
+  }
   nh_rotated_k0(K0, R, rw, y);
+  if (spins) {
+    double q[24], fa[3], c[3];
+    nh_rotated_k0(K0, R, frame + NH_FRAME_D, q);
+    for (int a = 0; a < 8; a++) {
+      for (int k = 0; k < 3; k++) fa[k] = q[3 * a + k];
+      nh_cross(fa, om, c);
+      for (int k = 0; k < 3; k++) y[3 * a + k] -= c[k];
+    }
+  }
   if (vol) {
-    double b[24], bw = 0.0, kv = vol->kappa * vol->volume;
-    for (int a = 0; a < 8; a++) nh_mat3_vec(frame + 9, vol->Gbar + 3 * a, b + 3 * a);
+    double b[24], bw = 0.0, kv = vol->kappa * vol->volume, theta = frame[NH_FRAME_THETA];
+    for (int a = 0; a < 8; a++) nh_mat3_vec(frame + NH_FRAME_COF, vol->Gbar + 3 * a, b + 3 * a);
     for (int i = 0; i < 24; i++) bw += b[i] * w[i];
     for (int i = 0; i < 24; i++) y[i] += kv * bw * b[i];
+    if (theta != 0.0)
+      for (int a = 0; a < 8; a++)
+        for (int c = 0; c < 8; c++) { /* Hₐ_c w_c = (F̄ (ḡ_c × ḡₐ)) × w_c */
+          double n[3], v[3], x[3];
+          nh_cross(vol->Gbar + 3 * c, vol->Gbar + 3 * a, n);
+          nh_mat3_vec(frame + NH_FRAME_FBAR, n, v);
+          nh_cross(v, w + 3 * c, x);
+          for (int k = 0; k < 3; k++) y[3 * a + k] += kv * theta * x[k];
+        }
   }
 }
 
 void nh_hex_corot(const double X[24], const double u[24], const double K0[576], const double G0[24],
                   const nh_hex_volumetric *vol, double R[9], double f[24], double Kt[576]) {
-  double frame[18];
+  double frame[NH_HEX_FRAME];
   nh_hex_corot_force(X, u, K0, G0, vol, frame, f);
-  memcpy(R, frame, 9 * sizeof(double));
-  if (Kt) nh_hex_corot_tangent(K0, vol, frame, Kt);
+  memcpy(R, frame + NH_FRAME_R, 9 * sizeof(double));
+  nh_hex_frame_corotational(frame);
+  if (Kt) nh_hex_corot_tangent(K0, G0, vol, frame, Kt);
 }

@@ -279,7 +279,7 @@ int nh_tissue_corner_masses(const nh_tissue *t, int c, const double *plane, doub
       above += (Xe[3 * a] - plane[0]) * plane[3] + (Xe[3 * a + 1] - plane[1]) * plane[4] +
                    (Xe[3 * a + 2] - plane[2]) * plane[5] >
                0;
-    box = m->domain.kind != NH_DOMAIN_BOX && nh_hex_is_box(Xe, lo, hi);
+    box = nh_domain_integrates_cuts(&m->domain) && nh_hex_is_box(Xe, lo, hi);
   }
   if (above == 0) {
     for (int a = 0; a < 8; a++) mc[a] = 0.0;
@@ -382,7 +382,7 @@ const double *nh_tissue_g0(const nh_tissue *t, int c) {
 }
 
 void nh_tissue_element_force(const nh_tissue *t, int c, const double *u, double f[24],
-                             double frame[18]) {
+                             double frame[NH_HEX_FRAME]) {
   const nh_mesh *m = t->mesh;
   double Xe[24], ue[24], Kc[576];
   nh_hex_volumetric vol;
@@ -401,12 +401,13 @@ void nh_tissue_element_force(const nh_tissue *t, int c, const double *u, double 
         for (int k = 0; k < 3; k++) f[3 * a + k] += T[8 * a + b] * ue[3 * b + k];
 }
 
-void nh_tissue_element_tangent(const nh_tissue *t, int c, const double frame[18], double Kt[576]) {
+void nh_tissue_element_tangent(const nh_tissue *t, int c, const double frame[NH_HEX_FRAME],
+                               double Kt[576]) {
   double Kc[576];
   nh_hex_volumetric vol;
   const nh_hex_volumetric *vp;
   const double *K0 = nh_cell_data(t, c, Kc, &vol, &vp);
-  nh_hex_corot_tangent(K0, vp, frame, Kt);
+  nh_hex_corot_tangent(K0, nh_tissue_g0(t, c), vp, frame, Kt);
   double phi = nh_tissue_cell_cut(t, c) ? 1.0 : nh_cell_phi(t, c);
   if (phi != 1.0)
     for (int i = 0; i < 576; i++) Kt[i] *= phi;
@@ -417,13 +418,13 @@ void nh_tissue_element_tangent(const nh_tissue *t, int c, const double frame[18]
         for (int k = 0; k < 3; k++) Kt[24 * (3 * a + k) + 3 * b + k] += T[8 * a + b];
 }
 
-void nh_tissue_element_apply(const nh_tissue *t, int c, const double frame[18], const double w[24],
-                             double y[24]) {
+void nh_tissue_element_apply(const nh_tissue *t, int c, const double frame[NH_HEX_FRAME],
+                             const double w[24], double y[24]) {
   double Kc[576];
   nh_hex_volumetric vol;
   const nh_hex_volumetric *vp;
   const double *K0 = nh_cell_data(t, c, Kc, &vol, &vp);
-  nh_hex_corot_apply(K0, vp, frame, w, y);
+  nh_hex_corot_apply(K0, nh_tissue_g0(t, c), vp, frame, w, y);
   double phi = nh_tissue_cell_cut(t, c) ? 1.0 : nh_cell_phi(t, c);
   if (phi != 1.0)
     for (int i = 0; i < 24; i++) y[i] *= phi;
@@ -435,8 +436,9 @@ void nh_tissue_element_apply(const nh_tissue *t, int c, const double frame[18], 
 }
 
 void nh_tissue_element(const nh_tissue *t, int c, const double *u, double f[24], double Kt[576]) {
-  double frame[18];
+  double frame[NH_HEX_FRAME];
   nh_tissue_element_force(t, c, u, f, frame);
+  nh_hex_frame_corotational(frame);
   if (Kt) nh_tissue_element_tangent(t, c, frame, Kt);
 }
 
@@ -587,7 +589,7 @@ static int nh_tissue_cuts(nh_tissue *t) {
       return NH_ERROR(NH_ERR_MEMORY, "out of memory: cut cells");
     for (int c = old; c < t->cap_cell_cut; c++) t->cell_cut[c] = NH_CUT_NONE;
   }
-  if (m->domain.kind == NH_DOMAIN_BOX) {
+  if (!nh_domain_integrates_cuts(&m->domain)) { /* a box, or tissue.cut_cells: scaled */
     for (int c = 0; c < t->cap_cell_cut; c++) t->cell_cut[c] = NH_CUT_NONE;
     t->n_cut = 0;
     return NH_OK;

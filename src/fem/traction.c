@@ -13,11 +13,13 @@
  *                F = 0 is cut from each tetrahedron with F interpolated
  *                linearly (marching tetrahedra): one triangle or a quad as
  *                two. n is the triangle's normal, turned away from an inside vertex. Each
- *                triangle is integrated by 6 points of degree 4 (N_a, a
- *                cubic on a plane, exactly: the immersed patch test of a
- *                uniform pressure, docs/theory.md §5c; the sub-lattice is
+ *                triangle is integrated by its three edge midpoints (exact
+ *                for quadratics in ξ), or, with tissue.cut_cells:
+ *                integrated, by 6 points of degree 4 (N_a, a cubic on a
+ *                plane, exactly: the immersed patch test of a uniform
+ *                pressure, docs/theory.md §5c); the sub-lattice is
  *                cutcell.c's at NH_CUT_DEPTH, so Γ bounds the polyhedron
- *                the stiffness is integrated over). On a grid of equal leaves the triangles of
+ *                the stiffness is integrated over. On a grid of equal leaves the triangles of
  *                neighbouring cells share their edges, so the pieces form a
  *                closed polyhedron and Σ n A = 0: a pressure then has no net
  *                force (to round-off). Where the shape leaves the grid's box
@@ -135,6 +137,15 @@ static double nh_traction_triangle(const nh_mesh *m, int c, double p[3][3], doub
     for (int k = 0; k < 3; k++) n[k] = -n[k];
   double t[3], A = 0.5 * two_a;
   nh_traction_vector(tr, n, t);
+  if (!nh_domain_integrates_cuts(&m->domain)) {
+    for (int e = 0; e < 3; e++) { /* edge midpoints, weight A/3 */
+      double xi[3], N[8];
+      for (int k = 0; k < 3; k++) xi[k] = 0.5 * (p[e][k] + p[(e + 1) % 3][k]);
+      nh_hex_shape(xi, N);
+      nh_traction_add(m, c, N, A / 3.0, t, f);
+    }
+    return A;
+  }
   /* Strang & Fix / Dunavant's 6-point rule of degree 4: N_a, trilinear,
    * is a cubic on a triangle of a cut plane, so the consistent load of a
    * uniform pressure is exact (the immersed patch test, docs/theory.md §5c). */

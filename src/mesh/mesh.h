@@ -63,6 +63,8 @@ typedef struct nh_domain {
   nh_surface *surface;       /* surface: the closed surface */
   nh_image *labels;          /* the label image of materials and {label: N} regions, or NULL */
   double cap;                /* surface: F is the signed distance truncated at ±cap */
+  nh_cut_cells cut_cells;    /* tissue.cut_cells: how an immersed domain's box cells are
+                                integrated (stiffness, mass, ties, loads, tractions) */
 } nh_domain;
 
 /* Floor of the fill fraction: a cell that barely meets the shape keeps
@@ -83,6 +85,10 @@ void nh_domain_sphere(const double center[3], double radius, nh_domain *domain);
  * tissue.domain.mask.labels or tissue.materials that no voxel holds.
  * Release with nh_domain_release. */
 int nh_domain_from_scene(const nh_scene *scene, nh_domain *domain);
+/* True if the domain is immersed and its cut box cells are integrated by
+ * the finite cell quadrature (tissue.cut_cells: integrated), false if they
+ * are scaled by their fill fraction. */
+int nh_domain_integrates_cuts(const nh_domain *domain);
 /* *dst = *src with a new reference to its image, surface and label image. */
 void nh_domain_copy(nh_domain *dst, const nh_domain *src);
 /* Drop the references the domain holds (keeps kind and box). */
@@ -210,6 +216,10 @@ int nh_region_contains(const nh_region *region, const double x[3], double tol);
  * half its length if shorter), a box's smallest half-extent (a label
  * region: +inf). */
 double nh_region_size(const nh_region *region);
+/* Signed distance from x to the surface of a box, sphere or finite cylinder
+ * (its side and its flat ends): negative inside; NAN for a label region
+ * (its voxels are the image's: plan/obstacle.c). */
+double nh_region_distance(const nh_region *region, const double x[3]);
 /* "box [..] - [..]", "sphere centre [..] radius r", "cylinder [..] - [..] radius r", "label N". */
 void nh_region_describe(const nh_region *region, char *buf, size_t cap);
 

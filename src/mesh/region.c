@@ -88,6 +88,32 @@ double nh_region_size(const nh_region *r) {
   return l;
 }
 
+double nh_region_distance(const nh_region *r, const double x[3]) {
+  if (r->kind == NH_REGION_LABEL) return NAN;
+  if (r->kind == NH_REGION_SPHERE) {
+    double d2 = 0.0;
+    for (int k = 0; k < 3; k++) d2 += (x[k] - r->center[k]) * (x[k] - r->center[k]);
+    return sqrt(d2) - r->radius;
+  }
+  double out = 0.0, in = -INFINITY;
+  if (r->kind == NH_REGION_CYLINDER) {
+    /* in the cylinder's axes: t along the axis from start, ρ from it */
+    double axis[3], rel[3], len = 0.0, t = 0.0, rho2 = 0.0;
+    for (int k = 0; k < 3; k++) axis[k] = r->end[k] - r->start[k], len += axis[k] * axis[k];
+    len = sqrt(len);
+    for (int k = 0; k < 3; k++) axis[k] /= len, rel[k] = x[k] - r->start[k], t += rel[k] * axis[k];
+    for (int k = 0; k < 3; k++) rho2 += (rel[k] - t * axis[k]) * (rel[k] - t * axis[k]);
+    double q[2] = {sqrt(rho2) - r->radius, fmax(-t, t - len)}; /* a 2-D box's distance */
+    for (int k = 0; k < 2; k++) out += q[k] > 0 ? q[k] * q[k] : 0.0, in = fmax(in, q[k]);
+  } else {
+    for (int k = 0; k < 3; k++) {
+      double q = fmax(r->min[k] - x[k], x[k] - r->max[k]);
+      out += q > 0 ? q * q : 0.0, in = fmax(in, q);
+    }
+  }
+  return in > 0 ? sqrt(out) : in;
+}
+
 void nh_region_describe(const nh_region *r, char *buf, size_t cap) {
   if (r->kind == NH_REGION_LABEL)
     snprintf(buf, cap, "label %d", r->label);
@@ -167,7 +193,7 @@ static double nh_cell_region_integrals(const nh_domain *d, const double Xe[24], 
   double lo[3], hi[3];
   const int immersed = d->kind != NH_DOMAIN_BOX;
   for (int a = 0; a < 8; a++) w[a] = 0.0;
-  if (immersed && r->kind != NH_REGION_LABEL && nh_hex_is_box(Xe, lo, hi)) {
+  if (nh_domain_integrates_cuts(d) && r->kind != NH_REGION_LABEL && nh_hex_is_box(Xe, lo, hi)) {
     nh_cut_moments mom;
     double wq[27];
     if (nh_cut_domain_cell(d, lo, hi, r, NULL, &mom, wq)) return 0.0; /* cannot fail here */
@@ -281,7 +307,8 @@ double nh_mesh_region_tie(const nh_mesh *m, int c, const nh_region *r, double T[
       rlo[k] = r->min[k], rhi[k] = r->max[k];
     if (hi[k] < rlo[k] || lo[k] > rhi[k]) return 0.0;
   }
-  if (immersed && r->kind != NH_REGION_LABEL && nh_hex_is_box(Xe, lo, hi)) {
+  if (nh_domain_integrates_cuts(&m->domain) && r->kind != NH_REGION_LABEL &&
+      nh_hex_is_box(Xe, lo, hi)) {
     nh_cut_moments mom;
     double wq[27], N[8];
     if (nh_cut_domain_cell(&m->domain, lo, hi, r, NULL, &mom, wq) || !(mom.volume > 0.0))

@@ -55,19 +55,23 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 
-#define NH_TMPL_TOL        1e-12   /* equal coordinates; nodes on a plane */
-#define NH_TMPL_MAX_TOKENS 9       /* one more than a cell line holds */
-#define NH_TMPL_MAX_COUNT  1000000 /* nodes or cells: a sanity bound */
+#define NH_TMPL_TOL        1e-12    /* equal coordinates; nodes on a plane */
+#define NH_TMPL_MAX_TOKENS 9        /* one more than a cell line holds */
+#define NH_TMPL_MAX_COUNT  10000    /* nodes or cells (hex4: 125, 64); the checks are O(N²) */
+#define NH_TMPL_MAX_LINE   4096     /* bytes of a line */
+#define NH_TMPL_MAX_BYTES  16777216 /* bytes of a file: 16 MB, far above any template */
 
 /* The line-by-line reader of one template file. */
 typedef struct {
   const char *path;
   FILE *f;
-  char *buf;
-  size_t cap;
+  char buf[NH_TMPL_MAX_LINE + 1];
+  double bytes;                      /* bytes read so far */
   int line;                          /* number of the line last read */
   int read_errno;                    /* errno of a failed read, 0 at a clean end */
+  char why[96];                      /* a line that no template has: too long, binary, ... */
   int n_tok;                         /* tokens on it (capped at NH_TMPL_MAX_TOKENS) */
   char *tok[NH_TMPL_MAX_TOKENS + 1]; /* pointers into buf */
 } nh_tmpl_reader;
@@ -91,14 +95,42 @@ static int bad(const char *path, int line, const char *fmt, ...) {
   return NH_ERROR(NH_ERR_INPUT, "%s:%d: %s", path, line, msg);
 }
 
+/* Read one line into r->buf, at most NH_TMPL_MAX_LINE bytes of text.
+ * Returns its length, -1 at the end of the file or on a line that no
+ * template has (then r->why says what). */
+static int read_line(nh_tmpl_reader *r) {
+  int n = 0, c;
+  while ((c = getc(r->f)) != EOF) {
+    if (++r->bytes > NH_TMPL_MAX_BYTES) {
+      snprintf(r->why, sizeof r->why, "the file goes on past %d bytes: not a template",
+               NH_TMPL_MAX_BYTES);
+      return -1;
+    }
+    if (c == '\n') break;
+    if (c == 0 || (c < 0x20 && !strchr("\t\r\v\f", c)) || c == 0x7f) {
+      snprintf(r->why, sizeof r->why, "byte 0x%02x: a template is a text file", (unsigned)c);
+      return -1;
+    }
+    if (n == NH_TMPL_MAX_LINE) {
+      snprintf(r->why, sizeof r->why, "a line longer than %d bytes", NH_TMPL_MAX_LINE);
+      return -1;
+    }
+    r->buf[n++] = (char)c;
+  }
+  r->buf[n] = '\0';
+  if (c == EOF && ferror(r->f)) r->read_errno = errno ? errno : EIO;
+  return c == EOF && n == 0 ? -1 : n;
+}
+
 /* Read the next line that holds tokens once its comment is cut off.
- * Returns 1 with the tokens in r->tok, 0 at the end of the file. */
+ * Returns 1 with the tokens in r->tok, 0 at the end of the file (or a line
+ * no template has: r->why). */
 static int next_line(nh_tmpl_reader *r) {
   for (;;) {
     errno = 0;
-    ssize_t len = getline(&r->buf, &r->cap, r->f);
-    if (len < 0) {
-      if (ferror(r->f)) r->read_errno = errno ? errno : EIO;
+    if (r->why[0]) return 0;
+    if (read_line(r) < 0) {
+      r->line += r->why[0] != 0; /* the bad line's number */
       return 0;
     }
     r->line++;
@@ -226,18 +258,32 @@ static int read_cells(nh_tmpl_reader *r, nh_template *t, nh_tmpl_lines *lines) {
 }
 
 static int parse(const char *path, nh_template *t, nh_tmpl_lines *lines) {
-  nh_tmpl_reader r = {.path = path};
-  r.f = fopen(path, "r");
-  if (!r.f) return bad(path, 0, "cannot open the template: %s", strerror(errno));
+  nh_tmpl_reader *r = nh_calloc(1, sizeof *r);
+  if (!r) return NH_ERR_MEMORY;
+  r->path = path;
+  r->f = fopen(path, "r");
+  if (!r->f) {
+    int err = errno;
+    free(r);
+    return bad(path, 0, "cannot open the template: %s", strerror(err));
+  }
+  struct stat st;
+  int rc = NH_OK;
+  if (fstat(fileno(r->f), &st) == 0 && S_ISREG(st.st_mode) && st.st_size > NH_TMPL_MAX_BYTES)
+    rc = bad(path, 0, "%lld bytes: a template has at most %d", (long long)st.st_size,
+             NH_TMPL_MAX_BYTES);
   char name[NH_NAME_MAX];
-  int rc = read_header(&r, "template", name, sizeof name, NULL);
-  if (!rc) rc = read_nodes(&r, t, lines);
-  if (!rc) rc = read_cells(&r, t, lines);
-  /* A read error (a directory, an I/O failure) looks like an early end to
-   * the readers above: replace their message. */
-  if (r.read_errno) rc = bad(path, r.line, "cannot read the template: %s", strerror(r.read_errno));
-  free(r.buf);
-  fclose(r.f);
+  if (!rc) rc = read_header(r, "template", name, sizeof name, NULL);
+  if (!rc) rc = read_nodes(r, t, lines);
+  if (!rc) rc = read_cells(r, t, lines);
+  /* A read error (a directory, an I/O failure) or a line no template has
+   * looks like an early end to the readers above: replace their message. */
+  if (r->read_errno)
+    rc = bad(path, r->line, "cannot read the template: %s", strerror(r->read_errno));
+  else if (r->why[0])
+    rc = bad(path, r->line, "%s", r->why);
+  fclose(r->f);
+  free(r);
   return rc;
 }
 

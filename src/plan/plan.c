@@ -26,6 +26,7 @@
 #include "plan/plan.h"
 
 #include "io/io.h"
+#include "plan/plan_impl.h"
 #include "scene/scene.h"
 #include "sim/sim.h"
 
@@ -67,6 +68,16 @@ static int planned_target(const nh_scene *s, int *target, double aim[3]) {
                     "nothing to aim",
                     s->file);
   return NH_OK;
+}
+
+/* The target whose tool has a bevel (the first such), if any: 1 and *target. */
+static int steered_target(const nh_scene *s, int *target) {
+  for (int i = 0; i < s->n_targets; i++)
+    if (s->tools[s->targets[i].tool].bevel > 0) {
+      *target = i;
+      return 1;
+    }
+  return 0;
 }
 
 /* One run of the procedure aimed at `aim`, outputs in `dir`: its miss. */
@@ -146,8 +157,20 @@ static void broyden_update(double J[9], const nh_plan_run_record *prev,
     for (int j = 0; j < 3; j++) J[3 * i + j] += (dm[i] - Jda[i]) * da[j] / ss;
 }
 
-static void put_vec(FILE *f, const double v[3]) {
+void nh_plan_put_vec(FILE *f, const double v[3]) {
   fprintf(f, "[%.17g, %.17g, %.17g]", v[0], v[1], v[2]);
+}
+
+int nh_plan_yaml_finish(FILE *f, char **text, const char *out) {
+  int failed = ferror(f);
+  if (fclose(f) != 0) failed = 1;
+  char path[NH_PATH_MAX + 16];
+  snprintf(path, sizeof path, "%s/plan.yaml", out);
+  int rc = failed || !*text ? NH_ERROR(NH_ERR_MEMORY, "out of memory: plan.yaml")
+                            : nh_write_text(path, *text);
+  free(*text);
+  *text = NULL;
+  return rc;
 }
 
 /* OUT/plan.yaml, composed in memory and written atomically. */
@@ -167,29 +190,22 @@ static int write_plan_yaml(const char *out, const char *scene_path, const nh_sce
              "# target's position at the last step of the run.\n");
   fprintf(f, "scene: %s\ntarget: %s\ntool: %s\ntarget_point: ", scene_path, g->name,
           s->tools[g->tool].name);
-  put_vec(f, g->point);
+  nh_plan_put_vec(f, g->point);
   fprintf(f, "\nentry: ");
-  put_vec(f, tool->entry);
+  nh_plan_put_vec(f, tool->entry);
   fprintf(f, "\ntolerance: %.17g\nmax_runs: %d\nconverged: %s\nruns: %d\ntime: %.3f\naim: ",
           o->tolerance, o->max_runs, converged ? "true" : "false", n_runs, seconds);
-  put_vec(f, runs[n_runs - 1].aim);
+  nh_plan_put_vec(f, runs[n_runs - 1].aim);
   fprintf(f, "\nmiss: %.17g\nfinal_run: run_%02d\niterations:\n", runs[n_runs - 1].distance,
           n_runs);
   for (int k = 0; k < n_runs; k++) {
     fprintf(f, "  - {run: %d, aim: ", k + 1);
-    put_vec(f, runs[k].aim);
+    nh_plan_put_vec(f, runs[k].aim);
     fprintf(f, ", miss_vector: ");
-    put_vec(f, runs[k].miss);
+    nh_plan_put_vec(f, runs[k].miss);
     fprintf(f, ", miss: %.17g, time: %.3f}\n", runs[k].distance, runs[k].seconds);
   }
-  int failed = ferror(f);
-  if (fclose(f) != 0) failed = 1;
-  char path[NH_PATH_MAX + 16];
-  snprintf(path, sizeof path, "%s/plan.yaml", out);
-  int rc = failed || !text ? NH_ERROR(NH_ERR_MEMORY, "out of memory: plan.yaml")
-                           : nh_write_text(path, text);
-  free(text);
-  return rc;
+  return nh_plan_yaml_finish(f, &text, out);
 }
 
 int nh_plan_run(const char *scene_path, int n_sets, const char *const *sets,
@@ -198,17 +214,27 @@ int nh_plan_run(const char *scene_path, int n_sets, const char *const *sets,
            "--tolerance: expected a length > 0 in m, got %g", o->tolerance);
   NH_CHECK(o->max_runs >= 1 && o->max_runs <= 99, NH_ERR_INPUT,
            "--max-runs: expected 1 to 99 runs, got %d", o->max_runs);
+  NH_CHECK(o->workers >= 0 && o->workers <= 64, NH_ERR_INPUT,
+           "--workers: expected 0 to 64 runs at once, got %d", o->workers);
   nh_scene *scene = NULL;
   NH_TRY(nh_scene_load(scene_path, n_sets, sets, &scene));
-  int target;
+  int target = -1;
   double aim[3];
-  int rc = planned_target(scene, &target, aim);
   char out[NH_PATH_MAX];
   if (o->out_dir)
     snprintf(out, sizeof out, "%s", o->out_dir);
   else
     snprintf(out, sizeof out, "out/%s-plan", scene->name);
-  if (!rc && strlen(out) > NH_PATH_MAX - 16) rc = NH_ERROR(NH_ERR_INPUT, "--out: path too long");
+  int rc = strlen(out) > NH_PATH_MAX - 16 ? NH_ERROR(NH_ERR_INPUT, "--out: path too long") : NH_OK;
+  /* a bevel-tip needle is steered: the steering planner (steer.c) */
+  int steer = steered_target(scene, &target);
+  if (!rc && steer) {
+    rc = nh_mkdir_p(out);
+    if (!rc) rc = nh_plan_steer(scene_path, n_sets, sets, scene, target, o, out);
+    nh_scene_destroy(&scene);
+    return rc;
+  }
+  if (!rc) rc = planned_target(scene, &target, aim);
   if (!rc) rc = nh_mkdir_p(out);
   nh_plan_run_record *runs = calloc((size_t)o->max_runs, sizeof *runs);
   if (!rc && !runs) rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: plan");

@@ -17,6 +17,8 @@ typedef struct {
   double tolerance;    /* m: stop when |miss| <= tolerance (> 0) */
   int max_runs;        /* at most this many runs of the procedure (>= 1) */
   int quiet;           /* no line per run on stdout */
+  int workers;         /* steering: candidate runs at once, as child processes (<= 1: one after
+                          another in this process) */
 } nh_plan_options;
 
 /* Compensate the scene `scene_path` (with the `--set` overrides

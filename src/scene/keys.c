@@ -5,12 +5,13 @@
  * this file reads its tables, so that
  *  - `needlehex keys` prints every key with its type, default, unit and
  *    notes (as deal.II's print_parameters), from the installed binary alone;
- *  - the reader refuses to accept a key the docs do not describe: check_keys
- *    (scene.c) asks nh_scene_keys_check for every key a section allows,
- *    before reading it, and an undocumented one is NH_ERR_INTERNAL naming
- *    the key and docs/scene.md. Every scene the tests read walks the
- *    sections it has, so a key added to the reader without its row fails
- *    the suite (tests/docs.py reads scenes that have every section).
+ *  - the reader refuses to accept a key the docs do not describe:
+ *    nh_read_keys (read.c) asks nh_scene_keys_check for every key of a
+ *    mapping's table (scene_impl.h), before reading it, and an undocumented
+ *    one is NH_ERR_INTERNAL naming the key and docs/scene.md. Every scene
+ *    the tests read walks the sections it has, so a key added to the
+ *    reader without its row fails the suite (tests/docs.py reads scenes
+ *    that have every section).
  *
  * Table rows. A row of a table whose header starts `| key |` is
  *   | `KEY`[, `.SIBLING` ...] | type | default | unit | notes |

@@ -1,6 +1,7 @@
 /* print.c — the summary `needlehex check` prints: what the scene will
  * model (domain, material, loads, tools and their planned motion, adapt,
- * outputs), with every value as read and resolved. */
+ * outputs), with every value as read and resolved, a function per
+ * section. */
 #include "scene/scene.h"
 
 #include <math.h>
@@ -96,8 +97,8 @@ static void print_tool(FILE *f, const nh_scene *s, int i) {
   }
 }
 
-void nh_scene_print(const nh_scene *s, void *stdio_file) {
-  FILE *f = stdio_file ? stdio_file : stdout;
+/* The scene, its clock and gravity. */
+static void print_time(FILE *f, const nh_scene *s) {
   fprintf(f, "scene     %s (%s)\n", s->name, s->file);
   fprintf(f, "time      %s, %d steps of %g s (end %g s)\n",
           s->time.mode == NH_MODE_STATIC ? "static" : "dynamic", s->time.steps, s->time.step,
@@ -105,6 +106,10 @@ void nh_scene_print(const nh_scene *s, void *stdio_file) {
   fprintf(f, "gravity   [%g, %g, %g] m/s^2", s->gravity[0], s->gravity[1], s->gravity[2]);
   print_schedule(f, &s->gravity_schedule);
   fprintf(f, "\n");
+}
+
+/* The tissue's domain and grid, and its label image. */
+static void print_domain(FILE *f, const nh_scene *s) {
   if (s->tissue.domain == NH_DOMAIN_BRAIN) {
     const double *z = s->tissue.brain_size, *c = s->tissue.brain_center;
     fprintf(f, "tissue    brain of size [%g, %g, %g] m centred at [%g, %g, %g] m\n", z[0], z[1],
@@ -135,6 +140,10 @@ void nh_scene_print(const nh_scene *s, void *stdio_file) {
             (s->tissue.grid[0] + 1) * (s->tissue.grid[1] + 1) * (s->tissue.grid[2] + 1));
   }
   if (s->tissue.labels_file[0]) fprintf(f, "labels    %s\n", s->tissue.labels_file);
+}
+
+/* The tissue's material(s), damping, buoyancy and skull. */
+static void print_material(FILE *f, const nh_scene *s) {
   fprintf(f, "material  E = %g Pa, nu = %g, density %g kg/m^3%s, %s hexahedra\n", s->tissue.young,
           s->tissue.poisson, s->tissue.density,
           s->tissue.n_materials ? " (voxels of other labels)" : "",
@@ -160,6 +169,10 @@ void nh_scene_print(const nh_scene *s, void *stdio_file) {
   }
   if (s->tissue.skull)
     fprintf(f, "skull     rigid, frictionless, CSF gap %g m\n", s->tissue.skull_gap);
+}
+
+/* Fixed regions, loads and tractions. */
+static void print_regions(FILE *f, const nh_scene *s) {
   fprintf(f, "fixed     %d region%s\n", s->tissue.n_fixed, s->tissue.n_fixed == 1 ? "" : "s");
   for (int i = 0; i < s->tissue.n_fixed; ++i) {
     const nh_fix *fx = &s->tissue.fix[i];
@@ -199,44 +212,52 @@ void nh_scene_print(const nh_scene *s, void *stdio_file) {
       fprintf(f, ", schedule of %d point%s", t->schedule.n, t->schedule.n == 1 ? "" : "s");
     fprintf(f, "\n");
   }
-  if (!s->adapt.enabled) {
+}
+
+/* Adaptivity: estimator, marking, template and limits. */
+static void print_adapt(FILE *f, const nh_scene *s) {
+  const nh_adapt_spec *a = &s->adapt;
+  if (!a->enabled) {
     fprintf(f, "adapt     no (the mesh stays fixed)\n");
-  } else {
-    fprintf(f, "adapt     estimator %s, every %d step%s; marking ",
-            s->adapt.estimator == NH_ESTIMATOR_GOAL ? "goal" : "spr", s->adapt.every,
-            s->adapt.every == 1 ? "" : "s");
-    if (s->adapt.strategy == NH_MARK_DORFLER)
-      fprintf(f, "dorfler, fraction %g of the total squared error\n", s->adapt.fraction);
-    else
-      fprintf(f, "max, theta %g of the largest error\n", s->adapt.theta);
-    fprintf(f, "          template %s\n", s->adapt.template_path);
-    fprintf(f, "          max_level %d, min_size ", s->adapt.max_level);
-    if (s->adapt.min_size > 0)
-      fprintf(f, "%g m", s->adapt.min_size);
+    return;
+  }
+  fprintf(f, "adapt     estimator %s, every %d step%s; marking ",
+          a->estimator == NH_ESTIMATOR_GOAL ? "goal" : "spr", a->every, a->every == 1 ? "" : "s");
+  if (a->strategy == NH_MARK_DORFLER)
+    fprintf(f, "dorfler, fraction %g of the total squared error\n", a->fraction);
+  else
+    fprintf(f, "max, theta %g of the largest error\n", a->theta);
+  fprintf(f, "          template %s\n", a->template_path);
+  fprintf(f, "          max_level %d, min_size ", a->max_level);
+  if (a->min_size > 0)
+    fprintf(f, "%g m", a->min_size);
+  else
+    fprintf(f, "none");
+  if (a->max_dofs > 0)
+    fprintf(f, ", max_dofs %d", a->max_dofs);
+  else
+    fprintf(f, ", max_dofs none");
+  fprintf(f, ", hanging nodes %s\n", a->hanging == NH_HANGING_LAGRANGE ? "lagrange" : "eliminate");
+  if (a->estimator == NH_ESTIMATOR_GOAL) {
+    fprintf(f, "          goal:");
+    for (int i = 0; i < a->n_goals; i++) {
+      int g = a->goal[i];
+      fprintf(f, " %s", g < s->n_probes ? s->probes[g].name : s->targets[g - s->n_probes].name);
+    }
+    fprintf(f, "; tolerance ");
+    if (a->tolerance > 0)
+      fprintf(f, "%g m", a->tolerance);
     else
       fprintf(f, "none");
-    if (s->adapt.max_dofs > 0)
-      fprintf(f, ", max_dofs %d", s->adapt.max_dofs);
-    else
-      fprintf(f, ", max_dofs none");
-    fprintf(f, ", hanging nodes %s\n",
-            s->adapt.hanging == NH_HANGING_LAGRANGE ? "lagrange" : "eliminate");
-    if (s->adapt.estimator == NH_ESTIMATOR_GOAL) {
-      fprintf(f, "          goal:");
-      for (int i = 0; i < s->adapt.n_goals; i++) {
-        int g = s->adapt.goal[i];
-        fprintf(f, " %s", g < s->n_probes ? s->probes[g].name : s->targets[g - s->n_probes].name);
-      }
-      fprintf(f, "; tolerance ");
-      if (s->adapt.tolerance > 0)
-        fprintf(f, "%g m", s->adapt.tolerance);
-      else
-        fprintf(f, "none");
-      fprintf(f, ", resolve %d, graded (2:1)\n", s->adapt.resolve);
-    }
-    if (s->adapt.coarsen > 0)
-      fprintf(f, "          coarsen below %g of the marking threshold\n", s->adapt.coarsen);
+    fprintf(f, ", resolve %d, separate duals every %d estimates, graded (2:1)\n", a->resolve,
+            a->separate_every);
   }
+  if (a->coarsen > 0)
+    fprintf(f, "          coarsen below %g of the marking threshold\n", a->coarsen);
+}
+
+/* The solver. */
+static void print_solver(FILE *f, const nh_scene *s) {
   fprintf(f, "solver    tolerance %g, at most %d iterations, ", s->solver.tolerance,
           s->solver.max_iterations);
   if (s->solver.threads > 0)
@@ -246,8 +267,10 @@ void nh_scene_print(const nh_scene *s, void *stdio_file) {
   fprintf(f, "refactor %s", s->solver.refactor == NH_REFACTOR_EVERY ? "every step" : "auto");
   if (s->solver.lazy_rotation > 0) fprintf(f, ", lazy tangents %g", s->solver.lazy_rotation);
   fputc('\n', f);
-  fprintf(f, "tools     %d\n", s->n_tools);
-  for (int i = 0; i < s->n_tools; ++i) print_tool(f, s, i);
+}
+
+/* Probes and targets. */
+static void print_points(FILE *f, const nh_scene *s) {
   fprintf(f, "probes    %d\n", s->n_probes);
   for (int i = 0; i < s->n_probes; ++i)
     fprintf(f, "          %s at [%g, %g, %g] m\n", s->probes[i].name, s->probes[i].point[0],
@@ -258,10 +281,41 @@ void nh_scene_print(const nh_scene *s, void *stdio_file) {
     fprintf(f, "          %s at [%g, %g, %g] m, distance to the tip of %s\n", t->name, t->point[0],
             t->point[1], t->point[2], s->tools[t->tool].name);
   }
+}
+
+/* The output folder and what goes into it. */
+static void print_output(FILE *f, const nh_scene *s) {
   if (s->output.every > 0)
     fprintf(f, "output    %s, a frame every %d step%s, hdf5 %s\n", s->output.dir, s->output.every,
             s->output.every == 1 ? "" : "s", s->output.hdf5 ? "yes" : "no");
   else
     fprintf(f, "output    %s, the last step only, hdf5 %s\n", s->output.dir,
             s->output.hdf5 ? "yes" : "no");
+  static const char *const how[] = {"auto", "linear", "nearest"};
+  const int n_field = s->output.displacement_field.n_at, n_warp = s->output.warped.n_at;
+  if (s->output.displacement_field.reference[0]) {
+    fprintf(f, "          displacement field on %s at", s->output.displacement_field.reference);
+    for (int k = 0; k < n_field; ++k) fprintf(f, " %g s,", s->output.displacement_field.at[k]);
+    fprintf(f, " the last step\n");
+  }
+  if (s->output.warped.image[0]) {
+    fprintf(f, "          warped %s (interpolation %s) at", s->output.warped.image,
+            how[s->output.warped.interpolation]);
+    for (int k = 0; k < n_warp; ++k) fprintf(f, " %g s,", s->output.warped.at[k]);
+    fprintf(f, " the last step\n");
+  }
+}
+
+void nh_scene_print(const nh_scene *s, void *stdio_file) {
+  FILE *f = stdio_file ? stdio_file : stdout;
+  print_time(f, s);
+  print_domain(f, s);
+  print_material(f, s);
+  print_regions(f, s);
+  print_adapt(f, s);
+  print_solver(f, s);
+  fprintf(f, "tools     %d\n", s->n_tools);
+  for (int i = 0; i < s->n_tools; ++i) print_tool(f, s, i);
+  print_points(f, s);
+  print_output(f, s);
 }

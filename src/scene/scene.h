@@ -24,6 +24,11 @@ typedef enum { NH_MODE_DYNAMIC = 0, NH_MODE_STATIC = 1 } nh_time_mode;
  * volume change; docs/theory.md §2b) or fully integrated (locks as ν → 0.5). */
 typedef enum { NH_FORMULATION_BBAR = 0, NH_FORMULATION_FULL = 1 } nh_formulation;
 
+/* How cells cut by an immersed domain's boundary are integrated
+ * (tissue.cut_cells, docs/theory.md §5c): scaled by their fill fraction φ,
+ * or by the finite cell quadrature over their tissue part. */
+typedef enum { NH_CUT_CELLS_SCALED = 0, NH_CUT_CELLS_INTEGRATED = 1 } nh_cut_cells;
+
 typedef enum {
   NH_REGION_BOX = 0,
   NH_REGION_SPHERE = 1,
@@ -144,6 +149,8 @@ typedef struct {
   double friction_static; /* tools[i].interaction.friction_static, static μ_s: the threshold
                              to start sliding (default friction, >= friction) */
   double friction_per_length; /* tools[i].interaction.friction_per_length, N/m (default 0, >= 0) */
+  double torsion_per_length;  /* tools[i].interaction.torsion_per_length, N·m/m: the channel's
+                                 torsional friction (default 0, >= 0; dynamic mode only) */
   double spacing; /* tools[i].interaction.spacing: path-point spacing, m (default 0: half the
                      local cell edge; >= 0) */
   double bevel;   /* tools[i].bevel.angle ψ, degrees (default 0: symmetric tip; in [0, 90)) */
@@ -193,14 +200,24 @@ typedef struct {
   nh_hanging_method hanging;       /* adapt.hanging: eliminate (default) | lagrange */
   nh_estimator estimator;          /* adapt.estimator: spr (default) | goal */
   int n_goals;                     /* goal: the embedded points adapt.goal names ... */
-  int goal[NH_MAX_GOALS];   /* ... as indices into probes, then targets (default: every target,
-                               else every probe) */
-  double tolerance;         /* adapt.tolerance, m, on each goal's estimate (>= 0; 0: none) */
-  int resolve;              /* adapt.resolve: re-solves of a step on its refined mesh (>= 0) */
-  double coarsen;           /* adapt.coarsen.fraction (0: no coarsening; in (0, 1)) */
-  char where[NH_WHERE_MAX]; /* "FILE:LINE: adapt" */
+  int goal[NH_MAX_GOALS]; /* ... as indices into probes, then targets (default: every target,
+                             else every probe) */
+  double tolerance;       /* adapt.tolerance, m, on each goal's estimate (>= 0; 0: none) */
+  int resolve;            /* adapt.resolve: re-solves of a step on its refined mesh (>= 0) */
+  int separate_every; /* adapt.separate_every: every N-th goal estimate solves each goal's duals,
+                         the others one combined dual (>= 1, default 1) */
+  double coarsen;     /* adapt.coarsen.fraction (0: no coarsening; in (0, 1)) */
+  char where[NH_WHERE_MAX];          /* "FILE:LINE: adapt" */
   char where_template[NH_WHERE_MAX]; /* "FILE:LINE: adapt.template" */
 } nh_adapt_spec;
+
+/* output.displacement_field.at, output.warped.at: at most this many times */
+#define NH_OUTPUT_AT_MAX 64
+typedef enum {
+  NH_INTERPOLATION_AUTO,
+  NH_INTERPOLATION_LINEAR,
+  NH_INTERPOLATION_NEAREST
+} nh_interpolation;
 
 typedef struct nh_scene {
   char file[NH_PATH_MAX]; /* the scene file as given */
@@ -209,6 +226,7 @@ typedef struct nh_scene {
   struct {
     nh_time_mode mode; /* time.mode: dynamic (default) | static */
     double step;       /* time.step, s (default 0.01) */
+    double end;        /* time.end, s, as given (0: not given; steps is what a run uses) */
     int steps; /* number of steps: time.steps, or round(time.end / time.step); default 100 */
   } time;
 
@@ -241,6 +259,7 @@ typedef struct nh_scene {
     double poisson; /* tissue.material.poisson (required, in (-1, 0.5)) */
     double density; /* tissue.material.density, kg/m³ (default 1000, > 0) */
     nh_formulation formulation; /* tissue.material.formulation: bbar (default) | full */
+    nh_cut_cells cut_cells;     /* tissue.cut_cells: scaled (default) | integrated */
     double damping_mass;        /* tissue.damping.mass (Rayleigh α, 1/s, default 0, >= 0) */
     double damping_stiffness;   /* tissue.damping.stiffness (Rayleigh β, s, default 0, >= 0) */
     /* tissue.buoyancy {before, after, schedule} (optional): the rest shape is the equilibrium
@@ -294,11 +313,35 @@ typedef struct nh_scene {
   int n_targets;
   nh_target *targets; /* targets: list of {name, point, tool} */
 
+  /* plan: what `needlehex plan` keeps a bevel-tip needle clear of (docs/cases.md, "Planning
+     the steering") */
+  struct {
+    int n_obstacles;
+    nh_region *obstacles;     /* plan.obstacles: list of {box | sphere | cylinder | label} */
+    double clearance;         /* plan.clearance, m: from the tool's axis to their surfaces (default
+                                 0.001, >= 0) */
+    double curvature;         /* plan.curvature, 1/m: the bicycle model's (default 0: estimated from
+                                 the wheelbase, then fitted to the plan's first run; >= 0) */
+    char where[NH_WHERE_MAX]; /* "FILE:LINE: plan" (empty without the section) */
+  } plan;
+
   struct {
     char dir[NH_PATH_MAX]; /* output.dir (default "out/<name>") */
     int every;             /* output.every: frame every N steps, 0 = last step only (default 1) */
     int hdf5;              /* output.hdf5: results.h5 + results.xdmf (default false) */
     int checkpoint;        /* output.checkpoint: a restart file every N steps, 0 = none (default) */
+    struct {
+      char reference[NH_PATH_MAX]; /* output.displacement_field.reference: a NIfTI image whose
+                                      voxel centres get the field (resolved; "" = none) */
+      int n_at;
+      double at[NH_OUTPUT_AT_MAX]; /* .at: times (s); the last step writes too */
+    } displacement_field;
+    struct {
+      char image[NH_PATH_MAX]; /* output.warped.image: the image to shift (resolved; "" = none) */
+      int n_at;
+      double at[NH_OUTPUT_AT_MAX];    /* .at: times (s); the last step writes too */
+      nh_interpolation interpolation; /* .interpolation: auto (default) | linear | nearest */
+    } warped;
   } output;
 
   char *yaml; /* the scene as run, overrides applied, as YAML text (owned) */
@@ -333,6 +376,12 @@ void nh_scene_gravity(const nh_scene *scene, double t, double g[3]);
 void nh_scene_tissue_gravity(const nh_scene *scene, double t, double g[3]);
 
 /* ---- trajectory planning (trajectory.c) ---- */
+/* The integral over [from, t] of the speed (spin = 0: the distance travelled
+ * along the direction, m) or of the spin (spin = 1: the base's turn about it,
+ * rad) of the tool's first n motion segments (n <= n_motion, untils
+ * resolved; at rest after them). The one definition of a tool's motion: the
+ * contact module moves the tools by it, symbolic untils are resolved by it. */
+double nh_scene_motion_integral(const nh_tool_spec *tool, int n, double from, double t, int spin);
 /* The distance tools[i]'s tip has travelled along its direction by time t,
  * from its first n motion segments (n <= n_motion; untils of those segments
  * resolved): a nested tool moves with its host until its release and by its

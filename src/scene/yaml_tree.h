@@ -3,9 +3,9 @@
  * A scene file is parsed with libyaml into nodes that are a mapping, a
  * sequence or a scalar, each remembering where it came from: the 1-based line
  * in the scene file, or the 1-based index of the `--set` override that put it
- * there. scene.c walks this tree to fill nh_scene and reports errors as
- * "FILE:LINE: KEY: ..." or "--set:K: KEY: ...". The tree can be written back
- * as YAML text (the scene as run).
+ * there. The section readers (scene_impl.h) walk this tree to fill nh_scene
+ * and report errors as "FILE:LINE: KEY: ..." or "--set:K: KEY: ...". The
+ * tree can be written back as YAML text (the scene as run).
  *
  * Errors are NH_ERR_INPUT with one message (or NH_ERR_MEMORY). */
 #ifndef NH_YAML_TREE_H

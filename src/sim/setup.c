@@ -196,18 +196,23 @@ static int nh_sim_load_vectors(nh_sim *s) {
 }
 
 /* The tissue's linear system (fixed DOFs and, under adapt.hanging:
- * eliminate, hanging nodes eliminated; under lagrange, their rows). */
-static int nh_sim_system_build(nh_sim *s) {
+ * eliminate, hanging nodes eliminated; under lagrange, their rows). After a
+ * mesh change (transfer: how adapt carried the fields) with factor reuse,
+ * the new system preconditions with the old one's factor until it
+ * factorises its own (solve/inherit.c). */
+static int nh_sim_system_build(nh_sim *s, const nh_node_transfer *transfer) {
   const nh_scene *sc = s->scene;
   const int lagrange = sc->adapt.hanging == NH_HANGING_LAGRANGE;
-  nh_system_destroy(&s->system);
+  nh_system *old = s->system;
+  s->system = NULL;
   int rc = nh_system_create(s->tissue, s->fixed, lagrange ? NULL : s->hanging, &s->system);
   if (rc == NH_ERR_INPUT)
-    return NH_ERROR(NH_ERR_INPUT, "%s: every node of the tissue is fixed: nothing to simulate",
-                    sc->tissue.where_fixed);
-  NH_TRY(rc);
-  if (lagrange) NH_TRY(nh_system_set_hanging_rows(s->system, s->hanging));
-  return NH_OK;
+    rc = NH_ERROR(NH_ERR_INPUT, "%s: every node of the tissue is fixed: nothing to simulate",
+                  sc->tissue.where_fixed);
+  if (!rc && lagrange) rc = nh_system_set_hanging_rows(s->system, s->hanging);
+  if (!rc && transfer && s->integrator.reuse) rc = nh_system_inherit(s->system, old, transfer);
+  nh_system_destroy(&old);
+  return rc;
 }
 
 int nh_sim_setup_mesh(nh_sim *s, int first) {
@@ -220,5 +225,5 @@ int nh_sim_setup_mesh(nh_sim *s, int first) {
   NH_TRY(nh_sim_load_vectors(s));
   NH_TRY(nh_sim_locate_points(s, first));
   if (!first && s->contact) NH_TRY(nh_contact_relocate(s->contact, s->mesh));
-  return nh_sim_system_build(s);
+  return nh_sim_system_build(s, first ? NULL : nh_adapt_last_transfer(s->adapt));
 }

@@ -79,7 +79,11 @@ static const char *const nh_step_columns[] = {"step",
                                               "skull_contacts",
                                               "skull_fx",
                                               "skull_fy",
-                                              "skull_fz"};
+                                              "skull_fz",
+                                              "constraint_newton",
+                                              "constraint_sweeps",
+                                              "constraint_method",
+                                              "load_steps"};
 static const char *const nh_probe_columns[] = {"step", "time", "name", "x",  "y",
                                                "z",    "ux",   "uy",   "uz", "error_estimate"};
 
@@ -92,6 +96,7 @@ void nh_sim_destroy(nh_sim **sim) {
   if (!sim || !*sim) return;
   nh_sim *s = *sim;
   nh_sim_tools_destroy(s);
+  nh_sim_patient_close(s);
   nh_system_destroy(&s->system);
   nh_tissue_destroy(&s->tissue);
   nh_mesh_destroy(&s->mesh);
@@ -361,21 +366,29 @@ static int nh_write_probe_rows(nh_sim *s) {
 /* Is `name` a file a run writes (docs/outputs.md): the tables, collections,
  * frames NAME_NNNNNN.vtu and results_NNNNNN.h5, results.h5/.xdmf, the
  * checkpoint, scene.yaml, a moved-aside results.h5.damaged*, a *.tmp? */
-static int nh_is_run_output(const char *name) {
-  static const char *const fixed[] = {"scene.yaml",   "steps.csv",      "probes.csv",
-                                      "targets.csv",  "tools.csv",      "results.h5",
-                                      "results.xdmf", "checkpoint.nhc", NULL};
+static int nh_is_run_output(const nh_scene *sc, const char *name) {
+  static const char *const fixed[] = {
+      "scene.yaml", "steps.csv",    "probes.csv",     "targets.csv",      "tools.csv",
+      "results.h5", "results.xdmf", "checkpoint.nhc", "targets.mrk.json", "tissue_mask.nii.gz",
+      NULL};
   for (int i = 0; fixed[i]; i++)
     if (!strcmp(name, fixed[i])) return 1;
   size_t n = strlen(name);
+  for (int k = 0; k < sc->n_tools; k++) /* <tool>.mrk.json */
+    if (n == strlen(sc->tools[k].name) + 9 && !strncmp(name, sc->tools[k].name, n - 9) &&
+        !strcmp(name + n - 9, ".mrk.json"))
+      return 1;
   if (!strncmp(name, "results.h5.damaged", 18)) return 1;
   if (n > 4 && (!strcmp(name + n - 4, ".pvd") || !strcmp(name + n - 4, ".tmp"))) return 1;
-  /* PREFIX_NNNNNN.vtu, results_NNNNNN.h5 */
+  /* PREFIX_NNNNNN.vtu, results_NNNNNN.h5, displacement_ and warped_NNNNNN.nii.gz */
   const char *us = strrchr(name, '_');
   if (!us || us == name) return 0;
   size_t d = strspn(us + 1, "0123456789");
-  return d >= 6 && (!strcmp(us + 1 + d, ".vtu") ||
-                    (!strcmp(us + 1 + d, ".h5") && !strncmp(name, "results_", 8)));
+  const char *ext = us + 1 + d;
+  return d >= 6 &&
+         (!strcmp(ext, ".vtu") || (!strcmp(ext, ".h5") && !strncmp(name, "results_", 8)) ||
+          (!strcmp(ext, ".nii.gz") &&
+           (!strncmp(name, "displacement_", 13) || !strncmp(name, "warped_", 7))));
 }
 
 /* A fresh run's folder: refuse one holding a previous run's outputs, or
@@ -387,7 +400,7 @@ static int nh_claim_folder(const nh_sim *s) {
   int count = 0, rc = NH_OK;
   char first[256] = "";
   for (struct dirent *e; (e = readdir(d)) && !rc;) {
-    if (!nh_is_run_output(e->d_name)) continue;
+    if (!nh_is_run_output(s->scene, e->d_name)) continue;
     if (!count++) snprintf(first, sizeof first, "%s", e->d_name);
     if (s->options.overwrite) {
       char path[NH_PATH_MAX + 300];
@@ -440,7 +453,11 @@ static int nh_open_outputs(nh_sim *s) {
   const char *dir = sc->output.dir;
   NH_TRY(nh_mkdir_p(dir));
   snprintf(path, sizeof path, "%s/scene.yaml", dir);
-  NH_TRY(nh_write_text(path, sc->yaml ? sc->yaml : ""));
+  char *text;
+  NH_TRY(nh_scene_text_absolute(sc, &text));
+  int rc = nh_write_text(path, text);
+  free(text);
+  NH_TRY(rc);
   snprintf(path, sizeof path, "%s/steps.csv", dir);
   NH_TRY(nh_csv_create(path, (int)(sizeof nh_step_columns / sizeof *nh_step_columns),
                        nh_step_columns, &s->steps_csv));
@@ -507,6 +524,7 @@ static int nh_sim_build(nh_sim *s) {
   s->max_goal_point = -1;
   NH_TRY(nh_sim_setup_mesh(s, 1));
   NH_TRY(nh_sim_tools_build(s));
+  NH_TRY(nh_sim_patient_open(s));
   s->integrator =
       (nh_integrator){.dt = sc->time.step,
                       .alpha = sc->tissue.damping_mass,
@@ -597,8 +615,8 @@ static int nh_sim_estimate(nh_sim *s) {
     return nh_adapt_estimate(s->adapt, s->mesh, s->tissue, s->u, s->hanging, &s->eta, &s->eta_rel);
   const double h = sc->time.step;
   double scale = sc->time.mode == NH_MODE_STATIC ? 1.0 : h * sc->tissue.damping_stiffness + h * h;
-  return nh_adapt_estimate_goal(s->adapt, s->system, scale, s->mesh, s->tissue, s->u, s->hanging,
-                                &s->eta, &s->eta_rel);
+  return nh_adapt_estimate_goal(s->adapt, s->system, nh_contact_rows(s->contact), scale, s->mesh,
+                                s->tissue, s->u, s->hanging, &s->eta, &s->eta_rel);
 }
 
 /* Static mode: a step that does not converge is solved again from its
@@ -630,6 +648,7 @@ static int nh_sim_solve_static(nh_sim *s, double t_new, nh_step_stats *st) {
       sum.residual = one.residual;
     }
     sum.t_factor_reference = sum.factorised > 0 ? sum.t_factor / sum.factorised : 0.0;
+    sum.load_steps = parts;
     *st = sum;
     if (rc != NH_ERR_NUMERIC || depth == NH_STATIC_SPLITS) return rc;
     /* back to the step's start, and again in twice as many load steps */
@@ -822,6 +841,7 @@ static int nh_sim_write_solution(nh_sim *s) {
   int due = (sc->output.every > 0 && s->step % sc->output.every == 0) || s->step == sc->time.steps;
   NH_TRY_OUTPUT(nh_write_probe_rows(s), s->step);
   if (due && s->last_frame != s->step) NH_TRY_OUTPUT(nh_write_frame(s), s->step);
+  NH_TRY_OUTPUT(nh_sim_patient_write(s), s->step);
   return NH_OK;
 }
 
@@ -911,7 +931,11 @@ static int nh_sim_write_row(nh_sim *s, const nh_sim_record *r, double t_end) {
                         r->cc.skull_contacts,
                         r->cc.skull_force[0],
                         r->cc.skull_force[1],
-                        r->cc.skull_force[2]};
+                        r->cc.skull_force[2],
+                        cs->mcp.newton_steps,
+                        cs->mcp.sweeps,
+                        cs->mcp.method,
+                        st->load_steps > 0 ? st->load_steps : 1};
   enum { NH_STEP_COLUMNS = sizeof nh_step_columns / sizeof *nh_step_columns };
   _Static_assert(sizeof row / sizeof *row == NH_STEP_COLUMNS, "one value per steps.csv column");
   if (!s->options.dry_run)
@@ -960,8 +984,13 @@ int nh_sim_step(nh_sim *s) {
   nh_sim_adapt_mesh(s, &r);
   double t3 = nh_time_now();
   s->t_adapt = r.t_estimate + (t3 - t2);
-  /* A checkpoint holds the state the next step starts from: after refinement. */
-  if (nh_sim_checkpoint_due(s, &r)) NH_TRY_OUTPUT(nh_checkpoint_write(s), s->step);
+  /* A checkpoint holds the state the next step starts from: after
+   * refinement; not the old mesh's factor (solve/inherit.c), so the run
+   * drops it there too and continues as a restarted one would. */
+  if (nh_sim_checkpoint_due(s, &r)) {
+    nh_system_inherit_drop(s->system);
+    NH_TRY_OUTPUT(nh_checkpoint_write(s), s->step);
+  }
   double t4 = nh_time_now(); /* the checkpoint counts as output */
   r.t_output = t2 - t1 + (t4 - t3);
   NH_TRY(nh_sim_write_row(s, &r, t4));
@@ -1007,13 +1036,16 @@ int nh_sim_run(nh_sim *s) {
         snprintf(when, sizeof when, "during step %d, after", s->step + 1);
       else
         snprintf(when, sizeof when, "after");
-      /* The scene as run (overrides applied) is DIR/scene.yaml: the command
-       * continues exactly this run, whatever --set made it. */
+      /* The scene as run (overrides applied, files by absolute path) is
+       * DIR/scene.yaml: the command continues exactly this run, whatever
+       * --set made it, from any folder (DIR absolute too). */
+      char abs[2 * NH_PATH_MAX];
+      const char *dir = nh_path_absolute(s->scene->output.dir, abs, sizeof abs);
       rc = NH_ERROR(NH_ERR_INTERRUPTED,
                     "stopped by signal %d %s step %d of %d (t = %g s); the last frame and a "
                     "checkpoint are in %s; continue with: needlehex run %s/scene.yaml --restart %s",
                     nh_stop_requested(), when, s->step, s->scene->time.steps, s->time,
-                    s->scene->output.dir, s->scene->output.dir, s->scene->output.dir);
+                    s->scene->output.dir, dir, dir);
       break;
     }
   }

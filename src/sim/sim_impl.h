@@ -72,7 +72,12 @@ struct nh_sim {
   /* outputs */
   nh_csv *steps_csv, *probes_csv;
   nh_pvd *tissue_pvd, *points_pvd;
-  nh_h5 *h5; /* results.h5 when output.hdf5 */
+  nh_h5 *h5;                 /* results.h5 when output.hdf5 */
+  nh_image *field_reference; /* output.displacement_field.reference (header; NULL: none) */
+  nh_image *warp_image;      /* output.warped.image (NULL: none) and its voxel values */
+  double *warp_values;
+  int warp_nearest; /* resampled by the nearest label, else trilinear */
+  int mask_written; /* tissue_mask.nii.gz written */
   int last_frame;
   nh_progress progress;
   unsigned char *restore_tools; /* --restart: the checkpoint's tool state until applied */
@@ -100,6 +105,13 @@ typedef struct {
   size_t solver_size;
 } nh_checkpoint;
 
+/* The scene as run (sc->yaml) with every file it names (tissue mask,
+ * surface and labels files, adapt.template when a path) replaced by the
+ * absolute path of the file the reader resolved, as a double-quoted
+ * string: what DIR/scene.yaml holds, so that the printed continue command
+ * works from any folder, and what a checkpoint's scene hash is taken of
+ * (docs/outputs.md, "Restart"). Output *out (the caller frees). */
+int nh_scene_text_absolute(const nh_scene *sc, char **out);
 /* DIR/checkpoint.nhc */
 void nh_checkpoint_path(const char *dir, char *path, size_t size);
 /* Write the run's state to <output.dir>/checkpoint.nhc, atomically. */
@@ -151,5 +163,16 @@ void nh_sim_tools_destroy(nh_sim *sim);
 int nh_sim_tools_open(nh_sim *sim);
 int nh_sim_tools_rows(nh_sim *sim);
 int nh_sim_tools_frame(nh_sim *sim);
+
+/* ---- outputs on the patient's images (sim/patient.c) ---- */
+/* Read the images output.displacement_field and output.warped name (at
+ * creation: a bad one stops the run before its first step). Fails as
+ * nh_image_read. */
+int nh_sim_patient_open(nh_sim *sim);
+void nh_sim_patient_close(nh_sim *sim);
+/* This step's displacement field and warped image when one of their times
+ * falls in it or it is the last; at the last step the tools' axes and the
+ * targets as Slicer markups. Fails with NH_ERR_IO, NH_ERR_MEMORY. */
+int nh_sim_patient_write(nh_sim *sim);
 
 #endif

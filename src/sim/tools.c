@@ -11,18 +11,22 @@
 
 static const char *const nh_tool_columns[] = {"step",          "time",  "name",  "tip_x",
                                               "tip_y",         "tip_z", "depth", "axial_force",
-                                              "lateral_force", "state"};
+                                              "lateral_force", "state", "twist"};
 static const char *const nh_target_columns[] = {
     "step", "time", "name", "x", "y", "z", "distance", "error_estimate", "distance_error_estimate"};
 
+/* The tools' twist is written (tools.csv `twist`, the HDF5 series'
+ * component, the frames' point field) when a tool's channel resists its
+ * spin: without it the twist is 0 to round-off (docs/outputs.md). */
+static int nh_twist_written(const nh_scene *sc) {
+  for (int k = 0; k < sc->n_tools; k++)
+    if (sc->tools[k].torsion_per_length > 0) return 1;
+  return 0;
+}
+
 /* How far the tool's motion has advanced it along its axis at time t. */
 static double nh_tool_advance(const nh_tool_spec *tool, double t) {
-  double p = 0.0, start = 0.0;
-  for (int k = 0; k < tool->n_motion && start < t; k++) {
-    p += tool->motion[k].speed * (fmin(t, tool->motion[k].until) - start);
-    start = tool->motion[k].until;
-  }
-  return p;
+  return nh_scene_motion_integral(tool, tool->n_motion, 0.0, t, 0);
 }
 
 /* A tool that travels more than a cell per step jumps over the tissue its
@@ -102,8 +106,9 @@ int nh_sim_tools_open(nh_sim *s) {
   const int resume = s->options.restart_dir != NULL; /* keep the rows and frames <= step */
   if (sc->n_tools > 0) {
     snprintf(path, sizeof path, "%s/tools.csv", sc->output.dir);
-    NH_TRY(resume ? nh_csv_resume(path, 10, nh_tool_columns, s->step, &s->tools_csv)
-                  : nh_csv_create(path, 10, nh_tool_columns, &s->tools_csv));
+    const int nc = nh_twist_written(sc) ? 11 : 10;
+    NH_TRY(resume ? nh_csv_resume(path, nc, nh_tool_columns, s->step, &s->tools_csv)
+                  : nh_csv_create(path, nc, nh_tool_columns, &s->tools_csv));
     for (int k = 0; k < sc->n_tools; k++) {
       snprintf(path, sizeof path, "%s/%s.pvd", sc->output.dir, sc->tools[k].name);
       NH_TRY(resume ? nh_pvd_resume(sc->output.dir, sc->tools[k].name, sc->time.step, s->step,
@@ -125,25 +130,32 @@ int nh_sim_tools_rows(nh_sim *s) {
   const nh_scene *sc = s->scene;
   int rc = NH_OK;
   if (sc->n_tools > 0) {
-    double *vals = malloc(sizeof(double) * 7 * (size_t)sc->n_tools);
-    const char **names = malloc(sizeof(char *) * (size_t)sc->n_tools);
+    const int twist = nh_twist_written(sc), nv = twist ? 8 : 7;
+    double *vals = nh_calloc((size_t)nv * (size_t)sc->n_tools, sizeof *vals);
+    const char **names = nh_calloc((size_t)sc->n_tools, sizeof *names);
     if (!vals || !names) rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: tool rows");
     for (int k = 0; k < sc->n_tools && !rc; k++) {
       nh_tool_report r;
       nh_contact_report(s->contact, k, &r);
-      rc = nh_csv_row(s->tools_csv, "%d,%.17g,%s,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%s", s->step,
-                      s->time, sc->tools[k].name, r.tip[0], r.tip[1], r.tip[2], r.depth,
-                      r.axial_force, r.lateral_force, nh_tool_state_name(r.state));
-      double *v = vals + 7 * k;
+      const double tw = twist ? nh_beam_twist(nh_contact_beam(s->contact, k), NULL) : 0.0;
+      rc = twist ? nh_csv_row(s->tools_csv,
+                              "%d,%.17g,%s,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%s,%.17g", s->step,
+                              s->time, sc->tools[k].name, r.tip[0], r.tip[1], r.tip[2], r.depth,
+                              r.axial_force, r.lateral_force, nh_tool_state_name(r.state), tw)
+                 : nh_csv_row(s->tools_csv, "%d,%.17g,%s,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%s",
+                              s->step, s->time, sc->tools[k].name, r.tip[0], r.tip[1], r.tip[2],
+                              r.depth, r.axial_force, r.lateral_force, nh_tool_state_name(r.state));
+      double *v = vals + nv * k;
       v[0] = r.tip[0], v[1] = r.tip[1], v[2] = r.tip[2], v[3] = r.depth;
       v[4] = r.axial_force, v[5] = r.lateral_force, v[6] = r.state;
+      if (twist) v[7] = tw;
       names[k] = sc->tools[k].name;
     }
     static const char *const comps[] = {"tip_x",       "tip_y",         "tip_z", "depth",
-                                        "axial_force", "lateral_force", "state"};
+                                        "axial_force", "lateral_force", "state", "twist"};
     if (!rc && s->h5)
-      rc =
-          nh_h5_append_series(s->h5, "tools", s->step, s->time, sc->n_tools, names, 7, comps, vals);
+      rc = nh_h5_append_series(s->h5, "tools", s->step, s->time, sc->n_tools, names, nv, comps,
+                               vals);
     free(vals);
     free(names);
   }
@@ -185,8 +197,8 @@ int nh_sim_tools_frame(nh_sim *s) {
     /* nn - 1 two-node VTK_LINE cells, base to tip (meshio drops poly-lines) */
     int *conn = nh_calloc(2 * (size_t)nn, sizeof *conn), *off = nh_calloc((size_t)nn, sizeof *off);
     double *f = nh_calloc(3 * (size_t)nn, sizeof *f), *vel = nh_calloc(3 * (size_t)nn, sizeof *vel);
-    double *arc = nh_calloc((size_t)nn, sizeof *arc);
-    if (!conn || !off || !f || !vel || !arc)
+    double *arc = nh_calloc((size_t)nn, sizeof *arc), *twist = nh_calloc((size_t)nn, sizeof *twist);
+    if (!conn || !off || !f || !vel || !arc || !twist)
       rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: tool frame");
     if (!rc) {
       const double *v = nh_beam_velocities(b);
@@ -199,20 +211,22 @@ int nh_sim_tools_frame(nh_sim *s) {
         arc[i] = nh_beam_length(b) * i / (nn - 1);
         for (int c = 0; c < 3; c++) vel[3 * i + c] = v[6 * i + c];
       }
-      const nh_field pf[3] = {{"constraint_force", 3, f, "N"},
+      nh_beam_twist(b, twist);
+      const nh_field pf[4] = {{"constraint_force", 3, f, "N"},
                               {"velocity", 3, vel, "m/s"},
-                              {"arc_length", 1, arc, "m"}};
+                              {"arc_length", 1, arc, "m"},
+                              {"twist", 1, twist, "rad"}};
       const nh_frame frame = {.n_points = nn,
                               .points = nh_beam_positions(b),
                               .n_cells = nn - 1,
                               .connectivity = conn,
                               .offsets = off,
                               .type = NH_VTK_LINE,
-                              .n_point_fields = 3,
+                              .n_point_fields = nh_twist_written(s->scene) ? 4 : 3,
                               .point_fields = pf};
       rc = nh_pvd_write_frame(s->tool_pvd[k], s->step, s->time, &frame);
     }
-    free(conn), free(off), free(f), free(vel), free(arc);
+    free(conn), free(off), free(f), free(vel), free(arc), free(twist);
   }
   return rc;
 }

@@ -50,6 +50,12 @@ void nh_system_set_lazy(nh_system *s, double tolerance) {
   s->lazy_tolerance = tolerance;
 }
 
+void nh_system_set_tangent(nh_system *s, nh_tangent tangent) {
+  int consistent = tangent == NH_TANGENT_CONSISTENT;
+  if (consistent != s->consistent) s->a_valid = 0; /* every tangent changes */
+  s->consistent = consistent;
+}
+
 int nh_system_lazy_updates(const nh_system *s) {
   return s->lazy_updates;
 }
@@ -95,13 +101,26 @@ static void nh_scatter_leaf(const nh_system *s, int l, const double *Ae, double 
 }
 
 /* δ = max(‖R − R̃‖_F, ‖C − C̃‖_F) of two frames. */
-static double nh_frame_change(const double a[18], const double b[18]) {
+static double nh_frame_change(const double a[NH_HEX_FRAME], const double b[NH_HEX_FRAME]) {
   double r = 0.0, c = 0.0;
   for (int i = 0; i < 9; i++) {
-    r += (a[i] - b[i]) * (a[i] - b[i]);
-    c += (a[9 + i] - b[9 + i]) * (a[9 + i] - b[9 + i]);
+    r += (a[NH_FRAME_R + i] - b[NH_FRAME_R + i]) * (a[NH_FRAME_R + i] - b[NH_FRAME_R + i]);
+    c += (a[NH_FRAME_COF + i] - b[NH_FRAME_COF + i]) * (a[NH_FRAME_COF + i] - b[NH_FRAME_COF + i]);
   }
   return sqrt(fmax(r, c));
+}
+
+/* The element matrix K split for A: K ← its symmetric part ½ (K + Kᵀ), and
+ * (skew != NULL) skew ← the skew-symmetric part ½ (K − Kᵀ). */
+static void nh_split_symmetric(double K[576], double *skew) {
+  for (int r = 0; r < 24; r++) {
+    if (skew) skew[25 * r] = 0.0;
+    for (int c = r + 1; c < 24; c++) {
+      double a = K[24 * r + c], b = K[24 * c + r], m = 0.5 * (a + b), k = 0.5 * (a - b);
+      K[24 * r + c] = K[24 * c + r] = m;
+      if (skew) skew[24 * r + c] = k, skew[24 * c + r] = -k;
+    }
+  }
 }
 
 /* A parallel region costs tens of µs (far more when cores are shared): only
@@ -131,10 +150,12 @@ void nh_system_assemble(nh_system *s, const double *u, const double *v, double c
     for (int k = lo; k < hi; k++) {
       int l = s->colour_leaf[k], c = m->leaves[l];
       const int *e = m->cells + 8 * c;
-      double f[24], *now = s->frame_new + 18 * (size_t)l, *old = s->frame + 18 * (size_t)l;
+      double f[24], *now = s->frame_new + NH_HEX_FRAME * (size_t)l,
+                    *old = s->frame + NH_HEX_FRAME * (size_t)l;
       nh_tissue_element_force(t, c, u, f, now);
+      if (!s->consistent) nh_hex_frame_corotational(now);
       int update = fresh || (tol > 0.0 ? nh_frame_change(now, old) > tol
-                                       : memcmp(now, old, 18 * sizeof(double)) != 0);
+                                       : memcmp(now, old, NH_HEX_FRAME * sizeof(double)) != 0);
       s->updated[l] = (unsigned char)update;
       for (int a = 0; a < 8; a++)
         for (int i = 0; i < 3; i++) f_int[3 * e[a] + i] += f[3 * a + i];
@@ -167,6 +188,7 @@ void nh_system_assemble(nh_system *s, const double *u, const double *v, double c
   const int full = fresh || tol == 0.0 || 2 * count > m->n_leaves;
   double *Ax = s->A->x;
   if (full) memset(Ax, 0, sizeof(double) * ((int *)s->A->p)[s->n_free]);
+  if (full && s->skew) memset(s->skew, 0, sizeof(double) * ((int *)s->A->p)[s->n_free]);
   for (int colour = 0; colour <= s->n_colours; colour++) {
     if (nh_stop_requested()) {
       s->a_valid = 0;
@@ -178,11 +200,12 @@ void nh_system_assemble(nh_system *s, const double *u, const double *v, double c
 #pragma omp parallel for num_threads(nt) schedule(static) if (parallel)
     for (int k = lo; k < hi; k++) {
       int l = s->colour_leaf[k], c = m->leaves[l];
-      double *frame = s->frame + 18 * (size_t)l, *now = s->frame_new + 18 * (size_t)l;
+      double *frame = s->frame + NH_HEX_FRAME * (size_t)l,
+             *now = s->frame_new + NH_HEX_FRAME * (size_t)l;
       if (!full && !s->updated[l]) continue;
-      double K[576];
+      double K[576], N[576];
       if (full) {
-        if (s->updated[l]) memcpy(frame, now, 18 * sizeof(double));
+        if (s->updated[l]) memcpy(frame, now, NH_HEX_FRAME * sizeof(double));
         /* Aₑ = cK Kₑ + cM Mₑ, Mₑ the lumped mass ρ φ Vₑ / 8 per corner. */
         nh_tissue_element_tangent(t, c, frame, K);
         double me[8];
@@ -194,9 +217,11 @@ void nh_system_assemble(nh_system *s, const double *u, const double *v, double c
         nh_tissue_element_tangent(t, c, now, K);
         nh_tissue_element_tangent(t, c, frame, K_old);
         for (int r = 0; r < 576; r++) K[r] = cK * (K[r] - K_old[r]);
-        memcpy(frame, now, 18 * sizeof(double));
+        memcpy(frame, now, NH_HEX_FRAME * sizeof(double));
       }
+      if (s->consistent) nh_split_symmetric(K, s->skew ? N : NULL);
       nh_scatter_leaf(s, l, K, Ax);
+      if (s->consistent && s->skew) nh_scatter_leaf(s, l, N, s->skew);
     }
   }
   s->a_valid = 1;

@@ -33,6 +33,7 @@ int nh_system_factor(nh_system *s) {
   if (!ok || s->cm.status < CHOLMOD_OK)
     return NH_ERROR(NH_ERR_NUMERIC, "CHOLMOD factorisation failed (status %d)", s->cm.status);
   s->factor_current = 1;
+  nh_inherit_free(s); /* the system's own factor from now on */
   memcpy(s->u_factored, s->u_assembled, sizeof(double) * 3 * (size_t)s->n_nodes);
   memcpy(s->c_factored, s->c_assembled, sizeof s->c_factored);
   s->factor_age = 0;
@@ -41,6 +42,7 @@ int nh_system_factor(nh_system *s) {
 }
 
 int nh_system_solve(nh_system *s, const double *b, double *x) {
+  if (!s->L && s->inh) return nh_inherit_apply(s, b, x); /* the preconditioner (inherit.c) */
   if (!s->B) {
     s->B = cholmod_allocate_dense((size_t)s->n_free, 1, (size_t)s->n_free, CHOLMOD_REAL, &s->cm);
     if (!s->B) return NH_ERROR(NH_ERR_MEMORY, "out of memory: solve workspace");
@@ -55,6 +57,10 @@ int nh_system_solve(nh_system *s, const double *b, double *x) {
 int nh_system_solve_many(nh_system *s, int ncol, const double *b, double *x) {
   if (ncol <= 0) return NH_OK;
   const size_t n = (size_t)s->n_free;
+  if (!s->L && s->inh) {
+    for (int c = 0; c < ncol; c++) NH_TRY(nh_inherit_apply(s, b + n * c, x + n * c));
+    return NH_OK;
+  }
   cholmod_dense *B = cholmod_allocate_dense(n, (size_t)ncol, n, CHOLMOD_REAL, &s->cm);
   if (!B) return NH_ERROR(NH_ERR_MEMORY, "out of memory: %d right-hand sides", ncol);
   memcpy(B->x, b, sizeof(double) * n * (size_t)ncol);

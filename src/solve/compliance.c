@@ -459,6 +459,7 @@ static int nh_compliance_add_supernodal(nh_system *s, cholmod_sparse *Jt, double
 }
 
 int nh_system_compliance_add(nh_system *s, cholmod_sparse *Jt, double *W) {
+  if (!s->L && s->inh) return nh_inherit_compliance_add(s, Jt, W); /* W₀ = J B Jᵀ */
   if (s->L->is_super) return nh_compliance_add_supernodal(s, Jt, W);
   return nh_system_compliance_add_spsolve(s, Jt, W);
 }
@@ -533,4 +534,83 @@ void nh_system_add_reactions(const nh_system *s, double *b) {
   const double *Jx = s->Jt->x;
   for (int j = 0; j < s->n_rows; j++)
     for (int p = Jp[j]; p < Jp[j + 1]; p++) b[Ji[p]] += Jx[p] * s->lambda_total[j];
+}
+
+/* The dual of a constrained step (solve.h): the active rows' tissue parts
+ * compacted into a row set of their own, W of it, and the pivoted Cholesky
+ * factor of D W D (D = diag(W)^−½) for the multipliers. */
+int nh_system_solve_rows(nh_system *s, const nh_rows *rows, const unsigned char *active, int ncol,
+                         const double *b, double *x, int *n_used) {
+  const int n = s->n_free;
+  if (n_used) *n_used = 0;
+  NH_TRY(nh_system_solve_many(s, ncol, b, x));
+  int m = 0;
+  for (int i = 0; rows && i < rows->m; i++) m += !active || active[i];
+  if (m == 0 || ncol <= 0) return NH_OK;
+  nh_rows sub = {.m = m, .cap = m};
+  sub.node = malloc(sizeof(int) * 8 * (size_t)m);
+  sub.N = malloc(sizeof(double) * 8 * (size_t)m);
+  sub.dir = malloc(sizeof(double) * 3 * (size_t)m);
+  int *mark = malloc(sizeof(int) * (size_t)(n ? n : 1)), *piv = malloc(sizeof(int) * (size_t)m);
+  double *W = calloc((size_t)m * (size_t)m, sizeof(double));
+  double *d = malloc(sizeof(double) * (size_t)m);
+  double *mu = malloc(sizeof(double) * (size_t)m * (size_t)ncol);
+  double *c = malloc(sizeof(double) * (size_t)m * (size_t)ncol);
+  double *f = malloc(sizeof(double) * (size_t)n * (size_t)ncol);
+  double *y = malloc(sizeof(double) * (size_t)n * (size_t)ncol);
+  cholmod_sparse *Jt = NULL;
+  int rc = sub.node && sub.N && sub.dir && mark && piv && W && d && mu && c && f && y
+               ? NH_OK
+               : NH_ERROR(NH_ERR_MEMORY, "out of memory: constrained dual (%d rows)", m);
+  if (!rc) {
+    for (int i = 0, k = 0; i < rows->m; i++) {
+      if (active && !active[i]) continue;
+      memcpy(sub.node + 8 * k, rows->node + 8 * i, 8 * sizeof(int));
+      memcpy(sub.N + 8 * k, rows->N + 8 * i, 8 * sizeof(double));
+      memcpy(sub.dir + 3 * k, rows->dir + 3 * i, 3 * sizeof(double));
+      k++;
+    }
+    for (int i = 0; i < n; i++) mark[i] = -1;
+    Jt = nh_rows_tissue_jt(s, &sub, mark);
+    if (!Jt) rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: constrained dual (%d rows)", m);
+  }
+  if (!rc) rc = nh_system_compliance_add(s, Jt, W);
+  if (!rc) {
+    const int *Jp = Jt->p, *Ji = Jt->i;
+    const double *Jx = Jt->x;
+    for (int j = 0; j < m; j++) {
+      double w = W[(size_t)j * m + j];
+      d[j] = w > 0.0 ? 1.0 / sqrt(w) : 0.0; /* a row without free DOFs: dropped */
+    }
+    for (int j = 0; j < m; j++)
+      for (int i = 0; i < m; i++) W[(size_t)j * m + i] *= d[i] * d[j];
+    for (int q = 0; q < ncol; q++) /* D J A⁻¹ b */
+      for (int j = 0; j < m; j++) {
+        double v = 0.0;
+        for (int p = Jp[j]; p < Jp[j + 1]; p++) v += Jx[p] * x[(size_t)n * q + Ji[p]];
+        mu[(size_t)m * q + j] = d[j] * v;
+      }
+    /* Pᵀ W̃ P = L Lᵀ up to rank r; L₁₁ L₁₁ᵀ y₁ = (Pᵀ c)₁, y₂ = 0, μ = D P y. */
+    int rank = 0;
+    int info = (int)LAPACKE_dpstrf(LAPACK_COL_MAJOR, 'L', m, W, m, piv, &rank, 1e-12);
+    if (info < 0) rc = NH_ERROR(NH_ERR_NUMERIC, "constrained dual: dpstrf failed (%d)", info);
+    if (!rc && rank > 0) {
+      for (int q = 0; q < ncol; q++)
+        for (int i = 0; i < rank; i++) c[(size_t)rank * q + i] = mu[(size_t)m * q + piv[i] - 1];
+      LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', rank, ncol, W, m, c, rank);
+      for (int q = 0; q < ncol; q++) {
+        double *mq = mu + (size_t)m * q;
+        memset(mq, 0, sizeof(double) * (size_t)m);
+        for (int i = 0; i < rank; i++) mq[piv[i] - 1] = d[piv[i] - 1] * c[(size_t)rank * q + i];
+        nh_rows_tissue_force(Jt, mq, f + (size_t)n * q, n);
+      }
+      rc = nh_system_solve_many(s, ncol, f, y);
+      for (size_t i = 0; !rc && i < (size_t)n * (size_t)ncol; i++) x[i] -= y[i];
+    }
+  }
+  if (!rc && n_used) *n_used = m;
+  if (Jt) cholmod_free_sparse(&Jt, &s->cm);
+  free(sub.node), free(sub.N), free(sub.dir), free(mark), free(piv), free(W), free(d), free(mu);
+  free(c), free(f), free(y);
+  return rc;
 }

@@ -461,6 +461,7 @@ int nh_step_coupled(nh_system *s, const nh_integrator *in, const double *f_ext, 
     w.st.step.t_assemble = nh_time_now() - t0;
     rc = nh_stop_check(); /* an assembly cut short */
   }
+  s->rows_hint = w.m; /* what an inherited factor's W₀ would cost (reuse.c) */
   if (!rc) rc = nh_system_factor_or_reuse(s, in, NH_FACTOR_STEP, &w.st.step);
   if (!rc) rc = nh_coupled_free_solve(&w);
   if (!rc && w.m > 0) rc = nh_coupled_constraints(&w);

@@ -26,6 +26,7 @@
 #include "solve/system_impl.h"
 
 #include <math.h>
+#include <stdlib.h>
 
 static double nh_norm(const double *a, int n) {
   double s = 0.0;
@@ -67,29 +68,85 @@ int nh_step_dynamic(nh_system *s, const nh_integrator *in, const double *f_ext, 
   return rc;
 }
 
+/* The relative residual below which the static Newton takes the consistent
+ * tangent (docs/theory.md §3, "Quasi-static Newton"). */
+#define NH_NEWTON_CONSISTENT 0.1
+
+/* One Newton step du = K⁻¹ b with the consistent tangent K = S + N:
+ * UMFPACK's LU of K without multiplier rows; with them (hanging nodes), the
+ * Cholesky factor of S and the rows' multipliers, falling back to the
+ * corotational tangent (positive semi-definite) where S is indefinite
+ * (docs/theory.md §3, "Quasi-static Newton"). */
+static int nh_static_newton_step(nh_system *s, const nh_integrator *in, const double *u,
+                                 const double *b, double *du, nh_step_stats *st) {
+  if (s->consistent && s->skew) {
+    double tf = 0.0;
+    int rc = nh_system_solve_lu(s, b, du, &tf);
+    st->t_factor += tf;
+    st->factorised++;
+    return rc;
+  }
+  int rc = nh_system_factor_or_reuse(s, in, NH_FACTOR_NEWTON, st);
+  if (rc == NH_ERR_NUMERIC && s->consistent) {
+    nh_error_clear();
+    double t0 = nh_time_now();
+    nh_system_set_tangent(s, NH_TANGENT_COROTATIONAL);
+    nh_system_assemble(s, u, NULL, 0.0, 1.0, s->work[0], NULL, in->threads);
+    nh_system_set_tangent(s, NH_TANGENT_CONSISTENT);
+    st->t_assemble += nh_time_now() - t0;
+    rc = nh_system_factor_or_reuse(s, in, NH_FACTOR_NEWTON, st);
+  }
+  return rc ? rc : nh_step_free_solve(s, in, b, du, st);
+}
+
 int nh_solve_static(nh_system *s, const nh_integrator *in, const double *f_ext, double *u,
                     nh_step_stats *stats) {
   double *b = s->fwork[0], *du = s->fwork[1];
   double t_sol = 0.0, rel = INFINITY;
   nh_step_stats st = {0};
-  int it;
+  int it, rc = NH_OK, lu_steps = 0;
   nh_step_begin(s, in);
-  for (it = 0; it <= in->max_iterations; it++) {
+  for (it = 0; !rc && it <= in->max_iterations; it++) {
     double t0 = nh_time_now(), f_scale;
+    /* the consistent tangent once the residual is below NH_NEWTON_CONSISTENT
+     * (the iterations before take the corotational one, which does not
+     * diverge from far-off starts) */
+    const int consistent = rel <= NH_NEWTON_CONSISTENT;
+    nh_system_set_tangent(s, consistent ? NH_TANGENT_CONSISTENT : NH_TANGENT_COROTATIONAL);
+    if (consistent && s->n_rows == 0 && (rc = nh_system_keep_skew(s))) break;
     nh_step_assemble(s, in, 1, f_ext, u, NULL, b, &f_scale);
-    NH_TRY(nh_stop_check()); /* SIGINT/SIGTERM: between iterations or in the assembly */
+    if ((rc = nh_stop_check())) break; /* SIGINT/SIGTERM: between iterations or in the assembly */
     nh_system_add_reactions(s, b);
     rel = nh_norm(b, s->n_free) / fmax(f_scale, 1e-300);
     st.t_assemble += nh_time_now() - t0;
-    if (!isfinite(rel)) return NH_ERROR(NH_ERR_NUMERIC, "the static residual is not finite");
+    if (!isfinite(rel)) {
+      rc = NH_ERROR(NH_ERR_NUMERIC, "the static residual is not finite");
+      break;
+    }
     if (rel <= in->tolerance || nh_norm(b, s->n_free) == 0.0) break;
     if (it == in->max_iterations) break;
-    NH_TRY(nh_system_factor_or_reuse(s, in, NH_FACTOR_NEWTON, &st));
-    double t2 = nh_time_now();
-    NH_TRY(nh_step_free_solve(s, in, b, du, &st));
+    double t2 = nh_time_now(), tf0 = st.t_factor;
+    lu_steps += s->consistent && s->skew;
+    if ((rc = nh_static_newton_step(s, in, u, b, du, &st))) break;
     nh_step_update(s, 1, 1.0, du, u, NULL);
-    t_sol += nh_time_now() - t2;
+    t_sol += nh_time_now() - t2 - (st.t_factor - tf0);
   }
+  /* Back to the corotational tangent, the other steps'; after the LU path
+   * the system is left with the Cholesky factor of the corotational tangent
+   * at the solution, which the goal-oriented estimate's dual solves and the
+   * next step's reuse use (adapt/dwr.c, reuse.c). */
+  nh_system_set_tangent(s, NH_TANGENT_COROTATIONAL);
+  free(s->skew);
+  s->skew = NULL;
+  if (lu_steps > 0 && !rc) {
+    double t0 = nh_time_now(), f_scale;
+    nh_step_assemble(s, in, 1, f_ext, u, NULL, s->fwork[1], &f_scale);
+    double t1 = nh_time_now();
+    rc = nh_system_factor(s);
+    st.t_assemble += t1 - t0;
+    st.t_factor += nh_time_now() - t1;
+  }
+  NH_TRY(rc);
   if (stats) {
     stats->t_assemble = st.t_assemble;
     stats->t_factor = st.t_factor;

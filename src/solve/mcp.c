@@ -65,7 +65,7 @@
  * freed on return.
  * Failures: NH_ERR_INPUT (inconsistent laws or arguments), NH_ERR_NUMERIC
  * (non-finite data, a negative diagonal, no convergence), NH_ERR_MEMORY. */
-#include "solve/solve.h"
+#include "solve/mcp_impl.h"
 
 #include <float.h>
 #include <lapacke.h>
@@ -83,25 +83,16 @@
 #ifndef NH_MCP_SUBSPACE
 #define NH_MCP_SUBSPACE 1
 #endif
-
-typedef struct {
-  int m, nb, block_ok;
-  double *Wt;   /* W̃, column-major */
-  double *d;    /* D = diag(W)^{-1/2} (1 for a zero diagonal) */
-  double *rt;   /* r̃ */
-  double *lt;   /* λ̃ */
-  double *wt;   /* w̃ = W̃ λ̃ + r̃ */
-  double *best; /* λ̃ of the smallest residual so far */
-  double *L;    /* Cholesky factor of W̃_BB (lower, column-major, nb×nb) */
-  double *tmp;  /* m */
-  int *bil;     /* indices of bilateral rows */
-  double *Lf;   /* subspace step: factor of W̃_FF (m×m), saved λ̃ and w̃ */
-  double *save_l, *save_w;
-  int *free_rows;
-  int *lf_rows; /* the free set Lf factorises (lf_n rows; −1: none yet) */
-  int lf_n, lf_ok;
-  double flops, flops_dense; /* operations so far (nh_mcp_stats) */
-} nh_mcp_work;
+/* Rows up to which the exact method (semismooth Newton) goes first; above,
+ * the sweeps go first and Newton is their fallback (the crossover measured
+ * in docs/interaction.md, "Method and fallback"). 0: sweeps first always. */
+#ifndef NH_MCP_EXACT_ROWS
+#define NH_MCP_EXACT_ROWS 200
+#endif
+/* Newton steps per attempt (with max_iterations, the lower of the two), and
+ * the multiple of it the Tresca fixed point may spend. */
+#define NH_MCP_NEWTON_MAX   100
+#define NH_MCP_TRESCA_STEPS 10
 
 static void nh_mcp_work_free(nh_mcp_work *ws) {
   free(ws->Wt), free(ws->d), free(ws->rt), free(ws->lt), free(ws->wt), free(ws->best);
@@ -155,7 +146,7 @@ static int nh_mcp_check_laws(int m, const nh_row_law *laws) {
 }
 
 /* Unscaled Coulomb bound of a friction row from the current normal force. */
-static double nh_mcp_bound(const nh_mcp_work *ws, const nh_row_law *l) {
+double nh_mcp_bound(const nh_mcp_work *ws, const nh_row_law *l) {
   double n = l->normal >= 0 ? fabs(ws->d[l->normal] * ws->lt[l->normal]) : 0.0;
   if (l->normal2 >= 0) n = hypot(n, ws->d[l->normal2] * ws->lt[l->normal2]);
   return l->mu * n + l->threshold;
@@ -167,7 +158,7 @@ static double nh_clamp(double x, double b) {
 
 /* Scaled upper bound of a unilateral row: threshold / d_i, or none (∞) for
  * threshold 0. */
-static double nh_mcp_cap(const nh_mcp_work *ws, const nh_row_law *l, int i) {
+double nh_mcp_cap(const nh_mcp_work *ws, const nh_row_law *l, int i) {
   return l->threshold > 0.0 ? l->threshold / ws->d[i] : INFINITY;
 }
 
@@ -185,7 +176,7 @@ static void nh_mcp_move(nh_mcp_work *ws, int i, double delta) {
   for (int k = 0; k < ws->m; k++) ws->wt[k] += delta * c[k];
 }
 
-static void nh_mcp_recompute_w(nh_mcp_work *ws) {
+void nh_mcp_recompute_w(nh_mcp_work *ws) {
   int m = ws->m;
   memcpy(ws->wt, ws->rt, sizeof(double) * (size_t)m);
   for (int j = 0; j < m; j++) {
@@ -237,13 +228,13 @@ static void nh_mcp_disc(const double B[3], double q0, double q1, double b, doubl
 }
 
 /* The pair's isotropic scale: 1/√(mean of the two diagonals). */
-static double nh_mcp_pair_scale(const double *W, int m, int g) {
+double nh_mcp_pair_scale(const double *W, int m, int g) {
   double s = 0.5 * (W[(size_t)g * m + g] + W[(size_t)(g + 1) * m + g + 1]);
   return s > 0.0 ? 1.0 / sqrt(s) : 1.0;
 }
 
 /* Dimensionless natural-map residual of the current iterate (w̃ must be current). */
-static double nh_mcp_residual(const nh_mcp_work *ws, const double *W, const nh_row_law *laws) {
+double nh_mcp_residual(const nh_mcp_work *ws, const double *W, const nh_row_law *laws) {
   int m = ws->m;
   double res = 0.0, rmax = 0.0, wlmax = 0.0;
   for (int i = 0; i < m; i++) {
@@ -341,7 +332,7 @@ static void nh_mcp_sweep(nh_mcp_work *ws, const double *W, const nh_row_law *law
 }
 
 /* Project λ̃ onto every row's set (normals first, so the bounds are current). */
-static void nh_mcp_project(nh_mcp_work *ws, const double *W, const nh_row_law *laws) {
+void nh_mcp_project(nh_mcp_work *ws, const double *W, const nh_row_law *laws) {
   int m = ws->m;
   for (int i = 0; i < m; i++)
     if (laws[i].kind == NH_ROW_UNILATERAL)
@@ -460,6 +451,55 @@ static double nh_mcp_run(nh_mcp_work *ws, const double *W, const nh_row_law *law
   return best_res;
 }
 
+/* One solve of the laws `lw` from the current λ̃ (docs/interaction.md,
+ * "Method and fallback"): up to NH_MCP_EXACT_ROWS rows the semismooth Newton
+ * method first (mcp_newton.c), its converged λ̃ projected onto the sets
+ * (kept if still within tolerance), and the sweeps from its best iterate if
+ * it stopped short; above, the sweeps first and Newton from theirs. λ̃ is
+ * left at the best iterate (also in ws->best), its residual in *res;
+ * st->newton_steps, st->sweeps and the methods used (bits 1: exact, 2:
+ * sweeps, in *used) accumulate. */
+static int nh_mcp_attempt(nh_mcp_work *ws, const double *W, const nh_row_law *lw, double tolerance,
+                          int max_iterations, nh_mcp_stats *st, int *used, double *res) {
+  const int m = ws->m;
+  const int newton_max = max_iterations < NH_MCP_NEWTON_MAX ? max_iterations : NH_MCP_NEWTON_MAX;
+  double r = HUGE_VAL;
+  if (m <= NH_MCP_EXACT_ROWS) {
+    NH_TRY(nh_mcp_newton(ws, W, lw, tolerance, newton_max, &st->newton_steps, &r));
+    *used |= 1;
+    if (r <= tolerance) { /* feasible forces (the natural map allows a round-off outside) */
+      memcpy(ws->tmp, ws->lt, sizeof(double) * (size_t)m);
+      nh_mcp_project(ws, W, lw);
+      nh_mcp_recompute_w(ws);
+      double rp = nh_mcp_residual(ws, W, lw);
+      if (rp <= tolerance) {
+        r = rp;
+      } else {
+        memcpy(ws->lt, ws->tmp, sizeof(double) * (size_t)m);
+        nh_mcp_recompute_w(ws);
+      }
+      memcpy(ws->best, ws->lt, sizeof(double) * (size_t)m);
+    } else {
+      NH_TRY(nh_mcp_tresca(ws, W, lw, tolerance,
+                           st->newton_steps + NH_MCP_TRESCA_STEPS * newton_max, &st->newton_steps,
+                           &r));
+      if (!(r <= tolerance)) {
+        r = nh_mcp_run(ws, W, lw, tolerance, max_iterations, &st->sweeps);
+        *used |= 2;
+      }
+    }
+  } else {
+    r = nh_mcp_run(ws, W, lw, tolerance, max_iterations, &st->sweeps);
+    *used |= 2;
+    if (!(r <= tolerance)) {
+      NH_TRY(nh_mcp_newton(ws, W, lw, tolerance, newton_max, &st->newton_steps, &r));
+      *used |= 1;
+    }
+  }
+  *res = r;
+  return NH_OK;
+}
+
 int nh_mcp_solve(int m, const double *W, const double *r, nh_row_law *laws, double tolerance,
                  int max_iterations, double *lambda, nh_mcp_stats *stats) {
   nh_mcp_stats dummy;
@@ -537,11 +577,12 @@ int nh_mcp_solve(int m, const double *W, const double *r, nh_row_law *laws, doub
     if (laws[i].kind == NH_ROW_FRICTION && !laws[i].sliding)
       lw[i].mu = fmax(laws[i].mu, laws[i].mu_static);
   }
-  int it = 0;
-  double best_res = nh_mcp_run(&ws, W, lw, tolerance, max_iterations, &it);
+  int used = 0, rc = NH_OK;
+  double best_res = HUGE_VAL;
+  rc = nh_mcp_attempt(&ws, W, lw, tolerance, max_iterations, stats, &used, &best_res);
   /* Break-away: a row on its static bound slides, at the kinetic bound;
    * solve again from here until no row breaks away (at most once per row). */
-  for (int broke = 1; broke && best_res <= tolerance && !nh_stop_requested();) {
+  for (int broke = 1; !rc && broke && best_res <= tolerance && !nh_stop_requested();) {
     broke = 0;
     for (int i = 0; i < m; i++) {
       nh_row_law *l = &lw[i];
@@ -552,11 +593,13 @@ int nh_mcp_solve(int m, const double *W, const double *r, nh_row_law *laws, doub
       if (l->group == i) lw[i + 1].mu = laws[i + 1].mu;
       broke = 1;
     }
-    if (broke) best_res = nh_mcp_run(&ws, W, lw, tolerance, max_iterations, &it);
+    if (broke) rc = nh_mcp_attempt(&ws, W, lw, tolerance, max_iterations, stats, &used, &best_res);
   }
   memcpy(ws.lt, ws.best, sizeof(double) * (size_t)m);
   for (int i = 0; i < m; i++) lambda[i] = ws.d[i] * ws.lt[i];
+  const int it = stats->newton_steps + stats->sweeps;
   stats->iterations = it;
+  stats->method = used == 3 ? NH_MCP_FALLBACK : used == 1 ? NH_MCP_EXACT : NH_MCP_SWEEPS;
   stats->residual = best_res;
   stats->flops = ws.flops, stats->flops_dense = ws.flops_dense;
   nh_mcp_count(&ws, lw, stats);
@@ -569,12 +612,13 @@ int nh_mcp_solve(int m, const double *W, const double *r, nh_row_law *laws, doub
   free(lw);
   int block_ok = ws.block_ok;
   nh_mcp_work_free(&ws);
+  if (rc) return rc;
   if (nh_stop_requested()) return nh_stop_check();
   if (!(best_res <= tolerance))
     return NH_ERROR(NH_ERR_NUMERIC,
-                    "constraint solve: residual %.3g > tolerance %.3g after %d sweeps (%d rows, "
-                    "%d bilateral%s)",
-                    best_res, tolerance, it, m, nb,
+                    "constraint solve: residual %.3g > tolerance %.3g after %d Newton steps and %d "
+                    "sweeps (%d rows, %d bilateral%s)",
+                    best_res, tolerance, stats->newton_steps, stats->sweeps, m, nb,
                     NH_MCP_BILATERAL_BLOCK && nb > 0 && !block_ok ? ", dependent: solved row by row"
                                                                   : "");
   return NH_OK;

@@ -23,8 +23,12 @@
  * (in->reuse); then a factor of this very A is kept as it is (lazy tangents
  * may leave A unchanged), and an earlier one is kept as a preconditioner
  * unless
- *   - there is no factor yet, or the pattern changed: a mesh change builds a
- *     new system, whose first step factorises;
+ *   - there is no factor yet: a new system factorises at its first step,
+ *     unless it inherited the factor of the mesh before a refinement or
+ *     coarsening (inherit.c: the old factor extended to the new unknowns,
+ *     a two-level preconditioner), which serves under the same rules while
+ *     it pays; with constraint rows, it serves while W₀ = J B Jᵀ (one
+ *     application per row) costs less than a factorisation;
  *   - the renewal rule of nh_system_account asks for it;
  *   - the factor is NH_REFACTOR_MAX_AGE steps old (a schedule that bounds
  *     drift on long quiet runs);
@@ -63,7 +67,8 @@ static int nh_precondition(nh_system *s, const double *r, double *z) {
  * (discarded): the reference a reused step is compared with. */
 static int nh_time_aside(nh_system *s, nh_step_stats *st) {
   double t0 = nh_time_now();
-  if (!s->L_aside && !(s->L_aside = cholmod_copy_factor(s->L, &s->cm)))
+  if (!s->L_aside &&
+      !(s->L_aside = s->L ? cholmod_copy_factor(s->L, &s->cm) : cholmod_analyze(s->A, &s->cm)))
     return NH_ERROR(NH_ERR_MEMORY, "out of memory: a factor copy to time");
   double t1 = nh_time_now();
   int ok = cholmod_factorize(s->A, s->L_aside, &s->cm);
@@ -82,8 +87,17 @@ int nh_system_factor_or_reuse(nh_system *s, const nh_integrator *in, nh_factor_r
   if (rule == NH_FACTOR_NEWTON) {
     need = !s->factor_current; /* lazy tangents may have left A as it was */
   } else {
-    need = !in->reuse || !s->L || s->n_rows > 0 || s->refactor_due ||
+    need = !in->reuse || (!s->L && !s->inh) || s->n_rows > 0 || s->refactor_due ||
            s->factor_age >= NH_REFACTOR_MAX_AGE;
+    /* an inherited factor (inherit.c) builds W₀ by one application per
+     * constraint row: with many rows a factorisation is cheaper */
+    if (!need && !s->L &&
+        (double)s->rows_hint * s->flops_iteration * NH_SOLVE_FLOP_COST > s->flops_factor)
+      need = 1;
+    if (!need && !s->L) {
+      NH_TRY(nh_inherit_ready(s)); /* the new unknowns' block, once */
+      need = !s->inh;
+    }
     /* already the factor of this A (lazy tangents may keep A): reuse takes it;
      * `every` factorises at every step, as asked */
     if (s->factor_current && in->reuse) need = 0;
@@ -175,7 +189,9 @@ void nh_system_account(nh_system *s, const nh_step_stats *st) {
   const double later = st->corrections > 1 ? st->corrections - 1 : 0;
   const double streamed = (double)st->pcg_iterations * s->flops_iteration +
                           later * (s->flops_iteration + s->flops_solve) + st->correction_flops;
-  const double extra = streamed * NH_SOLVE_FLOP_COST + st->correction_flops_dense;
+  /* an inherited factor's W₀: one application of the preconditioner per row */
+  const double rows_w = !s->L && s->inh ? (double)s->rows_hint * s->flops_iteration : 0.0;
+  const double extra = (streamed + rows_w) * NH_SOLVE_FLOP_COST + st->correction_flops_dense;
   if (s->factor_age == 0) {
     s->cycle_cost = s->flops_factor;
     s->cycle_steps = 1;

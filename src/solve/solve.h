@@ -25,6 +25,34 @@ static inline int nh_fixed_component(const unsigned char *fixed, int i, int k) {
   return fixed && fixed[i] && (!(fixed[i] & NH_FIX_AXES) || (fixed[i] >> k) & 1);
 }
 
+/* How the nodes of a changed mesh relate to those before the change (the
+ * refinement's Eq. 17 and the coarsening's injection, adapt/refine.c): the
+ * new node v's values are Σ weight[q] · (old values of node[q]) over q in
+ * start[v] .. start[v+1]. A linear map of nodal fields, old → new. */
+typedef struct {
+  int n_old, n_new;
+  int *start; /* n_new + 1 */
+  int *node;  /* old node indices */
+  double *weight;
+  int cap; /* room of node and weight */
+} nh_node_transfer;
+void nh_node_transfer_free(nh_node_transfer *t);
+
+/* After a mesh change with solver.refactor auto: let the new system `sys`
+ * (created, not yet assembled) precondition with the factor of `old`, the
+ * system of the mesh before the change, through the nodal transfer t
+ * (solve/inherit.c): its first steps solve by PCG instead of factorising.
+ * The factor moves from old to sys (old is then only to be destroyed), with
+ * the renewal rule's state. Does nothing (the first step factorises) when old
+ * has no factor of its own, either system has hanging-node rows, or t does
+ * not fit. NH_ERR_MEMORY. */
+int nh_system_inherit(nh_system *sys, nh_system *old, const nh_node_transfer *t);
+/* Whether sys preconditions with an inherited factor. */
+int nh_system_inherited(const nh_system *sys);
+/* Drop an inherited preconditioner: the next step factorises (a checkpoint
+ * cannot hold the old mesh's factor, so one is not carried past it). */
+void nh_system_inherit_drop(nh_system *sys);
+
 /* Build the DOF map, pattern, scatter maps and colouring of the leaves of
  * `tissue->mesh`; fixed[i] fixes components of node i (above). Hanging
  * nodes (may be NULL) are eliminated: u = P u_free, A = Pᵀ A P.
@@ -116,6 +144,8 @@ typedef struct {
   int pcg_iterations;  /* PCG iterations of the step's solves with a reused factor */
   int corrections;     /* outer constraint corrections with a reused factor (0: exact W) */
   int tangent_updates; /* leaves whose tangent the step's assemblies rebuilt (solve/assemble.c) */
+  int load_steps;      /* static: the equal load steps the step was solved in (1, or 2, 4, ... after
+                          a split: sim.c, nh_sim_solve_static); 1 dynamic */
   /* s: one numeric factorisation of this step's A — the one done, or with
    * nh_integrator.time_factor one done aside (and discarded) on a step that
    * reused the factor; 0 otherwise. t_aside: the time that aside cost (copy
@@ -217,9 +247,23 @@ typedef struct {
   int sliding;
 } nh_row_law;
 
+/* The method that solved the constraints (nh_mcp_stats.method; steps.csv
+ * constraint_method): none (no rows), the exact semismooth Newton method
+ * alone, the projected sweeps alone, or both (the first method fell short
+ * and the other one finished from its best iterate). */
+typedef enum {
+  NH_MCP_NONE = 0,
+  NH_MCP_EXACT = 1,
+  NH_MCP_SWEEPS = 2,
+  NH_MCP_FALLBACK = 3
+} nh_mcp_method;
+
 /* What one constraint solve did. */
 typedef struct {
-  int iterations;  /* Gauss-Seidel sweeps (0: the warm start was already converged) */
+  int iterations;   /* newton_steps + sweeps (0: the warm start was already converged) */
+  int newton_steps; /* semismooth Newton steps (each one LU of the reduced Jacobian) */
+  int sweeps;       /* projected Gauss-Seidel sweeps */
+  nh_mcp_method method;
   double residual; /* dimensionless law violation of the returned λ (see nh_mcp_solve) */
   int n_stick;     /* friction rows strictly inside their bound */
   int n_slide;     /* friction rows on their bound (a zero bound counts as sliding) */
@@ -284,6 +328,19 @@ void nh_rows_free(nh_rows *rows);
 /* Append a row (law BILATERAL, λ = 0, no tool part); returns its index, or
  * −1 when out of memory. The caller fills the fields of row i. */
 int nh_rows_add(nh_rows *rows);
+
+/* The dual of a constrained step: ncol problems
+ *     A x + J_tᵀ μ = b,   J_t x = 0
+ * with the current factor of A and J_t the tissue part of the rows with
+ * active[i] != 0 (active NULL: every row); the tools' parts are held (a
+ * rigid tool). x = A⁻¹ b − A⁻¹ J_tᵀ μ with W μ = J_t A⁻¹ b,
+ * W = J_t A⁻¹ J_tᵀ (nh_system_compliance_add), solved by a pivoted
+ * Cholesky factorisation of the diagonally scaled W truncated at relative
+ * pivots below 1e-12 (dependent rows: J_tᵀ μ is still unique). b, x:
+ * column-major n_free x ncol. *n_used (may be NULL): the active rows.
+ * NH_ERR_MEMORY, NH_ERR_NUMERIC. */
+int nh_system_solve_rows(nh_system *sys, const nh_rows *rows, const unsigned char *active, int ncol,
+                         const double *b, double *x, int *n_used);
 
 /* A tool in the coupled step: its beam and the prescribed base velocity at
  * the end of the step (linear, angular). */

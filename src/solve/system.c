@@ -44,6 +44,7 @@ void nh_system_destroy(nh_system **sys) {
   free(s->lambda_total);
   cholmod_free_factor(&s->L, &s->cm);
   cholmod_free_factor(&s->L_aside, &s->cm);
+  nh_inherit_free(s);
   for (int i = 0; i < 4; i++) free(s->pcg[i]);
   cholmod_free_dense(&s->B, &s->cm);
   cholmod_free_dense(&s->X, &s->cm);
@@ -65,6 +66,7 @@ void nh_system_destroy(nh_system **sys) {
   free(s->colour_leaf);
   free(s->frame);
   free(s->frame_new);
+  free(s->skew);
   free(s->updated);
   for (int i = 0; i < 4; i++) free(s->work[i]);
   for (int i = 0; i < 2; i++) free(s->fwork[i]);
@@ -380,8 +382,8 @@ int nh_system_create(const nh_tissue *tissue, const unsigned char *fixed, const 
       (rc = nh_colour_leaves(s)))
     goto fail;
   size_t nl = m->n_leaves ? (size_t)m->n_leaves : 1;
-  s->frame = malloc(sizeof(double) * 18 * nl);
-  s->frame_new = malloc(sizeof(double) * 18 * nl);
+  s->frame = malloc(sizeof(double) * NH_HEX_FRAME * nl);
+  s->frame_new = malloc(sizeof(double) * NH_HEX_FRAME * nl);
   s->updated = malloc(nl);
   if (!s->frame || !s->frame_new || !s->updated) {
     rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: element frames");

@@ -33,13 +33,18 @@ struct nh_system {
   /* Reuse across steps (reuse.c): L factorises the assembled A
    * (factor_current), or an earlier A and serves as a preconditioner. */
   int factor_current;
-  int factor_age;          /* steps since the factorisation (0: factorised in this step) */
-  int refactor_due;        /* the renewal rule asks for a factorisation at the next step */
-  double cycle_cost;       /* flops: the last factorisation and the reuse's extra solves since */
-  int cycle_steps;         /* steps of the cycle (nh_system_account) */
-  double flops_factor;     /* one numeric factorisation (CHOLMOD's count at analysis) */
-  double flops_solve;      /* one solve: two triangular solves with L */
-  double flops_iteration;  /* one PCG iteration: a solve and a product with A */
+  int factor_age;         /* steps since the factorisation (0: factorised in this step) */
+  int refactor_due;       /* the renewal rule asks for a factorisation at the next step */
+  double cycle_cost;      /* flops: the last factorisation and the reuse's extra solves since */
+  int cycle_steps;        /* steps of the cycle (nh_system_account) */
+  double flops_factor;    /* one numeric factorisation (CHOLMOD's count at analysis) */
+  double flops_solve;     /* one solve: two triangular solves with L */
+  double flops_iteration; /* one PCG iteration: a solve and a product with A */
+  /* Across a mesh change (inherit.c): the old mesh's factor extended to the
+   * new unknowns, the preconditioner while L is NULL; rows_hint: the
+   * constraint rows of the coming step (coupled.c), whose W₀ it would cost */
+  struct nh_inherited *inh;
+  int rows_hint;
   cholmod_factor *L_aside; /* benchmarks: the factor timed aside (NH_TIME_FACTOR) */
   /* What A was assembled from (u, and cM, cK), at the last assembly and at
    * the one the factor L factorises: a continued run assembles and factorises
@@ -55,10 +60,12 @@ struct nh_system {
   int *colour_leaf;  /* leaf indices grouped by colour */
 
   /* Lazy element tangents (assemble.c): the tangent of leaf l in A is that
-   * of frame[18 l ..] (its rotation R and, B-bar, cof F̄ when last updated);
+   * of frame[NH_HEX_FRAME l ..] (its rotation R and, B-bar, cof F̄ when last updated);
    * frame_new and updated: the current assembly's frames and which leaves it
    * updates. A holds cM M + cK K̃ for a_cM, a_cK when a_valid. */
   double lazy_tolerance; /* solver.lazy_rotation (0: exact) */
+  int consistent; /* nh_system_set_tangent: A holds the consistent tangent's symmetric part */
+  double *skew;   /* consistent, when kept: the skew part's upper triangle on A's pattern */
   double *frame, *frame_new;
   unsigned char *updated;
   int a_valid;
@@ -81,6 +88,18 @@ struct nh_system {
   double *work[4];  /* 3 per node each */
   double *fwork[2]; /* n_free each */
 };
+
+/* ---- the preconditioner across a mesh change (inherit.c) ---- */
+typedef struct nh_inherited nh_inherited;
+void nh_inherit_free(nh_system *s);
+/* Before the first solve on the mesh: factorise the new unknowns' block of
+ * the assembled A; a block that is not positive definite drops the
+ * inherited preconditioner (the caller then factorises A). NH_ERR_MEMORY. */
+int nh_inherit_ready(nh_system *s);
+/* z = B r, the two-level preconditioner (inherit.c's header). */
+int nh_inherit_apply(nh_system *s, const double *r, double *z);
+/* W += J B Jᵀ for rows given as Jᵀ (n_free x m): one application per row. */
+int nh_inherit_compliance_add(nh_system *s, cholmod_sparse *Jt, double *W);
 
 /* Reuse of factorisations (reuse.c): a solve that misses its tolerance after
  * NH_PCG_MAX iterations, or constraint forces after NH_OUTER_MAX corrections,
@@ -184,5 +203,25 @@ int nh_step_free_solve(nh_system *s, const nh_integrator *in, const double *b, d
  * 3, where the step's nodal update stays): statics, u ← u + P x; dynamic,
  * v ← v + P x, u ← u + h v. */
 void nh_step_update(nh_system *s, int statics, double h, const double *x, double *u, double *v);
+
+/* ---- the consistent tangent (assemble.c) and its LU path (unsymmetric.c) ---- */
+
+/* The element tangent in A: NH_TANGENT_COROTATIONAL (the default of a new
+ * system: dynamic steps, the coupled quasi-static step) R K₀ Rᵀ (+ κ V b bᵀ),
+ * symmetric positive semi-definite; or NH_TANGENT_CONSISTENT (the static
+ * Newton, nh_solve_static), the exact derivative of the internal force with
+ * the variations of R and of B-bar's b (fem/hex.c, docs/theory.md §2), of
+ * which A holds the symmetric part S (and skew, when kept, the rest). A
+ * change starts the next assembly afresh. */
+typedef enum { NH_TANGENT_COROTATIONAL = 0, NH_TANGENT_CONSISTENT = 1 } nh_tangent;
+void nh_system_set_tangent(nh_system *s, nh_tangent tangent);
+
+/* Keep the skew-symmetric part N of the consistent tangent beside A (on A's
+ * upper-triangle pattern) from the next assembly on; A holds the symmetric
+ * part S, so the tangent is S + N. */
+int nh_system_keep_skew(nh_system *s);
+/* x = (S + N)⁻¹ b by UMFPACK's LU of the full matrix (no multiplier rows);
+ * *t_factor (may be NULL) receives the factorisation's time. */
+int nh_system_solve_lu(nh_system *s, const double *b, double *x, double *t_factor);
 
 #endif

@@ -1,0 +1,58 @@
+/* time.c — the scene's clock and the field every body feels: the time
+ * section (mode, step, and the run's length as end or steps) and gravity
+ * (a vector, or a vector and a schedule scaling it). */
+#include "scene/scene_impl.h"
+
+#include <math.h>
+
+#define NH_STEPS_MAX 1000000000.0
+
+static const char *const modes[] = {"dynamic", "static", NULL};
+
+#define T(member) offsetof(nh_scene, time.member)
+static const nh_key time_rows[] = {
+    {NH_CHOICE("mode", T(mode), NH_MODE_DYNAMIC, modes)},
+    {NH_NUMBER("step", T(step), 0.01, NH_ABOVE, 0)},
+    {NH_NUMBER("end", T(end), 0, NH_ABOVE, 0)},
+    {NH_INT("steps", T(steps), 100, NH_AT_LEAST, 1)},
+    {NULL},
+};
+
+int nh_read_time(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
+  NH_TRY(nh_read_top(c, root, "time", 0, time_rows, s));
+  const nh_yaml_node *t = nh_yaml_get(root, "time", NULL); /* NULL fields unless a mapping */
+  const nh_yaml_node *at_end = nh_yaml_get(t, "end", NULL),
+                     *at_steps = nh_yaml_get(t, "steps", NULL);
+  if (at_end && at_steps) {
+    /* Report at whichever of the two comes second. */
+    int steps_later = at_steps->source > at_end->source ||
+                      (at_steps->source == at_end->source && at_steps->line >= at_end->line);
+    return steps_later ? nh_read_fail(c, at_steps, "time.steps",
+                                      "give either time.end or time.steps, not both")
+                       : nh_read_fail(c, at_end, "time.end",
+                                      "give either time.end or time.steps, not both");
+  }
+  if (at_end) {
+    double steps = floor(s->time.end / s->time.step + 0.5);
+    if (steps > NH_STEPS_MAX)
+      return nh_read_fail(c, at_end, "time.end", "end / step = %g steps is more than %g", steps,
+                          NH_STEPS_MAX);
+    s->time.steps = steps < 1 ? 1 : (int)steps;
+  }
+  return NH_OK;
+}
+
+#define G(member) offsetof(nh_scene, member)
+static const nh_key gravity_rows[] = {
+    {NH_VEC3("vector", G(gravity)), .required = 1},
+    {NH_SCHEDULE("schedule", G(gravity_schedule))},
+    {NULL},
+};
+
+int nh_read_gravity(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
+  const nh_yaml_node *n;
+  NH_TRY(nh_read_field(c, root, "", "gravity", 0, &n));
+  if (!n) return NH_OK;
+  if (n->kind != NH_YAML_MAP) return nh_read_vec3(c, n, "gravity", s->gravity);
+  return nh_read_table(c, n, "gravity", gravity_rows, s);
+}

@@ -1,0 +1,268 @@
+/* test_dwr_rows — the goal-oriented estimate of a constrained step
+ * (adapt/dwr.c, "Constraints" and "Several goals in one dual") on a small
+ * linear problem: the block 4 x 2 x 2 cm (E 10 kPa, ν 0.3, full element),
+ * clamped at x = 4 cm, 1 µN down over the 2 mm cube centred at (1, 1, 1) cm,
+ * with six constraint rows (no tool part, gap 0):
+ *   r0, r1  unilateral, normal +z, on the bottom face, pressing (λ > 0);
+ *   r2      friction row along x on the bottom face, sticking;
+ *   r3      unilateral on the top face, open (λ = 0);
+ *   r4      bilateral (a tie) inside, along (0.6, 0, 0.8);
+ *   r5      friction row along y on the bottom face, sliding.
+ * The active set of the dual (nh_dwr_active_rows) is then {r0, r1, r2, r4}:
+ * the problem whose solution the estimate sees is A u + Jᵀλ = f, J u = 0 on
+ * those four rows, bilateral.
+ *
+ *  1. The constrained DWR identity. V_h: the 4x2x2 grid; V_f: every cell
+ *     refined once (8x4x4). u_h, u_f: the constrained solutions on both,
+ *     computed independently of the code under test by a dense LU solve of
+ *     the saddle-point system [K Jᵀ; J 0] (K summed from the element
+ *     matrices nh_tissue_element, J from the rows' shape values). z_f: the
+ *     fine constrained dual of nh_dwr_duals (CHOLMOD factor, compliance
+ *     W = J A⁻¹ Jᵀ, nh_system_solve_rows). With P u_h the coarse solution
+ *     carried to V_f (exact, nested), J_f P u_h = 0 (same points), so
+ *       J(u_f) − J(u_h) = f(z_f) − a(P u_h, z_f)
+ *     is an identity of the Galerkin equations (docs/theory.md §6.6,
+ *     "Constraints"), asserted to 1e-9 relative per component. Also: z_f
+ *     satisfies the active rows (J_f z_f = 0 to 1e-10 of max |z_f|), and
+ *     the dual of the tissue alone (rows NULL) misses the identity by more
+ *     than 1 % (the rows matter here: the test can fail).
+ *  2. The combined dual (Hartmann & Houston): for two goal points, weights
+ *     ω_pk of mixed signs, the estimate of the one dual of Σ ω_pk J_pk
+ *     (nh_dwr_estimate_combined) equals Σ ω_pk E_pk of the separate
+ *     estimates (nh_dwr_estimate) to 1e-10 relative: the recovery and the
+ *     integrals are linear in the dual, and so is the constrained solve.
+ * NH_VERBOSE=1 prints the numbers. */
+#include "check.h"
+#include "adapt/adapt.h"
+#include "fem/fem.h"
+#include "mesh/mesh.h"
+#include "solve/solve.h"
+
+#include <lapacke.h>
+#include <string.h>
+
+#include "dwr_support.h"
+#include "hanging_mesh.h"
+
+#define RADIUS 5e-4
+#define NROWS  6
+
+static const double lo[3] = {0, 0, 0}, hi[3] = {0.04, 0.02, 0.02};
+static const int grid[3] = {4, 2, 2};
+static const double points[6] = {0.025, 0.010, 0.015, 0.015, 0.015, 0.005};
+
+typedef struct {
+  nh_mesh *m;
+  nh_tissue *t;
+  unsigned char *fixed;
+  nh_hanging *h;
+  nh_system *s;
+  nh_rows rows;
+  double *f, *j; /* load, the first goal's 3 functionals (3 n each) */
+} problem;
+
+/* The six rows of the header on the current mesh. */
+static void make_rows(problem *p) {
+  static const double X[NROWS][3] = {{0.007, 0.006, 0.0},   {0.013, 0.014, 0.0},
+                                     {0.011, 0.009, 0.0},   {0.022, 0.010, 0.020},
+                                     {0.015, 0.005, 0.010}, {0.009, 0.012, 0.0}};
+  static const double dir[NROWS][3] = {{0, 0, 1}, {0, 0, 1},     {1, 0, 0},
+                                       {0, 0, 1}, {0.6, 0, 0.8}, {0, 1, 0}};
+  static const nh_row_kind kind[NROWS] = {NH_ROW_UNILATERAL, NH_ROW_UNILATERAL, NH_ROW_FRICTION,
+                                          NH_ROW_UNILATERAL, NH_ROW_BILATERAL,  NH_ROW_FRICTION};
+  static const double lambda[NROWS] = {1e-7, 2e-7, 1e-8, 0.0, 3e-8, 1e-8};
+  nh_rows_clear(&p->rows);
+  for (int i = 0; i < NROWS; i++) {
+    int r = nh_rows_add(&p->rows), c;
+    CHECK(r == i, "row %d added as %d", i, r);
+    double xi[3], N[8], Xe[24], x[3] = {0, 0, 0};
+    CHECK_OK(nh_mesh_locate(p->m, X[i], &c, xi));
+    nh_hex_shape(xi, N);
+    nh_mesh_cell_coords(p->m, p->m->X, c, Xe);
+    for (int a = 0; a < 8; a++) {
+      p->rows.node[8 * r + a] = p->m->cells[8 * c + a];
+      p->rows.N[8 * r + a] = N[a];
+      for (int k = 0; k < 3; k++) x[k] += N[a] * Xe[3 * a + k];
+    }
+    for (int k = 0; k < 3; k++) CHECK_CLOSE(x[k], X[i][k], 1e-15, "row point located");
+    memcpy(p->rows.dir + 3 * r, dir[i], sizeof dir[i]);
+    p->rows.tool[r] = -1;
+    p->rows.gap[r] = 0.0;
+    p->rows.law[r].kind = kind[i];
+    p->rows.law[r].sliding = i == 5;
+    p->rows.lambda[r] = lambda[i];
+  }
+}
+
+static void setup(problem *p) {
+  nh_mesh *m = p->m;
+  int n = 3 * m->n_nodes;
+  nh_tissue_destroy(&p->t);
+  nh_material mat = {1.0e4, 0.3, 1000, NH_FORMULATION_FULL};
+  CHECK_OK(nh_tissue_create(m, &mat, &p->t));
+  p->fixed = realloc(p->fixed, m->n_nodes);
+  for (int i = 0; i < m->n_nodes; i++) p->fixed[i] = m->X[3 * i] > 0.0399;
+  nh_hanging_destroy(&p->h);
+  CHECK_OK(nh_hanging_detect(m, p->fixed, &p->h));
+  nh_system_destroy(&p->s);
+  CHECK_OK(nh_system_create(p->t, p->fixed, p->h, &p->s));
+  double *zero = calloc(n, sizeof(double));
+  nh_system_assemble(p->s, zero, NULL, 0.0, 1.0, zero, NULL, 0);
+  CHECK_OK(nh_system_factor(p->s));
+  free(zero);
+  p->f = realloc(p->f, sizeof(double) * n);
+  p->j = realloc(p->j, sizeof(double) * 3 * n);
+  CHECK_OK(dwr_block_load(m, p->f));
+  for (int k = 0; k < 3; k++)
+    CHECK_OK(nh_goal_functional(m, points, RADIUS, k, "probe", p->j + (size_t)n * k));
+  make_rows(p);
+}
+
+static int active_row(int i) {
+  return i != 3 && i != 5;
+}
+
+/* The constrained solution by a dense LU solve of [K Jᵀ; J 0] [u; λ] =
+ * [f; 0] over the unfixed DOFs (K from the element matrices at rest). */
+static void dense_solve(const problem *p, double *u) {
+  const nh_mesh *m = p->m;
+  int n = 3 * m->n_nodes, *dof = malloc(sizeof(int) * n), nf = 0;
+  for (int i = 0; i < n; i++) dof[i] = p->fixed[i / 3] ? -1 : nf++;
+  int na = 0;
+  for (int i = 0; i < NROWS; i++) na += active_row(i);
+  int N = nf + na;
+  double *A = calloc((size_t)N * N, sizeof(double)), *b = calloc(N, sizeof(double));
+  double *zero = calloc(n, sizeof(double));
+  for (int l = 0; l < m->n_leaves; l++) {
+    int c = m->leaves[l];
+    double fe[24], K[576];
+    nh_tissue_element(p->t, c, zero, fe, K);
+    for (int r = 0; r < 24; r++)
+      for (int q = 0; q < 24; q++) {
+        int dr = dof[3 * m->cells[8 * c + r / 3] + r % 3],
+            dq = dof[3 * m->cells[8 * c + q / 3] + q % 3];
+        if (dr >= 0 && dq >= 0) A[(size_t)dq * N + dr] += K[24 * r + q];
+      }
+  }
+  for (int i = 0; i < n; i++)
+    if (dof[i] >= 0) b[dof[i]] = p->f[i];
+  for (int i = 0, row = nf; i < NROWS; i++) {
+    if (!active_row(i)) continue;
+    for (int a = 0; a < 8; a++)
+      for (int k = 0; k < 3; k++) {
+        int d = dof[3 * p->rows.node[8 * i + a] + k];
+        double v = p->rows.N[8 * i + a] * p->rows.dir[3 * i + k];
+        if (d < 0) continue;
+        A[(size_t)d * N + row] += v;
+        A[(size_t)row * N + d] += v;
+      }
+    row++;
+  }
+  int *piv = malloc(sizeof(int) * N);
+  CHECK(LAPACKE_dgesv(LAPACK_COL_MAJOR, N, 1, A, N, piv, b, N) == 0, "dense KKT solve");
+  for (int i = 0; i < n; i++) u[i] = dof[i] >= 0 ? b[dof[i]] : 0.0;
+  free(dof), free(A), free(b), free(zero), free(piv);
+}
+
+/* n_i · w(P_i) of row i for a nodal field w. */
+static double row_value(const nh_rows *rows, int i, const double *w) {
+  double s = 0.0;
+  for (int a = 0; a < 8; a++)
+    for (int k = 0; k < 3; k++)
+      s += rows->N[8 * i + a] * rows->dir[3 * i + k] * w[3 * rows->node[8 * i + a] + k];
+  return s;
+}
+
+static void destroy(problem *p) {
+  nh_system_destroy(&p->s);
+  nh_hanging_destroy(&p->h);
+  nh_tissue_destroy(&p->t);
+  nh_mesh_destroy(&p->m);
+  nh_rows_free(&p->rows);
+  free(p->fixed), free(p->f), free(p->j);
+}
+
+/* Part 2 on the coarse problem with its solution uh. */
+static void test_combined(problem *p, const double *uh) {
+  const int nc = p->m->n_cells;
+  double E[6], norm[2], Ec, nc_norm;
+  double *ind = malloc(sizeof(double) * 2 * nc), *indc = malloc(sizeof(double) * nc);
+  nh_dwr_result r = {.estimate = E, .norm = norm, .indicator = ind};
+  CHECK_OK(nh_dwr_estimate(p->s, &p->rows, 1.0, p->m, p->t, p->h, uh, 2, points, RADIUS, NULL, &r));
+  CHECK(r.n_rows == 4, "separate estimate: %d rows in the duals, expected 4", r.n_rows);
+  const double w[6] = {0.7, -1.3, 0.2, -0.4, 1.1, 2.5};
+  double sum = 0.0, scale = 0.0;
+  for (int q = 0; q < 6; q++) sum += w[q] * E[q], scale += fabs(w[q] * E[q]);
+  nh_dwr_result rc = {.estimate = &Ec, .norm = &nc_norm, .indicator = indc};
+  CHECK_OK(nh_dwr_estimate_combined(p->s, &p->rows, 1.0, p->m, p->t, p->h, uh, 2, points, RADIUS,
+                                    NULL, w, &rc));
+  CHECK(scale > 0.0, "separate estimates vanish");
+  CHECK_CLOSE(Ec, sum, 1e-10 * scale, "combined estimate = sum of weighted separate estimates");
+  CHECK_CLOSE(rc.eta, r.eta, 1e-14 * r.eta, "the primal's SPR estimate is the same");
+  if (getenv("NH_VERBOSE"))
+    printf("combined: E_c = %.9e, sum w E = %.9e (rel diff %.1e)\n", Ec, sum,
+           fabs(Ec - sum) / scale);
+  free(ind), free(indc);
+}
+
+int main(void) {
+  problem p = {0};
+  CHECK_OK(nh_mesh_create_box(lo, hi, grid, &p.m));
+  setup(&p);
+  int nc = p.m->n_nodes, n = 3 * nc;
+  double Jh[3], *uh = malloc(sizeof(double) * n);
+  dense_solve(&p, uh);
+  for (int k = 0; k < 3; k++) Jh[k] = dwr_dot(n, p.j + (size_t)n * k, uh);
+  for (int i = 0; i < NROWS; i++)
+    if (active_row(i))
+      CHECK_CLOSE(row_value(&p.rows, i, uh), 0.0, 1e-12 * fabs(Jh[2]), "coarse rows hold");
+  test_combined(&p, uh);
+
+  /* V_f: every leaf refined once. */
+  nh_template *t2 = regular_template(2);
+  nh_refine_info info = {0};
+  int nl = p.m->n_leaves, *all = malloc(sizeof(int) * nl);
+  memcpy(all, p.m->leaves, sizeof(int) * nl);
+  CHECK_OK(nh_mesh_refine(p.m, t2, all, nl, &info));
+  double *Puh = dwr_prolong(p.m, &info, uh, nc);
+  setup(&p);
+  int nfn = 3 * p.m->n_nodes;
+  double *uf = malloc(sizeof(double) * nfn), *zf = malloc(sizeof(double) * 3 * nfn);
+  double *z0 = malloc(sizeof(double) * 3 * nfn);
+  dense_solve(&p, uf);
+  int used = -1;
+  CHECK_OK(nh_dwr_duals(p.s, &p.rows, 1.0, p.m->n_nodes, 3, p.j, zf, &used));
+  CHECK(used == 4, "active rows in the dual: %d, expected 4", used);
+  CHECK_OK(nh_dwr_duals(p.s, NULL, 1.0, p.m->n_nodes, 3, p.j, z0, NULL));
+  for (int k = 0; k < 3; k++) {
+    const double *jk = p.j + (size_t)nfn * k, *zk = zf + (size_t)nfn * k,
+                 *z0k = z0 + (size_t)nfn * k;
+    double zmax = 0.0;
+    for (int i = 0; i < nfn; i++) zmax = fmax(zmax, fabs(zk[i]));
+    for (int i = 0; i < NROWS; i++) {
+      if (active_row(i)) {
+        CHECK_CLOSE(row_value(&p.rows, i, zk), 0.0, 1e-10 * zmax, "the dual obeys the active rows");
+        CHECK_CLOSE(row_value(&p.rows, i, Puh), 0.0, 1e-12 * fabs(Jh[2]), "J_f P u_h = 0");
+      }
+    }
+    double JPuh = dwr_dot(nfn, jk, Puh), Juf = dwr_dot(nfn, jk, uf);
+    double lhs = Juf - Jh[k], rhs = dwr_dot(nfn, p.f, zk) - dwr_energy_product(p.m, p.t, Puh, zk);
+    double rhs0 = dwr_dot(nfn, p.f, z0k) - dwr_energy_product(p.m, p.t, Puh, z0k);
+    double scale = fmax(fabs(Juf), fabs(Jh[k]));
+    CHECK_CLOSE(JPuh, Jh[k], 1e-12 * scale, "J(P u_h) on V_f = J(u_h) on V_h");
+    CHECK_CLOSE(rhs, lhs, 1e-9 * fabs(lhs),
+                "constrained DWR identity J(u_f) - J(u_h) = rho(u_h; z_f)");
+    CHECK(fabs(rhs0 - lhs) > 1e-2 * fabs(lhs),
+          "k=%d: the unconstrained dual misses the identity by only %.2e relative", k,
+          fabs(rhs0 - lhs) / fabs(lhs));
+    if (getenv("NH_VERBOSE"))
+      printf("identity k=%d: J(u_f)-J(u_h) = %.6e, rho(z_f) = %.6e (rel diff %.1e), "
+             "tissue-alone dual %.6e (rel diff %.1e)\n",
+             k, lhs, rhs, fabs(lhs - rhs) / fabs(lhs), rhs0, fabs(lhs - rhs0) / fabs(lhs));
+  }
+  nh_refine_info_free(&info);
+  nh_template_destroy(&t2);
+  free(all), free(uh), free(Puh), free(uf), free(zf), free(z0);
+  destroy(&p);
+  return nh_test_failures ? 1 : 0;
+}

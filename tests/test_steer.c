@@ -1,0 +1,209 @@
+/* test_steer.c — the steering planner's kinematic model and obstacles
+ * (src/plan/bicycle.c, src/plan/obstacle.c, mesh/region.c's distance).
+ *
+ * Expectations, each derived independently of the code under test:
+ *  1. the two-arc finish: forward integration of its two arcs (the arc
+ *     formula, here written out again) from random starts, headings, signs
+ *     and curvatures (equal, or two) ends on the target (to 1e-12 of the
+ *     scale); a target is reachable exactly when its distance from the first
+ *     arc's centre lies in [a, a + 2b] (a, b the two radii: the second
+ *     circle's centre lies at a + b from the first's, the target on it);
+ *  2. the kinematic plan without obstacles has one turn and ends on the
+ *     target; with a cylinder across the straight line which the one-turn S
+ *     (excursion about 1/(4 kappa) = 10 mm > radius + clearance) passes, it
+ *     keeps one turn with at least the clearance asked; in exact mode it has
+ *     two turns, ends on the target and passes the cylinder at exactly the
+ *     clearance asked (the bisection's tolerance, 1e-9 m); asked for less
+ *     clearance it stays closer (monotone);
+ *  3. region distances at hand-computed points (sphere, box outside and
+ *     inside, finite cylinder beside, beyond an end, at a rim);
+ *  4. a label obstacle: label 2 of cases/steering/obstacle.nii.gz, the
+ *     voxels (1 mm) whose centres lie within 4 mm of the axis x = 60, y =
+ *     40 mm: its voxel staircase lies within half a voxel diagonal in the
+ *     (x, y) plane (0.5 √2 mm) of the cylinder's side, so the label's
+ *     distance differs from the cylinder's by at most that;
+ *  5. the curvature fit recovers the three arcs' κ of a path made by the
+ *     model with the same schedule (golden section to 1e-7 relative). */
+#include "check.h"
+#include "mesh/mesh.h"
+#include "plan/plan_impl.h"
+
+#include <string.h>
+
+/* The arc formula, written out again for the check. */
+static void arc(double st[3], double k, double l) {
+  double t1 = st[2] + k * l;
+  st[0] += (sin(t1) - sin(st[2])) / k;
+  st[1] -= (cos(t1) - cos(st[2])) / k;
+  st[2] = t1;
+}
+
+static double urand(double a, double b) {
+  return a + (b - a) * rand() / (double)RAND_MAX;
+}
+
+static void test_finish(void) {
+  srand(7);
+  int solved = 0;
+  for (int t = 0; t < 2000; t++) {
+    /* equal curvatures half the time (Webster's model), else two */
+    double ka = urand(1, 50), kb = t % 2 ? ka : urand(1, 50), Ra = 1 / ka, Rb = 1 / kb;
+    double R = fmax(Ra, Rb), start[2] = {urand(-R, R), urand(-R, R)};
+    double heading = urand(-M_PI, M_PI), sign = rand() % 2 ? 1.0 : -1.0;
+    /* a target at distance rho in [0.5 a, 1.2 (a + 2b)] from the first arc's centre */
+    double c[2] = {start[0] - sign * Ra * sin(heading), start[1] + sign * Ra * cos(heading)};
+    double rho = urand(0.5 * Ra, 1.2 * (Ra + 2 * Rb)), phi = urand(-M_PI, M_PI);
+    double T[2] = {c[0] + rho * cos(phi), c[1] + rho * sin(phi)}, len[2];
+    int rc = nh_bike_finish(start, heading, sign, ka, kb, T, len);
+    int inside = rho >= Ra * (1 + 1e-9) && rho <= (Ra + 2 * Rb) * (1 - 1e-9);
+    if (rho < Ra * (1 - 1e-9) || rho > (Ra + 2 * Rb) * (1 + 1e-9))
+      CHECK(rc != 0, "rho = %g, a = %g, b = %g: expected no two-arc path", rho, Ra, Rb);
+    if (!inside) continue;
+    CHECK(rc == 0, "rho = %g in [a, a + 2b] = [%g, %g]: expected a two-arc path", rho, Ra,
+          Ra + 2 * Rb);
+    if (rc) continue;
+    solved++;
+    CHECK(len[0] >= 0 && len[1] >= 0 && len[0] <= 2 * M_PI * Ra && len[1] <= 2 * M_PI * Rb,
+          "arc lengths %g %g outside [0, 2 pi R]", len[0], len[1]);
+    double st[3] = {start[0], start[1], heading};
+    arc(st, sign * ka, len[0]);
+    arc(st, -sign * kb, len[1]);
+    CHECK_CLOSE(st[0], T[0], 1e-12 * (1 + R), "finish: end x");
+    CHECK_CLOSE(st[1], T[1], 1e-12 * (1 + R), "finish: end y");
+  }
+  CHECK(solved > 500, "only %d reachable targets solved", solved);
+}
+
+/* A scene holding plan.obstacles only (what nh_obstacles_create reads). */
+static nh_scene *scene_with(int n, const nh_region *r, const char *labels) {
+  nh_scene *s = calloc(1, sizeof *s);
+  s->plan.n_obstacles = n;
+  s->plan.obstacles = calloc((size_t)n + 1, sizeof *r);
+  memcpy(s->plan.obstacles, r, sizeof *r * (size_t)n);
+  if (labels) snprintf(s->tissue.labels_file, sizeof s->tissue.labels_file, "%s", labels);
+  return s;
+}
+
+static void free_scene(nh_scene *s) {
+  free(s->plan.obstacles);
+  free(s);
+}
+
+static void test_choose(void) {
+  nh_region cyl = {.kind = NH_REGION_CYLINDER,
+                   .start = {0.06, 0.04, 0.0},
+                   .end = {0.06, 0.04, 0.039},
+                   .radius = 0.004};
+  nh_scene *s = scene_with(1, &cyl, NULL);
+  nh_obstacles *ob = NULL;
+  CHECK_OK(nh_obstacles_create(s, &ob));
+  nh_bike_frame f = {
+      .entry = {0, 0.04, 0.0195}, .ex = {1, 0, 0}, .ey = {0, 1, 0}, .kappa = {10, 8, 6}};
+  nh_bike_choice c;
+  /* without obstacles: one turn, on the target */
+  double T1[2] = {0.1, 0.02}, end[2];
+  CHECK(nh_bike_choose(&f, T1, 0.001, 0, &c) == 0, "no plan to (0.1, 0.02)");
+  CHECK(c.plan.n == 2 && !c.active, "one turn expected, got %d arcs, active %d", c.plan.n,
+        c.active);
+  nh_bike_end(&c.plan, f.kappa, end, NULL);
+  CHECK_CLOSE(end[0], T1[0], 1e-12, "one turn: end x");
+  CHECK_CLOSE(end[1], T1[1], 1e-12, "one turn: end y");
+  /* the cylinder across the line: the one-turn S passes it (excursion ~ 1/(4 kappa)), so the
+     chooser keeps one turn; exact mode gives two turns at exactly the clearance asked */
+  f.obstacles = ob;
+  double T2[2] = {0.12, 0.0}, last = INFINITY;
+  for (double want = 0.003; want >= 0.0005; want -= 0.001) {
+    CHECK(nh_bike_choose(&f, T2, want, 0, &c) == 0, "no plan around the cylinder (%g)", want);
+    CHECK(c.plan.n == 2 && !c.active, "one turn expected: %d arcs, active %d", c.plan.n, c.active);
+    CHECK(c.clearance >= want, "one turn: clearance %g below %g", c.clearance, want);
+    nh_bike_end(&c.plan, f.kappa, end, NULL);
+    CHECK_CLOSE(end[0], T2[0], 1e-12, "one turn around: end x");
+    CHECK_CLOSE(end[1], T2[1], 1e-12, "one turn around: end y");
+    nh_bike_choice e;
+    CHECK(nh_bike_choose(&f, T2, want, 1, &e) == 0, "exact mode: no plan");
+    CHECK(e.plan.n == 3 && e.active, "exact: two turns, active expected: %d arcs, active %d",
+          e.plan.n, e.active);
+    nh_bike_end(&e.plan, f.kappa, end, NULL);
+    CHECK_CLOSE(end[0], T2[0], 1e-12, "two turns: end x");
+    CHECK_CLOSE(end[1], T2[1], 1e-12, "two turns: end y");
+    CHECK_CLOSE(e.clearance, want, 1e-9, "two turns: clearance");
+    CHECK_CLOSE(nh_bike_clearance(&f, &e.plan), want, 1e-9, "two turns: clearance again");
+    CHECK(e.excursion < last, "excursion %g not below %g with less clearance", e.excursion, last);
+    last = e.excursion;
+  }
+  nh_obstacles_destroy(&ob);
+  free_scene(s);
+}
+
+static void test_regions(void) {
+  nh_region sph = {.kind = NH_REGION_SPHERE, .center = {1, 2, 3}, .radius = 0.5};
+  CHECK_CLOSE(nh_region_distance(&sph, (double[]){1, 2, 5}), 1.5, 1e-15, "sphere outside");
+  CHECK_CLOSE(nh_region_distance(&sph, (double[]){1.2, 2, 3}), -0.3, 1e-15, "sphere inside");
+  nh_region box = {.kind = NH_REGION_BOX, .min = {0, 0, 0}, .max = {1, 2, 3}};
+  CHECK_CLOSE(nh_region_distance(&box, (double[]){4, 6, 1}), 5.0, 1e-15, "box: corner (3, 4)");
+  CHECK_CLOSE(nh_region_distance(&box, (double[]){0.5, 1.8, 1}), -0.2, 1e-15, "box inside");
+  nh_region cyl = {.kind = NH_REGION_CYLINDER, .start = {0, 0, 0}, .end = {0, 0, 2}, .radius = 1};
+  CHECK_CLOSE(nh_region_distance(&cyl, (double[]){3, 4, 1}), 4.0, 1e-15, "cylinder beside");
+  CHECK_CLOSE(nh_region_distance(&cyl, (double[]){0.3, 0, 4}), 2.0, 1e-15, "cylinder beyond end");
+  CHECK_CLOSE(nh_region_distance(&cyl, (double[]){4, 0, 6}), 5.0, 1e-15, "cylinder at the rim");
+  CHECK_CLOSE(nh_region_distance(&cyl, (double[]){0.5, 0, 1.9}), -0.1, 1e-15, "cylinder inside");
+}
+
+static void test_label(void) {
+  const char *src = getenv("NH_SOURCE_DIR");
+  char path[sizeof((nh_scene *)0)->tissue.labels_file];
+  snprintf(path, sizeof path, "%s/cases/steering/obstacle.nii.gz", src ? src : ".");
+  nh_region lab = {.kind = NH_REGION_LABEL, .label = 2};
+  nh_region cyl = {.kind = NH_REGION_CYLINDER,
+                   .start = {0.06, 0.04, -1},
+                   .end = {0.06, 0.04, 1},
+                   .radius = 0.004};
+  nh_scene *s = scene_with(1, &lab, path);
+  nh_obstacles *ob = NULL;
+  CHECK_OK(nh_obstacles_create(s, &ob));
+  const double bound = 0.5 * sqrt(2.0) * 0.001 + 1e-12;
+  double worst = 0;
+  for (int i = 0; i < 400; i++) {
+    double r = urand(0.0045, 0.02), a = urand(-M_PI, M_PI);
+    double x[3] = {0.06 + r * cos(a), 0.04 + r * sin(a), urand(0.001, 0.038)};
+    double dl = nh_obstacle_distance(ob, 0, x), dc = nh_region_distance(&cyl, x);
+    worst = fmax(worst, fabs(dl - dc));
+    CHECK(fabs(dl - dc) <= bound, "label vs cylinder at r = %g mm: %g vs %g mm", 1e3 * r, 1e3 * dl,
+          1e3 * dc);
+  }
+  double in[3] = {0.06, 0.04, 0.02};
+  CHECK(nh_obstacle_distance(ob, 0, in) < 0, "the axis is inside the label: %g",
+        nh_obstacle_distance(ob, 0, in));
+  /* the path clearance is the least point distance */
+  double path3[9] = {0.07, 0.04, 0.02, 0.06, 0.05, 0.02, 0.03, 0.04, 0.02};
+  double cl = nh_obstacles_clearance(ob, 3, path3, NULL);
+  double least =
+      fmin(nh_obstacle_distance(ob, 0, path3),
+           fmin(nh_obstacle_distance(ob, 0, path3 + 3), nh_obstacle_distance(ob, 0, path3 + 6)));
+  CHECK_CLOSE(cl, least, 1e-15, "path clearance");
+  nh_obstacles_destroy(&ob);
+  free_scene(s);
+  (void)worst;
+}
+
+static void test_fit(void) {
+  nh_bike_plan p = {.n = 3, .sign0 = 1, .len = {0.03, 0.05, 0.04}};
+  const double kappa[3] = {12.3, 8.1, 5.2};
+  enum { N = 120 };
+  double xy[2 * N], s[N], k[3] = {10, 10, 10};
+  for (int i = 0; i < N; i++) {
+    s[i] = 0.12 * (i + 1) / N;
+    nh_bike_point(&p, kappa, s[i], xy + 2 * i, NULL);
+  }
+  nh_bike_fit(&p, N, xy, s, k);
+  for (int j = 0; j < 3; j++) CHECK_CLOSE(k[j], kappa[j], 1e-7 * kappa[j], "fitted curvature");
+}
+
+int main(void) {
+  test_finish();
+  test_choose();
+  test_regions();
+  test_label();
+  test_fit();
+  return nh_test_failures ? 1 : 0;
+}
