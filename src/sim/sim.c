@@ -83,7 +83,8 @@ static const char *const nh_step_columns[] = {"step",
                                               "constraint_newton",
                                               "constraint_sweeps",
                                               "constraint_method",
-                                              "load_steps"};
+                                              "splits",
+                                              "unsolved"};
 static const char *const nh_probe_columns[] = {"step", "time", "name", "x",  "y",
                                                "z",    "ux",   "uy",   "uz", "error_estimate"};
 
@@ -888,8 +889,40 @@ static double *nh_sim_record_times(nh_sim *s, const nh_sim_record *r, double t_e
 
 /* Output of the step: its times and its row of steps.csv and of
  * results.h5. */
+/* A linearised dynamic step (no solver.newton) that leaves this much of its
+ * equations' relative residual is not a solution (docs/outputs.md, unsolved). */
+#define NH_UNSOLVED_LINEAR 0.5
+/* ... unless its forces are below this fraction of the run's largest. */
+#define NH_UNSOLVED_SCALE 1e-6
+
+/* The step's relative residual stayed above its bound: the Newton tolerance
+ * (static mode; dynamic with solver.newton), else NH_UNSOLVED_LINEAR. The
+ * first such step is warned about, every one counted (the summary). */
+static int nh_sim_unsolved(nh_sim *s, const nh_step_stats *st) {
+  const nh_scene *sc = s->scene;
+  double bound = sc->time.mode == NH_MODE_STATIC    ? sc->solver.tolerance
+                 : sc->solver.newton_iterations > 0 ? sc->solver.newton_tolerance
+                                                    : NH_UNSOLVED_LINEAR;
+  /* a linearised step whose forces are round-off next to the run's (a body
+   * left at rest) has a relative residual of round-off over round-off */
+  double scale = nh_system_residual_scale(s->system);
+  if (sc->time.mode == NH_MODE_DYNAMIC && scale > s->residual_scale_max)
+    s->residual_scale_max = scale;
+  if (!(st->residual > bound)) return 0;
+  if (sc->time.mode == NH_MODE_DYNAMIC && scale < NH_UNSOLVED_SCALE * s->residual_scale_max)
+    return 0;
+  if (s->unsolved_steps++ == 0) {
+    s->unsolved_first = s->step;
+    nh_log_warn("step %d (t = %g s): relative residual %.3g above %g: the step's equations are "
+                "not solved (steps.csv `unsolved`; docs/outputs.md)",
+                s->step, s->time, st->residual, bound);
+  }
+  return 1;
+}
+
 static int nh_sim_write_row(nh_sim *s, const nh_sim_record *r, double t_end) {
   const nh_step_stats *st = &r->st;
+  const int unsolved = nh_sim_unsolved(s, st);
   const nh_coupled_stats *cs = &r->cc.solve;
   const double *pt = nh_sim_record_times(s, r, t_end);
   const double row[] = {s->step,
@@ -935,7 +968,8 @@ static int nh_sim_write_row(nh_sim *s, const nh_sim_record *r, double t_end) {
                         cs->mcp.newton_steps,
                         cs->mcp.sweeps,
                         cs->mcp.method,
-                        st->load_steps > 0 ? st->load_steps : 1};
+                        log2(st->load_steps > 0 ? st->load_steps : 1),
+                        unsolved};
   enum { NH_STEP_COLUMNS = sizeof nh_step_columns / sizeof *nh_step_columns };
   _Static_assert(sizeof row / sizeof *row == NH_STEP_COLUMNS, "one value per steps.csv column");
   if (!s->options.dry_run)
@@ -1052,6 +1086,10 @@ int nh_sim_run(nh_sim *s) {
   /* results.h5 holds the rows since its last frame in memory: writing them
    * is an output like any other, and can fail like any other. */
   if (!rc && s->h5 && (rc = nh_h5_close(&s->h5))) rc = nh_output_failed(rc, s->step);
+  if (s->unsolved_steps > 0)
+    nh_log_warn("%d of %d steps left unsolved (relative residual above its bound; the first: step "
+                "%d): steps.csv `unsolved`",
+                s->unsolved_steps, s->step - s->first_step, s->unsolved_first);
   if (s->options.progress) {
     double median[NH_PHASES];
     nh_sim_median_times(s, median);

@@ -55,11 +55,13 @@ struct nh_sim {
   nh_adapt *adapt; /* template, marking, indicators */
   nh_hanging *hanging;
   double eta, eta_rel;
-  double t_adapt;   /* s, this step: estimate + mark + refine + rebuild */
-  double *u_start;  /* u at the start of the step (the guard's increment) */
-  double *v_start;  /* v at the start of the step (a step interrupted inside goes back to it) */
-  int inverted;     /* cells inverted after the last step (steps.csv `inverted`) */
-  int guard_warned; /* bit per kind of invalid step already warned about */
+  double t_adapt;  /* s, this step: estimate + mark + refine + rebuild */
+  double *u_start; /* u at the start of the step (the guard's increment) */
+  double *v_start; /* v at the start of the step (a step interrupted inside goes back to it) */
+  int inverted;    /* cells inverted after the last step (steps.csv `inverted`) */
+  int unsolved_steps, unsolved_first; /* steps left unsolved (steps.csv `unsolved`), the first */
+  double residual_scale_max; /* the largest residual denominator of the run's dynamic steps */
+  int guard_warned;          /* bit per kind of invalid step already warned about */
   /* estimator goal: goal index of each embedded point (−1: not a goal), the
    * largest estimate so far (summary) and its point */
   int *goal_of_point;

@@ -190,6 +190,9 @@ typedef struct {
 double nh_dynamic_residual(nh_system *sys, const nh_integrator *in, const double *f_ext,
                            const double *u, const double *v, const double *dv,
                            const double *reaction, double *b);
+/* The denominator of the last nh_dynamic_residual (N s): the size of the
+ * forces the step's equations balance, 0 before any. */
+double nh_system_residual_scale(const nh_system *sys);
 
 /* One backward-Euler step with one linearisation (seed Eq. 13):
  *   A = (1 + hα) M + (hβ + h²) K,

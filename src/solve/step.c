@@ -65,6 +65,10 @@ void nh_step_update(nh_system *s, int statics, double h, const double *x, double
   }
 }
 
+double nh_system_residual_scale(const nh_system *s) {
+  return s->residual_scale;
+}
+
 double nh_dynamic_residual(nh_system *s, const nh_integrator *in, const double *f_ext,
                            const double *u, const double *v, const double *dv,
                            const double *reaction, double *b) {
@@ -87,5 +91,6 @@ double nh_dynamic_residual(nh_system *s, const nh_integrator *in, const double *
   double r = 0.0;
   for (int i = 0; i < nf; i++) r += b[i] * b[i];
   double scale = fmax(fmax(h * sqrt(fe), h * sqrt(fi)), fmax(sqrt(md), 1e-300));
+  s->residual_scale = scale;
   return sqrt(r) / scale;
 }
