@@ -9,9 +9,11 @@
  *                                 the variation G Ω of R (and, B-bar, of b)
  * K₀ is either the fully integrated one or the B-bar (mean-dilatation) one
  * that does not lock near incompressibility (docs/theory.md §2b).
- * Lumped mass ρ Vₑ / 8 per node; an immersed cell scales stiffness and mass
- * by its fill fraction φ. Matrices are row-major, 24x24, row 3a+i is node a,
- * component i. Voigt order for stresses: xx, yy, zz, yz, xz, xy.
+ * Lumped mass ρ Vₑ / 8 per node; a cut cell of an immersed domain has K₀,
+ * mean gradients and mass ρ ∫ N_a integrated over its tissue part by the
+ * finite cell quadrature, plus α K_cell on its fictitious part
+ * (docs/theory.md §5c); a cell that is not a box scales by its fill φ. Matrices are row-major,
+ * 24x24, row 3a+i is node a, component i. Voigt order for stresses: xx, yy, zz, yz, xz, xy.
  *
  * Files, each using only those before it: hex.c (one element: K₀, the
  * rotation, force and tangent) < stress.c (the stress anywhere inside one
@@ -40,6 +42,10 @@ typedef struct {
  * cell) if the Jacobian is not positive at a Gauss point. */
 int nh_hex_stiffness(const double X[24], double lambda, double mu, int bbar, double K0[576],
                      double G0[24], double Gbar[24], double *volume);
+
+/* K += w [λ gₐ ⊗ g_b + μ g_b ⊗ gₐ + μ (gₐ·g_b) I] (blocks a, b): one point
+ * of ∫ BᵀDB with gradients g[24] and weight w (det J times the rule's). */
+void nh_hex_point_stiffness(const double g[24], double w, double lambda, double mu, double K[576]);
 
 /* Rest shape-function gradients g[8][3] = ∇_X Nₐ at ξ; returns det J.
  * g is written only when det J > 0 and J is invertible; otherwise g is left
@@ -161,6 +167,24 @@ double nh_von_mises(const double s[6]);
 /* Doubles per cell in nh_tissue.cell_material. */
 #define NH_CELL_MATERIAL 9
 
+/* Default stiffness of the fictitious part of a cut cell, as a fraction α
+ * of the tissue's (docs/theory.md §5c). */
+#define NH_TISSUE_ALPHA 1e-6
+
+/* A cut cell's element data (docs/theory.md §5c), integrated over its
+ * tissue part by the finite cell quadrature (mesh/cutcell.c). */
+typedef struct nh_tissue_cut {
+  double lo[3], hi[3]; /* the rest box they were computed for */
+  double lambda, mu;   /* the material they were computed with */
+  double w[27];        /* fitted weights (m³) at nh_cut_points */
+  double K0[576];      /* (1 − α) ∫_tissue BᵀDB dV + α K_cell (B-bar: D_dev in the first) */
+  double G0[24];       /* ∇N at the tissue part's centroid (the rotation's F) */
+  double Gbar[24];     /* (1/V_t) ∫_tissue ∇N dV (B-bar's dilatation) */
+  double corner[8];    /* ∫_tissue N_a dV */
+  double volume, fraction; /* V_t and V_t / V_cell */
+  double xi[3];            /* the centroid, natural coordinates */
+} nh_tissue_cut;
+
 /* The tissue model: material, per-cell element data and the lumped mass.
  * Element data are shared between cells of identical rest shape (all cells
  * of a uniform grid share one K0), found by hashing the rest corners. */
@@ -189,7 +213,30 @@ typedef struct nh_tissue {
   int *cell_tie, cap_cell_tie;
   double *tie; /* 64 per tied cell: k ∫ χ Nₐ N_b dV (8x8) */
   int n_ties, cap_ties;
+  /* cut cells of an immersed domain (docs/theory.md §5c): per cell an index
+   * into cut, NH_CUT_WHOLE (a box cell all inside: φ = 1) or NH_CUT_NONE
+   * (a box domain, or a cell that is not an axis-aligned box: scaled by φ) */
+  double alpha; /* the fictitious part's stiffness fraction (NH_TISSUE_ALPHA) */
+  int *cell_cut, cap_cell_cut;
+  nh_tissue_cut *cut;
+  int n_cut, cap_cut;
 } nh_tissue;
+enum { NH_CUT_NONE = -1, NH_CUT_WHOLE = -2 };
+
+/* The cut-cell data of leaf c, or NULL if c is not a cut cell. */
+const nh_tissue_cut *nh_tissue_cell_cut(const nh_tissue *tissue, int c);
+/* Set the stabilisation α >= 0 and recompute every cut cell. NH_ERR_MEMORY. */
+int nh_tissue_set_stabilisation(nh_tissue *tissue, double alpha);
+/* The natural points where leaf c holds tissue, for the inversion check:
+ * returns -1 for a cell that is not cut (check the whole cell), else the
+ * number n of points in xi[3n]: the tissue part's centroid (1), or 0 when
+ * the cell holds no tissue. (The fitted Gauss points are not used: in a
+ * cell with a small tissue part those of positive weight can lie in its
+ * fictitious part.) */
+int nh_tissue_tissue_points(const nh_tissue *tissue, int c, double xi[3]);
+/* The rotation's gradients G0 (24) of leaf c: at the centre, or at a cut
+ * cell's tissue centroid. */
+const double *nh_tissue_g0(const nh_tissue *tissue, int c);
 
 /* The mean gradients of leaf c for the stress of its formulation: NULL for
  * the fully integrated element. */
@@ -211,8 +258,13 @@ int nh_tissue_set_label_materials(nh_tissue *tissue, int n, const int *labels,
 /* Lamé parameters and density of leaf c. */
 void nh_tissue_cell_material(const nh_tissue *tissue, int c, double *lambda, double *mu,
                              double *density);
-/* Lumped mass per corner of leaf c: ρ_c φ_c V_c / 8. */
-double nh_tissue_corner_mass(const nh_tissue *tissue, int c);
+/* Lumped mass of leaf c's corners m[8]: ρ_c φ_c V_c / 8 each, or a cut
+ * cell's ρ_c ∫_tissue N_a dV. With plane = {p[3], up[3]} (may be NULL) only
+ * the tissue above the plane, (x − p)·up > 0, counts (the drained mass of
+ * tissue.buoyancy.level): on an immersed box cell by the same quadrature
+ * with the half-space as a set, elsewhere as ρ_c φ_c V_c / 8 times
+ * nh_mesh_cell_fraction_above. Fails with NH_ERR_MEMORY. */
+int nh_tissue_corner_masses(const nh_tissue *tissue, int c, const double *plane, double m[8]);
 /* Recompute element data of new cells and the lumped mass after the mesh changed. */
 int nh_tissue_update(nh_tissue *tissue);
 void nh_tissue_destroy(nh_tissue **tissue);

@@ -49,6 +49,18 @@ double nh_hex_gradients(const double X[24], const double xi[3], double g[24]) {
   return det;
 }
 
+void nh_hex_point_stiffness(const double g[24], double w, double lambda, double mu, double K[576]) {
+  for (int a = 0; a < 8; a++)
+    for (int b = 0; b < 8; b++) {
+      const double *ga = g + 3 * a, *gb = g + 3 * b;
+      double dot = ga[0] * gb[0] + ga[1] * gb[1] + ga[2] * gb[2];
+      for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++)
+          K[24 * (3 * a + i) + 3 * b + j] +=
+              w * (lambda * ga[i] * gb[j] + mu * gb[i] * ga[j] + (i == j ? mu * dot : 0.0));
+    }
+}
+
 int nh_hex_stiffness(const double X[24], double lambda, double mu, int bbar, double K0[576],
                      double G0[24], double Gbar[24], double *volume) {
   static const double q = 0.57735026918962576451; /* 1/√3 */
@@ -66,15 +78,7 @@ int nh_hex_stiffness(const double X[24], double lambda, double mu, int bbar, dou
     if (!(det > 0.0)) return NH_ERR_NUMERIC;
     vol += det;
     for (int i = 0; i < 24; i++) gmean[i] += det * g[i];
-    for (int a = 0; a < 8; a++)
-      for (int b = 0; b < 8; b++) {
-        const double *ga = g + 3 * a, *gb = g + 3 * b;
-        double dot = ga[0] * gb[0] + ga[1] * gb[1] + ga[2] * gb[2];
-        for (int i = 0; i < 3; i++)
-          for (int j = 0; j < 3; j++)
-            K0[24 * (3 * a + i) + 3 * b + j] +=
-                det * (lam_gp * ga[i] * gb[j] + mu * gb[i] * ga[j] + (i == j ? mu * dot : 0.0));
-      }
+    nh_hex_point_stiffness(g, det, lam_gp, mu, K0);
   }
   for (int i = 0; i < 24; i++) gmean[i] /= vol;
   if (Gbar) memcpy(Gbar, gmean, sizeof gmean);

@@ -49,6 +49,8 @@ void nh_tissue_destroy(nh_tissue **tissue) {
   free(t->label), free(t->label_material), free(t->Kl), free(t->Km), free(t->cell_material);
   free(t->cell_tie);
   free(t->tie);
+  free(t->cell_cut);
+  free(t->cut);
   free(t);
   *tissue = NULL;
 }
@@ -129,6 +131,7 @@ static int nh_tissue_shape(nh_tissue *t, const double Xe[24], int *table, int ta
 }
 
 static void nh_tissue_mix(nh_tissue *t, int c);
+static int nh_tissue_cuts(nh_tissue *t);
 
 /* Cell c's stored λ, μ, ρ were mixed for the cell that now has its id: the
  * same rest corners 0 and 6 (no two cells of a mesh share both). */
@@ -187,11 +190,13 @@ int nh_tissue_update(nh_tissue *t) {
   if (t->n_labels) /* coarsening renumbers cells: a leaf's mix is kept only if it is its own */
     for (int l = 0; l < m->n_leaves; l++)
       if (!nh_tissue_mix_is_own(t, m->leaves[l])) nh_tissue_mix(t, m->leaves[l]);
+  NH_TRY(nh_tissue_cuts(t));
   memset(t->mass, 0, sizeof(double) * (size_t)m->n_nodes);
   for (int l = 0; l < m->n_leaves; l++) {
     int c = m->leaves[l];
-    double mc = nh_tissue_corner_mass(t, c);
-    for (int a = 0; a < 8; a++) t->mass[m->cells[8 * c + a]] += mc;
+    double mc[8];
+    NH_TRY(nh_tissue_corner_masses(t, c, NULL, mc));
+    for (int a = 0; a < 8; a++) t->mass[m->cells[8 * c + a]] += mc[a];
   }
   return NH_OK;
 }
@@ -248,10 +253,50 @@ void nh_tissue_cell_material(const nh_tissue *t, int c, double *lambda, double *
   if (density) *density = t->material.density;
 }
 
-double nh_tissue_corner_mass(const nh_tissue *t, int c) {
+/* φ of leaf c for the cells that are not cut: the sampled fill fraction
+ * where no quadrature applies, 1 for an immersed box cell all inside. */
+static double nh_cell_phi(const nh_tissue *t, int c) {
+  int k = c < t->cap_cell_cut ? t->cell_cut[c] : NH_CUT_NONE;
+  return k == NH_CUT_WHOLE ? 1.0 : t->mesh->fill[c];
+}
+
+const nh_tissue_cut *nh_tissue_cell_cut(const nh_tissue *t, int c) {
+  int k = c < t->cap_cell_cut ? t->cell_cut[c] : NH_CUT_NONE;
+  return k >= 0 ? t->cut + k : NULL;
+}
+
+int nh_tissue_corner_masses(const nh_tissue *t, int c, const double *plane, double mc[8]) {
+  const nh_mesh *m = t->mesh;
   double rho;
   nh_tissue_cell_material(t, c, NULL, NULL, &rho);
-  return rho * t->mesh->fill[c] * t->volume[t->cell_shape[c]] / 8.0;
+  const nh_tissue_cut *cut = nh_tissue_cell_cut(t, c);
+  double Xe[24], lo[3], hi[3];
+  int above = 8, box = 0;
+  if (plane) {
+    nh_mesh_cell_coords(m, m->X, c, Xe);
+    above = 0;
+    for (int a = 0; a < 8; a++)
+      above += (Xe[3 * a] - plane[0]) * plane[3] + (Xe[3 * a + 1] - plane[1]) * plane[4] +
+                   (Xe[3 * a + 2] - plane[2]) * plane[5] >
+               0;
+    box = nh_domain_integrates_cuts(&m->domain) && nh_hex_is_box(Xe, lo, hi);
+  }
+  if (above == 0) {
+    for (int a = 0; a < 8; a++) mc[a] = 0.0;
+  } else if (above < 8 && box) { /* the level cuts an immersed box cell: tissue ∩ half-space */
+    const double half[6] = {plane[0], plane[1], plane[2], -plane[3], -plane[4], -plane[5]};
+    nh_cut_moments mom;
+    double w[27];
+    NH_TRY(nh_cut_domain_cell(&m->domain, lo, hi, NULL, half, &mom, w));
+    nh_cut_shape_integrals(w, mc, NULL);
+    for (int a = 0; a < 8; a++) mc[a] *= rho;
+  } else {
+    double f = above < 8 ? nh_mesh_cell_fraction_above(m, c, plane, plane + 3) : 1.0;
+    for (int a = 0; a < 8; a++)
+      mc[a] = cut ? rho * cut->corner[a] * f
+                  : rho * nh_cell_phi(t, c) * t->volume[t->cell_shape[c]] / 8.0 * f;
+  }
+  return NH_OK;
 }
 
 /* K₀ of leaf c: the shape's, or λ_c K_λ + μ_c K_μ with materials per label
@@ -301,6 +346,7 @@ int nh_tissue_create(const nh_mesh *mesh, const nh_material *material, nh_tissue
   if (!t) return NH_ERR_MEMORY;
   t->mesh = mesh;
   t->material = *material;
+  t->alpha = NH_TISSUE_ALPHA;
   nh_lame(material->young, material->poisson, &t->lambda, &t->mu);
   int rc = nh_tissue_update(t);
   if (rc) {
@@ -323,9 +369,16 @@ static const double *nh_cell_data(const nh_tissue *t, int c, double Kc[576], nh_
   int s = t->cell_shape[c];
   double lambda, mu;
   nh_tissue_cell_material(t, c, &lambda, &mu, NULL);
-  *vol = (nh_hex_volumetric){t->Gbar + 24 * s, lambda + 2.0 * mu / 3.0, t->volume[s]};
+  const nh_tissue_cut *cut = nh_tissue_cell_cut(t, c);
+  *vol = (nh_hex_volumetric){cut ? cut->Gbar : t->Gbar + 24 * s, lambda + 2.0 * mu / 3.0,
+                             cut ? cut->volume : t->volume[s]};
   *volp = nh_tissue_gbar(t, c) ? vol : NULL;
-  return nh_cell_K0(t, c, Kc);
+  return cut ? cut->K0 : nh_cell_K0(t, c, Kc);
+}
+
+const double *nh_tissue_g0(const nh_tissue *t, int c) {
+  const nh_tissue_cut *cut = nh_tissue_cell_cut(t, c);
+  return cut ? cut->G0 : t->G0 + 24 * t->cell_shape[c];
 }
 
 void nh_tissue_element_force(const nh_tissue *t, int c, const double *u, double f[24],
@@ -337,8 +390,8 @@ void nh_tissue_element_force(const nh_tissue *t, int c, const double *u, double 
   nh_mesh_cell_coords(m, m->X, c, Xe);
   nh_mesh_cell_coords(m, u, c, ue);
   const double *K0 = nh_cell_data(t, c, Kc, &vol, &vp);
-  nh_hex_corot_force(Xe, ue, K0, t->G0 + 24 * t->cell_shape[c], vp, frame, f);
-  double phi = m->fill[c];
+  nh_hex_corot_force(Xe, ue, K0, nh_tissue_g0(t, c), vp, frame, f);
+  double phi = nh_tissue_cell_cut(t, c) ? 1.0 : nh_cell_phi(t, c);
   if (phi != 1.0)
     for (int i = 0; i < 24; i++) f[i] *= phi;
   const double *T = nh_cell_tie(t, c);
@@ -354,8 +407,8 @@ void nh_tissue_element_tangent(const nh_tissue *t, int c, const double frame[NH_
   nh_hex_volumetric vol;
   const nh_hex_volumetric *vp;
   const double *K0 = nh_cell_data(t, c, Kc, &vol, &vp);
-  nh_hex_corot_tangent(K0, t->G0 + 24 * t->cell_shape[c], vp, frame, Kt);
-  double phi = t->mesh->fill[c];
+  nh_hex_corot_tangent(K0, nh_tissue_g0(t, c), vp, frame, Kt);
+  double phi = nh_tissue_cell_cut(t, c) ? 1.0 : nh_cell_phi(t, c);
   if (phi != 1.0)
     for (int i = 0; i < 576; i++) Kt[i] *= phi;
   const double *T = nh_cell_tie(t, c);
@@ -371,8 +424,8 @@ void nh_tissue_element_apply(const nh_tissue *t, int c, const double frame[NH_HE
   nh_hex_volumetric vol;
   const nh_hex_volumetric *vp;
   const double *K0 = nh_cell_data(t, c, Kc, &vol, &vp);
-  nh_hex_corot_apply(K0, t->G0 + 24 * t->cell_shape[c], vp, frame, w, y);
-  double phi = t->mesh->fill[c];
+  nh_hex_corot_apply(K0, nh_tissue_g0(t, c), vp, frame, w, y);
+  double phi = nh_tissue_cell_cut(t, c) ? 1.0 : nh_cell_phi(t, c);
   if (phi != 1.0)
     for (int i = 0; i < 24; i++) y[i] *= phi;
   const double *T = nh_cell_tie(t, c);
@@ -427,28 +480,29 @@ double nh_tissue_energy(const nh_tissue *t, const double *u) {
   const nh_mesh *m = t->mesh;
   double energy = 0.0;
   for (int l = 0; l < m->n_leaves; l++) {
-    int c = m->leaves[l], s = t->cell_shape[c];
+    int c = m->leaves[l];
     double Xe[24], ue[24], R[9], d[24];
     nh_mesh_cell_coords(m, m->X, c, Xe);
     nh_mesh_cell_coords(m, u, c, ue);
     /* ½ dᵀ K0 d with d computed as the force is (centroid-relative, no
      * cancellation of the coordinates' magnitude). */
-    nh_hex_corotated(Xe, ue, t->G0 + 24 * s, R, d);
+    nh_hex_corotated(Xe, ue, nh_tissue_g0(t, c), R, d);
     double Kc[576];
-    const double *K0 = nh_cell_K0(t, c, Kc);
+    nh_hex_volumetric vol;
+    const nh_hex_volumetric *vp;
+    const double *K0 = nh_cell_data(t, c, Kc, &vol, &vp);
+    const nh_tissue_cut *cut = nh_tissue_cell_cut(t, c);
     double e = 0.0;
     for (int r = 0; r < 24; r++) {
       double kd = 0.0;
       for (int q = 0; q < 24; q++) kd += K0[24 * r + q] * d[q];
       e += d[r] * kd;
     }
-    const double *gbar = nh_tissue_gbar(t, c);
-    if (gbar) {
-      double theta = nh_hex_mean_dilatation(ue, gbar, NULL), lambda, mu;
-      nh_tissue_cell_material(t, c, &lambda, &mu, NULL);
-      e += (lambda + 2.0 * mu / 3.0) * t->volume[s] * theta * theta;
+    if (vp) {
+      double theta = nh_hex_mean_dilatation(ue, vp->Gbar, NULL);
+      e += vp->kappa * vp->volume * theta * theta;
     }
-    energy += 0.5 * m->fill[c] * e;
+    energy += 0.5 * (cut ? 1.0 : nh_cell_phi(t, c)) * e;
     int tie = c < t->cap_cell_tie ? t->cell_tie[c] : -1;
     if (tie >= 0)
       for (int a = 0; a < 8; a++)
@@ -467,8 +521,7 @@ void nh_tissue_gauss_stress(const nh_tissue *t, int c, const double *u, const do
   nh_mesh_cell_coords(m, u, c, ue);
   double lambda, mu;
   nh_tissue_cell_material(t, c, &lambda, &mu, NULL);
-  nh_hex_stress_at(Xe, ue, t->G0 + 24 * t->cell_shape[c], nh_tissue_gbar(t, c), lambda, mu, 1, xi,
-                   s, NULL);
+  nh_hex_stress_at(Xe, ue, nh_tissue_g0(t, c), nh_tissue_gbar(t, c), lambda, mu, 1, xi, s, NULL);
 }
 
 void nh_tissue_cell_stress(const nh_tissue *t, int c, const double *u, double s[6]) {
@@ -478,5 +531,132 @@ void nh_tissue_cell_stress(const nh_tissue *t, int c, const double *u, double s[
 
 const double *nh_tissue_gbar(const nh_tissue *t, int c) {
   if (t->material.formulation != NH_FORMULATION_BBAR) return NULL;
-  return t->Gbar + 24 * t->cell_shape[c];
+  const nh_tissue_cut *cut = nh_tissue_cell_cut(t, c);
+  return cut ? cut->Gbar : t->Gbar + 24 * t->cell_shape[c];
+}
+
+/* ---- cut cells (docs/theory.md §5c) ---- */
+
+/* The element data of a cut cell from the fitted weights w of its tissue
+ * part: K0 = (1 − α) Σ_q w_q BᵀDB(ξ_q) + α K_cell, the mean gradients and
+ * the centroid's gradients over the tissue part, ∫ N_a. */
+static int nh_cut_data(const nh_tissue *t, int c, const double Xe[24], const nh_cut_moments *mom,
+                       const double w[27], nh_tissue_cut *e) {
+  double lambda, mu, xi[81], Kf[576], G[24], Gb[24], v;
+  nh_tissue_cell_material(t, c, &lambda, &mu, NULL);
+  const int bbar = t->material.formulation == NH_FORMULATION_BBAR;
+  const double lam_q = bbar ? -2.0 * mu / 3.0 : lambda, a = t->alpha;
+  /* the fictitious part: the whole cell, fully integrated, times α */
+  if (nh_hex_stiffness(Xe, lambda, mu, 0, Kf, G, Gb, &v)) return NH_ERR_INPUT;
+  e->lambda = lambda, e->mu = mu;
+  e->volume = mom->volume, e->fraction = mom->volume / v;
+  memcpy(e->w, w, sizeof e->w);
+  for (int i = 0; i < 576; i++) e->K0[i] = a * Kf[i];
+  memset(e->Gbar, 0, sizeof e->Gbar);
+  nh_cut_points(xi);
+  for (int q = 0; q < 27; q++) {
+    double g[24];
+    if (w[q] == 0.0 || !(nh_hex_gradients(Xe, xi + 3 * q, g) > 0.0)) continue;
+    const double wq = (1.0 - a) * w[q];
+    for (int i = 0; i < 24; i++) e->Gbar[i] += w[q] * g[i];
+    nh_hex_point_stiffness(g, wq, lam_q, mu, e->K0);
+  }
+  double lo[3], hi[3];
+  nh_hex_is_box(Xe, lo, hi);
+  for (int k = 0; k < 3; k++) {
+    e->lo[k] = lo[k], e->hi[k] = hi[k];
+    e->xi[k] = mom->volume > 0.0
+                   ? (mom->centroid[k] - 0.5 * (lo[k] + hi[k])) / (0.5 * (hi[k] - lo[k]))
+                   : 0.0;
+  }
+  if (mom->volume > 0.0) {
+    for (int i = 0; i < 24; i++) e->Gbar[i] /= mom->volume;
+  } else {
+    memcpy(e->Gbar, Gb, sizeof Gb);
+  }
+  if (!(nh_hex_gradients(Xe, e->xi, e->G0) > 0.0)) memcpy(e->G0, G, sizeof G);
+  nh_cut_shape_integrals(w, e->corner, NULL);
+  return NH_OK;
+}
+
+/* The cut cells of every leaf: kept where the leaf's box and material are
+ * those an entry was computed for, else computed. */
+static int nh_tissue_cuts(nh_tissue *t) {
+  const nh_mesh *m = t->mesh;
+  if (m->n_cells > t->cap_cell_cut) {
+    int old = t->cap_cell_cut;
+    if (nh_grow((void **)&t->cell_cut, &t->cap_cell_cut, m->n_cells, sizeof(int)))
+      return NH_ERROR(NH_ERR_MEMORY, "out of memory: cut cells");
+    for (int c = old; c < t->cap_cell_cut; c++) t->cell_cut[c] = NH_CUT_NONE;
+  }
+  if (!nh_domain_integrates_cuts(&m->domain)) { /* a box, or tissue.cut_cells: scaled */
+    for (int c = 0; c < t->cap_cell_cut; c++) t->cell_cut[c] = NH_CUT_NONE;
+    t->n_cut = 0;
+    return NH_OK;
+  }
+  int *index = malloc(sizeof(int) * (size_t)t->cap_cell_cut);
+  nh_tissue_cut *cut = NULL;
+  int n_cut = 0, cap_cut = 0, rc = NH_OK;
+  if (!index) return NH_ERROR(NH_ERR_MEMORY, "out of memory: cut cells");
+  for (int c = 0; c < t->cap_cell_cut; c++) index[c] = NH_CUT_NONE;
+  for (int l = 0; l < m->n_leaves && !rc; l++) {
+    int c = m->leaves[l];
+    double Xe[24], lo[3], hi[3], mid[3], diag = 0.0;
+    nh_mesh_cell_coords(m, m->X, c, Xe);
+    if (!nh_hex_is_box(Xe, lo, hi)) continue;
+    for (int k = 0; k < 3; k++)
+      mid[k] = 0.5 * (lo[k] + hi[k]), diag += 0.25 * (hi[k] - lo[k]) * (hi[k] - lo[k]);
+    if (nh_domain_level(&m->domain, mid) < -sqrt(diag)) { /* 1-Lipschitz: all inside */
+      index[c] = NH_CUT_WHOLE;
+      continue;
+    }
+    if (n_cut >= cap_cut && nh_grow((void **)&cut, &cap_cut, n_cut + 1, sizeof *cut)) {
+      rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: cut cells");
+      break;
+    }
+    nh_tissue_cut *e = cut + n_cut;
+    const nh_tissue_cut *old = nh_tissue_cell_cut(t, c);
+    double lambda, mu;
+    nh_tissue_cell_material(t, c, &lambda, &mu, NULL);
+    if (old && !memcmp(old->lo, lo, sizeof lo) && !memcmp(old->hi, hi, sizeof hi) &&
+        old->lambda == lambda && old->mu == mu) {
+      *e = *old;
+      index[c] = n_cut++;
+      continue;
+    }
+    nh_cut_moments mom;
+    double w[27];
+    rc = nh_cut_domain_cell(&m->domain, lo, hi, NULL, NULL, &mom, w);
+    if (rc) break;
+    if (mom.volume >= (1.0 - 1e-12) * (hi[0] - lo[0]) * (hi[1] - lo[1]) * (hi[2] - lo[2])) {
+      index[c] = NH_CUT_WHOLE;
+      continue;
+    }
+    rc = nh_cut_data(t, c, Xe, &mom, w, e);
+    if (rc)
+      NH_ERROR(rc, "cut cell %d (level %d) has a non-positive Jacobian", c, m->level[c]);
+    else
+      index[c] = n_cut++;
+  }
+  if (rc) {
+    free(index), free(cut);
+    return rc;
+  }
+  free(t->cell_cut), free(t->cut);
+  t->cell_cut = index, t->cut = cut, t->n_cut = n_cut, t->cap_cut = cap_cut;
+  return NH_OK;
+}
+
+int nh_tissue_set_stabilisation(nh_tissue *t, double alpha) {
+  t->alpha = alpha;
+  for (int k = 0; k < t->n_cut; k++) t->cut[k].lambda = NAN; /* recompute every entry */
+  return nh_tissue_update(t);
+}
+
+int nh_tissue_tissue_points(const nh_tissue *t, int c, double xi[3]) {
+  const nh_tissue_cut *cut = nh_tissue_cell_cut(t, c);
+  if (!cut) return -1;
+  if (!(cut->volume > 0.0)) return 0;
+  memcpy(xi, cut->xi, 3 * sizeof(double));
+  return 1;
 }

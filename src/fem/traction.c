@@ -14,8 +14,12 @@
  *                linearly (marching tetrahedra): one triangle or a quad as
  *                two. n is the triangle's normal, turned away from an inside vertex. Each
  *                triangle is integrated by its three edge midpoints (exact
- *                for quadratics in ξ) with N_a at the midpoints' natural
- *                coordinates. On a grid of equal leaves the triangles of
+ *                for quadratics in ξ), or, with tissue.cut_cells:
+ *                integrated, by 6 points of degree 4 (N_a, a cubic on a
+ *                plane, exactly: the immersed patch test of a uniform
+ *                pressure, docs/theory.md §5c); the sub-lattice is
+ *                cutcell.c's at NH_CUT_DEPTH, so Γ bounds the polyhedron
+ *                the stiffness is integrated over. On a grid of equal leaves the triangles of
  *                neighbouring cells share their edges, so the pieces form a
  *                closed polyhedron and Σ n A = 0: a pressure then has no net
  *                force (to round-off). Where the shape leaves the grid's box
@@ -29,7 +33,7 @@
 #include <string.h>
 
 /* Sub-cubes per axis of a leaf for the immersed surface. */
-#define NH_TRACTION_SUB 4
+#define NH_TRACTION_SUB (1 << NH_CUT_DEPTH)
 
 /* Add w t to the 8 nodes of cell c with shape values N (one quadrature point). */
 static void nh_traction_add(const nh_mesh *m, int c, const double N[8], double w, const double t[3],
@@ -133,12 +137,29 @@ static double nh_traction_triangle(const nh_mesh *m, int c, double p[3][3], doub
     for (int k = 0; k < 3; k++) n[k] = -n[k];
   double t[3], A = 0.5 * two_a;
   nh_traction_vector(tr, n, t);
-  for (int e = 0; e < 3; e++) { /* edge midpoints, weight A/3 */
-    double xi[3], N[8];
-    for (int k = 0; k < 3; k++) xi[k] = 0.5 * (p[e][k] + p[(e + 1) % 3][k]);
-    nh_hex_shape(xi, N);
-    nh_traction_add(m, c, N, A / 3.0, t, f);
+  if (!nh_domain_integrates_cuts(&m->domain)) {
+    for (int e = 0; e < 3; e++) { /* edge midpoints, weight A/3 */
+      double xi[3], N[8];
+      for (int k = 0; k < 3; k++) xi[k] = 0.5 * (p[e][k] + p[(e + 1) % 3][k]);
+      nh_hex_shape(xi, N);
+      nh_traction_add(m, c, N, A / 3.0, t, f);
+    }
+    return A;
   }
+  /* Strang & Fix / Dunavant's 6-point rule of degree 4: N_a, trilinear,
+   * is a cubic on a triangle of a cut plane, so the consistent load of a
+   * uniform pressure is exact (the immersed patch test, docs/theory.md §5c). */
+  static const double bary[2][2] = {{0.445948490915965, 0.108103018168070},
+                                    {0.091576213509771, 0.816847572980459}};
+  static const double weight[2] = {0.223381589678011, 0.109951743655322};
+  for (int r = 0; r < 2; r++)
+    for (int e = 0; e < 3; e++) {
+      double xi[3], N[8], b[3] = {bary[r][0], bary[r][0], bary[r][0]};
+      b[e] = bary[r][1];
+      for (int k = 0; k < 3; k++) xi[k] = b[0] * p[0][k] + b[1] * p[1][k] + b[2] * p[2][k];
+      nh_hex_shape(xi, N);
+      nh_traction_add(m, c, N, A * weight[r], t, f);
+    }
   return A;
 }
 

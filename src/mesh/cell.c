@@ -7,6 +7,8 @@
  * takes its tables from here, so one numbering holds throughout. */
 #include "mesh/mesh.h"
 
+#include <math.h>
+
 const double nh_hex_corner[8][3] = {{-1, -1, -1}, {1, -1, -1}, {1, 1, -1}, {-1, 1, -1},
                                     {-1, -1, 1},  {1, -1, 1},  {1, 1, 1},  {-1, 1, 1}};
 
@@ -30,4 +32,15 @@ void nh_hex_dshape(const double xi[3], double dN[8][3]) {
     dN[a][1] = 0.125 * s[1] * f0 * f2;
     dN[a][2] = 0.125 * s[2] * f0 * f1;
   }
+}
+
+int nh_hex_is_box(const double Xe[24], double lo[3], double hi[3]) {
+  for (int k = 0; k < 3; k++) lo[k] = Xe[k], hi[k] = Xe[18 + k];
+  double tol = 1e-12 * (fabs(hi[0] - lo[0]) + fabs(hi[1] - lo[1]) + fabs(hi[2] - lo[2]));
+  for (int a = 0; a < 8; a++)
+    for (int k = 0; k < 3; k++) {
+      double want = nh_hex_corner[a][k] < 0 ? lo[k] : hi[k];
+      if (fabs(Xe[3 * a + k] - want) > tol) return 0;
+    }
+  return hi[0] > lo[0] && hi[1] > lo[1] && hi[2] > lo[2];
 }

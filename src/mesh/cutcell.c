@@ -685,3 +685,34 @@ void nh_cut_surface_free(nh_cut_surface *surface) {
   surface->point = NULL;
   surface->n = surface->cap = 0;
 }
+
+/* ---- the mesh's cut cells ---- */
+
+int nh_cut_domain_cell(const nh_domain *domain, const double lo[3], const double hi[3],
+                       const nh_region *region, const double *plane, nh_cut_moments *moments,
+                       double w[27]) {
+  nh_cut_spec spec;
+  nh_cut_spec_domain(&spec, domain, NH_CUT_DEPTH);
+  spec.region = region;
+  spec.plane = plane;
+  NH_TRY(nh_cut_cell(&spec, lo, hi, moments, NULL, 0u));
+  if (w) nh_cut_fit(moments->m, w);
+  return NH_OK;
+}
+
+void nh_cut_shape_integrals(const double w[27], double N[8], double NN[64]) {
+  double xi[81];
+  nh_cut_points(xi);
+  for (int a = 0; a < 8; a++) N[a] = 0.0;
+  if (NN)
+    for (int i = 0; i < 64; i++) NN[i] = 0.0;
+  for (int q = 0; q < 27; q++) {
+    double Nq[8];
+    nh_hex_shape(xi + 3 * q, Nq);
+    for (int a = 0; a < 8; a++) {
+      N[a] += w[q] * Nq[a];
+      if (NN)
+        for (int b = 0; b < 8; b++) NN[8 * a + b] += w[q] * Nq[a] * Nq[b];
+    }
+  }
+}

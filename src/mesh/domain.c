@@ -158,9 +158,14 @@ int nh_domain_from_scene(const nh_scene *s, nh_domain *d) {
     nh_domain_brain(s->tissue.brain_center, s->tissue.brain_size, d);
   else
     nh_domain_box(s->tissue.box_min, s->tissue.box_max, d);
+  d->cut_cells = s->tissue.cut_cells;
   int rc = nh_domain_load(s, d);
   if (rc) nh_domain_release(d);
   return rc;
+}
+
+int nh_domain_integrates_cuts(const nh_domain *d) {
+  return d->kind != NH_DOMAIN_BOX && d->cut_cells == NH_CUT_CELLS_INTEGRATED;
 }
 
 void nh_domain_copy(nh_domain *dst, const nh_domain *src) {

@@ -63,6 +63,8 @@ typedef struct nh_domain {
   nh_surface *surface;       /* surface: the closed surface */
   nh_image *labels;          /* the label image of materials and {label: N} regions, or NULL */
   double cap;                /* surface: F is the signed distance truncated at ±cap */
+  nh_cut_cells cut_cells;    /* tissue.cut_cells: how an immersed domain's box cells are
+                                integrated (stiffness, mass, ties, loads, tractions) */
 } nh_domain;
 
 /* Floor of the fill fraction: a cell that barely meets the shape keeps
@@ -83,6 +85,10 @@ void nh_domain_sphere(const double center[3], double radius, nh_domain *domain);
  * tissue.domain.mask.labels or tissue.materials that no voxel holds.
  * Release with nh_domain_release. */
 int nh_domain_from_scene(const nh_scene *scene, nh_domain *domain);
+/* True if the domain is immersed and its cut box cells are integrated by
+ * the finite cell quadrature (tissue.cut_cells: integrated), false if they
+ * are scaled by their fill fraction. */
+int nh_domain_integrates_cuts(const nh_domain *domain);
 /* *dst = *src with a new reference to its image, surface and label image. */
 void nh_domain_copy(nh_domain *dst, const nh_domain *src);
 /* Drop the references the domain holds (keeps kind and box). */
@@ -163,6 +169,9 @@ extern const int nh_hex_edge[12][2];
 /* Trilinear shape functions N[8] and their derivatives dN[8][3] at ξ. */
 void nh_hex_shape(const double xi[3], double N[8]);
 void nh_hex_dshape(const double xi[3], double dN[8][3]);
+/* True if the corners Xe[24] form an axis-aligned box [lo, hi] (to 1e-12 of
+ * its size, corners in VTK order); lo and hi are corners 0 and 6. */
+int nh_hex_is_box(const double Xe[24], double lo[3], double hi[3]);
 
 /* Build a (grid[0] x grid[1] x grid[2]) grid of level-0 cells over the box
  * [min, max]. Node (i, j, k) has index i + (g0+1) (j + (g1+1) k), cell
@@ -292,6 +301,21 @@ int nh_cut_cell(const nh_cut_spec *spec, const double lo[3], const double hi[3],
 void nh_cut_points(double xi[81]);
 void nh_cut_fit(const double m[27], double w[27]);
 void nh_cut_surface_free(nh_cut_surface *surface);
+/* The lattice depth of the mesh's cut cells: 2^NH_CUT_DEPTH sub-boxes per
+ * cell edge for stiffness, mass, loads, ties and drainage (fem/tissue.c,
+ * mesh/region.c), the sub-lattice of the immersed surface (fem/traction.c),
+ * so that volume and surface are one polyhedron. */
+#define NH_CUT_DEPTH 2
+/* The part of the box cell [lo, hi] inside the domain's shape, a region
+ * (may be NULL) and the half-space {(x − p)·n < 0} (plane = {p, n}, may be
+ * NULL) at depth NH_CUT_DEPTH: its moments and the 27 fitted weights w
+ * (nh_cut_fit; may be NULL). Fails as nh_cut_cell. */
+int nh_cut_domain_cell(const nh_domain *domain, const double lo[3], const double hi[3],
+                       const nh_region *region, const double *plane, nh_cut_moments *moments,
+                       double w[27]);
+/* From fitted weights w: N[a] = Σ_q w_q N_a(ξ_q) = ∫ N_a dV and (NN may be
+ * NULL) NN[8a + b] = ∫ N_a N_b dV over the part (exact: Q2 integrands). */
+void nh_cut_shape_integrals(const double w[27], double N[8], double NN[64]);
 
 /* ---- refinement templates (mesh/template.c) ----
  * A template is a set of nodes in the parent's natural coordinates [-1, 1]³

@@ -23,7 +23,11 @@
  * and centre: a goal point's small box deep in the brain, which 6³ samples
  * of a coarse cell could miss entirely). Everything else (sphere and
  * cylinder regions, boxes across the immersed boundary, the distorted
- * meshes of the tests) is sampled by 6³ sub-cell midpoints.
+ * meshes of the tests) is sampled by 6³ sub-cell midpoints, except on an
+ * immersed domain's box cells: there loads and ties of box, sphere and
+ * cylinder regions use the finite cell quadrature of tissue ∩ region
+ * (cutcell.c, nh_cut_domain_cell; the region on its own finer lattice), so
+ * a region smaller than a cell ties exactly the tissue inside it.
  *
  * The same sampling gives two more cell quantities: the fraction of a cell's
  * tissue above a fluid level (the drainage of tissue.buoyancy.level) and the
@@ -139,18 +143,6 @@ int nh_mesh_nodes_in_region(const nh_mesh *m, const nh_region *r, unsigned char 
   return count;
 }
 
-/* True if the 8 corners are those of an axis-aligned box [lo, hi]. */
-static int nh_cell_is_box(const double Xe[24], double lo[3], double hi[3]) {
-  for (int k = 0; k < 3; k++) lo[k] = Xe[k], hi[k] = Xe[18 + k];
-  double tol = 1e-12 * (fabs(hi[0] - lo[0]) + fabs(hi[1] - lo[1]) + fabs(hi[2] - lo[2]));
-  for (int a = 0; a < 8; a++)
-    for (int k = 0; k < 3; k++) {
-      double want = nh_hex_corner[a][k] < 0 ? lo[k] : hi[k];
-      if (fabs(Xe[3 * a + k] - want) > tol) return 0;
-    }
-  return hi[0] > lo[0] && hi[1] > lo[1] && hi[2] > lo[2];
-}
-
 /* Midpoint n × n × n of the rest cell Xe: position, shape values, and the
  * volume it stands for. */
 static void nh_cell_sample(const double Xe[24], int n, int i, int j, int k, double x[3],
@@ -201,7 +193,15 @@ static double nh_cell_region_integrals(const nh_domain *d, const double Xe[24], 
   double lo[3], hi[3];
   const int immersed = d->kind != NH_DOMAIN_BOX;
   for (int a = 0; a < 8; a++) w[a] = 0.0;
-  if (r->kind == NH_REGION_BOX && nh_cell_is_box(Xe, lo, hi) &&
+  if (nh_domain_integrates_cuts(d) && r->kind != NH_REGION_LABEL && nh_hex_is_box(Xe, lo, hi)) {
+    nh_cut_moments mom;
+    double wq[27];
+    if (nh_cut_domain_cell(d, lo, hi, r, NULL, &mom, wq)) return 0.0; /* cannot fail here */
+    if (!(mom.volume > 0.0)) return 0.0;
+    nh_cut_shape_integrals(wq, w, NULL);
+    return mom.volume;
+  }
+  if (r->kind == NH_REGION_BOX && nh_hex_is_box(Xe, lo, hi) &&
       (!immersed || nh_clip_in_tissue(d, lo, hi, r))) {
     double I[3][2]; /* I[k][0]: ∫ ½(1-ξ) dξ, I[k][1]: ∫ ½(1+ξ) dξ over the clipped interval */
     double jac = 1.0;
@@ -306,6 +306,15 @@ double nh_mesh_region_tie(const nh_mesh *m, int c, const nh_region *r, double T[
     else
       rlo[k] = r->min[k], rhi[k] = r->max[k];
     if (hi[k] < rlo[k] || lo[k] > rhi[k]) return 0.0;
+  }
+  if (nh_domain_integrates_cuts(&m->domain) && r->kind != NH_REGION_LABEL &&
+      nh_hex_is_box(Xe, lo, hi)) {
+    nh_cut_moments mom;
+    double wq[27], N[8];
+    if (nh_cut_domain_cell(&m->domain, lo, hi, r, NULL, &mom, wq) || !(mom.volume > 0.0))
+      return 0.0;
+    nh_cut_shape_integrals(wq, N, T);
+    return mom.volume;
   }
   for (int i = 0; i < n; i++)
     for (int j = 0; j < n; j++)

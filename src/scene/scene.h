@@ -24,6 +24,11 @@ typedef enum { NH_MODE_DYNAMIC = 0, NH_MODE_STATIC = 1 } nh_time_mode;
  * volume change; docs/theory.md §2b) or fully integrated (locks as ν → 0.5). */
 typedef enum { NH_FORMULATION_BBAR = 0, NH_FORMULATION_FULL = 1 } nh_formulation;
 
+/* How cells cut by an immersed domain's boundary are integrated
+ * (tissue.cut_cells, docs/theory.md §5c): scaled by their fill fraction φ,
+ * or by the finite cell quadrature over their tissue part. */
+typedef enum { NH_CUT_CELLS_SCALED = 0, NH_CUT_CELLS_INTEGRATED = 1 } nh_cut_cells;
+
 typedef enum {
   NH_REGION_BOX = 0,
   NH_REGION_SPHERE = 1,
@@ -254,6 +259,7 @@ typedef struct nh_scene {
     double poisson; /* tissue.material.poisson (required, in (-1, 0.5)) */
     double density; /* tissue.material.density, kg/m³ (default 1000, > 0) */
     nh_formulation formulation; /* tissue.material.formulation: bbar (default) | full */
+    nh_cut_cells cut_cells;     /* tissue.cut_cells: scaled (default) | integrated */
     double damping_mass;        /* tissue.damping.mass (Rayleigh α, 1/s, default 0, >= 0) */
     double damping_stiffness;   /* tissue.damping.stiffness (Rayleigh β, s, default 0, >= 0) */
     /* tissue.buoyancy {before, after, schedule} (optional): the rest shape is the equilibrium

@@ -10,7 +10,9 @@
  *   them means anything);
  * - inverted cells: det J <= 0 of the deformed cell at any of its 8 corners
  *   or 2x2x2 Gauss points (the corners catch a cell folded at one node that
- *   the Gauss points miss). Counted in steps.csv `inverted`;
+ *   the Gauss points miss); a cut cell of an immersed domain only where its
+ *   tissue is: the tissue part's centroid (nh_tissue_tissue_points; its fictitious part carries no
+ *   load and may fold). Counted in steps.csv `inverted`;
  * - an implausible step: a node moved by more than NH_GUARD_STEP_FRACTION
  *   of the tissue's size (the diagonal of its rest bounding box) in one
  *   step. No physical insertion does that, and an implicit Euler step that
@@ -44,7 +46,11 @@ int nh_sim_count_inverted(const nh_sim *s, int *first) {
     nh_mesh_cell_coords(m, s->u, c, x);
     for (int i = 0; i < 24; i++) x[i] += X[i];
     int bad = 0;
-    for (int p = 0; p < 16 && !bad; p++) {
+    double pts[3];
+    int n_pts = nh_tissue_tissue_points(s->tissue, c, pts);
+    if (n_pts >= 0) /* a cut cell: where its tissue is */
+      for (int p = 0; p < n_pts && !bad; p++) bad = !(nh_hex_gradients(x, pts + 3 * p, grad) > 0.0);
+    for (int p = 0; p < 16 && !bad && n_pts < 0; p++) {
       double a = p < 8 ? 1.0 : g;
       double xi[3] = {(p & 1) ? a : -a, (p & 2) ? a : -a, (p & 4) ? a : -a};
       bad = !(nh_hex_gradients(x, xi, grad) > 0.0);

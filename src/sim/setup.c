@@ -162,23 +162,22 @@ static int nh_sim_ties(nh_sim *s, int first) {
 }
 
 /* The drained mass: all of it, or the part above the fluid level. */
-static void nh_sim_drained_mass(nh_sim *s) {
+static int nh_sim_drained_mass(nh_sim *s) {
   const nh_scene *sc = s->scene;
   const nh_mesh *m = s->mesh;
   memcpy(s->drained, s->tissue->mass, sizeof(double) * (size_t)m->n_nodes);
-  if (!sc->tissue.buoyant || !sc->tissue.buoyancy_has_level) return;
+  if (!sc->tissue.buoyant || !sc->tissue.buoyancy_has_level) return NH_OK;
   const double *g = sc->gravity;
-  double gn = sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]),
-         up[3] = {-g[0] / gn, -g[1] / gn, -g[2] / gn};
+  double gn = sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]), plane[6];
+  for (int k = 0; k < 3; k++) plane[k] = sc->tissue.buoyancy_level[k], plane[3 + k] = -g[k] / gn;
   memset(s->drained, 0, sizeof(double) * (size_t)m->n_nodes);
   for (int l = 0; l < m->n_leaves; l++) {
     int c = m->leaves[l];
-    double above = nh_mesh_cell_fraction_above(m, c, sc->tissue.buoyancy_level, up);
-    double rho;
-    nh_tissue_cell_material(s->tissue, c, NULL, NULL, &rho);
-    double mc = rho * m->fill[c] * s->tissue->volume[s->tissue->cell_shape[c]] / 8.0 * above;
-    for (int a = 0; a < 8; a++) s->drained[m->cells[8 * c + a]] += mc;
+    double mc[8];
+    NH_TRY(nh_tissue_corner_masses(s->tissue, c, plane, mc));
+    for (int a = 0; a < 8; a++) s->drained[m->cells[8 * c + a]] += mc[a];
   }
+  return NH_OK;
 }
 
 /* The nodal forces of each load, then each traction, at factor 1. */
@@ -222,7 +221,7 @@ int nh_sim_setup_mesh(nh_sim *s, int first) {
   NH_TRY(nh_sim_hanging_nodes(s));
   NH_TRY(nh_sim_tissue_build(s, first));
   NH_TRY(nh_sim_ties(s, first));
-  nh_sim_drained_mass(s);
+  NH_TRY(nh_sim_drained_mass(s));
   NH_TRY(nh_sim_load_vectors(s));
   NH_TRY(nh_sim_locate_points(s, first));
   if (!first && s->contact) NH_TRY(nh_contact_relocate(s->contact, s->mesh));

@@ -208,9 +208,10 @@ void nh_system_assemble(nh_system *s, const double *u, const double *v, double c
         if (s->updated[l]) memcpy(frame, now, NH_HEX_FRAME * sizeof(double));
         /* Aₑ = cK Kₑ + cM Mₑ, Mₑ the lumped mass ρ φ Vₑ / 8 per corner. */
         nh_tissue_element_tangent(t, c, frame, K);
-        double me = nh_tissue_corner_mass(t, c);
+        double me[8];
+        nh_tissue_corner_masses(t, c, NULL, me); /* no plane: cannot fail */
         for (int r = 0; r < 576; r++) K[r] *= cK;
-        for (int r = 0; r < 24; r++) K[25 * r] += cM * me;
+        for (int r = 0; r < 24; r++) K[25 * r] += cM * me[r / 3];
       } else {
         double K_old[576];
         nh_tissue_element_tangent(t, c, now, K);
