@@ -168,6 +168,9 @@ CASES = [
     ("control_bytes.yaml", [], 5, None),
     ("set_base.yaml", ["tissue.grid=[16,\x1b[31m,8]"], "--set:1", "tissue.grid"),
     ("set_base.yaml", ["limits.max_cells=0"], "--set:1", "limits.max_cells"),
+    # limits.max_voxels: the label image's header (150 x 80 x 39 voxels) exceeds 100
+    ("materials_negative_label.yaml", ["tissue.materials={2: {young: 1e6}}",
+                                       "limits.max_voxels=100"], 7, "tissue.labels.file"),
     # A material's label: whole numbers >= 0 written in digits (not -2, 2.0, +2);
     # the same fixture with label 2 (held by the image) is valid (VALID).
     ("materials_negative_label.yaml", [], 10, "tissue.materials.-2"),

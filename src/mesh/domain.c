@@ -108,7 +108,7 @@ static int nh_domain_load(const nh_scene *s, nh_domain *d) {
   const int n_mat = s->tissue.n_materials;
   if (s->tissue.domain == NH_DOMAIN_MASK) {
     d->kind = NH_DOMAIN_MASK;
-    if (nh_image_read(s->tissue.mask_file, 1, NULL, &d->image))
+    if (nh_image_read(s->tissue.mask_file, 1, &s->limits.read, &d->image))
       return nh_domain_fail(s->tissue.where_domain);
     NH_TRY(nh_labels_present(d->image, s->tissue.mask_labels, s->tissue.n_mask_labels,
                              s->tissue.where_labels));
@@ -118,7 +118,8 @@ static int nh_domain_load(const nh_scene *s, nh_domain *d) {
     d->labels = d->image;
   } else if (s->tissue.domain == NH_DOMAIN_SURFACE) {
     d->kind = NH_DOMAIN_SURFACE;
-    if (nh_surface_read(s->tissue.surface_file, s->tissue.surface_unit, 0, NULL, &d->surface))
+    if (nh_surface_read(s->tissue.surface_file, s->tissue.surface_unit, 0, &s->limits.read,
+                        &d->surface))
       return nh_domain_fail(s->tissue.where_domain);
     nh_domain_set_box(d, d->surface->min, d->surface->max);
     /* Truncation of the distance: far above the sub-cell radii the mesh
@@ -126,7 +127,7 @@ static int nh_domain_load(const nh_scene *s, nh_domain *d) {
     d->cap = 0.25 * fmax(d->half[0], fmax(d->half[1], d->half[2]));
   }
   if (s->tissue.labels_file[0]) {
-    if (nh_image_read(s->tissue.labels_file, 1, NULL, &d->labels))
+    if (nh_image_read(s->tissue.labels_file, 1, &s->limits.read, &d->labels))
       return nh_domain_fail(s->tissue.where_labels);
   }
   for (int i = 0; i < n_mat; i++)

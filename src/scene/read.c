@@ -319,7 +319,7 @@ int nh_read_relative(const nh_ctx *c, const char *value, char out[NH_PATH_MAX]) 
 
 int nh_read_image_header(const nh_ctx *c, const nh_yaml_node *at, const char *key, const char *path,
                          nh_image **out) {
-  if (nh_image_read(path, 0, NULL, out) == NH_OK) return NH_OK;
+  if (nh_image_read(path, 0, &c->scene->limits.read, out) == NH_OK) return NH_OK;
   char msg[1024];
   snprintf(msg, sizeof msg, "%s", nh_error_message());
   return nh_read_fail(c, at, key, "%s", msg);

@@ -303,6 +303,8 @@ typedef struct nh_scene {
 
   struct {
     int max_cells; /* limits.max_cells: cap on tissue cells, lattice and refined (default 2e6) */
+    nh_read_limits read; /* limits.max_voxels, .max_triangles, .max_file_bytes: what a file the
+                            scene names may hold (core.h's defaults) */
   } limits;
 
   int n_probes;

@@ -132,6 +132,11 @@ int nh_read_output(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
 
 static const nh_key limits_rows[] = {
     {NH_INT("max_cells", offsetof(nh_scene, limits.max_cells), 2000000, NH_AT_LEAST, 1)},
+    {NH_NUMBER("max_voxels", offsetof(nh_scene, limits.read.max_voxels), 2e8, NH_AT_LEAST, 1)},
+    {NH_NUMBER("max_triangles", offsetof(nh_scene, limits.read.max_triangles), 2e7, NH_AT_LEAST,
+               1)},
+    {NH_NUMBER("max_file_bytes", offsetof(nh_scene, limits.read.max_file_bytes), 4e9, NH_AT_LEAST,
+               1)},
     {NULL},
 };
 

@@ -102,7 +102,8 @@ static int read_surface(const nh_ctx *c, const nh_yaml_node *node, nh_scene *s) 
   nh_read_join(key, path, "file");
   nh_read_where(c, at_file, key, s->tissue.where_domain);
   nh_surface *surface;
-  if (nh_surface_read(s->tissue.surface_file, s->tissue.surface_unit, 0, NULL, &surface)) {
+  if (nh_surface_read(s->tissue.surface_file, s->tissue.surface_unit, 0, &s->limits.read,
+                      &surface)) {
     char msg[1024];
     snprintf(msg, sizeof msg, "%s", nh_error_message());
     return nh_read_fail(c, at_file, key, "%s", msg);

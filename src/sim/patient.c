@@ -46,9 +46,11 @@ static int nh_is_label_image(const double *values, size_t n) {
 int nh_sim_patient_open(nh_sim *s) {
   const nh_scene *sc = s->scene;
   if (sc->output.displacement_field.reference[0])
-    NH_TRY(nh_image_read(sc->output.displacement_field.reference, 0, NULL, &s->field_reference));
+    NH_TRY(nh_image_read(sc->output.displacement_field.reference, 0, &sc->limits.read,
+                         &s->field_reference));
   if (!sc->output.warped.image[0]) return NH_OK;
-  NH_TRY(nh_image_read_values(sc->output.warped.image, NULL, &s->warp_image, &s->warp_values));
+  NH_TRY(nh_image_read_values(sc->output.warped.image, &sc->limits.read, &s->warp_image,
+                              &s->warp_values));
   const nh_image *im = s->warp_image;
   size_t n = (size_t)im->n[0] * im->n[1] * im->n[2];
   int how = sc->output.warped.interpolation;
