@@ -274,13 +274,7 @@ int nh_plan_run(const char *scene_path, int n_sets, const char *const *sets,
   double seconds = nh_time_now() - t0;
   if (n_runs > 0) {
     int wrc = write_plan_yaml(out, scene_path, scene, target, o, runs, n_runs, converged, seconds);
-    char link[NH_PATH_MAX + 16], name[16];
-    snprintf(link, sizeof link, "%s/final", out);
-    snprintf(name, sizeof name, "run_%02d", n_runs);
-    if (unlink(link) != 0 && errno != ENOENT && !wrc)
-      wrc = NH_ERROR(NH_ERR_IO, "cannot replace %s: %s", link, strerror(errno));
-    if (!wrc && symlink(name, link) != 0)
-      wrc = NH_ERROR(NH_ERR_IO, "cannot link %s to %s: %s", link, name, strerror(errno));
+    if (!wrc) wrc = nh_plan_link_final(out, n_runs);
     if (!rc) rc = wrc;
   }
   if (!rc && !o->quiet)

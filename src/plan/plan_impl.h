@@ -156,6 +156,9 @@ void nh_plan_put_vec(FILE *f, const double v[3]);
 /* Close the memory stream f (open_memstream's *text, set at the close; freed) and write it to
  * OUT/plan.yaml; NH_ERR_MEMORY (the stream failed), NH_ERR_IO. */
 int nh_plan_yaml_finish(FILE *f, char **text, const char *out);
+/* OUT/final, a symbolic link to OUT/run_NN (run = NN, from 1): the outputs
+ * of the plan's chosen run. NH_ERR_IO naming the link. */
+int nh_plan_link_final(const char *out, int run);
 
 /* ---- steer.c ---- */
 /* The steering planner (plan.c calls it when the target's tool has a

@@ -329,3 +329,14 @@ int nh_runs_execute(const char *scene_path, int n_user, const char *const *user,
     if (!res[i].failed) rc = nh_read_run(c[i].dir, tool, target, &res[i]);
   return rc;
 }
+
+int nh_plan_link_final(const char *out, int run) {
+  char link[NH_PATH_MAX + 16], name[16];
+  snprintf(link, sizeof link, "%s/final", out);
+  snprintf(name, sizeof name, "run_%02d", run);
+  if (unlink(link) != 0 && errno != ENOENT)
+    return NH_ERROR(NH_ERR_IO, "cannot replace %s: %s", link, strerror(errno));
+  if (symlink(name, link) != 0)
+    return NH_ERROR(NH_ERR_IO, "cannot link %s to %s: %s", link, name, strerror(errno));
+  return NH_OK;
+}

@@ -675,13 +675,7 @@ int nh_plan_steer(const char *scene_path, int n_sets, const char *const *sets,
   int final = converged >= 0 ? converged : best;
   if (n_runs > 0 && final >= 0) {
     int wrc = nh_steer_write(out, scene_path, &P, o, runs, n_runs, final, converged >= 0, seconds);
-    char link[NH_PATH_MAX + 16], name[16];
-    snprintf(link, sizeof link, "%s/final", out);
-    snprintf(name, sizeof name, "run_%02d", final + 1);
-    if (unlink(link) != 0 && errno != ENOENT && !wrc)
-      wrc = NH_ERROR(NH_ERR_IO, "cannot replace %s: %s", link, strerror(errno));
-    if (!wrc && symlink(name, link) != 0)
-      wrc = NH_ERROR(NH_ERR_IO, "cannot link %s to %s: %s", link, name, strerror(errno));
+    if (!wrc) wrc = nh_plan_link_final(out, final + 1);
     if (!rc) rc = wrc;
     if (!rc && !o->quiet)
       printf("plan: %s after %d run%s (%.1f s): run %d, miss %.4g mm, clearance %.4g mm; "
