@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""The per-step converged reference of tools/study.py dbs-goal
+"""The per-step converged reference of tools/study.py dbs-goal and phantom
 (per_step_reference, tools/richardson.py): Richardson through three meshes
 with a sanity range on the observed order, else the finest value with the
 last difference as its error bar. Silent on success, one line per failure,
@@ -12,6 +12,12 @@ Expected values from the closed form f(h) = f∞ − C h^p at h = 14, 10, 7:
     reported but not used.
  3. Differences changing sign (1.0, 1.2, 1.1): no order, 1.1 ± 0.1.
  4. The same value on every mesh (step 0): that value, bar 0, no order.
+ 5. The phantom study's reference (tools/study_phantom.py) on probes whose
+    components follow u(h) = u∞ + C h^2 at h = 1.25, 0.833, 0.625 mm (its
+    three finest meshes), different u∞, C per component and step: u∞, order
+    2, sane, bar |C| 0.625²; the order of the RMS differences between
+    successive meshes (u(h) = u∞ + h^1.5 v, a fixed vector v, on 2.5, 1.25,
+    0.833 mm): 1.5.
 """
 import math
 import os
@@ -53,4 +59,25 @@ for i, (r, b, p, ok) in enumerate(want):
     if bool(sane[i]) != ok:
         print("FAIL: column %d: sane %s, expected %s" % (i, bool(sane[i]), ok), file=sys.stderr)
         failures.append("sane %d" % i)
+
+from study_phantom import converged_reference, difference_order  # noqa: E402
+
+hp = [1.25, 0.8333333333333334, 0.625]
+rng = np.random.default_rng(1)
+uinf = {n: rng.normal(size=(5, 3)) * 1e-6 for n in ("1", "1A")}
+coef = {n: rng.normal(size=(5, 3)) * 1e-7 for n in ("1", "1A")}
+runs = [{n: uinf[n] + coef[n] * x ** 2 for n in uinf} for x in hp]
+conv = converged_reference(runs, hp, list(uinf), (1.0, 5.99))
+for n in uinf:
+    for i in range(5):
+        for c in range(3):
+            what = "phantom probe %s step %d component %d" % (n, i, c)
+            check(what + ": reference", conv[n]["u"][i, c], uinf[n][i, c], 1e-15)
+            check(what + ": order", conv[n]["order"][i, c], 2.0, 1e-6)
+            check(what + ": bar", conv[n]["bar"][i, c], abs(coef[n][i, c]) * 0.625 ** 2, 1e-15)
+            check(what + ": sane", float(conv[n]["sane"][i, c]), 1.0, 0)
+hd = [2.5, 1.25, 0.8333333333333334]
+v = np.array([0.3, -0.1, 0.7])
+d = [np.linalg.norm(v) * abs(hd[i] ** 1.5 - hd[i + 1] ** 1.5) for i in range(2)]
+check("phantom: order of the RMS differences", difference_order(hd, d), 1.5, 1e-6)
 sys.exit(1 if failures else 0)

@@ -3,7 +3,7 @@
 steps.csv / probes.csv / targets.csv and writes plots and a Markdown report.
 
     tools/study.py phantom [--binary PATH] [--out DIR] [--img DIR | --docs] [--only NAME ...]
-                           [--fresh-reference] [--check-reference] [--steps N] [--reuse | --restart]
+                           [--fresh-reference] [--steps N] [--reuse | --restart]
                            [--workers N | --scheduler tcp://HOST:PORT] [--threads T]
     tools/study.py dbs     [the same options]
     tools/study.py cube    [the same options]
@@ -78,10 +78,8 @@ def main():
     ap.add_argument("--docs", action="store_true",
                     help="write the PNGs to docs/img (the plots the docs show)")
     ap.add_argument("--only", nargs="*", help="run only these variants (names as in the report)")
-    ap.add_argument("--fresh-reference", action="store_true", help="run the reference again")
-    ap.add_argument("--check-reference", action="store_true",
-                    help="phantom: measure the runs and the reference against a finer mesh too "
-                    "(64×32×32, cached in OUT like the reference)")
+    ap.add_argument("--fresh-reference", action="store_true",
+                    help="run the reference (its cached runs) again")
     ap.add_argument("--steps", type=int, default=None, help="fewer steps (a quick look)")
     ap.add_argument("--reuse", action="store_true",
                     help="report on the runs already in OUT instead of running them again")

@@ -251,17 +251,20 @@ def run_variants(a, binary, scene, out, variants):
 def run_with_reference(a, binary, st, out):
     """Runs the study's selected variants (--only) of st["variants"] [(name, label, sets,
     kind)] and, when missing or with --fresh-reference, its reference st["reference"] (name,
-    label, sets) first (the longest run); returns the reference's name, label and folder and
-    the runs' records."""
-    rname, rlabel, rsets = st["reference"]
-    rdir = os.path.join(out, rname)
+    label, sets), or each of its cached runs st["references"] [(name, label, sets)], first
+    (the longest runs); returns the (first) reference's name, label and folder and the runs'
+    records."""
+    refs = st.get("references") or [st["reference"]]
     selected = [(name, sets) for name, _, sets, _ in st["variants"] if not a.only or name in a.only]
-    if a.fresh_reference or not os.path.exists(os.path.join(rdir, "run.json")):
-        selected.insert(0, (rname, rsets))  # the longest run first
+    for rname, _, rsets in reversed(refs):
+        if a.fresh_reference or not os.path.exists(os.path.join(out, rname, "run.json")):
+            selected.insert(0, (rname, rsets))  # the longest runs first
     infos = run_variants(a, binary, st["scene"], out, selected)
-    if not os.path.exists(os.path.join(rdir, "run.json")):
-        raise SystemExit("no reference run in %s" % rdir)
-    return rname, rlabel, rdir, infos
+    for rname, _, _ in refs:
+        if not os.path.exists(os.path.join(out, rname, "run.json")):
+            raise SystemExit("no reference run in %s" % os.path.join(out, rname))
+    rname, rlabel, _ = refs[0]
+    return rname, rlabel, os.path.join(out, rname), infos
 
 
 def table_head(*columns):
