@@ -34,10 +34,21 @@
  * to the material point at the tip, laying channel points on the way. A
  * channel point is tied to the outermost tool of the group whose axis
  * passes it within the tool's length; a retracting tool uncovers the
- * points it leaves, which then have no rows. */
+ * points it leaves, which then have no rows.
+ * The hand-over: a point that passes from one tool of the group to another
+ * (the cannula retracts past it and the electrode inside covers it) keeps
+ * its lateral offset o to the new tool's axis, and its lateral rows hold
+ * g = n · (x_P − x_tool − o) for o closed by at most NH_HANDOVER_RATE of
+ * the point's spacing per step: the tissue moves onto the new axis over
+ * several steps instead of jumping across the difference of the two axes
+ * in one (docs/interaction.md, "Nested tools"). */
 #include "contact/contact_impl.h"
 
 #include <string.h>
+
+/* The hand-over's rate: the fraction of a point's spacing (half the local
+ * cell) its remaining offset closes per step. */
+#define NH_HANDOVER_RATE 0.1
 
 int nh_channel_open(nh_group *G, const nh_tool_spec *sp, const nh_mesh *m) {
   if (nh_grow((void **)&G->chan, &G->cap_chan, 1, sizeof *G->chan)) return NH_ERR_MEMORY;
@@ -136,6 +147,10 @@ static int nh_tie_rows(nh_contact *c, const nh_mesh *m, const double *u, nh_cpoi
     rows->tool[r] = tl->dyn, rows->elem[r] = e;
     memcpy(rows->J + 36 * r, J, sizeof J);
     double g[3] = {xp[0] - xb[0], xp[1] - xb[1], xp[2] - xb[2]};
+    if (q == 0 && !tip && p->tool >= 0 && p->tool != k) /* handed over: its offset is allowed */
+      for (int i = 0; i < 3; i++) p->handover[i] = g[i] - nh_vec3_dot(g, t) * t[i];
+    if (q < 2 && !tip)
+      for (int i = 0; i < 3; i++) g[i] -= p->handover[i];
     rows->gap[r] = (q < 2 || tip) ? nh_vec3_dot(dirs[q], g) : 0.0;
     if (q == 2 && !tip && c->statics) { /* the shaft's slip since the step began */
       if (c->iteration == 0 || p->tool != k) p->s0 = s;
@@ -275,6 +290,7 @@ int nh_shaft_rows(nh_contact *c, nh_group *G, const nh_mesh *m, const double *u,
     if (k < 0 || c->tools[k].dyn < 0) { /* uncovered: no rows */
       p->tool = -1, p->slid = 0;
       memset(p->lam, 0, sizeof p->lam);
+      memset(p->handover, 0, sizeof p->handover);
       continue;
     }
     const nh_tool *tl = &c->tools[k];
@@ -295,6 +311,8 @@ void nh_shaft_update(nh_contact *c, nh_group *G, double h, nh_group_events *ev) 
       nh_tool_add_force(&c->tools[p->tool], &c->rows, p->row + q, h, p->s);
     }
     p->slid = c->rows.law[p->row + 2].sliding;
+    double o = sqrt(nh_vec3_dot(p->handover, p->handover)), close = NH_HANDOVER_RATE * p->len;
+    for (int q = 0; q < 3; q++) p->handover[q] *= o > close ? 1.0 - close / o : 0.0;
     /* the torsion row follows the three: a moment, kept as the next warm start */
     if (nh_torsion_threshold(c, &c->tools[p->tool], p, 1.0) > 0.0)
       p->lam[3] = c->rows.lambda[p->row + 3];

@@ -24,16 +24,18 @@
 
 /* A tissue material point tied to a tool. */
 typedef struct {
-  double X[3];   /* material position */
-  int cell;      /* leaf containing X */
-  double xi[3];  /* natural coordinates in it */
-  double len;    /* channel length it stands for (spacing), m */
-  double s;      /* arc length of its tool point (last projection) */
-  double s0;     /* quasi-static: s at the step's first iteration (the slip is s − s0) */
-  int tool;      /* the tool it was tied to in the last step (−1: none) */
-  int row;       /* its first row in the last step (−1: none) */
-  double lam[4]; /* its rows' multipliers: n1, n2, t, and the torsion row (shaft points) */
-  int slid;      /* its friction slid in the last step (static or kinetic bound next) */
+  double X[3];        /* material position */
+  int cell;           /* leaf containing X */
+  double xi[3];       /* natural coordinates in it */
+  double len;         /* channel length it stands for (spacing), m */
+  double s;           /* arc length of its tool point (last projection) */
+  double s0;          /* quasi-static: s at the step's first iteration (the slip is s − s0) */
+  int tool;           /* the tool it was tied to in the last step (−1: none) */
+  int row;            /* its first row in the last step (−1: none) */
+  double lam[4];      /* its rows' multipliers: n1, n2, t, and the torsion row (shaft points) */
+  int slid;           /* its friction slid in the last step (static or kinetic bound next) */
+  double handover[3]; /* the lateral offset to its tool's axis still allowed after it passed
+                         from one tool of the group to another (channel.c: the hand-over) */
 } nh_cpoint;
 
 /* One tool: a beam, its motion and the forces of the last step. */
