@@ -4,6 +4,7 @@ actual, tolerance) and counted for the exit status, and a run that returns
 the CSV tables of its output folder."""
 import csv
 import os
+import resource
 import subprocess
 import sys
 
@@ -23,14 +24,24 @@ def fail(msg):
     print("FAIL:", msg, file=sys.stderr)
 
 
+def run_process(scene, out, sets=()):
+    """needlehex run SCENE --out OUT (--set S for each of sets): the finished
+    process (returncode, stdout, stderr) and the CPU seconds it used."""
+    cmd = [BIN, "run", scene, "--out", out, "--overwrite", "--quiet"]
+    for s in sets:
+        cmd += ["--set", s]
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    p = subprocess.run(cmd, capture_output=True, text=True)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return p, cpu
+
+
 def run(scene, out, sets=(), tables=("steps", "probes", "tools")):
     """needlehex run SCENE --out OUT (--set S for each of sets); the tables
     that exist as {name: rows}, or None (a failure recorded) on a non-zero
     exit."""
-    cmd = [BIN, "run", scene, "--out", out, "--overwrite", "--quiet"]
-    for s in sets:
-        cmd += ["--set", s]
-    p = subprocess.run(cmd, capture_output=True, text=True)
+    p, _ = run_process(scene, out, sets)
     if p.returncode != 0:
         fail("%s: exit %d, expected 0: %s" % (scene, p.returncode, p.stderr.strip()))
         return None

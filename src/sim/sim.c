@@ -651,7 +651,7 @@ static int nh_sim_solve_static(nh_sim *s, double t_new, nh_step_stats *st) {
     sum.t_factor_reference = sum.factorised > 0 ? sum.t_factor / sum.factorised : 0.0;
     sum.load_steps = parts;
     *st = sum;
-    if (rc != NH_ERR_NUMERIC || depth == NH_STATIC_SPLITS) return rc;
+    if (rc != NH_ERR_NUMERIC || depth == NH_STATIC_SPLITS || one.diagnosed) return rc;
     /* back to the step's start, and again in twice as many load steps */
     char why[512];
     snprintf(why, sizeof why, "%s", nh_error_message());
@@ -984,7 +984,7 @@ static int nh_sim_write_row(nh_sim *s, const nh_sim_record *r, double t_end) {
 
 /* A failed step: the message names it (exit 1). */
 static int nh_sim_step_failed(const nh_sim *s, int rc, double t_new) {
-  char reason[1024];
+  char reason[1900];
   snprintf(reason, sizeof reason, "%s", nh_error_message());
   return NH_ERROR(rc, "step %d (t = %g s): %s", s->step + 1, t_new, reason);
 }

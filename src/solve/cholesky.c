@@ -38,11 +38,18 @@ int nh_system_factor(nh_system *s) {
   s->W_valid = 0; /* the compliance belongs to the previous A */
   s->factor_current = 0;
   int ok = cholmod_factorize(s->A, s->L, &s->cm);
-  if (s->cm.status == CHOLMOD_NOT_POSDEF)
-    return NH_ERROR(
-        NH_ERR_NUMERIC,
-        "the system matrix is not positive definite (CHOLMOD stopped at column %d of %d)",
-        (int)s->L->minor, s->n_free);
+  s->not_posdef = s->cm.status == CHOLMOD_NOT_POSDEF;
+  if (s->not_posdef) { /* the column in A's order, its node, cells and the likely cause */
+    const int k = (int)s->L->minor, *perm = s->L->Perm;
+    const int col = perm && k < s->n_free ? perm[k] : k;
+    char where[1536] = "";
+    nh_system_diagnose(s, s->u_assembled, col < s->n_free ? s->dof_of[col] : -1, NULL, where,
+                       sizeof where);
+    return NH_ERROR(NH_ERR_NUMERIC,
+                    "the system matrix is not positive definite (CHOLMOD stopped at column %d "
+                    "of %d); the pivot is%s",
+                    k, s->n_free, where);
+  }
   if (!ok || s->cm.status < CHOLMOD_OK) return nh_cholmod_failed(s, "factorisation");
   s->factor_current = 1;
   nh_inherit_free(s); /* the system's own factor from now on */

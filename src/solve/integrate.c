@@ -26,7 +26,9 @@
 #include "solve/system_impl.h"
 
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
 
 static double nh_norm(const double *a, int n) {
   double s = 0.0;
@@ -72,6 +74,50 @@ int nh_step_dynamic(nh_system *s, const nh_integrator *in, const double *f_ext, 
  * tangent (docs/theory.md §3, "Quasi-static Newton"). */
 #define NH_NEWTON_CONSISTENT 0.1
 
+/* No progress (docs/reliability.md, "Failures diagnosed"): after
+ * NH_NEWTON_STALL_ITERATIONS iterations no relative residual has fallen
+ * below NH_NEWTON_STALL times the step's first, and the diagnosis names a
+ * cause that more iterations or smaller load steps cannot remove: a rigid
+ * mode not held or held only by a support far softer than the tissue (at
+ * the step's start), or an inverted cell at the largest residual. Without
+ * such a cause the iteration goes on: a large load's Newton can stall that
+ * long and converge (the cantilever of cases/cantilever.yaml at 0.2 N: 1, 1,
+ * 0.998, 0.553, then 0.072 and 1e-13 at the 9th iteration). */
+#define NH_NEWTON_STALL_ITERATIONS 3
+#define NH_NEWTON_STALL            0.5
+
+/* Append to msg where the largest entry of the residual b (over the
+ * unknowns) sits and the likely cause (diagnose.c), which it returns. */
+static nh_cause nh_static_where(nh_system *s, const double *u, const double *b,
+                                const nh_rigid *start, char *msg, size_t size) {
+  int worst = 0;
+  for (int i = 1; i < s->n_free; i++)
+    if (fabs(b[i]) > fabs(b[worst])) worst = i;
+  size_t len = strlen(msg);
+  snprintf(msg + len, size - len, "; the largest residual, %.3g N, is",
+           s->n_free > 0 ? fabs(b[worst]) : 0.0);
+  return nh_system_diagnose(s, u, s->n_free > 0 ? s->dof_of[worst] : -1, start, msg, size);
+}
+
+/* The no-progress rule at iteration `it` (rel[0..it]: the residuals so far):
+ * NH_OK to go on, else the failure with its message. */
+static int nh_static_progress(nh_system *s, const double *u, const double *b, const double *rel,
+                              int it, const nh_rigid *start, nh_step_stats *stats) {
+  double best = rel[1];
+  for (int k = 2; k <= it; k++) best = fmin(best, rel[k]);
+  if (best < NH_NEWTON_STALL * rel[0]) return NH_OK;
+  char msg[1536] = "static Newton makes no progress: relative residual";
+  for (int k = 0; k <= it; k++)
+    snprintf(msg + strlen(msg), sizeof msg - strlen(msg), "%s %.3g", k ? "," : "", rel[k]);
+  snprintf(msg + strlen(msg), sizeof msg - strlen(msg),
+           " in %d iterations (none below %g of the first)", it, NH_NEWTON_STALL);
+  nh_cause cause = nh_static_where(s, u, b, start, msg, sizeof msg);
+  if (cause != NH_CAUSE_NOT_HELD && cause != NH_CAUSE_WEAK && cause != NH_CAUSE_INVERTED)
+    return NH_OK;
+  if (stats) stats->diagnosed = 1;
+  return NH_ERROR(NH_ERR_NUMERIC, "%s", msg);
+}
+
 /* One Newton step du = K⁻¹ b with the consistent tangent K = S + N:
  * UMFPACK's LU of K without multiplier rows; with them (hanging nodes), the
  * Cholesky factor of S and the rows' multipliers, falling back to the
@@ -102,8 +148,10 @@ static int nh_static_newton_step(nh_system *s, const nh_integrator *in, const do
 int nh_solve_static(nh_system *s, const nh_integrator *in, const double *f_ext, double *u,
                     nh_step_stats *stats) {
   double *b = s->fwork[0], *du = s->fwork[1];
-  double t_sol = 0.0, rel = INFINITY;
+  double t_sol = 0.0, rel = INFINITY, history[NH_NEWTON_STALL_ITERATIONS + 1];
   nh_step_stats st = {0};
+  nh_rigid start = {.mode = -1};
+  if (stats) stats->diagnosed = 0;
   int it, rc = NH_OK, lu_steps = 0;
   nh_step_begin(s, in);
   for (it = 0; !rc && it <= in->max_iterations; it++) {
@@ -124,10 +172,21 @@ int nh_solve_static(nh_system *s, const nh_integrator *in, const double *f_ext, 
       break;
     }
     if (rel <= in->tolerance || nh_norm(b, s->n_free) == 0.0) break;
+    if (it == 0) start = nh_system_rigid(s, u); /* the supports, at the step's start */
+    if (it <= NH_NEWTON_STALL_ITERATIONS) history[it] = rel;
+    if (it == NH_NEWTON_STALL_ITERATIONS &&
+        (rc = nh_static_progress(s, u, b, history, it, &start, stats)))
+      break;
     if (it == in->max_iterations) break;
     double t2 = nh_time_now(), tf0 = st.t_factor;
     lu_steps += s->consistent && s->skew;
-    if ((rc = nh_static_newton_step(s, in, u, b, du, &st))) break;
+    if ((rc = nh_static_newton_step(s, in, u, b, du, &st))) {
+      /* a pivot <= 0 of the corotational tangent (positive semi-definite):
+       * A is singular, which no load step changes (cholesky.c named where) */
+      if (rc == NH_ERR_NUMERIC && s->not_posdef && !(s->consistent && s->skew) && stats)
+        stats->diagnosed = 1;
+      break;
+    }
     nh_step_update(s, 1, 1.0, du, u, NULL);
     t_sol += nh_time_now() - t2 - (st.t_factor - tf0);
   }
@@ -160,10 +219,13 @@ int nh_solve_static(nh_system *s, const nh_integrator *in, const double *f_ext, 
     stats->t_factor_reference = st.factorised > 0 ? st.t_factor / st.factorised : 0.0;
     stats->t_aside = 0.0;
   }
-  if (!(rel <= in->tolerance) && rel != 0.0)
-    return NH_ERROR(
-        NH_ERR_NUMERIC,
-        "static Newton did not converge in %d iterations (relative residual %.3g > %.3g)",
-        in->max_iterations, rel, in->tolerance);
+  if (!(rel <= in->tolerance) && rel != 0.0) {
+    char msg[1536];
+    snprintf(msg, sizeof msg,
+             "static Newton did not converge in %d iterations (relative residual %.3g > %.3g)",
+             in->max_iterations, rel, in->tolerance);
+    nh_static_where(s, u, b, &start, msg, sizeof msg);
+    return NH_ERROR(NH_ERR_NUMERIC, "%s", msg);
+  }
   return NH_OK;
 }

@@ -155,6 +155,10 @@ typedef struct {
    * first (nh_mcp_stats.flops, flops_dense): what reuse costs on top of the
    * exact path's one constraint solve */
   double correction_flops, correction_flops_dense;
+  /* static: the step failed with a diagnosis (a singular tangent, no
+   * progress: nh_solve_static) that solving it again in load steps cannot
+   * change */
+  int diagnosed;
 } nh_step_stats;
 
 /* Integrator settings. */

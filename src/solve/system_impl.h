@@ -34,6 +34,7 @@ struct nh_system {
   /* Reuse across steps (reuse.c): L factorises the assembled A
    * (factor_current), or an earlier A and serves as a preconditioner. */
   int factor_current;
+  int not_posdef;         /* the last nh_system_factor stopped at a pivot <= 0 */
   int factor_age;         /* steps since the factorisation (0: factorised in this step) */
   int refactor_due;       /* the renewal rule asks for a factorisation at the next step */
   double cycle_cost;      /* flops: the last factorisation and the reuse's extra solves since */
@@ -89,6 +90,35 @@ struct nh_system {
   double *work[4];  /* 3 per node each */
   double *fwork[2]; /* n_free each */
 };
+
+/* ---- where and why a solve failed (diagnose.c) ---- */
+/* The softest rigid mode of the assembled A, the six rigid fields at
+ * displacements u restricted to the unknowns: mode 0-2 translations along
+ * x, y, z, 3-5 rotations about them (-1: no unknown), rho its Rayleigh
+ * quotient over A's mean diagonal, loose a bit per mode with rho at
+ * round-off (not held at all). Uses the PCG work vectors 0 and 1. */
+typedef struct {
+  int mode;
+  double rho;
+  int loose;
+} nh_rigid;
+nh_rigid nh_system_rigid(nh_system *s, const double *u);
+/* The likely causes of a failed solve, as nh_system_diagnose names them. */
+typedef enum {
+  NH_CAUSE_NONE,
+  NH_CAUSE_NOT_HELD, /* a rigid mode meets no stiffness: A is singular */
+  NH_CAUSE_WEAK,     /* a rigid mode is held by a support far softer than the tissue */
+  NH_CAUSE_INVERTED, /* an inverted cell at the node */
+  NH_CAUSE_SLIVER    /* a cut cell with a tiny tissue fraction at the node */
+} nh_cause;
+/* Append to the message in buf (size bytes in all) where a failure sits:
+ * " at node N, c, rest position (...)" for the nodal DOF `dof` (-1: none),
+ * the cells around it (tissue fraction, tied, inverted at displacements
+ * u), the smallest tissue fraction, the softest rigid mode (rigid: as
+ * measured at the step's start, NULL: of the assembled A now) and the
+ * likely cause, which it returns. Uses the PCG work vectors 0 and 1. */
+nh_cause nh_system_diagnose(nh_system *s, const double *u, int dof, const nh_rigid *rigid,
+                            char *buf, size_t size);
 
 /* ---- the preconditioner across a mesh change (inherit.c) ---- */
 typedef struct nh_inherited nh_inherited;

@@ -1,0 +1,92 @@
+#!/usr/bin/python3
+"""static_failures.py — a static step that cannot be solved stops at once,
+naming the step, where and the likely cause (docs/reliability.md, "Failures
+diagnosed"), instead of 30 iterations in up to 16 load steps.
+
+1. Unsupported bodies: tests/data/brain.yaml (immersed brain under gravity)
+   and tests/data/traction_patch.yaml (a box pulled at one face), each with
+   tissue.fixed = []. With no support the corotational tangent at rest has
+   the six rigid fields in its kernel (each element's K0 annihilates them
+   exactly), so A is singular: the run must exit 1 at step 1 naming all six
+   rigid modes as not held, within 2 s of CPU (one assembly and one
+   factorisation of a few thousand unknowns; the split into load steps,
+   which cannot change a singular matrix, is not tried).
+2. A Newton that cannot progress: the same brain, E = 1 kPa, held only by a
+   tie of radius a = 2 mm at (0.04, 0.03, 0.05), off the centre of mass.
+   The tie's stiffness is k = 10^3 E / (2a)^2 (docs/scene.md), so it resists
+   a rotation about its centre with k_rot = k (8/15) pi a^5 = 3.4e-3 N m,
+   while gravity's torque about it is about M g d = 1.2 kg x 9.81 m/s^2 x
+   0.058 m = 0.7 N m: the linearised first step turns the brain by ~200 rad,
+   metres of displacement on a 0.17 m body, from which the corotational
+   iteration cannot come back. The run must exit 1 within 2 s of CPU with
+   "makes no progress", the residual history of exactly 4 values (the
+   rule's 3 iterations), a node, its cells and a likely cause.
+3. The rule does not stop a hard but converging Newton: cases/cantilever.yaml
+   at 0.2 N (200 times its load, tip deflection over half the beam), whose
+   first residuals (1, 1, 0.998, 0.553) meet the no-progress test but with
+   no cause (clamped, no cell inverted), must converge: exit 0, residual
+   <= the tolerance 1e-8, more than 3 iterations.
+Silent on success; exit 1 on failure.
+"""
+import csv
+import os
+import re
+
+from nh_run import fail, finish, run, run_process, work
+
+SRC = os.environ["NH_SOURCE_DIR"]
+WORK = work("static_failures")
+CPU_BOUND = 2.0  # s of CPU per failing run
+
+
+def check(cond, msg):
+    if not cond:
+        fail(msg)
+
+
+def run_failing(name, scene, *sets):
+    out = os.path.join(WORK, name)
+    p, cpu = run_process(os.path.join(SRC, scene), out, sets)
+    return p, cpu, out
+
+
+MODES = ["translation along x", "translation along y", "translation along z",
+         "rotation about x", "rotation about y", "rotation about z"]
+
+for name, scene in (("brain_free", "tests/data/brain.yaml"),
+                    ("patch_free", "tests/data/traction_patch.yaml")):
+    p, cpu, out = run_failing(name, scene, "tissue.fixed=[]")
+    err = p.stderr
+    check(p.returncode == 1, "%s: exit %d, expected 1: %s" % (name, p.returncode, err))
+    check(cpu <= CPU_BOUND, "%s: %.2f s of CPU, expected <= %g" % (name, cpu, CPU_BOUND))
+    check("step 1 (t = 1 s)" in err and "the body is not held" in err
+          and all(m in err.split("Likely cause")[-1] for m in MODES),
+          "%s: the message does not name step 1 and the six free rigid modes:\n%s" % (name, err))
+    check(re.search(r"at node \d+, [xyz], rest position", err) is not None,
+          "%s: the message names no node:\n%s" % (name, err))
+    with open(os.path.join(out, "steps.csv")) as f:
+        rows = list(csv.DictReader(f))
+    check(rows == [], "%s: steps.csv has rows of a failed step: %s" % (name, rows))
+
+p, cpu, _ = run_failing("brain_small_tie", "tests/data/brain.yaml", "tissue.material.young=1000",
+                        "tissue.fixed=[{sphere: {center: [0.04, 0.03, 0.05], radius: 0.002}}]")
+err = p.stderr
+check(p.returncode == 1, "small tie: exit %d, expected 1: %s" % (p.returncode, err))
+check(cpu <= CPU_BOUND, "small tie: %.2f s of CPU, expected <= %g" % (cpu, CPU_BOUND))
+m = re.search(r"makes no progress: relative residual ([0-9.e+, -]+) in (\d+) iterations", err)
+check(m is not None and len(m.group(1).split(",")) == 4 and m.group(2) == "3",
+      "small tie: no 'makes no progress' with 4 residuals after 3 iterations:\n" + err)
+check(re.search(r"the largest residual, [0-9.e+-]+ N, is at node \d+", err) is not None
+      and "cells around it (tissue fraction)" in err and "Likely cause" in err,
+      "small tie: the message does not say where and why:\n" + err)
+
+tables = run(os.path.join(SRC, "cases/cantilever.yaml"), os.path.join(WORK, "cantilever_hard"),
+             ["tissue.loads.0.force=[0,0,-0.2]", "solver.on_invalid=warn"], tables=("steps",))
+if tables:
+    row = tables["steps"][-1]
+    check(float(row["residual"]) <= 1e-8 and int(float(row["iterations"])) > 3
+          and float(row["splits"]) == 0,
+          "cantilever 0.2 N: residual %s, iterations %s, splits %s: expected <= 1e-8, > 3, 0"
+          % (row["residual"], row["iterations"], row["splits"]))
+
+finish()
