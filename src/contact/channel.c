@@ -286,7 +286,11 @@ int nh_shaft_rows(nh_contact *c, nh_group *G, const nh_mesh *m, const double *u,
     double xp[3], s;
     nh_point_position(m, u, p, xp);
     p->row = -1;
-    int k = nh_cover(c, G, xp, p->tool >= 0 ? p->s : L, 0.5 * p->len, &s);
+    /* hysteresis within a quasi-static step: a point tied at the previous
+     * iteration stays tied up to the tip (clearance 0), one that was not
+     * gets its rows only half a spacing behind it */
+    const double clear = c->statics && c->iteration && p->tool >= 0 ? 0.0 : 0.5 * p->len;
+    int k = nh_cover(c, G, xp, p->tool >= 0 ? p->s : L, clear, &s);
     if (k < 0 || c->tools[k].dyn < 0) { /* uncovered: no rows */
       p->tool = -1, p->slid = 0;
       memset(p->lam, 0, sizeof p->lam);
