@@ -11,17 +11,23 @@ cortical shift |u(end)| of a probe added to the scene (--cortex X,Y,Z in m;
 default 3 mm behind the anterior pole of the right hemisphere of the analytic
 brain, in the frontal lobe that drains: (cx + 0.45a, cy + b − 3 mm, cz + 0.3c)
 with a, b, c the box's half sizes, docs/theory.md §5b), wall and CPU time
-(the sum of t_step), the largest count of inverted cells (steps.csv), and the
-status: ok, or failed with needlehex's reason (inverted cells, Newton, other).
+(the sum of t_step), the skull contact rows at the end and the largest count of
+inverted cells (steps.csv), and the
+status: ok; unsolved (the run reached its end but steps.csv's `unsolved` marks
+steps whose equations were left unsolved: a Newton failure, the shifts still
+tabulated and the grid flagged); or failed with needlehex's reason (Newton,
+inverted cells, diverged: an implausible step, other) and its message.
 A failed run is a row of the table, not a failure of the study.
 
-For every three consecutive grids (in h, coarse first) that ran: the spread
+For every three consecutive grids (in h, coarse first) that reached their end
+(the grids not ok among them named): the spread
 (max − min)/mean and the largest deviation from the mean max|f − mean|/mean of
 the STN shifts (the goal of issue 25: within 2 %), whether the three grids are
 nested (each refines the previous by a whole factor per axis), and the observed
 order with the extrapolated value (tools/richardson.py: f(h) = f∞ − C h^p
 through the three (h, f), bisection on p, so the ratios need not be constant;
-"none" when the differences change sign or no p in (0.05, 6) fits).
+"none" when the differences change sign or no p in (0.05, 6) fits); and the
+change between every two grids of which one refines the other (nested pairs).
 
 Output: OUT/GRID/ (one run each), OUT/report.md (also printed), OUT/img (or
 --img / --docs) convergence-SCENE.png: the shifts against h. --reuse reports
@@ -30,7 +36,6 @@ on the runs already in OUT; --restart runs only the missing ones.
 import os
 import re
 import subprocess
-import time
 
 import numpy as np
 
@@ -97,14 +102,26 @@ def nested(a, b):
 
 
 def status(info, st):
-    """ok, or failed with the reason (from needlehex's message)."""
+    """ok; unsolved (the run reached its end, but steps.csv marks steps whose equations
+    Newton left unsolved: a Newton failure, warned about, exit 0); or failed with the reason
+    from needlehex's message."""
     if info.get("returncode", 0) == 0:
+        bad = np.nonzero(st["unsolved"])[0] if st is not None and "unsolved" in st else []
+        if len(bad):
+            return "unsolved (Newton): %d of %d steps, the first step %d (residual %.2f)" % (
+                len(bad), len(st["step"]), int(st["step"][bad[0]]), st["residual"][bad[0]])
         return "ok" if st is None or st.get("inverted", np.zeros(1)).max() == 0 else \
             "ok (inverted cells reported)"
     msg = info.get("message", "")
-    kind = ("inverted" if "invert" in msg else
-            "Newton" if re.search(r"Newton|did not converge|no progress", msg) else "other")
-    return "failed (%s): %s" % (kind, msg)
+    kind = [k for k, pat in (("Newton", r"Newton|did not converge|no progress|relative residual"),
+                             ("inverted", r"invert"), ("diverged", r"implausible step"))
+            if re.search(pat, msg)] or ["other"]
+    return "failed (%s): %s" % (", ".join(kind), msg)
+
+
+def ran(r):
+    """Whether the run reached its end (ok, or with unsolved steps): its shifts are tabulated."""
+    return not r["status"].startswith("failed")
 
 
 def measure(d, info, target, probe):
@@ -114,8 +131,9 @@ def measure(d, info, target, probe):
          "dofs": int(st["dofs"].max()) if st else 0, "cells": int(st["cells"].max()) if st else 0,
          "cpu": float(st["t_step"].sum()) if st else float("nan"),
          "inverted": int(st["inverted"].max()) if st and "inverted" in st else 0,
+         "skull": int(st["skull_contacts"][-1]) if st and "skull_contacts" in st else 0,
          "stn": float("nan"), "cortex": float("nan"), "t": float(st["time"][-1]) if st else 0.0}
-    if r["status"].startswith("ok"):
+    if ran(r):
         r["stn"] = 1e3 * float(np.linalg.norm(target_shift(d, target)))
         u = read_points(d, "probes.csv")[0]
         r["cortex"] = 1e3 * float(np.linalg.norm(u[probe][-1, :3]))
@@ -126,12 +144,13 @@ def triples(rows):
     """For every three consecutive rows that ran (coarse first): their names, hs, the STN
     spread (max − min)/mean, the largest |f − mean|/mean, nested or not, the observed order
     and extrapolated value of the STN and cortical shifts (order None: not observed)."""
-    ok = [r for r in rows if r["status"].startswith("ok")]
+    ok = [r for r in rows if ran(r)]
     out = []
     for a, b, c in zip(ok, ok[1:], ok[2:]):
         h = [a["h"], b["h"], c["h"]]
         t = {"names": [a["name"], b["name"], c["name"]], "h": h,
-             "nested": nested(a["grid"], b["grid"]) and nested(b["grid"], c["grid"])}
+             "nested": nested(a["grid"], b["grid"]) and nested(b["grid"], c["grid"]),
+             "flagged": [r["name"] for r in (a, b, c) if r["status"] != "ok"]}
         for key in ("stn", "cortex"):
             f = np.array([a[key], b[key], c[key]])
             mean = float(f.mean())
@@ -145,10 +164,14 @@ def triples(rows):
 def plot(rows, path, title):
     from plotstyle import plt, save
     fig, axes = plt.subplots(1, 2, figsize=(9.6, 3.8))
-    ok = [r for r in rows if r["status"].startswith("ok")]
-    bad = [r for r in rows if not r["status"].startswith("ok")]
+    ok = [r for r in rows if ran(r)]
+    bad = [r for r in rows if not ran(r)]
     for ax, key, what in zip(axes, ("stn", "cortex"), ("STN shift", "cortical shift")):
         ax.plot([r["h"] for r in ok], [r[key] for r in ok], "o-", label="ran")
+        flag = [r for r in ok if r["status"] != "ok"]
+        if flag:
+            ax.plot([r["h"] for r in flag], [r[key] for r in flag], "s", mfc="none",
+                    color="tab:orange", ms=10, label="steps unsolved")
         for r in bad:
             ax.axvline(r["h"], color="tab:red", ls=":", lw=1)
         if bad:
@@ -166,35 +189,51 @@ def report(scene, sets, rows, tri):
     """The report's lines: the grid table, the triples' table, the verdict against the goal."""
     lines = ["Scene %s, overrides: %s." % (scene, " ".join(sets) or "none"), ""]
     p = lines.append
-    lines += engine.table_head("grid", "h mm", "dofs", "cells", "STN shift mm",
-                               "cortical shift mm", "wall s", "CPU s (steps)", "status")
+    lines += engine.table_head("grid", "h mm", "dofs", "cells", "skull contacts",
+                               "STN shift mm", "cortical shift mm", "wall s", "CPU s (steps)",
+                               "status")
     for r in rows:
-        okr = r["status"].startswith("ok")
-        p("| %s | %.2f | %d | %d | %s | %s | %.1f | %.1f | %s |" % (
-            r["name"], r["h"], r["dofs"], r["cells"], "%.4f" % r["stn"] if okr else "–",
+        okr = ran(r)
+        p("| %s | %.2f | %d | %d | %d | %s | %s | %.1f | %.1f | %s |" % (
+            r["name"], r["h"], r["dofs"], r["cells"], r["skull"],
+            "%.4f" % r["stn"] if okr else "–",
             "%.3f" % r["cortex"] if okr else "–", r["wall"], r["cpu"],
             r["status"] if okr else "%s (at t = %.2f s)" % (r["status"], r["t"])))
     p("")
     lines += engine.table_head("grids (coarse first)", "h mm", "nested", "STN spread",
                                "STN max dev.", "STN order", "STN f∞ mm", "cortex spread",
-                               "cortex order")
+                               "cortex order", "grids not ok")
     for t in tri:
-        p("| %s | %s | %s | %.2f %% | %.2f %% | %s | %s | %.2f %% | %s |" % (
+        p("| %s | %s | %s | %.2f %% | %.2f %% | %s | %s | %.2f %% | %s | %s |" % (
             ", ".join(t["names"]), ", ".join("%.2f" % h for h in t["h"]),
             "yes" if t["nested"] else "no", 100 * t["stn_spread"], 100 * t["stn_dev"],
             "%.2f" % t["stn_order"] if t["stn_order"] else "none",
             "%.4f" % t["stn_inf"] if t["stn_order"] else "–", 100 * t["cortex_spread"],
-            "%.2f" % t["cortex_order"] if t["cortex_order"] else "none"))
+            "%.2f" % t["cortex_order"] if t["cortex_order"] else "none",
+            ", ".join(t["flagged"]) or "–"))
+    ok = [r for r in rows if ran(r)]
+    pairs = [(a, b) for i, a in enumerate(ok) for b in ok[i + 1:] if nested(a["grid"], b["grid"])]
+    if pairs:
+        p("")
+        p("Nested pairs (the finer grid refines the coarser by a whole factor): " + "; ".join(
+            "%s → %s: STN %.4f → %.4f mm (%+.2f %%), cortex %.3f → %.3f mm (%+.2f %%)" % (
+                a["name"], b["name"], a["stn"], b["stn"], 100 * (b["stn"] / a["stn"] - 1),
+                a["cortex"], b["cortex"], 100 * (b["cortex"] / a["cortex"] - 1))
+            for a, b in pairs) + ".")
     p("")
     within = [t for t in tri if t["stn_dev"] <= GOAL]
-    failed = [r for r in rows if not r["status"].startswith("ok")]
+    failed = [r for r in rows if not ran(r)]
+    unsolved = [r for r in rows if r["status"].startswith("unsolved")]
     inverted = [r for r in rows if r["inverted"] > 0]
-    met = tri and len(within) == len(tri) and not failed and not inverted
+    met = tri and len(within) == len(tri) and not failed and not inverted and not unsolved
+
+    def names(rs):
+        return " (%s)" % ", ".join(r["name"] for r in rs) if rs else ""
     p("Goal (issue 25: every three consecutive STN shifts within %g %% of their mean, no "
       "inverted cell, no Newton failure): **%s** — %d of %d triples within, %d grid(s) "
-      "failed%s, %d with inverted cells." % (
+      "failed%s, %d ran with steps unsolved%s, %d complete run(s) with inverted cells." % (
           100 * GOAL, "met" if met else "missed", len(within), len(tri), len(failed),
-          " (%s)" % ", ".join(r["name"] for r in failed) if failed else "", len(inverted)))
+          names(failed), len(unsolved), names(unsolved), len(inverted)))
     return lines
 
 
@@ -227,7 +266,6 @@ def run(a, binary):
             cmd += ["--set", s]
         # exit 1 (the simulation failed: inverted cells, Newton) is a result, a row
         jobs.append(engine.Job(name, os.path.join(out, name), cmd, (0, 1)))
-    t0 = time.time()
     done, failed = engine.run_jobs(jobs, workers=a.workers, scheduler=a.scheduler,
                                    skip_complete=a.reuse or a.restart,
                                    same_command=not a.reuse, threads=a.threads)
@@ -242,9 +280,9 @@ def run(a, binary):
     tri = triples(rows)
     lines = report(os.path.relpath(scene, engine.ROOT), a.sets, rows, tri)
     lines.append("")
-    lines.append("Target %s; cortical probe at [%s] m; %.0f s of wall time for the runs above "
-                 "(shared machine)." % (target, ", ".join("%.4g" % v for v in cortex),
-                                        time.time() - t0))
+    lines.append("Target %s; cortical probe at [%s] m; %.0f s of wall time in the runs above "
+                 "(the sum of their run.json; a shared machine)." % (
+                     target, ", ".join("%.4g" % v for v in cortex), sum(r["wall"] for r in rows)))
     img = engine.plot_dir(a, out)
     tag = base + ("-" + "-".join(s.split("=")[-1] for s in a.sets) if a.sets else "")
     plot(rows, os.path.join(img, "convergence-%s.png" % re.sub(r"[^A-Za-z0-9_.-]", "_", tag)),
