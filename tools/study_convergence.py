@@ -29,8 +29,10 @@ through the three (h, f), bisection on p, so the ratios need not be constant;
 "none" when the differences change sign or no p in (0.05, 6) fits); and the
 change between every two grids of which one refines the other (nested pairs).
 
-Output: OUT/GRID/ (one run each), OUT/report.md (also printed), OUT/img (or
---img / --docs) convergence-SCENE.png: the shifts against h. --reuse reports
+Output (TAG: the scene's name and the values of the --set overrides, e.g.
+dbs-skull-integrated): OUT/GRID/ (one run each; OUT default
+out/study/convergence-TAG), OUT/report.md (also printed), OUT/img (or --img /
+--docs) convergence-TAG.png: the shifts against h. --reuse reports
 on the runs already in OUT; --restart runs only the missing ones.
 """
 import os
@@ -242,7 +244,9 @@ def run(a, binary):
         raise SystemExit("convergence needs --grids NXxNYxNZ,...")
     scene = os.path.abspath(a.spec)
     base = os.path.splitext(os.path.basename(scene))[0]
-    out = engine.out_dir(a, "convergence-" + base)
+    # the scene and the values of the overrides: the default folder and the plot's name
+    tag = re.sub(r"[^A-Za-z0-9_.-]", "_", "-".join([base] + [s.split("=", 1)[-1] for s in a.sets]))
+    out = engine.out_dir(a, "convergence-" + tag)
     lo, hi, first = scene_box(binary, scene, a.sets)
     target = a.target or first
     if target is None:
@@ -284,8 +288,6 @@ def run(a, binary):
                  "(the sum of their run.json; a shared machine)." % (
                      target, ", ".join("%.4g" % v for v in cortex), sum(r["wall"] for r in rows)))
     img = engine.plot_dir(a, out)
-    tag = base + ("-" + "-".join(s.split("=")[-1] for s in a.sets) if a.sets else "")
-    plot(rows, os.path.join(img, "convergence-%s.png" % re.sub(r"[^A-Za-z0-9_.-]", "_", tag)),
-         "%s %s" % (base, " ".join(a.sets)))
+    plot(rows, os.path.join(img, "convergence-%s.png" % tag), "%s %s" % (base, " ".join(a.sets)))
     engine.write_report(out, lines)
     return engine.report_failures(failed)
