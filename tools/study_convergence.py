@@ -200,7 +200,8 @@ def report(scene, sets, rows, tri):
             r["name"], r["h"], r["dofs"], r["cells"], r["skull"],
             "%.4f" % r["stn"] if okr else "–",
             "%.3f" % r["cortex"] if okr else "–", r["wall"], r["cpu"],
-            r["status"] if okr else "%s (at t = %.2f s)" % (r["status"], r["t"])))
+            r["status"] if okr else "%s (%s)" % (r["status"], "last step written at t = %.2f s"
+                                                 % r["t"] if r["dofs"] else "no step written")))
     p("")
     lines += engine.table_head("grids (coarse first)", "h mm", "nested", "STN spread",
                                "STN max dev.", "STN order", "STN f∞ mm", "cortex spread",
