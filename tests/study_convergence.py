@@ -84,9 +84,10 @@ with tempfile.TemporaryDirectory() as tmp:
         print("FAIL: the study exited %d: %s" % (p.returncode, p.stderr), file=sys.stderr)
         sys.exit(1)
     rep = open(os.path.join(tmp, "report.md")).read()
-    if not os.path.exists(os.path.join(tmp, "img", "convergence-dbs.png")):
+    png = "convergence-%s.png" % os.path.basename(tmp)  # named after the folder
+    if not os.path.exists(os.path.join(tmp, "img", png)):
         failures.append("no plot")
-        print("FAIL: no img/convergence-dbs.png", file=sys.stderr)
+        print("FAIL: no img/%s" % png, file=sys.stderr)
 
 rows = {}
 for line in rep.splitlines():

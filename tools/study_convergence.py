@@ -32,7 +32,8 @@ change between every two grids of which one refines the other (nested pairs).
 Output (TAG: the scene's name and the values of the --set overrides, e.g.
 dbs-skull-integrated): OUT/GRID/ (one run each; OUT default
 out/study/convergence-TAG), OUT/report.md (also printed), OUT/img (or --img /
---docs) convergence-TAG.png: the shifts against h. --reuse reports
+--docs) the folder's name (convergence-TAG by default) .png: the shifts
+against h. --reuse reports
 on the runs already in OUT; --restart runs only the missing ones.
 """
 import os
@@ -289,6 +290,8 @@ def run(a, binary):
                  "(the sum of their run.json; a shared machine)." % (
                      target, ", ".join("%.4g" % v for v in cortex), sum(r["wall"] for r in rows)))
     img = engine.plot_dir(a, out)
-    plot(rows, os.path.join(img, "convergence-%s.png" % tag), "%s %s" % (base, " ".join(a.sets)))
+    name = os.path.basename(os.path.normpath(out))  # the plot is named after the folder
+    name = name if name.startswith("convergence") else "convergence-" + name
+    plot(rows, os.path.join(img, name + ".png"), "%s %s" % (base, " ".join(a.sets)))
     engine.write_report(out, lines)
     return engine.report_failures(failed)
