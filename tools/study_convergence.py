@@ -10,31 +10,31 @@ Per grid: h (mm) = the longest cell edge, the scene's bounding box (as
 cortical shift |u(end)| of a probe added to the scene (--cortex X,Y,Z in m;
 default 3 mm behind the anterior pole of the right hemisphere of the analytic
 brain, in the frontal lobe that drains: (cx + 0.45a, cy + b − 3 mm, cz + 0.3c)
-with a, b, c the box's half sizes, docs/theory.md §5b), wall and CPU time
-(the sum of t_step), the skull contact rows at the end and the largest count of
-inverted cells (steps.csv), and the
-status: ok; unsolved (the run reached its end but steps.csv's `unsolved` marks
-steps whose equations were left unsolved: a Newton failure, the shifts still
+with a, b, c the box's half sizes, docs/theory.md §5b; other shapes need
+--cortex), wall and CPU time (the sum of t_step), the skull contact rows at
+the end, the largest count of inverted cells (steps.csv), and the status:
+ok; unsolved (the run reached its end but steps.csv's `unsolved` marks steps
+whose equations were left unsolved: a Newton failure, the shifts still
 tabulated and the grid flagged); or failed with needlehex's reason (Newton,
-inverted cells, diverged: an implausible step, other) and its message.
-A failed run is a row of the table, not a failure of the study.
+inverted cells, diverged: an implausible step, other) and its message. A
+failed run is a row of the table, not a failure of the study.
 
 For every three consecutive grids (in h, coarse first) that reached their end
-(the grids not ok among them named): the spread
-(max − min)/mean and the largest deviation from the mean max|f − mean|/mean of
-the STN shifts (the goal of issue 25: within 2 %), whether the three grids are
-nested (each refines the previous by a whole factor per axis), and the observed
-order with the extrapolated value (tools/richardson.py: f(h) = f∞ − C h^p
-through the three (h, f), bisection on p, so the ratios need not be constant;
-"none" when the differences change sign or no p in (0.05, 6) fits); and the
-change between every two grids of which one refines the other (nested pairs).
+(the grids not ok among them named): the spread (max − min)/mean and the
+largest deviation from the mean max|f − mean|/mean of the STN shifts (the goal
+of issue 25: within 2 %), whether the three grids are nested (each refines the
+previous by a whole factor per axis), and the observed order with the
+extrapolated value (tools/richardson.py: f(h) = f∞ − C h^p through the three
+(h, f), bisection on p, so the ratios need not be constant; "none" when the
+differences change sign or no p in (0.05, 6) fits); and the change between
+every two grids of which one refines the other (nested pairs).
 
 Output (TAG: the scene's name and the values of the --set overrides, e.g.
-dbs-skull-integrated): OUT/GRID/ (one run each; OUT default
-out/study/convergence-TAG), OUT/report.md (also printed), OUT/img (or --img /
---docs) the folder's name (convergence-TAG by default) .png: the shifts
-against h. --reuse reports
-on the runs already in OUT; --restart runs only the missing ones.
+dbs-skull-integrated): OUT/GRID/ (one run each; OUT by default
+out/study/convergence-TAG), OUT/report.md (also printed), and in OUT/img (or
+--img DIR, docs/img with --docs) a PNG named after OUT (convergence-TAG.png
+by default): the shifts against h. --reuse reports on the runs already in
+OUT; --restart runs only the missing ones.
 """
 import os
 import re
@@ -43,7 +43,7 @@ import subprocess
 import numpy as np
 
 import study_engine as engine
-from outputs import read_csv, read_points, read_steps, target_shift
+from outputs import read_points, read_steps, target_shift
 from richardson import observed
 
 POSITIONAL = ("SCENE", "a scene file (convergence)")
