@@ -25,3 +25,9 @@ nh_add_py_test(skull_force verify skull_force.py)
 # f(h) = f∞ − C h^p; an order outside [1, 6) or differences changing sign fall
 # back to the finest value with the last difference as its error bar.
 nh_add_py_test(study_reference unit study_reference.py)
+
+# tools/study.py convergence on synthetic run folders (tests/study_convergence.py): h
+# from the scene's box, the shifts of a closed form f(h) = f∞ − C h^p tabulated, the
+# observed order of every triple of consecutive grids (ratios not constant) and their
+# spread; a run stopped by inverted cells is a row, left out of the triples.
+nh_add_py_test(study_convergence unit study_convergence.py)

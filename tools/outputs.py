@@ -7,6 +7,7 @@ per point and step), tools.csv (one row per tool and step).
     rows = read_rows(path)                  # [{column: number}] (step an int), row by row
     u, steps, times = read_points(run)      # probes.csv: {name: array (steps + 1, 4)}
     x, steps, times = read_points(run, "targets.csv")
+    u = target_shift(run, "STN")            # x(last step) − X of a target (m)
     tl = read_tools(run, "needle")          # {column: array over the tool's steps}, state, name
     s = speed(st)                           # median, p95, total of t_step, ... (ms)
 
@@ -60,6 +61,13 @@ def read_points(run, fname="probes.csv"):
             v = [float(r["x"]), float(r["y"]), float(r["z"]), float(r["distance"])]
         pts.setdefault(r["name"], []).append(v)
     return {k: np.array(v) for k, v in pts.items()}, np.array(steps), np.array(times)
+
+
+def target_shift(run, name):
+    """The displacement of target NAME from its first to its last row of targets.csv (m):
+    x(end) − X, an array of 3."""
+    x = read_points(run, "targets.csv")[0][name]
+    return x[-1, :3] - x[0, :3]
 
 
 def read_series(run, fname, cols):

@@ -11,12 +11,14 @@ steps.csv / probes.csv / targets.csv and writes plots and a Markdown report.
     tools/study.py dbs-goal  [the same options]
     tools/study.py sweep SPEC.yaml [--out DIR] [--fresh] [--workers N | --scheduler ...]
     tools/study.py plan SPEC.yaml  [the same]: one `needlehex plan` per variant
+    tools/study.py convergence SCENE --grids NXxNYxNZ,... [--set KEY=VAL ...] [--out DIR]
 
 This is the command line; each study is one module, named in STUDIES below,
 whose docstring says what it runs and writes: study_phantom.py (docs/phantom.md),
 study_dbs.py, study_dbs_shift.py, study_dbs_goal.py (docs/dbs.md),
 study_cube.py (docs/adaptivity.md), study_sweep.py (sweep and plan,
-docs/performance.md). They share the study engine (study_engine.py: runs the
+docs/performance.md), study_convergence.py (a scene's brain shift on the
+grids the reader lists, docs/dbs.md). They share the study engine (study_engine.py: runs the
 variants, the folders, the report), outputs.py (reading steps.csv,
 probes.csv, targets.csv, tools.csv), richardson.py (extrapolation with the
 observed order) and plotstyle.py (the figures' style). A new study is a
@@ -59,6 +61,7 @@ STUDIES = {
     "sweep": "study_sweep",
     "plan": "study_sweep",
     "cube": "study_cube",
+    "convergence": "study_convergence",
 }
 
 

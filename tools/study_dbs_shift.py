@@ -11,7 +11,7 @@ import os
 import numpy as np
 
 import study_engine as engine
-from outputs import read_csv, read_points, read_steps, speed
+from outputs import read_csv, read_points, read_steps, speed, target_shift
 from richardson import observed
 
 ROOT = engine.ROOT
@@ -58,7 +58,7 @@ def run(a, binary):
         rows = [r for r in read_csv(os.path.join(d, "targets.csv")) if r["name"] == st["target"]]
         tip = [r for r in read_csv(os.path.join(d, "tools.csv")) if r["name"] == st["tool"]][-1]
         x = pos[st["target"]]
-        return {"u": x[-1, :3] - x[0, :3], "x": x[-1, :3], "distance": x[-1, 3],
+        return {"u": target_shift(d, st["target"]), "x": x[-1, :3], "distance": x[-1, 3],
                 "tip": np.array([float(tip[k]) for k in ("tip_x", "tip_y", "tip_z")]),
                 "est": float(rows[-1].get("error_estimate", "nan")),
                 "dest": float(rows[-1].get("distance_error_estimate", "nan")),
