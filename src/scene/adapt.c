@@ -146,12 +146,12 @@ static const nh_key marking_rows[] = {
     {NH_CHOICE("strategy", A(strategy), NH_MARK_MAX, strategies)},
     {NH_NUMBER("theta", A(theta), 0.3, NH_ANY, 0)}, /* ranges: check_marking */
     {NH_NUMBER("fraction", A(fraction), 0.5, NH_ANY, 0)},
-    {NULL},
+    {0},
 };
 
 static const nh_key coarsen_rows[] = {
     {NH_NUMBER("fraction", A(coarsen), 0, NH_ANY, 0), .required = 1, .check = check_coarsen},
-    {NULL},
+    {0},
 };
 
 /* The keys in the order they are read: the estimator first, as later keys
@@ -170,7 +170,7 @@ static const nh_key adapt_rows[] = {
     {NH_INT("resolve", A(resolve), 0, NH_AT_LEAST, 0), .check = check_resolve},
     {NH_INT("separate_every", A(separate_every), 1, NH_AT_LEAST, 1), .check = check_separate_every},
     {NH_MAP("coarsen", coarsen_rows)},
-    {NULL},
+    {0},
 };
 
 /* adapt: present (even empty) means the mesh adapts. */

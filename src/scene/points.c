@@ -154,14 +154,14 @@ static int read_target_tool(const nh_ctx *c, const nh_key_site *k, void *base) {
 static const nh_key probe_rows[] = {
     {NH_CUSTOM("name", read_probe_name), .required = 1},
     {NH_POINT("point", offsetof(nh_probe, point)), .required = 1, .check = check_in_image},
-    {NULL},
+    {0},
 };
 
 static const nh_key target_rows[] = {
     {NH_CUSTOM("name", read_target_name), .required = 1},
     {NH_POINT("point", offsetof(nh_target, point)), .required = 1, .check = check_in_image},
     {NH_CUSTOM("tool", read_target_tool), .required = 1},
-    {NULL},
+    {0},
 };
 
 /* NAME: a list of mappings (else "expected EXPECTED") read by `rows` into a

@@ -166,7 +166,7 @@ static const nh_key fixed_rows[] = {
     {NH_CUSTOM("axes", read_axes)},
     {NH_VEC3("displacement", offsetof(nh_fix, displacement))},
     {NH_CUSTOM("schedule", read_fix_schedule)},
-    {NULL},
+    {0},
 };
 
 static const nh_key load_rows[] = {
@@ -176,7 +176,7 @@ static const nh_key load_rows[] = {
     {NH_CUSTOM("label", NULL)},
     {NH_VEC3("force", offsetof(nh_load, force)), .required = 1},
     {NH_SCHEDULE("schedule", offsetof(nh_load, schedule))},
-    {NULL},
+    {0},
 };
 
 static const nh_key traction_rows[] = {
@@ -186,7 +186,7 @@ static const nh_key traction_rows[] = {
     {NH_CUSTOM("traction", read_traction)},
     {NH_CUSTOM("pressure", NULL)}, /* read by read_traction */
     {NH_SCHEDULE("schedule", offsetof(nh_traction, schedule))},
-    {NULL},
+    {0},
 };
 
 int nh_read_fixed(const nh_ctx *c, const nh_key_site *k, void *base) {
@@ -265,7 +265,7 @@ static const nh_key obstacle_rows[] = {
     {NH_CUSTOM("sphere", NULL)},
     {NH_CUSTOM("cylinder", NULL)},
     {NH_CUSTOM("label", NULL)},
-    {NULL},
+    {0},
 };
 
 static int read_obstacles(const nh_ctx *c, const nh_key_site *k, void *base) {
@@ -298,7 +298,7 @@ static const nh_key plan_rows[] = {
     {NH_CUSTOM("obstacles", read_obstacles)},
     {NH_NUMBER("clearance", P(clearance), 0.001, NH_AT_LEAST, 0)},
     {NH_NUMBER("curvature", P(curvature), 0, NH_AT_LEAST, 0)},
-    {NULL},
+    {0},
 };
 #undef P
 

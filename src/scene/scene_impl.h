@@ -10,7 +10,7 @@
  *     static const nh_key solver_rows[] = {
  *         {NH_NUMBER("tolerance", offsetof(nh_scene, solver.tolerance), 1e-8, NH_ABOVE, 0)},
  *         ...
- *         {NULL},
+ *         {0},
  *     };
  *
  * nh_read_table refuses the keys of a mapping that no row names (and,

@@ -12,7 +12,7 @@ static const char *const refactors[] = {"auto", "every", NULL};
 static const nh_key newton_rows[] = {
     {NH_INT("max_iterations", S(newton_iterations), 0, NH_AT_LEAST, 0)},
     {NH_NUMBER("tolerance", S(newton_tolerance), 1e-8, NH_ABOVE, 0)},
-    {NULL},
+    {0},
 };
 
 /* solver.newton given (a mapping): Newton corrections are on, 5 unless said. */
@@ -30,7 +30,7 @@ static const nh_key solver_rows[] = {
     {NH_INT("threads", S(threads), 0, NH_AT_LEAST, 0)},
     {NH_NUMBER("lazy_rotation", S(lazy_rotation), 0, NH_AT_LEAST, 0)},
     {NH_CHOICE("refactor", S(refactor), NH_REFACTOR_AUTO, refactors)},
-    {NULL},
+    {0},
 };
 
 int nh_read_solver(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
@@ -124,14 +124,14 @@ static const char *const interpolations[] = {"auto", "linear", "nearest", NULL};
 static const nh_key field_rows[] = {
     {NH_CUSTOM("reference", read_field_reference), .required = 1},
     {NH_CUSTOM("at", read_field_times)},
-    {NULL},
+    {0},
 };
 
 static const nh_key warped_rows[] = {
     {NH_CUSTOM("image", read_warped_image), .required = 1},
     {NH_CUSTOM("at", read_warped_times)},
     {NH_CHOICE("interpolation", O(warped.interpolation), NH_INTERPOLATION_AUTO, interpolations)},
-    {NULL},
+    {0},
 };
 
 static const nh_key output_rows[] = {
@@ -141,7 +141,7 @@ static const nh_key output_rows[] = {
     {NH_INT("checkpoint", O(checkpoint), 0, NH_AT_LEAST, 0)},
     {NH_MAP("displacement_field", field_rows)},
     {NH_MAP("warped", warped_rows)},
-    {NULL},
+    {0},
 };
 
 int nh_read_output(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
@@ -156,7 +156,7 @@ static const nh_key limits_rows[] = {
                1)},
     {NH_NUMBER("max_file_bytes", offsetof(nh_scene, limits.read.max_file_bytes), 4e9, NH_AT_LEAST,
                1)},
-    {NULL},
+    {0},
 };
 
 int nh_read_section_limits(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {

@@ -15,7 +15,7 @@ static const nh_key time_rows[] = {
     {NH_NUMBER("step", T(step), 0.01, NH_ABOVE, 0)},
     {NH_NUMBER("end", T(end), 0, NH_ABOVE, 0)},
     {NH_INT("steps", T(steps), 100, NH_AT_LEAST, 1)},
-    {NULL},
+    {0},
 };
 
 int nh_read_time(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
@@ -46,7 +46,7 @@ int nh_read_time(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
 static const nh_key gravity_rows[] = {
     {NH_VEC3("vector", G(gravity)), .required = 1},
     {NH_SCHEDULE("schedule", G(gravity_schedule))},
-    {NULL},
+    {0},
 };
 
 int nh_read_gravity(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {

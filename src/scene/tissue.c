@@ -286,7 +286,7 @@ static const nh_key material_rows[] = {
     {NH_NUMBER("young", M(young), 0, NH_ABOVE, 0), .required = 1},
     {NH_NUMBER("poisson", M(poisson), 0, NH_ANY, 0), .required = 1, .check = nh_read_check_poisson},
     {NH_NUMBER("density", M(density), 1000, NH_ABOVE, 0)},
-    {NULL},
+    {0},
 };
 
 /* tissue.materials.LABEL: poisson and density default to tissue.material's (set by the caller). */
@@ -295,7 +295,7 @@ static const nh_key label_material_rows[] = {
     {NH_NUMBER("young", L(young), 0, NH_ABOVE, 0), .required = 1},
     {NH_NUMBER("poisson", L(poisson), 0, NH_ANY, 0), .check = nh_read_check_poisson},
     {NH_NUMBER("density", L(density), 0, NH_ABOVE, 0)},
-    {NULL},
+    {0},
 };
 
 /* tissue.materials {LABEL: {young, poisson, density}} (optional). */
@@ -343,7 +343,7 @@ static int read_materials(const nh_ctx *c, const nh_key_site *k, void *base) {
 static const nh_key damping_rows[] = {
     {NH_NUMBER("mass", M(damping_mass), 0, NH_AT_LEAST, 0)},
     {NH_NUMBER("stiffness", M(damping_stiffness), 0, NH_AT_LEAST, 0)},
-    {NULL},
+    {0},
 };
 
 /* A fraction of the weight, in [0, 1]. */
@@ -373,7 +373,7 @@ static const nh_key buoyancy_rows[] = {
     {NH_NUMBER("after", M(buoyancy_after), 0, NH_ANY, 0), .required = 1, .check = check_fraction},
     {NH_SCHEDULE("schedule", M(buoyancy_schedule))},
     {NH_VEC3("level", M(buoyancy_level)), .check = check_level},
-    {NULL},
+    {0},
 };
 
 static int buoyancy_given(const nh_ctx *c, const nh_key_site *k, void *base) {
@@ -384,7 +384,7 @@ static int buoyancy_given(const nh_ctx *c, const nh_key_site *k, void *base) {
 
 static const nh_key skull_rows[] = {
     {NH_NUMBER("gap", M(skull_gap), 0, NH_AT_LEAST, 0)},
-    {NULL},
+    {0},
 };
 
 /* tissue.skull: {gap: g >= 0 (default 0)}, an immersed domain only; given
@@ -422,7 +422,7 @@ static const nh_key tissue_rows[] = {
     {NH_CUSTOM("loads", nh_read_loads)},
     {NH_CUSTOM("tractions", nh_read_tractions)},
     {NH_CUSTOM("labels", NULL)},
-    {NULL},
+    {0},
 };
 
 int nh_read_tissue(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {

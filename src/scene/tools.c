@@ -62,13 +62,13 @@ static const nh_key material_rows[] = {
     {NH_NUMBER("young", TL(young), 0, NH_ABOVE, 0), .required = 1},
     {NH_NUMBER("poisson", TL(poisson), 0.3, NH_ANY, 0), .check = nh_read_check_poisson},
     {NH_NUMBER("density", TL(density), 7800, NH_AT_LEAST, 0)},
-    {NULL},
+    {0},
 };
 
 static const nh_key damping_rows[] = {
     {NH_NUMBER("mass", TL(damping_mass), 0, NH_AT_LEAST, 0)},
     {NH_NUMBER("stiffness", TL(damping_stiffness), 0, NH_AT_LEAST, 0)},
-    {NULL},
+    {0},
 };
 
 /* tools.i.trajectory: the target's name is looked up by trajectory.c, once
@@ -78,7 +78,7 @@ static const nh_key trajectory_rows[] = {
     {NH_CUSTOM("target", NULL), .required = 1},
     {NH_NUMBER("standoff", TL(standoff), 0.005, NH_ABOVE, 0)},
     {NH_POINT("aim", TL(aim))},
-    {NULL},
+    {0},
 };
 
 /* tools.i.trajectory given: the tool is planned; base and direction, which
@@ -215,7 +215,7 @@ static int check_toward(const nh_ctx *c, const nh_key_site *k, void *base) {
 static const nh_key bevel_rows[] = {
     {NH_NUMBER("angle", TL(bevel), 0, NH_ANY, 0), .required = 1, .check = check_angle},
     {NH_VEC3("toward", TL(bevel_toward)), .check = check_toward},
-    {NULL},
+    {0},
 };
 
 /* The static friction coefficient is at least the kinetic one, which is
@@ -247,7 +247,7 @@ static const nh_key interaction_rows[] = {
     {NH_NUMBER("spacing", TL(spacing), 0, NH_AT_LEAST, 0)},
     {NH_NUMBER("friction_static", TL(friction_static), 0, NH_AT_LEAST, 0)}, /* check_friction */
     {NH_NUMBER("torsion_per_length", TL(torsion_per_length), 0, NH_AT_LEAST, 0)},
-    {NULL},
+    {0},
 };
 
 /* tools.i.inside (optional): the name of a tool listed before this one that
@@ -323,7 +323,7 @@ static const nh_key tool_rows[] = {
     {NH_MAP("interaction", interaction_rows), .check = check_friction},
     {NH_CUSTOM("inside", read_host)},
     {NH_CUSTOM("release", read_release)},
-    {NULL},
+    {0},
 };
 
 int nh_read_tools(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {

@@ -357,7 +357,7 @@ static void nh_checkpoint_check(const nh_mesh *m, const nh_checkpoint *ck, char 
                          c >= (size_t)m->first_child[p] + (size_t)m->n_children[p])))
       snprintf(why, n, "cell %zu: parent %d does not list it as a child", c, p);
     else if (f < -1 || k < 0 || (f < 0) != (k == 0) || (f >= 0 && (size_t)f + (size_t)k > nc))
-      snprintf(why, n, "cell %zu: children %d to %d of %zu cells", c, f, f + k - 1, nc);
+      snprintf(why, n, "cell %zu: %d children from %d of %zu cells", c, k, f, nc);
     for (int j = 0; j < k && f >= 0 && !why[0]; j++)
       if ((size_t)m->parent[f + j] != c)
         snprintf(why, n, "cell %zu: its child %d has parent %d", c, f + j, m->parent[f + j]);
