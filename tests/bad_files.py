@@ -8,9 +8,10 @@ a scene naming it; this runs the reader on each through the binary
 checkpoint; a FIFO case is fed by a thread here while it runs) and requires:
 
   bad case:  exit status 2 and exactly one stderr line "needlehex: ..." that
-             names the file, the scene key where the scene reader prefixes it
-             (tissue.domain.mask.file, tissue.labels.file,
-             tissue.domain.surface.file, --restart), and the problem (each of
+             names the file, the scene's line and key that name it
+             ("scene.yaml:LINE: KEY: ": tissue.domain.mask.file,
+             tissue.labels.file, tissue.domain.surface.file, adapt.template;
+             --restart for a checkpoint), and the problem (each of
              the case's `expect` strings, written from what the file holds,
              not copied from a run); so nothing from a library before it;
   control:   exit status 0 and an empty stderr;
@@ -110,8 +111,9 @@ def judge(c, rc, stderr, seconds, mb, killed):
         return problems
     line = lines[0]
     want = [c.file if c.key != "restart" else "checkpoint.nhc"] + c.expect
-    if mbf.KEY[c.key]:
-        want.append(mbf.KEY[c.key])
+    want.append(mbf.KEY[c.key])
+    if c.key in mbf.LINE:
+        want.append(f"scene.yaml:{mbf.LINE[c.key]}: {mbf.KEY[c.key]}: ")
     missing = [w for w in want if w not in line]
     if missing:
         problems.append(f"the message lacks {missing}: {line}")

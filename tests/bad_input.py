@@ -185,6 +185,22 @@ CASES = [
     ("trajectory_base.yaml", ["tools.0.trajectory.aim=[0.031, 0.01, 0.01]"], 12,
      "tools.0.length"),
     ("trajectory_base.yaml", ["tools.1.length=0.025"], "--set:1", "tools.1.length"),
+    # A negative label where a label is expected: in the mask's labels, a
+    # fixed region, a load (the materials' keys: above).
+    ("mask_negative_label.yaml", [], 6, "tissue.domain.mask.labels.1"),
+    ("region_negative_label.yaml", [], 11, "tissue.fixed.1.label"),
+    ("region_negative_label.yaml", ["tissue.fixed=[]",
+                                    "tissue.loads=[{label: -3, force: [0, 0, 1]}]"], "--set:2",
+     "tissue.loads.0.label"),
+    ("region_negative_label.yaml", ["tissue.fixed=[]", "plan={obstacles: [{label: -1}]}"],
+     "--set:2", "plan.obstacles.0.label"),
+    # solver.newton where no step takes it: with tools (the coupled step is
+    # linearised once), in static mode (Newton already); without tools in
+    # dynamic mode it is valid (VALID).
+    ("newton_with_tools.yaml", [], 16, "solver.newton"),
+    ("tools_base.yaml", ["solver.newton={max_iterations: 3}"], "--set:1", "solver.newton"),
+    ("set_base.yaml", ["time.mode=static", "solver.newton={tolerance: 1e-9}"], "--set:2",
+     "solver.newton"),
 ]
 
 # Scenes that `needlehex plan` must refuse as `check` does, before any run.
@@ -213,7 +229,9 @@ VALID = [("set_base.yaml", []), ("set_base.yaml", ["tissue.damping.mass=0.5", "t
                               "targets.0.tool=cannula"]),
          ("materials_negative_label.yaml", ["tissue.materials={2: {young: 2.0e6}}"]),
          # a tool exactly as long as its planned depth (0.022 m)
-         ("tool_shorter_than_depth.yaml", ["tools.0.length=0.022"])]
+         ("tool_shorter_than_depth.yaml", ["tools.0.length=0.022"]),
+         ("set_base.yaml", ["solver.newton={max_iterations: 3}"]),
+         ("mask_negative_label.yaml", ["tissue.domain.mask.labels=[1, 2]"])]
 
 # Command lines (argv after the binary; SCENE is tests/bad/set_base.yaml),
 # each refused with exit 2 and one line naming the option and holding the

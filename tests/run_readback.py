@@ -29,6 +29,8 @@ and the checks follow the output contract of docs/outputs.md:
 - steps.csv has one row per step (N, default 20) and at least the columns
   step,time,dofs,cells,t_assemble,t_factor,t_solve,t_step; each PVD timestep
   equals steps.csv `time` at that frame's step.
+- every column of every CSV file written has its row in docs/outputs.md
+  (the table of its section, or the `a,b,...` header line the section gives).
 
 The step of a frame is read from its file name. Silent on success; prints
 every mismatch and exits 1. Exit 77 (ctest: skipped) when the case file does
@@ -317,6 +319,46 @@ def check_steps(out, n_steps, pvd_frames):
                 fail(f"{pvd}: frame {f} timestep {t!r} != steps.csv time {time_at[step]!r}")
 
 
+def documented_columns(name):
+    """The column names docs/outputs.md gives in the section "## `NAME`": the
+    backticked names of its table's first cells and of its `a,b,...` header
+    lines (a bracketed optional part included)."""
+    source = os.environ.get("NH_SOURCE_DIR", os.path.join(os.path.dirname(__file__), ".."))
+    with open(os.path.join(source, "docs", "outputs.md")) as f:
+        text = f.read()
+    m = re.search(r"^## `%s`\n(.*?)(?=^## )" % re.escape(name), text, re.S | re.M)
+    if not m:
+        return None
+    names = set()
+    for line in m.group(1).split("\n"):
+        if line.startswith("|"):
+            cells = [line.split("|")[1]]
+        elif re.match(r"^`[a-z_]+,[a-z_,\[\]]+`", line):
+            cells = [line.split("`")[1]]
+        else:
+            continue
+        for cell in cells:
+            for tick in re.findall(r"`([^`]+)`", cell) or [cell]:
+                names.update(re.split(r"[,\[\]\s]+", tick.strip()))
+    return names
+
+
+def check_documented(out):
+    """Every column of every CSV file of the run has its row (or its place in
+    the header line) in docs/outputs.md."""
+    for name in sorted(os.listdir(out)):
+        if not name.endswith(".csv"):
+            continue
+        header, _ = read_csv(os.path.join(out, name))
+        names = documented_columns(name)
+        if names is None:
+            fail(f"{name}: docs/outputs.md has no section \"## `{name}`\"")
+            continue
+        missing = [c for c in header if c not in names]
+        if missing:
+            fail(f"{name}: columns without a row in docs/outputs.md: {missing}")
+
+
 def check_folder(out, n_steps):
     tissue_frames = read_pvd(os.path.join(out, "tissue.pvd"))
     point_frames = read_pvd(os.path.join(out, "points.pvd"))
@@ -342,6 +384,7 @@ def check_folder(out, n_steps):
     check_points(out, point_frames, probe_rows, len(names))
     check_probe_at_node(tissue, probe_rows)
     check_steps(out, n_steps, {"tissue.pvd": tissue_frames, "points.pvd": point_frames})
+    check_documented(out)
     leftovers = [f for f in os.listdir(out) if f.endswith(".tmp")]
     if leftovers:
         fail(f"{out}: temporary files left behind: {leftovers}")

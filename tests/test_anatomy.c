@@ -369,10 +369,9 @@ static void test_contract(const char *dir) {
   CHECK(nh_surface_read(path, 1e-3, 0, &lim, &s) == NH_ERR_INPUT &&
             says("limits.max_file_bytes = 1000"),
         "max_file_bytes: %s", nh_error_message());
-  /* The cell size. */
-  CHECK(nh_surface_read(path, 1e-3, 0.1, NULL, &s) == NH_ERR_INPUT &&
-            says("smaller than one cell of 0.1 m"),
-        "cell 0.1 m: %s", nh_error_message());
+  /* The smallest extent. */
+  CHECK(nh_surface_read(path, 1e-3, 0.1, NULL, &s) == NH_ERR_INPUT && says("smaller than 0.1 m"),
+        "min_extent 0.1 m: %s", nh_error_message());
   CHECK_OK(nh_surface_read(path, 1e-3, 0.05, NULL, &s));
   nh_surface_release(&s);
   remove(path);

@@ -119,7 +119,9 @@ typedef struct nh_adapt nh_adapt; /* template, marking parameters, indicators */
 /* Create the driver of the scene's adapt section: loads spec->template_path;
  * refinement never makes more than max_cells leaves (0: no cap; one warning
  * when it stops there).
- * Fails as nh_template_load (NH_ERR_INPUT for a bad template), NH_ERR_MEMORY. */
+ * Fails as nh_template_load (NH_ERR_INPUT for a bad template, its message
+ * prefixed by spec->where_template: "SCENE:LINE: adapt.template: "),
+ * NH_ERR_MEMORY. */
 int nh_adapt_create(const nh_adapt_spec *spec, int max_cells, nh_adapt **out);
 /* Free and set *adapt = NULL (accepts NULL). */
 void nh_adapt_destroy(nh_adapt **adapt);

@@ -34,6 +34,7 @@
 #include "adapt/adapt_impl.h"
 
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -78,7 +79,10 @@ int nh_adapt_create(const nh_adapt_spec *spec, int max_cells, nh_adapt **out) {
   int rc = nh_template_load(spec->template_path, &a->tmpl);
   if (rc) {
     free(a);
-    return rc;
+    if (rc != NH_ERR_INPUT || !spec->where_template[0]) return rc;
+    char msg[1024]; /* a bad template: reported at the scene's adapt.template */
+    snprintf(msg, sizeof msg, "%s", nh_error_message());
+    return NH_ERROR(rc, "%s: %s", spec->where_template, msg);
   }
   a->mark = (nh_mark_params){.strategy = spec->strategy,
                              .theta = spec->theta,

@@ -137,8 +137,8 @@ typedef struct nh_surface {
  * bound (a stream such as a FIFO too: it must end where its header says, an
  * ASCII one within max_file_bytes and max_triangles). The geometry must be
  * what the file says (docs/anatomy.md, "Surface meshes"): closed, largest
- * extent between `cell` (m, the caller's cell size; 0: no lower bound) and
- * 10 m, a non-zero volume, and the volume inside by nh_surface_inside
+ * extent between `min_extent` (m; 0: no lower bound; a scene gives
+ * NH_SURFACE_MIN_EXTENT) and 10 m, a non-zero volume, and the volume inside by nh_surface_inside
  * within 1 % of the volume enclosed by the divergence theorem (else
  * overlapping shells, self-intersection or inconsistent orientation).
  * Fails with NH_ERR_INPUT, "PATH:LINE: reason" (ASCII) or "PATH: reason"
@@ -147,8 +147,13 @@ typedef struct nh_surface {
  * binary byte in an ASCII file, a truncated or overlong file, more than the
  * limits, no triangles, an open surface (an edge not shared by an even
  * number of triangles), the geometry. NH_ERR_MEMORY. */
-int nh_surface_read(const char *path, double unit, double cell, const nh_read_limits *limits,
+int nh_surface_read(const char *path, double unit, double min_extent, const nh_read_limits *limits,
                     nh_surface **out);
+/* The smallest largest extent of a scene's surface, m: the domain's grid is
+ * laid over the surface's own bounding box, so no grid cell can bound it
+ * from below; a shape under 1 mm is a `unit` that reads metres as
+ * millimetres (a 10 cm organ stored in metres becomes 0.1 mm). */
+#define NH_SURFACE_MIN_EXTENT 1e-3
 void nh_surface_retain(nh_surface *surface);
 void nh_surface_release(nh_surface **surface);
 

@@ -333,6 +333,13 @@ static int nh_surface_cell_of(const nh_surface *s, int axis, double x) {
   return nh_clampi((int)floor((x - s->min[axis]) / s->cell[axis]), 0, s->g[axis] - 1);
 }
 
+/* The index's (triangle, cell) pairs: at most 64 per triangle or 1e7 (40 MB)
+ * in all, whichever is more. A fan of long slivers (a cone's or a cap's
+ * triangles all from one apex) overlaps many cells each: a double cone of
+ * 65 000 segments would need 2e9 pairs, 8 GB, and overflow the int offsets. */
+#define NH_SURFACE_PAIRS_PER_TRIANGLE 64
+#define NH_SURFACE_PAIRS_MIN          1e7
+
 /* Bucket triangles into the grid cells of `axes` (2: y, z; 3: x, y, z). */
 static int nh_surface_bucket(nh_surface *s, int three_d, int **start_out, int **tri_out) {
   const int a0 = three_d ? 0 : 1;
@@ -340,6 +347,9 @@ static int nh_surface_bucket(nh_surface *s, int three_d, int **start_out, int **
   for (int a = a0; a < 3; a++) cells *= (size_t)s->g[a];
   int *start = calloc(cells + 1, sizeof(int));
   if (!start) return NH_ERROR(NH_ERR_MEMORY, "out of memory: %s", s->path);
+  const double most = fmin(
+      INT_MAX - 1.0, fmax(NH_SURFACE_PAIRS_PER_TRIANGLE * (double)s->n_tri, NH_SURFACE_PAIRS_MIN));
+  double pairs = 0.0;
   for (int pass = 0; pass < 2; pass++) {
     int *fill = NULL;
     if (pass == 1) {
@@ -358,6 +368,17 @@ static int nh_surface_bucket(nh_surface *s, int three_d, int **start_out, int **
       nh_tri_box(s->v + 9 * t, lo, hi);
       for (int a = a0; a < 3; a++)
         l[a] = nh_surface_cell_of(s, a, lo[a]), h[a] = nh_surface_cell_of(s, a, hi[a]);
+      pairs += pass ? 0.0 : (h[0] - l[0] + 1.0) * (h[1] - l[1] + 1.0) * (h[2] - l[2] + 1.0);
+      if (pairs > most) {
+        free(start);
+        return NH_ERROR(NH_ERR_INPUT,
+                        "%s: its %d triangles overlap more than %.0f cells of the reader's %s "
+                        "index (%d per triangle or %.0f in all): long sliver triangles, such as "
+                        "a fan from one apex across the shape; remesh it into triangles of "
+                        "similar size",
+                        s->path, s->n_tri, most, three_d ? "(x, y, z)" : "(y, z)",
+                        NH_SURFACE_PAIRS_PER_TRIANGLE, NH_SURFACE_PAIRS_MIN);
+      }
       for (int k = l[2]; k <= h[2]; k++)
         for (int j = l[1]; j <= h[1]; j++)
           for (int i = l[0]; i <= h[0]; i++) {
@@ -680,17 +701,17 @@ static void nh_volume_rays(const nh_surface *s, int n, int *ny, int *nz) {
 /* The shape is what the file says: a size between `cell` and 10 m, a
  * volume, and the same volume by the inside test and by the divergence
  * theorem (docs/anatomy.md, "Surface meshes"). */
-static int nh_surface_check_geometry(const nh_surface *s, double cell) {
+static int nh_surface_check_geometry(const nh_surface *s, double min_extent) {
   double ext[3], big = 0.0;
   for (int k = 0; k < 3; k++) ext[k] = s->max[k] - s->min[k], big = fmax(big, ext[k]);
   NH_CHECK(big <= 10.0, NH_ERR_INPUT,
            "%s: the surface measures %g x %g x %g m with unit %g m per file unit: larger than "
            "10 m (is `unit` right? 0.001 reads millimetres)",
            s->path, ext[0], ext[1], ext[2], s->unit);
-  NH_CHECK(big >= cell, NH_ERR_INPUT,
+  NH_CHECK(big >= min_extent, NH_ERR_INPUT,
            "%s: the surface measures %g x %g x %g m with unit %g m per file unit: smaller than "
-           "one cell of %g m (is `unit` right? 0.001 reads millimetres)",
-           s->path, ext[0], ext[1], ext[2], s->unit, cell);
+           "%g m (is `unit` right? 1 reads metres, 0.001 millimetres)",
+           s->path, ext[0], ext[1], ext[2], s->unit, min_extent);
   double enclosed = nh_surface_signed_volume(s);
   NH_CHECK(fabs(enclosed) > 1e-9 * big * big * big, NH_ERR_INPUT,
            "%s: the surface encloses no volume (%g m^3 in a box of %g x %g x %g m): a flat or "
@@ -721,7 +742,7 @@ static int nh_surface_check_geometry(const nh_surface *s, double cell) {
                         "the surface intersects itself");
 }
 
-int nh_surface_read(const char *path, double unit, double cell, const nh_read_limits *limits,
+int nh_surface_read(const char *path, double unit, double min_extent, const nh_read_limits *limits,
                     nh_surface **out) {
   *out = NULL;
   limits = nh_read_limits_or_default(limits);
@@ -791,7 +812,7 @@ int nh_surface_read(const char *path, double unit, double cell, const nh_read_li
                   s->n_tri, s->n_tri == 1 ? "" : "s");
   if (!rc) rc = nh_surface_check_closed(s);
   if (!rc) rc = nh_surface_index(s);
-  if (!rc) rc = nh_surface_check_geometry(s, cell);
+  if (!rc) rc = nh_surface_check_geometry(s, min_extent);
   if (rc) {
     nh_surface_release(&s);
     return rc;

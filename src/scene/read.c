@@ -165,6 +165,14 @@ int nh_read_int(const nh_ctx *c, const nh_yaml_node *n, const char *key, int *ou
   return NH_OK;
 }
 
+int nh_read_label(const nh_ctx *c, const nh_yaml_node *n, const char *key, int *out) {
+  NH_TRY(nh_read_int(c, n, key, out));
+  if (*out < 0)
+    return nh_read_fail(c, n, key,
+                        "a label is a whole number >= 0 (as in tissue.materials), got %d", *out);
+  return NH_OK;
+}
+
 int nh_read_bool(const nh_ctx *c, const nh_yaml_node *n, const char *key, int *out) {
   char d[96];
   if (n->kind == NH_YAML_SCALAR && !n->quoted) {

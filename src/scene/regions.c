@@ -62,7 +62,7 @@ static int read_shape(const nh_ctx *c, const nh_yaml_node *node, const char *pat
   nh_read_join(key, path, shape_key->text);
   if (!strcmp(shape_key->text, "label")) { /* the voxels of the label image holding it; */
     region->kind = NH_REGION_LABEL;        /* that image is checked by the domain */
-    return nh_read_int(c, shape, key, &region->label);
+    return nh_read_label(c, shape, key, &region->label);
   }
   if (!strcmp(shape_key->text, "box")) {
     region->kind = NH_REGION_BOX;

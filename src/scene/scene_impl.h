@@ -68,6 +68,8 @@ int nh_read_keys(const nh_ctx *c, const nh_yaml_node *map, const char *path,
 
 int nh_read_number(const nh_ctx *c, const nh_yaml_node *n, const char *key, double *out);
 int nh_read_int(const nh_ctx *c, const nh_yaml_node *n, const char *key, int *out);
+/* An integer label of an image: >= 0 (mask labels, {label: N} regions). */
+int nh_read_label(const nh_ctx *c, const nh_yaml_node *n, const char *key, int *out);
 int nh_read_bool(const nh_ctx *c, const nh_yaml_node *n, const char *key, int *out);
 int nh_read_string(const nh_ctx *c, const nh_yaml_node *n, const char *key, char *out, size_t cap);
 int nh_read_vec3(const nh_ctx *c, const nh_yaml_node *n, const char *key, double out[3]);
@@ -213,8 +215,10 @@ int nh_read_tissue(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s);     
 int nh_read_adapt(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s);          /* adapt.c */
 int nh_read_solver(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s);         /* solver.c */
 int nh_read_tools(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s);          /* tools.c */
-int nh_read_probes(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s);         /* points.c */
-int nh_read_targets(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s);        /* points.c */
+int nh_read_solver_newton(const nh_ctx *c, const nh_yaml_node *root,
+                          const nh_scene *s);                                /* solver.c */
+int nh_read_probes(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s);  /* points.c */
+int nh_read_targets(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s); /* points.c */
 /* adapt.goal, once probes and targets are read (adapt.c). */
 int nh_read_adapt_goal(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s);
 /* Trajectories, release: target and symbolic untils, once targets are read (trajectory.c). */

@@ -75,7 +75,7 @@ static int read_mask(const nh_ctx *c, const nh_yaml_node *mask, nh_scene *s) {
   for (int i = 0; i < labels->n; ++i) {
     char item[NH_KEY_MAX];
     NH_TRY(
-        nh_read_int(c, labels->items[i], nh_read_index(item, key, i), &s->tissue.mask_labels[i]));
+        nh_read_label(c, labels->items[i], nh_read_index(item, key, i), &s->tissue.mask_labels[i]));
     for (int j = 0; j < i; ++j)
       if (s->tissue.mask_labels[j] == s->tissue.mask_labels[i])
         return nh_read_fail(c, labels->items[i], item, "label %d is listed twice",
@@ -102,8 +102,8 @@ static int read_surface(const nh_ctx *c, const nh_yaml_node *node, nh_scene *s) 
   nh_read_join(key, path, "file");
   nh_read_where(c, at_file, key, s->tissue.where_domain);
   nh_surface *surface;
-  if (nh_surface_read(s->tissue.surface_file, s->tissue.surface_unit, 0, &s->limits.read,
-                      &surface)) {
+  if (nh_surface_read(s->tissue.surface_file, s->tissue.surface_unit, NH_SURFACE_MIN_EXTENT,
+                      &s->limits.read, &surface)) {
     char msg[1024];
     snprintf(msg, sizeof msg, "%s", nh_error_message());
     return nh_read_fail(c, at_file, key, "%s", msg);

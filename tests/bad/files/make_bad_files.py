@@ -54,11 +54,14 @@ def case(*args, **kw):
 
 
 # ---------------------------------------------------------------- scenes ----
-# The key each kind of case names its file at, as the scene reader reports it
-# (None: the message is not prefixed by the scene yet: templates are loaded
-# when the run is built; checkpoints come from --restart).
+# The key each kind of case names its file at, and its line in the scene
+# below (counted by hand), as the message reports them: "scene.yaml:LINE:
+# KEY:" (a template is loaded when the run is built, and reported at the
+# scene's adapt.template all the same); a checkpoint comes from --restart.
 KEY = {"mask": "tissue.domain.mask.file", "labels": "tissue.labels.file",
-       "surface": "tissue.domain.surface.file", "template": None, "restart": "--restart"}
+       "surface": "tissue.domain.surface.file", "template": "adapt.template",
+       "restart": "--restart"}
+LINE = {"mask": 5, "labels": 7, "surface": 5, "template": 9}
 
 # A static scene over a 16 mm box (the images' extent) whose tissue section
 # names the file; {file} and {unit} are filled in per case.
@@ -437,6 +440,20 @@ def cube(h=10.0, lo=(0.0, 0.0, 0.0)):
     return T
 
 
+def cylinder_fans(n, r=10.0, length=40.0):
+    """A closed cylinder along x (radius r, file units) of n side segments,
+    each cap a fan of n triangles from its centre, outward."""
+    rim = [(r * math.cos(2 * math.pi * j / n), r * math.sin(2 * math.pi * j / n)) for j in range(n)]
+    T = []
+    for j in range(n):
+        (y0, z0), (y1, z1) = rim[j], rim[(j + 1) % n]
+        a, b, c, d = (0.0, y0, z0), (0.0, y1, z1), (length, y1, z1), (length, y0, z0)
+        T += [[a, b, c], [a, c, d]]
+        T.append([(0.0, 0.0, 0.0), b, a])
+        T.append([(length, 0.0, 0.0), d, c])
+    return T
+
+
 def flip(tris):
     return [[t[0], t[2], t[1]] for t in tris]
 
@@ -514,7 +531,26 @@ def make_stl():
                          (1e6, "larger than 10 m"), (1e300, "larger than 10 m"),
                          (1e307, "not a finite length")):
         stl_case(f"unit_{unit:g}", ascii_stl(S), [expect], unit=unit)
+    # A shape under 1 mm: a unit that reads metres as millimetres (the grid
+    # lies over the surface's own box, so no cell bounds it from below). The
+    # sphere is 40 file units across: 0.04 mm at unit 1e-6, 40 mm at the
+    # default; one of radius 2 (4 mm across) passes.
+    for unit in (1e-6, 1e-9, 1e-30):
+        stl_case(f"unit_{unit:g}", ascii_stl(S), ["smaller than 0.001 m", "is `unit` right?"],
+                 unit=unit)
+    stl_case("ok_sphere_4mm", ascii_stl(sphere(2.0)), [], ok=True)
     stl_case("coordinate_3e38_binary", binary_stl(cube(3e38)), ["larger than 10 m"])
+    # The reader's index lists each triangle under every cell of its box: 4000
+    # slivers (2000 triangles, each with its flipped twin: closed) whose box is
+    # the whole (y, z) extent put 4000 x ~4000 = 1.6e7 pairs in the (y, z)
+    # index, above 64 per triangle and 1e7 (a double cone of 65 000 segments
+    # overflowed the int offsets). A cylinder of 2000 segments whose caps are
+    # fans from their centres (as CAD exports write them) stays well below.
+    slivers = [[(0.01 * i, 0.0, 0.0), (0.01 * i + 1.0, 10.0, 10.0), (0.01 * i + 2.0, 10.0, 10.0)]
+               for i in range(2000)]
+    stl_case("slivers_across_the_index", binary_stl(slivers + flip(slivers)),
+             ["long sliver triangles", "remesh"])
+    stl_case("ok_cylinder_fan_caps", binary_stl(cylinder_fans(2000)), [], ok=True)
     # Binary files shorter or longer than their count says.
     B = binary_stl(S)
     for name, data, expect in (
