@@ -2,3 +2,5 @@
 nh_add_c_test(test_coupled verify)
 # Skull contact: a sphere resting in a spherical cavity (tests/test_skull.c).
 nh_add_c_test(test_skull "verify;slow")
+# Skull contact points from the cut cells' surface quadrature: area order 2 on an off-centre sphere (tests/test_skull_surface.c).
+nh_add_c_test(test_skull_surface "unit;verify")

@@ -5,14 +5,30 @@
  * with φ(x) = F(x) / |∇F(x)| (F the domain's level function; φ is the signed
  * distance to first order, exactly for a sphere), the tissue must stay where
  * φ ≤ gap. Contact points are points of the immersed surface F = 0 of the
- * rest shape, one per cut leaf, each carrying the surface area it stands for:
- * with 6³ sub-cell midpoints xₛ of volume dvₛ and the one-sided smeared
- * delta (inside only: the cells just outside the shape are not in the mesh)
- *   δ_ε(φ) = 2 max(0, 1 + φ/ε) / ε for φ ≤ 0,   ε = 1.5 × the sub-cell edge,
- * the cell's area is A = Σₛ δ_ε(φₛ) dvₛ (→ ∫ δ(φ) dV, the area of the
- * surface in the cell), and its point is the δ-weighted mean of the
- * projections xₛ − φₛ n(xₛ), projected onto F = 0 by three more steps. The
- * points are material points (cell, ξ), found again after refinement.
+ * rest shape, one per cut leaf, each carrying the surface area it stands for
+ * (docs/theory.md §5c, "Skull contact points"):
+ *   integrated cut cells (tissue.cut_cells: integrated, a box leaf): the
+ *     surface quadrature of the cut cell (mesh/cutcell.c, depth
+ *     NH_CUT_DEPTH): the pieces Γ_c of {I F = 0} (I F the piecewise linear
+ *     interpolant of F on the Kuhn lattice, the boundary of the polyhedron
+ *     the stiffness is integrated over) with points ξ_q and area vectors
+ *     A_q; the leaf's point has the area A_c = Σ_q |A_q| and stands at the
+ *     area-weighted mean ξ̄ = Σ_q |A_q| ξ_q / A_c, moved onto F = 0 along
+ *     the normal by three steps x ← x − φ(x) n(x). Σ_c A_c is the area of
+ *     the reconstructed surface: O(s²) from the true one (s = the sub-box
+ *     edge). The point belongs to that leaf, whose tissue holds Γ_c, with
+ *     its natural coordinates in it: never to a neighbour (a neighbour's
+ *     sliver of tissue, held only by the stabilisation α, would take the
+ *     contact force; tests/skull_force.py);
+ *   scaled cut cells (and leaves that are not boxes): 6³ sub-cell midpoints
+ *     xₛ of volume dvₛ and the one-sided smeared delta (inside only: the
+ *     cells just outside the shape are not in the mesh)
+ *       δ_ε(φ) = 2 max(0, 1 + φ/ε) / ε for φ ≤ 0,   ε = 1.5 × the sub-cell edge,
+ *     A = Σₛ δ_ε(φₛ) dvₛ (→ ∫ δ(φ) dV, the area of the surface in the
+ *     cell), the point the δ-weighted mean of the projections xₛ − φₛ
+ *     n(xₛ), projected onto F = 0 by three more steps and located in the
+ *     mesh (it may lie in a neighbour).
+ * The points are material points (cell, ξ), found again after refinement.
  *
  * Each step, point i at its current position x = X + u(X) gives one row
  * of the constraint solver (nh_rows, no tool part):
@@ -43,13 +59,16 @@ typedef struct {
   double edge;  /* that leaf's largest edge, m */
   double lam;   /* last impulse (N s), warm start */
   int row;      /* its row this step, or −1 */
+  int small;    /* its leaf's tissue fraction is below NH_FILL_MIN (merged away in the build) */
 } nh_skull_point;
 
 /* A leaf's surface sample as last computed: a function of its corners
  * only, so a leaf whose corners are bitwise the same gets it again without
  * the 6³ samples (area < 0: not computed). */
 typedef struct {
-  double Xe[24], P[3], area;
+  double Xe[24], P[3], xi[3], area;
+  double fraction; /* the leaf's tissue volume / its volume (integrated cut cells) */
+  int own;         /* the point belongs to this leaf at xi (integrated cut cell) */
 } nh_skull_cell;
 
 struct nh_skull {
@@ -129,6 +148,66 @@ static double nh_cell_surface(const nh_domain *d, const double Xe[24], double P[
   return area;
 }
 
+/* The surface point of an integrated box leaf [lo, hi] from the cut-cell
+ * quadrature: its area (0 if the surface misses the leaf), position P on
+ * F = 0 and natural coordinates xi in the leaf. */
+static int nh_cell_cut_surface(const nh_domain *d, const double lo[3], const double hi[3],
+                               double P[3], double xi[3], double *area, double *fraction) {
+  nh_cut_spec spec;
+  nh_cut_spec_domain(&spec, d, NH_CUT_DEPTH);
+  nh_cut_moments mom;
+  nh_cut_surface surf = {0, 0, NULL};
+  int rc = nh_cut_cell(&spec, lo, hi, &mom, &surf, 0u);
+  double a = 0.0, acc[3] = {0, 0, 0};
+  for (int q = 0; q < surf.n && !rc; q++) {
+    const nh_cut_point *p = &surf.point[q];
+    if (p->piece != -1) continue;
+    const double w =
+        sqrt(p->area[0] * p->area[0] + p->area[1] * p->area[1] + p->area[2] * p->area[2]);
+    a += w;
+    for (int k = 0; k < 3; k++) acc[k] += w * p->xi[k];
+  }
+  nh_cut_surface_free(&surf);
+  *area = a;
+  *fraction = mom.volume / ((hi[0] - lo[0]) * (hi[1] - lo[1]) * (hi[2] - lo[2]));
+  if (rc || a == 0.0) return rc;
+  for (int k = 0; k < 3; k++) P[k] = 0.5 * (lo[k] + hi[k]) + 0.5 * (hi[k] - lo[k]) * acc[k] / a;
+  for (int it = 0; it < 3; it++) {
+    double nrm[3], phi = nh_skull_distance(d, P, nrm);
+    for (int k = 0; k < 3; k++) P[k] -= phi * nrm[k];
+  }
+  for (int k = 0; k < 3; k++) xi[k] = (2.0 * P[k] - lo[k] - hi[k]) / (hi[k] - lo[k]);
+  return NH_OK;
+}
+
+/* Aggregation of small cut parts: a point whose leaf holds less than
+ * NH_FILL_MIN of its volume in tissue gives its area to the nearest point
+ * of a leaf that holds more, and is dropped. Such a leaf's outer nodes are
+ * held by the stabilisation α alone (and carry almost no mass): a contact
+ * row there is met by moving them, not the tissue (a node 1 m away in one
+ * step, tests/skull_force.py). The total area is kept. */
+static void nh_skull_merge_small(nh_skull *s) {
+  int n = 0;
+  for (int i = 0; i < s->n; i++) {
+    if (!s->p[i].small) continue;
+    int best = -1;
+    double d2best = INFINITY;
+    for (int j = 0; j < s->n; j++) {
+      if (s->p[j].small) continue;
+      double d2 = 0.0;
+      for (int k = 0; k < 3; k++)
+        d2 += (s->p[j].X[k] - s->p[i].X[k]) * (s->p[j].X[k] - s->p[i].X[k]);
+      if (d2 < d2best) d2best = d2, best = j;
+    }
+    if (best < 0) return; /* no leaf holds enough tissue: keep every point */
+    s->p[best].area += s->p[i].area;
+    s->p[i].area = 0.0;
+  }
+  for (int i = 0; i < s->n; i++)
+    if (s->p[i].area > 0.0) s->p[n++] = s->p[i];
+  s->n = n;
+}
+
 int nh_skull_build(nh_skull *s, const nh_mesh *m) {
   s->n = 0;
   /* each leaf's sample: kept from the last build where its corners are the
@@ -145,16 +224,30 @@ int nh_skull_build(nh_skull *s, const nh_mesh *m) {
     if (c < s->n_cell && s->cell[c].area >= 0.0 && !memcmp(s->cell[c].Xe, Xe, sizeof Xe)) {
       *f = s->cell[c];
     } else {
+      double lo[3], hi[3];
+      memset(f, 0, sizeof *f);
       memcpy(f->Xe, Xe, sizeof Xe);
-      f->P[0] = f->P[1] = f->P[2] = 0.0;
-      f->area = nh_cell_surface(&s->domain, Xe, f->P);
+      f->own = nh_domain_integrates_cuts(&s->domain) && nh_hex_is_box(Xe, lo, hi);
+      if (f->own) {
+        int rc = nh_cell_cut_surface(&s->domain, lo, hi, f->P, f->xi, &f->area, &f->fraction);
+        if (rc) {
+          free(fresh);
+          return rc;
+        }
+      } else {
+        f->area = nh_cell_surface(&s->domain, Xe, f->P);
+      }
     }
     double area = f->area;
     memcpy(P, f->P, sizeof P);
     if (area == 0.0) continue;
-    /* The point may lie in a neighbour: locate it (it is on the surface,
-     * so inside a kept cell unless round-off puts it just outside). */
-    if (nh_mesh_locate(m, P, &cell, xi) != NH_OK) {
+    /* A point of the smeared delta may lie in a neighbour: locate it (it is
+     * on the surface, so inside a kept cell unless round-off puts it just
+     * outside). */
+    if (f->own) {
+      cell = c;
+      memcpy(xi, f->xi, sizeof xi);
+    } else if (nh_mesh_locate(m, P, &cell, xi) != NH_OK) {
       cell = c;
       if (nh_hex_invert(Xe, P, xi) != NH_OK) continue;
     }
@@ -166,12 +259,14 @@ int nh_skull_build(nh_skull *s, const nh_mesh *m) {
     memcpy(p->X, P, sizeof P);
     memcpy(p->xi, xi, sizeof xi);
     p->area = area, p->cell = cell, p->lam = 0.0, p->row = -1;
+    p->small = f->own && f->fraction < NH_FILL_MIN;
     double edge = 0.0;
     for (int k = 0; k < 3; k++) edge = fmax(edge, fabs(Xe[18 + k] - Xe[k]));
     p->edge = edge;
   }
   free(s->cell);
   s->cell = fresh, s->n_cell = m->n_cells;
+  nh_skull_merge_small(s);
   return NH_OK;
 }
 
