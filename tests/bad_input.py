@@ -113,6 +113,8 @@ CASES = [
     ("tools_base.yaml", ["tools.0.radius=0.001", "tools.1.inside=electrode"], "--set:2",
      "tools.1.inside"),
     ("tools_base.yaml", ["tools.2.length=1"], "--set:1", "tools.2"),
+    # a motion that pushes the 32 mm cannula 50 mm: its base would end inside the tissue
+    ("tools_base.yaml", ["tools.0.motion=[{until: 1.0, speed: 0.05}]"], 9, "tools.0"),
     ("set_base.yaml", ["tools.0.length=1"], "--set:1", "tools.0"),
     # formulation is the tissue's: a tool's material does not take it
     ("tools_base.yaml", ["tools.0.material.formulation=bbar"], "--set:1",

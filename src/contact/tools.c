@@ -34,16 +34,18 @@ double nh_tool_speed(const nh_tool_spec *sp, double t, double h) {
   return (nh_motion_distance(sp, t + h) - nh_motion_distance(sp, t)) / h;
 }
 
-/* NH_ERR_INPUT if the tool starts inside the tissue or its tip never comes
- * within one cell of it over its motion. */
+/* NH_ERR_INPUT if the tool starts inside the tissue, its tip never comes
+ * within one cell of it over its motion, or its motion carries its base
+ * into the tissue (a tool shorter than the depth it is pushed to). */
 static int nh_tool_check_reach(const nh_scene *sc, const nh_mesh *m, const nh_tool_spec *sp) {
   double dmax = 0.0, T = sc->time.steps * sc->time.step;
   for (int i = 0; i < sp->n_motion; i++)
     dmax = fmax(dmax, nh_motion_distance(sp, fmin(sp->motion[i].until, T)));
-  double tip0[3], tip1[3], cell = fmax(m->spacing[0], fmax(m->spacing[1], m->spacing[2]));
+  double tip0[3], tip1[3], base1[3], cell = fmax(m->spacing[0], fmax(m->spacing[1], m->spacing[2]));
   for (int i = 0; i < 3; i++) {
     tip0[i] = sp->base[i] + sp->length * sp->direction[i];
     tip1[i] = tip0[i] + dmax * sp->direction[i];
+    base1[i] = sp->base[i] + dmax * sp->direction[i];
   }
   NH_CHECK(!nh_domain_inside(&m->domain, tip0), NH_ERR_INPUT,
            "%s: the tip starts inside the tissue at [%g, %g, %g]: place the base so the tool "
@@ -54,6 +56,10 @@ static int nh_tool_check_reach(const nh_scene *sc, const nh_mesh *m, const nh_to
            "%s: the tool never meets the tissue: its tip travels from [%g, %g, %g] to "
            "[%g, %g, %g] and stays %g m away from it (check base, direction and motion)",
            sp->where, tip0[0], tip0[1], tip0[2], tip1[0], tip1[1], tip1[2], d);
+  NH_CHECK(!nh_domain_inside(&m->domain, base1), NH_ERR_INPUT,
+           "%s: the motion carries the base into the tissue: after %g m of travel the base of "
+           "this %g m tool is at [%g, %g, %g], inside it (a longer tool or a shorter motion)",
+           sp->where, dmax, sp->length, base1[0], base1[1], base1[2]);
   return NH_OK;
 }
 

@@ -646,6 +646,8 @@ static int nh_sim_solve_static(nh_sim *s, double t_new, nh_step_stats *st) {
       sum.t_assemble += one.t_assemble, sum.t_factor += one.t_factor;
       sum.t_solve += one.t_solve, sum.t_constraints += one.t_constraints;
       sum.iterations += one.iterations, sum.factorised += one.factorised;
+      sum.pcg_iterations += one.pcg_iterations, sum.corrections += one.corrections;
+      sum.tangent_updates += one.tangent_updates;
       sum.residual = one.residual;
     }
     sum.t_factor_reference = sum.factorised > 0 ? sum.t_factor / sum.factorised : 0.0;

@@ -50,6 +50,7 @@ int nh_step_dynamic(nh_system *s, const nh_integrator *in, const double *f_ext, 
     if (nh_stop_requested()) break; /* the step stands as linearised (u, v consistent) */
     double t0 = nh_time_now();
     if ((rc = nh_system_factor(s))) break; /* the A the residual assembled (reuse.c) */
+    st.step.factorised++;
     double t1 = nh_time_now();
     if ((rc = nh_step_free_solve(s, in, b, x, &st.step))) break;
     nh_system_scatter(s, x, delta);
@@ -202,6 +203,7 @@ int nh_solve_static(nh_system *s, const nh_integrator *in, const double *f_ext, 
     nh_step_assemble(s, in, 1, f_ext, u, NULL, s->fwork[1], &f_scale);
     double t1 = nh_time_now();
     rc = nh_system_factor(s);
+    st.factorised += !rc;
     st.t_assemble += t1 - t0;
     st.t_factor += nh_time_now() - t1;
   }
