@@ -29,6 +29,21 @@ set_tests_properties(restart_tools_dbs PROPERTIES LABELS "io;slow" TIMEOUT 900)
 nh_add_py_test(restart_tools_skull io restart_tools.py skull)
 nh_add_py_test(restart_tools_mri io restart_tools.py mri)
 set_tests_properties(restart_tools_skull PROPERTIES LABELS "io;slow" TIMEOUT 600)
+
+# Restart from anywhere, every shipped case (tests/restart_cases.py; cases
+# found by globbing cases/, study files skipped): each case shortened to 10
+# steps, stopped by SIGINT (needle-phantom: SIGTERM) after step 3, its frames
+# and results.h5 read, DIR/scene.yaml checked for relative file paths, the
+# printed command run from another folder and the result compared with the
+# uninterrupted run (1e-12; 1e-6 where docs/performance.md's inherited-factor
+# exception applies). About 25 s of runs on a loaded 2-core machine.
+nh_add_py_test(restart_cases io restart_cases.py cases)
+set_tests_properties(restart_cases PROPERTIES TIMEOUT 600)
+# Known failure (measured reason in restart_cases.py, KNOWN): the static
+# skull path does not continue bitwise (first continued step: 64 skull rows
+# instead of 70; probes 7e-8 relative at step 10).
+nh_add_py_test(restart_cases_known io restart_cases.py known)
+set_tests_properties(restart_cases_known PROPERTIES TIMEOUT 600 WILL_FAIL TRUE)
 nh_add_c_test(test_traction verify)
 nh_add_py_test(traction_patch verify traction_patch.py)
 

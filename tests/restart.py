@@ -16,7 +16,8 @@
    one /steps row per step 1..30, equal to steps.csv, and its probe series
    equals the reference run's to 1e-12 relative.
 6. SIGTERM inside a long step (a `lagrange` W build and solve of seconds) stops the
-   run within 1 s, exit 1, with the last complete step checkpointed.
+   run within 2.5 x step 1's own time (1 s on a quiet machine), exit 1, with
+   the last complete step checkpointed.
 """
 import csv
 import os
@@ -211,7 +212,7 @@ def main():
         # 6: SIGTERM inside a long step (step 2 refines 24x12x12 to 40410
         # dofs with `lagrange` hanging rows: 4.9 s of step, 3.7 s of it the
         # constraint rows' W and solve, on a quiet machine since W is built by
-        # supernodes): the run stops within 1 s of the signal,
+        # supernodes): the run stops soon after the signal (BOUND below),
         # exit 1, with the last complete step checkpointed.
         # The signal is aimed into step 2's constraint rows, past its
         # refinement, METIS ordering and factorisation (about 1.2 s, 3 x step
@@ -223,7 +224,17 @@ def main():
         # tried up to three times (4.5, 3.6 and 6 x step 1). Step 3 (the same
         # 40410-dof mesh, its W built again) is as long a step: a signal in it
         # counts too. Each try must stop with exit 1 and the checkpoint (or end
-        # before the signal came: a miss), and one must stop within 1 s.
+        # before the signal came: a miss), and one must stop within
+        # BOUND x step 1's t_step of the signal. The bound is relative to the
+        # run's own step 1, not a wall time, so that load and sanitizers,
+        # which slow both alike, do not fail it (a fixed 1 s failed at 1.42 -
+        # 4.55 s under ASan at load 8): 2.5 x step 1 is the 1 s of a quiet
+        # machine (step 1 0.41 s), above the 0.1 - 0.2 s from a signal in the
+        # W build and the up to 1.8 s (4.4 x) of a signal caught inside the
+        # ordering (a try that lands there misses; the next aims elsewhere),
+        # and below the 3.7 s (9 x) of a W build and solve that ignored the
+        # stop request until its end.
+        BOUND = 2.5
         latencies = []
         for aim in (4.5, 3.6, 6.0):
             long_dir = os.path.join(tmp, "long-%g" % aim)
@@ -256,14 +267,13 @@ def main():
                 continue
             if not os.path.exists(os.path.join(long_dir, "checkpoint.nhc")):
                 fail("SIGTERM in a long step: no checkpoint")
-            latencies.append(latency)
-            if latency <= 1.0:
+            latencies.append(latency / step1)
+            if latency <= BOUND * step1:
                 break
-        print("SIGTERM in a long step: stopped %s s after the signal"
-              % ", ".join("%.2f" % t for t in latencies))
-        if not latencies or min(latencies) > 1.0:
-            fail("SIGTERM in a long step: stopped %s s after the signal, expected within 1 s"
-                 % (", ".join("%.2f" % t for t in latencies) or "never (every aim missed)"))
+        if not latencies or min(latencies) > BOUND:
+            fail("SIGTERM in a long step: stopped %s x step 1's time after the signal, expected "
+                 "within %g x" % (", ".join("%.2f" % t for t in latencies) or "never (every aim missed)",
+                                  BOUND))
 
         # 4: bad checkpoints.
         bad = os.path.join(tmp, "bad")
