@@ -19,6 +19,8 @@ set_tests_properties(static_skull PROPERTIES LABELS "verify;slow")
 # The skull's force in steps.csv balances the weight of a brain at rest in
 # its skull (tests/skull_force.py).
 nh_add_py_test(skull_force verify skull_force.py)
+# The same under tissue.cut_cells: integrated (aggregated nodes, docs/theory.md §5c).
+nh_add_py_test(skull_force_integrated verify skull_force.py tissue.cut_cells=integrated)
 
 # The per-step reference of tools/study.py dbs-goal (tools/richardson.py; tests/study_reference.py):
 # Richardson through three meshes recovers f∞, the order and the error bar of

@@ -18,8 +18,12 @@ masses. Checks (silent on success, one line per failure, exit 1):
  2. skull_contacts > 0 at rest, and 0 with zero force in a run without
     gravity whose skull stands 1 mm off (nothing touches; with gap 0 the
     surface points touch and carry round-off multipliers, ~1e-16 N).
+Arguments KEY=VALUE are scene overrides for both runs (the ctest variant
+skull_force_integrated passes tissue.cut_cells=integrated: then `fill` is
+the quadrature's tissue fraction and M the quadrature's mass).
 """
 import os
+import sys
 import xml.etree.ElementTree as ET
 
 import numpy as np
@@ -28,7 +32,8 @@ from vtk.util.numpy_support import vtk_to_numpy
 
 from nh_run import fail, finish, run, work
 
-WORK = work("skull_force")
+SETS = sys.argv[1:]
+WORK = work("skull_force" + ("_" + "_".join(a.split("=")[1] for a in SETS) if SETS else ""))
 SCENE = os.path.join(WORK, "rest.yaml")
 RHO, G = 1040.0, 9.81
 with open(SCENE, "w") as f:
@@ -47,7 +52,7 @@ output:
 """ % (G, RHO))
 
 out = os.path.join(WORK, "rest")
-r = run(SCENE, out)
+r = run(SCENE, out, SETS)
 if r:
     last = r["steps"][-1]
     F = np.array([float(last[c]) for c in ("skull_fx", "skull_fy", "skull_fz")])
@@ -76,7 +81,7 @@ if r:
     print("at rest: skull force (%.3e, %.8f, %.3e) N, weight %.8f N, %s contacts"
           % (F[0], F[1], F[2], W, last["skull_contacts"]))
 free = run(SCENE, os.path.join(WORK, "free"),
-           ["gravity=[0,0,0]", "time.end=0.1", "tissue.skull.gap=0.001"])
+           ["gravity=[0,0,0]", "time.end=0.1", "tissue.skull.gap=0.001"] + SETS)
 if free and any(int(s["skull_contacts"]) != 0 or float(s["skull_fy"]) != 0.0 for s in free["steps"]):
     fail("without gravity: skull_contacts/skull_fy %s, expected 0 (nothing presses)"
          % [(s["skull_contacts"], s["skull_fy"]) for s in free["steps"]])

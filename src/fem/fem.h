@@ -225,6 +225,14 @@ enum { NH_CUT_NONE = -1, NH_CUT_WHOLE = -2 };
 
 /* The cut-cell data of leaf c, or NULL if c is not a cut cell. */
 const nh_tissue_cut *nh_tissue_cell_cut(const nh_tissue *tissue, int c);
+/* The tissue fraction of leaf c: V_t / V_c of a cut cell, 1 of a whole
+ * one, else its fill fraction φ (a box domain: 1). */
+double nh_tissue_fraction(const nh_tissue *tissue, int c);
+/* The support measure of every node (docs/theory.md §5c, "Aggregated
+ * nodes"): μ_v = Σ_L ∫_{tissue ∩ L} N_v dV / Σ_L ∫_L N_v dV over the leaves
+ * L it is a corner of (a cut cell's ∫ N_v from its quadrature, any other
+ * leaf's φ V_L / 8 over V_L / 8); 0 for a node of no leaf. NH_ERR_MEMORY. */
+int nh_tissue_node_support(const nh_tissue *tissue, double *support);
 /* Set the stabilisation α >= 0 and recompute every cut cell. NH_ERR_MEMORY. */
 int nh_tissue_set_stabilisation(nh_tissue *tissue, double alpha);
 /* The natural points where leaf c holds tissue, for the inversion check:

@@ -260,6 +260,31 @@ static double nh_cell_phi(const nh_tissue *t, int c) {
   return k == NH_CUT_WHOLE ? 1.0 : t->mesh->fill[c];
 }
 
+double nh_tissue_fraction(const nh_tissue *t, int c) {
+  const nh_tissue_cut *cut = nh_tissue_cell_cut(t, c);
+  return cut ? cut->fraction : nh_cell_phi(t, c);
+}
+
+int nh_tissue_node_support(const nh_tissue *t, double *support) {
+  const nh_mesh *m = t->mesh;
+  double *full = nh_calloc((size_t)(m->n_nodes ? m->n_nodes : 1), sizeof(double));
+  if (!full) return NH_ERROR(NH_ERR_MEMORY, "out of memory: support measures");
+  memset(support, 0, sizeof(double) * (size_t)m->n_nodes);
+  for (int l = 0; l < m->n_leaves; l++) {
+    int c = m->leaves[l];
+    const nh_tissue_cut *cut = nh_tissue_cell_cut(t, c);
+    double v = t->volume[t->cell_shape[c]] / 8.0;
+    for (int a = 0; a < 8; a++) {
+      int i = m->cells[8 * c + a];
+      support[i] += cut ? cut->corner[a] : nh_cell_phi(t, c) * v;
+      full[i] += v;
+    }
+  }
+  for (int i = 0; i < m->n_nodes; i++) support[i] = full[i] > 0.0 ? support[i] / full[i] : 0.0;
+  free(full);
+  return NH_OK;
+}
+
 const nh_tissue_cut *nh_tissue_cell_cut(const nh_tissue *t, int c) {
   int k = c < t->cap_cell_cut ? t->cell_cut[c] : NH_CUT_NONE;
   return k >= 0 ? t->cut + k : NULL;

@@ -18,7 +18,20 @@
  * Chains: a master can itself be hanging (a refined cell next to a cell
  * refined twice). Each hanging node's masters are expanded recursively until
  * only non-hanging nodes remain, merging repeated masters; a cycle is
- * detected by marking nodes in progress. */
+ * detected by marking nodes in progress.
+ *
+ * Aggregated nodes (docs/theory.md §5c, "Aggregated nodes"; Badia, Verdugo
+ * & Martín 2018, "The aggregated unfitted finite element method for
+ * elliptic problems") are the same mechanism with a root leaf that does
+ * not contain the node: an ill-posed node of an immersed domain (a corner
+ * only of leaves with tissue fraction below the threshold) takes the
+ * trilinear field of a nearby well-posed leaf, extrapolated to its natural
+ * coordinates outside [−1, 1]³ (nh_find_aggregated). They enter the raw
+ * table next to the hanging nodes, so chains through either kind resolve to
+ * free masters, and everything downstream (elimination u = P u_free, the
+ * Lagrange rows, the contact rows' J through P, interpolation of fields)
+ * treats both alike. Extrapolation of a box leaf's trilinear field
+ * reproduces every linear field, so the weights sum to 1 and reproduce x. */
 #include "mesh/mesh.h"
 
 #include <math.h>
@@ -34,6 +47,7 @@ void nh_hanging_destroy(nh_hanging **hanging) {
   free(h->master);
   free(h->weight);
   free(h->index);
+  free(h->aggregated);
   free(h);
   *hanging = NULL;
 }
@@ -163,6 +177,123 @@ static int nh_find_raw(const nh_mesh *m, const unsigned char *skip, nh_raw *raw)
   return rc;
 }
 
+/* A candidate root's rank: nearer (smaller max_k |ξ_k|) first, then one
+ * without a hanging corner, the larger tissue fraction, the lower index. */
+typedef struct {
+  int cell, hanging;
+  double reach, fraction, xi[3];
+} nh_root;
+
+static int nh_root_better(const nh_root *a, const nh_root *b) {
+  if (b->cell < 0) return 1;
+  if (fabs(a->reach - b->reach) > 1e-9 * fmax(1.0, b->reach)) return a->reach < b->reach;
+  if (a->hanging != b->hanging) return a->hanging < b->hanging;
+  if (a->fraction != b->fraction) return a->fraction > b->fraction;
+  return a->cell < b->cell;
+}
+
+/* The ill-posed nodes' roots into raw (cell, ξ), flagged in *is_agg (per
+ * node, allocated here). Rings of leaves: ring 0 the node's own leaves,
+ * ring r + 1 the leaves sharing a corner with ring r; the root is the best
+ * well-posed leaf (tissue, and no ill-posed corner) of the first ring that
+ * has one. */
+static int nh_find_aggregated(const nh_mesh *m, const unsigned char *skip,
+                              const nh_aggregation *agg, nh_raw *raw, unsigned char **is_agg,
+                              int *n_orphans) {
+  const int n = m->n_nodes, nl = m->n_leaves;
+  int rc = NH_OK, orphans = 0, cap_ring = 0, cap_next = 0;
+  int *start = nh_calloc((size_t)n + 1, sizeof(int)),
+      *leaf = nh_calloc((size_t)8 * nl + 1, sizeof(int));
+  int *stamp = nh_calloc((size_t)(m->n_cells ? m->n_cells : 1), sizeof(int));
+  int *ring = NULL, *next = NULL;
+  unsigned char *flag = nh_calloc((size_t)(n ? n : 1), 1);
+  if (!start || !leaf || !stamp || !flag) {
+    rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: aggregated nodes");
+    goto done;
+  }
+  for (int l = 0; l < nl; l++) /* node -> the leaves it is a corner of (CSR) */
+    for (int a = 0; a < 8; a++) start[m->cells[8 * m->leaves[l] + a] + 1]++;
+  for (int v = 0; v < n; v++) start[v + 1] += start[v];
+  for (int l = 0; l < nl; l++) /* start[v] counts up to its end, then is restored */
+    for (int a = 0; a < 8; a++) {
+      int v = m->cells[8 * m->leaves[l] + a];
+      leaf[start[v]++] = m->leaves[l];
+    }
+  for (int v = n; v > 0; v--) start[v] = start[v - 1];
+  start[0] = 0;
+  const double thr = agg->threshold;
+  for (int v = 0; v < n; v++) /* the ill-posed nodes */
+    flag[v] = raw->cell[v] < 0 && !(skip && skip[v]) && !(agg->keep && agg->keep[v]) &&
+              start[v] < start[v + 1] && agg->support[v] > 0.0 && agg->support[v] < thr;
+  for (int v = 0; v < n && !rc; v++) {
+    if (!flag[v]) continue;
+    int n_ring = 0;
+    for (int p = start[v]; p < start[v + 1]; p++) {
+      if ((rc = nh_grow((void **)&ring, &cap_ring, n_ring + 1, sizeof(int)))) break;
+      ring[n_ring++] = leaf[p];
+      stamp[leaf[p]] = v + 1;
+    }
+    nh_root best = {.cell = -1};
+    for (int r = 0; r < NH_AGGREGATE_RINGS && best.cell < 0 && !rc; r++) {
+      int n_next = 0;
+      for (int i = 0; i < n_ring && !rc; i++)
+        for (int a = 0; a < 8 && !rc; a++) {
+          int u = m->cells[8 * ring[i] + a];
+          for (int p = start[u]; p < start[u + 1] && !rc; p++) {
+            int c = leaf[p];
+            if (stamp[c] == v + 1) continue;
+            stamp[c] = v + 1;
+            if ((rc = nh_grow((void **)&next, &cap_next, n_next + 1, sizeof(int)))) break;
+            next[n_next++] = c;
+            int ill = 0; /* a root: tissue, and no ill-posed corner */
+            for (int b = 0; b < 8; b++) ill |= flag[m->cells[8 * c + b]] != 0;
+            if (ill || !(agg->fraction[c] > 0.0)) continue;
+            double Xe[24];
+            nh_root cand = {.cell = c, .fraction = agg->fraction[c]};
+            nh_mesh_cell_coords(m, m->X, c, Xe);
+            if (nh_natural(Xe, m->X + 3 * v, cand.xi)) continue;
+            cand.reach = fmax(fabs(cand.xi[0]), fmax(fabs(cand.xi[1]), fabs(cand.xi[2])));
+            for (int b = 0; b < 8; b++) cand.hanging |= raw->cell[m->cells[8 * c + b]] >= 0;
+            if (nh_root_better(&cand, &best)) best = cand;
+          }
+        }
+      int *t = ring, tc = cap_ring;
+      ring = next, cap_ring = cap_next, n_ring = n_next;
+      next = t, cap_next = tc;
+    }
+    if (rc) break;
+    if (best.cell < 0) {
+      orphans++;
+      flag[v] = 2; /* ill posed without a root: stays free */
+      continue;
+    }
+    raw->cell[v] = best.cell;
+    memcpy(raw->xi + 3 * v, best.xi, sizeof best.xi);
+  }
+  for (int v = 0; v < n; v++) flag[v] = flag[v] == 1;
+done:
+  free(start), free(leaf), free(stamp), free(ring), free(next);
+  if (rc) {
+    free(flag);
+    return rc;
+  }
+  *is_agg = flag;
+  if (n_orphans) *n_orphans = orphans;
+  return NH_OK;
+}
+
+/* The aggregated flags of the resolved table. */
+static int nh_hanging_mark_aggregated(nh_hanging *h, const unsigned char *is_agg) {
+  h->aggregated = nh_calloc((size_t)(h->n_hanging ? h->n_hanging : 1), 1);
+  if (!h->aggregated) return NH_ERROR(NH_ERR_MEMORY, "out of memory: aggregated nodes");
+  h->n_aggregated = 0;
+  for (int k = 0; k < h->n_hanging; k++) {
+    h->aggregated[k] = is_agg && is_agg[h->node[k]];
+    h->n_aggregated += h->aggregated[k];
+  }
+  return NH_OK;
+}
+
 /* Resolved master lists, built recursively. */
 typedef struct {
   const nh_mesh *m;
@@ -214,7 +345,14 @@ static int nh_resolve(nh_resolver *r, int v) {
 }
 
 int nh_hanging_detect(const nh_mesh *m, const unsigned char *skip, nh_hanging **out) {
+  return nh_hanging_detect_aggregated(m, skip, NULL, out, NULL);
+}
+
+int nh_hanging_detect_aggregated(const nh_mesh *m, const unsigned char *skip,
+                                 const nh_aggregation *agg, nh_hanging **out, int *n_orphans) {
   *out = NULL;
+  unsigned char *is_agg = NULL;
+  if (n_orphans) *n_orphans = 0;
   int n = m->n_nodes, rc = NH_OK;
   nh_raw raw = {malloc(sizeof(int) * (size_t)(n ? n : 1)),
                 malloc(sizeof(double) * 3 * (size_t)(n ? n : 1))};
@@ -229,6 +367,7 @@ int nh_hanging_detect(const nh_mesh *m, const unsigned char *skip, nh_hanging **
     goto done;
   }
   if ((rc = nh_find_raw(m, skip, &raw))) goto done;
+  if (agg && (rc = nh_find_aggregated(m, skip, agg, &raw, &is_agg, n_orphans))) goto done;
   int count = 0, total = 0;
   for (int v = 0; v < n && !rc; v++)
     if (raw.cell[v] >= 0) {
@@ -258,7 +397,9 @@ int nh_hanging_detect(const nh_mesh *m, const unsigned char *skip, nh_hanging **
     k++;
   }
   h->start[k] = p;
+  rc = nh_hanging_mark_aggregated(h, is_agg);
 done:
+  free(is_agg);
   if (r.list)
     for (int v = 0; v < n; v++) free(r.list[v]), free(r.wts[v]);
   free(r.list), free(r.wts), free(r.len), free(r.state), free(raw.cell), free(raw.xi);

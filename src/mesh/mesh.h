@@ -409,6 +409,9 @@ typedef struct nh_hanging {
   int *master;    /* masters (non-hanging nodes) */
   double *weight; /* interpolation weights, sum 1 per hanging node */
   int *index;     /* per mesh node: its position in `node`, or -1 */
+  /* aggregated nodes (nh_hanging_detect_aggregated): tied by extrapolation */
+  int n_aggregated;
+  unsigned char *aggregated; /* n_hanging: 1 for an aggregated node, 0 for a hanging one */
 } nh_hanging;
 
 /* Detect the hanging nodes of the leaves and resolve their chains. Nodes with
@@ -417,6 +420,35 @@ typedef struct nh_hanging {
  * Fails with NH_ERR_INTERNAL if a node lies inside a leaf or the chains form
  * a cycle (a broken mesh), NH_ERR_MEMORY. */
 int nh_hanging_detect(const nh_mesh *mesh, const unsigned char *skip, nh_hanging **out);
+
+/* Aggregated nodes of an immersed domain with integrated cut cells
+ * (docs/theory.md §5c, "Aggregated nodes"; Badia, Verdugo & Martín 2018).
+ * A node's support measure is the tissue share of its shape function over
+ * the leaves it is a corner of,
+ *     μ_v = Σ_L ∫_{Ω ∩ L} N_v dV / Σ_L ∫_L N_v dV   (the lumped mass over the full cells'),
+ * and the node is ill posed when 0 < μ_v < threshold (a node without
+ * tissue, μ_v = 0, stays as it is). An ill-posed node is tied, like a
+ * hanging node, to the trilinear field of a well-posed root leaf (tissue,
+ * and no ill-posed corner) extrapolated to it: u_s = Σ_a N_a(ξ_s) u_a, ξ_s
+ * its natural coordinates in the root (outside [−1, 1]³). The root is
+ * searched in NH_AGGREGATE_RINGS rings of corner neighbours of the node's
+ * leaves, the first ring with one; in it the smallest max_k |ξ_s,k| (ties:
+ * no hanging corner, then the larger tissue fraction, then the lower cell
+ * index). A node without one stays free. */
+#define NH_AGGREGATE_MIN   0.125
+#define NH_AGGREGATE_RINGS 2
+typedef struct {
+  const double *support;     /* per node: μ_v */
+  const double *fraction;    /* per cell (leaves read): the tissue fraction V_t / V_c */
+  double threshold;          /* ill posed: 0 < μ_v < threshold (NH_AGGREGATE_MIN) */
+  const unsigned char *keep; /* per node, may be NULL: never aggregated (a fixed component) */
+} nh_aggregation;
+/* nh_hanging_detect, and with agg != NULL the aggregated nodes too, in one
+ * table (chains through hanging and aggregated nodes resolved to free
+ * masters). n_orphans (may be NULL): ill-posed nodes left free for want of a
+ * root. Fails as nh_hanging_detect. */
+int nh_hanging_detect_aggregated(const nh_mesh *mesh, const unsigned char *skip,
+                                 const nh_aggregation *agg, nh_hanging **out, int *n_orphans);
 void nh_hanging_destroy(nh_hanging **hanging);
 /* Set the hanging entries of a nodal field (3 per node) to the
  * interpolation of their masters. */

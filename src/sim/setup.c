@@ -97,16 +97,36 @@ static int nh_sim_fixed_nodes(nh_sim *s, int first) {
 /* Hanging nodes: every node not fixed in all three components (a node
  * fixed in some axes keeps the hanging constraint on all three: its
  * masters lie on the same fixed face); the Lagrange variant's rows take
- * whole nodes: there every fixed node is left out. */
+ * whole nodes: there every fixed node is left out. With integrated cut
+ * cells also the aggregated nodes (docs/theory.md §5c): the ill-posed nodes
+ * without a fixed component, by the tissue's support measures. */
 static int nh_sim_hanging_nodes(nh_sim *s) {
   const nh_scene *sc = s->scene;
-  const int nn = s->mesh->n_nodes, lagrange = sc->adapt.hanging == NH_HANGING_LAGRANGE;
-  unsigned char *in = calloc((size_t)(nn ? nn : 1), 1);
-  if (!in) return NH_ERROR(NH_ERR_MEMORY, "out of memory: %d nodes", nn);
-  for (int i = 0; i < nn; i++) in[i] = s->fixed[i] == 1 || (lagrange && s->fixed[i]);
+  const nh_mesh *m = s->mesh;
+  const int nn = m->n_nodes, lagrange = sc->adapt.hanging == NH_HANGING_LAGRANGE;
+  const int aggregate = nh_domain_integrates_cuts(&m->domain);
   nh_hanging_destroy(&s->hanging);
-  int rc = sc->adapt.enabled ? nh_hanging_detect(s->mesh, in, &s->hanging) : NH_OK;
-  free(in);
+  if (!sc->adapt.enabled && !aggregate) return NH_OK;
+  const size_t n1 = (size_t)(nn ? nn : 1);
+  unsigned char *in = nh_calloc(2 * n1, 1), *keep = in + n1;
+  double *support = nh_calloc(n1 + (size_t)m->n_cells, sizeof(double)), *fraction = support + n1;
+  int rc = in && support ? NH_OK : NH_ERROR(NH_ERR_MEMORY, "out of memory: %d nodes", nn);
+  for (int i = 0; i < nn && !rc; i++) {
+    in[i] = s->fixed[i] == 1 || (lagrange && s->fixed[i]);
+    keep[i] = s->fixed[i] != 0;
+  }
+  if (!rc && aggregate) {
+    rc = nh_tissue_node_support(s->tissue, support);
+    for (int l = 0; l < m->n_leaves; l++)
+      fraction[m->leaves[l]] = nh_tissue_fraction(s->tissue, m->leaves[l]);
+  }
+  const nh_aggregation agg = {support, fraction, NH_AGGREGATE_MIN, keep};
+  int orphans = 0;
+  if (!rc) rc = nh_hanging_detect_aggregated(m, in, aggregate ? &agg : NULL, &s->hanging, &orphans);
+  if (!rc && aggregate && nh_log_get_level() >= NH_LOG_DEBUG)
+    nh_log_info("aggregated nodes: %d tied to a root leaf, %d ill posed without one",
+                s->hanging->n_aggregated, orphans);
+  free(in), free(support);
   return rc;
 }
 
@@ -218,8 +238,8 @@ static int nh_sim_system_build(nh_sim *s, const nh_node_transfer *transfer) {
 int nh_sim_setup_mesh(nh_sim *s, int first) {
   NH_TRY(nh_sim_resize_nodes(s));
   NH_TRY(nh_sim_fixed_nodes(s, first));
-  NH_TRY(nh_sim_hanging_nodes(s));
   NH_TRY(nh_sim_tissue_build(s, first));
+  NH_TRY(nh_sim_hanging_nodes(s));
   NH_TRY(nh_sim_ties(s, first));
   NH_TRY(nh_sim_drained_mass(s));
   NH_TRY(nh_sim_load_vectors(s));

@@ -243,14 +243,15 @@ static int nh_write_tissue_frame(nh_sim *s) {
     nh_tissue_cell_stress(s->tissue, c, s->u, sig);
     cell[l] = nh_von_mises(sig);
     cell[nc + l] = m->level[c];
-    cell[2 * nc + l] = m->fill[c];
+    cell[2 * nc + l] = nh_tissue_fraction(s->tissue, c);
     cell[3 * nc + l] = eta ? eta[c] : 0.0;
     double lambda, mu; /* the cell's Young's modulus (mixed cells: from the averaged λ, μ) */
     nh_tissue_cell_material(s->tissue, c, &lambda, &mu, NULL);
     cell[4 * nc + l] = mu * (3 * lambda + 2 * mu) / (lambda + mu);
   }
   if (!rc && s->hanging)
-    for (int k = 0; k < s->hanging->n_hanging; k++) hang[s->hanging->node[k]] = 1.0;
+    for (int k = 0; k < s->hanging->n_hanging; k++)
+      hang[s->hanging->node[k]] = s->hanging->aggregated[k] ? 2.0 : 1.0;
   for (int i = 0; i < np && !rc; i++) {
     flags[i] = s->fixed[i];
     for (int k = 0; k < 3; k++) s->x[3 * i + k] = m->X[3 * i + k] + s->u[3 * i + k];
@@ -826,7 +827,7 @@ static void nh_sim_count(const nh_sim *s, nh_sim_record *r) {
   const nh_mesh *m = s->mesh;
   r->dofs = 3 * m->n_nodes, r->free_dofs = nh_system_free_dofs(s->system);
   r->cells = m->n_leaves;
-  r->hanging = s->hanging ? s->hanging->n_hanging : 0;
+  r->hanging = s->hanging ? s->hanging->n_hanging - s->hanging->n_aggregated : 0;
   if (s->contact) nh_contact_stats_get(s->contact, &r->cc);
   r->rows = nh_system_constraint_rows(s->system) + r->cc.rows;
   /* f_ext · u: at a static equilibrium of a linear problem, the energy norm
