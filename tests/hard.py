@@ -213,7 +213,7 @@ def check_scene(arg, tag=""):
 def bevel_series():
     """Deviation towards the bevel (+y from the mid-plane y = 0.02) at 0.5 s."""
     d = 0.02 * 0.01        # the tip's advance per step: 2 cm/s x 0.01 s
-    s = 0.005 / 2          # the channel spacing: half the 5 mm cell edge (default)
+    s = 0.005              # the channel spacing: the 5 mm cell edge (the default)
     l1 = 0.32 * s + 1.1 * d
     dev = []
     for angle, name in [(0, "bevel-0-friction"), (2, "bevel-friction"), (4, "bevel-4-friction"),

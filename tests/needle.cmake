@@ -15,3 +15,10 @@ nh_add_py_test(static_insertion verify static_insertion.py)
 # flips the curvature, circular paths with kappa proportional to tan(psi) in a
 # rigid-like medium (the bicycle model).
 nh_add_py_test(steering "verify;slow" steering.py)
+# The channel points' default spacing, one cell edge (tests/channel_spacing.py,
+# docs/interaction.md "Why one point per cell"): an explicit spacing finer than
+# the cell warns once; on the phantom's 48x24x24 grid, where half a cell edge
+# locked the tip at step 32, the first 40 steps cut within the friction bound.
+nh_add_py_test(channel_spacing verify channel_spacing.py)
+nh_add_py_test(channel_spacing_lock "verify;slow" channel_spacing.py --lock)
+set_tests_properties(channel_spacing_lock PROPERTIES TIMEOUT 900)

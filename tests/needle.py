@@ -355,7 +355,7 @@ def test_reinsert():
     if not any(int(r["cut"]) > 0 for r in st if float(r["time"]) <= 0.4 + 1e-9):
         fail("reinsert: no cut during the first insertion")
     second = [(a, b) for a, b in zip(tr, st) if 0.65 + 1e-9 < float(a["time"]) <= 0.75 + 1e-9]
-    spacing = 0.5 * 0.005  # channel points: one per half cell (default spacing)
+    spacing = 0.005  # channel points: one per cell edge (the default spacing)
     for a, b in second:
         if int(b["cut"]) != 0 or a["state"] == "cutting":
             fail("reinsert: step %s cut %s state %s during re-insertion, expected no cut"

@@ -11,7 +11,7 @@ the uniform 32×16×16, 48×24×24 and 64×32×32 runs with the observed order
 is observed, the 64×32×32 value with |u64 − u48| as its error bar.
 |u − u_ref| over all probes and all steps: its maximum and its root mean
 square. The uniform runs of the convergence study (16×8×8, 32×16×16,
-48×24×24, 64×32×32, one channel point per cell edge) are computed once and
+48×24×24, 64×32×32; one channel point per cell edge, the default) are computed once and
 cached in OUT/conv-* (with run.json recording their command and cost);
 --fresh-reference runs them again. Every other variant is run every time,
 since its timing is the point. The report also has the uniform meshes'
@@ -53,18 +53,13 @@ PHANTOM = {
     "scene": os.path.join(ROOT, "cases", "phantom", "phantom.yaml"),
     # the uniform meshes of the convergence study and the converged reference, cached like a
     # reference (longest first): folder, label, overrides, cell edge (mm). Their channel points
-    # are one cell edge apart (spacing = h): with the default, half a cell edge, the
-    # 48×24×24 run locks at step 32 (docs/phantom.md, "Converged reference"). The last three
-    # make the reference.
+    # are one cell edge apart, the default (docs/interaction.md, "Why one point per cell": at
+    # half a cell edge the 48×24×24 run locked at step 32). The last three make the reference.
     "references": [
-        ("conv-64x32x32", "uniform 64×32×32", ["tissue.grid=[64,32,32]",
-                                               "tools.0.interaction.spacing=0.000625"]),
-        ("conv-48x24x24", "uniform 48×24×24", ["tissue.grid=[48,24,24]",
-                                               "tools.0.interaction.spacing=0.00083333333333333"]),
-        ("conv-32x16x16", "uniform 32×16×16", ["tissue.grid=[32,16,16]",
-                                               "tools.0.interaction.spacing=0.00125"]),
-        ("conv-16x8x8", "uniform 16×8×8", ["tissue.grid=[16,8,8]",
-                                           "tools.0.interaction.spacing=0.0025"])],
+        ("conv-64x32x32", "uniform 64×32×32", ["tissue.grid=[64,32,32]"]),
+        ("conv-48x24x24", "uniform 48×24×24", ["tissue.grid=[48,24,24]"]),
+        ("conv-32x16x16", "uniform 32×16×16", ["tissue.grid=[32,16,16]"]),
+        ("conv-16x8x8", "uniform 16×8×8", ["tissue.grid=[16,8,8]"])],
     "convergence": [("conv-16x8x8", "uniform 16×8×8", 2.5),
                     ("conv-32x16x16", "uniform 32×16×16", 1.25),
                     ("conv-48x24x24", "uniform 48×24×24", 0.8333333333333334),

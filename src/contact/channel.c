@@ -46,9 +46,10 @@
 
 #include <string.h>
 
-/* The hand-over's rate: the fraction of a point's spacing (half the local
- * cell) its remaining offset closes per step. */
-#define NH_HANDOVER_RATE 0.1
+/* The hand-over's rate: the fraction of a point's spacing (one local cell
+ * edge) its remaining offset closes per step: 5 % of a cell, as when the
+ * spacing was half a cell and the rate 0.1. */
+#define NH_HANDOVER_RATE 0.05
 
 int nh_channel_open(nh_group *G, const nh_tool_spec *sp, const nh_mesh *m) {
   if (nh_grow((void **)&G->chan, &G->cap_chan, 1, sizeof *G->chan)) return NH_ERR_MEMORY;
@@ -62,7 +63,10 @@ int nh_channel_open(nh_group *G, const nh_tool_spec *sp, const nh_mesh *m) {
   return NH_OK;
 }
 
-/* Lay channel points from the last one towards `to`, one per spacing. */
+/* Lay channel points from the last one towards `to`, one per spacing. An
+ * explicit spacing finer than the cell a point is laid from is the user's
+ * choice: warned once per group, not refused (docs/interaction.md, "Why one
+ * point per cell": the rule is sufficient, not necessary). */
 static int nh_channel_lay(nh_group *G, const nh_tool_spec *spec, const nh_mesh *m,
                           const nh_cpoint *to) {
   for (;;) {
@@ -70,6 +74,15 @@ static int nh_channel_lay(nh_group *G, const nh_tool_spec *spec, const nh_mesh *
     double d[3] = {to->X[0] - last->X[0], to->X[1] - last->X[1], to->X[2] - last->X[2]};
     double dist = sqrt(nh_vec3_dot(d, d)), sp = nh_point_spacing(spec, m, last);
     if (dist < sp) return NH_OK;
+    double cell = nh_mesh_cell_size(m, last->cell);
+    if (!G->fine_warned && sp < (1.0 - 1e-9) * cell) {
+      nh_log_warn("%s: interaction.spacing %.3g m is finer than the cell the channel reaches "
+                  "(edge %.3g m): more shaft rows than the tissue's nodes along the needle can "
+                  "satisfy apart, and the shaft may lock (docs/interaction.md, \"Why one point "
+                  "per cell\"); 0 lays one point per cell edge",
+                  spec->where, sp, cell);
+      G->fine_warned = 1;
+    }
     double X[3]; /* before the array grows: `last` points into it */
     for (int i = 0; i < 3; i++) X[i] = last->X[i] + d[i] * sp / dist;
     if (nh_grow((void **)&G->chan, &G->cap_chan, G->n_chan + 1, sizeof *G->chan))

@@ -46,6 +46,13 @@ void nh_contact_destroy(nh_contact **contact);
 
 nh_beam *nh_contact_beam(nh_contact *c, int tool);
 
+/* The spacing of a tool's channel points (docs/interaction.md, "Shaft"): the
+ * scene's `spacing` if > 0, else `cell`, the edge of the cell the last point
+ * lies in. One point per cell edge along the axis is at most one point per
+ * cell the axis crosses, so the shaft's lateral rows never outnumber the
+ * values the tissue can take along the axis ("Why one point per cell"). */
+double nh_channel_spacing(double spacing, double cell);
+
 /* One step t_new − h → t_new of tissue and tools, h = in->dt: the rows of
  * every constraint in its current state on the tissue state (mesh, u, v),
  * the coupled solve (nh_step_coupled: u, v advanced, the tools' beams

@@ -68,6 +68,7 @@ typedef struct {
   nh_cpoint front;   /* the channel's front: the tip's anchor */
   int tip_tool;      /* the tool with the tip rows in the last step (−1) */
   double entry_x[3]; /* current position of the entry point (after the last step) */
+  int fine_warned;   /* the warning that an explicit spacing is finer than a cell was given */
 } nh_group;
 
 /* What a group's constraints saw in the step just solved: the input of the
@@ -138,7 +139,7 @@ int nh_point_set(const nh_mesh *mesh, nh_cpoint *p, const double X[3]);
  * starting from X0). NH_ERR_INPUT if it leaves the tissue. */
 int nh_material_point(const nh_mesh *mesh, const double *u, const double x[3], const double X0[3],
                       nh_cpoint *p);
-/* Channel point spacing at p: the scene's, or half the local cell edge. */
+/* Channel point spacing at p: nh_channel_spacing with the edge of p's cell. */
 double nh_point_spacing(const nh_tool_spec *spec, const nh_mesh *mesh, const nh_cpoint *p);
 /* The tissue part of row r: p's cell nodes and shape values. */
 void nh_row_tissue(nh_rows *rows, int r, const nh_mesh *mesh, const nh_cpoint *p);

@@ -58,8 +58,12 @@ int nh_material_point(const nh_mesh *m, const double *u, const double x[3], cons
   return nh_point_set(m, p, X);
 }
 
+double nh_channel_spacing(double spacing, double cell) {
+  return spacing > 0 ? spacing : cell;
+}
+
 double nh_point_spacing(const nh_tool_spec *sp, const nh_mesh *m, const nh_cpoint *p) {
-  return sp->spacing > 0 ? sp->spacing : 0.5 * nh_mesh_cell_size(m, p->cell);
+  return nh_channel_spacing(sp->spacing, nh_mesh_cell_size(m, p->cell));
 }
 
 void nh_row_tissue(nh_rows *rows, int r, const nh_mesh *m, const nh_cpoint *p) {

@@ -63,6 +63,7 @@
  * straight needle (docs/interaction.md, "Torsional friction"), so that the
  * tip turns by π. */
 #include "beam/beam.h"
+#include "contact/contact.h"
 #include "io/io.h"
 #include "plan/plan_impl.h"
 
@@ -193,7 +194,7 @@ static int nh_steer_setup(nh_steer *P, const nh_scene *s, int target) {
   double cell = INFINITY;
   for (int k = 0; k < 3; k++)
     cell = fmin(cell, (s->tissue.box_max[k] - s->tissue.box_min[k]) / s->tissue.grid[k]);
-  double spacing = t->spacing > 0 ? t->spacing : 0.5 * cell;
+  double spacing = nh_channel_spacing(t->spacing, cell);
   P->kappa0 = s->plan.curvature > 0
                   ? s->plan.curvature
                   : tan(t->bevel * NH_PI / 180) / (0.32 * spacing + 1.1 * P->speed * P->h);

@@ -86,7 +86,7 @@ static void print_tool(FILE *f, const nh_scene *s, int i) {
   if (t->spacing > 0)
     fprintf(f, "%g m\n", t->spacing);
   else
-    fprintf(f, "half a cell edge\n");
+    fprintf(f, "one cell edge\n");
   if (t->inside >= 0) {
     fprintf(f, "            inside %s, ", s->tools[t->inside].name);
     if (isfinite(t->release))

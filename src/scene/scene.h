@@ -151,8 +151,8 @@ typedef struct {
   double friction_per_length; /* tools[i].interaction.friction_per_length, N/m (default 0, >= 0) */
   double torsion_per_length;  /* tools[i].interaction.torsion_per_length, N·m/m: the channel's
                                  torsional friction (default 0, >= 0; dynamic mode only) */
-  double spacing; /* tools[i].interaction.spacing: path-point spacing, m (default 0: half the
-                     local cell edge; >= 0) */
+  double spacing; /* tools[i].interaction.spacing: path-point spacing, m (default 0: one local
+                     cell edge; >= 0) */
   double bevel;   /* tools[i].bevel.angle ψ, degrees (default 0: symmetric tip; in [0, 90)) */
   double bevel_toward[3];   /* tools[i].bevel.toward: the side the tip bends to at t = 0, unit and
                                orthogonal to direction (default: the beam's default d2) */
