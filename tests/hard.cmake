@@ -18,8 +18,8 @@ nh_add_py_test(hard_bevel_series hard hard.py --bevel-series)
 #     "Hysteresis of the tied set": step 13). Not yet passing: every
 #     constraint solve is exact (residual <= 1e-14) and the tied set and
 #     stick/slip states settle, but the outer Newton contracts by ~0.6 per
-#     iteration (the needle's symmetrised beam tangent, measured, see
-#     "Which tangent limits the rate") and 30 iterations of 16 load steps
+#     iteration (not the beam tangent: its full, unsymmetric form changes
+#     nothing, "Which tangent limits the rate") and 30 iterations of 16 load steps
 #     miss 1e-8. Kept disabled until then.
 nh_add_py_test(hard_static_push hard hard.py static-push)
 set_tests_properties(hard_static_push PROPERTIES DISABLED TRUE)

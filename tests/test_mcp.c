@@ -15,6 +15,8 @@
  *     sticks again below that and needs μ_s again to restart (decoupled W:
  *     exact forces; coupled W: the slide force from an independent
  *     fixed-point solve); the disc pair likewise;
+ *  8. known solutions of constructed problems (test_known), and of
+ *     problems with an unsymmetric W (test_unsymmetric);
  *  plus bad laws rejected and non-convergence reported. Silent on success. */
 #include "solve/solve.h"
 
@@ -540,7 +542,7 @@ static void conditioned_block(int m, double *W, int n, const int *idx, double ka
  * (a bit mask of 1 << ROW_*), condition κ, stiffness ratio `ratio` (S from
  * 1/√ratio to √ratio), friction μ (0: Tresca), normal-friction coupling. */
 static void known_build(known_problem *p, int m, unsigned types, double kappa, double ratio,
-                        double mu, int blocked) {
+                        double mu, int blocked, double skew) {
   nh_row_law *L = p->laws;
   int n = 0, grp[MAXM], groups = 0;
   while (n < m) {
@@ -621,6 +623,14 @@ static void known_build(known_problem *p, int m, unsigned types, double kappa, d
     for (int i = 0; i < m; i++) idx[i] = i;
     conditioned_block(m, p->W, m, idx, kappa);
   }
+  if (skew > 0.0) { /* W += skew K/|K|_F, K = G − Gᵀ: W's symmetric part stays */
+    double G[MAXM * MAXM], f = 0.0;
+    for (int k = 0; k < m * m; k++) G[k] = nh_rand();
+    for (int j = 0; j < m; j++)
+      for (int i = 0; i < m; i++) f += pow(G[j * m + i] - G[i * m + j], 2);
+    for (int j = 0; j < m; j++)
+      for (int i = 0; i < m; i++) p->W[j * m + i] += skew * (G[j * m + i] - G[i * m + j]) / sqrt(f);
+  }
   /* stiffness ratio: the rows of a group (which share a point) scaled by one
    * S, so its law keeps μ: W → S W S, λ* → S⁻¹ λ*, w* → S w*, thresholds → S⁻¹ */
   double S[MAXM], Sg[MAXM];
@@ -640,11 +650,13 @@ static void known_build(known_problem *p, int m, unsigned types, double kappa, d
 }
 
 /* Relative error max|λ − λ*| / max|λ*| of the solver on p from a cold start. */
-static double known_error(const known_problem *p, double tol, nh_mcp_stats *st, int *rc) {
+static double known_error(const known_problem *p, double tol, nh_mcp_stats *st, int *rc,
+                          int unsym) {
   nh_row_law laws[MAXM];
   double lam[MAXM] = {0};
   memcpy(laws, p->laws, sizeof(nh_row_law) * (size_t)p->m);
-  *rc = nh_mcp_solve(p->m, p->W, p->r, laws, tol, 2000, lam, st);
+  *rc =
+      (unsym ? nh_mcp_solve_unsymmetric : nh_mcp_solve)(p->m, p->W, p->r, laws, tol, 2000, lam, st);
   if (*rc) nh_error_clear();
   double e = 0.0, s = 0.0;
   for (int i = 0; i < p->m; i++)
@@ -680,10 +692,10 @@ static void test_known(void) {
         for (int trial = 0; trial < 10; trial++) {
           known_problem p;
           int coulomb = trial % 2;
-          known_build(&p, m, sets[si], kappas[ki], ratio, coulomb ? mu : 0.0, blocked);
+          known_build(&p, m, sets[si], kappas[ki], ratio, coulomb ? mu : 0.0, blocked, 0.0);
           nh_mcp_stats st;
           int rc;
-          double e = known_error(&p, tol, &st, &rc);
+          double e = known_error(&p, tol, &st, &rc, 0);
           int unique = !coulomb || blocked;
           if (verbose)
             printf("set %d kappa %.0e m %d blocked %d ratio %.0e coulomb %d: rc %d method %d "
@@ -714,6 +726,89 @@ static void test_known(void) {
            worst[0], worst[1], worst[2], worst[3], newton_max, unasserted, unasserted_failed);
 }
 
+/* An unsymmetric W (nh_mcp_solve_unsymmetric): W = S + N, S the SPD matrix
+ * of test_known's problems (condition κ, stiffness ratio), N skew with
+ * |N|₂ ≤ |N|_F = 0.5 |S|₂, and r = w* − W λ* for the constructed solution
+ * (λ*, w*) whose every row obeys its law exactly (open, active, at its cap,
+ * bilateral, sticking and sliding friction with fixed bounds, disc pairs).
+ * W's symmetric part is S, so W λ + r is strongly monotone and, the sets
+ * being fixed (μ = 0), the solution is unique: the solver must find λ*,
+ * within 20 m κ ε (the bound of test_known with cond(W) ≤ 1.5 κ). Then the
+ * sweeps' path (more than 200 rows: bilateral block and subspace steps by
+ * LU): W = I + 0.2 G/√m (G uniform in [−1, 1], |0.2 G/√m|₂ ≤ 0.35, so the
+ * symmetric part is positive definite), 20 bilateral rows and unilateral
+ * ones open, active and at their cap, λ* within 1e-10 (tolerance 1e-14,
+ * cond(W) ≤ 1.35/0.65). */
+static void test_unsymmetric(void) {
+  static const unsigned sets[] = {1u << ROW_B | 1u << ROW_U | 1u << ROW_CAP, 1u << ROW_POINT,
+                                  1u << ROW_CONTACT, 1u << ROW_DISC, (1u << ROW_TYPES) - 1};
+  static const double kappas[] = {1.0, 1e4};
+  for (int si = 0; si < 5; si++)
+    for (int ki = 0; ki < 2; ki++)
+      for (int v = 0; v < 4; v++)
+        for (int trial = 0; trial < 5; trial++) {
+          known_problem p;
+          double ratio = (v & 1) ? 1e6 : 1.0;
+          known_build(&p, (v & 2) ? 40 : 12, sets[si], kappas[ki], ratio, 0.0, 0, 0.1);
+          double asym = 0.0;
+          for (int j = 0; j < p.m; j++)
+            for (int i = 0; i < j; i++)
+              asym = fmax(asym, fabs(p.W[j * p.m + i] - p.W[i * p.m + j]) /
+                                    sqrt(p.W[i * p.m + i] * p.W[j * p.m + j]));
+          CHECK(asym > 1e-3, "unsymmetric W: relative asymmetry %g", asym);
+          nh_mcp_stats st;
+          int rc;
+          double e = known_error(&p, 1e-14, &st, &rc, 1);
+          double bound = 20.0 * p.m * kappas[ki] * DBL_EPSILON;
+          if (getenv("NH_TEST_VERBOSE"))
+            printf(
+                "unsym set %d kappa %g m %d ratio %g: rc %d method %d newton %d sweeps %d res %.2e "
+                "err %.2e\n",
+                si, kappas[ki], p.m, ratio, rc, (int)st.method, st.newton_steps, st.sweeps,
+                st.residual, e);
+          CHECK(rc == NH_OK && e <= bound,
+                "unsymmetric W, set %d, kappa %g, m %d, ratio %g: rc %d (residual %g), relative "
+                "error %g > %g",
+                si, kappas[ki], p.m, ratio, rc, st.residual, e, bound);
+        }
+  enum { M = 220, NB = 20 };
+  double *W = malloc(sizeof(double) * M * M), *r = malloc(sizeof(double) * M);
+  double *ls = malloc(sizeof(double) * M), *ws = malloc(sizeof(double) * M);
+  double *lam = calloc(M, sizeof(double));
+  nh_row_law *laws = malloc(sizeof *laws * M);
+  CHECK(W && r && ls && ws && lam && laws, "out of memory");
+  if (!(W && r && ls && ws && lam && laws)) return;
+  for (int j = 0; j < M; j++)
+    for (int i = 0; i < M; i++) W[j * M + i] = (i == j) + 0.2 * nh_rand() / sqrt((double)M);
+  for (int i = 0; i < M; i++) {
+    double pick = urand();
+    laws[i] = law(i < NB ? NH_ROW_BILATERAL : NH_ROW_UNILATERAL);
+    if (i < NB) {
+      ls[i] = nh_rand(), ws[i] = 0.0;
+    } else if (pick < 0.3) {
+      ls[i] = 0.0, ws[i] = 0.2 + urand();
+    } else if (pick < 0.45) {
+      laws[i].threshold = 0.5, ls[i] = 0.5, ws[i] = -(0.2 + urand());
+    } else {
+      ls[i] = 0.2 + urand(), ws[i] = 0.0;
+    }
+  }
+  for (int i = 0; i < M; i++) {
+    long double v = ws[i];
+    for (int j = 0; j < M; j++) v -= (long double)W[j * M + i] * ls[j];
+    r[i] = (double)v;
+  }
+  nh_mcp_stats st;
+  int rc = nh_mcp_solve_unsymmetric(M, W, r, laws, 1e-14, 5000, lam, &st);
+  double e = 0.0;
+  for (int i = 0; i < M; i++) e = fmax(e, fabs(lam[i] - ls[i]));
+  CHECK(rc == NH_OK && st.sweeps > 0 && e <= 1e-10,
+        "unsymmetric W, %d rows (sweeps): rc %d, %d sweeps, %d Newton steps, residual %g, "
+        "max|lambda - lambda*| = %g > 1e-10",
+        M, rc, st.sweeps, st.newton_steps, st.residual, e);
+  free(W), free(r), free(ls), free(ws), free(lam), free(laws);
+}
+
 int main(void) {
   test_bilateral();
   test_unilateral();
@@ -725,5 +820,6 @@ int main(void) {
   test_static_kinetic();
   test_failures();
   test_known();
+  test_unsymmetric();
   TEST_END();
 }

@@ -191,7 +191,9 @@ typedef struct {
   double gravity[3];  /* m/s², lumped (M g) */
   int quasi_static;   /* a Newton iteration of the static problem (solve/coupled.c): A = K
                          without the mass; with dt = 1, α = β = 0 and v = 0 the right-hand
-                         side is the static residual and the base velocity its increment */
+                         side is the static residual and the base velocity its increment;
+                         K is then the full consistent tangent, factorised by LU when its
+                         symmetric part is positive definite (A unsymmetric) */
 } nh_beam_dynamic_options;
 
 /* One backward-Euler step with one linearisation, the tissue's form
@@ -208,7 +210,8 @@ int nh_beam_step_dynamic(nh_beam *beam, const nh_beam_dynamic_options *options,
  * constraint rows (Algorithm 1, solve/coupled.c), with a prescribed base
  * velocity (the tool's motion):
  *   prepare: assemble and factorise A (free DOFs: nodes 1 … n, m = 6n; by
- *            Cholesky: A is symmetric, see nh_beam_system_projected) and
+ *            Cholesky: A is symmetric, see nh_beam_system_projected; by LU
+ *            in the quasi-static case, see its option) and
  *            the right-hand side rhs[m] of the free DOFs for the base
  *            velocity base_velocity[6] (linear, angular) at the end of the step:
  *              rhs = h (f_ext + M g − f_int − α M v − β K v) − h² K v

@@ -7,7 +7,10 @@
  * Dynamic: A = (1 + hα) M + (hβ + h²) K with the symmetrised K is
  * factorised by dense Cholesky (LAPACK), the tangent's positive part
  * replacing K when A is indefinite (nh_beam_dynamic_prepare). Cost (6n)³/3
- * flops: 0.07 GFlop for n = 100, milliseconds.
+ * flops: 0.07 GFlop for n = 100, milliseconds. The same step quasi-static
+ * (a Newton iteration of the coupled equilibrium, A = K): the full
+ * consistent tangent by LU (LAPACK dgetrf) when its symmetric part is
+ * positive definite, else the symmetric part's positive part as above.
  *
  * Static: Newton on K du = λ_k (f_ext + f_g(x)) − f_int(x), λ_k = k/S for
  * load steps k = 1 … S, each to convergence. The tangent is the exact
@@ -188,8 +191,10 @@ int nh_beam_solve_static(nh_beam *b, const nh_beam_static_options *o, const doub
 
 struct nh_beam_system {
   int N, m;               /* all DOFs, free DOFs (N − 6) */
-  double *K, *A, *M, *Kv; /* N x N tangent, m x m Cholesky factor of A, N mass, N work */
+  double *K, *A, *M, *Kv; /* N x N tangent, m x m factor of A, N mass, N work */
+  int *piv;               /* m: A's LU pivots when lu */
   int projected;          /* the last prepare clipped negative tangent eigenvalues */
+  int lu;                 /* A holds the LU factor of the full (unsymmetric) tangent */
 };
 
 int nh_beam_system_create(const nh_beam *b, nh_beam_system **out) {
@@ -201,7 +206,8 @@ int nh_beam_system_create(const nh_beam *b, nh_beam_system **out) {
   s->A = nh_calloc((size_t)s->m * s->m, sizeof(double));
   s->M = nh_calloc((size_t)s->N, sizeof(double));
   s->Kv = nh_calloc((size_t)s->N, sizeof(double));
-  if (!s->K || !s->A || !s->M || !s->Kv) {
+  s->piv = nh_calloc((size_t)s->m, sizeof(int));
+  if (!s->K || !s->A || !s->M || !s->Kv || !s->piv) {
     nh_beam_system_destroy(&s);
     return NH_ERR_MEMORY;
   }
@@ -212,7 +218,7 @@ int nh_beam_system_create(const nh_beam *b, nh_beam_system **out) {
 void nh_beam_system_destroy(nh_beam_system **ps) {
   nh_beam_system *s = *ps;
   if (!s) return;
-  free(s->K), free(s->A), free(s->M), free(s->Kv);
+  free(s->K), free(s->A), free(s->M), free(s->Kv), free(s->piv);
   free(s);
   *ps = NULL;
 }
@@ -243,7 +249,8 @@ int nh_beam_dynamic_prepare(nh_beam *b, const nh_beam_dynamic_options *o, const 
     return NH_ERR_MEMORY;
   }
   nh_beam_mass(b, s->M);
-  nh_beam_internal_force(b, fi, s->K, 1);
+  /* quasi-static: the consistent tangent itself (the Newton iteration's) */
+  nh_beam_internal_force(b, fi, s->K, !o->quasi_static);
   for (int i = 0; i < N; i++) {
     double v = 0.0;
     for (int j = 0; j < N; j++) v += s->K[(size_t)i * N + j] * b->v[j];
@@ -259,8 +266,30 @@ int nh_beam_dynamic_prepare(nh_beam *b, const nh_beam_dynamic_options *o, const 
   }
   nh_beam_free_block(s->K, N, Kf);
   int rc = NH_OK;
-  s->projected = 0;
-  if (nh_beam_form_factor(s, Kf, cM, cK)) {
+  s->projected = s->lu = 0;
+  double *Kfull = NULL; /* quasi-static: the free block of the full tangent */
+  if (o->quasi_static) {
+    Kfull = nh_calloc((size_t)m * m, sizeof(double));
+    if (!Kfull) {
+      free(fi), free(Kf);
+      return NH_ERR_MEMORY;
+    }
+    memcpy(Kfull, Kf, sizeof(double) * (size_t)m * m);
+    for (int i = 0; i < m; i++) /* Kf: the symmetric part, for the definiteness test */
+      for (int j = 0; j < i; j++)
+        Kf[(size_t)i * m + j] = Kf[(size_t)j * m + i] =
+            0.5 * (Kfull[(size_t)i * m + j] + Kfull[(size_t)j * m + i]);
+  }
+  if (!nh_beam_form_factor(s, Kf, cM, cK)) {
+    /* the symmetric part is positive definite; quasi-static: factorise the
+     * full tangent by LU (A = K, no mass), for Newton's rate */
+    if (Kfull) {
+      for (size_t k = 0; k < (size_t)m * m; k++) s->A[k] = cK * Kfull[k];
+      if (LAPACKE_dgetrf(LAPACK_ROW_MAJOR, m, m, s->A, m, s->piv) != 0)
+        rc = NH_ERROR(NH_ERR_NUMERIC, "beam quasi-static step: the tangent is singular");
+      s->lu = 1;
+    }
+  } else {
     /* A is indefinite: the tool is compressed beyond a buckling load of
      * the step operator. Use the tangent's positive part (eigenvalues
      * clipped at 0, or without mass at 1e-9 of the largest): the residual
@@ -290,12 +319,15 @@ int nh_beam_dynamic_prepare(nh_beam *b, const nh_beam_dynamic_options *o, const 
     }
     free(w);
   }
-  free(fi), free(Kf);
+  free(fi), free(Kf), free(Kfull);
   return rc;
 }
 
 void nh_beam_system_solve(const nh_beam_system *s, double *y) {
-  LAPACKE_dpotrs(LAPACK_ROW_MAJOR, 'L', s->m, 1, s->A, s->m, y, 1);
+  if (s->lu)
+    LAPACKE_dgetrs(LAPACK_ROW_MAJOR, 'N', s->m, 1, s->A, s->m, s->piv, y, 1);
+  else
+    LAPACKE_dpotrs(LAPACK_ROW_MAJOR, 'L', s->m, 1, s->A, s->m, y, 1);
 }
 
 int nh_beam_system_projected(const nh_beam_system *s) {

@@ -137,8 +137,9 @@ static void nh_step_work_free(nh_step_work *w) {
 /* nh_mcp_solve with the acceptance of a stalled solve (see nh_step_coupled). */
 static int nh_constraint_solve(nh_step_work *w, const double *r) {
   nh_mcp_stats *st = &w->st.mcp;
-  int rc = nh_mcp_solve(w->m, w->W, r, w->rows->law, w->tolerance, w->max_iterations,
-                        w->rows->lambda, st);
+  /* quasi-static: the tools' full tangents make W = J A⁻¹ Jᵀ unsymmetric */
+  int rc = (w->statics ? nh_mcp_solve_unsymmetric : nh_mcp_solve)(
+      w->m, w->W, r, w->rows->law, w->tolerance, w->max_iterations, w->rows->lambda, st);
   /* Projected Gauss-Seidel can stall short of a tight tolerance on nearly
    * dependent friction rows (a stiff needle's shaft points share the
    * axial load in many ways): its best iterate is accepted up to

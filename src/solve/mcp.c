@@ -61,6 +61,11 @@
  * (so a warm start at the solution costs 0 sweeps) and after every sweep. The best
  * iterate is kept and returned if max_iterations is reached.
  *
+ * Unsymmetric W (nh_mcp_solve_unsymmetric; the quasi-static step's beam
+ * blocks with their full tangent): the blocks by LU with partial pivoting,
+ * W̃'s rows read as rows (Newton's Jacobian, a disc pair's block); the
+ * symmetric path is unchanged (docs/interaction.md "Unsymmetric compliance").
+ *
  * Workspace: O(m²) doubles (W̃, the bilateral and the subspace factors),
  * freed on return.
  * Failures: NH_ERR_INPUT (inconsistent laws or arguments), NH_ERR_NUMERIC
@@ -97,7 +102,7 @@
 static void nh_mcp_work_free(nh_mcp_work *ws) {
   free(ws->Wt), free(ws->d), free(ws->rt), free(ws->lt), free(ws->wt), free(ws->best);
   free(ws->L), free(ws->tmp), free(ws->bil), free(ws->Lf), free(ws->save_l), free(ws->save_w);
-  free(ws->free_rows), free(ws->lf_rows);
+  free(ws->free_rows), free(ws->lf_rows), free(ws->piv), free(ws->pivf);
 }
 
 static int nh_mcp_check_laws(int m, const nh_row_law *laws) {
@@ -188,17 +193,20 @@ void nh_mcp_recompute_w(nh_mcp_work *ws) {
   }
 }
 
-/* Disc pair (g, g+1) in unscaled coordinates: B the 2×2 block of W, x the
- * current forces, w the current violations. Returns the new forces in x:
- * argmin ½ yᵀBy + qᵀy over |y| ≤ b with q = w − Bx. */
-static void nh_mcp_disc(const double B[3], double q0, double q1, double b, double x[2]) {
+/* Disc pair (g, g+1) in unscaled coordinates: B the 2×2 block of W
+ * (B[0] = W_gg, B[1] = W_g+1,g, B[2] = W_g+1,g+1, B[3] = W_g,g+1), x the
+ * current forces, w the current violations. Returns the new forces in x: the
+ * y with |y| ≤ b and v = B y + q (q = w − Bx) zero inside the disc, −ν y
+ * (ν ≥ 0) on its circle; for a symmetric B the minimiser of ½ yᵀBy + qᵀy
+ * over the disc. */
+static void nh_mcp_disc(const double B[4], double q0, double q1, double b, double x[2]) {
   if (!(b > 0.0)) {
     x[0] = x[1] = 0.0;
     return;
   }
-  double det = B[0] * B[2] - B[1] * B[1];
+  double det = B[0] * B[2] - B[3] * B[1];
   if (det > 1e-14 * (B[0] * B[2] + DBL_MIN)) { /* the stick candidate */
-    double y0 = -(B[2] * q0 - B[1] * q1) / det, y1 = -(-B[1] * q0 + B[0] * q1) / det;
+    double y0 = -(B[2] * q0 - B[3] * q1) / det, y1 = -(-B[1] * q0 + B[0] * q1) / det;
     if (y0 * y0 + y1 * y1 <= b * b) {
       x[0] = y0, x[1] = y1;
       return;
@@ -209,19 +217,20 @@ static void nh_mcp_disc(const double B[3], double q0, double q1, double b, doubl
     x[0] = x[1] = 0.0;
     return;
   }
-  /* |(B + νI)⁻¹ q| decreases in ν ≥ 0 and is ≤ |q|/ν (B ⪰ 0): bracket [0, |q|/b]. */
+  /* |(B + νI)⁻¹ q| is ≤ |q|/ν (B + Bᵀ ⪰ 0), decreasing in ν ≥ 0 for a
+   * symmetric B: bisection on the bracket [0, |q|/b]. */
   double lo = 0.0, hi = qn / b, y0 = 0.0, y1 = 0.0;
   for (int it = 0; it < 200 && hi - lo > 1e-15 * hi; it++) {
     double nu = 0.5 * (lo + hi);
-    double a = B[0] + nu, c = B[2] + nu, dt = a * c - B[1] * B[1];
-    y0 = -(c * q0 - B[1] * q1) / dt, y1 = -(-B[1] * q0 + a * q1) / dt;
+    double a = B[0] + nu, c = B[2] + nu, dt = a * c - B[3] * B[1];
+    y0 = -(c * q0 - B[3] * q1) / dt, y1 = -(-B[1] * q0 + a * q1) / dt;
     if (y0 * y0 + y1 * y1 > b * b)
       lo = nu;
     else
       hi = nu;
   }
-  double a = B[0] + hi, c = B[2] + hi, dt = a * c - B[1] * B[1];
-  y0 = -(c * q0 - B[1] * q1) / dt, y1 = -(-B[1] * q0 + a * q1) / dt;
+  double a = B[0] + hi, c = B[2] + hi, dt = a * c - B[3] * B[1];
+  y0 = -(c * q0 - B[3] * q1) / dt, y1 = -(-B[1] * q0 + a * q1) / dt;
   double n = sqrt(y0 * y0 + y1 * y1);
   if (n > 0.0) y0 *= b / n, y1 *= b / n; /* onto the circle exactly */
   x[0] = y0, x[1] = y1;
@@ -238,6 +247,8 @@ double nh_mcp_residual(const nh_mcp_work *ws, const double *W, const nh_row_law 
   int m = ws->m;
   double res = 0.0, rmax = 0.0, wlmax = 0.0;
   for (int i = 0; i < m; i++) {
+    /* fmax drops a NaN: a non-finite iterate is no solution */
+    if (!isfinite(ws->lt[i]) || !isfinite(ws->wt[i])) return NAN;
     rmax = fmax(rmax, fabs(ws->rt[i]));
     wlmax = fmax(wlmax, fabs(ws->wt[i] - ws->rt[i]));
   }
@@ -273,12 +284,21 @@ double nh_mcp_residual(const nh_mcp_work *ws, const double *W, const nh_row_law 
 /* Dense Cholesky of W̃(idx, idx) into L (nb×nb, lower triangle; the upper
  * one keeps W̃'s entries); 0 if it is not numerically positive definite.
  * LAPACK's blocked dpotrf: with hundreds of free skull rows this factor is
- * O(nb³) per subspace step and was most of the step written as a loop. */
-static int nh_mcp_factor(nh_mcp_work *ws, int nb, const int *idx, double *L) {
+ * O(nb³) per subspace step and was most of the step written as a loop.
+ * An unsymmetric W̃ (ws->unsym): LU with partial pivoting (dgetrf, pivots
+ * into piv), 0 if a pivot of U is below 1e-12 (dependent rows). */
+static int nh_mcp_factor(nh_mcp_work *ws, int nb, const int *idx, double *L, int *piv) {
   int m = ws->m;
   ws->flops += (double)nb * nb, ws->flops_dense += (double)nb * nb * nb / 3.0;
   for (int j = 0; j < nb; j++)
     for (int i = 0; i < nb; i++) L[(size_t)j * nb + i] = ws->Wt[(size_t)idx[j] * m + idx[i]];
+  if (ws->unsym) {
+    ws->flops_dense += (double)nb * nb * nb / 3.0; /* LU: 2 nb³/3 */
+    if (LAPACKE_dgetrf(LAPACK_COL_MAJOR, nb, nb, L, nb, piv) != 0) return 0;
+    for (int j = 0; j < nb; j++)
+      if (!(fabs(L[(size_t)j * nb + j]) > 1e-12)) return 0;
+    return 1;
+  }
   if (LAPACKE_dpotrf(LAPACK_COL_MAJOR, 'L', nb, L, nb) != 0) return 0;
   /* W̃ has unit diagonal: a pivot below 1e-12 (L_jj below 1e-6) means dependent rows. */
   for (int j = 0; j < nb; j++)
@@ -288,17 +308,21 @@ static int nh_mcp_factor(nh_mcp_work *ws, int nb, const int *idx, double *L) {
 
 /* λ̃_idx ← λ̃_idx − W̃(idx, idx)⁻¹ w̃_idx with the factor L (step 1 of a sweep for the
  * bilateral rows; the subspace step for the free rows). */
-static void nh_mcp_solve_block(nh_mcp_work *ws, int nb, const int *idx, const double *L) {
+static void nh_mcp_solve_block(nh_mcp_work *ws, int nb, const int *idx, const double *L,
+                               const int *piv) {
   double *z = ws->tmp;
   for (int j = 0; j < nb; j++) z[j] = ws->wt[idx[j]];
   ws->flops += 2.0 * nb * nb;
-  LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', nb, 1, L, nb, z, nb); /* L Lᵀ δ = w̃_B */
+  if (ws->unsym)
+    LAPACKE_dgetrs(LAPACK_COL_MAJOR, 'N', nb, 1, L, nb, piv, z, nb); /* P L U δ = w̃_B */
+  else
+    LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', nb, 1, L, nb, z, nb); /* L Lᵀ δ = w̃_B */
   for (int j = 0; j < nb; j++) nh_mcp_move(ws, idx[j], -z[j]);
 }
 
 static void nh_mcp_sweep(nh_mcp_work *ws, const double *W, const nh_row_law *laws) {
   int m = ws->m;
-  if (ws->nb > 0 && ws->block_ok) nh_mcp_solve_block(ws, ws->nb, ws->bil, ws->L);
+  if (ws->nb > 0 && ws->block_ok) nh_mcp_solve_block(ws, ws->nb, ws->bil, ws->L, ws->piv);
   for (int i = 0; i < m; i++) {
     const nh_row_law *l = &laws[i];
     double diag = ws->Wt[(size_t)i * m + i];
@@ -320,10 +344,11 @@ static void nh_mcp_sweep(nh_mcp_work *ws, const double *W, const nh_row_law *law
     } else if (l->group == i) {
       int j = i + 1;
       double di = ws->d[i], dj = ws->d[j];
-      double B[3] = {W[(size_t)i * m + i], W[(size_t)i * m + j], W[(size_t)j * m + j]};
+      double B[4] = {W[(size_t)i * m + i], W[(size_t)i * m + j], W[(size_t)j * m + j],
+                     W[(size_t)(ws->unsym ? j : i) * m + (ws->unsym ? i : j)]};
       double x[2] = {di * ws->lt[i], dj * ws->lt[j]};
       double w0 = ws->wt[i] / di, w1 = ws->wt[j] / dj;
-      double q0 = w0 - B[0] * x[0] - B[1] * x[1], q1 = w1 - B[1] * x[0] - B[2] * x[1];
+      double q0 = w0 - B[0] * x[0] - B[3] * x[1], q1 = w1 - B[1] * x[0] - B[2] * x[1];
       nh_mcp_disc(B, q0, q1, nh_mcp_bound(ws, l), x);
       nh_mcp_move(ws, i, x[0] / di - ws->lt[i]);
       nh_mcp_move(ws, j, x[1] / dj - ws->lt[j]);
@@ -386,14 +411,14 @@ static double nh_mcp_subspace(nh_mcp_work *ws, const double *W, const nh_row_law
   /* Near convergence the free set stops changing: W̃ is fixed for the whole
    * solve, so the factor of the same set is the same and is kept. */
   if (nf != ws->lf_n || memcmp(ws->free_rows, ws->lf_rows, sizeof(int) * (size_t)nf)) {
-    ws->lf_ok = nh_mcp_factor(ws, nf, ws->free_rows, ws->Lf);
+    ws->lf_ok = nh_mcp_factor(ws, nf, ws->free_rows, ws->Lf, ws->pivf);
     ws->lf_n = nf;
     memcpy(ws->lf_rows, ws->free_rows, sizeof(int) * (size_t)nf);
   }
   if (!ws->lf_ok) return res;
   memcpy(ws->save_l, ws->lt, sizeof(double) * (size_t)m);
   memcpy(ws->save_w, ws->wt, sizeof(double) * (size_t)m);
-  nh_mcp_solve_block(ws, nf, ws->free_rows, ws->Lf);
+  nh_mcp_solve_block(ws, nf, ws->free_rows, ws->Lf, ws->pivf);
   nh_mcp_project(ws, W, laws);
   nh_mcp_recompute_w(ws);
   double r2 = nh_mcp_residual(ws, W, laws);
@@ -500,8 +525,9 @@ static int nh_mcp_attempt(nh_mcp_work *ws, const double *W, const nh_row_law *lw
   return NH_OK;
 }
 
-int nh_mcp_solve(int m, const double *W, const double *r, nh_row_law *laws, double tolerance,
-                 int max_iterations, double *lambda, nh_mcp_stats *stats) {
+static int nh_mcp_solve_any(int m, const double *W, int unsym, const double *r, nh_row_law *laws,
+                            double tolerance, int max_iterations, double *lambda,
+                            nh_mcp_stats *stats) {
   nh_mcp_stats dummy;
   if (!stats) stats = &dummy;
   memset(stats, 0, sizeof *stats);
@@ -523,7 +549,7 @@ int nh_mcp_solve(int m, const double *W, const double *r, nh_row_law *laws, doub
              i, i, W[(size_t)i * m + i]);
   }
 
-  nh_mcp_work ws = {.m = m, .flops = 3.0 * (double)m * m}; /* W checked, scaled */
+  nh_mcp_work ws = {.m = m, .unsym = unsym, .flops = 3.0 * (double)m * m}; /* W checked, scaled */
   size_t mm = (size_t)m * m;
   int nb = 0;
   for (int i = 0; i < m; i++) nb += laws[i].kind == NH_ROW_BILATERAL;
@@ -545,9 +571,13 @@ int nh_mcp_solve(int m, const double *W, const double *r, nh_row_law *laws, doub
   }
   ws.lf_n = -1;
   ws.bil = malloc(sizeof(int) * ((size_t)nb + 1));
+  if (unsym) {
+    ws.piv = nh_calloc((size_t)nb + 1, sizeof(int));
+    ws.pivf = nh_calloc((size_t)m, sizeof(int));
+  }
   nh_row_law *lw = malloc(sizeof *lw * (size_t)m);
   if (!lw || !ws.Wt || !ws.d || !ws.rt || !ws.lt || !ws.wt || !ws.best || !ws.L || !ws.tmp ||
-      !ws.bil ||
+      !ws.bil || (unsym && (!ws.piv || !ws.pivf)) ||
       (NH_MCP_SUBSPACE && (!ws.Lf || !ws.save_l || !ws.save_w || !ws.free_rows || !ws.lf_rows))) {
     nh_mcp_work_free(&ws);
     free(lw);
@@ -568,7 +598,7 @@ int nh_mcp_solve(int m, const double *W, const double *r, nh_row_law *laws, doub
   nb = 0;
   for (int i = 0; i < m; i++)
     if (laws[i].kind == NH_ROW_BILATERAL) ws.bil[nb++] = i;
-  ws.block_ok = NH_MCP_BILATERAL_BLOCK && nb > 0 ? nh_mcp_factor(&ws, nb, ws.bil, ws.L) : 0;
+  ws.block_ok = NH_MCP_BILATERAL_BLOCK && nb > 0 ? nh_mcp_factor(&ws, nb, ws.bil, ws.L, ws.piv) : 0;
 
   /* The laws as solved: a row that stuck at the previous step starts with its
    * static coefficient. */
@@ -622,4 +652,15 @@ int nh_mcp_solve(int m, const double *W, const double *r, nh_row_law *laws, doub
                     NH_MCP_BILATERAL_BLOCK && nb > 0 && !block_ok ? ", dependent: solved row by row"
                                                                   : "");
   return NH_OK;
+}
+
+int nh_mcp_solve(int m, const double *W, const double *r, nh_row_law *laws, double tolerance,
+                 int max_iterations, double *lambda, nh_mcp_stats *stats) {
+  return nh_mcp_solve_any(m, W, 0, r, laws, tolerance, max_iterations, lambda, stats);
+}
+
+int nh_mcp_solve_unsymmetric(int m, const double *W, const double *r, nh_row_law *laws,
+                             double tolerance, int max_iterations, double *lambda,
+                             nh_mcp_stats *stats) {
+  return nh_mcp_solve_any(m, W, 1, r, laws, tolerance, max_iterations, lambda, stats);
 }

@@ -8,13 +8,14 @@
 
 typedef struct {
   int m, nb, block_ok;
+  int unsym;    /* W is not symmetric (beyond round-off): LU blocks, rows read as rows */
   double *Wt;   /* W̃ = D W D, column-major */
   double *d;    /* D = diag(W)^{-1/2} (1 for a zero diagonal) */
   double *rt;   /* r̃ */
   double *lt;   /* λ̃ */
   double *wt;   /* w̃ = W̃ λ̃ + r̃ */
   double *best; /* λ̃ of the smallest residual so far */
-  double *L;    /* Cholesky factor of W̃_BB (lower, column-major, nb×nb) */
+  double *L;    /* factor of W̃_BB (column-major, nb×nb): Cholesky, or LU if unsym */
   double *tmp;  /* m */
   int *bil;     /* indices of bilateral rows */
   double *Lf;   /* subspace step: factor of W̃_FF (m×m), saved λ̃ and w̃ */
@@ -22,8 +23,14 @@ typedef struct {
   int *free_rows;
   int *lf_rows; /* the free set Lf factorises (lf_n rows; −1: none yet) */
   int lf_n, lf_ok;
+  int *piv, *pivf;           /* unsym: the LU pivots of L (nb) and of Lf (m) */
   double flops, flops_dense; /* operations so far (nh_mcp_stats) */
 } nh_mcp_work;
+
+/* W̃(i, j) of the scaled compliance (column-major). */
+static inline double nh_mcp_w(const nh_mcp_work *ws, int i, int j) {
+  return ws->Wt[(size_t)j * ws->m + i];
+}
 
 /* Unscaled Coulomb bound μ N + c of a friction row from the current normal
  * force(s) N = |λ_n| or |(λ_n, λ_n2)|. */

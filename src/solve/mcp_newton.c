@@ -134,10 +134,15 @@ static void nh_newton_pieces(const nh_mcp_work *ws, const double *W, const nh_ro
   }
 }
 
-/* H(i, :) += f W̃(i, :) (W̃ symmetric: its column i). */
-static void nh_add_w_row(const nh_mcp_work *ws, double *H, int i, double f) {
+/* H(i, :) += f W̃(q, :): W̃'s row q (the column q of a symmetric W̃, read
+ * contiguously; an unsymmetric one's row). */
+static void nh_add_w_row(const nh_mcp_work *ws, double *H, int i, int q, double f) {
   const int m = ws->m;
-  const double *c = ws->Wt + (size_t)i * m;
+  if (ws->unsym) {
+    for (int j = 0; j < m; j++) H[(size_t)j * m + i] += f * nh_mcp_w(ws, q, j);
+    return;
+  }
+  const double *c = ws->Wt + (size_t)q * m;
   for (int j = 0; j < m; j++) H[(size_t)j * m + i] += f * c[j];
 }
 
@@ -163,7 +168,7 @@ static void nh_newton_system(nh_mcp_work *ws, const double *W, const nh_row_law 
     switch (piece[i]) {
     case NH_PIECE_FREE:
       F[i] = ws->wt[i];
-      if (H) nh_add_w_row(ws, H, i, 1.0);
+      if (H) nh_add_w_row(ws, H, i, i, 1.0);
       break;
     case NH_PIECE_LOW:
       F[i] = lam, nw->unit[i] = 1;
@@ -207,10 +212,7 @@ static void nh_newton_system(nh_mcp_work *ws, const double *W, const nh_row_law 
         for (int q = 0; q < 2; q++) {
           const double P = (k == q) - yh[k] * yh[q]; /* dG = (I − αP) dx + αP dv − ŷ db */
           H[(size_t)(i + q) * m + i + k] += ((k == q) - alpha * P) * dd[q] / s;
-          if (alpha * P != 0.0) {
-            const double f = alpha * P * s / dd[q], *c = ws->Wt + (size_t)(i + q) * m;
-            for (int j = 0; j < m; j++) H[(size_t)j * m + i + k] += f * c[j];
-          }
+          if (alpha * P != 0.0) nh_add_w_row(ws, H, i + k, i + q, alpha * P * s / dd[q]);
         }
         for (int e = 0; e < ng; e++) H[(size_t)idx[e] * m + i + k] -= yh[k] * l->mu * g[e] / s;
       }

@@ -301,6 +301,16 @@ typedef struct {
  * iterate and stats says how far it got), NH_ERR_MEMORY. m = 0 succeeds. */
 int nh_mcp_solve(int m, const double *W, const double *r, nh_row_law *laws, double tolerance,
                  int max_iterations, double *lambda, nh_mcp_stats *stats);
+/* The same for a W that need not be symmetric (W = J A⁻¹ Jᵀ with an
+ * unsymmetric A: the quasi-static step's beam blocks with their consistent
+ * tangent), its symmetric part positive semi-definite: every row of W is
+ * read as a row, the exact blocks (bilateral, subspace) are factorised by
+ * LU with partial pivoting instead of Cholesky. On a symmetric W it returns
+ * what nh_mcp_solve does up to round-off (docs/interaction.md, "Unsymmetric
+ * compliance"). */
+int nh_mcp_solve_unsymmetric(int m, const double *W, const double *r, nh_row_law *laws,
+                             double tolerance, int max_iterations, double *lambda,
+                             nh_mcp_stats *stats);
 
 /* ---- tissue and tools in one step: Algorithm 1 across blocks (coupled.c) ----
  * docs/interaction.md "The coupled step". The rows below are this module's
