@@ -409,11 +409,13 @@ static double kkt_reference(kkt_input *p, double *vt, double *vb, double *lambda
   const double hb = o->dt, cKb = hb * o->beta + hb * hb;
   double *Kb = dalloc(N * N), *fb = dalloc(N), *Mb = dalloc(N);
   const double *v_old = nh_beam_velocities(p->needle);
-  nh_beam_internal_force(p->needle, fb, Kb, 1);
+  nh_beam_internal_force(p->needle, fb, Kb, 0); /* the exact K on the rhs (docs/beam.md §2) */
   nh_beam_mass(p->needle, Mb);
-  double *Kff = dalloc(nb * nb); /* the free block of K in A_b (the rhs keeps K) */
+  double *Kff = dalloc(nb * nb); /* the free block of ½(K + Kᵀ) in A_b (the rhs keeps K) */
   for (int i = 0; i < nb; i++)
-    for (int j = 0; j < nb; j++) Kff[(size_t)i * nb + j] = Kb[(size_t)(i + 6) * N + j + 6];
+    for (int j = 0; j < nb; j++)
+      Kff[(size_t)i * nb + j] =
+          0.5 * (Kb[(size_t)(i + 6) * N + j + 6] + Kb[(size_t)(j + 6) * N + i + 6]);
   if (p->positive_part) positive_part(nb, Kff);
   for (int i = 6; i < N; i++) {
     double Kv = 0.0;

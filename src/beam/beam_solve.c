@@ -31,9 +31,17 @@
  * while the displacements are already converged to round-off.
  *
  * Dynamic: backward Euler with one linearisation, the tissue's form
- * (solve/integrate.c) with the symmetrised tangent, and the rotation update
- * T ← exp(h ω) T (first-order in h like the translation; the gyroscopic term
- * vanishes because the lumped rotary inertia is isotropic, see beam.c). */
+ * (solve/integrate.c), and the rotation update T ← exp(h ω) T (first-order
+ * in h like the translation; the gyroscopic term vanishes because the lumped
+ * rotary inertia is isotropic, see beam.c). The step matrix A takes the
+ * symmetrised tangent (Cholesky); the right-hand side's K v, β K v and
+ * prescribed-base terms take the exact one. That matters for a spinning
+ * base: turning every section about its own tangent leaves a bent
+ * isotropic beam's strains unchanged, so that velocity field is in the
+ * right kernel of the exact K but not of its symmetric part, whose skew
+ * remainder (the bending moments' S(m) terms) turned the spin into a
+ * spurious lateral load h² ½(K − Kᵀ) v that grew twentyfold per step for a
+ * bent needle turned 9° per step (docs/beam.md §2, tests/test_beam.c test 8). */
 #include "beam/beam_impl.h"
 
 #include <lapacke.h>
@@ -249,8 +257,9 @@ int nh_beam_dynamic_prepare(nh_beam *b, const nh_beam_dynamic_options *o, const 
     return NH_ERR_MEMORY;
   }
   nh_beam_mass(b, s->M);
-  /* quasi-static: the consistent tangent itself (the Newton iteration's) */
-  nh_beam_internal_force(b, fi, s->K, !o->quasi_static);
+  /* the exact tangent on the right-hand side (see the file comment: a
+   * spinning base), its symmetric part in A */
+  nh_beam_internal_force(b, fi, s->K, 0);
   for (int i = 0; i < N; i++) {
     double v = 0.0;
     for (int j = 0; j < N; j++) v += s->K[(size_t)i * N + j] * b->v[j];
@@ -275,11 +284,12 @@ int nh_beam_dynamic_prepare(nh_beam *b, const nh_beam_dynamic_options *o, const 
       return NH_ERR_MEMORY;
     }
     memcpy(Kfull, Kf, sizeof(double) * (size_t)m * m);
-    for (int i = 0; i < m; i++) /* Kf: the symmetric part, for the definiteness test */
-      for (int j = 0; j < i; j++)
-        Kf[(size_t)i * m + j] = Kf[(size_t)j * m + i] =
-            0.5 * (Kfull[(size_t)i * m + j] + Kfull[(size_t)j * m + i]);
   }
+  for (int i = 0; i < m; i++) /* Kf: the symmetric part (A; the definiteness test) */
+    for (int j = 0; j < i; j++) {
+      const double k = 0.5 * (Kf[(size_t)i * m + j] + Kf[(size_t)j * m + i]);
+      Kf[(size_t)i * m + j] = Kf[(size_t)j * m + i] = k;
+    }
   if (!nh_beam_form_factor(s, Kf, cM, cK)) {
     /* the symmetric part is positive definite; quasi-static: factorise the
      * full tangent by LU (A = K, no mass), for Newton's rate */
