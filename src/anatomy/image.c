@@ -409,6 +409,22 @@ static int nh_image_frame(nh_image *im, const nh_nifti_header *h) {
   for (int i = 0; i < 3; i++) finite &= isfinite(im->t[i]);
   NH_CHECK(finite && nh_mat3_inverse(im->A, im->Ainv) == NH_OK && fabs(nh_mat3_det(im->A)) > 0,
            NH_ERR_INPUT, "%s: the %s transform is singular or not finite", im->path, im->xform);
+  /* The voxel box's corners (indices -1/2 and n - 1/2) within reach. */
+  double far = 0.0;
+  for (int b = 0; b < 8; b++)
+    for (int r = 0; r < 3; r++) {
+      double x = im->t[r];
+      for (int c = 0; c < 3; c++) x += im->A[3 * r + c] * ((b >> c & 1) ? im->n[c] - 0.5 : -0.5);
+      far = isfinite(x) ? fmax(far, fabs(x)) : INFINITY;
+    }
+  NH_CHECK(far <= NH_IMAGE_MAX_COORDINATE, NH_ERR_INPUT,
+           "%s: its voxels reach %g m from the origin (%s transform, %s units): more than %g m is "
+           "not a position in a patient or a phantom (check xyzt_units and the transform)",
+           im->path, far, im->xform,
+           im->unit == 1.0    ? "metre"
+           : im->unit == 1e-6 ? "micron"
+                              : "millimetre",
+           NH_IMAGE_MAX_COORDINATE);
   double frob = 0.0;
   for (int i = 0; i < 9; i++) frob += im->Ainv[i] * im->Ainv[i];
   im->level_scale = 1.0 / (sqrt(3.0) * sqrt(frob));
