@@ -19,7 +19,9 @@ the option and the command's usage line, and write nothing.
 Every command (bad, valid, command line) must end within 10 s of wall time
 and 600 MB of peak memory (the child's ru_maxrss from wait4); the count, the
 slowest and the largest are printed in one line (the campaign's record,
-docs/reliability.md), the rest only on failure.
+docs/reliability.md), the rest only on failure. With NH_SANITIZED=1 (the
+ASan + UBSan build, 5-10 times slower: a valid label image's check takes
+26 s) the limits are printed, not asserted.
 
 Environment: NH_BINARY (the needlehex executable), NH_SOURCE_DIR (the source
 tree). Silent on success; prints every failing case and exits 1 otherwise.
@@ -438,7 +440,7 @@ def main():
             print("FAILED: tests/bad/%s has no case in bad_input.py" % name, file=sys.stderr)
     # The campaign's limits, for every child run above.
     for seconds, mb, shown in RECORD:
-        if seconds > MAX_SECONDS or mb > MAX_MB:
+        if (seconds > MAX_SECONDS or mb > MAX_MB) and not os.environ.get("NH_SANITIZED"):
             failed += 1
             print("FAILED %s: %.2f s, %.0f MB (at most %g s and %g MB)"
                   % (shown, seconds, mb, MAX_SECONDS, MAX_MB), file=sys.stderr)
