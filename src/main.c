@@ -357,7 +357,7 @@ int main(int argc, char **argv) {
   a.is_plan = !strcmp(a.command, "plan");
   if (!a.is_run && !a.is_check && !a.is_plan)
     return nh_fail(NH_ERROR(NH_ERR_INPUT, "unknown command '%s' (try --help)", a.command));
-  a.sets = calloc((size_t)argc + 1, sizeof(char *));
+  a.sets = nh_calloc((size_t)argc + 1, sizeof(char *));
   if (!a.sets) return nh_fail(NH_ERROR(NH_ERR_MEMORY, "out of memory"));
   int status, rc = nh_parse_args(argc, argv, &a);
   if (a.help) {

@@ -16,6 +16,13 @@ empty stderr. Bad command lines (COMMAND_LINES: an option where a value is
 expected, a missing value, an unknown option) exit 2 with one line naming
 the option and the command's usage line, and write nothing.
 
+Every command (bad, valid, command line) must end within 10 s of wall time
+and 600 MB of peak memory (the child's ru_maxrss from wait4); the count, the
+slowest and the largest are printed in one line (the campaign's record,
+docs/reliability.md), the rest only on failure. With NH_SANITIZED=1 (the
+ASan + UBSan build, 5-10 times slower: a valid label image's check takes
+26 s) the limits are printed, not asserted.
+
 Environment: NH_BINARY (the needlehex executable), NH_SOURCE_DIR (the source
 tree). Silent on success; prints every failing case and exits 1 otherwise.
 """
@@ -203,6 +210,30 @@ CASES = [
     ("tools_base.yaml", ["solver.newton={max_iterations: 3}"], "--set:1", "solver.newton"),
     ("set_base.yaml", ["time.mode=static", "solver.newton={tolerance: 1e-9}"], "--set:2",
      "solver.newton"),
+    # Numbers that become counts or sizes (issue 31's overflow audit): an int
+    # that does not fit, a grid whose cells (2^31 - 1) or nodes (46341^2 x 2
+    # x 3 dofs > 2^31) overflow an int even with max_cells raised, steps
+    # beyond 1e7 given directly (was: "out of memory: timing table", exit 1)
+    # or as end / step (1e302), a step outside [1e-9, 1e6] s (1e-300: ρ/Δt²
+    # infinite, the run stood still and "succeeded"; 1e300: exit 1 at step
+    # 1), 2^31 - 1 beam elements (was: n + 1 overflowed, a negative
+    # allocation), a box whose cells overflow their aspect ratio.
+    ("set_base.yaml", ["tissue.grid=[1e10,1,1]"], "--set:1", "tissue.grid.0"),
+    ("set_base.yaml", ["tissue.grid=[2147483647,1,1]", "limits.max_cells=2147483647"], "--set:1",
+     "tissue.grid"),
+    ("set_base.yaml", ["tissue.grid=[46341,46341,1]", "limits.max_cells=2147483647"], "--set:1",
+     "tissue.grid"),
+    ("set_base.yaml", ["limits.max_cells=99999999999"], "--set:1", "limits.max_cells"),
+    ("set_base.yaml", ["time.steps=2147483647"], "--set:1", "time.steps"),
+    ("set_base.yaml", ["time.steps=10000001"], "--set:1", "time.steps"),
+    ("set_base.yaml", ["time.steps=99999999999"], "--set:1", "time.steps"),
+    ("set_base.yaml", ["time.end=1e300"], "--set:1", "time.end"),
+    ("set_base.yaml", ["time.step=1e-300"], "--set:1", "time.step"),
+    ("set_base.yaml", ["time.step=1e-300", "time.end=1"], "--set:1", "time.step"),
+    ("set_base.yaml", ["time.step=1e300"], "--set:1", "time.step"),
+    ("set_base.yaml", ["tissue.domain.box.max=[1e300,1,1]"], 5, "tissue.domain.box"),
+    ("tools_base.yaml", ["tools.0.elements=2147483647"], "--set:1", "tools.0.elements"),
+    ("tools_base.yaml", ["tools.0.elements=100001"], "--set:1", "tools.0.elements"),
 ]
 
 # Scenes that `needlehex plan` must refuse as `check` does, before any run.
@@ -233,7 +264,14 @@ VALID = [("set_base.yaml", []), ("set_base.yaml", ["tissue.damping.mass=0.5", "t
          # a tool exactly as long as its planned depth (0.022 m)
          ("tool_shorter_than_depth.yaml", ["tools.0.length=0.022"]),
          ("set_base.yaml", ["solver.newton={max_iterations: 3}"]),
-         ("mask_negative_label.yaml", ["tissue.domain.mask.labels=[1, 2]"])]
+         ("mask_negative_label.yaml", ["tissue.domain.mask.labels=[1, 2]"]),
+         # Counts at their bounds, and periods as large as an int: a step
+         # count <= 1e7 keeps step + 1 and step % N far from overflow.
+         ("set_base.yaml", ["time.steps=10000000", "output.every=2147483647",
+                            "output.checkpoint=2147483647"]),
+         ("set_base.yaml", ["time.step=1e-9"]), ("set_base.yaml", ["time.step=1e6"]),
+         ("set_base.yaml", ["adapt.every=2147483647", "adapt.max_level=2147483647"]),
+         ("tools_base.yaml", ["tools.0.elements=100000"])]
 
 # Command lines (argv after the binary; SCENE is tests/bad/set_base.yaml),
 # each refused with exit 2 and one line naming the option and holding the
@@ -252,15 +290,37 @@ COMMAND_LINES = [
 SANITIZER_WORDS = ("AddressSanitizer", "LeakSanitizer", "runtime error", "UndefinedBehaviorSanitizer")
 
 
+MAX_SECONDS, MAX_MB = 10.0, 600.0
+RECORD = []  # (seconds, MB, command) of every child
+
+
+def measured(args, cwd=None):
+    """Run args; (exit status or None if killed at 60 s, stdout, stderr),
+    its wall time and peak memory recorded in RECORD and checked by main."""
+    with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
+        start = time.monotonic()
+        p = subprocess.Popen(args, stdout=out, stderr=err, cwd=cwd, text=True)
+        while True:
+            pid, status, usage = os.wait4(p.pid, os.WNOHANG)
+            if pid:
+                break
+            if time.monotonic() - start > 60:
+                p.kill()
+            time.sleep(0.002)
+        seconds = time.monotonic() - start
+        p.returncode = os.waitstatus_to_exitcode(status)
+        RECORD.append((seconds, usage.ru_maxrss / 1024.0, " ".join(args)))
+        out.seek(0), err.seek(0)
+        rc = None if p.returncode == -9 else p.returncode
+        return rc, out.read(), err.read() if rc is not None else "killed after 60 s"
+
+
 def run(binary, path, overrides, command=("check",)):
     args = [binary, command[0], path] + list(command[1:])
     for o in overrides:
         args += ["--set", o]
-    try:
-        p = subprocess.run(args, capture_output=True, text=True, timeout=60)
-    except subprocess.TimeoutExpired:
-        return None, "", "timed out after 60 s", args
-    return p.returncode, p.stdout, p.stderr, args
+    rc, out, err = measured(args)
+    return rc, out, err, args
 
 
 def check_case(binary, bad_dir, fixture, overrides, where, key, command=("check",)):
@@ -356,21 +416,21 @@ def main():
     for argv, want in COMMAND_LINES:
         args = [binary] + [scene if a == "SCENE" else a for a in argv]
         with tempfile.TemporaryDirectory() as cwd:
-            p = subprocess.run(args, capture_output=True, text=True, timeout=60, cwd=cwd)
+            rc, _, stderr = measured(args, cwd=cwd)
             left = os.listdir(cwd)
-        lines = p.stderr.split("\n")
+        lines = stderr.split("\n")
         problems = []
-        if p.returncode != 2:
-            problems.append("exit status: expected 2, got %s" % p.returncode)
+        if rc != 2:
+            problems.append("exit status: expected 2, got %s" % rc)
         if not (len(lines) == 2 and lines[1] == ""):
             problems.append("stderr: expected exactly one line")
-        if want not in p.stderr or "usage: needlehex %s SCENE.yaml" % argv[0] not in p.stderr:
+        if want not in stderr or "usage: needlehex %s SCENE.yaml" % argv[0] not in stderr:
             problems.append("message: expected %r and the usage line" % want)
         if left:
             problems.append("the folder it ran in is not empty: %s" % left)
         if problems:
             failed += 1
-            print("FAILED %s\n  stderr: %r\n  %s" % (" ".join(args), p.stderr,
+            print("FAILED %s\n  stderr: %r\n  %s" % (" ".join(args), stderr,
                                                      "\n  ".join(problems)), file=sys.stderr)
     # Every fixture in tests/bad/ must be exercised by a case above.
     used = {c[0] for c in CASES} | {v[0] for v in VALID}
@@ -378,6 +438,18 @@ def main():
         if name.endswith(".yaml") and name not in used:
             failed += 1
             print("FAILED: tests/bad/%s has no case in bad_input.py" % name, file=sys.stderr)
+    # The campaign's limits, for every child run above.
+    for seconds, mb, shown in RECORD:
+        if (seconds > MAX_SECONDS or mb > MAX_MB) and not os.environ.get("NH_SANITIZED"):
+            failed += 1
+            print("FAILED %s: %.2f s, %.0f MB (at most %g s and %g MB)"
+                  % (shown, seconds, mb, MAX_SECONDS, MAX_MB), file=sys.stderr)
+    slowest, largest = max(RECORD), max(RECORD, key=lambda r: r[1])
+    print("bad_input: %d commands (%d bad scenes, %d size, %d plan, %d valid, %d command lines); "
+          "slowest %.2f s (%s), largest %.0f MB (%s)"
+          % (len(RECORD), len(CASES), len(SIZE_CASES), len(PLAN_CASES), len(VALID),
+             len(COMMAND_LINES), slowest[0], slowest[2].split(" ", 1)[1], largest[1],
+             largest[2].split(" ", 1)[1]))
     if failed:
         print("bad_input: %d failure(s)" % failed, file=sys.stderr)
     return 1 if failed else 0

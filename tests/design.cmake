@@ -4,3 +4,5 @@
 # name defined, every file there, each function in the file the page names).
 nh_add_py_test(layering unit design.py layering)
 nh_add_py_test(design_refs unit design.py refs)
+# No malloc/calloc/realloc in src/ outside the checked allocator (core/error.c).
+nh_add_py_test(design_alloc unit design.py alloc)

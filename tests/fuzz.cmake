@@ -1,6 +1,6 @@
 # Fuzz targets (tests/fuzz/): the scene reader, the template loader, and the
 # readers of the files a scene names: NIfTI images, STL surfaces,
-# checkpoints (docs/reliability.md).
+# checkpoints, 3D Slicer markups (docs/reliability.md).
 #
 # In every build, replay_TARGET runs each target's entry point over its seed
 # corpus (cases/, tests/bad/, tests/data/, templates/; for the file readers
@@ -8,7 +8,7 @@
 # test fuzz_corpus) and over the inputs the fuzzer once crashed on
 # (tests/fuzz/regressions/TARGET/), label bad-input. With -DNH_FUZZ=ON
 # (clang, tools/fuzz.sh) the libFuzzer binaries fuzz_TARGET are built as well.
-foreach(target scene template nifti stl checkpoint)
+foreach(target scene template nifti stl checkpoint markups)
   add_executable(replay_${target} fuzz/replay.c fuzz/fuzz_${target}.c)
   target_link_libraries(replay_${target} PRIVATE needlehex_lib)
   if(NH_FUZZ)
@@ -37,5 +37,12 @@ add_test(NAME fuzz_replay_checkpoint COMMAND replay_checkpoint ${NH_CORPUS}/chec
   ${NH_SRC}/tests/fuzz/regressions/checkpoint)
 set_tests_properties(fuzz_replay_nifti fuzz_replay_stl fuzz_replay_checkpoint PROPERTIES
   FIXTURES_REQUIRED fuzz_corpus)
+# markups: the case's plan and the .mrk.json and .fcsv files test_markups
+# writes (good ones in RAS/LPS, mm/um, and its malformed ones).
+add_test(NAME fuzz_replay_markups COMMAND replay_markups ${NH_SRC}/cases/dbs-mri/plan.mrk.json
+  ${CMAKE_CURRENT_BINARY_DIR}/markups_scratch)
+# (no markups input has crashed the reader yet: the first one found goes to
+# tests/fuzz/regressions/markups/, and that folder into the list above)
+set_tests_properties(fuzz_replay_markups PROPERTIES FIXTURES_REQUIRED nh_markups_files)
 set_tests_properties(fuzz_corpus fuzz_replay_scene fuzz_replay_template fuzz_replay_nifti
-  fuzz_replay_stl fuzz_replay_checkpoint PROPERTIES LABELS bad-input)
+  fuzz_replay_stl fuzz_replay_checkpoint fuzz_replay_markups PROPERTIES LABELS bad-input)

@@ -2,6 +2,11 @@
 # and the bad-input suite that runs `needlehex check` on tests/bad/*.yaml.
 nh_add_c_test(test_scene unit)
 nh_add_py_test(bad_input bad-input bad_input.py)
+# Under the sanitizers (Debug, 5-10 times slower) the time and memory limits
+# are recorded and printed, not asserted.
+if(NH_SANITIZE)
+  set_property(TEST bad_input APPEND PROPERTY ENVIRONMENT NH_SANITIZED=1)
+endif()
 # Planned trajectories, gravity schedules and buoyancy through the binary
 # (tests/plan.py): the tip on the target and back at its start in a rigid
 # block along a line of nodes, buoyancy against plain gravity, a scheduled

@@ -176,7 +176,7 @@ int nh_goal_functional(const nh_mesh *m, const double point[3], double radius, i
 int nh_goal_distance_functional(const nh_mesh *m, const double target[3], const double n[3],
                                 double radius, const char *where, double *j) {
   const size_t n3 = 3 * (size_t)m->n_nodes;
-  double *jk = malloc(sizeof(double) * n3);
+  double *jk = nh_calloc(n3, sizeof(double));
   if (!jk) return NH_ERROR(NH_ERR_MEMORY, "out of memory: distance functional");
   int rc = NH_OK;
   memset(j, 0, sizeof(double) * n3);
@@ -209,9 +209,9 @@ int nh_dwr_duals(nh_system *sys, const nh_rows *rows, double scale, int n_nodes,
   if (n_rows) *n_rows = 0;
   NH_CHECK(nh_system_constraint_rows(sys) == 0, NH_ERR_INPUT,
            "the goal-oriented estimate needs hanging nodes eliminated (adapt.hanging: eliminate)");
-  double *b = malloc(sizeof(double) * (size_t)nf * (size_t)(n ? n : 1));
-  double *x = malloc(sizeof(double) * (size_t)nf * (size_t)(n ? n : 1));
-  unsigned char *active = rows && rows->m > 0 ? malloc((size_t)rows->m) : NULL;
+  double *b = nh_calloc((size_t)nf * (size_t)(n ? n : 1), sizeof(double));
+  double *x = nh_calloc((size_t)nf * (size_t)(n ? n : 1), sizeof(double));
+  unsigned char *active = rows && rows->m > 0 ? nh_calloc((size_t)rows->m, 1) : NULL;
   int rc = b && x && (active || !rows || rows->m == 0)
                ? NH_OK
                : NH_ERROR(NH_ERR_MEMORY, "out of memory: %d dual problems", n);
@@ -238,13 +238,13 @@ static int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale,
                               int group, const double *j, nh_dwr_result *out) {
   const int nn = m->n_nodes, nl = m->n_leaves, nfld = 1 + nz, ng = nz / group;
   const size_t n3 = 3 * (size_t)nn;
-  double *z = malloc(sizeof(double) * n3 * (size_t)(nz ? nz : 1));
+  double *z = nh_calloc(n3 * (size_t)(nz ? nz : 1), sizeof(double));
   double *samples =
-      malloc(sizeof(double) * 6 * (size_t)nfld * (size_t)(m->n_cells ? m->n_cells : 1));
-  double *star = malloc(sizeof(double) * 6 * (size_t)nfld * (size_t)(nn ? nn : 1));
-  double *cell_eps = malloc(sizeof(double) * (size_t)(nz ? nz : 1) * (size_t)(nl ? nl : 1));
-  double *cell_err2 = malloc(sizeof(double) * (size_t)(nl ? nl : 1));
-  double *cell_norm2 = malloc(sizeof(double) * (size_t)(nl ? nl : 1));
+      nh_calloc(6 * (size_t)nfld * (size_t)(m->n_cells ? m->n_cells : 1), sizeof(double));
+  double *star = nh_calloc(6 * (size_t)nfld * (size_t)(nn ? nn : 1), sizeof(double));
+  double *cell_eps = nh_calloc((size_t)(nz ? nz : 1) * (size_t)(nl ? nl : 1), sizeof(double));
+  double *cell_err2 = nh_calloc((size_t)(nl ? nl : 1), sizeof(double));
+  double *cell_norm2 = nh_calloc((size_t)(nl ? nl : 1), sizeof(double));
   int rc = NH_OK;
   if (!z || !samples || !star || !cell_eps || !cell_err2 || !cell_norm2) {
     rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: goal-oriented estimate (%d duals, %d nodes)", nz,
@@ -399,7 +399,7 @@ int nh_dwr_estimate(nh_system *sys, const nh_rows *rows, double scale, const nh_
                     const double *points, double radius, char (*where)[NH_WHERE_MAX],
                     nh_dwr_result *out) {
   const int nz = 3 * n_points;
-  double *j = malloc(sizeof(double) * 3 * (size_t)m->n_nodes * (size_t)(nz ? nz : 1));
+  double *j = nh_calloc(3 * (size_t)m->n_nodes * (size_t)(nz ? nz : 1), sizeof(double));
   if (!j) return NH_ERROR(NH_ERR_MEMORY, "out of memory: %d goal functionals", nz);
   int rc = nh_dwr_point_functionals(m, n_points, points, radius, where, j);
   if (!rc) rc = nh_dwr_functionals(sys, rows, scale, m, t, h, u, nz, 3, j, out);
@@ -416,7 +416,7 @@ int nh_dwr_estimate_combined(nh_system *sys, const nh_rows *rows, double scale, 
                              const double *points, double radius, char (*where)[NH_WHERE_MAX],
                              const double *weights, nh_dwr_result *out) {
   const size_t n3 = 3 * (size_t)m->n_nodes;
-  double *jk = malloc(sizeof(double) * n3), *jc = calloc(n3, sizeof(double));
+  double *jk = nh_calloc(n3, sizeof(double)), *jc = nh_calloc(n3, sizeof(double));
   int rc = jk && jc ? NH_OK : NH_ERROR(NH_ERR_MEMORY, "out of memory: combined goal functional");
   for (int p = 0; p < n_points && !rc; p++)
     for (int k = 0; k < 3 && !rc; k++) {

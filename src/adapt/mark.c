@@ -66,7 +66,7 @@ int nh_mark_cells(const nh_mesh *m, const double *eta_cell, const nh_mark_params
     for (int l = 0; l < m->n_leaves; l++)
       if (eta_cell[m->leaves[l]] >= bar) marked[n++] = m->leaves[l];
   } else {
-    nh_mark_entry *order = malloc(sizeof *order * (size_t)m->n_leaves);
+    nh_mark_entry *order = nh_calloc((size_t)m->n_leaves, sizeof *order);
     if (!order) return NH_ERROR(NH_ERR_MEMORY, "out of memory: marking (%d leaves)", m->n_leaves);
     for (int l = 0; l < m->n_leaves; l++) {
       order[l].cell = m->leaves[l];

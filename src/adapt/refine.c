@@ -120,9 +120,7 @@ void nh_adapt_destroy(nh_adapt **adapt) {
 int nh_adapt_estimate(nh_adapt *a, const nh_mesh *m, const nh_tissue *tissue, const double *u,
                       const nh_hanging *hanging, double *eta, double *eta_rel) {
   if (m->n_cells > a->cap_eta) {
-    double *e = realloc(a->eta_cell, sizeof(double) * (size_t)m->n_cells);
-    if (!e) return NH_ERROR(NH_ERR_MEMORY, "out of memory: error indicators");
-    a->eta_cell = e;
+    NH_TRY(nh_realloc((void **)&a->eta_cell, (size_t)m->n_cells, sizeof(double)));
     a->cap_eta = m->n_cells;
   }
   NH_TRY(nh_spr_estimate(m, tissue, u, hanging, a->eta_cell, eta, eta_rel));
@@ -132,11 +130,11 @@ int nh_adapt_estimate(nh_adapt *a, const nh_mesh *m, const nh_tissue *tissue, co
 
 int nh_adapt_set_goals(nh_adapt *a, const nh_mesh *m, int n, const double *points) {
   free(a->goal_points), free(a->goal_error), free(a->goal_est), free(a->weight), free(a->sep_est);
-  a->goal_points = malloc(sizeof(double) * 3 * (size_t)(n ? n : 1));
-  a->goal_error = malloc(sizeof(double) * (size_t)(n ? n : 1));
-  a->goal_est = malloc(sizeof(double) * 3 * (size_t)(n ? n : 1));
-  a->weight = malloc(sizeof(double) * 3 * (size_t)(n ? n : 1));
-  a->sep_est = malloc(sizeof(double) * 3 * (size_t)(n ? n : 1));
+  a->goal_points = nh_calloc(3 * (size_t)(n ? n : 1), sizeof(double));
+  a->goal_error = nh_calloc((size_t)(n ? n : 1), sizeof(double));
+  a->goal_est = nh_calloc(3 * (size_t)(n ? n : 1), sizeof(double));
+  a->weight = nh_calloc(3 * (size_t)(n ? n : 1), sizeof(double));
+  a->sep_est = nh_calloc(3 * (size_t)(n ? n : 1), sizeof(double));
   if (!a->goal_points || !a->goal_error || !a->goal_est || !a->weight || !a->sep_est)
     return NH_ERROR(NH_ERR_MEMORY, "out of memory: goals");
   a->have_weights = 0;
@@ -152,13 +150,10 @@ int nh_adapt_estimate_goal(nh_adapt *a, nh_system *sys, const nh_rows *rows, dou
                            const nh_hanging *hanging, double *eta, double *eta_rel) {
   NH_CHECK(a->goal && a->n_goals > 0, NH_ERR_INTERNAL, "goal estimate without goals");
   if (m->n_cells > a->cap_eta) {
-    double *e = realloc(a->eta_cell, sizeof(double) * (size_t)m->n_cells);
-    if (e) a->eta_cell = e;
-    double *g = realloc(a->goal_ind, sizeof(double) * (size_t)m->n_cells * (size_t)a->n_goals);
-    if (g) a->goal_ind = g;
-    double *all = realloc(a->eta_all, sizeof(double) * (size_t)m->n_cells);
-    if (all) a->eta_all = all;
-    if (!e || !g || !all) return NH_ERROR(NH_ERR_MEMORY, "out of memory: error indicators");
+    NH_TRY(nh_realloc((void **)&a->eta_cell, (size_t)m->n_cells, sizeof(double)));
+    NH_TRY(
+        nh_realloc((void **)&a->goal_ind, (size_t)m->n_cells * (size_t)a->n_goals, sizeof(double)));
+    NH_TRY(nh_realloc((void **)&a->eta_all, (size_t)m->n_cells, sizeof(double)));
     a->cap_eta = m->n_cells;
   }
   a->have_eta = 0; /* until this estimate is complete */
@@ -237,7 +232,7 @@ const double *nh_adapt_indicators(const nh_adapt *a) {
 
 /* Keep the first cells of largest η whose new nodes fit in the budget. */
 static int nh_adapt_budget(nh_adapt *a, const nh_mesh *m, int *marked, int *n_marked) {
-  nh_mark_entry *order = malloc(sizeof *order * (size_t)*n_marked);
+  nh_mark_entry *order = nh_calloc((size_t)*n_marked, sizeof *order);
   if (!order) return NH_ERROR(NH_ERR_MEMORY, "out of memory: refinement budget");
   for (int i = 0; i < *n_marked; i++)
     order[i] = (nh_mark_entry){.eta = a->eta_cell[marked[i]], .cell = marked[i]};
@@ -263,7 +258,7 @@ static int nh_adapt_budget(nh_adapt *a, const nh_mesh *m, int *marked, int *n_ma
 /* Close the marked set under the 2:1 rule; with a budget, shorten the
  * (η-sorted) prefix until the closed set fits. */
 static int nh_adapt_close(const nh_adapt *a, const nh_mesh *m, int *marked, int *n_marked) {
-  int *order = malloc(sizeof(int) * (size_t)(*n_marked ? *n_marked : 1));
+  int *order = nh_calloc((size_t)(*n_marked ? *n_marked : 1), sizeof(int));
   if (!order) return NH_ERROR(NH_ERR_MEMORY, "out of memory: grading");
   memcpy(order, marked, sizeof(int) * (size_t)*n_marked);
   long room =
@@ -290,9 +285,7 @@ static int nh_adapt_transfer_refine(nh_adapt *a, const nh_mesh *m, const nh_refi
                                     int old_nodes) {
   nh_node_transfer *t = &a->transfer;
   const int n = old_nodes + info->n_new;
-  int *start = realloc(t->start, sizeof(int) * ((size_t)n + 1));
-  if (!start) return NH_ERROR(NH_ERR_MEMORY, "out of memory: the nodal transfer");
-  t->start = start;
+  NH_TRY(nh_realloc((void **)&t->start, (size_t)n + 1, sizeof(int)));
   NH_TRY(nh_grow((void **)&t->node, &t->cap, old_nodes + 8 * info->n_new, sizeof(int)));
   int cap = 0;
   NH_TRY(nh_grow((void **)&t->weight, &cap, t->cap, sizeof(double)));
@@ -335,9 +328,9 @@ static void nh_adapt_transfer_compact(nh_adapt *a, int old_nodes, const int *map
 static int nh_adapt_coarsen(nh_adapt *a, nh_mesh *m, int old_cells, double threshold, int n_fields,
                             double **fields, int *n_merged) {
   *n_merged = 0;
-  unsigned char *below = calloc((size_t)(m->n_cells ? m->n_cells : 1), 1);
-  int *parents = malloc(sizeof(int) * (size_t)(m->n_leaves / 2 + 1));
-  int *map = malloc(sizeof(int) * (size_t)(m->n_nodes ? m->n_nodes : 1));
+  unsigned char *below = nh_calloc((size_t)(m->n_cells ? m->n_cells : 1), 1);
+  int *parents = nh_calloc((size_t)(m->n_leaves / 2 + 1), sizeof(int));
+  int *map = nh_calloc((size_t)(m->n_nodes ? m->n_nodes : 1), sizeof(int));
   int rc = below && parents && map ? NH_OK : NH_ERROR(NH_ERR_MEMORY, "out of memory: coarsening");
   if (!rc) {
     for (int l = 0; l < m->n_leaves; l++) {
@@ -381,13 +374,8 @@ int nh_adapt_refine_cells(nh_adapt *a, nh_mesh *m, const int *cells, int n, int 
   int rc = nh_mesh_refine(m, a->tmpl, cells, n, &info);
   if (!rc) rc = nh_adapt_transfer_refine(a, m, &info, old_nodes);
   for (int f = 0; f < n_fields && !rc; f++) {
-    double *p = realloc(fields[f], sizeof(double) * 3 * (size_t)(m->n_nodes ? m->n_nodes : 1));
-    if (!p)
-      rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: %d nodes", m->n_nodes);
-    else {
-      fields[f] = p;
-      nh_adapt_transfer(m, &info, old_nodes, p);
-    }
+    rc = nh_realloc((void **)&fields[f], 3 * (size_t)m->n_nodes, sizeof(double));
+    if (!rc) nh_adapt_transfer(m, &info, old_nodes, fields[f]);
   }
   nh_refine_info_free(&info);
   if (n > 0) a->have_eta = 0;
@@ -397,7 +385,7 @@ int nh_adapt_refine_cells(nh_adapt *a, nh_mesh *m, const int *cells, int n, int 
 int nh_adapt_step(nh_adapt *a, nh_mesh *m, int n_fields, double **fields, int *n_refined) {
   *n_refined = 0;
   NH_CHECK(a->have_eta, NH_ERR_INTERNAL, "refinement without error indicators");
-  int *marked = malloc(sizeof(int) * (size_t)(m->n_leaves ? m->n_leaves : 1)), n_marked = 0;
+  int *marked = nh_calloc((size_t)(m->n_leaves ? m->n_leaves : 1), sizeof(int)), n_marked = 0;
   if (!marked) return NH_ERROR(NH_ERR_MEMORY, "out of memory: marking");
   int rc = NH_OK;
   double threshold = 0.0;               /* the smallest marked η (coarsening's reference) */
@@ -413,7 +401,7 @@ int nh_adapt_step(nh_adapt *a, nh_mesh *m, int n_fields, double **fields, int *n
     const double *eta = a->eta_cell;
     double *eligible = NULL;
     if (a->goal && a->tolerance > 0) {
-      eligible = malloc(sizeof(double) * (size_t)m->n_cells);
+      eligible = nh_calloc((size_t)m->n_cells, sizeof(double));
       if (!eligible) {
         free(marked);
         return NH_ERROR(NH_ERR_MEMORY, "out of memory: marking");

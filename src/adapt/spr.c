@@ -127,7 +127,7 @@ int nh_spr_fit_patch_n(int n, const double *points, int m, const double *values,
   /* p(x0) = v̄ + y0ᵀ C⁻¹ b = v̄ + Σ_i c_i (v_i − v̄), b = Σ_i y_i (v_i − v̄), with the
    * sample weights c_i = y_iᵀ C⁻¹ y0 = Σ_j (V_jᵀ y_i)(V_jᵀ y0) / w_j shared by
    * all m components. */
-  double c_stack[256], *c = n <= 256 ? c_stack : malloc(sizeof(double) * (size_t)n);
+  double c_stack[256], *c = n <= 256 ? c_stack : nh_calloc((size_t)n, sizeof(double));
   if (!c) return NH_ERR_MEMORY;
   for (int i = 0; i < n; i++) {
     double y[3];
@@ -175,9 +175,8 @@ static int nh_spr_reserve_int(int **p, int *cap, int need) {
   if (need <= *cap) return 0;
   int c = *cap ? *cap : 64;
   while (c < need) c *= 2;
-  int *q = realloc(*p, sizeof(int) * (size_t)c);
-  if (!q) return NH_ERR_MEMORY;
-  *p = q, *cap = c;
+  NH_TRY(nh_realloc((void **)p, (size_t)c, sizeof(int)));
+  *cap = c;
   return 0;
 }
 
@@ -224,11 +223,8 @@ static int nh_spr_node(const nh_spr_ctx *x, int node, nh_spr_work *w, double *ou
     if (n > w->cap_samples) {
       int c = w->cap_samples ? w->cap_samples : 64;
       while (c < n) c *= 2;
-      double *p = realloc(w->points, sizeof(double) * 3 * (size_t)c);
-      if (p) w->points = p;
-      double *v = realloc(w->values, sizeof(double) * (size_t)nv * (size_t)c);
-      if (v) w->values = v;
-      if (!p || !v) return NH_ERR_MEMORY;
+      NH_TRY(nh_realloc((void **)&w->points, 3 * (size_t)c, sizeof(double)));
+      NH_TRY(nh_realloc((void **)&w->values, (size_t)nv * (size_t)c, sizeof(double)));
       w->cap_samples = c;
     }
     for (int i = 0; i < n; i++) {
@@ -280,7 +276,7 @@ static int nh_spr_check(const nh_mesh *m, const nh_tissue *t, const nh_hanging *
 int nh_spr_recover(const nh_mesh *m, const nh_tissue *t, const double *u, const nh_hanging *h,
                    double *sigma_star) {
   NH_TRY(nh_spr_check(m, t, h));
-  double *stress = malloc(sizeof(double) * 6 * (size_t)(m->n_cells ? m->n_cells : 1));
+  double *stress = nh_calloc(6 * (size_t)(m->n_cells ? m->n_cells : 1), sizeof(double));
   if (!stress) return NH_ERROR(NH_ERR_MEMORY, "out of memory: SPR samples (%d cells)", m->n_cells);
   const int nl = m->n_leaves;
 #pragma omp parallel for schedule(static) if (nl >= NH_SPR_PARALLEL_MIN)
@@ -295,11 +291,11 @@ int nh_spr_recover_fields(const nh_mesh *m, const nh_tissue *t, const nh_hanging
   NH_TRY(nh_spr_check(m, t, h));
   const int nv = 6 * n_fields;
   int nn = m->n_nodes, nl = m->n_leaves;
-  double *centre = malloc(sizeof(double) * 3 * (size_t)m->n_cells);
-  double *weight = malloc(sizeof(double) * (size_t)m->n_cells);
-  int *start = calloc((size_t)nn + 1, sizeof(int));
-  int *adj = malloc(sizeof(int) * 8 * (size_t)(nl > 0 ? nl : 1));
-  unsigned char *hangs = calloc((size_t)nn, 1);
+  double *centre = nh_calloc(3 * (size_t)m->n_cells, sizeof(double));
+  double *weight = nh_calloc((size_t)m->n_cells, sizeof(double));
+  int *start = nh_calloc((size_t)nn + 1, sizeof(int));
+  int *adj = nh_calloc(8 * (size_t)(nl > 0 ? nl : 1), sizeof(int));
+  unsigned char *hangs = nh_calloc((size_t)nn, 1);
   int rc = NH_OK;
   if (!centre || !weight || !start || !adj || !hangs) {
     rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: SPR workspace (%d nodes, %d cells)", nn,
@@ -325,7 +321,7 @@ int nh_spr_recover_fields(const nh_mesh *m, const nh_tissue *t, const nh_hanging
     for (int a = 0; a < 8; a++) start[m->cells[8 * m->leaves[l] + a] + 1]++;
   for (int i = 0; i < nn; i++) start[i + 1] += start[i];
   {
-    int *fill = malloc(sizeof(int) * (size_t)(nn > 0 ? nn : 1));
+    int *fill = nh_calloc((size_t)(nn > 0 ? nn : 1), sizeof(int));
     if (!fill) {
       rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: SPR adjacency");
       goto done;
@@ -401,9 +397,10 @@ done:
 int nh_spr_estimate(const nh_mesh *m, const nh_tissue *t, const double *u, const nh_hanging *h,
                     double *eta_cell, double *eta, double *eta_rel) {
   int nl = m ? m->n_leaves : 0;
-  double *sigma_star = malloc(sizeof(double) * 6 * (size_t)(m && m->n_nodes > 0 ? m->n_nodes : 1));
-  double *err2 = malloc(sizeof(double) * (size_t)(nl > 0 ? nl : 1));
-  double *norm2 = malloc(sizeof(double) * (size_t)(nl > 0 ? nl : 1));
+  double *sigma_star =
+      nh_calloc(6 * (size_t)(m && m->n_nodes > 0 ? m->n_nodes : 1), sizeof(double));
+  double *err2 = nh_calloc((size_t)(nl > 0 ? nl : 1), sizeof(double));
+  double *norm2 = nh_calloc((size_t)(nl > 0 ? nl : 1), sizeof(double));
   int rc = NH_OK;
   if (!sigma_star || !err2 || !norm2) {
     rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: SPR estimate");

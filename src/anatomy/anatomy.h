@@ -65,11 +65,17 @@ typedef struct nh_image {
  * Fails with NH_ERR_INPUT, message "PATH: what is wrong (the value, the
  * field)": missing, unreadable or not a regular file; not NIfTI; a header
  * field out of range (dim, pixdim, quaternion of norm > 1, non-finite or
- * singular sform, codes, vox_offset); not 3D; not a label data type; more
+ * singular sform, codes, vox_offset); voxels reaching farther than
+ * NH_IMAGE_MAX_COORDINATE from the origin; not 3D; not a label data type; more
  * voxels or bytes than the limits; a file shorter or longer than its header
  * says (gzip'd: found as it is read); a voxel that is not a whole number
  * (NaN, 2.5), named by its index. NH_ERR_MEMORY. */
 int nh_image_read(const char *path, int read_data, const nh_read_limits *limits, nh_image **out);
+/* m: an image whose voxels reach farther from the origin is in no patient's
+ * or phantom's frame (a wrong unit code or offset); it also keeps the
+ * image's box resolvable in doubles (an offset of 1e20 m swallows the
+ * extent). */
+#define NH_IMAGE_MAX_COORDINATE 1e3
 void nh_image_retain(nh_image *image);
 void nh_image_release(nh_image **image); /* sets *image = NULL */
 

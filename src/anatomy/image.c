@@ -409,6 +409,22 @@ static int nh_image_frame(nh_image *im, const nh_nifti_header *h) {
   for (int i = 0; i < 3; i++) finite &= isfinite(im->t[i]);
   NH_CHECK(finite && nh_mat3_inverse(im->A, im->Ainv) == NH_OK && fabs(nh_mat3_det(im->A)) > 0,
            NH_ERR_INPUT, "%s: the %s transform is singular or not finite", im->path, im->xform);
+  /* The voxel box's corners (indices -1/2 and n - 1/2) within reach. */
+  double far = 0.0;
+  for (int b = 0; b < 8; b++)
+    for (int r = 0; r < 3; r++) {
+      double x = im->t[r];
+      for (int c = 0; c < 3; c++) x += im->A[3 * r + c] * ((b >> c & 1) ? im->n[c] - 0.5 : -0.5);
+      far = isfinite(x) ? fmax(far, fabs(x)) : INFINITY;
+    }
+  NH_CHECK(far <= NH_IMAGE_MAX_COORDINATE, NH_ERR_INPUT,
+           "%s: its voxels reach %g m from the origin (%s transform, %s units): more than %g m is "
+           "not a position in a patient or a phantom (check xyzt_units and the transform)",
+           im->path, far, im->xform,
+           im->unit == 1.0    ? "metre"
+           : im->unit == 1e-6 ? "micron"
+                              : "millimetre",
+           NH_IMAGE_MAX_COORDINATE);
   double frob = 0.0;
   for (int i = 0; i < 9; i++) frob += im->Ainv[i] * im->Ainv[i];
   im->level_scale = 1.0 / (sqrt(3.0) * sqrt(frob));
@@ -590,14 +606,14 @@ static int nh_int_compare(const void *a, const void *b) {
 int nh_image_labels(const nh_image *im, int **labels, long **counts, int *n) {
   size_t nvox = (size_t)im->n[0] * im->n[1] * im->n[2];
   *labels = NULL, *counts = NULL, *n = 0;
-  int *sorted = malloc(sizeof(int) * nvox);
+  int *sorted = nh_calloc(nvox, sizeof(int));
   if (!sorted) return NH_ERROR(NH_ERR_MEMORY, "out of memory: labels of %s", im->path);
   memcpy(sorted, im->label, sizeof(int) * nvox);
   qsort(sorted, nvox, sizeof(int), nh_int_compare);
   int distinct = 0;
   for (size_t v = 0; v < nvox; v++) distinct += v == 0 || sorted[v] != sorted[v - 1];
-  int *l = malloc(sizeof(int) * (size_t)distinct);
-  long *c = calloc((size_t)distinct, sizeof(long));
+  int *l = nh_calloc((size_t)distinct, sizeof(int));
+  long *c = nh_calloc((size_t)distinct, sizeof(long));
   if (!l || !c) {
     free(sorted), free(l), free(c);
     return NH_ERROR(NH_ERR_MEMORY, "out of memory: labels of %s", im->path);
@@ -669,9 +685,9 @@ static int nh_image_distance(nh_image *im) {
   size_t nvox = (size_t)n0 * n1 * n2;
   int nmax = n0 > n1 ? (n0 > n2 ? n0 : n2) : (n1 > n2 ? n1 : n2);
   free(im->distance);
-  im->distance = malloc(sizeof(float) * nvox);
-  int *v = malloc(sizeof(int) * (size_t)nmax);
-  double *z = malloc(sizeof(double) * (size_t)(nmax + 1)), *g = malloc(sizeof(double) * nmax);
+  im->distance = nh_calloc(nvox, sizeof(float));
+  int *v = nh_calloc((size_t)nmax, sizeof(int));
+  double *z = nh_calloc((size_t)(nmax + 1), sizeof(double)), *g = nh_calloc(nmax, sizeof(double));
   if (!im->distance || !v || !z || !g) {
     free(v), free(z), free(g);
     return NH_ERROR(NH_ERR_MEMORY, "out of memory: distances in %s", im->path);
@@ -690,7 +706,7 @@ static int nh_image_distance(nh_image *im) {
   /* Prefix sums for box counts. */
   const size_t m0 = (size_t)n0 + 1, m1 = (size_t)n1 + 1;
   free(im->prefix);
-  im->prefix = calloc(m0 * m1 * ((size_t)n2 + 1), sizeof(int));
+  im->prefix = nh_calloc(m0 * m1 * ((size_t)n2 + 1), sizeof(int));
   if (!im->prefix) return NH_ERROR(NH_ERR_MEMORY, "out of memory: %s", im->path);
   for (int k = 1; k <= n2; k++)
     for (int j = 1; j <= n1; j++)
@@ -716,7 +732,7 @@ static int nh_image_distance(nh_image *im) {
 int nh_image_select(nh_image *im, const int *labels, int n) {
   size_t nvox = (size_t)im->n[0] * im->n[1] * im->n[2];
   free(im->inside);
-  im->inside = calloc(nvox, 1);
+  im->inside = nh_calloc(nvox, 1);
   if (!im->inside) return NH_ERROR(NH_ERR_MEMORY, "out of memory: %s", im->path);
   for (int k = 0; k < 3; k++) im->lo[k] = im->n[k], im->hi[k] = -1;
   for (int k = 0; k < im->n[2]; k++)

@@ -270,9 +270,9 @@ static int nh_edge_compare(const void *a, const void *b) {
 
 static int nh_surface_check_closed(const nh_surface *s) {
   int n = 3 * s->n_tri;
-  nh_corner_ref *c = malloc(sizeof *c * (size_t)n);
-  int *id = malloc(sizeof(int) * (size_t)n);
-  long long *edge = malloc(sizeof(long long) * (size_t)n);
+  nh_corner_ref *c = nh_calloc((size_t)n, sizeof *c);
+  int *id = nh_calloc((size_t)n, sizeof(int));
+  long long *edge = nh_calloc((size_t)n, sizeof(long long));
   if (!c || !id || !edge) {
     free(c), free(id), free(edge);
     return NH_ERROR(NH_ERR_MEMORY, "out of memory: %s", s->path);
@@ -345,7 +345,7 @@ static int nh_surface_bucket(nh_surface *s, int three_d, int **start_out, int **
   const int a0 = three_d ? 0 : 1;
   size_t cells = 1;
   for (int a = a0; a < 3; a++) cells *= (size_t)s->g[a];
-  int *start = calloc(cells + 1, sizeof(int));
+  int *start = nh_calloc(cells + 1, sizeof(int));
   if (!start) return NH_ERROR(NH_ERR_MEMORY, "out of memory: %s", s->path);
   const double most = fmin(
       INT_MAX - 1.0, fmax(NH_SURFACE_PAIRS_PER_TRIANGLE * (double)s->n_tri, NH_SURFACE_PAIRS_MIN));
@@ -354,8 +354,8 @@ static int nh_surface_bucket(nh_surface *s, int three_d, int **start_out, int **
     int *fill = NULL;
     if (pass == 1) {
       for (size_t c = 0; c < cells; c++) start[c + 1] += start[c];
-      *tri_out = malloc(sizeof(int) * (size_t)(start[cells] + 1));
-      fill = malloc(sizeof(int) * cells);
+      *tri_out = nh_calloc((size_t)(start[cells] + 1), sizeof(int));
+      fill = nh_calloc(cells, sizeof(int));
       if (!*tri_out || !fill) {
         free(fill), free(start);
         return NH_ERROR(NH_ERR_MEMORY, "out of memory: %s", s->path);

@@ -12,12 +12,11 @@ void nh_bytes_put(nh_bytes *b, const void *p, size_t n) {
   if (b->len + n > b->cap) {
     size_t cap = b->cap ? b->cap : 4096;
     while (cap < b->len + n) cap *= 2;
-    unsigned char *d = realloc(b->data, cap);
-    if (!d) {
+    if (nh_realloc((void **)&b->data, cap, 1)) {
       b->failed = 1;
       return;
     }
-    b->data = d, b->cap = cap;
+    b->cap = cap;
   }
   memcpy(b->data + b->len, p, n);
   b->len += n;

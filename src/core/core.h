@@ -58,6 +58,10 @@ void *nh_calloc(size_t n, size_t size);
 /* Grow *ptr to hold at least `need` items of `size` bytes (capacity doubles).
  * Returns NH_OK or NH_ERR_MEMORY (the old block is kept on failure). */
 int nh_grow(void **ptr, int *capacity, int need, size_t size);
+/* Resize *ptr to exactly `n` items of `size` bytes (at least one item), the
+ * realloc of this code base. Returns NH_OK, or NH_ERR_MEMORY with a message
+ * if n * size overflows or the allocation fails (the old block is kept). */
+int nh_realloc(void **ptr, size_t n, size_t size);
 
 /* ---- stop requests (SIGINT, SIGTERM) ----
  * A signal handler records the request (async-signal-safe); the long loops

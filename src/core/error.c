@@ -9,8 +9,10 @@
  * as \n, \t, \r or \xNN. */
 #include "core/core.h"
 
+#include <limits.h>
 #include <signal.h>
 #include <stdarg.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -84,13 +86,22 @@ void *nh_calloc(size_t n, size_t size) {
   return p;
 }
 
+int nh_realloc(void **ptr, size_t n, size_t size) {
+  n = n ? n : 1, size = size ? size : 1;
+  if (n > SIZE_MAX / size)
+    return NH_ERROR(NH_ERR_MEMORY, "array of %zu x %zu bytes exceeds the address space", n, size);
+  void *p = realloc(*ptr, n * size);
+  if (!p)
+    return NH_ERROR(NH_ERR_MEMORY, "out of memory resizing an array to %zu x %zu bytes", n, size);
+  *ptr = p;
+  return NH_OK;
+}
+
 int nh_grow(void **ptr, int *capacity, int need, size_t size) {
   if (need <= *capacity) return NH_OK;
   int cap = *capacity > 0 ? *capacity : 16;
-  while (cap < need) cap *= 2;
-  void *p = realloc(*ptr, (size_t)cap * size);
-  if (!p) return NH_ERROR(NH_ERR_MEMORY, "out of memory growing an array to %d items", cap);
-  *ptr = p;
+  while (cap < need) cap = cap > INT_MAX / 2 ? need : 2 * cap; /* no int overflow */
+  NH_TRY(nh_realloc(ptr, (size_t)cap, size));
   *capacity = cap;
   return NH_OK;
 }

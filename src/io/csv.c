@@ -114,7 +114,7 @@ int nh_csv_row(nh_csv *csv, const char *fmt, ...) {
   va_end(ap);
   NH_CHECK(n >= 0, NH_ERR_INTERNAL, "CSV '%s': formatting a row failed", csv->path);
   if ((size_t)n + 2 > sizeof small) {
-    line = malloc((size_t)n + 2);
+    line = nh_calloc((size_t)n + 2, 1);
     if (!line) return NH_ERROR(NH_ERR_MEMORY, "out of memory writing CSV '%s'", csv->path);
     va_start(ap, fmt);
     vsnprintf(line, (size_t)n + 1, fmt, ap);
@@ -157,7 +157,7 @@ int nh_csv_resume(const char *path, int n_columns, const char *const *columns, i
     fseek(f, 0, SEEK_END);
     long size = ftell(f);
     rewind(f);
-    text = malloc((size_t)(size > 0 ? size : 0) + 1);
+    text = nh_calloc((size_t)(size > 0 ? size : 0) + 1, 1);
     if (!text) {
       fclose(f);
       return NH_ERROR(NH_ERR_MEMORY, "out of memory resuming %s", path);

@@ -93,7 +93,7 @@ int nh_h5_persist(hid_t file, const char *path) {
   if (H5Fflush(file, H5F_SCOPE_GLOBAL) < 0) return nh_h5_fail(path, "H5Fflush", "/");
   ssize_t n = H5Fget_file_image(file, NULL, 0);
   if (n < 0) return nh_h5_fail(path, "H5Fget_file_image", "/");
-  void *image = malloc(n > 0 ? (size_t)n : 1);
+  void *image = nh_calloc(n > 0 ? (size_t)n : 1, 1);
   if (!image) return NH_ERROR(NH_ERR_MEMORY, "out of memory writing '%s' (%zd bytes)", path, n);
   int rc = NH_OK;
   nh_atomic_file a;
@@ -504,10 +504,8 @@ static int write_connectivity(nh_h5 *h, hid_t frame, const char *frame_name, con
   }
   NH_TRY(write_array(h, frame, "connectivity", H5T_STD_I32LE, H5T_NATIVE_INT, g->n_cells, 8,
                      g->connectivity));
-  int *copy = realloc(h->prev_conn, (n ? n : 1) * sizeof(int));
-  if (!copy) return NH_ERROR(NH_ERR_MEMORY, "out of memory writing an HDF5 frame");
-  if (n) memcpy(copy, g->connectivity, n * sizeof(int));
-  h->prev_conn = copy;
+  NH_TRY(nh_realloc((void **)&h->prev_conn, n, sizeof(int)));
+  if (n) memcpy(h->prev_conn, g->connectivity, n * sizeof(int));
   h->prev_cells = g->n_cells;
   snprintf(h->prev_frame, sizeof h->prev_frame, "%s", frame_name);
   return NH_OK;

@@ -351,11 +351,9 @@ static int stored_frame_xdmf(nh_h5 *h, const char *name, int last) {
   }
   if (rc == NH_OK && last) {
     size_t n = 8 * (size_t)dc[0];
-    int *c = realloc(h->prev_conn, (n ? n : 1) * sizeof(int));
-    if (!c) {
-      rc = NH_ERROR(NH_ERR_MEMORY, "out of memory resuming '%s'", h->path);
-    } else {
-      h->prev_conn = c;
+    rc = nh_realloc((void **)&h->prev_conn, n, sizeof(int));
+    if (rc == NH_OK) {
+      int *c = h->prev_conn;
       if (n && H5Dread(conn, H5T_NATIVE_INT, H5S_ALL, H5S_ALL, H5P_DEFAULT, c) < 0) {
         rc = nh_h5_fail(h->path, "H5Dread", "connectivity");
       } else {

@@ -17,9 +17,7 @@ int nh_text_printf(nh_text *b, const char *fmt, ...) {
   if (b->len + (size_t)n + 1 > b->cap) {
     size_t cap = b->cap ? b->cap : 4096;
     while (cap < b->len + (size_t)n + 1) cap *= 2;
-    char *p = realloc(b->s, cap);
-    if (!p) return NH_ERROR(NH_ERR_MEMORY, "out of memory rendering a %zu-byte file", cap);
-    b->s = p;
+    NH_TRY(nh_realloc((void **)&b->s, cap, 1));
     b->cap = cap;
   }
   va_start(ap, fmt);

@@ -34,8 +34,8 @@ int nh_mesh_coarsen(nh_mesh *m, const int *parents, int n, int *node_map) {
       NH_CHECK(m->first_child[ch] < 0, NH_ERR_INTERNAL,
                "cell %d cannot be coarsened: its child %d is refined", p, ch);
   }
-  int *cell_map = malloc(sizeof(int) * (size_t)(nc ? nc : 1));
-  unsigned char *used = calloc((size_t)(nn ? nn : 1), 1);
+  int *cell_map = nh_calloc((size_t)(nc ? nc : 1), sizeof(int));
+  unsigned char *used = nh_calloc((size_t)(nn ? nn : 1), 1);
   if (!cell_map || !used) {
     free(cell_map), free(used);
     return NH_ERROR(NH_ERR_MEMORY, "out of memory: coarsening %d cells", n);

@@ -85,8 +85,8 @@ static int nh_cmp_int(const void *a, const void *b) {
 }
 
 int nh_mesh_grade_marks(const nh_mesh *m, int *marked, int *n_marked) {
-  unsigned char *flag = calloc((size_t)(m->n_cells ? m->n_cells : 1), 1);
-  int *work = malloc(sizeof(int) * (size_t)(m->n_leaves ? m->n_leaves : 1));
+  unsigned char *flag = nh_calloc((size_t)(m->n_cells ? m->n_cells : 1), 1);
+  int *work = nh_calloc((size_t)(m->n_leaves ? m->n_leaves : 1), sizeof(int));
   if (!flag || !work) {
     free(flag), free(work);
     return NH_ERROR(NH_ERR_MEMORY, "out of memory: grading %d leaves", m->n_leaves);

@@ -36,9 +36,7 @@ void nh_mesh_destroy(nh_mesh **mesh) {
 }
 
 int nh_mesh_update_leaves(nh_mesh *m) {
-  int *leaves = realloc(m->leaves, (size_t)(m->n_cells ? m->n_cells : 1) * sizeof(int));
-  if (!leaves) return NH_ERROR(NH_ERR_MEMORY, "out of memory listing leaf cells");
-  m->leaves = leaves;
+  NH_TRY(nh_realloc((void **)&m->leaves, (size_t)m->n_cells, sizeof(int)));
   m->n_leaves = 0;
   for (int c = 0; c < m->n_cells; c++)
     if (m->first_child[c] < 0) m->leaves[m->n_leaves++] = c;
@@ -57,14 +55,14 @@ int nh_mesh_create_box(const double min[3], const double max[3], const int grid[
   const int n0 = grid[0] + 1, n1 = grid[1] + 1, n2 = grid[2] + 1;
   m->n_nodes = m->cap_nodes = n0 * n1 * n2;
   m->n_cells = m->cap_cells = grid[0] * grid[1] * grid[2];
-  m->X = malloc(sizeof(double) * 3 * (size_t)m->n_nodes);
-  m->cells = malloc(sizeof(int) * 8 * (size_t)m->n_cells);
-  m->level = calloc((size_t)m->n_cells, sizeof(int));
-  m->parent = malloc(sizeof(int) * (size_t)m->n_cells);
-  m->first_child = malloc(sizeof(int) * (size_t)m->n_cells);
-  m->n_children = calloc((size_t)m->n_cells, sizeof(int));
-  m->fill = malloc(sizeof(double) * (size_t)m->n_cells);
-  m->root = malloc(sizeof(int) * (size_t)m->n_cells);
+  m->X = nh_calloc(3 * (size_t)m->n_nodes, sizeof(double));
+  m->cells = nh_calloc(8 * (size_t)m->n_cells, sizeof(int));
+  m->level = nh_calloc((size_t)m->n_cells, sizeof(int));
+  m->parent = nh_calloc((size_t)m->n_cells, sizeof(int));
+  m->first_child = nh_calloc((size_t)m->n_cells, sizeof(int));
+  m->n_children = nh_calloc((size_t)m->n_cells, sizeof(int));
+  m->fill = nh_calloc((size_t)m->n_cells, sizeof(double));
+  m->root = nh_calloc((size_t)m->n_cells, sizeof(int));
   if (!m->X || !m->cells || !m->level || !m->parent || !m->first_child || !m->n_children ||
       !m->fill || !m->root) {
     nh_mesh_destroy(&m);
@@ -145,8 +143,8 @@ int nh_mesh_create(const nh_domain *d, const int grid[3], nh_mesh **out) {
   nh_mesh *m = *out;
   nh_domain_copy(&m->domain, d);
   if (d->kind == NH_DOMAIN_BOX) return NH_OK;
-  unsigned char *keep = malloc((size_t)m->n_cells);
-  int *node_map = malloc(sizeof(int) * (size_t)m->n_nodes);
+  unsigned char *keep = nh_calloc((size_t)m->n_cells, 1);
+  int *node_map = nh_calloc((size_t)m->n_nodes, sizeof(int));
   int rc = NH_OK, kept = 0;
   if (!keep || !node_map) {
     rc = NH_ERROR(NH_ERR_MEMORY, "out of memory building a %d x %d x %d grid", grid[0], grid[1],
@@ -180,9 +178,8 @@ int nh_mesh_index_roots(nh_mesh *m) {
   const int n = m->grid[0] * m->grid[1] * m->grid[2];
   NH_CHECK(n > 0, NH_ERR_INPUT, "the mesh has an empty grid %d x %d x %d", m->grid[0], m->grid[1],
            m->grid[2]);
-  int *root = realloc(m->root, sizeof(int) * (size_t)n);
-  if (!root) return NH_ERROR(NH_ERR_MEMORY, "out of memory indexing %d grid cells", n);
-  m->root = root;
+  NH_TRY(nh_realloc((void **)&m->root, (size_t)n, sizeof(int)));
+  int *root = m->root;
   for (int i = 0; i < n; i++) root[i] = -1;
   for (int c = 0; c < m->n_cells; c++) {
     if (m->parent[c] >= 0) continue;

@@ -109,7 +109,7 @@ static int nh_find_raw(const nh_mesh *m, const unsigned char *skip, nh_raw *raw)
       int64_t b = (int64_t)floor((m->X[3 * i + k] - lo[k]) / bucket) + 1;
       if (b + 1 > dim[k]) dim[k] = b + 1;
     }
-  nh_bucket_entry *e = malloc(sizeof *e * (size_t)(n ? n : 1));
+  nh_bucket_entry *e = nh_calloc((size_t)(n ? n : 1), sizeof *e);
   if (!e) return NH_ERROR(NH_ERR_MEMORY, "out of memory detecting hanging nodes");
   for (int i = 0; i < n; i++) {
     int64_t b[3];
@@ -354,14 +354,14 @@ int nh_hanging_detect_aggregated(const nh_mesh *m, const unsigned char *skip,
   unsigned char *is_agg = NULL;
   if (n_orphans) *n_orphans = 0;
   int n = m->n_nodes, rc = NH_OK;
-  nh_raw raw = {malloc(sizeof(int) * (size_t)(n ? n : 1)),
-                malloc(sizeof(double) * 3 * (size_t)(n ? n : 1))};
+  nh_raw raw = {nh_calloc((size_t)(n ? n : 1), sizeof(int)),
+                nh_calloc(3 * (size_t)(n ? n : 1), sizeof(double))};
   nh_resolver r = {.m = m, .raw = &raw};
-  r.state = calloc((size_t)(n ? n : 1), sizeof(int));
-  r.list = calloc((size_t)(n ? n : 1), sizeof(int *));
-  r.wts = calloc((size_t)(n ? n : 1), sizeof(double *));
-  r.len = calloc((size_t)(n ? n : 1), sizeof(int));
-  nh_hanging *h = calloc(1, sizeof *h);
+  r.state = nh_calloc((size_t)(n ? n : 1), sizeof(int));
+  r.list = nh_calloc((size_t)(n ? n : 1), sizeof(int *));
+  r.wts = nh_calloc((size_t)(n ? n : 1), sizeof(double *));
+  r.len = nh_calloc((size_t)(n ? n : 1), sizeof(int));
+  nh_hanging *h = nh_calloc(1, sizeof *h);
   if (!raw.cell || !raw.xi || !r.state || !r.list || !r.wts || !r.len || !h) {
     rc = NH_ERROR(NH_ERR_MEMORY, "out of memory detecting hanging nodes");
     goto done;
@@ -377,11 +377,11 @@ int nh_hanging_detect_aggregated(const nh_mesh *m, const unsigned char *skip,
     }
   if (rc) goto done;
   h->n_hanging = count;
-  h->node = malloc(sizeof(int) * (size_t)(count ? count : 1));
-  h->start = malloc(sizeof(int) * (size_t)(count + 1));
-  h->master = malloc(sizeof(int) * (size_t)(total ? total : 1));
-  h->weight = malloc(sizeof(double) * (size_t)(total ? total : 1));
-  h->index = malloc(sizeof(int) * (size_t)(n ? n : 1));
+  h->node = nh_calloc((size_t)(count ? count : 1), sizeof(int));
+  h->start = nh_calloc((size_t)(count + 1), sizeof(int));
+  h->master = nh_calloc((size_t)(total ? total : 1), sizeof(int));
+  h->weight = nh_calloc((size_t)(total ? total : 1), sizeof(double));
+  h->index = nh_calloc((size_t)(n ? n : 1), sizeof(int));
   if (!h->node || !h->start || !h->master || !h->weight || !h->index) {
     rc = NH_ERROR(NH_ERR_MEMORY, "out of memory detecting hanging nodes");
     goto done;

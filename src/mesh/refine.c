@@ -138,9 +138,9 @@ int nh_mesh_refine(nh_mesh *m, const nh_template *t, const int *cells, int n,
   h.quantum = 10 * h.tol;
   int max_nodes = m->n_nodes + n * t->n_nodes;
   h.size = 2 * max_nodes + 1;
-  h.key = malloc(sizeof(int64_t) * 3 * (size_t)h.size);
-  h.node = malloc(sizeof(int) * (size_t)h.size);
-  int *map = malloc(sizeof(int) * (size_t)t->n_nodes);
+  h.key = nh_calloc(3 * (size_t)h.size, sizeof(int64_t));
+  h.node = nh_calloc((size_t)h.size, sizeof(int));
+  int *map = nh_calloc((size_t)t->n_nodes, sizeof(int));
   int rc = NH_OK;
   if (!h.key || !h.node || !map) {
     rc = NH_ERROR(NH_ERR_MEMORY, "out of memory refining %d cells", n);
@@ -152,8 +152,8 @@ int nh_mesh_refine(nh_mesh *m, const nh_template *t, const int *cells, int n,
       (rc = nh_grow_cells(m, m->n_cells + n * t->n_children)))
     goto done;
   if (info) {
-    info->parent = malloc(sizeof(int) * (size_t)(n * t->n_nodes));
-    info->xi = malloc(sizeof(double) * 3 * (size_t)(n * t->n_nodes));
+    info->parent = nh_calloc((size_t)(n * t->n_nodes), sizeof(int));
+    info->xi = nh_calloc(3 * (size_t)(n * t->n_nodes), sizeof(double));
     if (!info->parent || !info->xi) {
       rc = NH_ERROR(NH_ERR_MEMORY, "out of memory refining %d cells", n);
       goto done;

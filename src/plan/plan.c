@@ -83,8 +83,8 @@ static int steered_target(const nh_scene *s, int *target) {
 /* One run of the procedure aimed at `aim`, outputs in `dir`: its miss. */
 static int run_once(const char *scene_path, int n_sets, const char *const *sets,
                     const double aim[3], const char *dir, int run, nh_plan_run_record *rec) {
-  const char **all = calloc((size_t)n_sets + NH_PLAN_SET_MAX, sizeof(char *));
-  char(*aims)[160] = calloc(NH_PLAN_SET_MAX, sizeof *aims);
+  const char **all = nh_calloc((size_t)n_sets + NH_PLAN_SET_MAX, sizeof(char *));
+  char(*aims)[160] = nh_calloc(NH_PLAN_SET_MAX, sizeof *aims);
   nh_scene *scene = NULL;
   nh_sim *sim = NULL;
   int rc = all && aims ? NH_OK : NH_ERROR(NH_ERR_MEMORY, "out of memory: plan");
@@ -236,7 +236,7 @@ int nh_plan_run(const char *scene_path, int n_sets, const char *const *sets,
   }
   if (!rc) rc = planned_target(scene, &target, aim);
   if (!rc) rc = nh_mkdir_p(out);
-  nh_plan_run_record *runs = calloc((size_t)o->max_runs, sizeof *runs);
+  nh_plan_run_record *runs = nh_calloc((size_t)o->max_runs, sizeof *runs);
   if (!rc && !runs) rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: plan");
   double J[9], t0 = nh_time_now();
   nh_mat3_identity(J);

@@ -5,7 +5,18 @@
 
 #include <math.h>
 
-#define NH_STEPS_MAX 1000000000.0
+/* The most steps a run may take, from time.steps or time.end / time.step:
+ * at 0.01 s a step, over a day of cheap steps; the run keeps a timing row
+ * per step, allocated for all steps up front (1e9 steps: 64 GB, refused as
+ * "out of memory" before this bound). */
+#define NH_STEPS_MAX 1e7
+/* The step's range in seconds. Below 1 ns the inertia ρ/Δt² of a 1 mm cell
+ * exceeds its stiffness E/h² (E = 1 MPa, ρ = 1000 kg/m³) by more than 1e9,
+ * so double precision keeps nothing of a load (at 1e-300 s, ρ/Δt² is
+ * infinite and the run "succeeds" standing still); above 1e6 s (11 days)
+ * Δt² overflows long before a tissue's rates mean anything. */
+#define NH_STEP_MIN 1e-9
+#define NH_STEP_MAX 1e6
 
 static const char *const modes[] = {"dynamic", "static", NULL};
 
@@ -22,7 +33,11 @@ int nh_read_time(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   NH_TRY(nh_read_top(c, root, "time", 0, time_rows, s));
   const nh_yaml_node *t = nh_yaml_get(root, "time", NULL); /* NULL fields unless a mapping */
   const nh_yaml_node *at_end = nh_yaml_get(t, "end", NULL),
-                     *at_steps = nh_yaml_get(t, "steps", NULL);
+                     *at_steps = nh_yaml_get(t, "steps", NULL),
+                     *at_step = nh_yaml_get(t, "step", NULL);
+  if (at_step && !(s->time.step >= NH_STEP_MIN && s->time.step <= NH_STEP_MAX))
+    return nh_read_fail(c, at_step, "time.step", "%g s is outside [%g, %g] s", s->time.step,
+                        NH_STEP_MIN, NH_STEP_MAX);
   if (at_end && at_steps) {
     /* Report at whichever of the two comes second. */
     int steps_later = at_steps->source > at_end->source ||
@@ -39,6 +54,9 @@ int nh_read_time(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
                           NH_STEPS_MAX);
     s->time.steps = steps < 1 ? 1 : (int)steps;
   }
+  if (at_steps && s->time.steps > NH_STEPS_MAX)
+    return nh_read_fail(c, at_steps, "time.steps", "%d steps is more than %g", s->time.steps,
+                        NH_STEPS_MAX);
   return NH_OK;
 }
 

@@ -58,6 +58,18 @@ static int check_inner_radius(const nh_ctx *c, const nh_key_site *k, void *base)
   return NH_OK;
 }
 
+/* Beam elements of one tool: a finer beam than this resolves nothing the
+ * tissue's cells can feel, and 2^31 of them would overflow the node count. */
+#define NH_TOOL_MAX_ELEMENTS 100000
+
+static int check_elements(const nh_ctx *c, const nh_key_site *k, void *base) {
+  const nh_tool_spec *t = base;
+  if (t->elements > NH_TOOL_MAX_ELEMENTS)
+    return nh_read_fail(c, k->at, k->key, "must be at most %d, got %d", NH_TOOL_MAX_ELEMENTS,
+                        t->elements);
+  return NH_OK;
+}
+
 static const nh_key material_rows[] = {
     {NH_NUMBER("young", TL(young), 0, NH_ABOVE, 0), .required = 1},
     {NH_NUMBER("poisson", TL(poisson), 0.3, NH_ANY, 0), .check = nh_read_check_poisson},
@@ -312,7 +324,7 @@ static const nh_key tool_rows[] = {
     {NH_NUMBER("length", TL(length), 0, NH_ABOVE, 0), .required = 1},
     {NH_NUMBER("radius", TL(radius), 0, NH_ABOVE, 0), .required = 1},
     {NH_NUMBER("inner_radius", TL(inner_radius), 0, NH_AT_LEAST, 0), .check = check_inner_radius},
-    {NH_INT("elements", TL(elements), 16, NH_AT_LEAST, 1)},
+    {NH_INT("elements", TL(elements), 16, NH_AT_LEAST, 1), .check = check_elements},
     {NH_MAP("material", material_rows), .required = 1},
     {NH_MAP("damping", damping_rows)},
     {NH_MAP("trajectory", trajectory_rows), .read = trajectory_given},

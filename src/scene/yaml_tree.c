@@ -587,12 +587,10 @@ static int write_handler(void *data, unsigned char *bytes, size_t size) {
   if (o->len + size + 1 > o->cap) {
     size_t cap = o->cap ? o->cap : 4096;
     while (cap < o->len + size + 1) cap *= 2;
-    char *p = realloc(o->buf, cap);
-    if (!p) {
+    if (nh_realloc((void **)&o->buf, cap, 1)) {
       o->failed = 1;
       return 0;
     }
-    o->buf = p;
     o->cap = cap;
   }
   memcpy(o->buf + o->len, bytes, size);

@@ -69,7 +69,7 @@ static void nh_scatter_expanded(const nh_system *s, int l, const double *Ae, dou
   int k = s->eff_start[l + 1] - s->eff_start[l], nd = 3 * k;
   const double *T = s->eff_T + 8 * s->eff_start[l];
   const int *map = s->emap + s->emap_start[l];
-  double *B = malloc(sizeof(double) * 24 * (size_t)nd); /* B = Aₑ T */
+  double *B = nh_calloc(24 * (size_t)nd, sizeof(double)); /* B = Aₑ T */
   if (!B) return; /* cannot happen in practice; the factorisation then fails loudly */
   for (int r = 0; r < 24; r++)
     for (int q = 0; q < k; q++)

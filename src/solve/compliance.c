@@ -74,8 +74,8 @@ int nh_system_set_hanging_rows(nh_system *s, const nh_hanging *h) {
   /* Rows of a column must be sorted for CHOLMOD. */
   cholmod_sort(s->Jt, &s->cm);
   s->n_rows = rows;
-  s->W = malloc(sizeof(double) * (size_t)rows * (size_t)rows);
-  s->lambda_total = calloc((size_t)rows, sizeof(double));
+  s->W = nh_calloc((size_t)rows * (size_t)rows, sizeof(double));
+  s->lambda_total = nh_calloc((size_t)rows, sizeof(double));
   if (!s->W || !s->lambda_total)
     return NH_ERROR(NH_ERR_MEMORY, "out of memory: compliance matrix (%d rows)", rows);
   return NH_OK;
@@ -220,9 +220,9 @@ static int nh_super_tree_build(const cholmod_factor *L, nh_super_tree *t) {
   const int n = (int)L->n, ns = (int)L->nsuper;
   t->nsuper = ns;
   t->super = L->super, t->pi = L->pi, t->px = L->px, t->ls = L->s, t->lx = L->x;
-  t->parent = malloc(sizeof(int) * (size_t)(ns ? ns : 1));
-  t->col_super = malloc(sizeof(int) * (size_t)(n ? n : 1));
-  t->iperm = malloc(sizeof(int) * (size_t)(n ? n : 1));
+  t->parent = nh_calloc((size_t)(ns ? ns : 1), sizeof(int));
+  t->col_super = nh_calloc((size_t)(n ? n : 1), sizeof(int));
+  t->iperm = nh_calloc((size_t)(n ? n : 1), sizeof(int));
   if (!t->parent || !t->col_super || !t->iperm) return NH_ERR_MEMORY;
   for (int k = 0; k < ns; k++)
     for (int j = t->super[k]; j < t->super[k + 1]; j++) t->col_super[j] = k;
@@ -242,7 +242,7 @@ static int nh_super_block_open(const nh_super_tree *t, const cholmod_sparse *Jt,
   enum { C = NH_SUPER_COLUMNS };
   const int *Jp = Jt->p, *Ji = Jt->i;
   const double *Jx = Jt->x;
-  if (!(b->row0 = malloc(sizeof(int) * (size_t)t->nsuper))) return NH_ERR_MEMORY;
+  if (!(b->row0 = nh_calloc((size_t)t->nsuper, sizeof(int)))) return NH_ERR_MEMORY;
   for (int k = 0; k < t->nsuper; k++) b->row0[k] = -1;
   for (int c = 0; c < b->nc; c++)
     for (int p = Jp[b->col[c]]; p < Jp[b->col[c] + 1]; p++)
@@ -392,7 +392,7 @@ static int nh_compliance_add_supernodal(nh_system *s, cholmod_sparse *Jt, double
   const int *Jp = Jt->p, *Ji = Jt->i;
   nh_super_tree t = {0};
   nh_super_block *blk = nh_calloc((size_t)(nb ? nb : 1), sizeof *blk);
-  nh_column_key *key = malloc(sizeof *key * (size_t)(m ? m : 1));
+  nh_column_key *key = nh_calloc((size_t)(m ? m : 1), sizeof *key);
   int *count = NULL, *start = NULL, *list = NULL;
   /* a BLAS with threads of its own (OPENBLAS_NUM_THREADS > 1) gets the cores instead */
   const int blas_threaded = openblas_get_num_threads && openblas_get_num_threads() > 1;
@@ -411,7 +411,7 @@ static int nh_compliance_add_supernodal(nh_system *s, cholmod_sparse *Jt, double
     }
     qsort(key, (size_t)m, sizeof *key, nh_column_key_compare);
     count = nh_calloc((size_t)t.nsuper + 1, sizeof(int));
-    start = malloc(sizeof(int) * ((size_t)t.nsuper + 1));
+    start = nh_calloc(((size_t)t.nsuper + 1), sizeof(int));
     if (!count || !start) rc = NH_ERR_MEMORY;
   }
   for (int b = 0; b < nb && !rc; b++) {
@@ -434,13 +434,13 @@ static int nh_compliance_add_supernodal(nh_system *s, cholmod_sparse *Jt, double
       if (hc * noff > umax) umax = hc * noff;
       count[k] = 0;
     }
-    if (!(list = malloc(sizeof(int) * (size_t)(start[t.nsuper] ? start[t.nsuper] : 1))))
+    if (!(list = nh_calloc((size_t)(start[t.nsuper] ? start[t.nsuper] : 1), sizeof(int))))
       rc = NH_ERR_MEMORY;
     for (int b = 0; b < nb && !rc; b++)
       for (int k = 0; k < t.nsuper; k++)
         if (blk[b].row0[k] >= 0) list[start[k] + count[k]++] = b;
-    Z = malloc(sizeof(double) * zmax), G = malloc(sizeof(double) * nt * gmax);
-    U = malloc(sizeof(double) * nt * umax);
+    Z = nh_calloc(zmax, sizeof(double)), G = nh_calloc(nt * gmax, sizeof(double));
+    U = nh_calloc(nt * umax, sizeof(double));
     if (!Z || !G || !U) rc = NH_ERR_MEMORY;
     for (int i = 0; i < nt && !rc; i++) ws[i].G = G + i * gmax, ws[i].U = U + i * umax;
   }
@@ -472,7 +472,7 @@ static int nh_compliance_build(nh_system *s) {
   /* Dense Cholesky W = G Gᵀ, lower triangle in place (column-major), by
    * LAPACK (blocked: thousands of hanging rows are O(m³)). A pivot below
    * 1e-14 of its diagonal means linearly dependent rows. */
-  double *diag = rc ? NULL : malloc(sizeof(double) * (size_t)(m ? m : 1));
+  double *diag = rc ? NULL : nh_calloc((size_t)(m ? m : 1), sizeof(double));
   if (!rc && !diag) rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: compliance (%d rows)", m);
   if (!rc) {
     for (int j = 0; j < m; j++) diag[j] = s->W[(size_t)j * m + j];
@@ -499,8 +499,8 @@ int nh_system_solve_constrained(nh_system *s, const double *b, double *x) {
   int m = s->n_rows, n = s->n_free;
   const int *Jp = s->Jt->p, *Ji = s->Jt->i;
   const double *Jx = s->Jt->x;
-  double *lambda = malloc(sizeof(double) * (size_t)m);
-  double *r = malloc(sizeof(double) * (size_t)n), *y = malloc(sizeof(double) * (size_t)n);
+  double *lambda = nh_calloc((size_t)m, sizeof(double));
+  double *r = nh_calloc((size_t)n, sizeof(double)), *y = nh_calloc((size_t)n, sizeof(double));
   if (!lambda || !r || !y) {
     free(lambda), free(r), free(y);
     return NH_ERROR(NH_ERR_MEMORY, "out of memory: constraint solve");
@@ -548,16 +548,16 @@ int nh_system_solve_rows(nh_system *s, const nh_rows *rows, const unsigned char 
   for (int i = 0; rows && i < rows->m; i++) m += !active || active[i];
   if (m == 0 || ncol <= 0) return NH_OK;
   nh_rows sub = {.m = m, .cap = m};
-  sub.node = malloc(sizeof(int) * 8 * (size_t)m);
-  sub.N = malloc(sizeof(double) * 8 * (size_t)m);
-  sub.dir = malloc(sizeof(double) * 3 * (size_t)m);
-  int *mark = malloc(sizeof(int) * (size_t)(n ? n : 1)), *piv = malloc(sizeof(int) * (size_t)m);
-  double *W = calloc((size_t)m * (size_t)m, sizeof(double));
-  double *d = malloc(sizeof(double) * (size_t)m);
-  double *mu = malloc(sizeof(double) * (size_t)m * (size_t)ncol);
-  double *c = malloc(sizeof(double) * (size_t)m * (size_t)ncol);
-  double *f = malloc(sizeof(double) * (size_t)n * (size_t)ncol);
-  double *y = malloc(sizeof(double) * (size_t)n * (size_t)ncol);
+  sub.node = nh_calloc(8 * (size_t)m, sizeof(int));
+  sub.N = nh_calloc(8 * (size_t)m, sizeof(double));
+  sub.dir = nh_calloc(3 * (size_t)m, sizeof(double));
+  int *mark = nh_calloc((size_t)(n ? n : 1), sizeof(int)), *piv = nh_calloc((size_t)m, sizeof(int));
+  double *W = nh_calloc((size_t)m * (size_t)m, sizeof(double));
+  double *d = nh_calloc((size_t)m, sizeof(double));
+  double *mu = nh_calloc((size_t)m * (size_t)ncol, sizeof(double));
+  double *c = nh_calloc((size_t)m * (size_t)ncol, sizeof(double));
+  double *f = nh_calloc((size_t)n * (size_t)ncol, sizeof(double));
+  double *y = nh_calloc((size_t)n * (size_t)ncol, sizeof(double));
   cholmod_sparse *Jt = NULL;
   int rc = sub.node && sub.N && sub.dir && mark && piv && W && d && mu && c && f && y
                ? NH_OK

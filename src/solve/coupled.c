@@ -110,7 +110,7 @@ static int nh_step_work_alloc(nh_step_work *w) {
     w->W = nh_calloc(3 * (size_t)m * m, sizeof(double));
     w->r = nh_calloc(2 * (size_t)m, sizeof(double));
     w->col = nh_calloc(2 * (size_t)nf, sizeof(double));
-    w->mark = malloc(sizeof(int) * (size_t)nf);
+    w->mark = nh_calloc((size_t)nf, sizeof(int));
     if (!w->W || !w->r || !w->col || !w->mark) return NH_ERR_MEMORY;
     w->Wt = w->W + (size_t)m * m, w->Wtools = w->W + 2 * (size_t)m * m;
     w->r_tools = w->r + m;
@@ -266,10 +266,11 @@ static void nh_coupled_tool_rates(nh_step_work *w) {
  * the start of the next correction's PCG. One correction (the usual case)
  * costs one PCG solve and one preconditioner solve: a solve fewer than the
  * free solve plus correction of a current factor would take with PCG.
- * Returns 1 (not converged in NH_OUTER_MAX corrections, or a PCG or
- * constraint solve failed: the caller factorises and solves exactly), 0, or
- * another error code (memory). Scratch: w->col (2 n_free), w->full. */
-static int nh_corrected_step(nh_step_work *w) {
+ * Returns NH_OK with *converged = 1, or NH_OK with *converged = 0 (not
+ * converged in NH_OUTER_MAX corrections, or a PCG or constraint solve failed
+ * numerically: the caller factorises and solves exactly), or another error
+ * code (memory). Scratch: w->col (2 n_free), w->full. */
+static int nh_corrected_step(nh_step_work *w, int *converged) {
   nh_system *s = w->s;
   nh_rows *rows = w->rows;
   nh_coupled_stats *st = &w->st;
@@ -278,14 +279,15 @@ static int nh_corrected_step(nh_step_work *w) {
   double *e = nh_calloc(3 * (size_t)m, sizeof(double));
   if (!e) return NH_ERROR(NH_ERR_MEMORY, "out of memory: constraint corrections (%d rows)", m);
   double *rk = e, *prev = e + m, *dl = e + 2 * m;
-  int rc = 1;
+  int rc = NH_OK;
+  *converged = 0;
   for (int k = 0; k < NH_OUTER_MAX; k++) {
     nh_rows_tissue_force(w->Jt, rows->lambda, bk, nf);
     for (int i = 0; i < nf; i++) bk[i] += w->b[i];
     int its = 0, prc = nh_system_pcg(s, bk, dv, k > 0, w->in->tolerance, NH_PCG_MAX, &its);
     st->step.pcg_iterations += its;
     if (prc) {
-      if (prc == NH_ERR_NUMERIC) nh_error_clear(), prc = 1;
+      if (prc == NH_ERR_NUMERIC) nh_error_clear(), prc = NH_OK; /* the exact path decides */
       rc = prc;
       break;
     }
@@ -304,7 +306,7 @@ static int nh_corrected_step(nh_step_work *w) {
     }
     if (rc) {
       /* not converged with W₀: the exact path decides (and reports) */
-      if (rc == NH_ERR_NUMERIC) nh_error_clear(), rc = 1;
+      if (rc == NH_ERR_NUMERIC) nh_error_clear(), rc = NH_OK;
       break;
     }
     double delta = 0.0, scale = 0.0;
@@ -316,9 +318,8 @@ static int nh_corrected_step(nh_step_work *w) {
     nh_rows_tissue_force(w->Jt, dl, col, nf);
     if ((rc = nh_system_solve(s, col, bk))) break;
     for (int i = 0; i < nf; i++) dv[i] += bk[i];
-    rc = 1;
     if (delta <= w->in->tolerance * scale) {
-      rc = 0;
+      *converged = 1;
       break;
     }
   }
@@ -331,8 +332,8 @@ static int nh_corrected_step(nh_step_work *w) {
  * and W from it, and the exact path follows. *tc0 moves by the
  * factorisation's time (not a constraint cost). */
 static int nh_coupled_reused(nh_step_work *w, double *tc0) {
-  int rc = nh_corrected_step(w);
-  if (rc != 1) return rc;
+  int converged = 0, rc = nh_corrected_step(w, &converged);
+  if (rc || converged) return rc;
   double tf = nh_time_now();
   NH_TRY(nh_system_factor(w->s));
   double tf1 = nh_time_now();

@@ -153,10 +153,10 @@ int nh_system_inherit(nh_system *s, nh_system *old, const nh_node_transfer *t) {
   s->inh = h;
   const int n = s->n_free;
   h->n0 = old->n_free;
-  h->N_of = malloc(sizeof(int) * (size_t)n);
-  h->N = malloc(sizeof(int) * (size_t)n);
-  h->q = malloc(sizeof(double) * (size_t)n);
-  h->r1 = malloc(sizeof(double) * (size_t)n);
+  h->N_of = nh_calloc((size_t)n, sizeof(int));
+  h->N = nh_calloc((size_t)n, sizeof(int));
+  h->q = nh_calloc((size_t)n, sizeof(double));
+  h->r1 = nh_calloc((size_t)n, sizeof(double));
   /* a row has at most (transfer entries) x (masters) entries */
   int most = 1;
   for (int v = 0; v < t->n_new; v++) {
@@ -165,8 +165,8 @@ int nh_system_inherit(nh_system *s, nh_system *old, const nh_node_transfer *t) {
       c += old->exp_start[t->node[q] + 1] - old->exp_start[t->node[q]];
     if (c > most) most = c;
   }
-  int *row = malloc(sizeof(int) * (size_t)most);
-  double *val = malloc(sizeof(double) * (size_t)most);
+  int *row = nh_calloc((size_t)most, sizeof(int));
+  double *val = nh_calloc((size_t)most, sizeof(double));
   int rc = h->N_of && h->N && h->q && h->r1 && row && val ? NH_OK : NH_ERR_MEMORY;
   /* Pᵀ by columns, counted then filled */
   size_t nnz = 0;

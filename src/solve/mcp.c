@@ -554,28 +554,28 @@ static int nh_mcp_solve_any(int m, const double *W, int unsym, const double *r, 
   int nb = 0;
   for (int i = 0; i < m; i++) nb += laws[i].kind == NH_ROW_BILATERAL;
   ws.nb = nb;
-  ws.Wt = malloc(sizeof(double) * mm);
-  ws.d = malloc(sizeof(double) * (size_t)m);
-  ws.rt = malloc(sizeof(double) * (size_t)m);
-  ws.lt = malloc(sizeof(double) * (size_t)m);
-  ws.wt = malloc(sizeof(double) * (size_t)m);
-  ws.best = malloc(sizeof(double) * (size_t)m);
-  ws.L = malloc(sizeof(double) * ((size_t)nb * nb + 1));
-  ws.tmp = malloc(sizeof(double) * (size_t)m);
+  ws.Wt = nh_calloc(mm, sizeof(double));
+  ws.d = nh_calloc((size_t)m, sizeof(double));
+  ws.rt = nh_calloc((size_t)m, sizeof(double));
+  ws.lt = nh_calloc((size_t)m, sizeof(double));
+  ws.wt = nh_calloc((size_t)m, sizeof(double));
+  ws.best = nh_calloc((size_t)m, sizeof(double));
+  ws.L = nh_calloc(((size_t)nb * nb + 1), sizeof(double));
+  ws.tmp = nh_calloc((size_t)m, sizeof(double));
   if (NH_MCP_SUBSPACE) {
-    ws.Lf = malloc(sizeof(double) * mm);
-    ws.save_l = malloc(sizeof(double) * (size_t)m);
-    ws.save_w = malloc(sizeof(double) * (size_t)m);
-    ws.free_rows = malloc(sizeof(int) * (size_t)m);
-    ws.lf_rows = malloc(sizeof(int) * (size_t)m);
+    ws.Lf = nh_calloc(mm, sizeof(double));
+    ws.save_l = nh_calloc((size_t)m, sizeof(double));
+    ws.save_w = nh_calloc((size_t)m, sizeof(double));
+    ws.free_rows = nh_calloc((size_t)m, sizeof(int));
+    ws.lf_rows = nh_calloc((size_t)m, sizeof(int));
   }
   ws.lf_n = -1;
-  ws.bil = malloc(sizeof(int) * ((size_t)nb + 1));
+  ws.bil = nh_calloc(((size_t)nb + 1), sizeof(int));
   if (unsym) {
     ws.piv = nh_calloc((size_t)nb + 1, sizeof(int));
     ws.pivf = nh_calloc((size_t)m, sizeof(int));
   }
-  nh_row_law *lw = malloc(sizeof *lw * (size_t)m);
+  nh_row_law *lw = nh_calloc((size_t)m, sizeof *lw);
   if (!lw || !ws.Wt || !ws.d || !ws.rt || !ws.lt || !ws.wt || !ws.best || !ws.L || !ws.tmp ||
       !ws.bil || (unsym && (!ws.piv || !ws.pivf)) ||
       (NH_MCP_SUBSPACE && (!ws.Lf || !ws.save_l || !ws.save_w || !ws.free_rows || !ws.lf_rows))) {

@@ -243,7 +243,7 @@ void nh_system_reuse_save(const nh_system *s, nh_bytes *b) {
 
 /* Assemble A at a saved u (f_int to scratch): NH_ERR_INPUT if u is not finite. */
 static int nh_reuse_assemble(nh_system *s, nh_byte_reader *r, int threads) {
-  double c[2], *u = malloc(sizeof(double) * 3 * (size_t)s->n_nodes);
+  double c[2], *u = nh_calloc(3 * (size_t)s->n_nodes, sizeof(double));
   if (!u) return NH_ERROR(NH_ERR_MEMORY, "out of memory restoring the solver's factor");
   nh_bytes_get(r, c, sizeof c);
   nh_bytes_get(r, u, sizeof(double) * 3 * (size_t)s->n_nodes);

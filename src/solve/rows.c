@@ -25,9 +25,7 @@ void nh_rows_free(nh_rows *r) {
 
 #define NH_GROW(ptr, count)                                                                        \
   do {                                                                                             \
-    void *q_ = realloc((ptr), sizeof *(ptr) * (size_t)(count));                                    \
-    if (!q_) return -1;                                                                            \
-    (ptr) = q_;                                                                                    \
+    if (nh_realloc((void **)&(ptr), (size_t)(count), sizeof *(ptr))) return -1; /* an index: -1 */ \
   } while (0)
 
 int nh_rows_add(nh_rows *r) {

@@ -109,7 +109,7 @@ static int nh_find_entry(const int *Ap, const int *Ai, int row, int col) {
 static int nh_node_graph(const nh_system *s, int **ptr_out, int **adj_out) {
   const nh_mesh *m = s->tissue->mesh;
   int n = m->n_nodes;
-  int *count = calloc((size_t)n + 1, sizeof(int));
+  int *count = nh_calloc((size_t)n + 1, sizeof(int));
   if (!count) return NH_ERROR(NH_ERR_MEMORY, "out of memory: node graph");
   for (int l = 0; l < m->n_leaves; l++) {
     const int *nodes;
@@ -117,8 +117,8 @@ static int nh_node_graph(const nh_system *s, int **ptr_out, int **adj_out) {
     for (int a = 0; a < k; a++) count[nodes[a] + 1] += k;
   }
   for (int i = 0; i < n; i++) count[i + 1] += count[i];
-  int *adj = malloc(sizeof(int) * (size_t)(count[n] ? count[n] : 1));
-  int *fill = malloc(sizeof(int) * (size_t)(n ? n : 1));
+  int *adj = nh_calloc((size_t)(count[n] ? count[n] : 1), sizeof(int));
+  int *fill = nh_calloc((size_t)(n ? n : 1), sizeof(int));
   if (!adj || !fill) {
     free(count), free(adj), free(fill);
     return NH_ERROR(NH_ERR_MEMORY, "out of memory: node graph");
@@ -150,8 +150,8 @@ static int nh_node_graph(const nh_system *s, int **ptr_out, int **adj_out) {
  * sharing a node. Leaves with a hanging corner go to a last, serial group. */
 static int nh_colour_leaves(nh_system *s) {
   const nh_mesh *m = s->tissue->mesh;
-  uint64_t *used = calloc((size_t)m->n_nodes, sizeof(uint64_t));
-  int *colour = malloc(sizeof(int) * (size_t)(m->n_leaves ? m->n_leaves : 1));
+  uint64_t *used = nh_calloc((size_t)m->n_nodes, sizeof(uint64_t));
+  int *colour = nh_calloc((size_t)(m->n_leaves ? m->n_leaves : 1), sizeof(int));
   if (!used || !colour) {
     free(used), free(colour);
     return NH_ERROR(NH_ERR_MEMORY, "out of memory: colouring");
@@ -176,8 +176,8 @@ static int nh_colour_leaves(nh_system *s) {
   for (int l = 0; l < m->n_leaves; l++)
     if (colour[l] < 0) colour[l] = n_colours; /* the serial group */
   s->n_colours = n_colours;
-  s->colour_start = calloc((size_t)n_colours + 2, sizeof(int));
-  s->colour_leaf = malloc(sizeof(int) * (size_t)(m->n_leaves ? m->n_leaves : 1));
+  s->colour_start = nh_calloc((size_t)n_colours + 2, sizeof(int));
+  s->colour_leaf = nh_calloc((size_t)(m->n_leaves ? m->n_leaves : 1), sizeof(int));
   if (!s->colour_start || !s->colour_leaf) {
     free(used), free(colour);
     return NH_ERROR(NH_ERR_MEMORY, "out of memory: colouring");
@@ -234,8 +234,8 @@ static int nh_system_pattern(nh_system *s) {
   free(adj);
 
   /* Maps: 576 entries per leaf for plain leaves, (3 n_eff)² for the others. */
-  s->scatter = malloc(sizeof(int) * 576 * (size_t)(m->n_leaves ? m->n_leaves : 1));
-  s->emap_start = malloc(sizeof(int) * ((size_t)m->n_leaves + 1));
+  s->scatter = nh_calloc(576 * (size_t)(m->n_leaves ? m->n_leaves : 1), sizeof(int));
+  s->emap_start = nh_calloc(((size_t)m->n_leaves + 1), sizeof(int));
   if (!s->scatter || !s->emap_start) return NH_ERROR(NH_ERR_MEMORY, "out of memory: scatter maps");
   size_t n_emap = 0;
   for (int l = 0; l < m->n_leaves; l++) {
@@ -244,7 +244,7 @@ static int nh_system_pattern(nh_system *s) {
     n_emap += (size_t)9 * k * k;
   }
   s->emap_start[m->n_leaves] = (int)n_emap;
-  s->emap = malloc(sizeof(int) * (n_emap ? n_emap : 1));
+  s->emap = nh_calloc((n_emap ? n_emap : 1), sizeof(int));
   if (!s->emap) return NH_ERROR(NH_ERR_MEMORY, "out of memory: scatter maps");
   for (int l = 0; l < m->n_leaves; l++) {
     const int *e;
@@ -276,10 +276,10 @@ static int nh_system_prolongation(nh_system *s, const unsigned char *fixed, cons
     int k = h && h->n_hanging ? h->index[v] : -1;
     total += k >= 0 ? h->start[k + 1] - h->start[k] : 1;
   }
-  s->exp_start = malloc(sizeof(int) * ((size_t)n + 1));
-  s->exp_node = malloc(sizeof(int) * (size_t)(total ? total : 1));
-  s->exp_w = malloc(sizeof(double) * (size_t)(total ? total : 1));
-  s->eff_start = calloc((size_t)m->n_leaves + 1, sizeof(int));
+  s->exp_start = nh_calloc(((size_t)n + 1), sizeof(int));
+  s->exp_node = nh_calloc((size_t)(total ? total : 1), sizeof(int));
+  s->exp_w = nh_calloc((size_t)(total ? total : 1), sizeof(double));
+  s->eff_start = nh_calloc((size_t)m->n_leaves + 1, sizeof(int));
   if (!s->exp_start || !s->exp_node || !s->exp_w || !s->eff_start)
     return NH_ERROR(NH_ERR_MEMORY, "out of memory: hanging-node elimination");
   int p = 0;
@@ -342,13 +342,13 @@ int nh_system_create(const nh_tissue *tissue, const unsigned char *fixed, const 
   s->tissue = tissue;
   s->n_nodes = m->n_nodes;
   int rc = NH_OK;
-  s->free_of = malloc(sizeof(int) * 3 * (size_t)m->n_nodes);
-  s->dof_of = malloc(sizeof(int) * 3 * (size_t)m->n_nodes);
-  for (int i = 0; i < 4; i++) s->work[i] = calloc(3 * (size_t)m->n_nodes, sizeof(double));
-  for (int i = 0; i < 2; i++) s->fwork[i] = calloc(3 * (size_t)m->n_nodes, sizeof(double));
-  for (int i = 0; i < 4; i++) s->pcg[i] = calloc(3 * (size_t)m->n_nodes, sizeof(double));
-  s->u_assembled = calloc(3 * (size_t)m->n_nodes, sizeof(double));
-  s->u_factored = calloc(3 * (size_t)m->n_nodes, sizeof(double));
+  s->free_of = nh_calloc(3 * (size_t)m->n_nodes, sizeof(int));
+  s->dof_of = nh_calloc(3 * (size_t)m->n_nodes, sizeof(int));
+  for (int i = 0; i < 4; i++) s->work[i] = nh_calloc(3 * (size_t)m->n_nodes, sizeof(double));
+  for (int i = 0; i < 2; i++) s->fwork[i] = nh_calloc(3 * (size_t)m->n_nodes, sizeof(double));
+  for (int i = 0; i < 4; i++) s->pcg[i] = nh_calloc(3 * (size_t)m->n_nodes, sizeof(double));
+  s->u_assembled = nh_calloc(3 * (size_t)m->n_nodes, sizeof(double));
+  s->u_factored = nh_calloc(3 * (size_t)m->n_nodes, sizeof(double));
   if (!s->free_of || !s->dof_of || !s->work[3] || !s->work[0] || !s->work[1] || !s->work[2] ||
       !s->fwork[0] || !s->fwork[1] || !s->pcg[0] || !s->pcg[1] || !s->pcg[2] || !s->pcg[3] ||
       !s->u_assembled || !s->u_factored) {
@@ -356,7 +356,7 @@ int nh_system_create(const nh_tissue *tissue, const unsigned char *fixed, const 
     goto fail;
   }
   /* A node that no leaf uses has no stiffness and no mass: treat it as fixed. */
-  unsigned char *used = calloc((size_t)m->n_nodes, 1);
+  unsigned char *used = nh_calloc((size_t)m->n_nodes, 1);
   if (!used) {
     rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: DOF map");
     goto fail;
@@ -382,9 +382,9 @@ int nh_system_create(const nh_tissue *tissue, const unsigned char *fixed, const 
       (rc = nh_colour_leaves(s)))
     goto fail;
   size_t nl = m->n_leaves ? (size_t)m->n_leaves : 1;
-  s->frame = malloc(sizeof(double) * NH_HEX_FRAME * nl);
-  s->frame_new = malloc(sizeof(double) * NH_HEX_FRAME * nl);
-  s->updated = malloc(nl);
+  s->frame = nh_calloc(NH_HEX_FRAME * nl, sizeof(double));
+  s->frame_new = nh_calloc(NH_HEX_FRAME * nl, sizeof(double));
+  s->updated = nh_calloc(nl, 1);
   if (!s->frame || !s->frame_new || !s->updated) {
     rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: element frames");
     goto fail;

@@ -278,6 +278,37 @@ def make_nifti():
     hdr = nifti_header(2, dim=[3, 10 ** 6, 10 ** 6, 10 ** 6, 1, 1, 1, 1]) + b"\0" * 20
     case("nifti/mask/huge_1e18_v2_gz", "nifti", "mask", put("image.nii.gz", hdr, True),
          ["limits.max_voxels"])
+    # NIfTI-2's 64-bit dims: 65535^3 and int64's largest cubed (whose product
+    # overflows any integer: the reader multiplies in doubles).
+    for name, n in (("65535", 65535), ("int64max", 2 ** 63 - 1)):
+        hdr = nifti_header(2, dim=[3, n, n, n, 1, 1, 1, 1]) + b"\0" * 20
+        case(f"nifti/mask/huge_{name}_cubed_v2_gz", "nifti", "mask", put("image.nii.gz", hdr, True),
+             ["limits.max_voxels"])
+    # Voxel sizes and offsets at double's ends (NIfTI-2 keeps them in
+    # doubles): 1e-300, 1e300 and 1e305 mm make the transform singular or
+    # infinite once in metres; 1e7 mm voxels are fine but 8 of them reach 80 km;
+    # an offset of 1e20 mm swallows the 16 mm extent (the box had max = min:
+    # "domain box: max[0] must exceed min[0]" without file or key, before
+    # NH_IMAGE_MAX_COORDINATE); 2 km is farther than any patient.
+    for v, expect in ((1e-300, "singular or not finite"), (1e300, "singular or not finite"),
+                      (1e305, "singular or not finite"), (1e7, "from the origin")):
+        nifti_case(f"pixdim_{v:g}_v2", [expect], version=2, sform_code=0, qform_code=0,
+                   pixdim=[1, v, 2, 2, 1, 1, 1, 1])
+        nifti_case(f"pixdim_{v:g}_qform_v2", [expect], version=2, sform_code=0,
+                   pixdim=[1, v, v, v, 1, 1, 1, 1])
+    for v in (1e20, 2e6):
+        nifti_case(f"qoffset_{v:g}_v2", ["from the origin", "qform"], version=2, sform_code=0,
+                   qoffset_x=v)
+        nifti_case(f"srow_offset_{v:g}_v2", ["from the origin", "sform"], version=2,
+                   srow_z=[0, 0, 2, -v])
+    nifti_case("ok_v2_qoffset_500m", [], ok=True, version=2, sform_code=0, qoffset_x=5e5)
+    # Scaling at double's ends: every label becomes 1e300 or 1e-300, not a
+    # whole number the reader could hold, named by its voxel.
+    for s in (1e300, 1e-300):
+        nifti_case(f"slope_{s:g}_v2", ["voxel [2, 2, 2]", f"holds {s:g}"], version=2, datatype=4,
+                   bitpix=16, scl_slope=s, scl_inter=0.0)
+        nifti_case(f"inter_{s:g}_v2", ["voxel [0, 0, 0]", f"holds {s:g}"], version=2,
+                   datatype=4, bitpix=16, scl_slope=1.0, scl_inter=s)
     hdr = nifti_header(1, dim=[3, 600, 600, 500, 1, 1, 1, 1], datatype=64, bitpix=64) + b"\0" * 8
     case("nifti/mask/bytes_1.4e9_float64_gz", "nifti", "mask", put("image.nii.gz", hdr, True),
          ["truncated"])  # under both limits: refused as it is read, not allocated first
