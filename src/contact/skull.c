@@ -212,7 +212,7 @@ int nh_skull_build(nh_skull *s, const nh_mesh *m) {
   s->n = 0;
   /* each leaf's sample: kept from the last build where its corners are the
    * same (after a refinement, all but the new leaves), else computed */
-  nh_skull_cell *fresh = malloc(sizeof *fresh * (size_t)(m->n_cells ? m->n_cells : 1));
+  nh_skull_cell *fresh = nh_calloc((size_t)(m->n_cells ? m->n_cells : 1), sizeof *fresh);
   if (!fresh) return NH_ERR_MEMORY;
   for (int c = 0; c < m->n_cells; c++) fresh[c].area = -1.0;
   for (int l = 0; l < m->n_leaves; l++) {
@@ -354,7 +354,7 @@ int nh_skull_relocate(nh_skull *s, const nh_mesh *m) {
    * sampling), carrying each new point's warm start from the old point
    * nearest to it. */
   int n_old = s->n;
-  nh_skull_point *old = malloc(sizeof *old * (size_t)(n_old ? n_old : 1));
+  nh_skull_point *old = nh_calloc((size_t)(n_old ? n_old : 1), sizeof *old);
   if (!old) return NH_ERROR(NH_ERR_MEMORY, "out of memory: skull points");
   memcpy(old, s->p, sizeof *old * (size_t)n_old);
   int rc = nh_skull_build(s, m);

@@ -109,9 +109,7 @@ int nh_contact_state_load(nh_contact *c, const unsigned char *data, size_t size)
     if (r.short_read || n_chan < 0 || (size_t)n_chan > size / sizeof *G->chan)
       return NH_ERROR(NH_ERR_INPUT, "the checkpoint's channel of group %d is malformed", g);
     if (n_chan > G->cap_chan) {
-      nh_cpoint *p = realloc(G->chan, sizeof *p * (size_t)n_chan);
-      if (!p) return NH_ERROR(NH_ERR_MEMORY, "out of memory restoring a channel");
-      G->chan = p;
+      NH_TRY(nh_realloc((void **)&G->chan, (size_t)n_chan, sizeof *G->chan));
       G->cap_chan = n_chan;
     }
     G->n_chan = n_chan;

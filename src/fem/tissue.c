@@ -93,26 +93,16 @@ static int nh_tissue_shape(nh_tissue *t, const double Xe[24], int *table, int ta
   int s = t->n_shapes;
   if (s >= t->cap_shapes) {
     int cap = t->cap_shapes ? 2 * t->cap_shapes : 8;
-    double *K0 = realloc(t->K0, sizeof(double) * 576 * cap);
-    if (K0) t->K0 = K0;
-    double *G0 = realloc(t->G0, sizeof(double) * 24 * cap);
-    if (G0) t->G0 = G0;
-    double *Gbar = realloc(t->Gbar, sizeof(double) * 24 * cap);
-    if (Gbar) t->Gbar = Gbar;
-    double *vol = realloc(t->volume, sizeof(double) * cap);
-    if (vol) t->volume = vol;
-    double *keys = realloc(t->key, sizeof(double) * 24 * cap);
-    if (keys) t->key = keys;
-    int mixed_ok = 1;
+    const size_t n = (size_t)cap;
+    NH_TRY(nh_realloc((void **)&t->K0, 576 * n, sizeof(double)));
+    NH_TRY(nh_realloc((void **)&t->G0, 24 * n, sizeof(double)));
+    NH_TRY(nh_realloc((void **)&t->Gbar, 24 * n, sizeof(double)));
+    NH_TRY(nh_realloc((void **)&t->volume, n, sizeof(double)));
+    NH_TRY(nh_realloc((void **)&t->key, 24 * n, sizeof(double)));
     if (t->n_labels) {
-      double *Kl = realloc(t->Kl, sizeof(double) * 576 * cap);
-      if (Kl) t->Kl = Kl;
-      double *Km = realloc(t->Km, sizeof(double) * 576 * cap);
-      if (Km) t->Km = Km;
-      mixed_ok = Kl && Km;
+      NH_TRY(nh_realloc((void **)&t->Kl, 576 * n, sizeof(double)));
+      NH_TRY(nh_realloc((void **)&t->Km, 576 * n, sizeof(double)));
     }
-    if (!K0 || !G0 || !Gbar || !vol || !keys || !mixed_ok)
-      return NH_ERROR(NH_ERR_MEMORY, "out of memory: element data");
     t->cap_shapes = cap;
   }
   if (nh_hex_stiffness(key, t->lambda, t->mu, t->material.formulation == NH_FORMULATION_BBAR,
@@ -146,28 +136,22 @@ static int nh_tissue_mix_is_own(const nh_tissue *t, int c) {
 int nh_tissue_update(nh_tissue *t) {
   const nh_mesh *m = t->mesh;
   if (m->n_cells > t->cap_cells) {
-    int *cs = realloc(t->cell_shape, sizeof(int) * (size_t)m->n_cells);
-    if (!cs) return NH_ERROR(NH_ERR_MEMORY, "out of memory: cell data");
-    for (int c = t->cap_cells; c < m->n_cells; c++) cs[c] = -1;
-    t->cell_shape = cs;
+    NH_TRY(nh_realloc((void **)&t->cell_shape, (size_t)m->n_cells, sizeof(int)));
+    for (int c = t->cap_cells; c < m->n_cells; c++) t->cell_shape[c] = -1;
     if (t->n_labels) {
-      double *cm =
-          realloc(t->cell_material, sizeof(double) * NH_CELL_MATERIAL * (size_t)m->n_cells);
-      if (!cm) return NH_ERROR(NH_ERR_MEMORY, "out of memory: cell materials");
-      for (int c = t->cap_cells; c < m->n_cells; c++) cm[NH_CELL_MATERIAL * c] = NAN;
-      t->cell_material = cm;
+      NH_TRY(nh_realloc((void **)&t->cell_material, NH_CELL_MATERIAL * (size_t)m->n_cells,
+                        sizeof(double)));
+      for (int c = t->cap_cells; c < m->n_cells; c++) t->cell_material[NH_CELL_MATERIAL * c] = NAN;
     }
     t->cap_cells = m->n_cells;
   }
   if (m->n_nodes > t->cap_nodes) {
-    double *mass = realloc(t->mass, sizeof(double) * (size_t)m->n_nodes);
-    if (!mass) return NH_ERROR(NH_ERR_MEMORY, "out of memory: nodal mass");
-    t->mass = mass;
+    NH_TRY(nh_realloc((void **)&t->mass, (size_t)m->n_nodes, sizeof(double)));
     t->cap_nodes = m->n_nodes;
   }
   /* The hash table is rebuilt from the shapes already known, then extended. */
   int table_size = 2 * (t->n_shapes + m->n_leaves) + 1;
-  int *table = malloc(sizeof(int) * (size_t)table_size);
+  int *table = nh_calloc((size_t)table_size, sizeof(int));
   if (!table) return NH_ERROR(NH_ERR_MEMORY, "out of memory: shape table");
   for (int i = 0; i < table_size; i++) table[i] = -1;
   for (int s = 0; s < t->n_shapes; s++) {
@@ -344,13 +328,13 @@ int nh_tissue_set_label_materials(nh_tissue *t, int n, const int *labels,
   t->n_labels = 0;
   if (n == 0) return nh_tissue_update(t);
   NH_CHECK(m->domain.labels, NH_ERR_INPUT, "materials per label need a label image");
-  t->label = malloc(sizeof(int) * (size_t)n);
-  t->label_material = malloc(sizeof(nh_material) * (size_t)n);
+  t->label = nh_calloc((size_t)n, sizeof(int));
+  t->label_material = nh_calloc((size_t)n, sizeof(nh_material));
   size_t cap = t->cap_shapes > 0 ? (size_t)t->cap_shapes : 1;
-  t->Kl = malloc(sizeof(double) * 576 * cap);
-  t->Km = malloc(sizeof(double) * 576 * cap);
+  t->Kl = nh_calloc((size_t)576 * cap, sizeof(double));
+  t->Km = nh_calloc((size_t)576 * cap, sizeof(double));
   t->cell_material =
-      malloc(sizeof(double) * NH_CELL_MATERIAL * (size_t)(t->cap_cells > 0 ? t->cap_cells : 1));
+      nh_calloc(NH_CELL_MATERIAL * (size_t)(t->cap_cells > 0 ? t->cap_cells : 1), sizeof(double));
   if (!t->label || !t->label_material || !t->Kl || !t->Km || !t->cell_material)
     return NH_ERROR(NH_ERR_MEMORY, "out of memory: materials per label");
   memcpy(t->label, labels, sizeof(int) * (size_t)n);
@@ -471,9 +455,7 @@ int nh_tissue_set_ties(nh_tissue *t, int n_regions, const nh_region *regions, co
                        double *volume) {
   const nh_mesh *m = t->mesh;
   if (m->n_cells > t->cap_cell_tie) {
-    int *ct = realloc(t->cell_tie, sizeof(int) * (size_t)m->n_cells);
-    if (!ct) return NH_ERROR(NH_ERR_MEMORY, "out of memory: ties");
-    t->cell_tie = ct;
+    NH_TRY(nh_realloc((void **)&t->cell_tie, (size_t)m->n_cells, sizeof(int)));
     t->cap_cell_tie = m->n_cells;
   }
   for (int c = 0; c < m->n_cells; c++) t->cell_tie[c] = -1;
@@ -619,7 +601,7 @@ static int nh_tissue_cuts(nh_tissue *t) {
     t->n_cut = 0;
     return NH_OK;
   }
-  int *index = malloc(sizeof(int) * (size_t)t->cap_cell_cut);
+  int *index = nh_calloc((size_t)t->cap_cell_cut, sizeof(int));
   nh_tissue_cut *cut = NULL;
   int n_cut = 0, cap_cut = 0, rc = NH_OK;
   if (!index) return NH_ERROR(NH_ERR_MEMORY, "out of memory: cut cells");

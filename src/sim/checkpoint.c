@@ -260,7 +260,7 @@ static int nh_get_block(nh_byte_reader *c, unsigned char **out, size_t *size) {
     c->short_read = 1;
     return 0;
   }
-  if (!(*out = malloc((size_t)n))) return 1;
+  if (!(*out = nh_calloc((size_t)n, 1))) return NH_ERR_MEMORY;
   *size = (size_t)n;
   nh_bytes_get(c, *out, (size_t)n);
   return 0;
@@ -291,12 +291,11 @@ static int nh_checkpoint_payload(const char *path, FILE *f, double file_size, ui
     if (got == cap) {
       cap = cap ? 2 * cap : 1 << 20;
       if (cap > size) cap = (size_t)size;
-      unsigned char *d = realloc(data, cap);
-      if (!d) {
+      int rc = nh_realloc((void **)&data, cap, 1);
+      if (rc) {
         free(data);
-        return NH_ERROR(NH_ERR_MEMORY, "out of memory reading a checkpoint");
+        return rc;
       }
-      data = d;
     }
     size_t n = fread(data + got, 1, cap - got, f);
     if (n == 0) break;
@@ -308,7 +307,7 @@ static int nh_checkpoint_payload(const char *path, FILE *f, double file_size, ui
     return NH_ERROR(NH_ERR_INPUT, "--restart: %s: the checkpoint is corrupted (%s)", path,
                     got != size ? "truncated" : "trailing bytes");
   }
-  *out = data ? data : malloc(1);
+  *out = data ? data : nh_calloc(1, 1);
   return *out ? NH_OK : NH_ERROR(NH_ERR_MEMORY, "out of memory reading a checkpoint");
 }
 
@@ -430,7 +429,7 @@ int nh_checkpoint_read(const char *dir, const nh_scene *scene, nh_checkpoint *ck
   }
   ck->step = nh_get_i32(&c);
   nh_bytes_get(&c, &ck->time, 8);
-  nh_mesh *m = calloc(1, sizeof *m);
+  nh_mesh *m = nh_calloc(1, sizeof *m);
   char why[160] = "";
   if (!m) {
     free(data);
@@ -446,7 +445,7 @@ int nh_checkpoint_read(const char *dir, const nh_scene *scene, nh_checkpoint *ck
              (unsigned long long)size);
     goto malformed;
   }
-  m->X = malloc(sizeof(double) * 3 * (size_t)m->n_nodes);
+  m->X = nh_calloc(3 * (size_t)m->n_nodes, sizeof(double));
   if (!m->X) goto oom;
   nh_bytes_get(&c, m->X, sizeof(double) * 3 * (size_t)m->n_nodes);
   m->n_cells = m->cap_cells = nh_get_i32(&c);
@@ -456,14 +455,14 @@ int nh_checkpoint_read(const char *dir, const nh_scene *scene, nh_checkpoint *ck
     goto malformed;
   }
   size_t nc = (size_t)m->n_cells;
-  m->cells = malloc(sizeof(int) * 8 * nc);
-  m->level = malloc(sizeof(int) * nc);
-  m->parent = malloc(sizeof(int) * nc);
-  m->first_child = malloc(sizeof(int) * nc);
-  m->n_children = malloc(sizeof(int) * nc);
-  m->fill = malloc(sizeof(double) * nc);
-  ck->u = malloc(sizeof(double) * 3 * (size_t)m->n_nodes);
-  ck->v = malloc(sizeof(double) * 3 * (size_t)m->n_nodes);
+  m->cells = nh_calloc(8 * nc, sizeof(int));
+  m->level = nh_calloc(nc, sizeof(int));
+  m->parent = nh_calloc(nc, sizeof(int));
+  m->first_child = nh_calloc(nc, sizeof(int));
+  m->n_children = nh_calloc(nc, sizeof(int));
+  m->fill = nh_calloc(nc, sizeof(double));
+  ck->u = nh_calloc(3 * (size_t)m->n_nodes, sizeof(double));
+  ck->v = nh_calloc(3 * (size_t)m->n_nodes, sizeof(double));
   if (!m->cells || !m->level || !m->parent || !m->first_child || !m->n_children || !m->fill ||
       !ck->u || !ck->v)
     goto oom;

@@ -14,10 +14,7 @@
 
 /* Resize a per-node array of `comps` doubles to the mesh's node count. */
 static int nh_resize(double **a, int n_nodes, int comps) {
-  double *p = realloc(*a, sizeof(double) * (size_t)comps * (size_t)(n_nodes ? n_nodes : 1));
-  if (!p) return NH_ERROR(NH_ERR_MEMORY, "out of memory: %d nodes", n_nodes);
-  *a = p;
-  return NH_OK;
+  return nh_realloc((void **)a, (size_t)comps * (size_t)n_nodes, sizeof(double));
 }
 
 /* A fixed region's tie stiffness is NH_TIE_STIFFNESS E / ℓ², ℓ its smallest
@@ -37,9 +34,7 @@ static int nh_sim_fixed_is_tie(const nh_scene *sc, int immersed, int r) {
 static int nh_sim_resize_nodes(nh_sim *s) {
   const nh_scene *sc = s->scene;
   const int nn = s->mesh->n_nodes;
-  unsigned char *fixed = realloc(s->fixed, (size_t)(nn ? nn : 1));
-  if (!fixed) return NH_ERROR(NH_ERR_MEMORY, "out of memory: %d nodes", nn);
-  s->fixed = fixed;
+  NH_TRY(nh_realloc((void **)&s->fixed, (size_t)nn, 1));
   memset(s->fixed, 0, (size_t)nn);
   NH_TRY(nh_resize(&s->x, nn, 3));
   NH_TRY(nh_resize(&s->u_start, nn, 3));
@@ -48,9 +43,7 @@ static int nh_sim_resize_nodes(nh_sim *s) {
   NH_TRY(nh_resize(&s->drained, nn, 1));
   const int n_unit = sc->tissue.n_loads + sc->tissue.n_tractions;
   NH_TRY(nh_resize(&s->load_unit, nn, 3 * (n_unit ? n_unit : 1)));
-  int *moved = realloc(s->moved, sizeof(int) * (size_t)(nn ? nn : 1));
-  if (!moved) return NH_ERROR(NH_ERR_MEMORY, "out of memory: %d nodes", nn);
-  s->moved = moved;
+  NH_TRY(nh_realloc((void **)&s->moved, (size_t)nn, sizeof(int)));
   for (int i = 0; i < nn; i++) s->moved[i] = -1;
   return NH_OK;
 }
@@ -64,7 +57,7 @@ static int nh_sim_fixed_nodes(nh_sim *s, int first) {
   const nh_scene *sc = s->scene;
   const nh_mesh *m = s->mesh;
   const int nn = m->n_nodes, immersed = m->domain.kind != NH_DOMAIN_BOX;
-  unsigned char *in = calloc((size_t)(nn ? nn : 1), 1);
+  unsigned char *in = nh_calloc((size_t)(nn ? nn : 1), 1);
   if (!in) return NH_ERROR(NH_ERR_MEMORY, "out of memory: %d nodes", nn);
   for (int r = 0; r < sc->tissue.n_fixed; r++) {
     const nh_region *reg = &sc->tissue.fixed[r];
@@ -139,8 +132,8 @@ static int nh_sim_tissue_build(nh_sim *s, int first) {
                      sc->tissue.formulation};
   NH_TRY(nh_tissue_create(s->mesh, &mat, &s->tissue));
   if (!sc->tissue.n_materials) return NH_OK;
-  int n = sc->tissue.n_materials, *labels = malloc(sizeof(int) * (size_t)n);
-  nh_material *mats = malloc(sizeof(nh_material) * (size_t)n);
+  int n = sc->tissue.n_materials, *labels = nh_calloc((size_t)n, sizeof(int));
+  nh_material *mats = nh_calloc((size_t)n, sizeof(nh_material));
   int rc = labels && mats ? NH_OK : NH_ERROR(NH_ERR_MEMORY, "out of memory: materials");
   for (int i = 0; i < n && !rc; i++) {
     const nh_label_material *lm = &sc->tissue.materials[i];
@@ -159,8 +152,9 @@ static int nh_sim_ties(nh_sim *s, int first) {
   const nh_scene *sc = s->scene;
   const int immersed = s->mesh->domain.kind != NH_DOMAIN_BOX, nr = sc->tissue.n_fixed;
   if (!immersed || nr == 0) return NH_OK;
-  double *k = malloc(sizeof(double) * 2 * (size_t)nr), *vol = k + nr;
+  double *k = nh_calloc(2 * (size_t)nr, sizeof(double));
   if (!k) return NH_ERROR(NH_ERR_MEMORY, "out of memory: ties");
+  double *vol = k + nr;
   for (int r = 0; r < nr; r++) {
     double l = nh_region_size(&sc->tissue.fixed[r]);
     k[r] = nh_sim_fixed_is_tie(sc, immersed, r) && l > 0.0 && isfinite(l)

@@ -206,7 +206,7 @@ void nh_sim_median_times(const nh_sim *s, double t[7]) {
   for (int p = 0; p < NH_PHASES; p++) t[p] = 0.0;
   const int first = s->first_step, n = s->step - first; /* steps this process timed */
   if (n <= 0) return;
-  double *buf = malloc(sizeof(double) * (size_t)n);
+  double *buf = nh_calloc((size_t)n, sizeof(double));
   if (!buf) return;
   for (int p = 0; p < NH_PHASES; p++) {
     for (int k = 0; k < n; k++) buf[k] = s->phase_times[NH_PHASES * (first + k) + p];
@@ -334,8 +334,8 @@ static int nh_write_probe_rows(nh_sim *s) {
   const nh_scene *sc = s->scene;
   if (s->h5 && sc->n_probes > 0) {
     static const char *const comps[] = {"x", "y", "z", "ux", "uy", "uz"};
-    const char **names = malloc(sizeof(char *) * (size_t)sc->n_probes);
-    double *vals = malloc(sizeof(double) * 6 * (size_t)sc->n_probes);
+    const char **names = nh_calloc((size_t)sc->n_probes, sizeof(char *));
+    double *vals = nh_calloc(6 * (size_t)sc->n_probes, sizeof(double));
     int rc = names && vals ? NH_OK : NH_ERROR(NH_ERR_MEMORY, "out of memory: probe series");
     for (int i = 0; i < sc->n_probes && !rc; i++) {
       names[i] = sc->probes[i].name;
@@ -498,19 +498,19 @@ static int nh_sim_build(nh_sim *s) {
     int rc = nh_mesh_create(&domain, sc->tissue.grid, &s->mesh);
     nh_domain_release(&domain); /* the mesh holds its own reference */
     NH_TRY(rc);
-    s->u = calloc(3 * (size_t)s->mesh->n_nodes, sizeof(double));
-    s->v = calloc(3 * (size_t)s->mesh->n_nodes, sizeof(double));
+    s->u = nh_calloc(3 * (size_t)s->mesh->n_nodes, sizeof(double));
+    s->v = nh_calloc(3 * (size_t)s->mesh->n_nodes, sizeof(double));
   }
   const int nn = s->mesh->n_nodes;
   const int n_points = sc->n_probes + sc->n_targets;
-  s->probe_cell = malloc(sizeof(int) * (size_t)(n_points ? n_points : 1));
-  s->probe_xi = malloc(sizeof(double) * 3 * (size_t)(n_points ? n_points : 1));
+  s->probe_cell = nh_calloc((size_t)(n_points ? n_points : 1), sizeof(int));
+  s->probe_xi = nh_calloc(3 * (size_t)(n_points ? n_points : 1), sizeof(double));
   if (!s->u || !s->v || !s->probe_cell || !s->probe_xi)
     return NH_ERROR(NH_ERR_MEMORY, "out of memory building the model (%d nodes)", nn);
   if (sc->adapt.enabled) NH_TRY(nh_adapt_create(&sc->adapt, sc->limits.max_cells, &s->adapt));
   if (sc->adapt.enabled && sc->adapt.estimator == NH_ESTIMATOR_GOAL) {
     double points[3 * NH_MAX_GOALS];
-    s->goal_of_point = malloc(sizeof(int) * (size_t)(n_points ? n_points : 1));
+    s->goal_of_point = nh_calloc((size_t)(n_points ? n_points : 1), sizeof(int));
     if (!s->goal_of_point) return NH_ERROR(NH_ERR_MEMORY, "out of memory: goals");
     for (int i = 0; i < n_points; i++) s->goal_of_point[i] = -1;
     for (int g = 0; g < sc->adapt.n_goals; g++) {
@@ -554,7 +554,7 @@ static int nh_sim_build(nh_sim *s) {
   s->restore_solver = NULL;
   s->cap_steps = sc->time.steps > s->step ? sc->time.steps : s->step + 1;
   s->phase_times =
-      calloc((size_t)NH_PHASES * (size_t)(s->cap_steps ? s->cap_steps : 1), sizeof(double));
+      nh_calloc((size_t)NH_PHASES * (size_t)(s->cap_steps ? s->cap_steps : 1), sizeof(double));
   if (!s->phase_times) return NH_ERROR(NH_ERR_MEMORY, "out of memory: timing table");
   s->last_frame = -1;
   s->eta = s->eta_rel = NAN;
@@ -685,7 +685,7 @@ static int nh_sim_resolve(nh_sim *s, double t_new, double *const start_in[2], nh
                           int *resolves) {
   const nh_scene *sc = s->scene;
   const int n = 3 * s->mesh->n_nodes;
-  double *start[2] = {malloc(sizeof(double) * n), malloc(sizeof(double) * n)};
+  double *start[2] = {nh_calloc(n, sizeof(double)), nh_calloc(n, sizeof(double))};
   int rc = start[0] && start[1] ? NH_OK : NH_ERROR(NH_ERR_MEMORY, "out of memory: re-solve");
   if (!rc)
     memcpy(start[0], start_in[0], sizeof(double) * n),
@@ -766,9 +766,7 @@ typedef struct {
 static int nh_sim_timing_reserve(nh_sim *s) {
   if (s->step < s->cap_steps) return NH_OK;
   int cap = 2 * s->cap_steps + 16;
-  double *pt = realloc(s->phase_times, sizeof(double) * NH_PHASES * (size_t)cap);
-  if (!pt) return NH_ERROR(NH_ERR_MEMORY, "out of memory: timing table");
-  s->phase_times = pt;
+  NH_TRY(nh_realloc((void **)&s->phase_times, NH_PHASES * (size_t)cap, sizeof(double)));
   s->cap_steps = cap;
   return NH_OK;
 }
@@ -794,7 +792,7 @@ static int nh_sim_predict(nh_sim *s, nh_sim_record *r) {
       return NH_ERROR(NH_ERR_MEMORY, "out of memory: step %d start state", s->step + 1);
   }
   if (!r->resolve) return NH_OK;
-  r->start[0] = malloc(sizeof(double) * n), r->start[1] = malloc(sizeof(double) * n);
+  r->start[0] = nh_calloc(n, sizeof(double)), r->start[1] = nh_calloc(n, sizeof(double));
   if (!r->start[0] || !r->start[1]) {
     free(r->start[0]), free(r->start[1]);
     return NH_ERROR(NH_ERR_MEMORY, "out of memory: step %d start state", s->step + 1);

@@ -160,8 +160,8 @@ int nh_sim_tools_rows(nh_sim *s) {
     free(names);
   }
   if (!rc && sc->n_targets > 0) {
-    double *vals = malloc(sizeof(double) * 4 * (size_t)sc->n_targets);
-    const char **names = malloc(sizeof(char *) * (size_t)sc->n_targets);
+    double *vals = nh_calloc(4 * (size_t)sc->n_targets, sizeof(double));
+    const char **names = nh_calloc((size_t)sc->n_targets, sizeof(char *));
     if (!vals || !names) rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: target rows");
     for (int i = 0; i < sc->n_targets && !rc; i++) {
       const nh_target *tg = &sc->targets[i];
