@@ -39,11 +39,6 @@ set_tests_properties(restart_tools_skull PROPERTIES LABELS "io;slow" TIMEOUT 600
 # exception applies). About 25 s of runs on a loaded 2-core machine.
 nh_add_py_test(restart_cases io restart_cases.py cases)
 set_tests_properties(restart_cases PROPERTIES TIMEOUT 600)
-# Known failure (measured reason in restart_cases.py, KNOWN): the static
-# skull path does not continue bitwise (first continued step: 64 skull rows
-# instead of 70; probes 7e-8 relative at step 10).
-nh_add_py_test(restart_cases_known io restart_cases.py known)
-set_tests_properties(restart_cases_known PROPERTIES TIMEOUT 600 WILL_FAIL TRUE)
 nh_add_c_test(test_traction verify)
 nh_add_py_test(traction_patch verify traction_patch.py)
 

@@ -7,8 +7,11 @@
  * the channel (every point with its material position, cell, natural
  * coordinates, length, projection, tie and multipliers: the constraint warm
  * start, and whether its friction slid: the static or the kinetic bound
- * next), the front and the tip tool; the skull's warm starts
- * (contact/skull.c); and the last step's statistics. The prescribed motion
+ * next), the front and the tip tool; the last step's statistics; the
+ * quasi-static step's prediction (the tissue's increment over the last
+ * step, contact.c: without it a continued static run starts its Newton
+ * elsewhere and agrees only to the tolerance); and the skull's warm starts
+ * (contact/skull.c). The prescribed motion
  * is a function of time, and the rows, blocks, rest shapes and skull points
  * are rebuilt from the scene and the mesh, so none of them is saved. Cells and
  * natural coordinates are saved as they are: the checkpoint restores the
@@ -59,6 +62,8 @@ int nh_contact_state_save(const nh_contact *c, unsigned char **out, size_t *size
   }
   put_int(&b, c->cut);
   put(&b, &c->solve, sizeof c->solve);
+  put_int(&b, c->n_du);
+  put(&b, c->du_last, sizeof(double) * (size_t)c->n_du);
   if (c->skull) nh_skull_state_save(c->skull, &b);
   if (b.failed) {
     free(b.data);
@@ -120,6 +125,14 @@ int nh_contact_state_load(nh_contact *c, const unsigned char *data, size_t size)
   }
   c->cut = get_int(&r);
   get(&r, &c->solve, sizeof c->solve);
+  int n_du = get_int(&r);
+  if (r.short_read || n_du < 0 || (size_t)n_du > size / sizeof(double))
+    return NH_ERROR(NH_ERR_INPUT, "the checkpoint's quasi-static prediction is malformed");
+  if (n_du != c->n_du) {
+    NH_TRY(nh_realloc((void **)&c->du_last, (size_t)n_du, sizeof(double)));
+    c->n_du = n_du;
+  }
+  get(&r, c->du_last, sizeof(double) * (size_t)n_du);
   if (c->skull) NH_TRY(nh_skull_state_load(c->skull, &r));
   if (r.short_read || r.p != r.end)
     return NH_ERROR(NH_ERR_INPUT, "the checkpoint's tool state is malformed");
