@@ -283,6 +283,9 @@ int nh_contact_solve_static(nh_contact *c, nh_system *sys, const nh_integrator *
     sum.t_assemble += c->solve.step.t_assemble, sum.t_factor += c->solve.step.t_factor;
     sum.t_solve += c->solve.step.t_solve, sum.t_constraints += c->solve.step.t_constraints;
     sum.factorised += c->solve.step.factorised;
+    sum.tangent_updates += c->solve.step.tangent_updates;
+    sum.pcg_iterations += c->solve.step.pcg_iterations;
+    sum.corrections += c->solve.step.corrections;
     if (rc) {
       if (c->rows.m > 0 && c->solve.mcp.sweeps >= NH_MCP_SWEEPS) {
         char why[512];
