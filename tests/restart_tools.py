@@ -38,10 +38,13 @@ def rows(out, name):
     return list(csv.DictReader(open(path))) if os.path.exists(path) else []
 
 
-def numeric(rs):
+def columns(rs):
     # steps.csv: every column but the timings (t_*), which no two runs share
-    keys = [k for k in rs[0] if k not in ("name", "state") and not k.startswith("t_")] if rs else []
-    a = np.array([[float(r[k]) for k in keys] for r in rs])
+    return [k for k in rs[0] if k not in ("name", "state") and not k.startswith("t_")] if rs else []
+
+
+def numeric(rs):
+    a = np.array([[float(r[k]) for k in columns(rs)] for r in rs])
     return np.nan_to_num(a, nan=0.0), [(r["step"], r.get("name"), r.get("state")) for r in rs]
 
 
@@ -64,9 +67,13 @@ def compare(what, ref, got, TOL):
         if a.size == 0:
             continue
         scale = np.maximum(np.abs(a).max(axis=0), 1e-300)
-        err = (np.abs(a - b) / scale).max()
+        rel = np.abs(a - b) / scale
+        err = rel.max()
         if not err <= TOL:
-            failures.append(f"{what}: {table}.csv differs by {err:.3g} relative (tolerance {TOL})")
+            i, j = np.unravel_index(np.argmax(rel), rel.shape)
+            failures.append(f"{what}: {table}.csv differs by {err:.3g} relative (tolerance {TOL}):"
+                            f" column {columns(rows(ref, table))[j]}, row {ka[i]}: {b[i, j]:.17g},"
+                            f" expected {a[i, j]:.17g}")
     (na, ua), (nb, ub) = last_frame(ref), last_frame(got)
     err = np.abs(ua - ub).max() / max(np.abs(ua).max(), 1e-300) if ua.shape == ub.shape else np.inf
     if na != nb or not err <= TOL:

@@ -785,7 +785,10 @@ static int nh_sim_predict(nh_sim *s, nh_sim_record *r) {
     s->tools_start = NULL;
     NH_TRY(nh_contact_state_save(s->contact, &s->tools_start, &s->tools_start_size));
   }
-  if (s->integrator.reuse) { /* the step may renew the factor before a stop inside it */
+  { /* the step may renew the factor or assemble A before a stop inside it: a
+     * checkpoint then holds the factor and the last assembly of its start
+     * (with `refactor: every` too, so that the continued step rebuilds no
+     * more tangents than the uninterrupted one) */
     s->solver_start.len = 0;
     nh_system_reuse_save(s->system, &s->solver_start);
     if (s->solver_start.failed)
