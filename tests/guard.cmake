@@ -6,8 +6,7 @@ nh_add_py_test(invalid_steps hard invalid_steps.py)
 
 # unsolved.py: steps whose relative residual stayed above its bound are
 # flagged in steps.csv (`unsolved`) and warned about (dbs.yaml at nu 0.4999:
-# every step, and the third consecutive one stops the run unless
-# solver.on_invalid: warn; at 0.45 none; a body at rest after the needle left: none).
+# every step; at 0.45 none; a body at rest after the needle left: none).
 nh_add_py_test(unsolved verify unsolved.py $<TARGET_FILE:needlehex>)
 
 # cholmod_memory.py: a factorisation larger than the memory limit is named

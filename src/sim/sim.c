@@ -899,12 +899,6 @@ static double *nh_sim_record_times(nh_sim *s, const nh_sim_record *r, double t_e
 /* ... unless its forces are below this fraction of the run's largest. */
 #define NH_UNSOLVED_SCALE 1e-6
 
-/* This many consecutive unsolved steps end the run (solver.on_invalid:
- * stop): one step left unsolved by a transient (a puncture's jump) can be
- * followed by solved ones, three in a row are a run that no longer solves
- * its equations, whose further frames would be written as if it did. */
-#define NH_UNSOLVED_STOP 3
-
 /* The step's relative residual stayed above its bound: the Newton tolerance
  * (static mode; dynamic with solver.newton), else NH_UNSOLVED_LINEAR. The
  * first such step is warned about, every one counted (the summary). */
@@ -918,12 +912,9 @@ static int nh_sim_unsolved(nh_sim *s, const nh_step_stats *st) {
   double scale = nh_system_residual_scale(s->system);
   if (sc->time.mode == NH_MODE_DYNAMIC && scale > s->residual_scale_max)
     s->residual_scale_max = scale;
-  const int run = s->unsolved_run;
-  s->unsolved_run = 0;
   if (!(st->residual > bound)) return 0;
   if (sc->time.mode == NH_MODE_DYNAMIC && scale < NH_UNSOLVED_SCALE * s->residual_scale_max)
     return 0;
-  s->unsolved_run = run + 1;
   if (s->unsolved_steps++ == 0) {
     s->unsolved_first = s->step;
     nh_log_warn("step %d (t = %g s): relative residual %.3g above %g: the step's equations are "
@@ -1041,12 +1032,6 @@ int nh_sim_step(nh_sim *s) {
   double t4 = nh_time_now(); /* the checkpoint counts as output */
   r.t_output = t2 - t1 + (t4 - t3);
   NH_TRY(nh_sim_write_row(s, &r, t4));
-  if (s->unsolved_run >= NH_UNSOLVED_STOP && !sc->solver.on_invalid_warn)
-    return NH_ERROR(NH_ERR_NUMERIC,
-                    "step %d (t = %g s): %d consecutive steps left unsolved (relative residual "
-                    "%.3g; steps.csv `unsolved`): the run no longer solves its equations; stopped "
-                    "after writing this step (solver.on_invalid: warn goes on)",
-                    s->step, r.t_new, s->unsolved_run, r.st.residual);
   /* The scene was validated at creation: nothing refinement meets later is
    * the scene's fault (exit 1, not 2). */
   if (r.refine_rc)
