@@ -331,14 +331,9 @@ def test_planner():
     if os.environ.get("NH_TEST_VERBOSE"):
         print("plan: misses %s m in %d runs" % ([r["miss"] for r in doc["iterations"]],
                                                 doc["runs"]))
-    # A rigid brain: the first run, aimed at the STN, is on it. Once the
-    # cannula stops at the target (step 29) the 1e12 Pa tissue carries almost
-    # no force and its linearised steps' relative residual is round-off over
-    # round-off (0.93-0.96, flagged unsolved; 7e-4 before): on_invalid: warn
-    # keeps the run going, as it did before three such steps stopped a run.
+    # A rigid brain: the first run, aimed at the STN, is on it.
     rigid = ["tissue.material.young=1.0e12", "tissue.buoyancy.after=1.0", "gravity=[0, 0, 0]",
-             "tissue.damping.mass=0", "adapt.every=1000000", "tools.0.interaction.friction=0",
-             "solver.on_invalid=warn"]
+             "tissue.damping.mass=0", "adapt.every=1000000", "tools.0.interaction.friction=0"]
     rc, doc, out, err = run_plan("plan-rigid", sets + rigid, ["--tolerance", "1e-6"])
     if doc is None:
         return
