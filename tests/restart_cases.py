@@ -64,12 +64,11 @@ import time
 import xml.etree.ElementTree as ET
 
 import h5py
-import numpy as np
 import vtk
 import yaml
 
 import nh_run
-from restart_tools import last_frame, numeric, rows, wait_rows
+from restart_tools import frame_difference, rows, table_difference, wait_rows
 
 BIN, SRC = os.environ["NH_BINARY"], os.environ["NH_SOURCE_DIR"]
 TOL = 1e-12
@@ -145,25 +144,12 @@ def compare(case, what, ref, got, stop):
                 if int(r["step"]) > stop:
                     for k in CYCLE:
                         r[k] = "0"
-        (a, ka), (b, kb) = numeric(ra), numeric(rb)
-        if ka != kb:
-            fail(case, f"{what}: {table}.csv rows (step, name, state) differ from the reference "
-                 f"({len(kb)} rows, expected {len(ka)})")
-            continue
-        if a.size == 0:
-            continue
-        scale = np.maximum(np.abs(a).max(axis=0), 1e-300)
-        err = np.abs(a - b) / scale
-        if not err.max() <= tol:
-            i, j = np.unravel_index(np.argmax(err), err.shape)
-            keys = [k for k in ra[0] if k not in ("name", "state") and not k.startswith("t_")]
-            fail(case, f"{what}: {table}.csv step {ka[i][0]} {keys[j]} = {b[i, j]!r}, reference "
-                 f"{a[i, j]!r}: {err.max():.3g} relative (tolerance {tol})")
-    (na, ua), (nb, ub) = last_frame(ref), last_frame(got)
-    err = np.abs(ua - ub).max() / max(np.abs(ua).max(), 1e-300) if ua.shape == ub.shape else np.inf
-    if na != nb or not err <= tol:
-        fail(case, f"{what}: last frame {nb}, reference {na}: displacements differ by {err:.3g} "
-             f"relative (tolerance {tol})")
+        why = table_difference(ra, rb, tol)
+        if why:
+            fail(case, f"{what}: {table}.csv: {why}")
+    why = frame_difference(ref, got, tol)
+    if why:
+        fail(case, f"{what}: {why}")
     return tol
 
 
