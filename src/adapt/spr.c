@@ -293,15 +293,13 @@ int nh_spr_recover_fields(const nh_mesh *m, const nh_tissue *t, const nh_hanging
   int nn = m->n_nodes, nl = m->n_leaves;
   double *centre = nh_calloc(3 * (size_t)m->n_cells, sizeof(double));
   double *weight = nh_calloc((size_t)m->n_cells, sizeof(double));
-  int *start = nh_calloc((size_t)nn + 1, sizeof(int));
-  int *adj = nh_calloc(8 * (size_t)(nl > 0 ? nl : 1), sizeof(int));
+  int *start = NULL, *adj = NULL; /* node -> leaves (CSR, ascending) */
   unsigned char *hangs = nh_calloc((size_t)nn, 1);
-  int rc = NH_OK;
-  if (!centre || !weight || !start || !adj || !hangs) {
+  int rc = nh_mesh_node_leaves(m, &start, &adj);
+  if (!rc && (!centre || !weight || !hangs))
     rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: SPR workspace (%d nodes, %d cells)", nn,
                   m->n_cells);
-    goto done;
-  }
+  if (rc) goto done;
 
 #pragma omp parallel for schedule(static) if (nl >= NH_SPR_PARALLEL_MIN)
   for (int l = 0; l < nl; l++) {
@@ -316,36 +314,6 @@ int nh_spr_recover_fields(const nh_mesh *m, const nh_tissue *t, const nh_hanging
     weight[c] = m->fill[c] * t->volume[t->cell_shape[c]];
   }
 
-  /* Node -> leaves, each list ascending because the leaves are. */
-  for (int l = 0; l < nl; l++)
-    for (int a = 0; a < 8; a++) start[m->cells[8 * m->leaves[l] + a] + 1]++;
-  for (int i = 0; i < nn; i++) start[i + 1] += start[i];
-  {
-    int *fill = nh_calloc((size_t)(nn > 0 ? nn : 1), sizeof(int));
-    if (!fill) {
-      rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: SPR adjacency");
-      goto done;
-    }
-    memcpy(fill, start, sizeof(int) * (size_t)nn);
-    for (int l = 0; l < nl; l++) {
-      int c = m->leaves[l];
-      for (int a = 0; a < 8; a++) {
-        int v = m->cells[8 * c + a];
-        /* A degenerate cell may list a node twice: keep it once. */
-        if (fill[v] > start[v] && adj[fill[v] - 1] == c) continue;
-        adj[fill[v]++] = c;
-      }
-    }
-    /* Close the gaps left by duplicates (start[v + 1] is the capacity). */
-    int w = 0;
-    for (int v = 0; v < nn; v++) {
-      int b = start[v], e = fill[v];
-      start[v] = w;
-      for (int i = b; i < e; i++) adj[w++] = adj[i];
-    }
-    start[nn] = w;
-    free(fill);
-  }
   if (h)
     for (int k = 0; k < h->n_hanging; k++) hangs[h->node[k]] = 1;
   if (h)

@@ -200,27 +200,17 @@ static int nh_root_better(const nh_root *a, const nh_root *b) {
 static int nh_find_aggregated(const nh_mesh *m, const unsigned char *skip,
                               const nh_aggregation *agg, nh_raw *raw, unsigned char **is_agg,
                               int *n_orphans) {
-  const int n = m->n_nodes, nl = m->n_leaves;
+  const int n = m->n_nodes;
   int rc = NH_OK, orphans = 0, cap_ring = 0, cap_next = 0;
-  int *start = nh_calloc((size_t)n + 1, sizeof(int)),
-      *leaf = nh_calloc((size_t)8 * nl + 1, sizeof(int));
+  int *start = NULL, *leaf = NULL; /* node -> the leaves it is a corner of (CSR) */
+  if ((rc = nh_mesh_node_leaves(m, &start, &leaf))) return rc;
   int *stamp = nh_calloc((size_t)(m->n_cells ? m->n_cells : 1), sizeof(int));
   int *ring = NULL, *next = NULL;
   unsigned char *flag = nh_calloc((size_t)(n ? n : 1), 1);
-  if (!start || !leaf || !stamp || !flag) {
+  if (!stamp || !flag) {
     rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: aggregated nodes");
     goto done;
   }
-  for (int l = 0; l < nl; l++) /* node -> the leaves it is a corner of (CSR) */
-    for (int a = 0; a < 8; a++) start[m->cells[8 * m->leaves[l] + a] + 1]++;
-  for (int v = 0; v < n; v++) start[v + 1] += start[v];
-  for (int l = 0; l < nl; l++) /* start[v] counts up to its end, then is restored */
-    for (int a = 0; a < 8; a++) {
-      int v = m->cells[8 * m->leaves[l] + a];
-      leaf[start[v]++] = m->leaves[l];
-    }
-  for (int v = n; v > 0; v--) start[v] = start[v - 1];
-  start[0] = 0;
   const double thr = agg->threshold;
   for (int v = 0; v < n; v++) /* the ill-posed nodes */
     flag[v] = raw->cell[v] < 0 && !(skip && skip[v]) && !(agg->keep && agg->keep[v]) &&

@@ -363,6 +363,10 @@ int nh_mesh_refine(nh_mesh *mesh, const nh_template *tmpl, const int *cells, int
 void nh_refine_info_free(nh_refine_info *info);
 
 /* Smallest edge length of cell c's rest shape. */
+/* Node -> the leaves having it as a corner, in CSR form: the leaves of node
+ * v are leaf[start[v] .. start[v + 1]), ascending, each once. Both arrays
+ * are allocated here (the caller frees them). */
+int nh_mesh_node_leaves(const nh_mesh *mesh, int **start, int **leaf);
 double nh_mesh_cell_size(const nh_mesh *mesh, int c);
 
 /* ---- grading and coarsening (mesh/grade.c, mesh/coarsen.c) ----

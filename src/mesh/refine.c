@@ -73,6 +73,41 @@ static int nh_hash_find(const nh_node_hash *h, const double x[3]) {
   return -1;
 }
 
+int nh_mesh_node_leaves(const nh_mesh *m, int **start_out, int **leaf_out) {
+  const int nn = m->n_nodes, nl = m->n_leaves;
+  int *start = nh_calloc((size_t)nn + 1, sizeof(int));
+  int *leaf = nh_calloc(8 * (size_t)(nl > 0 ? nl : 1), sizeof(int));
+  int *fill = nh_calloc((size_t)(nn > 0 ? nn : 1), sizeof(int));
+  if (!start || !leaf || !fill) {
+    free(start), free(leaf), free(fill);
+    return NH_ERROR(NH_ERR_MEMORY, "out of memory: node-to-leaf adjacency");
+  }
+  for (int l = 0; l < nl; l++)
+    for (int a = 0; a < 8; a++) start[m->cells[8 * m->leaves[l] + a] + 1]++;
+  for (int i = 0; i < nn; i++) start[i + 1] += start[i];
+  memcpy(fill, start, sizeof(int) * (size_t)nn);
+  for (int l = 0; l < nl; l++) {
+    int c = m->leaves[l];
+    for (int a = 0; a < 8; a++) {
+      int v = m->cells[8 * c + a];
+      /* A degenerate cell may list a node twice: keep it once. */
+      if (fill[v] > start[v] && leaf[fill[v] - 1] == c) continue;
+      leaf[fill[v]++] = c;
+    }
+  }
+  /* Close the gaps left by duplicates (start[v + 1] is the capacity). */
+  int w = 0;
+  for (int v = 0; v < nn; v++) {
+    int b = start[v], e = fill[v];
+    start[v] = w;
+    for (int i = b; i < e; i++) leaf[w++] = leaf[i];
+  }
+  start[nn] = w;
+  free(fill);
+  *start_out = start, *leaf_out = leaf;
+  return NH_OK;
+}
+
 double nh_mesh_cell_size(const nh_mesh *m, int c) {
   double size = INFINITY;
   for (int e = 0; e < 12; e++) {
