@@ -223,6 +223,9 @@ CASES = [
      "tissue.grid"),
     ("set_base.yaml", ["tissue.grid=[46341,46341,1]", "limits.max_cells=2147483647"], "--set:1",
      "tissue.grid"),
+    # cells within limits.max_cells, but 3 x 30001^2 x 3 unknowns beyond an int
+    ("set_base.yaml", ["tissue.grid=[30000,30000,2]", "limits.max_cells=2147483647"], "--set:1",
+     "tissue.grid"),
     ("set_base.yaml", ["limits.max_cells=99999999999"], "--set:1", "limits.max_cells"),
     ("set_base.yaml", ["time.steps=2147483647"], "--set:1", "time.steps"),
     ("set_base.yaml", ["time.steps=10000001"], "--set:1", "time.steps"),

@@ -209,7 +209,12 @@ static int check_size(const nh_ctx *c, const nh_yaml_node *at, const nh_scene *s
   double nodes = (g[0] + 1.0) * (g[1] + 1.0) * (g[2] + 1.0);
   char need[32], have[32];
   bytes_text(nh_scene_memory_estimate(cells), need, sizeof need);
-  if (cells > s->limits.max_cells || 3 * nodes > INT_MAX)
+  if (cells <= s->limits.max_cells && 3 * nodes > INT_MAX)
+    return nh_read_fail(c, at, "tissue.grid",
+                        "%d x %d x %d = %.0f cells: their %.0f nodes have %.0f unknowns, more "
+                        "than the %d one mesh can index; coarsen the grid and let `adapt` refine",
+                        g[0], g[1], g[2], cells, nodes, 3 * nodes, INT_MAX);
+  if (cells > s->limits.max_cells)
     return nh_read_fail(c, at, "tissue.grid",
                         "%d x %d x %d = %.0f cells (%.0f nodes) exceed limits.max_cells = %d "
                         "(a run would need about %s of memory); coarsen the grid and let `adapt` "

@@ -552,9 +552,11 @@ static int nh_sim_build(nh_sim *s) {
   }
   free(s->restore_solver);
   s->restore_solver = NULL;
-  s->cap_steps = sc->time.steps > s->step ? sc->time.steps : s->step + 1;
-  s->phase_times =
-      nh_calloc((size_t)NH_PHASES * (size_t)(s->cap_steps ? s->cap_steps : 1), sizeof(double));
+  /* rows for the first steps; nh_sim_timing_reserve grows the table, so a
+   * scene of 1e7 steps does not reserve its whole table up front */
+  s->cap_steps = sc->time.steps < 4096 ? sc->time.steps : 4096;
+  if (s->cap_steps <= s->step) s->cap_steps = s->step + 1;
+  s->phase_times = nh_calloc((size_t)NH_PHASES * (size_t)s->cap_steps, sizeof(double));
   if (!s->phase_times) return NH_ERROR(NH_ERR_MEMORY, "out of memory: timing table");
   s->last_frame = -1;
   s->eta = s->eta_rel = NAN;
@@ -767,6 +769,8 @@ static int nh_sim_timing_reserve(nh_sim *s) {
   if (s->step < s->cap_steps) return NH_OK;
   int cap = 2 * s->cap_steps + 16;
   NH_TRY(nh_realloc((void **)&s->phase_times, NH_PHASES * (size_t)cap, sizeof(double)));
+  memset(s->phase_times + NH_PHASES * (size_t)s->cap_steps, 0,
+         sizeof(double) * NH_PHASES * (size_t)(cap - s->cap_steps));
   s->cap_steps = cap;
   return NH_OK;
 }
