@@ -713,6 +713,7 @@ static int nh_sim_resolve(nh_sim *s, double t_new, double *const start_in[2], nh
     st->t_assemble += again.t_assemble, st->t_factor += again.t_factor;
     st->t_solve += again.t_solve, st->t_constraints += again.t_constraints;
     st->iterations = again.iterations, st->residual = again.residual;
+    st->residual_floor = again.residual_floor;
     (*resolves)++;
   }
   free(start[0]), free(start[1]);
@@ -900,25 +901,19 @@ static double *nh_sim_record_times(nh_sim *s, const nh_sim_record *r, double t_e
 /* A linearised dynamic step (no solver.newton) that leaves this much of its
  * equations' relative residual is not a solution (docs/outputs.md, unsolved). */
 #define NH_UNSOLVED_LINEAR 0.5
-/* ... unless its forces are below this fraction of the run's largest. */
-#define NH_UNSOLVED_SCALE 1e-6
 
 /* The step's relative residual stayed above its bound: the Newton tolerance
- * (static mode; dynamic with solver.newton), else NH_UNSOLVED_LINEAR. The
- * first such step is warned about, every one counted (the summary). */
+ * (static mode; dynamic with solver.newton), else NH_UNSOLVED_LINEAR, and
+ * above the round-off level of its internal forces (a stiff body at rest
+ * has forces at that level: a relative residual of round-off over
+ * round-off). The first such step is warned about, every one counted (the
+ * summary). */
 static int nh_sim_unsolved(nh_sim *s, const nh_step_stats *st) {
   const nh_scene *sc = s->scene;
   double bound = sc->time.mode == NH_MODE_STATIC    ? sc->solver.tolerance
                  : sc->solver.newton_iterations > 0 ? sc->solver.newton_tolerance
                                                     : NH_UNSOLVED_LINEAR;
-  /* a linearised step whose forces are round-off next to the run's (a body
-   * left at rest) has a relative residual of round-off over round-off */
-  double scale = nh_system_residual_scale(s->system);
-  if (sc->time.mode == NH_MODE_DYNAMIC && scale > s->residual_scale_max)
-    s->residual_scale_max = scale;
-  if (!(st->residual > bound)) return 0;
-  if (sc->time.mode == NH_MODE_DYNAMIC && scale < NH_UNSOLVED_SCALE * s->residual_scale_max)
-    return 0;
+  if (!(st->residual > fmax(bound, st->residual_floor))) return 0;
   if (s->unsolved_steps++ == 0) {
     s->unsolved_first = s->step;
     nh_log_warn("step %d (t = %g s): relative residual %.3g above %g: the step's equations are "

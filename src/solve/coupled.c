@@ -431,6 +431,7 @@ static void nh_coupled_residual(nh_step_work *w) {
   if (w->m) nh_rows_tissue_force(w->Jt, w->rows->lambda, w->col, w->s->n_free);
   st->residual =
       nh_dynamic_residual(w->s, w->in, w->f_ext, w->u, w->v, w->full, w->m ? w->col : NULL, w->b);
+  st->residual_floor = nh_system_residual_floor(w->s);
   st->t_assemble += nh_time_now() - t7;
 }
 

@@ -61,6 +61,7 @@ int nh_step_dynamic(nh_system *s, const nh_integrator *in, const double *f_ext, 
     }
     double t2 = nh_time_now();
     st.step.residual = nh_dynamic_residual(s, in, f_ext, u, v, dv, NULL, b);
+    st.step.residual_floor = nh_system_residual_floor(s);
     st.step.t_factor += t1 - t0;
     st.step.t_solve += t2 - t1;
     st.step.t_assemble += nh_time_now() - t2;

@@ -138,14 +138,16 @@ typedef struct {
   double t_assemble, t_factor, t_solve; /* s (t_solve excludes t_constraints) */
   double t_constraints;                 /* s: compliance W and multipliers */
   int iterations;                       /* Newton iterations (static), 1 (dynamic) */
-  double residual;     /* relative residual reached: static Newton; dynamic: of the implicit-Euler
-                          equations at the end of the step (nh_dynamic_residual) */
-  int factorised;      /* numeric factorisations of A in the step */
-  int pcg_iterations;  /* PCG iterations of the step's solves with a reused factor */
-  int corrections;     /* outer constraint corrections with a reused factor (0: exact W) */
-  int tangent_updates; /* leaves whose tangent the step's assemblies rebuilt (solve/assemble.c) */
-  int load_steps;      /* static: the equal load steps the step was solved in (1, or 2, 4, ... after
-                          a split: sim.c, nh_sim_solve_static); 1 dynamic */
+  double residual;       /* relative residual reached: static Newton; dynamic: of the implicit-Euler
+                            equations at the end of the step (nh_dynamic_residual) */
+  double residual_floor; /* dynamic: the round-off level of that residual
+                            (nh_system_residual_floor), 0 static */
+  int factorised;        /* numeric factorisations of A in the step */
+  int pcg_iterations;    /* PCG iterations of the step's solves with a reused factor */
+  int corrections;       /* outer constraint corrections with a reused factor (0: exact W) */
+  int tangent_updates;   /* leaves whose tangent the step's assemblies rebuilt (solve/assemble.c) */
+  int load_steps; /* static: the equal load steps the step was solved in (1, or 2, 4, ... after
+                     a split: sim.c, nh_sim_solve_static); 1 dynamic */
   /* s: one numeric factorisation of this step's A — the one done, or with
    * nh_integrator.time_factor one done aside (and discarded) on a step that
    * reused the factor; 0 otherwise. t_aside: the time that aside cost (copy
@@ -194,9 +196,9 @@ typedef struct {
 double nh_dynamic_residual(nh_system *sys, const nh_integrator *in, const double *f_ext,
                            const double *u, const double *v, const double *dv,
                            const double *reaction, double *b);
-/* The denominator of the last nh_dynamic_residual (N s): the size of the
- * forces the step's equations balance, 0 before any. */
-double nh_system_residual_scale(const nh_system *sys);
+/* The round-off level of the last nh_dynamic_residual, relative like it: a
+ * residual below it is as solved as the arithmetic allows (0 before any). */
+double nh_system_residual_floor(const nh_system *sys);
 
 /* One backward-Euler step with one linearisation (seed Eq. 13):
  *   A = (1 + hα) M + (hβ + h²) K,

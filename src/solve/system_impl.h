@@ -6,7 +6,7 @@
 #include <cholmod.h>
 
 struct nh_system {
-  double residual_scale;   /* the last nh_dynamic_residual's denominator (N s) */
+  double residual_floor;   /* the last nh_dynamic_residual's round-off level (relative) */
   const nh_tissue *tissue; /* borrowed; tissue->mesh is the mesh */
   int n_nodes;
   int n_free;
