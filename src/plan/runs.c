@@ -176,8 +176,11 @@ static int nh_run_here(const char *scene_path, int n_user, const char *const *us
   nh_sim *sim = NULL;
   double t0 = nh_time_now();
   int rc = nh_scene_load(scene_path, n_user + c->n_sets, all, &scene);
+  if (!rc && strlen(c->dir) >= sizeof scene->output.dir)
+    rc = NH_ERROR(NH_ERR_INPUT, "plan run folder longer than %zu bytes: %s",
+                  sizeof scene->output.dir - 1, c->dir);
   if (!rc) {
-    snprintf(scene->output.dir, sizeof scene->output.dir, "%s", c->dir);
+    memcpy(scene->output.dir, c->dir, strlen(c->dir) + 1);
     nh_sim_options opt = {.dry_run = 0, .progress = 0, .restart_dir = NULL, .overwrite = 1};
     rc = nh_sim_create(scene, &opt, &sim);
     if (!rc) rc = nh_sim_run(sim);
@@ -310,7 +313,8 @@ int nh_runs_execute(const char *scene_path, int n_user, const char *const *user,
             char last[400];
             nh_last_line(ch[i].log, last, sizeof last);
             res[i].failed = 1;
-            snprintf(res[i].message, sizeof res[i].message, "%s (%s)", last, ch[i].log);
+            /* the log's path last: a long one is cut, the reason is not */
+            snprintf(res[i].message, sizeof res[i].message, "%.400s (%.100s)", last, ch[i].log);
           } else if (failed < 0) {
             failed = i, status_failed = code;
           }
