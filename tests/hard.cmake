@@ -15,7 +15,7 @@ set_tests_properties(hard_grid_fine PROPERTIES LABELS "hard;slow")
 nh_add_py_test(hard_bevel_series hard hard.py --bevel-series)
 #   static-push: quasi-static, 2 mm per pseudo-step, mu 0.1, 10 kPa: was
 #     disabled (step 13 failed); runs on main 7260008 already (6-9 coupled
-#     Newton iterations per pseudo-step, none split), 4-8 with the tissue's
+#     Newton iterations per pseudo-step, none split), 5-8 with the tissue's
 #     consistent tangent in the coupled step (docs/interaction.md).
 nh_add_py_test(hard_static_push hard hard.py static-push)
 # Known failures (findings, not physical reasons; docs/cases.md "Hard cases"):

@@ -23,8 +23,11 @@
  * on the positions: A = K (no mass, no damping; the tools' options say
  * so too), b = f_ext − f_int, τ = in->dt = 1 so the rows' "rates" are
  * w = J δ + g (the new gaps, to first order) and λ are forces, not
- * impulses; u ← u + δ. The contact module calls it until the residual
- * vanishes (docs/interaction.md, "Quasi-static mode").
+ * impulses; u ← u + δ. With in->consistent_tangent the tissue's A is the
+ * consistent tangent's symmetric part S (nh_system_factor_symmetric falls
+ * back to R K₀ Rᵀ where S is indefinite; docs/theory.md §3 "With tools").
+ * The contact module calls it until the residual vanishes
+ * (docs/interaction.md, "Quasi-static mode").
  *
  * With in->reuse (solver.refactor: auto) the tissue block may keep an
  * earlier factorisation (reuse.c decides): its solves are then PCG with that
