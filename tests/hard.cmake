@@ -13,20 +13,11 @@ endforeach()
 nh_add_py_test(hard_grid_fine slow hard.py grid-fine)
 set_tests_properties(hard_grid_fine PROPERTIES LABELS "hard;slow")
 nh_add_py_test(hard_bevel_series hard hard.py --bevel-series)
-#   static-push: quasi-static, 2 mm per pseudo-step, mu 0.1, 10 kPa (main:
-#     step 7; with the tied set's hysteresis, docs/interaction.md
-#     "Hysteresis of the tied set": step 13). Not yet passing: every
-#     constraint solve is exact (residual <= 1e-14) and the tied set and
-#     stick/slip states settle, but the outer Newton contracts by ~0.6 per
-#     iteration (not the beam tangent: its full, unsymmetric form changes
-#     nothing, "Which tangent limits the rate") and 30 iterations of 16 load steps
-#     miss 1e-8. Kept disabled until then.
+#   static-push: quasi-static, 2 mm per pseudo-step, mu 0.1, 10 kPa: was
+#     disabled (step 13 failed); runs on main 7260008 already (6-9 coupled
+#     Newton iterations per pseudo-step, none split), 5-8 with the tissue's
+#     consistent tangent in the coupled step (docs/interaction.md).
 nh_add_py_test(hard_static_push hard hard.py static-push)
-set_tests_properties(hard_static_push PROPERTIES DISABLED TRUE)
-#   static-push up to step 12: past main's failure at step 7 (the newest
-#     channel point toggled tied/untied within the Newton iteration), which
-#     the tied set's hysteresis removes.
-nh_add_py_test(hard_static_push_12 hard hard.py static-push:12)
 # Known failures (findings, not physical reasons; docs/cases.md "Hard cases"):
 #   nu-04999-needle: 6 of 50 steps unsolved from step 6 (Newton relative
 #     residual 2.97; 45 of 50 with 5 iterations); not yet diagnosed: the

@@ -207,6 +207,10 @@ int nh_contact_step(nh_contact *c, nh_system *sys, const nh_integrator *in, cons
  * often one iteration may be solved again for it. */
 #define NH_STATIC_MISSED 0.01
 #define NH_STATIC_REDOS  4
+/* The relative residual below which an iteration takes the tissue's
+ * consistent tangent (solve/integrate.c's NH_NEWTON_CONSISTENT: from far
+ * off the corotational one does not diverge where the exact one may). */
+#define NH_STATIC_CONSISTENT 0.1
 
 /* Size of tool k's last increment (its velocities per τ = 1: translations,
  * rotations times the tool's length). */
@@ -266,10 +270,18 @@ int nh_contact_solve_static(nh_contact *c, nh_system *sys, const nh_integrator *
   nh_step_stats sum = {0};
   c->statics = 1;
   nh_tools_stop(c);
-  int rc = NH_OK, iter = 0, redos = 0, converged = 0;
+  int rc = NH_OK, iter = 0, redos = 0, converged = 0, consistent_steps = 0;
   double residual = INFINITY, tool_rel = 0.0;
   for (iter = 0; iter < in->max_iterations && !rc && !converged; iter++) {
     memcpy(u_iter, u, sizeof(double) * (size_t)n);
+    /* the tissue's consistent tangent (its symmetric part) once the residual is below
+     * NH_STATIC_CONSISTENT, as in the static Newton, but not with a skull:
+     * its rows' curvature term is not in the tangent, and without it the
+     * consistent tangent's initial-stress part leaves the brain's rigid
+     * turn on the skull unstable (docs/interaction.md, "Quasi-static
+     * mode") */
+    it.consistent_tangent = !c->skull && residual <= NH_STATIC_CONSISTENT;
+    consistent_steps += it.consistent_tangent;
     if (c->skull) {
       free(saved), saved = NULL;
       if ((rc = nh_contact_state_save(c, &saved, &saved_size))) break;
@@ -321,6 +333,10 @@ int nh_contact_solve_static(nh_contact *c, nh_system *sys, const nh_integrator *
                 !(c->solve.mcp.residual > NH_MCP_ACCEPT);
   }
   free(saved);
+  /* back to the corotational tangent, factorised at the solution (what the
+   * next step's reuse and the estimate's dual solves expect) */
+  int rc_restore = nh_system_tangent_restore(sys, &it, f_ext, u, consistent_steps > 0 && !rc, &sum);
+  if (!rc) rc = rc_restore;
   if (!rc && !converged)
     rc = NH_ERROR(NH_ERR_NUMERIC,
                   "quasi-static Newton with constraints did not converge in %d iterations "

@@ -23,8 +23,11 @@
  * on the positions: A = K (no mass, no damping; the tools' options say
  * so too), b = f_ext − f_int, τ = in->dt = 1 so the rows' "rates" are
  * w = J δ + g (the new gaps, to first order) and λ are forces, not
- * impulses; u ← u + δ. The contact module calls it until the residual
- * vanishes (docs/interaction.md, "Quasi-static mode").
+ * impulses; u ← u + δ. With in->consistent_tangent the tissue's A is the
+ * consistent tangent's symmetric part S (nh_system_factor_symmetric falls
+ * back to R K₀ Rᵀ where S is indefinite; docs/theory.md §3 "With tools").
+ * The contact module calls it until the residual vanishes
+ * (docs/interaction.md, "Quasi-static mode").
  *
  * With in->reuse (solver.refactor: auto) the tissue block may keep an
  * earlier factorisation (reuse.c decides): its solves are then PCG with that
@@ -458,6 +461,9 @@ int nh_step_coupled(nh_system *s, const nh_integrator *in, const double *f_ext, 
            "coupled step: hanging-node rows and tool rows cannot be combined");
   int rc = nh_step_work_alloc(&w);
   double t0 = nh_time_now();
+  if (w.statics) /* the tissue's tangent of this iteration: S or R K₀ Rᵀ (docs/theory.md §3) */
+    nh_system_set_tangent(s,
+                          in->consistent_tangent ? NH_TANGENT_CONSISTENT : NH_TANGENT_COROTATIONAL);
   if (!rc) {
     nh_step_begin(s, in);
     nh_step_assemble(s, in, w.statics, f_ext, u, v, w.b, &w.f_scale);
@@ -465,7 +471,7 @@ int nh_step_coupled(nh_system *s, const nh_integrator *in, const double *f_ext, 
     rc = nh_stop_check(); /* an assembly cut short */
   }
   s->rows_hint = w.m; /* what an inherited factor's W₀ would cost (reuse.c) */
-  if (!rc) rc = nh_system_factor_or_reuse(s, in, NH_FACTOR_STEP, &w.st.step);
+  if (!rc) rc = nh_system_factor_symmetric(s, in, u, NH_FACTOR_STEP, &w.st.step);
   if (!rc) rc = nh_coupled_free_solve(&w);
   if (!rc && w.m > 0) rc = nh_coupled_constraints(&w);
   if (!rc) rc = nh_coupled_update(&w);

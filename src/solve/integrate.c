@@ -120,6 +120,21 @@ static int nh_static_progress(nh_system *s, const double *u, const double *b, co
   return NH_ERROR(NH_ERR_NUMERIC, "%s", msg);
 }
 
+int nh_system_factor_symmetric(nh_system *s, const nh_integrator *in, const double *u,
+                               nh_factor_rule mode, nh_step_stats *st) {
+  int rc = nh_system_factor_or_reuse(s, in, mode, st);
+  if (rc == NH_ERR_NUMERIC && s->consistent) {
+    nh_error_clear();
+    double t0 = nh_time_now();
+    nh_system_set_tangent(s, NH_TANGENT_COROTATIONAL);
+    nh_system_assemble(s, u, NULL, 0.0, 1.0, s->work[0], NULL, in->threads);
+    nh_system_set_tangent(s, NH_TANGENT_CONSISTENT);
+    st->t_assemble += nh_time_now() - t0;
+    rc = nh_system_factor_or_reuse(s, in, mode, st);
+  }
+  return rc;
+}
+
 /* One Newton step du = K⁻¹ b with the consistent tangent K = S + N:
  * UMFPACK's LU of K without multiplier rows; with them (hanging nodes), the
  * Cholesky factor of S and the rows' multipliers, falling back to the
@@ -134,17 +149,24 @@ static int nh_static_newton_step(nh_system *s, const nh_integrator *in, const do
     st->factorised++;
     return rc;
   }
-  int rc = nh_system_factor_or_reuse(s, in, NH_FACTOR_NEWTON, st);
-  if (rc == NH_ERR_NUMERIC && s->consistent) {
-    nh_error_clear();
-    double t0 = nh_time_now();
-    nh_system_set_tangent(s, NH_TANGENT_COROTATIONAL);
-    nh_system_assemble(s, u, NULL, 0.0, 1.0, s->work[0], NULL, in->threads);
-    nh_system_set_tangent(s, NH_TANGENT_CONSISTENT);
-    st->t_assemble += nh_time_now() - t0;
-    rc = nh_system_factor_or_reuse(s, in, NH_FACTOR_NEWTON, st);
-  }
+  int rc = nh_system_factor_symmetric(s, in, u, NH_FACTOR_NEWTON, st);
   return rc ? rc : nh_step_free_solve(s, in, b, du, st);
+}
+
+int nh_system_tangent_restore(nh_system *s, const nh_integrator *in, const double *f_ext,
+                              const double *u, int refactor, nh_step_stats *st) {
+  nh_system_set_tangent(s, NH_TANGENT_COROTATIONAL);
+  free(s->skew);
+  s->skew = NULL;
+  if (!refactor) return NH_OK;
+  double t0 = nh_time_now(), f_scale;
+  nh_step_assemble(s, in, 1, f_ext, u, NULL, s->fwork[1], &f_scale);
+  double t1 = nh_time_now();
+  int rc = nh_system_factor(s);
+  st->factorised += !rc;
+  st->t_assemble += t1 - t0;
+  st->t_factor += nh_time_now() - t1;
+  return rc;
 }
 
 int nh_solve_static(nh_system *s, const nh_integrator *in, const double *f_ext, double *u,
@@ -196,18 +218,10 @@ int nh_solve_static(nh_system *s, const nh_integrator *in, const double *f_ext, 
    * the system is left with the Cholesky factor of the corotational tangent
    * at the solution, which the goal-oriented estimate's dual solves and the
    * next step's reuse use (adapt/dwr.c, reuse.c). */
-  nh_system_set_tangent(s, NH_TANGENT_COROTATIONAL);
-  free(s->skew);
-  s->skew = NULL;
-  if (lu_steps > 0 && !rc) {
-    double t0 = nh_time_now(), f_scale;
-    nh_step_assemble(s, in, 1, f_ext, u, NULL, s->fwork[1], &f_scale);
-    double t1 = nh_time_now();
-    rc = nh_system_factor(s);
-    st.factorised += !rc;
-    st.t_assemble += t1 - t0;
-    st.t_factor += nh_time_now() - t1;
-  }
+  if (!rc)
+    rc = nh_system_tangent_restore(s, in, f_ext, u, lu_steps > 0, &st);
+  else
+    nh_system_tangent_restore(s, in, f_ext, u, 0, &st);
   NH_TRY(rc);
   if (stats) {
     stats->t_assemble = st.t_assemble;

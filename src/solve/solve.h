@@ -182,6 +182,9 @@ typedef struct {
   double lazy_rotation;    /* lazy tangents' tolerance τ (solver.lazy_rotation; 0 = exact) */
   int quasi_static;        /* nh_step_coupled: one Newton iteration of the static problem with
                               constraint rows instead of a backward-Euler step (see there) */
+  int consistent_tangent;  /* quasi_static: the tissue's block is the consistent tangent's
+                              symmetric part S (Cholesky; the corotational one where S is
+                              indefinite), not R K₀ Rᵀ (docs/theory.md §3) */
 } nh_integrator;
 
 /* The relative residual of the implicit-Euler equations of the step just
@@ -397,6 +400,14 @@ typedef struct {
  * |b + J_tᵀλ| / max(|f_ext|, |f_int|, |J_tᵀλ|) at the state the iteration
  * started from (so K δ: zero at the solution), and the factor is always
  * the current one (no reuse). */
+/* After Newton iterations with the consistent tangent (nh_solve_static; the
+ * coupled quasi-static step with in->consistent_tangent): back to the
+ * corotational tangent; with `refactor`, assembled at u and factorised, the
+ * state the next step's reuse and the goal-oriented estimate's dual solves
+ * expect (one assembly and one Cholesky factorisation, added to *st). */
+int nh_system_tangent_restore(nh_system *s, const nh_integrator *in, const double *f_ext,
+                              const double *u, int refactor, nh_step_stats *st);
+
 int nh_step_coupled(nh_system *sys, const nh_integrator *in, const double *f_ext, double *u,
                     double *v, int n_tools, nh_coupled_tool *tools, nh_rows *rows, double tolerance,
                     double accept, int max_iterations, nh_coupled_stats *stats);

@@ -254,5 +254,12 @@ int nh_system_keep_skew(nh_system *s);
 /* x = (S + N)⁻¹ b by UMFPACK's LU of the full matrix (no multiplier rows);
  * *t_factor (may be NULL) receives the factorisation's time. */
 int nh_system_solve_lu(nh_system *s, const double *b, double *x, double *t_factor);
+/* Factorise or reuse (nh_system_factor_or_reuse) A as assembled; when A
+ * holds the consistent tangent's symmetric part S and S is not positive
+ * definite, the corotational tangent at u instead (assembled here; the
+ * system stays set to the consistent tangent). Used by the static Newton
+ * with hanging-node rows and the coupled quasi-static step (integrate.c). */
+int nh_system_factor_symmetric(nh_system *s, const nh_integrator *in, const double *u,
+                               nh_factor_rule mode, nh_step_stats *st);
 
 #endif
