@@ -32,13 +32,13 @@
  * Broyden with the secants of every run that has a residual (nearest b
  * first, orthogonalised so that all these secant equations hold), t ≤ 1
  * the largest fraction whose schedule changes no depth (turns, end) of b's
- * by more than the radius Δ. Δ starts at the first run's miss, halves
- * (to half the step) after a step that gained less than a quarter of what
- * the linear model predicts, or whose simulation failed (a constraint solve
- * that stalls, cells inverted: exit 1; no residual, so no secant), and
- * doubles after a good step at the radius. With the model refitted, J stays
- * near I and the step is the model's own correction; the secants learn what
- * the model misses (how a turn depth moves the later arcs' curvature).
+ * by more than the radius Δ; the candidate's schedule is b's (as it ran)
+ * moved by the model's change from its schedule at q_b to that at q. Δ starts at the first run's
+ * miss, halves (to half the step) after a step that gained less than a quarter of what the linear
+ * model predicts, or whose simulation failed (a constraint solve that stalls, cells inverted: exit
+ * 1; no residual, so no secant), and doubles after a good step at the radius. With the model
+ * refitted, J stays near I and the step is the model's own correction; the secants learn what the
+ * model misses (how a turn depth moves the later arcs' curvature).
  *
  * Clearance: c_goal = plan.clearance + tolerance. The clearance equation is
  * part of F from the first iterate on when the model's plan is decided by
@@ -473,6 +473,21 @@ static void nh_steer_print(const nh_steer_run *r, int k) {
   fflush(stdout);
 }
 
+/* The schedule of a step from the best run b: b's own schedule (as it ran)
+ * moved by the model's change from `from` (the model's schedule at b's q)
+ * to p, depth by depth: the model acts on the change only, and b's
+ * schedule, not the model's image of it, is where the step starts. */
+static void nh_steer_shift(const nh_bike_plan *b, const nh_bike_plan *from, nh_bike_plan *p) {
+  nh_bike_plan out = *b;
+  double cb = 0, cf = 0, cp = 0, prev = 0;
+  for (int j = 0; j < b->n; j++) {
+    cb += b->len[j], cf += from->len[j], cp += p->len[j];
+    double d = fmax(prev, cb + cp - cf);
+    out.len[j] = d - prev, prev = d;
+  }
+  *p = out;
+}
+
 /* The trust region's step length: the largest change of a depth (turns,
  * end) from the best run's schedule. */
 typedef struct {
@@ -492,7 +507,8 @@ static double nh_steer_length(void *ctx, const double *qb, const double *d, doub
 /* The next round's q: the trust region's Broyden step from the best run b
  * (trust.c), every run with a residual a secant. 0, or −1 when none. */
 static int nh_steer_step(const nh_steer *P, nh_trust *tr, const nh_steer_run *runs, int n_runs,
-                         int best, double *Q, double *F, int *ok, double q[NH_Q]) {
+                         int best, double *Q, double *F, int *ok, double q[NH_Q],
+                         nh_bike_plan *from) {
   const int nq = P->active ? 3 : 2;
   for (int i = 0; i < n_runs; i++) {
     memcpy(Q + NH_Q * i, runs[i].qr, sizeof runs[i].qr);
@@ -501,6 +517,7 @@ static int nh_steer_step(const nh_steer *P, nh_trust *tr, const nh_steer_run *ru
   }
   nh_steer_span span = {.P = P, .from = runs[best].realized};
   nh_steer_choose(P, runs[best].qr, &span.from, NULL); /* else the realized schedule */
+  *from = span.from;
   if (nh_trust_step(tr, nq, n_runs, Q, F, ok, best, nh_steer_length, &span, q)) return -1;
   if (!P->active) q[2] = P->c_goal;
   if (getenv("NH_PLAN_DEBUG")) {
@@ -543,7 +560,7 @@ int nh_plan_steer(const char *scene_path, int n_sets, const char *const *sets,
   nh_trust_init(&tr, INFINITY, 0, INFINITY);
   double t0 = nh_time_now(), q[NH_Q] = {P.T[0], P.T[1], P.c_goal};
   int n_runs = 0, converged = -1, best = -1, round = 0, active0 = 0;
-  nh_bike_plan plan = {0};
+  nh_bike_plan plan = {0}, from_b = {0};
   if (!rc && nh_steer_plan(&P, q, q, &plan, &active0))
     rc = NH_ERROR(NH_ERR_INPUT,
                   "%s: plan: the bicycle model (curvature %.4g 1/m) has no path with at most "
@@ -585,6 +602,11 @@ int nh_plan_steer(const char *scene_path, int n_sets, const char *const *sets,
         continue;
       }
       memcpy(r->q, qq, sizeof qq);
+      if (best >= 0 && isfinite(nh_bike_depth_change(&runs[best].plan, &from_b)) &&
+          isfinite(nh_bike_depth_change(&r->plan, &from_b))) {
+        nh_steer_shift(&runs[best].plan, &from_b, &r->plan);
+        r->delta = runs[best].delta;
+      }
       nh_candidate *c = &cand[made];
       nh_candidate_free(c);
       snprintf(c->dir, sizeof c->dir, "%s/run_%02d", out, n_runs + made + 1);
@@ -635,11 +657,26 @@ int nh_plan_steer(const char *scene_path, int n_sets, const char *const *sets,
       for (int j = 0; j < NH_BIKE_MAX_ARCS; j++) printf(" %.4g", P.frame.kappa[j]);
       printf(" 1/m, depth lag %.3g mm; trust radius %.3g mm\n", 1e3 * P.delta, 1e3 * tr.radius);
     }
-    if (nh_steer_step(&P, &tr, runs, n_runs, best, Q, F, ok, q)) {
+    if (nh_steer_step(&P, &tr, runs, n_runs, best, Q, F, ok, q, &from_b)) {
       rc = NH_ERROR(NH_ERR_NUMERIC,
                     "plan: round %d: the bicycle model has no path with at most two turns "
                     "within %.3g mm of run %d's depths",
                     round + 2, 1e3 * tr.radius, best + 1);
+      break;
+    }
+    /* a step that repeats a failed run (the radius at its floor, J = I):
+       nothing new to learn, the plan stops */
+    int again = -1;
+    for (int i = 0; i < n_runs && again < 0; i++)
+      if (runs[i].failed && fabs(runs[i].q[0] - q[0]) + fabs(runs[i].q[1] - q[1]) +
+                                    (P.active ? fabs(runs[i].q[2] - q[2]) : 0.0) <=
+                                1e-9)
+        again = i;
+    if (again >= 0) {
+      if (!o->quiet)
+        printf("plan: stopped: the trust region is at its floor (%.3g mm) and the next step "
+               "repeats run %d, which failed\n",
+               1e3 * tr.radius, again + 1);
       break;
     }
     round++;
