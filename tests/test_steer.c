@@ -283,9 +283,6 @@ static int synth_run(synth *S, const double *q1, double radius, double tol, int 
     if (!failed && S->fail_len > 0 && k > 0 && lens[k - 1] > S->fail_len) failed = 1;
     ok[k] = !failed;
     merit[k] = failed ? INFINITY : sqrt(Fk[0] * Fk[0] + Fk[1] * Fk[1] + Fk[2] * Fk[2]);
-    if (getenv("SYNTH_DEBUG"))
-      fprintf(stderr, "%s %d: merit %g radius %g best %d\n", what, k + 1, merit[k], tr.radius,
-              best + 1);
     if (!failed && merit[k] <= tol) return k + 1;
     const double merit_b = best >= 0 ? merit[best] : INFINITY;
     if (k > 0) nh_trust_judge(&tr, merit_b, merit[k]);
