@@ -23,7 +23,28 @@
  *     (x, y) plane (0.5 √2 mm) of the cylinder's side, so the label's
  *     distance differs from the cylinder's by at most that;
  *  5. the curvature fit recovers the three arcs' κ of a path made by the
- *     model with the same schedule (golden section to 1e-7 relative). */
+ *     model with the same schedule (golden section to 1e-7 relative);
+ *  6. the planner's iteration (trust.c), driven as steer.c drives it (step
+ *     from the best point, radius judged by each step's merit):
+ *     (a) on affine F(q) = A (q − q*) (A = I + E, |E_ij| <= 0.3, n = 2 and
+ *     3, no radius limit, no secant skipped) every secant equation is
+ *     exact, so once n
+ *     secants in general position are in J, J = A: point n + 2 is the root
+ *     (to 1e-9 of |F_1|; 50 random A, q*);
+ *     (b) on the bicycle model itself with each arc's true curvature off
+ *     the model's by +15, −10, +20 % (F = the true end of the model's plan
+ *     for q, minus T; depth-change radius as the planner's): F is affine up
+ *     to O(|e|/R) relative (R = 1/κ = 33 mm), so once J holds the n = 2
+ *     secants (point 4) each step multiplies the error by about |e|/R,
+ *     from a first miss e_1 = O(ε L²κ/2) ≈ 10 mm: ≈ 3 mm, 0.3 mm, 3 µm,
+ *     3e-10 m: |F| <= 1e-6 m by point n + 2 + 3 = 7, and every best merit
+ *     no larger than the one before;
+ *     (c) as (b), but a step that changes a depth by more than 2 mm "fails"
+ *     (as a run whose cells invert): after each failure the next step is at
+ *     most half as long and starts from the same best; the radius (first
+ *     |F_1|) reaches 2 mm after at most ⌈log2(|F_1| / 2 mm)⌉ + 1 failures,
+ *     the steps then cover the ≤ 2|F_1| of depth at >= 1 mm each, and (b)'s
+ *     end game follows: converged (1e-6 m) within 30 points. */
 #include "check.h"
 #include "mesh/mesh.h"
 #include "plan/plan_impl.h"
@@ -199,11 +220,137 @@ static void test_fit(void) {
   for (int j = 0; j < 3; j++) CHECK_CLOSE(k[j], kappa[j], 1e-7 * kappa[j], "fitted curvature");
 }
 
+/* The synthetic planner's problem of test 6. */
+typedef struct {
+  int kind; /* 0 affine, 1 bicycle */
+  int n;    /* unknowns */
+  double A[9], q0[3];
+  nh_bike_frame f; /* the model (bicycle) */
+  double kappa[3]; /* the true curvatures */
+  double T[2];
+  double fail_len; /* a step changing a depth by more: fails (0: never) */
+  nh_bike_plan from;
+} synth;
+
+static int synth_plan(const synth *S, const double *q, nh_bike_plan *p) {
+  nh_bike_choice c;
+  if (nh_bike_choose(&S->f, q, 0, 0, &c)) return -1;
+  *p = c.plan;
+  return 0;
+}
+
+/* F(q); −1: no plan (bicycle). */
+static int synth_F(const synth *S, const double *q, double *F) {
+  if (S->kind == 0) {
+    for (int i = 0; i < 3; i++) {
+      F[i] = 0;
+      for (int j = 0; j < S->n; j++) F[i] += S->A[3 * i + j] * (q[j] - S->q0[j]);
+    }
+    return 0;
+  }
+  nh_bike_plan p;
+  if (synth_plan(S, q, &p)) return -1;
+  double end[2];
+  nh_bike_end(&p, S->kappa, end, NULL);
+  F[0] = end[0] - S->T[0], F[1] = end[1] - S->T[1], F[2] = 0;
+  return 0;
+}
+
+static double synth_length(void *ctx, const double *qb, const double *d, double t) {
+  synth *S = ctx;
+  double q[3] = {0};
+  for (int i = 0; i < S->n; i++) q[i] = qb[i] + t * d[i];
+  if (S->kind == 0) return t * sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+  nh_bike_plan p;
+  return synth_plan(S, q, &p) ? INFINITY : nh_bike_depth_change(&p, &S->from);
+}
+
+/* Drive the iteration from q_1 as steer.c does; returns the 1-based point
+ * whose |F| <= tol first (0: not within max points). */
+static int synth_run(synth *S, const double *q1, double radius, double tol, int max,
+                     const char *what) {
+  enum { M = 40 };
+  double Q[3 * M] = {0}, F[3 * M] = {0}, merit[M], lens[M];
+  int ok[M] = {0}, best = -1, from[M];
+  nh_trust tr;
+  nh_trust_init(&tr, radius, 0, 2 * radius);
+  if (S->kind == 0) tr.skip = 1e-6; /* every secant (exact) */
+  memcpy(Q, q1, 3 * sizeof(double));
+  if (max > M) max = M;
+  for (int k = 0; k < max; k++) {
+    double *q = Q + 3 * k, *Fk = F + 3 * k;
+    int failed = synth_F(S, q, Fk) != 0;
+    if (!failed && S->fail_len > 0 && k > 0 && lens[k - 1] > S->fail_len) failed = 1;
+    ok[k] = !failed;
+    merit[k] = failed ? INFINITY : sqrt(Fk[0] * Fk[0] + Fk[1] * Fk[1] + Fk[2] * Fk[2]);
+    if (!failed && merit[k] <= tol) return k + 1;
+    const double merit_b = best >= 0 ? merit[best] : INFINITY;
+    if (k > 0) nh_trust_judge(&tr, merit_b, merit[k]);
+    if (ok[k] && (best < 0 || merit[k] < merit[best])) best = k;
+    CHECK(best >= 0, "%s: the first point failed", what);
+    if (best < 0) return 0;
+    if (k > 0 && failed) {
+      /* after a failure: from the same best, at most half as long */
+      CHECK(from[k - 1] == best, "%s: point %d failed and the best moved", what, k + 1);
+    }
+    if (S->kind == 1) synth_plan(S, Q + 3 * best, &S->from);
+    if (k + 1 >= max) break;
+    if (nh_trust_step(&tr, S->n, k + 1, Q, F, ok, best, synth_length, S, Q + 3 * (k + 1))) {
+      CHECK(0, "%s: no step from point %d", what, best + 1);
+      return 0;
+    }
+    lens[k] = tr.length, from[k] = best;
+    if (k > 0 && !ok[k] && from[k - 1] == best)
+      CHECK(lens[k] <= 0.5 * lens[k - 1] * (1 + 1e-12),
+            "%s: point %d failed at a step of %g, "
+            "the next is %g (expected at most half)",
+            what, k + 1, lens[k - 1], lens[k]);
+  }
+  return 0;
+}
+
+static void test_trust(void) {
+  srand(11);
+  for (int trial = 0; trial < 50; trial++) {
+    synth S = {.kind = 0, .n = 2 + trial % 2};
+    for (int i = 0; i < 9; i++) S.A[i] = (i % 4 == 0 ? 1.0 : 0.0) + urand(-0.3, 0.3);
+    for (int i = 0; i < 3; i++) S.q0[i] = i < S.n ? urand(-1, 1) : 0;
+    double q1[3] = {0}, F1[3];
+    for (int i = 0; i < S.n; i++) q1[i] = urand(-1, 1);
+    synth_F(&S, q1, F1);
+    const double tol = 1e-9 * sqrt(F1[0] * F1[0] + F1[1] * F1[1] + F1[2] * F1[2]);
+    int at = synth_run(&S, q1, INFINITY, tol, S.n + 2, "affine");
+    CHECK(at > 0 && at <= S.n + 2,
+          "affine F, n = %d: root expected at point %d, got %d (0: not "
+          "within %d)",
+          S.n, S.n + 2, at, S.n + 2);
+  }
+  /* (b), (c): the bicycle with the wrong curvatures */
+  synth S = {.kind = 1, .n = 2, .T = {0.1, 0.01}, .kappa = {34.5, 27, 36}};
+  for (int j = 0; j < 3; j++) S.f.kappa[j] = 30;
+  S.f.ex[0] = 1, S.f.ey[1] = 1;
+  double q1[3] = {S.T[0], S.T[1], 0}, F1[3];
+  CHECK(synth_F(&S, q1, F1) == 0, "bicycle: no plan to T");
+  CHECK(synth_plan(&S, q1, &S.from) == 0, "bicycle: no plan to T");
+  S.f.side = S.from.sign0 < 0 ? -1 : 1, S.f.turns = S.from.n - 1; /* as steer.c: one class */
+  const double m1 = hypot(F1[0], F1[1]);
+  int at = synth_run(&S, q1, m1, 1e-6, 7, "bicycle");
+  CHECK(at > 0 && at <= 7,
+        "bicycle: |F| <= 1e-6 m expected by point 7, got %d (0: not) from "
+        "|F_1| = %g m",
+        at, m1);
+  S.fail_len = 0.002;
+  at = synth_run(&S, q1, m1, 1e-6, 30, "bicycle, failures");
+  CHECK(at > 0 && at <= 30, "bicycle with failed long steps: not converged within 30 points (%d)",
+        at);
+}
+
 int main(void) {
   test_finish();
   test_choose();
   test_regions();
   test_label();
   test_fit();
+  test_trust();
   return nh_test_failures ? 1 : 0;
 }

@@ -43,6 +43,13 @@ enum { NH_BIKE_SCAN = 200 };
 #define NH_BIKE_SAMPLE 2e-4 /* m between the model path's points for the clearance */
 #define NH_PI          3.14159265358979323846
 
+double nh_bike_depth_change(const nh_bike_plan *a, const nh_bike_plan *b) {
+  if (a->n != b->n || a->sign0 != b->sign0) return INFINITY;
+  double da = 0, db = 0, m = 0;
+  for (int j = 0; j < a->n; j++) da += a->len[j], db += b->len[j], m = fmax(m, fabs(da - db));
+  return m;
+}
+
 /* Advance (x, y, θ) along an arc of signed curvature k and length l. */
 static void nh_arc(double st[3], double k, double l) {
   double t1 = st[2] + k * l;

@@ -3,8 +3,10 @@
  *
  *   plan.c      the command: target compensation of straight tools (Broyden
  *               on the aim), and the dispatch to the steering planner
- *   steer.c     the steering planner: Broyden on the kinematic plan's virtual
- *               target and clearance, κ calibrated on the first run
+ *   steer.c     the steering planner: the unknowns q (the kinematic plan's
+ *               virtual target and clearance), the model refitted to the runs
+ *   trust.c     its iteration on q: Broyden from the best run, in a trust
+ *               region on the depths' change
  *   bicycle.c   the kinematic (bicycle) model of a bevel-tip needle in its
  *               plane: arcs of curvature ±κ, the two-arc closed form, the
  *               plan of least excursion that keeps a clearance
@@ -94,6 +96,37 @@ double nh_bike_clearance(const nh_bike_frame *f, const nh_bike_plan *p);
  * [κ_j / 20, 20 κ_j]; an arc with fewer than 4 points keeps its κ, arcs
  * beyond the plan's take the last one's. */
 void nh_bike_fit(const nh_bike_plan *p, int n, const double *xy, const double *s, double *kappa);
+
+/* Largest change of a turn depth or of the final depth between two plans
+ * (m); +inf when they differ in their number of arcs or first side. */
+double nh_bike_depth_change(const nh_bike_plan *a, const nh_bike_plan *b);
+
+/* ---- trust.c: Broyden's method in a trust region (the theory at its top) ---- */
+enum { NH_TRUST_Q = 3, NH_TRUST_MAX_POINTS = 256 };
+typedef struct {
+  double radius, radius_min, radius_max; /* Δ and its bounds (the caller's length unit) */
+  double J[NH_TRUST_Q * NH_TRUST_Q];     /* the last step's Jacobian */
+  double t, length;                      /* the last step: fraction of d taken, its length */
+  double rho;                            /* the last judged step's ratio ρ */
+  double skip;                           /* secants less new than this (|u|/|s|) are skipped */
+  int pending;                           /* a step not yet judged */
+  int model_only;                        /* the next step with J = I */
+} nh_trust;
+/* The caller's length of the step q_b + t d (+inf where it has none). */
+typedef double (*nh_trust_length)(void *ctx, const double *qb, const double *d, double t);
+void nh_trust_init(nh_trust *tr, double radius, double radius_min, double radius_max);
+/* J = I updated with the secants of points q[3 i], residuals F[3 i] (ok[i]:
+ * it has one) against point `best`, nearest first (n unknowns used). */
+void nh_trust_jacobian(int n, int m, const double *q, const double *F, const int *ok, int best,
+                       double skip, double J[NH_TRUST_Q * NH_TRUST_Q]);
+/* The next point from `best`: Broyden's step, shortened to the radius;
+ * components n.. of out are q_b's. −1 when no fraction of it is short
+ * enough. */
+int nh_trust_step(nh_trust *tr, int n, int m, const double *q, const double *F, const int *ok,
+                  int best, nh_trust_length length, void *ctx, double out[NH_TRUST_Q]);
+/* Judge the last step by its point's merit (+inf: failed) against the best
+ * merit before it, and update the radius. */
+void nh_trust_judge(nh_trust *tr, double merit_best, double merit);
 
 /* ---- obstacle.c ---- */
 /* The scene's plan.obstacles (labels read from the scene's label image).

@@ -26,16 +26,19 @@
  * (puncture, compression) is taken from it; every run's q is recomputed
  * with the new model, so all runs so far are data in the same coordinates.
  *
- * Iteration: Broyden's method on F(q) = 0 from J = I, as the aim of
- * straight tools (plan.c): q ← q_b − J⁻¹ F_b from the best run b so far
- * (least |miss| + clearance deficit), J = I updated with the secants of the
- * last round's runs and the previous best against b (Broyden's update for
- * each, orthogonalised so that all these secant equations hold). With the
- * model refitted, J stays near I and the step is the model's own
- * correction; the secants learn what the model misses (how a turn depth
- * moves the later arcs' curvature). A run whose simulation fails (a
- * constraint solve that stalls: exit 1) is recorded, and the next step goes
- * half as far from b in the same direction.
+ * Iteration (trust.c): Broyden's method on F(q) = 0 from J = I, globalised
+ * by a trust region. Every step starts from the best run b so far (least
+ * |miss| + clearance deficit): q ← q_b + t d, J d = −F_b, J = I updated by
+ * Broyden with the secants of every run that has a residual (nearest b
+ * first, orthogonalised so that all these secant equations hold), t ≤ 1
+ * the largest fraction whose schedule changes no depth (turns, end) of b's
+ * by more than the radius Δ; the candidate's schedule is b's (as it ran)
+ * moved by the model's change from its schedule at q_b to that at q. Δ starts at the first run's
+ * miss, halves (to half the step) after a step that gained less than a quarter of what the linear
+ * model predicts, or whose simulation failed (a constraint solve that stalls, cells inverted: exit
+ * 1; no residual, so no secant), and doubles after a good step at the radius. With the model
+ * refitted, J stays near I and the step is the model's own correction; the secants learn what the
+ * model misses (how a turn depth moves the later arcs' curvature).
  *
  * Clearance: c_goal = plan.clearance + tolerance. The clearance equation is
  * part of F from the first iterate on when the model's plan is decided by
@@ -76,7 +79,7 @@
 
 #define NH_PI 3.14159265358979323846
 
-enum { NH_Q = 3 }; /* a_x, a_y, c* */
+enum { NH_Q = NH_TRUST_Q }; /* a_x, a_y, c* */
 
 /* One run of the plan. */
 typedef struct {
@@ -334,86 +337,30 @@ static int nh_converged(const nh_steer *P, const nh_plan_options *o, const nh_st
   return !r->failed && r->distance <= o->tolerance && r->clearance >= P->s->plan.clearance;
 }
 
-/* Solve J d = F (n x n, n <= 3) by Gaussian elimination with pivoting; −1 if singular. */
-static int nh_solve_small(int n, const double J[NH_Q * NH_Q], const double F[NH_Q],
-                          double d[NH_Q]) {
-  double A[NH_Q][NH_Q + 1];
-  for (int i = 0; i < n; i++) {
-    for (int j = 0; j < n; j++) A[i][j] = J[NH_Q * i + j];
-    A[i][n] = F[i];
+/* The schedule the kinematic planner gives q (its clearance part used when
+ * active). 0, or −1 when there is none. */
+static int nh_steer_choose(const nh_steer *P, const double q[NH_Q], nh_bike_plan *plan,
+                           int *active) {
+  nh_bike_choice c;
+  double c_star = P->active ? fmax(q[2], 0.0) : P->c_goal;
+  /* active: the plan that passes at exactly c*, else one that keeps it */
+  if (nh_bike_choose(&P->frame, q, c_star, P->active, &c) == 0 ||
+      (P->active && nh_bike_choose(&P->frame, q, c_star, 0, &c) == 0)) {
+    *plan = c.plan;
+    if (active) *active = c.active;
+    return 0;
   }
-  for (int c = 0; c < n; c++) {
-    int p = c;
-    for (int i = c + 1; i < n; i++)
-      if (fabs(A[i][c]) > fabs(A[p][c])) p = i;
-    if (!(fabs(A[p][c]) > 1e-12)) return -1;
-    for (int j = 0; j <= n; j++) {
-      double x = A[c][j];
-      A[c][j] = A[p][j], A[p][j] = x;
-    }
-    for (int i = 0; i < n; i++)
-      if (i != c) {
-        double f = A[i][c] / A[c][c];
-        for (int j = c; j <= n; j++) A[i][j] -= f * A[c][j];
-      }
-  }
-  for (int i = 0; i < n; i++) d[i] = A[i][n] / A[i][i];
-  return 0;
+  return -1;
 }
 
-static void nh_identity(double J[NH_Q * NH_Q]) {
-  memset(J, 0, sizeof(double) * NH_Q * NH_Q);
-  for (int i = 0; i < NH_Q; i++) J[NH_Q * i + i] = 1.0;
-}
-
-/* Broyden's update with the secants (qr_i − qr_b, F_i − F_b) of runs[i] for
- * i in idx[0..m), each direction orthogonalised against the earlier ones so
- * the later updates keep the earlier secant equations. */
-static void nh_secants(double J[NH_Q * NH_Q], int n, const nh_steer_run *b,
-                       const nh_steer_run *const *runs, int m) {
-  double S[NH_Q + 4][NH_Q];
-  int used = 0;
-  for (int k = 0; k < m; k++) {
-    double s[NH_Q], y[NH_Q], u[NH_Q];
-    for (int i = 0; i < n; i++) s[i] = runs[k]->qr[i] - b->qr[i], y[i] = runs[k]->F[i] - b->F[i];
-    memcpy(u, s, sizeof u);
-    for (int j = 0; j < used; j++) {
-      double su = 0, ss = 0;
-      for (int i = 0; i < n; i++) su += S[j][i] * u[i], ss += S[j][i] * S[j][i];
-      for (int i = 0; i < n; i++) u[i] -= su / ss * S[j][i];
-    }
-    double us = 0, uu = 0, sn = 0;
-    for (int i = 0; i < n; i++) us += u[i] * s[i], uu += u[i] * u[i], sn += s[i] * s[i];
-    if (!(uu > 1e-12 * sn) || !(sn > 0)) continue; /* no new direction */
-    double Js[NH_Q];
-    for (int i = 0; i < n; i++) {
-      Js[i] = 0;
-      for (int j = 0; j < n; j++) Js[i] += J[NH_Q * i + j] * s[j];
-    }
-    for (int i = 0; i < n; i++)
-      for (int j = 0; j < n; j++) J[NH_Q * i + j] += (y[i] - Js[i]) * u[j] / us;
-    memcpy(S[used++], u, sizeof u);
-    if (used == NH_Q + 4) break;
-  }
-}
-
-/* The schedule for q (its clearance part used when active); the step from
- * `from` is halved until the kinematic planner finds a plan (at most 12
- * times). 0, or −1 when none. */
+/* The schedule for q; the step from `from` is halved until the kinematic
+ * planner finds a plan (at most 12 times). 0, or −1 when none. */
 static int nh_steer_plan(const nh_steer *P, const double from[NH_Q], double q[NH_Q],
                          nh_bike_plan *plan, int *active) {
   double step[NH_Q];
   for (int i = 0; i < NH_Q; i++) step[i] = q[i] - from[i];
   for (int it = 0; it < 13; it++) {
-    nh_bike_choice c;
-    double c_star = P->active ? fmax(q[2], 0.0) : P->c_goal;
-    /* active: the plan that passes at exactly c*, else one that keeps it */
-    if (nh_bike_choose(&P->frame, q, c_star, P->active, &c) == 0 ||
-        (P->active && nh_bike_choose(&P->frame, q, c_star, 0, &c) == 0)) {
-      *plan = c.plan;
-      if (active) *active = c.active;
-      return 0;
-    }
+    if (nh_steer_choose(P, q, plan, active) == 0) return 0;
     for (int i = 0; i < NH_Q; i++) step[i] *= 0.5, q[i] = from[i] + step[i];
   }
   return -1;
@@ -526,24 +473,52 @@ static void nh_steer_print(const nh_steer_run *r, int k) {
   fflush(stdout);
 }
 
-/* The next round's q: Broyden's step from the best run b, J = I updated with
- * the secants of the last round's runs and of the previous best. */
-static void nh_steer_step(const nh_steer *P, const nh_steer_run *runs, int first, int n_runs,
-                          int best, int prev, double q[NH_Q]) {
-  const int nq = P->active ? 3 : 2;
-  double J[NH_Q * NH_Q], d[NH_Q] = {0, 0, 0};
-  nh_identity(J);
-  const nh_steer_run *sec[NH_Q + 4];
-  int m = 0;
-  for (int i = first; i < n_runs && m < NH_Q + 3; i++)
-    if (i != best && !runs[i].failed) sec[m++] = &runs[i];
-  if (prev >= 0 && prev != best && prev < first) sec[m++] = &runs[prev];
-  nh_secants(J, nq, &runs[best], sec, m);
-  if (nh_solve_small(nq, J, runs[best].F, d)) { /* singular: the fixed-point step */
-    nh_identity(J);
-    memcpy(d, runs[best].F, sizeof d);
+/* The schedule of a step from the best run b: b's own schedule (as it ran)
+ * moved by the model's change from `from` (the model's schedule at b's q)
+ * to p, depth by depth: the model acts on the change only, and b's
+ * schedule, not the model's image of it, is where the step starts. */
+static void nh_steer_shift(const nh_bike_plan *b, const nh_bike_plan *from, nh_bike_plan *p) {
+  nh_bike_plan out = *b;
+  double cb = 0, cf = 0, cp = 0, prev = 0;
+  for (int j = 0; j < b->n; j++) {
+    cb += b->len[j], cf += from->len[j], cp += p->len[j];
+    double d = fmax(prev, cb + cp - cf);
+    out.len[j] = d - prev, prev = d;
   }
-  for (int i = 0; i < NH_Q; i++) q[i] = runs[best].qr[i] - (i < nq ? d[i] : 0.0);
+  *p = out;
+}
+
+/* The trust region's step length: the largest change of a depth (turns,
+ * end) from the best run's schedule. */
+typedef struct {
+  const nh_steer *P;
+  nh_bike_plan from;
+} nh_steer_span;
+
+static double nh_steer_length(void *ctx, const double *qb, const double *d, double t) {
+  const nh_steer_span *c = ctx;
+  double q[NH_Q];
+  nh_bike_plan p;
+  for (int i = 0; i < NH_Q; i++) q[i] = qb[i] + t * d[i];
+  if (!c->P->active) q[2] = c->P->c_goal;
+  return nh_steer_choose(c->P, q, &p, NULL) ? INFINITY : nh_bike_depth_change(&p, &c->from);
+}
+
+/* The next round's q: the trust region's Broyden step from the best run b
+ * (trust.c), every run with a residual a secant. 0, or −1 when none. */
+static int nh_steer_step(const nh_steer *P, nh_trust *tr, const nh_steer_run *runs, int n_runs,
+                         int best, double *Q, double *F, int *ok, double q[NH_Q],
+                         nh_bike_plan *from) {
+  const int nq = P->active ? 3 : 2;
+  for (int i = 0; i < n_runs; i++) {
+    memcpy(Q + NH_Q * i, runs[i].qr, sizeof runs[i].qr);
+    memcpy(F + NH_Q * i, runs[i].F, sizeof runs[i].F);
+    ok[i] = !runs[i].failed;
+  }
+  nh_steer_span span = {.P = P, .from = runs[best].realized};
+  nh_steer_choose(P, runs[best].qr, &span.from, NULL); /* else the realized schedule */
+  *from = span.from;
+  if (nh_trust_step(tr, nq, n_runs, Q, F, ok, best, nh_steer_length, &span, q)) return -1;
   if (!P->active) q[2] = P->c_goal;
   if (getenv("NH_PLAN_DEBUG")) {
     for (int i = 0; i < n_runs; i++)
@@ -551,12 +526,14 @@ static void nh_steer_step(const nh_steer *P, const nh_steer_run *runs, int first
               i + 1, 1e3 * runs[i].q[0], 1e3 * runs[i].q[1], 1e3 * runs[i].q[2],
               1e3 * runs[i].qr[0], 1e3 * runs[i].qr[1], 1e3 * runs[i].qr[2], 1e3 * runs[i].F[0],
               1e3 * runs[i].F[1], 1e3 * runs[i].F[2]);
+    const double *J = tr->J;
     fprintf(stderr,
-            "  best %d, active %d, J [%.4g %.4g %.4g; %.4g %.4g %.4g; %.4g %.4g %.4g], next q "
-            "[%.6g %.6g %.6g]\n",
-            best + 1, P->active, J[0], J[1], J[2], J[3], J[4], J[5], J[6], J[7], J[8], 1e3 * q[0],
-            1e3 * q[1], 1e3 * q[2]);
+            "  best %d, active %d, J [%.4g %.4g %.4g; %.4g %.4g %.4g; %.4g %.4g %.4g], t %.3g, "
+            "step %.3g mm, radius %.3g mm, next q [%.6g %.6g %.6g]\n",
+            best + 1, P->active, J[0], J[1], J[2], J[3], J[4], J[5], J[6], J[7], J[8], tr->t,
+            1e3 * tr->length, 1e3 * tr->radius, 1e3 * q[0], 1e3 * q[1], 1e3 * q[2]);
   }
+  return 0;
 }
 
 int nh_plan_steer(const char *scene_path, int n_sets, const char *const *sets,
@@ -574,21 +551,26 @@ int nh_plan_steer(const char *scene_path, int n_sets, const char *const *sets,
   nh_steer_run *runs = nh_calloc((size_t)o->max_runs, sizeof *runs);
   nh_candidate *cand = nh_calloc((size_t)workers, sizeof *cand);
   nh_run_result *res = nh_calloc((size_t)workers, sizeof *res);
-  int rc = runs && cand && res ? NH_OK : NH_ERROR(NH_ERR_MEMORY, "out of memory: plan");
+  double *Q = nh_calloc(NH_Q * (size_t)o->max_runs, sizeof *Q),
+         *F = nh_calloc(NH_Q * (size_t)o->max_runs, sizeof *F);
+  int *ok = nh_calloc((size_t)o->max_runs, sizeof *ok);
+  int rc =
+      runs && cand && res && Q && F && ok ? NH_OK : NH_ERROR(NH_ERR_MEMORY, "out of memory: plan");
+  nh_trust tr;
+  nh_trust_init(&tr, INFINITY, 0, INFINITY);
   double t0 = nh_time_now(), q[NH_Q] = {P.T[0], P.T[1], P.c_goal};
   int n_runs = 0, converged = -1, best = -1, round = 0, active0 = 0;
-  nh_bike_plan plan;
+  nh_bike_plan plan = {0}, from_b = {0};
   if (!rc && nh_steer_plan(&P, q, q, &plan, &active0))
     rc = NH_ERROR(NH_ERR_INPUT,
                   "%s: plan: the bicycle model (curvature %.4g 1/m) has no path with at most "
                   "two turns to the target that keeps %.3g mm from the obstacles",
                   scene->targets[target].where, P.kappa0, 1e3 * P.c_goal);
   P.active = active0;
-  /* Broyden's steps stay in the first plan's homotopy class around the
-     obstacles: its first side and number of turns (a jump to another class
-     is no small step, and the secants of one class mislead in another) */
-  if (!rc && nh_obstacles_count(P.obstacles) > 0)
-    P.frame.side = plan.sign0 < 0 ? -1 : 1, P.frame.turns = plan.n - 1;
+  /* Broyden's steps stay in the first plan's homotopy class (around the
+     obstacles): its first side and number of turns (a jump to another class
+     is no small step in depth, and the secants of one class mislead in another) */
+  if (!rc) P.frame.side = plan.sign0 < 0 ? -1 : 1, P.frame.turns = plan.n - 1;
   if (!rc && !o->quiet)
     printf("plan: steering %s to %s at [%.6g, %.6g, %.6g] mm, tolerance %.3g mm, clearance %.3g "
            "mm from %d obstacle%s, curvature %.4g 1/m%s, at most %d runs on %d worker%s\n",
@@ -620,6 +602,11 @@ int nh_plan_steer(const char *scene_path, int n_sets, const char *const *sets,
         continue;
       }
       memcpy(r->q, qq, sizeof qq);
+      if (best >= 0 && isfinite(nh_bike_depth_change(&runs[best].plan, &from_b)) &&
+          isfinite(nh_bike_depth_change(&r->plan, &from_b))) {
+        nh_steer_shift(&runs[best].plan, &from_b, &r->plan);
+        r->delta = runs[best].delta;
+      }
       nh_candidate *c = &cand[made];
       nh_candidate_free(c);
       snprintf(c->dir, sizeof c->dir, "%s/run_%02d", out, n_runs + made + 1);
@@ -648,7 +635,7 @@ int nh_plan_steer(const char *scene_path, int n_sets, const char *const *sets,
         converged = i;
     if (converged >= 0) break;
     /* the best run so far; the model from it; every run's q in the new model */
-    const int prev = best;
+    const double merit_b = best >= 0 ? nh_merit(&P, &runs[best]) : INFINITY;
     for (int i = 0; i < n_runs; i++)
       if (!runs[i].failed && (best < 0 || nh_merit(&P, &runs[i]) < nh_merit(&P, &runs[best])))
         best = i;
@@ -656,19 +643,41 @@ int nh_plan_steer(const char *scene_path, int n_sets, const char *const *sets,
       rc = NH_ERROR(NH_ERR_NUMERIC, "plan: the first round's runs failed: %s", runs[0].message);
       break;
     }
+    /* the trust region: its radius from the first best run's merit (a depth
+       change of the order of the miss), then judged by each round's step */
+    if (round == 0)
+      nh_trust_init(&tr, fmax(nh_merit(&P, &runs[best]), 2 * o->tolerance), 0.5 * o->tolerance,
+                    2 * fmax(nh_merit(&P, &runs[best]), 2 * o->tolerance));
+    else
+      nh_trust_judge(&tr, merit_b, nh_merit(&P, &runs[first]));
     nh_steer_fit(&P, &runs[best]);
     for (int i = 0; i < n_runs; i++) nh_steer_residual(&P, &runs[i]);
     if (!o->quiet) {
       printf("model from run %d: curvature per arc", best + 1);
       for (int j = 0; j < NH_BIKE_MAX_ARCS; j++) printf(" %.4g", P.frame.kappa[j]);
-      printf(" 1/m, depth lag %.3g mm\n", 1e3 * P.delta);
+      printf(" 1/m, depth lag %.3g mm; trust radius %.3g mm\n", 1e3 * P.delta, 1e3 * tr.radius);
     }
-    if (runs[first].failed && best != first) {
-      /* the step's run failed: half as far from the best, in the same direction */
-      for (int i = 0; i < NH_Q; i++)
-        q[i] = runs[best].qr[i] + 0.5 * (runs[first].q[i] - runs[best].q[i]);
-    } else {
-      nh_steer_step(&P, runs, first, n_runs, best, prev, q);
+    if (nh_steer_step(&P, &tr, runs, n_runs, best, Q, F, ok, q, &from_b)) {
+      rc = NH_ERROR(NH_ERR_NUMERIC,
+                    "plan: round %d: the bicycle model has no path with at most two turns "
+                    "within %.3g mm of run %d's depths",
+                    round + 2, 1e3 * tr.radius, best + 1);
+      break;
+    }
+    /* a step that repeats a failed run (the radius at its floor, J = I):
+       nothing new to learn, the plan stops */
+    int again = -1;
+    for (int i = 0; i < n_runs && again < 0; i++)
+      if (runs[i].failed && fabs(runs[i].q[0] - q[0]) + fabs(runs[i].q[1] - q[1]) +
+                                    (P.active ? fabs(runs[i].q[2] - q[2]) : 0.0) <=
+                                1e-9)
+        again = i;
+    if (again >= 0) {
+      if (!o->quiet)
+        printf("plan: stopped: the trust region is at its floor (%.3g mm) and the next step "
+               "repeats run %d, which failed\n",
+               1e3 * tr.radius, again + 1);
+      break;
     }
     round++;
   }
@@ -693,7 +702,7 @@ int nh_plan_steer(const char *scene_path, int n_sets, const char *const *sets,
   for (int i = 0; cand && i < workers; i++) nh_candidate_free(&cand[i]);
   for (int i = 0; res && i < workers; i++) nh_run_result_free(&res[i]);
   for (int i = 0; runs && i < n_runs; i++) free(runs[i].xy), free(runs[i].s);
-  free(cand), free(res), free(runs);
+  free(cand), free(res), free(runs), free(Q), free(F), free(ok);
   nh_obstacles_destroy(&P.obstacles);
   return rc;
 }
