@@ -201,6 +201,9 @@ int nh_adapt_set_goals(nh_adapt *adapt, const nh_mesh *mesh, int n, const double
 int nh_adapt_estimate_goal(nh_adapt *adapt, nh_system *sys, const nh_rows *rows, double scale,
                            const nh_mesh *mesh, const nh_tissue *tissue, const double *u,
                            const nh_hanging *hanging, double *eta, double *eta_rel);
+/* The loads the next goal estimates' geometry term uses (dwr.c,
+ * "Geometry"); kept by pointer, NULL: the elastic part only. */
+void nh_adapt_set_geometry_loads(nh_adapt *adapt, const nh_geometry_loads *loads);
 /* |E_p| per goal of the last goal estimate (m), or NULL (none for this mesh). */
 const double *nh_adapt_goal_errors(const nh_adapt *adapt);
 /* The signed E_pk (3 per goal, m) of the last goal estimate, or NULL. */
@@ -253,6 +256,12 @@ typedef struct {
   double *eta_cell;    /* n_cells (may be NULL): the primal's SPR indicators ηₑ */
   double eta, eta_rel; /* the primal's SPR estimate (as nh_spr_estimate) */
   int n_rows;          /* constraint rows in the duals (nh_dwr_duals) */
+  /* The geometry term (dwr.c, "Geometry"), on a mesh with cut cells: in,
+   * the step's geometry-dependent loads (NULL: the elastic part only); out,
+   * geometry (may be NULL) the part of each estimate that is the geometry
+   * term, G_q (included in estimate). */
+  const nh_geometry_loads *loads;
+  double *geometry;
 } nh_dwr_result;
 
 /* Goal-oriented estimate of the displacement at n_points points[3 each]

@@ -106,6 +106,23 @@
  * Σ ω_pk E_pk: nh_dwr_estimate_combined solves one dual instead of 3 per
  * point (adapt/refine.c sets the weights from the last separate estimate).
  *
+ * Geometry (docs/theory.md §6.6, "Geometry"). The cut cells' quadrature
+ * integrates over the reconstruction Ω_d of the tissue (the Kuhn
+ * interpolant of its level set on 2^d sub-boxes per edge, d = NH_CUT_DEPTH),
+ * not over Ω: the discrete problem itself has a geometric error O(s²),
+ * s = h/2^d, which the recovered-stress product does not see. One level
+ * finer, the residual of u_h is R_{d+1}(u_h) = Σ_K r_K (R_d(u_h) = 0 at
+ * convergence), r_K the change of leaf K's residual
+ * (nh_tissue_geometry_residual: elastic force, body force on the mass,
+ * immersed tractions), so J(u_{d+1}) − J(u_d) ≈ z_hᵀ R_{d+1}(u_h) (static;
+ * the quasi-static limit of a dynamic step, z ≈ K⁻¹ j). With the error
+ * O(s²), J(u_Ω) − J(u_d) ≈ (4/3)(J(u_{d+1}) − J(u_d)):
+ *     G_q = (4/3) Σ_K z_q,Kᵀ r_K,     η_geo,K = (4/3) (Σ_k (z_pk,Kᵀ r_K)²)^½
+ * G_q is added to E_q, η_geo,K to the cell's marking indicator, so cut
+ * cells are refined where the geometry dominates (a child's sub-boxes are
+ * half its parent's). It vanishes on a box domain, with `scaled`, and in
+ * every cell whose level set is planar (the interpolant is exact there).
+ *
  * Workspace: the duals (3 per point, 3 per node each), the centre samples
  * and recovered nodal stresses of the 1 + 3 n_points fields (6 per cell or
  * node each), one value per leaf and field for the ordered sums. The cell
@@ -245,6 +262,7 @@ static int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale,
   double *cell_eps = nh_calloc((size_t)(nz ? nz : 1) * (size_t)(nl ? nl : 1), sizeof(double));
   double *cell_err2 = nh_calloc((size_t)(nl ? nl : 1), sizeof(double));
   double *cell_norm2 = nh_calloc((size_t)(nl ? nl : 1), sizeof(double));
+  double *cell_geo = NULL; /* nz per leaf: the geometry term (header "Geometry") */
   int rc = NH_OK;
   if (!z || !samples || !star || !cell_eps || !cell_err2 || !cell_norm2) {
     rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: goal-oriented estimate (%d duals, %d nodes)", nz,
@@ -281,7 +299,12 @@ static int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale,
   }
   for (int c = 0; c < m->n_cells && out->indicator; c++)
     for (int p = 0; p < ng; p++) out->indicator[(size_t)m->n_cells * p + c] = 0.0;
-  int bad_cell = -1;
+  int bad_cell = -1, geo_rc = 0;
+  cell_geo = t->n_cut ? nh_calloc((size_t)nz * (size_t)(nl ? nl : 1), sizeof(double)) : NULL;
+  if (t->n_cut && !cell_geo) {
+    rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: the goal estimate's geometry term");
+    goto done;
+  }
 #pragma omp parallel for schedule(static) if (nl >= NH_DWR_PARALLEL_MIN)
   for (int l = 0; l < nl; l++) {
     int c = m->leaves[l];
@@ -319,8 +342,21 @@ static int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale,
     }
     cell_err2[l] = m->fill[c] * e2;
     cell_norm2[l] = m->fill[c] * n2;
+    double rg[24];
+    int cut = cell_geo ? nh_tissue_geometry_residual(t, c, u, out->loads, rg) : 0;
+    if (cut < 0) {
+#pragma omp atomic write
+      geo_rc = -cut;
+      cut = 0;
+    }
+    for (int q = 0; q < nz && cut; q++) {
+      double s = 0.0;
+      for (int a = 0; a < 8; a++)
+        for (int k = 0; k < 3; k++) s += z[n3 * q + 3 * (size_t)corner[a] + k] * rg[3 * a + k];
+      cell_geo[(size_t)nz * l + q] = 4.0 / 3.0 * s;
+    }
     for (int p = 0; p < ng; p++) {
-      double zn2 = 0.0;
+      double zn2 = 0.0, gn2 = 0.0;
       for (int k = 0; k < group; k++) {
         int q = group * p + k;
         double dz[24], eps = 0.0, ezz = 0.0;
@@ -347,22 +383,35 @@ static int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale,
         }
         cell_eps[(size_t)nz * l + q] = m->fill[c] * eps;
         zn2 += m->fill[c] * ezz;
+        if (cut) gn2 += cell_geo[(size_t)nz * l + q] * cell_geo[(size_t)nz * l + q];
       }
       if (out->indicator)
-        out->indicator[(size_t)m->n_cells * p + c] = sqrt(fmax(cell_err2[l], 0.0) * fmax(zn2, 0.0));
+        out->indicator[(size_t)m->n_cells * p + c] =
+            sqrt(fmax(cell_err2[l], 0.0) * fmax(zn2, 0.0)) + sqrt(gn2);
     }
+  }
+  if (geo_rc) {
+    rc = NH_ERROR(geo_rc, "goal estimate: the geometry term's cut-cell quadrature failed");
+    goto done;
   }
   if (bad_cell >= 0) {
     rc = NH_ERROR(NH_ERR_INTERNAL, "goal estimate: leaf %d has a non-positive Jacobian", bad_cell);
     goto done;
   }
   double sum_err = 0.0, sum_norm = 0.0;
-  for (int q = 0; q < nz; q++) out->estimate[q] = 0.0;
+  for (int q = 0; q < nz; q++) {
+    out->estimate[q] = 0.0;
+    if (out->geometry) out->geometry[q] = 0.0;
+  }
   for (int l = 0; l < nl; l++) {
     sum_err += cell_err2[l];
     sum_norm += cell_norm2[l];
     if (out->eta_cell) out->eta_cell[m->leaves[l]] = sqrt(fmax(cell_err2[l], 0.0));
-    for (int q = 0; q < nz; q++) out->estimate[q] += cell_eps[(size_t)nz * l + q];
+    for (int q = 0; q < nz; q++) {
+      double g = cell_geo ? cell_geo[(size_t)nz * l + q] : 0.0;
+      out->estimate[q] += cell_eps[(size_t)nz * l + q] + g;
+      if (out->geometry) out->geometry[q] += g;
+    }
   }
   for (int q = 0; q < nz; q++)
     if (!isfinite(out->estimate[q])) {
@@ -380,6 +429,7 @@ static int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale,
 
 done:
   free(z), free(samples), free(star), free(cell_eps), free(cell_err2), free(cell_norm2);
+  free(cell_geo);
   return rc;
 }
 

@@ -47,19 +47,20 @@ struct nh_adapt {
   double *eta_cell; /* per cell id, valid when have_eta */
   int cap_eta, have_eta;
   /* goal-oriented estimation (estimator goal) */
-  int goal, grade;     /* estimator goal; refinement closed by the 2:1 rule */
-  double tolerance;    /* m (0: none) */
-  double coarsen;      /* fraction of the marking threshold (0: none) */
-  int n_goals;         /* goal points */
-  double *goal_points; /* 3 per goal */
-  double radius;       /* half-width of the averaging box */
-  double *goal_error;  /* per goal: |E_p| of the last estimate, valid when have_eta */
-  double *goal_est;    /* per goal: the signed E_pk (3), valid when have_eta */
-  double *goal_ind;    /* n_goals x cap_eta */
-  double *eta_all;     /* per cell: Σ over every goal (coarsening: a goal below tolerance still
-                          needs its cells) */
-  int n_active;        /* goals above tolerance at the last estimate */
-  nh_adapt_stop stop;  /* what ended the last refinement */
+  int goal, grade;                /* estimator goal; refinement closed by the 2:1 rule */
+  double tolerance;               /* m (0: none) */
+  const nh_geometry_loads *loads; /* the geometry term's loads (may be NULL) */
+  double coarsen;                 /* fraction of the marking threshold (0: none) */
+  int n_goals;                    /* goal points */
+  double *goal_points;            /* 3 per goal */
+  double radius;                  /* half-width of the averaging box */
+  double *goal_error;             /* per goal: |E_p| of the last estimate, valid when have_eta */
+  double *goal_est;               /* per goal: the signed E_pk (3), valid when have_eta */
+  double *goal_ind;               /* n_goals x cap_eta */
+  double *eta_all;    /* per cell: Σ over every goal (coarsening: a goal below tolerance still
+                         needs its cells) */
+  int n_active;       /* goals above tolerance at the last estimate */
+  nh_adapt_stop stop; /* what ended the last refinement */
   /* the nodal transfer of the last mesh change (the fields' Eq. 17 and
    * injection as a map), valid when have_transfer */
   nh_node_transfer transfer;
@@ -145,6 +146,10 @@ int nh_adapt_set_goals(nh_adapt *a, const nh_mesh *m, int n, const double *point
   return NH_OK;
 }
 
+void nh_adapt_set_geometry_loads(nh_adapt *a, const nh_geometry_loads *loads) {
+  a->loads = loads;
+}
+
 int nh_adapt_estimate_goal(nh_adapt *a, nh_system *sys, const nh_rows *rows, double scale,
                            const nh_mesh *m, const nh_tissue *tissue, const double *u,
                            const nh_hanging *hanging, double *eta, double *eta_rel) {
@@ -158,7 +163,8 @@ int nh_adapt_estimate_goal(nh_adapt *a, nh_system *sys, const nh_rows *rows, dou
   }
   a->have_eta = 0; /* until this estimate is complete */
   const int combined = a->have_weights && a->since_separate + 1 < a->separate_every;
-  nh_dwr_result r = {.estimate = a->goal_est, .norm = a->goal_error, .indicator = a->goal_ind};
+  nh_dwr_result r = {
+      .estimate = a->goal_est, .norm = a->goal_error, .indicator = a->goal_ind, .loads = a->loads};
   if (!combined) {
     NH_TRY(nh_dwr_estimate(sys, rows, scale, m, tissue, hanging, u, a->n_goals, a->goal_points,
                            a->radius, NULL, &r));

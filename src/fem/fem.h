@@ -314,6 +314,30 @@ void nh_tissue_gauss_stress(const nh_tissue *tissue, int c, const double *u, con
 /* Centre stress of leaf c: nh_tissue_gauss_stress at ξ = 0. */
 void nh_tissue_cell_stress(const nh_tissue *tissue, int c, const double *u, double s[6]);
 
+/* ---- the geometry term of the goal estimate (docs/theory.md §6.6, "Geometry") ----
+ * The loads of a step that depend on the immersed geometry: the body force
+ * per unit mass (gravity by its schedule, less the buoyed part), the share
+ * of each node's mass it acts on (drained / mass with buoyancy; NULL: 1),
+ * and the tractions with their schedule factors. */
+typedef struct nh_geometry_loads {
+  double body[3];
+  const double *body_share;
+  int n_tractions;
+  const nh_traction *tractions;
+  const double *traction_factor;
+} nh_geometry_loads;
+/* The change of leaf c's residual when its cut-cell quadrature goes from
+ * depth NH_CUT_DEPTH to NH_CUT_DEPTH + 1 (one lattice finer):
+ *     r = (f_ext' − f_ext) − (f_int'(u) − f_int(u))      (primes: depth + 1)
+ * over the leaf's 8 nodes (r[24]): the elastic force (K0, B-bar's mean
+ * gradients and volume, the centroid's frame), the body force on its mass
+ * and the immersed tractions (loads may be NULL: elastic part only). Ties
+ * and drainage planes are not re-integrated. Returns 1 for a cut leaf, 0
+ * (r zero) otherwise (a box domain, `scaled`, whole or not a box cell), or
+ * a negative NH_ERR_* code. */
+int nh_tissue_geometry_residual(const nh_tissue *tissue, int c, const double *u,
+                                const nh_geometry_loads *loads, double r[24]);
+
 /* ---- surface tractions (traction.c; docs/theory.md "Surface tractions") ----
  * Consistent nodal forces of the traction tr at schedule factor 1: adds
  * ∫_Γ N_a t dA to f[3 n] over the tissue's boundary Γ inside tr's region
@@ -322,5 +346,10 @@ void nh_tissue_cell_stress(const nh_tissue *tissue, int c, const double *u, doub
  * the area of Γ it integrated over. NH_ERR_INPUT (at tr->where) if the region
  * holds no boundary. */
 int nh_traction_load(const nh_mesh *mesh, const nh_traction *tr, double *f, double *area);
+/* The immersed-surface part of that load in leaf c alone, on the
+ * sub-lattice of 2^depth per cell edge (depth <= NH_CUT_DEPTH + 1), as an
+ * element vector fe[24]; returns the area (0 on a box domain). */
+double nh_traction_cell(const nh_mesh *mesh, int c, const nh_traction *tr, int depth,
+                        double fe[24]);
 
 #endif

@@ -667,3 +667,51 @@ int nh_tissue_tissue_points(const nh_tissue *t, int c, double xi[3]) {
   memcpy(xi, cut->xi, 3 * sizeof(double));
   return 1;
 }
+
+/* Leaf c's elastic force at u with the cut data e (the corotational
+ * element of nh_tissue_element_force, without the tie). */
+static void nh_cut_force(const nh_tissue *t, int c, const nh_tissue_cut *e, const double *u,
+                         double f[24]) {
+  const nh_mesh *m = t->mesh;
+  double Xe[24], ue[24], frame[NH_HEX_FRAME];
+  nh_mesh_cell_coords(m, m->X, c, Xe);
+  nh_mesh_cell_coords(m, u, c, ue);
+  nh_hex_volumetric vol = {e->Gbar, e->lambda + 2.0 * e->mu / 3.0, e->volume};
+  const int bbar = t->material.formulation == NH_FORMULATION_BBAR;
+  nh_hex_corot_force(Xe, ue, e->K0, e->G0, bbar ? &vol : NULL, frame, f);
+}
+
+int nh_tissue_geometry_residual(const nh_tissue *t, int c, const double *u,
+                                const nh_geometry_loads *loads, double r[24]) {
+  const nh_mesh *m = t->mesh;
+  const nh_tissue_cut *cut = nh_tissue_cell_cut(t, c);
+  memset(r, 0, 24 * sizeof(double));
+  if (!cut) return 0;
+  double Xe[24], lo[3], hi[3], w[27], f0[24], f1[24];
+  nh_cut_moments mom;
+  nh_tissue_cut fine;
+  nh_mesh_cell_coords(m, m->X, c, Xe);
+  nh_hex_is_box(Xe, lo, hi);
+  int rc = nh_cut_domain_cell_at(&m->domain, NH_CUT_DEPTH + 1, lo, hi, NULL, NULL, &mom, w);
+  if (!rc) rc = nh_cut_data(t, c, Xe, &mom, w, &fine);
+  if (rc) return -rc;
+  nh_cut_force(t, c, cut, u, f0);
+  nh_cut_force(t, c, &fine, u, f1);
+  for (int i = 0; i < 24; i++) r[i] = f0[i] - f1[i];
+  if (!loads) return 1;
+  double rho;
+  nh_tissue_cell_material(t, c, NULL, NULL, &rho);
+  for (int a = 0; a < 8; a++) {
+    const double share = loads->body_share ? loads->body_share[m->cells[8 * c + a]] : 1.0;
+    const double dm = rho * share * (fine.corner[a] - cut->corner[a]);
+    for (int k = 0; k < 3; k++) r[3 * a + k] += dm * loads->body[k];
+  }
+  for (int q = 0; q < loads->n_tractions; q++) {
+    const double factor = loads->traction_factor ? loads->traction_factor[q] : 1.0;
+    if (factor == 0.0) continue;
+    nh_traction_cell(m, c, loads->tractions + q, NH_CUT_DEPTH, f0);
+    nh_traction_cell(m, c, loads->tractions + q, NH_CUT_DEPTH + 1, f1);
+    for (int i = 0; i < 24; i++) r[i] += factor * (f1[i] - f0[i]);
+  }
+  return 1;
+}

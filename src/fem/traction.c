@@ -32,14 +32,17 @@
 #include <math.h>
 #include <string.h>
 
-/* Sub-cubes per axis of a leaf for the immersed surface. */
-#define NH_TRACTION_SUB (1 << NH_CUT_DEPTH)
+/* Sub-cubes per axis of a leaf for the immersed surface: the mesh's, and
+ * at most the geometry term's one level finer (nh_traction_cell). */
+#define NH_TRACTION_SUB     (1 << NH_CUT_DEPTH)
+#define NH_TRACTION_SUB_MAX (2 * NH_TRACTION_SUB)
 
-/* Add w t to the 8 nodes of cell c with shape values N (one quadrature point). */
+/* Add w t to the 8 nodes of cell c with shape values N (one quadrature
+ * point); c < 0: to the element vector f[24]. */
 static void nh_traction_add(const nh_mesh *m, int c, const double N[8], double w, const double t[3],
                             double *f) {
   for (int a = 0; a < 8; a++)
-    for (int k = 0; k < 3; k++) f[3 * m->cells[8 * c + a] + k] += w * N[a] * t[k];
+    for (int k = 0; k < 3; k++) f[3 * (c < 0 ? a : m->cells[8 * c + a]) + k] += w * N[a] * t[k];
 }
 
 static void nh_traction_vector(const nh_traction *tr, const double n[3], double t[3]) {
@@ -165,14 +168,12 @@ static double nh_traction_triangle(const nh_mesh *m, int c, double p[3][3], doub
 
 /* Immersed domain: the surface F = 0 in leaf c inside the region. */
 static double nh_traction_immersed_cell(const nh_mesh *m, int c, const double Xe[24],
-                                        const nh_traction *tr, double *f) {
-  const int n = NH_TRACTION_SUB;
+                                        const nh_traction *tr, int n, double *f) {
   /* the Kuhn split of a cube (VTK corner order) into six tetrahedra around 0–6 */
   static const int tets[6][4] = {{0, 1, 2, 6}, {0, 2, 3, 6}, {0, 3, 7, 6},
                                  {0, 7, 4, 6}, {0, 4, 5, 6}, {0, 5, 1, 6}};
-  double xi[(NH_TRACTION_SUB + 1) * (NH_TRACTION_SUB + 1) * (NH_TRACTION_SUB + 1)][3];
-  double x[(NH_TRACTION_SUB + 1) * (NH_TRACTION_SUB + 1) * (NH_TRACTION_SUB + 1)][3];
-  double F[(NH_TRACTION_SUB + 1) * (NH_TRACTION_SUB + 1) * (NH_TRACTION_SUB + 1)];
+  enum { NV = (NH_TRACTION_SUB_MAX + 1) * (NH_TRACTION_SUB_MAX + 1) * (NH_TRACTION_SUB_MAX + 1) };
+  double xi[NV][3], x[NV][3], F[NV];
   int neg = 0, pos = 0;
   for (int k = 0; k <= n; k++)
     for (int j = 0; j <= n; j++)
@@ -289,11 +290,20 @@ int nh_traction_load(const nh_mesh *m, const nh_traction *tr, double *f, double 
   for (int l = 0; l < m->n_leaves; l++) {
     int c = m->leaves[l];
     nh_mesh_cell_coords(m, m->X, c, Xe);
-    total += immersed ? nh_traction_immersed_cell(m, c, Xe, tr, f)
+    total += immersed ? nh_traction_immersed_cell(m, c, Xe, tr, NH_TRACTION_SUB, f)
                       : nh_traction_box_cell(m, c, Xe, tr, f);
   }
   if (area) *area = total;
   NH_CHECK(total > 0.0, NH_ERR_INPUT, "%s: the region contains no part of the tissue's boundary",
            tr->where);
   return NH_OK;
+}
+
+double nh_traction_cell(const nh_mesh *m, int c, const nh_traction *tr, int depth, double fe[24]) {
+  double Xe[24];
+  memset(fe, 0, 24 * sizeof(double));
+  if (m->domain.kind == NH_DOMAIN_BOX || depth < 0 || (1 << depth) > NH_TRACTION_SUB_MAX)
+    return 0.0;
+  nh_mesh_cell_coords(m, m->X, c, Xe);
+  return nh_traction_immersed_cell(m, -1 - c, Xe, tr, 1 << depth, fe);
 }

@@ -691,8 +691,14 @@ void nh_cut_surface_free(nh_cut_surface *surface) {
 int nh_cut_domain_cell(const nh_domain *domain, const double lo[3], const double hi[3],
                        const nh_region *region, const double *plane, nh_cut_moments *moments,
                        double w[27]) {
+  return nh_cut_domain_cell_at(domain, NH_CUT_DEPTH, lo, hi, region, plane, moments, w);
+}
+
+int nh_cut_domain_cell_at(const nh_domain *domain, int depth, const double lo[3],
+                          const double hi[3], const nh_region *region, const double *plane,
+                          nh_cut_moments *moments, double w[27]) {
   nh_cut_spec spec;
-  nh_cut_spec_domain(&spec, domain, NH_CUT_DEPTH);
+  nh_cut_spec_domain(&spec, domain, depth);
   spec.region = region;
   spec.plane = plane;
   NH_TRY(nh_cut_cell(&spec, lo, hi, moments, NULL, 0u));

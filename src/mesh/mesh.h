@@ -313,6 +313,11 @@ void nh_cut_surface_free(nh_cut_surface *surface);
 int nh_cut_domain_cell(const nh_domain *domain, const double lo[3], const double hi[3],
                        const nh_region *region, const double *plane, nh_cut_moments *moments,
                        double w[27]);
+/* The same on the lattice of the given depth (the goal estimate's geometry
+ * term compares NH_CUT_DEPTH with NH_CUT_DEPTH + 1, adapt/dwr.c). */
+int nh_cut_domain_cell_at(const nh_domain *domain, int depth, const double lo[3],
+                          const double hi[3], const nh_region *region, const double *plane,
+                          nh_cut_moments *moments, double w[27]);
 /* From fitted weights w: N[a] = Σ_q w_q N_a(ξ_q) = ∫ N_a dV and (NN may be
  * NULL) NN[8a + b] = ∫ N_a N_b dV over the part (exact: Q2 integrands). */
 void nh_cut_shape_integrals(const double w[27], double N[8], double NN[64]);

@@ -619,8 +619,26 @@ static int nh_sim_estimate(nh_sim *s) {
     return nh_adapt_estimate(s->adapt, s->mesh, s->tissue, s->u, s->hanging, &s->eta, &s->eta_rel);
   const double h = sc->time.step;
   double scale = sc->time.mode == NH_MODE_STATIC ? 1.0 : h * sc->tissue.damping_stiffness + h * h;
-  return nh_adapt_estimate_goal(s->adapt, s->system, nh_contact_rows(s->contact), scale, s->mesh,
-                                s->tissue, s->u, s->hanging, &s->eta, &s->eta_rel);
+  /* the geometry term's loads at this step (docs/theory.md §6.6, "Geometry") */
+  const int nt = sc->tissue.n_tractions, nn = s->mesh->n_nodes;
+  nh_geometry_loads loads = {.n_tractions = nt, .tractions = sc->tissue.tractions};
+  nh_scene_tissue_gravity(sc, s->time, loads.body);
+  double *buf = nh_calloc((size_t)nt + (sc->tissue.buoyant ? (size_t)nn : 0) + 1, sizeof(double));
+  if (!buf) return NH_ERROR(NH_ERR_MEMORY, "out of memory: goal estimate loads");
+  for (int q = 0; q < nt; q++)
+    buf[q] = nh_schedule_eval(&sc->tissue.tractions[q].schedule, s->time);
+  loads.traction_factor = buf;
+  if (sc->tissue.buoyant) { /* the drained share of each node's mass */
+    for (int i = 0; i < nn; i++)
+      buf[nt + i] = s->tissue->mass[i] > 0.0 ? s->drained[i] / s->tissue->mass[i] : 0.0;
+    loads.body_share = buf + nt;
+  }
+  nh_adapt_set_geometry_loads(s->adapt, &loads);
+  int rc = nh_adapt_estimate_goal(s->adapt, s->system, nh_contact_rows(s->contact), scale, s->mesh,
+                                  s->tissue, s->u, s->hanging, &s->eta, &s->eta_rel);
+  nh_adapt_set_geometry_loads(s->adapt, NULL);
+  free(buf);
+  return rc;
 }
 
 /* Static mode: a step that does not converge is solved again from its

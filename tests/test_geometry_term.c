@@ -1,0 +1,348 @@
+/* test_geometry_term — the geometry term of the goal estimate
+ * (nh_tissue_geometry_residual, adapt/dwr.c "Geometry", docs/theory.md
+ * §6.6): the change r_K of a cut cell's residual when its quadrature goes
+ * from depth NH_CUT_DEPTH to NH_CUT_DEPTH + 1.
+ *  1. It vanishes where the geometry is represented exactly: on a box
+ *     domain (no cut cells: r = 0 on every leaf, return 0) and with
+ *     tissue.cut_cells: scaled.
+ *  2. A tilted cube (an STL, 12 triangles, rotated about a non-axis
+ *     direction, off the grid's centre): in every cut cell whose level set
+ *     is one plane at all the lattice points of depth NH_CUT_DEPTH + 1
+ *     (the interpolants of both depths are that plane: the reconstruction
+ *     is exact), |r_K| <= 1e-10 × the cell's |f_int| + |f_ext| at a smooth
+ *     nonlinear field u with gravity and a pressure (round-off).
+ *  3. A ball (analytic, centre off the grid's centre), linear fields
+ *     u = ε₁ (X − c) and z = ε₂ A (X − c): the elastic term is
+ *     Σ_K z_Kᵀ r_K = −ΔV ε(z):D:ε(u), ΔV = V_{d+1} − V_d the
+ *     reconstructions' volume change (the stiffness is exact for Q2 on each
+ *     reconstruction, D:ε(u) uniform; u is a pure dilatation, carried by
+ *     B-bar's κ V_t θ̄, which the stabilisation does not scale by 1 − α),
+ *     to 1e-6 relative (the corotational and det F̄ nonlinearity: ε₁); ΔV ≥ 0 and below
+ *     the bound of V − V_d (F convex: I_d F ≥ I_{d+1} F ≥ F), 4πR² 3s²/
+ *     (2 (R − √3 s)), s = h/2^d; and it decreases at the quadrature's
+ *     order 2: the observed order over 6³ … 24³ within [1.7, 2.5].
+ *  4. The same ball with α = 0 under a pressure p and the linear field
+ *     u = −p (X − c)/(3K), for which both depths' discrete problems are in
+ *     equilibrium (the immersed patch test): the assembled Σ_K r_K is
+ *     round-off (1e-9 of Σ_K |r_K|) although each r_K is not: the
+ *     geometry term sees no error where the geometry does not change the
+ *     solution.
+ * Argument: a scratch folder for the STL. NH_VERBOSE=1 prints numbers. */
+#include "check.h"
+#include "fem/fem.h"
+#include "mesh/mesh.h"
+
+#include <string.h>
+
+static int verbose;
+
+static double norm24(const double *r) {
+  double s = 0.0;
+  for (int i = 0; i < 24; i++) s += r[i] * r[i];
+  return sqrt(s);
+}
+
+/* ---- 1. box domain, scaled ---- */
+static void test_exact_domains(void) {
+  nh_domain box, ball;
+  const double lo[3] = {0, 0, 0}, hi[3] = {0.03, 0.02, 0.01}, c0[3] = {0.0013, -0.0021, 0.0007};
+  nh_domain_box(lo, hi, &box);
+  box.cut_cells = NH_CUT_CELLS_INTEGRATED;
+  nh_domain_sphere(c0, 0.03, &ball); /* cut_cells: scaled (the default) */
+  const nh_domain *ds[2] = {&box, &ball};
+  for (int i = 0; i < 2; i++) {
+    nh_mesh *m = NULL;
+    nh_tissue *t = NULL;
+    const int grid[3] = {5, 4, 3};
+    CHECK_OK(nh_mesh_create(ds[i], grid, &m));
+    nh_material mat = {3000.0, 0.45, 1000.0, NH_FORMULATION_BBAR};
+    CHECK_OK(nh_tissue_create(m, &mat, &t));
+    double *u = calloc(3 * (size_t)m->n_nodes, sizeof(double)), r[24];
+    for (int n = 0; n < 3 * m->n_nodes; n++) u[n] = 1e-4 * sin(1.7 * n);
+    nh_geometry_loads loads = {{0, 0, -9.81}, NULL, 0, NULL, NULL};
+    for (int l = 0; l < m->n_leaves; l++) {
+      int cut = nh_tissue_geometry_residual(t, m->leaves[l], u, &loads, r);
+      CHECK(cut == 0 && norm24(r) == 0.0, "%s: leaf %d: returned %d, |r| %g, expected 0, 0",
+            i ? "scaled ball" : "box", m->leaves[l], cut, norm24(r));
+    }
+    free(u);
+    nh_tissue_destroy(&t);
+    nh_mesh_destroy(&m);
+  }
+  nh_domain_release(&ball);
+}
+
+/* ---- 2. a tilted cube: planar cells ---- */
+static double Q[3][3]; /* rotation: cube frame -> world */
+static const double cc[3] = {0.0021, -0.0013, 0.0009}, half = 0.015;
+
+static void rotation(void) {
+  const double ax[3] = {1 / sqrt(14.0), 2 / sqrt(14.0), 3 / sqrt(14.0)}, th = 0.5;
+  const double cs = cos(th), sn = sin(th);
+  for (int i = 0; i < 3; i++)
+    for (int j = 0; j < 3; j++) {
+      double e = (i == j) * cs + (1 - cs) * ax[i] * ax[j];
+      int k = 3 - i - j;
+      if (i != j) e += ((j == (i + 1) % 3) ? -1 : 1) * sn * ax[k];
+      Q[i][j] = e;
+    }
+}
+
+static void cube_point(const double p[3], double x[3]) {
+  for (int i = 0; i < 3; i++) {
+    x[i] = cc[i];
+    for (int j = 0; j < 3; j++) x[i] += Q[i][j] * p[j];
+  }
+}
+
+static int write_cube(const char *path) {
+  FILE *f = fopen(path, "w");
+  if (!f) return 1;
+  fprintf(f, "solid cube\n");
+  for (int ax = 0; ax < 3; ax++)
+    for (int side = -1; side <= 1; side += 2) {
+      int a1 = (ax + 1) % 3, a2 = (ax + 2) % 3;
+      double q[4][3];
+      const double s[4][2] = {{-1, -1}, {1, -1}, {1, 1}, {-1, 1}};
+      for (int v = 0; v < 4; v++) {
+        double p[3];
+        p[ax] = side * half, p[a1] = s[v][0] * half, p[a2] = s[v][1] * half;
+        cube_point(p, q[v]);
+      }
+      /* outward: (q1 − q0) × (q2 − q0) along side × axis ax, else reversed */
+      double e1[3], e2[3], nrm = 0.0;
+      for (int k = 0; k < 3; k++) e1[k] = q[1][k] - q[0][k], e2[k] = q[2][k] - q[0][k];
+      for (int k = 0; k < 3; k++)
+        nrm += (e1[(k + 1) % 3] * e2[(k + 2) % 3] - e1[(k + 2) % 3] * e2[(k + 1) % 3]) * Q[k][ax];
+      const int flip = nrm * side < 0.0;
+      const int tri[2][3] = {{0, flip ? 2 : 1, flip ? 1 : 2}, {0, flip ? 3 : 2, flip ? 2 : 3}};
+      for (int t = 0; t < 2; t++) {
+        fprintf(f, "facet normal 0 0 0\n outer loop\n");
+        for (int v = 0; v < 3; v++)
+          fprintf(f, "  vertex %.17g %.17g %.17g\n", 1e3 * q[tri[t][v]][0], 1e3 * q[tri[t][v]][1],
+                  1e3 * q[tri[t][v]][2]);
+        fprintf(f, " endloop\nendfacet\n");
+      }
+    }
+  fprintf(f, "endsolid cube\n");
+  return fclose(f) != 0;
+}
+
+/* The signed distance to face (ax, side)'s plane at x. */
+static double face_plane(int ax, int side, const double x[3]) {
+  double d = 0.0;
+  for (int i = 0; i < 3; i++) d += Q[i][ax] * (x[i] - cc[i]);
+  return side * d - half;
+}
+
+static void test_planar(const char *dir) {
+  rotation();
+  char stl[1024];
+  snprintf(stl, sizeof stl, "%s/geometry_term_cube.stl", dir);
+  CHECK(write_cube(stl) == 0, "cannot write %s", stl);
+  nh_domain d;
+  memset(&d, 0, sizeof d);
+  d.kind = NH_DOMAIN_SURFACE;
+  CHECK_OK(nh_surface_read(stl, 1e-3, 0, NULL, &d.surface));
+  for (int k = 0; k < 3; k++) {
+    d.min[k] = d.surface->min[k], d.max[k] = d.surface->max[k];
+    d.center[k] = 0.5 * (d.min[k] + d.max[k]), d.half[k] = 0.5 * (d.max[k] - d.min[k]);
+  }
+  d.cap = 0.0; /* the untruncated distance: planar within a cell near one face */
+  d.cut_cells = NH_CUT_CELLS_INTEGRATED;
+  nh_mesh *m = NULL;
+  nh_tissue *t = NULL;
+  const int grid[3] = {9, 8, 7};
+  CHECK_OK(nh_mesh_create(&d, grid, &m));
+  nh_material mat = {3000.0, 0.45, 1000.0, NH_FORMULATION_BBAR};
+  CHECK_OK(nh_tissue_create(m, &mat, &t));
+  double *u = calloc(3 * (size_t)m->n_nodes, sizeof(double));
+  for (int i = 0; i < m->n_nodes; i++)
+    for (int k = 0; k < 3; k++) {
+      const double *X = m->X + 3 * i;
+      u[3 * i + k] = 1e-3 * sin(90 * X[k] + 40 * X[(k + 1) % 3]) * (1 + 30 * X[(k + 2) % 3]);
+    }
+  nh_traction tr;
+  memset(&tr, 0, sizeof tr);
+  tr.region.kind = NH_REGION_BOX;
+  for (int k = 0; k < 3; k++) tr.region.min[k] = -1.0, tr.region.max[k] = 1.0;
+  tr.is_pressure = 1, tr.pressure = 50.0;
+  const double factor = 1.0;
+  nh_geometry_loads loads = {{0.3, -1.1, -9.81}, NULL, 1, &tr, &factor};
+  int planar = 0, curved = 0;
+  double worst = 0.0, curved_max = 0.0;
+  for (int l = 0; l < m->n_leaves; l++) {
+    int c = m->leaves[l];
+    if (!nh_tissue_cell_cut(t, c)) continue;
+    /* the face whose plane is the level at every lattice point of depth + 1 */
+    double Xe[24], lo[3], hi[3], mid[3];
+    nh_mesh_cell_coords(m, m->X, c, Xe);
+    nh_hex_is_box(Xe, lo, hi);
+    for (int k = 0; k < 3; k++) mid[k] = 0.5 * (lo[k] + hi[k]);
+    int best = -1;
+    double bd = -1e30;
+    for (int f = 0; f < 6; f++) {
+      double v = face_plane(f / 2, f % 2 ? 1 : -1, mid);
+      if (v > bd) bd = v, best = f;
+    }
+    const int n = 1 << (NH_CUT_DEPTH + 1);
+    double dev = 0.0;
+    for (int i = 0; i <= n; i++)
+      for (int j = 0; j <= n; j++)
+        for (int k = 0; k <= n; k++) {
+          double x[3] = {lo[0] + (hi[0] - lo[0]) * i / n, lo[1] + (hi[1] - lo[1]) * j / n,
+                         lo[2] + (hi[2] - lo[2]) * k / n};
+          dev =
+              fmax(dev, fabs(nh_domain_level(&d, x) - face_plane(best / 2, best % 2 ? 1 : -1, x)));
+        }
+    double r[24], fe[24], frame[NH_HEX_FRAME], fp[24];
+    CHECK(nh_tissue_geometry_residual(t, c, u, &loads, r) == 1, "cut leaf %d: not cut?", c);
+    nh_tissue_element_force(t, c, u, fe, frame);
+    nh_traction_cell(m, c, &tr, NH_CUT_DEPTH, fp);
+    const double scale = norm24(fe) + norm24(fp);
+    if (dev <= 1e-12 * (hi[0] - lo[0])) {
+      planar++;
+      worst = fmax(worst, norm24(r) / scale);
+      CHECK(norm24(r) <= 1e-10 * scale, "planar cut leaf %d: |r| %g, expected <= %g", c, norm24(r),
+            1e-10 * scale);
+    } else {
+      curved++;
+      curved_max = fmax(curved_max, norm24(r) / scale);
+    }
+  }
+  CHECK(planar >= 20, "tilted cube: only %d planar cut cells", planar);
+  CHECK(curved_max > 1e-6, "tilted cube: the cells at edges and corners have r %g (expected > 0)",
+        curved_max);
+  if (verbose)
+    printf("tilted cube 9x8x7: %d planar cut cells, max |r|/|f| %.2e; %d at edges/corners, max "
+           "%.2e\n",
+           planar, worst, curved, curved_max);
+  free(u);
+  nh_tissue_destroy(&t);
+  nh_mesh_destroy(&m);
+  nh_domain_release(&d);
+  remove(stl);
+}
+
+/* ---- 3, 4. a ball ---- */
+static const double c0[3] = {0.0013, -0.0021, 0.0007}, R = 0.03;
+
+/* The ball integrated on g³ cells, B-bar, ν = 0.45. */
+static void ball_tissue(int g, nh_domain *d, nh_mesh **m, nh_tissue **t) {
+  nh_domain_sphere(c0, R, d);
+  d->cut_cells = NH_CUT_CELLS_INTEGRATED;
+  const int grid[3] = {g, g, g};
+  CHECK_OK(nh_mesh_create(d, grid, m));
+  nh_material mat = {3000.0, 0.45, 1000.0, NH_FORMULATION_BBAR};
+  CHECK_OK(nh_tissue_create(*m, &mat, t));
+}
+
+/* Σ_K z_Kᵀ r_K (elastic part) and ΔV, on g³ cells. */
+static void ball_linear(int g, double *G, double *dV, double *expected_density) {
+  nh_domain d;
+  nh_mesh *m = NULL;
+  nh_tissue *t = NULL;
+  ball_tissue(g, &d, &m, &t);
+  const double e1 = 1e-9, e2 = 1.0, A[3][3] = {{1.0, 0.2, -0.1}, {0.2, 0.5, 0.3}, {-0.1, 0.3, 0.8}};
+  const size_t n3 = 3 * (size_t)m->n_nodes;
+  double *u = calloc(n3, sizeof(double)), *z = calloc(n3, sizeof(double));
+  for (int i = 0; i < m->n_nodes; i++)
+    for (int k = 0; k < 3; k++) {
+      u[3 * i + k] = e1 * (m->X[3 * i + k] - c0[k]);
+      for (int j = 0; j < 3; j++) z[3 * i + k] += e2 * A[k][j] * (m->X[3 * i + j] - c0[j]);
+    }
+  *G = 0.0, *dV = 0.0;
+  for (int l = 0; l < m->n_leaves; l++) {
+    int c = m->leaves[l];
+    const nh_tissue_cut *cut = nh_tissue_cell_cut(t, c);
+    double r[24];
+    if (nh_tissue_geometry_residual(t, c, u, NULL, r) != 1) continue;
+    for (int a = 0; a < 8; a++)
+      for (int k = 0; k < 3; k++) *G += z[3 * m->cells[8 * c + a] + k] * r[3 * a + k];
+    nh_cut_moments mom;
+    CHECK_OK(nh_cut_domain_cell_at(&d, NH_CUT_DEPTH + 1, cut->lo, cut->hi, NULL, NULL, &mom, NULL));
+    *dV += mom.volume - cut->volume;
+  }
+  /* ε(z):D:ε(u) = ε₁ ε₂ (3λ + 2μ) tr A (u a pure dilatation) */
+  *expected_density = e1 * e2 * (3 * t->lambda + 2 * t->mu) * (A[0][0] + A[1][1] + A[2][2]);
+  free(u), free(z);
+  nh_tissue_destroy(&t);
+  nh_mesh_destroy(&m);
+  nh_domain_release(&d);
+}
+
+static void test_ball_order(void) {
+  enum { NG = 5 };
+  const int grids[NG] = {6, 8, 12, 16, 24};
+  double h[NG], G[NG];
+  for (int i = 0; i < NG; i++) {
+    double dV, w;
+    ball_linear(grids[i], &G[i], &dV, &w);
+    h[i] = 2 * R / grids[i];
+    const double s = h[i] / (1 << NH_CUT_DEPTH);
+    const double bound = 4 * M_PI * R * R * 1.5 * s * s / (R - sqrt(3) * s);
+    CHECK_CLOSE(G[i], -dV * w, 1e-6 * fabs(dV * w), "ball: Σ zᵀr = −ΔV ε(z):D:ε(u)");
+    CHECK(dV >= 0.0 && dV <= bound, "ball %d³: ΔV %g outside [0, %g]", grids[i], dV, bound);
+    if (verbose)
+      printf("ball %2d³: Σ zᵀr %.4e, ΔV %.4e m³ (bound of V − V_d %.4e)\n", grids[i], G[i], dV,
+             bound);
+  }
+  /* least-squares slope of log |G| against log h */
+  double sx = 0, sy = 0, sxx = 0, sxy = 0;
+  for (int i = 0; i < NG; i++) {
+    double x = log(h[i]), y = log(fabs(G[i]));
+    sx += x, sy += y, sxx += x * x, sxy += x * y;
+  }
+  const double order = (NG * sxy - sx * sy) / (NG * sxx - sx * sx);
+  CHECK(order >= 1.7 && order <= 2.5, "ball: observed order of the geometry term %.3f, expected 2",
+        order);
+  if (verbose) printf("ball: observed order %.3f\n", order);
+}
+
+static void test_ball_patch(int g) {
+  nh_domain d;
+  nh_mesh *m = NULL;
+  nh_tissue *t = NULL;
+  ball_tissue(g, &d, &m, &t);
+  CHECK_OK(nh_tissue_set_stabilisation(t, 0.0));
+  const double p = 1e-6, K = t->lambda + 2.0 * t->mu / 3.0;
+  const size_t n3 = 3 * (size_t)m->n_nodes;
+  double *u = calloc(n3, sizeof(double)), *sum = calloc(n3, sizeof(double));
+  for (size_t i = 0; i < n3; i++) u[i] = -p * (m->X[i] - c0[i % 3]) / (3.0 * K);
+  nh_traction tr;
+  memset(&tr, 0, sizeof tr);
+  tr.region.kind = NH_REGION_BOX;
+  for (int k = 0; k < 3; k++) tr.region.min[k] = -1.0, tr.region.max[k] = 1.0;
+  tr.is_pressure = 1, tr.pressure = p;
+  nh_geometry_loads loads = {{0, 0, 0}, NULL, 1, &tr, NULL};
+  double local = 0.0;
+  for (int l = 0; l < m->n_leaves; l++) {
+    int c = m->leaves[l];
+    double r[24];
+    if (nh_tissue_geometry_residual(t, c, u, &loads, r) != 1) continue;
+    for (int i = 0; i < 24; i++) {
+      sum[3 * m->cells[8 * c + i / 3] + i % 3] += r[i];
+      local += fabs(r[i]);
+    }
+  }
+  double total = 0.0;
+  for (size_t i = 0; i < n3; i++) total = fmax(total, fabs(sum[i]));
+  CHECK(local > 0.0 && total <= 1e-9 * local,
+        "ball %d³ patch test: assembled |Σ r_K| %g, expected <= 1e-9 × Σ|r_K| = %g", g, total,
+        1e-9 * local);
+  if (verbose) printf("ball %2d³ patch: max assembled %.2e, Σ|r_K| %.2e\n", g, total, local);
+  free(u), free(sum);
+  nh_tissue_destroy(&t);
+  nh_mesh_destroy(&m);
+  nh_domain_release(&d);
+}
+
+int main(int argc, char **argv) {
+  verbose = getenv("NH_VERBOSE") != NULL;
+  test_exact_domains();
+  test_planar(argc > 1 ? argv[1] : ".");
+  test_ball_order();
+  test_ball_patch(7);
+  test_ball_patch(10);
+  return nh_test_failures ? 1 : 0;
+}
