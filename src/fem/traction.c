@@ -9,7 +9,8 @@
  *                x_s × x_t, turned away from the cell's centre;
  *   immersed     the surface F = 0 inside the cut cells: every leaf is split
  *                into NH_TRACTION_SUB³ sub-cubes of its natural coordinates,
- *                each into the six tetrahedra around its main diagonal, and
+ *                each into the six tetrahedra around its main diagonal
+ *                (reflected above the domain's centre, as cutcell.c), and
  *                F = 0 is cut from each tetrahedron with F interpolated
  *                linearly (marching tetrahedra): one triangle or a quad as
  *                two. n is the triangle's normal, turned away from an inside vertex. Each

@@ -33,7 +33,10 @@
  * sub-box, is still resolved. g is replaced by its piecewise linear
  * interpolant on the Kuhn (Freudenthal) triangulation of that lattice: every
  * sub-box split into the six tetrahedra around its main diagonal (corner
- * (0,0,0) to (1,1,1)), the split of src/fem/traction.c, so that the volume's
+ * (0,0,0) to (1,1,1)), reflected in each axis k on the upper side of
+ * spec->mirror (nh_cut_flip: the grid's centre, so that the triangulation,
+ * and every weight, is mirror symmetric; a per-axis slab reflection keeps it
+ * conforming and nested), the split of src/fem/traction.c, so that the volume's
  * boundary is the surface that traction.c integrates pressure over: one
  * geometry. Inside a sub-box with local coordinates u ∈ [0, 1]³ sorted
  * u_a >= u_b >= u_c that interpolant is
