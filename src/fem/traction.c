@@ -9,7 +9,8 @@
  *                x_s × x_t, turned away from the cell's centre;
  *   immersed     the surface F = 0 inside the cut cells: every leaf is split
  *                into NH_TRACTION_SUB³ sub-cubes of its natural coordinates,
- *                each into the six tetrahedra around its main diagonal, and
+ *                each into the six tetrahedra around its main diagonal
+ *                (reflected above the domain's centre, as cutcell.c), and
  *                F = 0 is cut from each tetrahedron with F interpolated
  *                linearly (marching tetrahedra): one triangle or a quad as
  *                two. n is the triangle's normal, turned away from an inside vertex. Each
@@ -166,6 +167,20 @@ static double nh_traction_triangle(const nh_mesh *m, int c, double p[3][3], doub
   return A;
 }
 
+/* The mirror orientation of sub-cube s of a leaf's lattice (n per axis,
+ * lattice points x): cutcell.c's rule (nh_cut_flip) about the domain's
+ * centre, so that this surface is the boundary of the cut-cell polyhedron. */
+static unsigned nh_traction_flip(const nh_mesh *m, double (*x)[3], int n, const int s[3]) {
+  const int lo = s[0] + (n + 1) * (s[1] + (n + 1) * s[2]),
+            hi = (s[0] + 1) + (n + 1) * ((s[1] + 1) + (n + 1) * (s[2] + 1));
+  unsigned mask = 0u;
+  for (int k = 0; k < 3; k++) {
+    const double centre = 0.5 * (x[lo][k] + x[hi][k]), edge = fabs(x[hi][k] - x[lo][k]);
+    if (centre - m->domain.center[k] > 0.25 * edge) mask |= 1u << k;
+  }
+  return mask;
+}
+
 /* Immersed domain: the surface F = 0 in leaf c inside the region. */
 static double nh_traction_immersed_cell(const nh_mesh *m, int c, const double Xe[24],
                                         const nh_traction *tr, int n, double *f) {
@@ -189,9 +204,12 @@ static double nh_traction_immersed_cell(const nh_mesh *m, int c, const double Xe
     for (int j = 0; j < n; j++)
       for (int i = 0; i < n; i++) {
         int v[8];
+        const int ijk[3] = {i, j, k};
+        const unsigned flip = nh_traction_flip(m, x, n, ijk);
         for (int a = 0; a < 8; a++) {
-          int di = nh_hex_corner[a][0] > 0, dj = nh_hex_corner[a][1] > 0,
-              dk = nh_hex_corner[a][2] > 0;
+          int di = (nh_hex_corner[a][0] > 0) ^ (int)(flip & 1),
+              dj = (nh_hex_corner[a][1] > 0) ^ (int)(flip >> 1 & 1),
+              dk = (nh_hex_corner[a][2] > 0) ^ (int)(flip >> 2 & 1);
           v[a] = (i + di) + (n + 1) * ((j + dj) + (n + 1) * (k + dk));
         }
         for (int t = 0; t < 6; t++) {
@@ -245,11 +263,14 @@ static double nh_traction_immersed_cell(const nh_mesh *m, int c, const double Xe
     const int fixed = face % 2 ? n : 0;
     for (int b = 0; b < n; b++)
       for (int a = 0; a < n; a++) {
-        int id[2][2];
+        int id[2][2], sub[3];
+        sub[axis] = face % 2 ? n - 1 : 0, sub[s_ax] = a, sub[t_ax] = b;
+        const unsigned flip = nh_traction_flip(m, x, n, sub);
+        const int fs = flip >> s_ax & 1, ft = flip >> t_ax & 1;
         for (int db = 0; db < 2; db++)
           for (int da = 0; da < 2; da++) {
             int ijk[3];
-            ijk[axis] = fixed, ijk[s_ax] = a + da, ijk[t_ax] = b + db;
+            ijk[axis] = fixed, ijk[s_ax] = a + (da ^ fs), ijk[t_ax] = b + (db ^ ft);
             id[da][db] = ijk[0] + (n + 1) * (ijk[1] + (n + 1) * ijk[2]);
           }
         const int tri[2][3] = {{id[0][0], id[1][0], id[1][1]}, {id[0][0], id[1][1], id[0][1]}};

@@ -33,7 +33,10 @@
  * sub-box, is still resolved. g is replaced by its piecewise linear
  * interpolant on the Kuhn (Freudenthal) triangulation of that lattice: every
  * sub-box split into the six tetrahedra around its main diagonal (corner
- * (0,0,0) to (1,1,1)), the split of src/fem/traction.c, so that the volume's
+ * (0,0,0) to (1,1,1)), reflected in each axis k on the upper side of
+ * spec->mirror (nh_cut_flip: the grid's centre, so that the triangulation,
+ * and every weight, is mirror symmetric; a per-axis slab reflection keeps it
+ * conforming and nested), the split of src/fem/traction.c, so that the volume's
  * boundary is the surface that traction.c integrates pressure over: one
  * geometry. Inside a sub-box with local coordinates u ∈ [0, 1]³ sorted
  * u_a >= u_b >= u_c that interpolant is
@@ -163,6 +166,25 @@ static void nh_cut_x(const nh_cut_ctx *c, int t, const int I[3], double x[3]) {
   for (int k = 0; k < 3; k++) x[k] = (c->lo[k] * (n - I[k]) + c->hi[k] * I[k]) / n;
 }
 
+/* The mirror orientation of box I of depth t (docs/theory.md §5b, "mirror
+ * symmetry"): bit k set if the box lies on the upper side of the spec's
+ * mirror plane x_k = mirror_k (its centre more than a quarter of its edge
+ * above; a box the plane passes through is never flipped). Its Kuhn
+ * tetrahedra are then those of the box reflected in axis k, so that the
+ * lattice's triangulation is mirror symmetric about every plane x_k =
+ * mirror_k that is a lattice plane. */
+static unsigned nh_cut_flip(const nh_cut_ctx *c, int t, const int I[3]) {
+  if (!c->spec->mirror) return 0u;
+  const double n = ldexp(1.0, t);
+  unsigned mask = 0u;
+  for (int k = 0; k < 3; k++) {
+    const double edge = (c->hi[k] - c->lo[k]) / n;
+    const double centre = (c->lo[k] * (n - I[k] - 0.5) + c->hi[k] * (I[k] + 0.5)) / n;
+    if (centre - c->spec->mirror[k] > 0.25 * edge) mask |= 1u << k;
+  }
+  return mask;
+}
+
 /* Set m at lattice point I of depth t <= its own depth (any depth for a plane). */
 static double nh_set_exact(nh_cut_ctx *c, int m, int t, const int I[3]) {
   double x[3];
@@ -192,8 +214,12 @@ static double nh_set_value(nh_cut_ctx *c, int m, int t, const int I[3]) {
     if (I0[k] >= n) I0[k] = n - 1;
     u[k] = ldexp((double)(I[k] - (I0[k] << sh)), -sh);
   }
+  const unsigned flip = nh_cut_flip(c, d, I0); /* the box's Kuhn split, reflected */
+  for (int k = 0; k < 3; k++)
+    if (flip >> k & 1) u[k] = 1.0 - u[k];
   for (int b = 0; b < 8; b++) {
-    int J[3] = {I0[0] + (b & 1), I0[1] + (b >> 1 & 1), I0[2] + (b >> 2 & 1)};
+    const unsigned r = (unsigned)b ^ flip;
+    int J[3] = {I0[0] + (int)(r & 1), I0[1] + (int)(r >> 1 & 1), I0[2] + (int)(r >> 2 & 1)};
     f[b] = nh_set_exact(c, m, d, J);
   }
   for (int p = 0; p < 2; p++) /* sort the axes by decreasing u */
@@ -281,7 +307,8 @@ static void nh_contract(const double C[3][3], const double in[27], int stride, d
 }
 
 /* Kuhn tetrahedron q of the current leaf box, in closed form: with
- * ξ_k = a_k + len_k u_k, ∫ u_a^p u_b^q u_c^r over {1 >= u_a >= u_b >= u_c >= 0}
+ * ξ_k = a_k + len_k u_k (len_k < 0 on a flipped axis: u_k from the box's upper
+ * side), ∫ u_a^p u_b^q u_c^r over {1 >= u_a >= u_b >= u_c >= 0}
  * is 1 / ((r + 1)(r + q + 2)(r + q + p + 3)), and ξ^i expands binomially. */
 static void nh_kuhn_moments(nh_cut_ctx *c, int q, double sign) {
   double R[27], A[3][3][3], t1[27], t2[27];
@@ -302,7 +329,7 @@ static void nh_kuhn_moments(nh_cut_ctx *c, int q, double sign) {
   nh_contract(A[0], R, 1, t1);
   nh_contract(A[1], t1, 3, t2);
   nh_contract(A[2], t2, 9, t1);
-  const double w = sign * c->jac * c->box_len[0] * c->box_len[1] * c->box_len[2];
+  const double w = sign * c->jac * fabs(c->box_len[0] * c->box_len[1] * c->box_len[2]);
   for (int q = 0; q < 27; q++) c->out->m[q] += w * t1[q];
   c->out->kuhn++;
 }
@@ -474,13 +501,15 @@ static void nh_box_moments(nh_cut_ctx *c, int t, const int I[3]) {
  * with corner values g[k][b]. */
 static void nh_box_faces(nh_cut_ctx *c, int t, const int I[3], double g[][8]) {
   const int n = 1 << t;
+  const unsigned flip = nh_cut_flip(c, t, I);
   for (int f = 0; f < 6 && !c->rc; f++) {
     const int ax = f / 2, side = f % 2, p = (ax + 1) % 3, q = (ax + 2) % 3;
     if (!(c->faces >> f & 1) || I[ax] != (side ? n - 1 : 0)) continue;
-    nh_cut_vertex V[2][2];
+    nh_cut_vertex V[2][2]; /* V[dp][dq]: from the flipped side on a flipped axis */
     for (int dq = 0; dq < 2; dq++)
       for (int dp = 0; dp < 2; dp++) {
-        const int b = side << ax | dp << p | dq << q;
+        const int b =
+            side << ax | (dp ^ (int)(flip >> p & 1)) << p | (dq ^ (int)(flip >> q & 1)) << q;
         for (int k = 0; k < 3; k++) V[dp][dq].xi[k] = ldexp(2.0 * (I[k] + (b >> k & 1)), -t) - 1.0;
         for (int k = 0; k < c->n_cut; k++) V[dp][dq].g[k] = g[k][b];
       }
@@ -535,14 +564,17 @@ static void nh_cut_box(nh_cut_ctx *c, int t, const int I[3], unsigned in) {
     }
     c->n_cut++;
   }
+  const unsigned flip = nh_cut_flip(c, t, I);
   for (int k = 0; k < 3; k++) {
-    c->box_a[k] = ldexp(2.0 * I[k], -t) - 1.0;
-    c->box_len[k] = ldexp(2.0, -t);
+    const int f = flip >> k & 1;
+    c->box_a[k] = ldexp(2.0 * (I[k] + f), -t) - 1.0;
+    c->box_len[k] = f ? -ldexp(2.0, -t) : ldexp(2.0, -t);
   }
-  nh_cut_vertex V[8];
+  nh_cut_vertex V[8]; /* by bit index in the box's (flipped) local coordinates */
   for (int b = 0; b < 8; b++) {
-    for (int k = 0; k < 3; k++) V[b].xi[k] = ldexp(2.0 * (I[k] + (b >> k & 1)), -t) - 1.0;
-    for (int k = 0; k < c->n_cut; k++) V[b].g[k] = g[k][b];
+    const unsigned r = (unsigned)b ^ flip;
+    for (int k = 0; k < 3; k++) V[b].xi[k] = ldexp(2.0 * (I[k] + (int)(r >> k & 1)), -t) - 1.0;
+    for (int k = 0; k < c->n_cut; k++) V[b].g[k] = g[k][r];
   }
   for (int q = 0; q < 6; q++) {
     const nh_cut_vertex T[4] = {V[nh_kuhn[q][0]], V[nh_kuhn[q][1]], V[nh_kuhn[q][2]],
@@ -564,7 +596,7 @@ static void nh_add_plane(nh_cut_ctx *c, const double a[3], double b) {
 /* Depth of a region's lattice: sub-box edge <= size / sub. */
 static int nh_region_depth(const nh_cut_ctx *c, double size, double sub) {
   const double edge = 2.0 * fmax(c->half[0], fmax(c->half[1], c->half[2]));
-  int d = 0;
+  int d = 1; /* at least 1: no lattice box straddles a mirror plane through the cell's middle */
   while (d < NH_CUT_REGION_DEPTH && ldexp(edge, -d) > size / sub) d++;
   return d;
 }
@@ -620,6 +652,7 @@ void nh_cut_spec_domain(nh_cut_spec *spec, const nh_domain *domain, int depth) {
   spec->ctx = domain;
   spec->lipschitz = 1.0;
   spec->depth = depth;
+  spec->mirror = domain->center;
 }
 
 int nh_cut_cell(const nh_cut_spec *spec, const double lo[3], const double hi[3],

@@ -90,9 +90,17 @@ static int nh_natural(const double Xe[24], const double x[3], double xi[3]) {
 }
 
 /* Raw (unresolved) masters of each node: the corners of its coarsest leaf. */
+/* Roots tied with the best one that an aggregated node also takes (its
+ * mirror images about the domain's centre in x, y, z: at most 7). */
+#define NH_AGG_TWINS 7
+
 typedef struct {
-  int *cell;  /* per node: the leaf it hangs on, or -1 */
-  double *xi; /* 3 per node */
+  int *cell;       /* per node: the leaf it hangs on, or -1 */
+  double *xi;      /* 3 per node */
+  int *twin;       /* NH_AGG_TWINS per node (aggregation only, else NULL): more roots tied with
+                      cell in every mirror-invariant key, -1 after the last; the node is then the
+                      mean of all its roots' extrapolations */
+  double *twin_xi; /* 3 per twin */
 } nh_raw;
 
 static int nh_find_raw(const nh_mesh *m, const unsigned char *skip, nh_raw *raw) {
@@ -178,18 +186,50 @@ static int nh_find_raw(const nh_mesh *m, const unsigned char *skip, nh_raw *raw)
 }
 
 /* A candidate root's rank: nearer (smaller max_k |ξ_k|) first, then one
- * without a hanging corner, the larger tissue fraction, the lower index. */
+ * without a hanging corner, the larger tissue fraction, the centre nearer
+ * the domain's centre in |x|, then |y|, then |z| (so that a mirror image of
+ * the mesh about the domain's centre chooses the mirror image of the root:
+ * the cell index is not mirror invariant), the lower index. Reals compare
+ * with a relative tolerance of 1e-9 (mirror images agree to round-off). */
 typedef struct {
   int cell, hanging;
-  double reach, fraction, xi[3];
+  double reach, fraction, xi[3], offset[3];
 } nh_root;
 
-static int nh_root_better(const nh_root *a, const nh_root *b) {
+static int nh_differ(double a, double b) {
+  return fabs(a - b) > 1e-9 * fmax(1.0, fabs(b));
+}
+
+/* 1: a before b; -1: b before a; 0: tied in every mirror-invariant key (a
+ * mirror image of b about the domain's centre, as for a node on a mirror plane). */
+static int nh_root_order(const nh_root *a, const nh_root *b) {
   if (b->cell < 0) return 1;
-  if (fabs(a->reach - b->reach) > 1e-9 * fmax(1.0, b->reach)) return a->reach < b->reach;
-  if (a->hanging != b->hanging) return a->hanging < b->hanging;
-  if (a->fraction != b->fraction) return a->fraction > b->fraction;
-  return a->cell < b->cell;
+  if (nh_differ(a->reach, b->reach)) return a->reach < b->reach ? 1 : -1;
+  if (a->hanging != b->hanging) return a->hanging < b->hanging ? 1 : -1;
+  if (nh_differ(a->fraction, b->fraction)) return a->fraction > b->fraction ? 1 : -1;
+  for (int k = 0; k < 3; k++)
+    if (fabs(a->offset[k] - b->offset[k]) > 1e-9 * fmax(a->offset[k], b->offset[k]))
+      return a->offset[k] < b->offset[k] ? 1 : -1;
+  return 0;
+}
+
+/* True if node w's value depends on an ill-posed node (flag): w is one, or
+ * it hangs on a leaf whose corners (with a nonzero weight) do, through
+ * chains of at most `depth` hanging nodes (deeper: assumed to). A root with
+ * such a corner would make its aggregated node a master of itself (a
+ * hanging corner on the face of a coarse leaf that has the node as a corner). */
+static int nh_depends_on_ill(const nh_mesh *m, const nh_raw *raw, const unsigned char *flag, int w,
+                             int depth) {
+  if (flag[w]) return 1;
+  if (raw->cell[w] < 0) return 0;
+  if (depth == 0) return 1;
+  double N[8];
+  nh_hex_shape(raw->xi + 3 * w, N);
+  for (int a = 0; a < 8; a++)
+    if (fabs(N[a]) >= 1e-14 &&
+        nh_depends_on_ill(m, raw, flag, m->cells[8 * raw->cell[w] + a], depth - 1))
+      return 1;
+  return 0;
 }
 
 /* The ill-posed nodes' roots into raw (cell, ξ), flagged in *is_agg (per
@@ -223,7 +263,8 @@ static int nh_find_aggregated(const nh_mesh *m, const unsigned char *skip,
       ring[n_ring++] = leaf[p];
       stamp[leaf[p]] = v + 1;
     }
-    nh_root best = {.cell = -1};
+    nh_root best = {.cell = -1}, twin[NH_AGG_TWINS];
+    int n_twin = 0;
     for (int r = 0; r < NH_AGGREGATE_RINGS && best.cell < 0 && !rc; r++) {
       int n_next = 0;
       for (int i = 0; i < n_ring && !rc; i++)
@@ -235,16 +276,27 @@ static int nh_find_aggregated(const nh_mesh *m, const unsigned char *skip,
             stamp[c] = v + 1;
             if ((rc = nh_grow((void **)&next, &cap_next, n_next + 1, sizeof(int)))) break;
             next[n_next++] = c;
-            int ill = 0; /* a root: tissue, and no ill-posed corner */
-            for (int b = 0; b < 8; b++) ill |= flag[m->cells[8 * c + b]] != 0;
+            int ill = 0; /* a root: tissue, and no corner that is or hangs on an ill-posed one */
+            for (int b = 0; b < 8 && !ill; b++)
+              ill = nh_depends_on_ill(m, raw, flag, m->cells[8 * c + b], NH_AGGREGATE_CHAIN);
             if (ill || !(agg->fraction[c] > 0.0)) continue;
             double Xe[24];
             nh_root cand = {.cell = c, .fraction = agg->fraction[c]};
             nh_mesh_cell_coords(m, m->X, c, Xe);
             if (nh_natural(Xe, m->X + 3 * v, cand.xi)) continue;
             cand.reach = fmax(fabs(cand.xi[0]), fmax(fabs(cand.xi[1]), fabs(cand.xi[2])));
+            for (int k = 0; k < 3; k++) {
+              double ctr = 0.0;
+              for (int b = 0; b < 8; b++) ctr += 0.125 * Xe[3 * b + k];
+              cand.offset[k] = fabs(ctr - m->domain.center[k]);
+            }
             for (int b = 0; b < 8; b++) cand.hanging |= raw->cell[m->cells[8 * c + b]] >= 0;
-            if (nh_root_better(&cand, &best)) best = cand;
+            const int order = nh_root_order(&cand, &best);
+            if (order > 0) {
+              best = cand, n_twin = 0;
+            } else if (order == 0 && n_twin < NH_AGG_TWINS) { /* mirror images: all, averaged */
+              twin[n_twin++] = cand;
+            }
           }
         }
       int *t = ring, tc = cap_ring;
@@ -259,6 +311,10 @@ static int nh_find_aggregated(const nh_mesh *m, const unsigned char *skip,
     }
     raw->cell[v] = best.cell;
     memcpy(raw->xi + 3 * v, best.xi, sizeof best.xi);
+    for (int t = 0; t < n_twin; t++) {
+      raw->twin[NH_AGG_TWINS * v + t] = twin[t].cell;
+      memcpy(raw->twin_xi + 3 * (NH_AGG_TWINS * v + t), twin[t].xi, sizeof twin[t].xi);
+    }
   }
   for (int v = 0; v < n; v++) flag[v] = flag[v] == 1;
 done:
@@ -315,19 +371,25 @@ static int nh_resolve(nh_resolver *r, int v) {
   if (r->state[v] == 1)
     return NH_ERROR(NH_ERR_INTERNAL, "hanging node %d depends on itself (a cycle of masters)", v);
   r->state[v] = 1;
-  const int *corner = r->m->cells + 8 * r->raw->cell[v];
-  double N[8];
-  nh_hex_shape(r->raw->xi + 3 * v, N);
-  int cap = 0;
-  for (int a = 0; a < 8; a++) {
-    if (fabs(N[a]) < 1e-14) continue;
-    int u = corner[a];
-    if (r->raw->cell[u] < 0) {
-      NH_TRY(nh_add_master(r, v, u, N[a], &cap));
-    } else {
-      NH_TRY(nh_resolve(r, u));
-      for (int p = 0; p < r->len[u]; p++)
-        NH_TRY(nh_add_master(r, v, r->list[u][p], N[a] * r->wts[u][p], &cap));
+  const int *twin = r->raw->twin ? r->raw->twin + NH_AGG_TWINS * v : NULL;
+  int n_roots = 1, cap = 0;
+  while (twin && n_roots <= NH_AGG_TWINS && twin[n_roots - 1] >= 0) n_roots++;
+  const double scale = 1.0 / n_roots;
+  for (int root = 0; root < n_roots; root++) {
+    const int *corner = r->m->cells + 8 * (root ? twin[root - 1] : r->raw->cell[v]);
+    double N[8];
+    nh_hex_shape(root ? r->raw->twin_xi + 3 * (NH_AGG_TWINS * v + root - 1) : r->raw->xi + 3 * v,
+                 N);
+    for (int a = 0; a < 8; a++) {
+      if (fabs(N[a]) < 1e-14) continue;
+      int u = corner[a];
+      if (r->raw->cell[u] < 0) {
+        NH_TRY(nh_add_master(r, v, u, scale * N[a], &cap));
+      } else {
+        NH_TRY(nh_resolve(r, u));
+        for (int p = 0; p < r->len[u]; p++)
+          NH_TRY(nh_add_master(r, v, r->list[u][p], scale * N[a] * r->wts[u][p], &cap));
+      }
     }
   }
   r->state[v] = 2;
@@ -344,8 +406,8 @@ int nh_hanging_detect_aggregated(const nh_mesh *m, const unsigned char *skip,
   unsigned char *is_agg = NULL;
   if (n_orphans) *n_orphans = 0;
   int n = m->n_nodes, rc = NH_OK;
-  nh_raw raw = {nh_calloc((size_t)(n ? n : 1), sizeof(int)),
-                nh_calloc(3 * (size_t)(n ? n : 1), sizeof(double))};
+  nh_raw raw = {.cell = nh_calloc((size_t)(n ? n : 1), sizeof(int)),
+                .xi = nh_calloc(3 * (size_t)(n ? n : 1), sizeof(double))};
   nh_resolver r = {.m = m, .raw = &raw};
   r.state = nh_calloc((size_t)(n ? n : 1), sizeof(int));
   r.list = nh_calloc((size_t)(n ? n : 1), sizeof(int *));
@@ -357,7 +419,16 @@ int nh_hanging_detect_aggregated(const nh_mesh *m, const unsigned char *skip,
     goto done;
   }
   if ((rc = nh_find_raw(m, skip, &raw))) goto done;
-  if (agg && (rc = nh_find_aggregated(m, skip, agg, &raw, &is_agg, n_orphans))) goto done;
+  if (agg) {
+    raw.twin = nh_calloc(NH_AGG_TWINS * (size_t)(n ? n : 1), sizeof(int));
+    raw.twin_xi = nh_calloc(3 * NH_AGG_TWINS * (size_t)(n ? n : 1), sizeof(double));
+    if (!raw.twin || !raw.twin_xi) {
+      rc = NH_ERROR(NH_ERR_MEMORY, "out of memory detecting hanging nodes");
+      goto done;
+    }
+    for (size_t v = 0; v < NH_AGG_TWINS * (size_t)n; v++) raw.twin[v] = -1;
+    if ((rc = nh_find_aggregated(m, skip, agg, &raw, &is_agg, n_orphans))) goto done;
+  }
   int count = 0, total = 0;
   for (int v = 0; v < n && !rc; v++)
     if (raw.cell[v] >= 0) {
@@ -393,6 +464,7 @@ done:
   if (r.list)
     for (int v = 0; v < n; v++) free(r.list[v]), free(r.wts[v]);
   free(r.list), free(r.wts), free(r.len), free(r.state), free(raw.cell), free(raw.xi);
+  free(raw.twin), free(raw.twin_xi);
   if (rc) nh_hanging_destroy(&h);
   *out = h;
   return rc;

@@ -264,8 +264,10 @@ typedef struct nh_cut_spec {
   double lipschitz;  /* |level(x) − level(y)| <= lipschitz |x − y| (1 for every nh_domain) */
   int depth;         /* its lattice: 2^depth sub-boxes per cell edge, 0 ..= NH_CUT_DEPTH_MAX */
   const nh_region *region; /* NULL, or also inside this box, sphere or cylinder */
-  double region_sub;   /* region's lattice: sub-box edge <= nh_region_size / region_sub (0: 8) */
-  const double *plane; /* NULL, or {p[3], n[3]}: also (x − p)·n < 0 */
+  double region_sub;    /* region's lattice: sub-box edge <= nh_region_size / region_sub (0: 8) */
+  const double *plane;  /* NULL, or {p[3], n[3]}: also (x − p)·n < 0 */
+  const double *mirror; /* NULL, or a point: each lattice box above mirror[k] in axis k is split
+                           as its reflection in axis k (nh_cut_spec_domain: the grid's centre) */
 } nh_cut_spec;
 #define NH_CUT_DEPTH_MAX 6
 typedef struct nh_cut_moments {
@@ -442,10 +444,13 @@ int nh_hanging_detect(const nh_mesh *mesh, const unsigned char *skip, nh_hanging
  * its natural coordinates in the root (outside [−1, 1]³). The root is
  * searched in NH_AGGREGATE_RINGS rings of corner neighbours of the node's
  * leaves, the first ring with one; in it the smallest max_k |ξ_s,k| (ties:
- * no hanging corner, then the larger tissue fraction, then the lower cell
- * index). A node without one stays free. */
+ * no hanging corner, then the larger tissue fraction, then the leaf centre
+ * nearest the domain's centre in |x|, |y|, |z| (mirror invariant), then the
+ * lower cell index). A node without one stays free. */
 #define NH_AGGREGATE_MIN   0.125
 #define NH_AGGREGATE_RINGS 2
+/* Hanging chains followed when a root's corner is checked for an ill-posed master. */
+#define NH_AGGREGATE_CHAIN 4
 typedef struct {
   const double *support;     /* per node: μ_v */
   const double *fraction;    /* per cell (leaves read): the tissue fraction V_t / V_c */
