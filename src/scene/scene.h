@@ -259,7 +259,7 @@ typedef struct nh_scene {
     double poisson; /* tissue.material.poisson (required, in (-1, 0.5)) */
     double density; /* tissue.material.density, kg/m³ (default 1000, > 0) */
     nh_formulation formulation; /* tissue.material.formulation: bbar (default) | full */
-    nh_cut_cells cut_cells;     /* tissue.cut_cells: scaled | integrated (default) */
+    nh_cut_cells cut_cells;     /* tissue.cut_cells: scaled (default) | integrated */
     double damping_mass;        /* tissue.damping.mass (Rayleigh α, 1/s, default 0, >= 0) */
     double damping_stiffness;   /* tissue.damping.stiffness (Rayleigh β, s, default 0, >= 0) */
     /* tissue.buoyancy {before, after, schedule} (optional): the rest shape is the equilibrium
