@@ -4,3 +4,5 @@ nh_add_c_test(test_coupled verify)
 nh_add_c_test(test_skull "verify;slow")
 # Skull contact points from the cut cells' surface quadrature: area order 2 on an off-centre sphere (tests/test_skull_surface.c).
 nh_add_c_test(test_skull_surface "unit;verify")
+# The tip disc: a point load's compliance diverges like 1/h, the disc's converges (tests/test_tip_disc.c).
+nh_add_c_test(test_tip_disc "unit;verify")

@@ -145,7 +145,12 @@ static int nh_tie_rows(nh_contact *c, const nh_mesh *m, const double *u, nh_cpoi
   double xb[3], t[3], J[36], xi, xp[3];
   int e;
   nh_beam_point(tl->beam, s, xb, t, &e, &xi, J);
-  nh_point_position(m, u, p, xp);
+  if (tip) { /* the tip acts through its cross-section (docs/interaction.md, "Tip disc") */
+    if (nh_disc_build(&c->disc, m, p, t, nh_tip_radius(tl->spec))) return -1;
+    nh_disc_position(&c->disc, m, u, xp);
+  } else {
+    nh_point_position(m, u, p, xp);
+  }
   double n1[3], n2[3];
   nh_frame_normal(nh_beam_directors(tl->beam) + 9 * (xi < 0.5 ? e : e + 1), t, n1);
   nh_vec3_cross(t, n1, n2);
@@ -155,7 +160,10 @@ static int nh_tie_rows(nh_contact *c, const nh_mesh *m, const double *u, nh_cpoi
     int r = nh_rows_add(rows);
     if (r < 0) return -1;
     if (q == 0) first = r;
-    nh_row_tissue(rows, r, m, p);
+    if (!tip)
+      nh_row_tissue(rows, r, m, p);
+    else if (nh_disc_row(rows, r, &c->disc))
+      return -1;
     memcpy(rows->dir + 3 * r, dirs[q], 3 * sizeof(double));
     rows->tool[r] = tl->dyn, rows->elem[r] = e;
     memcpy(rows->J + 36 * r, J, sizeof J);
@@ -221,8 +229,10 @@ int nh_tip_rows(nh_contact *c, nh_group *G, const nh_mesh *m, const double *u, d
   if (lead < 0 || c->tools[lead].dyn < 0) return NH_OK;
   nh_tool *tl = &c->tools[lead];
   double xt[3], tt[3], xf[3];
+  const double rho = nh_tip_radius(tl->spec);
   nh_beam_point(tl->beam, nh_beam_length(tl->beam), xt, tt, NULL, NULL, NULL);
-  nh_point_position(m, u, &G->front, xf);
+  NH_TRY(nh_disc_build(&c->disc, m, &G->front, tt, rho));
+  nh_disc_position(&c->disc, m, u, xf);
   double ahead = nh_vec3_dot(tt, xf) - nh_vec3_dot(tt, xt),
          sp_f = nh_point_spacing(sp, m, &G->front);
   /* the tip passed the front inside the channel: the front moves to it
@@ -232,7 +242,9 @@ int nh_tip_rows(nh_contact *c, nh_group *G, const nh_mesh *m, const double *u, d
     nh_cpoint p = G->front;
     double xa[3]; /* a bevel's front keeps its offset across the tip: it moves along t only */
     for (int i = 0; i < 3; i++) xa[i] = tl->spec->bevel > 0 ? xf[i] - ahead * tt[i] : xt[i];
-    if (!nh_material_point(m, u, xa, G->front.X, &p)) {
+    int rc = nh_material_point(m, u, xa, G->front.X, tt, rho, &c->disc, &p);
+    if (rc == NH_ERR_MEMORY) return rc;
+    if (!rc) {
       G->front = p, ahead = 0.0;
       NH_TRY(nh_channel_lay(G, sp, m, &G->front));
     }
@@ -273,17 +285,20 @@ int nh_tip_update(nh_contact *c, nh_group *G, const nh_mesh *m, const double *u,
    * tip; a bevel moves it on by d tan ψ along the tip's bevel direction
    * (d the tip's advance along its tangent past the old front) */
   double xt[3], tt[3], xf[3];
+  const double rho = nh_tip_radius(tl->spec);
   nh_beam_point(tl->beam, nh_beam_length(tl->beam), xt, tt, NULL, NULL, NULL);
   if (tl->spec->bevel > 0) {
     double b[3], d;
     nh_tip_bevel_direction(tl->beam, tt, b);
-    nh_point_position(m, u, &G->front, xf);
+    NH_TRY(nh_disc_build(&c->disc, m, &G->front, tt, rho));
+    nh_disc_position(&c->disc, m, u, xf);
     d = fmax(0.0, nh_vec3_dot(tt, xt) - nh_vec3_dot(tt, xf));
     const double h_bevel = d * tan(tl->spec->bevel * 3.14159265358979323846 / 180.0);
     for (int i = 0; i < 3; i++) xt[i] += h_bevel * b[i];
   }
   nh_cpoint p = G->front;
-  if (nh_material_point(m, u, xt, G->front.X, &p)) return NH_OK;
+  int rc = nh_material_point(m, u, xt, G->front.X, tt, rho, &c->disc, &p);
+  if (rc) return rc == NH_ERR_MEMORY ? rc : NH_OK;
   double d[3] = {p.X[0] - G->front.X[0], p.X[1] - G->front.X[1], p.X[2] - G->front.X[2]};
   if (sqrt(nh_vec3_dot(d, d)) > 1e-9 * nh_point_spacing(sp, m, &G->front))
     ev->cut = 1; /* it advanced */

@@ -92,6 +92,7 @@ void nh_contact_destroy(nh_contact **pc) {
   free(c->blocks);
   nh_skull_destroy(&c->skull);
   nh_rows_free(&c->rows);
+  nh_disc_free(&c->disc);
   free(c->du_last);
   free(c);
   *pc = NULL;

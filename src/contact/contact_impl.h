@@ -53,6 +53,15 @@ typedef struct {
   nh_tool_state state; /* an outer tool's: its group's */
 } nh_tool;
 
+/* The tissue part of a tip or puncture row: the mean over the tool's
+ * cross-section, a disc of material points (points.c, nh_disc_build), as
+ * node weights w (Σ w = 1). */
+typedef struct {
+  int n, cap;
+  int *node;
+  double *w;
+} nh_disc;
+
 /* A tool group: an outer tool and the tools nested in it, one hole in the
  * tissue. The constraints live here: the entry point (puncture), the
  * channel's front (tip) and the channel points (shaft). */
@@ -98,6 +107,7 @@ struct nh_contact {
   double *du_last;        /* quasi-static: the tissue's increment over the last step (3 per
                              node, n_du of them), which predicts the skull rows' approach */
   int n_du;
+  nh_disc disc; /* scratch: the disc of the tip or puncture rows being written */
 };
 
 /* ---- tools.c ---- */
@@ -135,14 +145,32 @@ double nh_tool_project(const nh_beam *beam, const double x[3], double s0);
 void nh_point_position(const nh_mesh *mesh, const double *u, const nh_cpoint *p, double x[3]);
 /* Set a point's material position and locate it (nonzero: outside the mesh). */
 int nh_point_set(const nh_mesh *mesh, nh_cpoint *p, const double X[3]);
-/* The material point whose current position is x (Newton on X + u(X) = x,
- * starting from X0). NH_ERR_INPUT if it leaves the tissue. */
+/* The tool's cross-section at p as the tissue sees it (docs/interaction.md,
+ * "Tip disc"): the disc of radius rho about p's material position normal to
+ * nrm, by a ring rule fine enough for p's cell (sample points at most half
+ * its edge apart, at most 8 rings), as the weights of the mesh nodes in
+ * the disc's mean; samples outside the tissue are left out. rho = 0: the
+ * point itself (its cell's shape values). NH_ERR_MEMORY. */
+int nh_disc_build(nh_disc *d, const nh_mesh *mesh, const nh_cpoint *p, const double nrm[3],
+                  double rho);
+void nh_disc_free(nh_disc *d);
+/* The disc's mean current position. */
+void nh_disc_position(const nh_disc *d, const nh_mesh *mesh, const double *u, double x[3]);
+/* The disc as the tissue part of row r (the last row). NH_ERR_MEMORY. */
+int nh_disc_row(nh_rows *rows, int r, const nh_disc *d);
+/* The material point p whose disc (nrm, rho, in d) has its mean at the
+ * current position x (Newton on x̄(X) = x with F = I + ∂u/∂X of the cell at
+ * X, starting from X0; rho = 0: X + u(X) = x). NH_ERR_INPUT if it leaves
+ * the tissue, NH_ERR_MEMORY. */
 int nh_material_point(const nh_mesh *mesh, const double *u, const double x[3], const double X0[3],
-                      nh_cpoint *p);
+                      const double nrm[3], double rho, nh_disc *d, nh_cpoint *p);
 /* Channel point spacing at p: nh_channel_spacing with the edge of p's cell. */
 double nh_point_spacing(const nh_tool_spec *spec, const nh_mesh *mesh, const nh_cpoint *p);
 /* The tissue part of row r: p's cell nodes and shape values. */
 void nh_row_tissue(nh_rows *rows, int r, const nh_mesh *mesh, const nh_cpoint *p);
+/* The radius of a tool's cross-section as its tip and puncture rows act on
+ * the tissue (docs/interaction.md, "Tip disc"). */
+double nh_tip_radius(const nh_tool_spec *spec);
 
 /* ---- puncture.c ---- */
 /* The entry point of an outer tool on the rest surface (has_entry = 0: its

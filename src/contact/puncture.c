@@ -77,7 +77,10 @@ int nh_puncture_rows(nh_contact *c, nh_group *G, const nh_mesh *m, const double 
   int e;
   nh_beam *b = tl->beam;
   nh_beam_point(b, nh_beam_length(b), xt, tt, &e, &xi, J);
-  nh_point_position(m, u, &G->entry, xp);
+  /* the tool's cross-section pressing on the surface: the disc in the
+   * surface's plane (docs/interaction.md, "Tip disc") */
+  NH_TRY(nh_disc_build(&c->disc, m, &G->entry, G->n_out, nh_tip_radius(sp)));
+  nh_disc_position(&c->disc, m, u, xp);
   if (!nh_puncture_near(G, tl, m, xt, xp, h)) {
     memset(G->entry.lam, 0, sizeof G->entry.lam);
     G->entry.slid = 0;
@@ -101,7 +104,7 @@ int nh_puncture_rows(nh_contact *c, nh_group *G, const nh_mesh *m, const double 
     int r = nh_rows_add(rows);
     if (r < 0) return NH_ERR_MEMORY;
     if (q == 0) G->entry_row = r;
-    nh_row_tissue(rows, r, m, &G->entry);
+    NH_TRY(nh_disc_row(rows, r, &c->disc));
     memcpy(rows->dir + 3 * r, dirs[q], 3 * sizeof(double));
     rows->tool[r] = tl->dyn, rows->elem[r] = e;
     memcpy(rows->J + 36 * r, J, sizeof J);

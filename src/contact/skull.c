@@ -318,7 +318,8 @@ int nh_skull_rows(nh_skull *s, const nh_mesh *m, const double *u, const double *
     int r = nh_rows_add(rows);
     if (r < 0) return NH_ERROR(NH_ERR_MEMORY, "out of memory: skull rows");
     for (int a = 0; a < 8; a++)
-      rows->node[8 * r + a] = m->cells[8 * p->cell + a], rows->N[8 * r + a] = N[a];
+      rows->node[rows->start[r] + a] = m->cells[8 * p->cell + a],
+                                  rows->N[rows->start[r] + a] = N[a];
     for (int k = 0; k < 3; k++) rows->dir[3 * r + k] = -nrm[k];
     rows->tool[r] = -1, rows->elem[r] = -1;
     rows->gap[r] = g;

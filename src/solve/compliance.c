@@ -547,9 +547,13 @@ int nh_system_solve_rows(nh_system *s, const nh_rows *rows, const unsigned char 
   int m = 0;
   for (int i = 0; rows && i < rows->m; i++) m += !active || active[i];
   if (m == 0 || ncol <= 0) return NH_OK;
-  nh_rows sub = {.m = m, .cap = m};
-  sub.node = nh_calloc(8 * (size_t)m, sizeof(int));
-  sub.N = nh_calloc(8 * (size_t)m, sizeof(double));
+  int slots = 0;
+  for (int i = 0; i < rows->m; i++)
+    if (!active || active[i]) slots += rows->start[i + 1] - rows->start[i];
+  nh_rows sub = {.m = m, .cap = m, .n_slots = slots};
+  sub.start = nh_calloc((size_t)m + 1, sizeof(int));
+  sub.node = nh_calloc((size_t)slots + 1, sizeof(int));
+  sub.N = nh_calloc((size_t)slots + 1, sizeof(double));
   sub.dir = nh_calloc(3 * (size_t)m, sizeof(double));
   int *mark = nh_calloc((size_t)(n ? n : 1), sizeof(int)), *piv = nh_calloc((size_t)m, sizeof(int));
   double *W = nh_calloc((size_t)m * (size_t)m, sizeof(double));
@@ -559,14 +563,16 @@ int nh_system_solve_rows(nh_system *s, const nh_rows *rows, const unsigned char 
   double *f = nh_calloc((size_t)n * (size_t)ncol, sizeof(double));
   double *y = nh_calloc((size_t)n * (size_t)ncol, sizeof(double));
   cholmod_sparse *Jt = NULL;
-  int rc = sub.node && sub.N && sub.dir && mark && piv && W && d && mu && c && f && y
+  int rc = sub.start && sub.node && sub.N && sub.dir && mark && piv && W && d && mu && c && f && y
                ? NH_OK
                : NH_ERROR(NH_ERR_MEMORY, "out of memory: constrained dual (%d rows)", m);
   if (!rc) {
     for (int i = 0, k = 0; i < rows->m; i++) {
       if (active && !active[i]) continue;
-      memcpy(sub.node + 8 * k, rows->node + 8 * i, 8 * sizeof(int));
-      memcpy(sub.N + 8 * k, rows->N + 8 * i, 8 * sizeof(double));
+      const int a = rows->start[i], len = rows->start[i + 1] - a;
+      sub.start[k + 1] = sub.start[k] + len;
+      memcpy(sub.node + sub.start[k], rows->node + a, (size_t)len * sizeof(int));
+      memcpy(sub.N + sub.start[k], rows->N + a, (size_t)len * sizeof(double));
       memcpy(sub.dir + 3 * k, rows->dir + 3 * i, 3 * sizeof(double));
       k++;
     }
@@ -610,7 +616,8 @@ int nh_system_solve_rows(nh_system *s, const nh_rows *rows, const unsigned char 
   }
   if (!rc && n_used) *n_used = m;
   if (Jt) cholmod_free_sparse(&Jt, &s->cm);
-  free(sub.node), free(sub.N), free(sub.dir), free(mark), free(piv), free(W), free(d), free(mu);
+  free(sub.start), free(sub.node), free(sub.N), free(sub.dir), free(mark), free(piv), free(W),
+      free(d), free(mu);
   free(c), free(f), free(y);
   return rc;
 }

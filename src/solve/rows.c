@@ -18,7 +18,7 @@ void nh_rows_clear(nh_rows *r) {
 }
 
 void nh_rows_free(nh_rows *r) {
-  free(r->node), free(r->N), free(r->dir), free(r->tool), free(r->elem), free(r->J);
+  free(r->start), free(r->node), free(r->N), free(r->dir), free(r->tool), free(r->elem), free(r->J);
   free(r->gap), free(r->law), free(r->lambda);
   memset(r, 0, sizeof *r);
 }
@@ -28,11 +28,22 @@ void nh_rows_free(nh_rows *r) {
     if (nh_realloc((void **)&(ptr), (size_t)(count), sizeof *(ptr))) return -1; /* an index: -1 */ \
   } while (0)
 
+/* node and N hold at least `slots` entries */
+static int nh_rows_slots(nh_rows *r, int slots) {
+  if (slots <= r->n_slots) return 0;
+  int cap = r->n_slots ? r->n_slots : 256;
+  while (cap < slots) cap *= 2;
+  NH_GROW(r->node, cap);
+  NH_GROW(r->N, cap);
+  r->n_slots = cap;
+  return 0;
+}
+
 int nh_rows_add(nh_rows *r) {
   if (r->m == r->cap) {
     int cap = r->cap ? 2 * r->cap : 32;
-    NH_GROW(r->node, 8 * cap);
-    NH_GROW(r->N, 8 * cap);
+    NH_GROW(r->start, cap + 1);
+    if (r->cap == 0) r->start[0] = 0;
     NH_GROW(r->dir, 3 * cap);
     NH_GROW(r->tool, cap);
     NH_GROW(r->elem, cap);
@@ -42,14 +53,27 @@ int nh_rows_add(nh_rows *r) {
     NH_GROW(r->lambda, cap);
     r->cap = cap;
   }
-  int i = r->m++;
-  for (int a = 0; a < 8; a++) r->node[8 * i + a] = -1, r->N[8 * i + a] = 0.0;
+  int i = r->m;
+  if (nh_rows_slots(r, r->start[i] + 8)) return -1;
+  r->m++;
+  r->start[i + 1] = r->start[i] + 8;
+  for (int a = r->start[i]; a < r->start[i + 1]; a++) r->node[a] = -1, r->N[a] = 0.0;
   memset(r->dir + 3 * i, 0, 3 * sizeof(double));
   r->tool[i] = -1, r->elem[i] = 0;
   memset(r->J + 36 * i, 0, 36 * sizeof(double));
   r->gap[i] = 0.0, r->lambda[i] = 0.0;
   r->law[i] = (nh_row_law){NH_ROW_BILATERAL, -1, -1, 0.0, 0.0, -1, 0.0, 0};
   return i;
+}
+
+int nh_rows_widen(nh_rows *r, int count) {
+  const int i = r->m - 1;
+  if (i < 0 || count < 0) return NH_ERROR(NH_ERR_INTERNAL, "widening no row");
+  if (nh_rows_slots(r, r->start[i] + count))
+    return NH_ERROR(NH_ERR_MEMORY, "out of memory: %d tissue slots of a row", count);
+  r->start[i + 1] = r->start[i] + count;
+  for (int a = r->start[i]; a < r->start[i + 1]; a++) r->node[a] = -1, r->N[a] = 0.0;
+  return NH_OK;
 }
 
 void nh_row_tool_coef(const nh_rows *r, int i, double c[12]) {
@@ -77,11 +101,10 @@ void nh_row_tool_column(const nh_rows *r, int i, double *col) {
 cholmod_sparse *nh_rows_tissue_jt(nh_system *s, const nh_rows *r, int *mark) {
   const int m = r->m, n = s->n_free;
   size_t nnz = 0;
-  for (int i = 0; i < m; i++)
-    for (int a = 0; a < 8; a++) {
-      int v = r->node[8 * i + a];
-      if (v >= 0) nnz += 3 * (size_t)(s->exp_start[v + 1] - s->exp_start[v]);
-    }
+  for (int a = 0; a < (m ? r->start[m] : 0); a++) {
+    int v = r->node[a];
+    if (v >= 0) nnz += 3 * (size_t)(s->exp_start[v + 1] - s->exp_start[v]);
+  }
   cholmod_sparse *Jt =
       cholmod_allocate_sparse((size_t)n, (size_t)m, nnz ? nnz : 1, 1, 1, 0, CHOLMOD_REAL, &s->cm);
   if (!Jt) return NULL;
@@ -89,13 +112,13 @@ cholmod_sparse *nh_rows_tissue_jt(nh_system *s, const nh_rows *r, int *mark) {
   double *Jx = Jt->x;
   for (int i = 0; i < m; i++) {
     const int start = Jp[i] = pos;
-    for (int a = 0; a < 8; a++) {
-      int v = r->node[8 * i + a];
+    for (int a = r->start[i]; a < r->start[i + 1]; a++) {
+      int v = r->node[a];
       if (v < 0) continue;
       for (int q = s->exp_start[v]; q < s->exp_start[v + 1]; q++) {
         const int *f = s->free_of + 3 * s->exp_node[q];
         for (int k = 0; k < 3; k++) {
-          double c = s->exp_w[q] * r->N[8 * i + a] * r->dir[3 * i + k];
+          double c = s->exp_w[q] * r->N[a] * r->dir[3 * i + k];
           if (c == 0.0 || f[k] < 0) continue;
           if (mark[f[k]] < start) mark[f[k]] = pos, Ji[pos] = f[k], Jx[pos++] = 0.0;
           Jx[mark[f[k]]] += c;
@@ -122,11 +145,11 @@ void nh_rows_tissue_rates(const nh_system *s, const nh_rows *rows, const double 
   nh_system_scatter(s, dv, full);
   for (int i = 0; i < rows->m; i++) {
     double rate = 0.0;
-    for (int a = 0; a < 8; a++) {
-      int node = rows->node[8 * i + a];
+    for (int a = rows->start[i]; a < rows->start[i + 1]; a++) {
+      int node = rows->node[a];
       if (node < 0) continue;
       for (int c = 0; c < 3; c++)
-        rate += rows->N[8 * i + a] * rows->dir[3 * i + c] * (v[3 * node + c] + full[3 * node + c]);
+        rate += rows->N[a] * rows->dir[3 * i + c] * (v[3 * node + c] + full[3 * node + c]);
     }
     out[i] = base[i] + rate;
   }

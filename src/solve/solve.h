@@ -325,7 +325,8 @@ int nh_mcp_solve_unsymmetric(int m, const double *W, const double *r, nh_row_law
 
 /* Constraint rows between tissue points and tool points. Row i reads
  *   g_i = n_i · (x_tissue(P_i) − x_tool(s_i)),
- * P_i a point of a tissue cell (its 8 nodes and shape values N), s_i a point
+ * P_i a point of a tissue cell (its 8 nodes and shape values N; or a weighted
+ * average of such points over any nodes: a widened row), s_i a point
  * of a tool element (the 3x12 Hermite Jacobian of nh_beam_point), n_i a unit
  * direction. Its force λ_i acts on the tissue point along +n_i and on the
  * tool point along −n_i. A row without a tool part (tool = −1) ties the
@@ -335,8 +336,10 @@ int nh_mcp_solve_unsymmetric(int m, const double *W, const double *r, nh_row_law
  * position-level violation g is removed within the step. */
 typedef struct {
   int m, cap;
-  int *node;        /* 8 per row: tissue nodes (−1: unused) */
-  double *N;        /* 8 per row: shape values at the point */
+  int *start;       /* m + 1: row i's tissue part is node[k], N[k], start[i] <= k < start[i + 1] */
+  int n_slots;      /* allocated length of node and N */
+  int *node;        /* tissue nodes (−1: unused); 8 per row unless a row was widened */
+  double *N;        /* their weights: the shape values at the point (or averaged over a disc) */
   double *dir;      /* 3 per row: n */
   int *tool, *elem; /* tool index (−1: none) and element */
   double *J;        /* 36 per row: d x_tool / d (element DOFs), row-major 3 x 12 */
@@ -347,9 +350,14 @@ typedef struct {
 
 void nh_rows_clear(nh_rows *rows);
 void nh_rows_free(nh_rows *rows);
-/* Append a row (law BILATERAL, λ = 0, no tool part); returns its index, or
- * −1 when out of memory. The caller fills the fields of row i. */
+/* Append a row (law BILATERAL, λ = 0, no tool part, 8 unused tissue slots);
+ * returns its index, or −1 when out of memory. The caller fills the fields
+ * of row i. */
 int nh_rows_add(nh_rows *rows);
+/* Give the last row `count` unused tissue slots instead of its 8 (a tissue
+ * part spread over more nodes than one cell's: the tip's disc,
+ * docs/interaction.md "Tip disc"). NH_ERR_MEMORY. */
+int nh_rows_widen(nh_rows *rows, int count);
 
 /* The dual of a constrained step: ncol problems
  *     A x + J_tᵀ μ = b,   J_t x = 0
