@@ -60,7 +60,7 @@ struct nh_sim {
   double *v_start; /* v at the start of the step (a step interrupted inside goes back to it) */
   int inverted;    /* cells inverted after the last step (steps.csv `inverted`) */
   int unsolved_steps, unsolved_first; /* steps left unsolved (steps.csv `unsolved`), the first */
-  int guard_warned;          /* bit per kind of invalid step already warned about */
+  int guard_warned;                   /* bit per kind of invalid step already warned about */
   /* estimator goal: goal index of each embedded point (−1: not a goal), the
    * largest estimate so far (summary) and its point */
   int *goal_of_point;
