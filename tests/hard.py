@@ -103,6 +103,19 @@ def no_locking(name, out, stderr):
         fail("%s: probe uz %.4g at nu 0.4999, expected >= 0.75 x %.4g (nu 0.45)" % (name, a, b))
 
 
+def newton_steps(name, out, stderr):
+    """Some step took Newton iterations (its linearisation left it above 0.5:
+    docs/theory.md section 3, "Newton iterations in the dynamic step"), and each
+    such step ended at most at their target, solver.newton.tolerance's default
+    1e-8, within their bound of 8 (iterations <= 9)."""
+    newton = [r for r in rows(out, "steps.csv") if int(float(r["iterations"])) > 1]
+    bad = [(r["step"], r["iterations"], r["residual"]) for r in newton
+           if not (float(r["residual"]) <= 1e-8 and int(float(r["iterations"])) <= 9)]
+    if not newton or bad:
+        fail("%s: %d steps with Newton iterations, expected some, each <= 9 iterations to a "
+             "residual <= 1e-8; not so: %s" % (name, len(newton), bad))
+
+
 def cantilever_nu(name, out, stderr):
     """Tip deflection within 10 % of the nu = 0.3 run (beam theory: independent of nu
     but for the shear term, 0.6 %, and the clamp's restraint); locking: ~20 %."""
@@ -178,7 +191,7 @@ SCENES = {
     "bevel-4-friction": (0, None, [tip_cut()]),
     "bevel-15-friction": (0, None, [tip_cut()]),
     "bevel-30-friction": (0, None, [tip_cut()]),
-    "nu-04999-needle": (0, None, [tip_cut(), no_locking]),
+    "nu-04999-needle": (0, None, [tip_cut(), no_locking, newton_steps]),
     "nu-04999-cantilever": (0, None, [cantilever_nu]),
     "soft-100pa": (0, None, [tip_cut()]),
     "soft-100pa-overload": (1, INVERTED, [crushed_before_puncture]),
