@@ -32,6 +32,11 @@ BIN = os.environ.get("NH_BINARY", "needlehex")
 WORK = os.environ.get("NH_WORK", tempfile.gettempdir())
 TOLERANCE = 1e-10
 INVERTED = r"cells inverted .*the load or the material is beyond what the model can represent"
+# inverted cells at a tip disc (src/sim/guard.c): force F, disc radius a, modulus E, strain
+DISC = (r"cells inverted .* at the tip disc of tool '(\w+)' \(cell \d+\): its ([0-9.e+-]+) N over "
+        r"the disc of radius ([0-9.e+-]+) mm press the tissue \(E = ([0-9.e+-]+) Pa\) by a nominal "
+        r"strain F / \(pi a\^2 E\) = ([0-9.e+-]+), beyond the small-strain material model.*"
+        r"the load or the material is beyond what the model can represent")
 failed = 0
 
 
@@ -77,10 +82,10 @@ def run(name, overrides=(), tag=""):
     return p, out, scene
 
 
-# Checks: f(name, out) -> None (call fail()). Expected values from analysis.
+# Checks: f(name, out, stderr) -> None (call fail()). Expected values from analysis.
 def tip_cut(tool="needle"):
     """The tip is inside the tissue and cutting at the end."""
-    def check(name, out):
+    def check(name, out, stderr):
         r = last_tool(out, tool)
         if r["state"] != "cutting" or not float(r["depth"]) > 0:
             fail("%s: %s at the end: state %s depth %s, expected cutting, depth > 0"
@@ -88,7 +93,7 @@ def tip_cut(tool="needle"):
     return check
 
 
-def no_locking(name, out):
+def no_locking(name, out, stderr):
     """Probe P's lift (uz, 5 mm above the path) at nu = 0.4999 at least 0.75 of the
     nu = 0.45 run's: a nearly incompressible gel bulges at least as much; the fully
     integrated hexahedron at nu = 0.4999 gives about 0.5 (locking)."""
@@ -98,7 +103,20 @@ def no_locking(name, out):
         fail("%s: probe uz %.4g at nu 0.4999, expected >= 0.75 x %.4g (nu 0.45)" % (name, a, b))
 
 
-def cantilever_nu(name, out):
+def newton_steps(name, out, stderr):
+    """Some step took Newton iterations (its linearisation left it above 0.5:
+    docs/theory.md section 3, "Newton iterations in the dynamic step"), and each
+    such step ended at most at their target, solver.newton.tolerance's default
+    1e-8, within their bound of 8 (iterations <= 9)."""
+    newton = [r for r in rows(out, "steps.csv") if int(float(r["iterations"])) > 1]
+    bad = [(r["step"], r["iterations"], r["residual"]) for r in newton
+           if not (float(r["residual"]) <= 1e-8 and int(float(r["iterations"])) <= 9)]
+    if not newton or bad:
+        fail("%s: %d steps with Newton iterations, expected some, each <= 9 iterations to a "
+             "residual <= 1e-8; not so: %s" % (name, len(newton), bad))
+
+
+def cantilever_nu(name, out, stderr):
     """Tip deflection within 10 % of the nu = 0.3 run (beam theory: independent of nu
     but for the shear term, 0.6 %, and the clamp's restraint); locking: ~20 %."""
     _, ref, _ = run(name, ["tissue.material.poisson=0.3"], "_ref")
@@ -107,7 +125,7 @@ def cantilever_nu(name, out):
         fail("%s: tip uz %.5g, expected within 10 %% of %.5g (nu 0.3)" % (name, a, b))
 
 
-def large_rotation(name, out):
+def large_rotation(name, out, stderr):
     """0.1 N on the 0.1 m cantilever, PL^2/EI = 1.2: the elastica (Bisshopp & Drucker
     1945) deflects 0.35 L at the tip, linear theory 0.40 L; the 20 x 2 x 2 mesh is
     11-13 % stiffer (docs/cases.md, cantilever): expected 0.27 L to 0.40 L."""
@@ -116,7 +134,7 @@ def large_rotation(name, out):
         fail("%s: tip deflection %.4g m, expected in [0.027, 0.040] m" % (name, uz))
 
 
-def skull_holds(name, out):
+def skull_holds(name, out, stderr):
     """The skull pushes the brain up, by less than the whole brain's weight (its
     bounding box full of tissue: 0.14 x 0.17 x 0.13 m x 1040 kg/m3 x 9.81 = 31.6 N)."""
     fy = float(rows(out, "steps.csv")[-1]["skull_fy"])
@@ -124,7 +142,7 @@ def skull_holds(name, out):
         fail("%s: skull_fy %.4g N, expected in (0, 31.6] N" % (name, fy))
 
 
-def nested_ahead(name, out):
+def nested_ahead(name, out, stderr):
     """After the release at 1 s the electrode goes 1 s x 15 mm/s further than the
     cannula, whose tip it shared: 15 mm ahead (0.5 mm: its shortening under the
     cutting load is < 1 um, the rest is the tissue's give at the tip)."""
@@ -133,7 +151,7 @@ def nested_ahead(name, out):
         fail("%s: electrode tip %.4g m ahead of the cannula's, expected 0.015 +- 0.0005" % (name, d))
 
 
-def at_target(name, out):
+def at_target(name, out, stderr):
     """The electrode's tip at the STN within 1 mm plus the STN's own shift: the
     trajectory aims at the STN's rest position (0.012, -0.005, -0.01), and the
     brain shift moves the material point."""
@@ -144,11 +162,26 @@ def at_target(name, out):
              % (name, float(r["distance"]), shift))
 
 
-def crushed_before_puncture(name, out):
+def crushed_before_puncture(name, out, stderr):
     """The overload stops the run while the tip still only touches the surface."""
     r = last_tool(out, "needle")
     if r["state"] != "contact":
         fail("%s: needle state %s at the last written step, expected contact" % (name, r["state"]))
+
+
+def disc_strain(name, out, stderr):
+    """The disc message's strain is F / (pi a^2 E) of its own numbers (to their 3
+    digits), above 1 (a strain the small-strain model cannot carry), with F at most
+    the puncture force 0.1 N (the push before the puncture) and a = 0.4 mm (the
+    needle's radius)."""
+    m = re.search(DISC, stderr)
+    tool, F, a, E, eps = m.group(1), *map(float, m.groups()[1:])
+    expected = F / (math.pi * (a * 1e-3) ** 2 * E)
+    if tool != "needle" or not abs(eps / expected - 1) <= 0.01 or not eps > 1:
+        fail("%s: tool %s, strain %g for F %g N, a %g mm, E %g Pa: expected needle, %g > 1"
+             % (name, tool, eps, F, a, E, expected))
+    if not (0 < F <= 0.1 * (1 + 1e-6) and a == 0.4):
+        fail("%s: disc force %g N, radius %g mm: expected (0, 0.1] N, 0.4 mm" % (name, F, a))
 
 
 # name: (exit status, reason regex for exit 1, checks)
@@ -158,7 +191,7 @@ SCENES = {
     "bevel-4-friction": (0, None, [tip_cut()]),
     "bevel-15-friction": (0, None, [tip_cut()]),
     "bevel-30-friction": (0, None, [tip_cut()]),
-    "nu-04999-needle": (0, None, [tip_cut(), no_locking]),
+    "nu-04999-needle": (0, None, [tip_cut(), no_locking, newton_steps]),
     "nu-04999-cantilever": (0, None, [cantilever_nu]),
     "soft-100pa": (0, None, [tip_cut()]),
     "soft-100pa-overload": (1, INVERTED, [crushed_before_puncture]),
@@ -169,6 +202,7 @@ SCENES = {
     "grid-fine": (0, None, [tip_cut()]),
     "levels-2": (0, None, [tip_cut()]),
     "levels-3": (0, None, [tip_cut()]),
+    "levels-2-overload": (1, DISC, [crushed_before_puncture, disc_strain]),
     "nested": (0, None, [nested_ahead]),
     "skull-nested": (0, None, [at_target]),
     "static-push": (0, None, []),
@@ -206,7 +240,7 @@ def check_scene(arg, tag=""):
             fail("%s: step %s left unsolved (Newton relative residual %s)"
                  % (name, r["step"], r["residual"]))
     for c in checks:
-        c(name, out)
+        c(name, out, p.stderr)
     return out
 
 

@@ -98,6 +98,21 @@ typedef struct {
 } nh_tool_report;
 void nh_contact_report(const nh_contact *c, int tool, nh_tool_report *r);
 
+/* Tool k's tip disc in the last step (docs/interaction.md, "Tip disc"): the
+ * puncture rows (its group's outer tool, before the puncture) or the tip
+ * rows (the group's tip tool after it). force: |λ| / τ of the disc's three
+ * rows, N (τ the rows' time scale: h, or 1 quasi-static); radius: the
+ * disc's; node[0..n_nodes): the tissue nodes its rows act on (the last
+ * step's rows; valid until the next step). active = 0 (the rest zero) when
+ * the tool had no such rows or they carried no force. */
+typedef struct {
+  int active;
+  double force, radius;
+  const int *node;
+  int n_nodes;
+} nh_tip_disc;
+void nh_contact_tip_disc(const nh_contact *c, int tool, double tau, nh_tip_disc *d);
+
 /* Of the last step: the constraint rows, the groups whose tip cut (slid
  * forward and moved the front), the channel points laid so far, and what
  * the coupled solve did (timings; sweeps, residual, friction rows sticking

@@ -222,6 +222,23 @@ void nh_contact_report(const nh_contact *c, int k, nh_tool_report *r) {
   }
 }
 
+void nh_contact_tip_disc(const nh_contact *c, int k, double tau, nh_tip_disc *d) {
+  const nh_tool *tl = &c->tools[k];
+  const nh_group *G = &c->groups[tl->group];
+  const nh_rows *rows = &c->rows;
+  *d = (nh_tip_disc){0};
+  int r = G->outer == k && G->entry_row >= 0 ? G->entry_row : G->tip_tool == k ? G->front.row : -1;
+  if (r < 0 || r + 3 > rows->m) return;
+  double f2 = 0.0;
+  for (int q = 0; q < 3; q++) f2 += rows->lambda[r + q] * rows->lambda[r + q];
+  if (!(f2 > 0.0)) return;
+  d->active = 1;
+  d->force = sqrt(f2) / tau;
+  d->radius = nh_tip_radius(tl->spec);
+  d->node = rows->node + rows->start[r];
+  d->n_nodes = rows->start[r + 1] - rows->start[r];
+}
+
 void nh_contact_node_forces(const nh_contact *c, int k, double *f) {
   memcpy(f, c->tools[k].f_node, sizeof(double) * 3 * (size_t)nh_beam_nodes(c->tools[k].beam));
 }

@@ -69,7 +69,7 @@ static int read_scene(nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   NH_TRY(nh_read_adapt(c, root, s));
   NH_TRY(nh_read_solver(c, root, s));
   NH_TRY(nh_read_tools(c, root, s));
-  NH_TRY(nh_read_solver_newton(c, root, s)); /* after tools: refused with them */
+  NH_TRY(nh_read_solver_newton(c, root, s));
   NH_TRY(nh_read_probes(c, root, s));
   NH_TRY(nh_read_targets(c, root, s));    /* after tools: a target names its tool */
   NH_TRY(nh_read_adapt_goal(c, root, s)); /* after probes and targets: goals name them */

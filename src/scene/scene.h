@@ -296,6 +296,8 @@ typedef struct nh_scene {
     double lazy_rotation;      /* solver.lazy_rotation: lazy tangents' tolerance (default 0) */
     int on_invalid_warn;       /* solver.on_invalid: stop (0, default) | warn (1) */
     int newton_iterations;     /* solver.newton.max_iterations (dynamic; default 0: none) */
+    int newton_given;          /* solver.newton given: its count holds (0: one linearisation);
+                                  else a step left unsolved iterates (nh_step_coupled) */
     double newton_tolerance;   /* solver.newton.tolerance (default 1e-8) */
   } solver;
 

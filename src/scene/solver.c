@@ -19,6 +19,7 @@ static const nh_key newton_rows[] = {
 static int newton_given(const nh_ctx *c, const nh_key_site *k, void *base) {
   (void)c, (void)k;
   ((nh_scene *)base)->solver.newton_iterations = 5;
+  ((nh_scene *)base)->solver.newton_given = 1;
   return NH_OK;
 }
 
@@ -37,10 +38,9 @@ int nh_read_solver(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   return nh_read_top(c, root, "solver", 0, solver_rows, s);
 }
 
-/* solver.newton corrects the linearised dynamic step of the tissue alone
- * (solve/integrate.c); a static solve is Newton already (solver.tolerance,
- * solver.max_iterations) and the coupled step with tools takes none, so the
- * key is refused there rather than ignored. After the tools are read. */
+/* solver.newton iterates the linearised dynamic step (solve/coupled.c); a
+ * static solve is Newton already (solver.tolerance, solver.max_iterations),
+ * so the key is refused there rather than ignored. */
 int nh_read_solver_newton(const nh_ctx *c, const nh_yaml_node *root, const nh_scene *s) {
   const nh_yaml_node *at = nh_yaml_get(nh_yaml_get(root, "solver", NULL), "newton", NULL);
   if (!at) return NH_OK;
@@ -48,11 +48,6 @@ int nh_read_solver_newton(const nh_ctx *c, const nh_yaml_node *root, const nh_sc
     return nh_read_fail(c, at, "solver.newton",
                         "is for dynamic steps; a static solve is Newton's already: set "
                         "solver.tolerance and solver.max_iterations instead");
-  if (s->n_tools > 0)
-    return nh_read_fail(c, at, "solver.newton",
-                        "is not taken with tools (the coupled step of %d tool%s is linearised "
-                        "once per step): remove it, or run without tools",
-                        s->n_tools, s->n_tools == 1 ? "" : "s");
   return NH_OK;
 }
 

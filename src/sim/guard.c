@@ -30,37 +30,82 @@
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
+#include <string.h>
 
 /* A node may move by at most this fraction of the tissue's size in a step. */
 #define NH_GUARD_STEP_FRACTION 0.5
 
-int nh_sim_count_inverted(const nh_sim *s, int *first) {
+/* Cell c inverted at the displacements u (see the top of this file). */
+static int nh_cell_inverted(const nh_sim *s, int c) {
   static const double g = 0.57735026918962576; /* 1/sqrt(3) */
+  const nh_mesh *m = s->mesh;
+  double X[24], x[24], grad[24];
+  nh_mesh_cell_coords(m, m->X, c, X);
+  nh_mesh_cell_coords(m, s->u, c, x);
+  for (int i = 0; i < 24; i++) x[i] += X[i];
+  int bad = 0;
+  double pts[3];
+  int n_pts = nh_tissue_tissue_points(s->tissue, c, pts);
+  if (n_pts >= 0) /* a cut cell: where its tissue is */
+    for (int p = 0; p < n_pts && !bad; p++) bad = !(nh_hex_gradients(x, pts + 3 * p, grad) > 0.0);
+  for (int p = 0; p < 16 && !bad && n_pts < 0; p++) {
+    double a = p < 8 ? 1.0 : g;
+    double xi[3] = {(p & 1) ? a : -a, (p & 2) ? a : -a, (p & 4) ? a : -a};
+    bad = !(nh_hex_gradients(x, xi, grad) > 0.0);
+  }
+  return bad;
+}
+
+int nh_sim_count_inverted(const nh_sim *s, int *first) {
   const nh_mesh *m = s->mesh;
   int count = 0;
   *first = -1;
   for (int l = 0; l < m->n_leaves; l++) {
     int c = m->leaves[l];
-    double X[24], x[24], grad[24];
-    nh_mesh_cell_coords(m, m->X, c, X);
-    nh_mesh_cell_coords(m, s->u, c, x);
-    for (int i = 0; i < 24; i++) x[i] += X[i];
-    int bad = 0;
-    double pts[3];
-    int n_pts = nh_tissue_tissue_points(s->tissue, c, pts);
-    if (n_pts >= 0) /* a cut cell: where its tissue is */
-      for (int p = 0; p < n_pts && !bad; p++) bad = !(nh_hex_gradients(x, pts + 3 * p, grad) > 0.0);
-    for (int p = 0; p < 16 && !bad && n_pts < 0; p++) {
-      double a = p < 8 ? 1.0 : g;
-      double xi[3] = {(p & 1) ? a : -a, (p & 2) ? a : -a, (p & 4) ? a : -a};
-      bad = !(nh_hex_gradients(x, xi, grad) > 0.0);
-    }
-    if (bad) {
+    if (nh_cell_inverted(s, c)) {
       if (*first < 0) *first = c;
       count++;
     }
   }
   return count;
+}
+
+/* Inverted cells at a tool's tip disc (docs/interaction.md, "Tip disc"):
+ * the first tool whose active disc acts on a node of an inverted cell
+ * appends to msg what it asks of the tissue there, its force F over the
+ * disc of radius a as the nominal strain F / (π a² E) (E of that cell): a
+ * linear half-space under that pressure sinks by 16 (1 − ν²) / (3 π) times
+ * it in disc radii (Timoshenko & Goodier, §138), so a strain of order one
+ * is beyond the small-strain material model, and a real tissue would
+ * rather be punctured or cut at a lower force. */
+static int nh_guard_disc(const nh_sim *s, char *msg, size_t size) {
+  const nh_mesh *m = s->mesh;
+  const double tau = s->scene->time.mode == NH_MODE_STATIC ? 1.0 : s->scene->time.step;
+  for (int t = 0; t < s->scene->n_tools; t++) {
+    nh_tip_disc d;
+    nh_contact_tip_disc(s->contact, t, tau, &d);
+    if (!d.active) continue;
+    for (int l = 0; l < m->n_leaves; l++) {
+      int c = m->leaves[l], touches = 0;
+      for (int a = 0; a < 8 && !touches; a++)
+        for (int k = 0; k < d.n_nodes && !touches; k++) touches = d.node[k] == m->cells[8 * c + a];
+      if (!touches || !nh_cell_inverted(s, c)) continue;
+      double lambda, mu;
+      nh_tissue_cell_material(s->tissue, c, &lambda, &mu, NULL);
+      const double E = mu * (3.0 * lambda + 2.0 * mu) / (lambda + mu);
+      const double pi = 3.14159265358979323846;
+      const double strain = d.force / (pi * d.radius * d.radius * E);
+      size_t len = strlen(msg);
+      snprintf(msg + len, size - len,
+               " at the tip disc of tool '%s' (cell %d): its %.3g N over the disc of radius "
+               "%.3g mm press the tissue (E = %.3g Pa) by a nominal strain F / (pi a^2 E) = "
+               "%.3g, beyond the small-strain material model (a real tissue is punctured or cut "
+               "at a lower force: the tool's puncture_force, cutting_force)",
+               s->scene->tools[t].name, c, d.force, 1e3 * d.radius, E, strain);
+      return 1;
+    }
+  }
+  return 0;
 }
 
 /* The tissue's rest size: the diagonal of the nodes' bounding box. */
@@ -109,12 +154,15 @@ int nh_sim_guard(nh_sim *s, const double *u_start) {
                       isfinite(s->u[i]) ? "velocity" : "displacement");
   int first = -1;
   s->inverted = nh_sim_count_inverted(s, &first);
-  if (s->inverted > 0)
+  if (s->inverted > 0) {
+    char disc[768] = "";
+    if (s->contact) nh_guard_disc(s, disc, sizeof disc);
     NH_TRY(nh_guard_report(s, 0,
                            "%d of %d cells inverted (det J <= 0 at a corner or Gauss point; "
-                           "first: cell %d, level %d): the load or the material is beyond what "
+                           "first: cell %d, level %d)%s: the load or the material is beyond what "
                            "the model can represent",
-                           s->inverted, m->n_leaves, first, m->level[first]));
+                           s->inverted, m->n_leaves, first, m->level[first], disc));
+  }
   double size = nh_tissue_size(m), worst = 0.0;
   int node = -1;
   for (int i = 0; i < m->n_nodes; i++) {

@@ -527,20 +527,21 @@ static int nh_sim_build(nh_sim *s) {
   NH_TRY(nh_sim_setup_mesh(s, 1));
   NH_TRY(nh_sim_tools_build(s));
   NH_TRY(nh_sim_patient_open(s));
-  s->integrator =
-      (nh_integrator){.dt = sc->time.step,
-                      .alpha = sc->tissue.damping_mass,
-                      .beta = sc->tissue.damping_stiffness,
-                      .tolerance = sc->solver.tolerance,
-                      .max_iterations = sc->solver.max_iterations,
-                      .threads = sc->solver.threads,
-                      /* the goal estimate's duals need this step's factor */
-                      .reuse = sc->solver.refactor == NH_REFACTOR_AUTO &&
-                               !(sc->adapt.enabled && sc->adapt.estimator == NH_ESTIMATOR_GOAL),
-                      .time_factor = getenv("NH_TIME_FACTOR") != NULL,
-                      .newton_iterations = sc->solver.newton_iterations,
-                      .newton_tolerance = sc->solver.newton_tolerance,
-                      .lazy_rotation = sc->solver.lazy_rotation};
+  s->integrator = (nh_integrator){
+      .dt = sc->time.step,
+      .alpha = sc->tissue.damping_mass,
+      .beta = sc->tissue.damping_stiffness,
+      .tolerance = sc->solver.tolerance,
+      .max_iterations = sc->solver.max_iterations,
+      .threads = sc->solver.threads,
+      /* the goal estimate's duals need this step's factor */
+      .reuse = sc->solver.refactor == NH_REFACTOR_AUTO &&
+               !(sc->adapt.enabled && sc->adapt.estimator == NH_ESTIMATOR_GOAL),
+      .time_factor = getenv("NH_TIME_FACTOR") != NULL,
+      /* without solver.newton: only unsolved steps iterate */
+      .newton_iterations = sc->solver.newton_given ? sc->solver.newton_iterations : -1,
+      .newton_tolerance = sc->solver.newton_tolerance,
+      .lazy_rotation = sc->solver.lazy_rotation};
   /* --restart: the factor the next step reuses, made again, and the last
    * assembly (the lazy tangents' frames: with `every` too) */
   if (s->restore_solver) {
@@ -916,12 +917,9 @@ static double *nh_sim_record_times(nh_sim *s, const nh_sim_record *r, double t_e
 
 /* Output of the step: its times and its row of steps.csv and of
  * results.h5. */
-/* A linearised dynamic step (no solver.newton) that leaves this much of its
- * equations' relative residual is not a solution (docs/outputs.md, unsolved). */
-#define NH_UNSOLVED_LINEAR 0.5
-
 /* The step's relative residual stayed above its bound: the Newton tolerance
- * (static mode; dynamic with solver.newton), else NH_UNSOLVED_LINEAR, and
+ * (static mode; dynamic with solver.newton), else NH_UNSOLVED_LINEAR (a
+ * linearised step that leaves that much is not a solution: solve.h), and
  * above the round-off level of its internal forces (a stiff body at rest
  * has forces at that level: a relative residual of round-off over
  * round-off). The first such step is warned about, every one counted (the

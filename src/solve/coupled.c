@@ -400,7 +400,8 @@ static int nh_coupled_constraints(nh_step_work *w) {
   return NH_OK;
 }
 
-/* Update: the tissue (nh_step_update) and the tools (their finish). */
+/* Update the tissue (nh_step_update); the tools finish after the step's
+ * Newton iterations (nh_coupled_finish), which change their λ. */
 static int nh_coupled_update(nh_step_work *w) {
   const int nf = w->s->n_free;
   double t6 = nh_time_now();
@@ -411,11 +412,18 @@ static int nh_coupled_update(nh_step_work *w) {
     w->b_norm = sqrt(w->b_norm);
   }
   nh_step_update(w->s, w->statics, w->in->dt, w->dv, w->u, w->v);
+  w->st.step.t_solve += nh_time_now() - t6;
+  w->st.step.iterations = 1;
+  return NH_OK;
+}
+
+/* The tools' update with the step's final λ (nh_beam_dynamic_finish). */
+static int nh_coupled_finish(nh_step_work *w) {
+  double t0 = nh_time_now();
   for (int k = 0; k < w->n_tools; k++)
     NH_TRY(nh_beam_dynamic_finish(w->tools[k].beam, w->in->dt, w->tools[k].base_velocity,
                                   w->tw[k].dv));
-  w->st.step.t_solve += nh_time_now() - t6;
-  w->st.step.iterations = 1;
+  w->st.step.t_solve += nh_time_now() - t0;
   return NH_OK;
 }
 
@@ -436,6 +444,103 @@ static void nh_coupled_residual(nh_step_work *w) {
       nh_dynamic_residual(w->s, w->in, w->f_ext, w->u, w->v, w->full, w->m ? w->col : NULL, w->b);
   st->residual_floor = nh_system_residual_floor(w->s);
   st->t_assemble += nh_time_now() - t7;
+}
+
+/* The Newton iterations' trigger, target and count (docs/theory.md §3,
+ * "Newton iterations in the dynamic step"): with solver.newton, while the
+ * residual exceeds its tolerance, at most its count; without, only a step
+ * whose one linearisation leaves it above NH_UNSOLVED_LINEAR (and above its
+ * round-off level) iterates, towards the same tolerance, at most
+ * NH_DYNAMIC_NEWTON_MAX times. */
+static int nh_newton_wanted(const nh_integrator *in, const nh_step_stats *st, int it, int *rescue) {
+  if (in->newton_iterations >= 0)
+    return it < in->newton_iterations && !(st->residual <= in->newton_tolerance);
+  if (it == 0) *rescue = st->residual > fmax(NH_UNSOLVED_LINEAR, st->residual_floor);
+  return *rescue && it < NH_DYNAMIC_NEWTON_MAX &&
+         st->residual > fmax(in->newton_tolerance, st->residual_floor);
+}
+
+/* Newton iterations on the step's implicit-Euler equations with the step's
+ * rows (dynamic; see nh_step_coupled). The first pass left u_k, v_k, the
+ * residual R_k = h (f_ext − f_int(u_k) − C v_k) − M Δv_k + J_tᵀ λ_k in b and
+ * A(u_k) assembled; each iteration solves the linearised equations
+ *   A_k δ = (R_k − J_tᵀ λ_k) + J_tᵀ λ,   λ from w = W_k λ + r_k and the laws,
+ * W_k = J_t A_k⁻¹ J_tᵀ + W_tools, r_k = J_t (v_k + δ_free) + r_tools: the
+ * coupled step's phases again with A_k, the rows, their gaps and the tools'
+ * blocks unchanged (the rows are linear in the velocities and the tools'
+ * blocks are linearised once per step; their update moves by
+ * A_j⁻¹ J_jᵀ (λ − λ_k)). A_k is the consistent tangent's symmetric part once
+ * the residual is below NH_NEWTON_CONSISTENT (the corotational one where
+ * that is indefinite: nh_system_factor_symmetric), as in the static Newton;
+ * the residual is always that of the step's equations (corotational K in
+ * the damping). Hanging-node rows carry their multipliers' increments
+ * (nh_system_solve_constrained). */
+static int nh_coupled_newton(nh_step_work *w) {
+  nh_system *s = w->s;
+  const nh_integrator *in = w->in;
+  nh_step_stats *st = &w->st.step;
+  const int n = 3 * s->n_nodes, nf = s->n_free, m = w->m;
+  int rescue = 0, it;
+  if (!nh_newton_wanted(in, st, 0, &rescue)) return NH_OK;
+  double *dvt = nh_calloc((size_t)n + (size_t)m, sizeof(double)), *lam0 = dvt + n;
+  if (!dvt) return NH_ERROR(NH_ERR_MEMORY, "out of memory: Newton iterations of the step");
+  memcpy(dvt, w->full, sizeof(double) * (size_t)n); /* Δv so far (w->full: the rates' scratch) */
+  const double cM = 1.0 + in->dt * in->alpha, cK = in->dt * in->beta + in->dt * in->dt;
+  int rc = NH_OK;
+  for (it = 0; !rc && nh_newton_wanted(in, st, it, &rescue); it++) {
+    if (nh_stop_requested()) break; /* the step stands as it is (u, v consistent) */
+    double t0 = nh_time_now();
+    if (m)
+      for (int i = 0; i < nf; i++) w->b[i] -= w->col[i]; /* R_k − J_tᵀ λ_k */
+    if (st->residual <= NH_NEWTON_CONSISTENT) {
+      nh_system_set_tangent(s, NH_TANGENT_CONSISTENT);
+      nh_system_assemble(s, w->u, NULL, cM, cK, s->work[0], NULL, in->threads);
+    }
+    double t1 = nh_time_now();
+    st->t_assemble += t1 - t0;
+    if ((rc = nh_system_factor_symmetric(s, in, w->u, NH_FACTOR_NEWTON, st))) break;
+    double t2 = nh_time_now();
+    if ((rc = nh_step_free_solve(s, in, w->b, w->dv, st))) break;
+    st->t_solve += nh_time_now() - t2;
+    if (m) {
+      double tc = nh_time_now();
+      memcpy(lam0, w->rows->lambda, sizeof(double) * (size_t)m);
+      if ((rc = nh_tissue_compliance(w)) || (rc = nh_coupled_constraint_solve(w)) ||
+          (rc = nh_coupled_correction(w)))
+        break;
+      for (int i = 0; i < m; i++) lam0[i] = w->rows->lambda[i] - lam0[i];
+      for (int k = 0; k < w->n_tools; k++) { /* A_j⁻¹ J_jᵀ (λ − λ_k) */
+        nh_tool_work *t = &w->tw[k];
+        for (int a = 0; a < t->nrows; a++) {
+          const double *x = t->X + (size_t)a * t->mfree, dl = lam0[t->rows[a]];
+          for (int q = 0; q < t->mfree; q++) t->dv[q] += dl * x[q];
+        }
+      }
+      st->t_constraints += nh_time_now() - tc;
+    }
+    if (!nh_finite(w->dv, nf)) {
+      rc = NH_ERROR(NH_ERR_NUMERIC, "the tissue's Newton correction is not finite");
+      break;
+    }
+    double t3 = nh_time_now();
+    double *delta = s->work[0];
+    nh_system_scatter(s, w->dv, delta);
+    for (int i = 0; i < n; i++) {
+      w->v[i] += delta[i];
+      w->u[i] += in->dt * delta[i];
+      dvt[i] += delta[i];
+    }
+    nh_system_set_tangent(s, NH_TANGENT_COROTATIONAL);
+    if (m) nh_rows_tissue_force(w->Jt, w->rows->lambda, w->col, nf);
+    st->residual = nh_dynamic_residual(s, in, w->f_ext, w->u, w->v, dvt, m ? w->col : NULL, w->b);
+    st->residual_floor = nh_system_residual_floor(s);
+    st->t_assemble += nh_time_now() - t3;
+    st->iterations++;
+  }
+  nh_system_set_tangent(s, NH_TANGENT_COROTATIONAL);
+  memcpy(w->full, dvt, sizeof(double) * (size_t)n); /* the step's nodal update, as documented */
+  free(dvt);
+  return rc;
 }
 
 int nh_step_coupled(nh_system *s, const nh_integrator *in, const double *f_ext, double *u,
@@ -477,6 +582,8 @@ int nh_step_coupled(nh_system *s, const nh_integrator *in, const double *f_ext, 
   if (!rc) rc = nh_coupled_update(&w);
   if (!rc) nh_coupled_residual(&w);
   w.st.step.factorised = s->factor_age == 0;
+  if (!rc && !w.statics) rc = nh_coupled_newton(&w);
+  if (!rc) rc = nh_coupled_finish(&w);
   w.st.step.tangent_updates = nh_system_lazy_updates(s);
   if (stats) *stats = w.st;
   nh_step_work_free(&w);

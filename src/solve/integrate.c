@@ -40,41 +40,9 @@ int nh_step_dynamic(nh_system *s, const nh_integrator *in, const double *f_ext, 
                     double *v, nh_step_stats *stats) {
   nh_coupled_stats st;
   int rc = nh_step_coupled(s, in, f_ext, u, v, 0, NULL, NULL, 1.0, 1.0, 0, &st);
-  /* Newton corrections on the implicit-Euler equations: the residual's
-   * evaluation left A(u) assembled and R in fwork[0]; work[3] holds the
-   * step's velocity change so far. */
-  const int n = 3 * s->n_nodes;
-  double *dv = s->work[3], *delta = s->work[0], *b = s->fwork[0], *x = s->fwork[1];
-  for (int it = 0; !rc && it < in->newton_iterations && !(st.step.residual <= in->newton_tolerance);
-       it++) {
-    if (nh_stop_requested()) break; /* the step stands as linearised (u, v consistent) */
-    double t0 = nh_time_now();
-    if ((rc = nh_system_factor(s))) break; /* the A the residual assembled (reuse.c) */
-    st.step.factorised++;
-    double t1 = nh_time_now();
-    if ((rc = nh_step_free_solve(s, in, b, x, &st.step))) break;
-    nh_system_scatter(s, x, delta);
-    for (int i = 0; i < n; i++) {
-      v[i] += delta[i];
-      u[i] += in->dt * delta[i];
-      dv[i] += delta[i];
-    }
-    double t2 = nh_time_now();
-    st.step.residual = nh_dynamic_residual(s, in, f_ext, u, v, dv, NULL, b);
-    st.step.residual_floor = nh_system_residual_floor(s);
-    st.step.t_factor += t1 - t0;
-    st.step.t_solve += t2 - t1;
-    st.step.t_assemble += nh_time_now() - t2;
-    st.step.iterations++;
-  }
-  st.step.tangent_updates = nh_system_lazy_updates(s);
   if (stats) *stats = st.step;
   return rc;
 }
-
-/* The relative residual below which the static Newton takes the consistent
- * tangent (docs/theory.md §3, "Quasi-static Newton"). */
-#define NH_NEWTON_CONSISTENT 0.1
 
 /* No progress (docs/reliability.md, "Failures diagnosed"): after
  * NH_NEWTON_STALL_ITERATIONS iterations no relative residual has fallen
@@ -126,8 +94,8 @@ int nh_system_factor_symmetric(nh_system *s, const nh_integrator *in, const doub
   if (rc == NH_ERR_NUMERIC && s->consistent) {
     nh_error_clear();
     double t0 = nh_time_now();
-    nh_system_set_tangent(s, NH_TANGENT_COROTATIONAL);
-    nh_system_assemble(s, u, NULL, 0.0, 1.0, s->work[0], NULL, in->threads);
+    nh_system_set_tangent(s, NH_TANGENT_COROTATIONAL); /* with A's coefficients (dynamic too) */
+    nh_system_assemble(s, u, NULL, s->a_cM, s->a_cK, s->work[0], NULL, in->threads);
     nh_system_set_tangent(s, NH_TANGENT_CONSISTENT);
     st->t_assemble += nh_time_now() - t0;
     rc = nh_system_factor_or_reuse(s, in, mode, st);

@@ -176,8 +176,10 @@ typedef struct {
                               the solves then stop at `tolerance` (relative, see nh_system_pcg) */
   int time_factor;         /* benchmarks: also time a factorisation of A on steps that reuse one
                               (nh_step_stats.t_factor_reference; env NH_TIME_FACTOR=1) */
-  int newton_iterations;   /* dynamic, without tools: Newton corrections after the linearised
-                              step while the residual exceeds newton_tolerance (0: none) */
+  int newton_iterations;   /* dynamic (solver.newton): Newton iterations after the linearised
+                              step while the residual exceeds newton_tolerance (0: none);
+                              < 0: only a step left above NH_UNSOLVED_LINEAR iterates, at most
+                              NH_DYNAMIC_NEWTON_MAX times (nh_step_coupled) */
   double newton_tolerance; /* dynamic: relative residual */
   double lazy_rotation;    /* lazy tangents' tolerance τ (solver.lazy_rotation; 0 = exact) */
   int quasi_static;        /* nh_step_coupled: one Newton iteration of the static problem with
@@ -186,6 +188,14 @@ typedef struct {
                               symmetric part S (Cholesky; the corotational one where S is
                               indefinite), not R K₀ Rᵀ (docs/theory.md §3) */
 } nh_integrator;
+
+/* A dynamic step whose relative residual (below) stays above this bound
+ * after its one linearisation did not solve its equations (docs/outputs.md,
+ * `unsolved`): with in->newton_iterations < 0 (no solver.newton), such a
+ * step takes Newton iterations (nh_step_coupled), at most
+ * NH_DYNAMIC_NEWTON_MAX, towards newton_tolerance. */
+#define NH_UNSOLVED_LINEAR    0.5
+#define NH_DYNAMIC_NEWTON_MAX 8
 
 /* The relative residual of the implicit-Euler equations of the step just
  * taken (docs/theory.md §3): with v the end velocity, dv = v − v_start (3
