@@ -208,10 +208,6 @@ int nh_contact_step(nh_contact *c, nh_system *sys, const nh_integrator *in, cons
  * often one iteration may be solved again for it. */
 #define NH_STATIC_MISSED 0.01
 #define NH_STATIC_REDOS  4
-/* The relative residual below which an iteration takes the tissue's
- * consistent tangent (solve/integrate.c's NH_NEWTON_CONSISTENT: from far
- * off the corotational one does not diverge where the exact one may). */
-#define NH_STATIC_CONSISTENT 0.1
 
 /* Size of tool k's last increment (its velocities per τ = 1: translations,
  * rotations times the tool's length). */
@@ -276,12 +272,12 @@ int nh_contact_solve_static(nh_contact *c, nh_system *sys, const nh_integrator *
   for (iter = 0; iter < in->max_iterations && !rc && !converged; iter++) {
     memcpy(u_iter, u, sizeof(double) * (size_t)n);
     /* the tissue's consistent tangent (its symmetric part) once the residual is below
-     * NH_STATIC_CONSISTENT, as in the static Newton, but not with a skull:
+     * NH_NEWTON_CONSISTENT, as in the static Newton, but not with a skull:
      * its rows' curvature term is not in the tangent, and without it the
      * consistent tangent's initial-stress part leaves the brain's rigid
      * turn on the skull unstable (docs/interaction.md, "Quasi-static
      * mode") */
-    it.consistent_tangent = !c->skull && residual <= NH_STATIC_CONSISTENT;
+    it.consistent_tangent = !c->skull && residual <= NH_NEWTON_CONSISTENT;
     consistent_steps += it.consistent_tangent;
     if (c->skull) {
       free(saved), saved = NULL;

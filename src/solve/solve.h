@@ -196,6 +196,11 @@ typedef struct {
  * NH_DYNAMIC_NEWTON_MAX, towards newton_tolerance. */
 #define NH_UNSOLVED_LINEAR    0.5
 #define NH_DYNAMIC_NEWTON_MAX 8
+/* The relative residual below which a Newton iteration (the static Newton,
+ * the dynamic step's, the quasi-static step with constraint rows) takes the
+ * consistent tangent (docs/theory.md §3, "Quasi-static Newton"): from far
+ * off the corotational one does not diverge where the exact one may. */
+#define NH_NEWTON_CONSISTENT 0.1
 
 /* The relative residual of the implicit-Euler equations of the step just
  * taken (docs/theory.md §3): with v the end velocity, dv = v − v_start (3

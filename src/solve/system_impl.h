@@ -245,11 +245,6 @@ void nh_step_update(nh_system *s, int statics, double h, const double *x, double
  * which A holds the symmetric part S (and skew, when kept, the rest). A
  * change starts the next assembly afresh. */
 typedef enum { NH_TANGENT_COROTATIONAL = 0, NH_TANGENT_CONSISTENT = 1 } nh_tangent;
-/* The relative residual below which a Newton iteration (the static Newton,
- * the dynamic step's) takes the consistent tangent (docs/theory.md §3,
- * "Quasi-static Newton"): from far off the corotational one does not
- * diverge where the exact one may. */
-#define NH_NEWTON_CONSISTENT 0.1
 void nh_system_set_tangent(nh_system *s, nh_tangent tangent);
 
 /* Keep the skew-symmetric part N of the consistent tangent beside A (on A's
