@@ -166,7 +166,7 @@ static int nh_sim_ties(nh_sim *s, int first) {
     if (!nh_sim_fixed_is_tie(sc, immersed, r)) continue;
     char what[256];
     nh_region_describe(&sc->tissue.fixed[r], what, sizeof what);
-    if (first) /* Σ ∫ χ dV of the tie's quadrature: the volume of region ∩ tissue */
+    if (first && s->options.progress) /* Σ ∫ χ dV of the quadrature: region ∩ tissue */
       nh_log_info("tie %d (%s): tissue volume %.6g m^3, stiffness %.4g N/m^4", r, what, vol[r],
                   k[r]);
     if (!(vol[r] > 0.0))
