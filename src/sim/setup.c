@@ -162,15 +162,19 @@ static int nh_sim_ties(nh_sim *s, int first) {
                : 0.0;
   }
   int rc = nh_tissue_set_ties(s->tissue, nr, sc->tissue.fixed, k, vol);
-  for (int r = 0; r < nr && !rc; r++)
-    if (nh_sim_fixed_is_tie(sc, immersed, r) && !(vol[r] > 0.0)) {
-      char what[256];
-      nh_region_describe(&sc->tissue.fixed[r], what, sizeof what);
+  for (int r = 0; r < nr && !rc; r++) {
+    if (!nh_sim_fixed_is_tie(sc, immersed, r)) continue;
+    char what[256];
+    nh_region_describe(&sc->tissue.fixed[r], what, sizeof what);
+    if (first && s->options.progress) /* Σ ∫ χ dV of the quadrature: region ∩ tissue */
+      nh_log_info("tie %d (%s): tissue volume %.6g m^3, stiffness %.4g N/m^4", r, what, vol[r],
+                  k[r]);
+    if (!(vol[r] > 0.0))
       rc = NH_ERROR(first ? NH_ERR_INPUT : NH_ERR_INTERNAL,
                     "%s: the %s holds no tissue (on an immersed domain a fixed region ties the "
                     "tissue inside it, so it needs a volume inside the shape)",
                     sc->tissue.fixed[r].where, what);
-    }
+  }
   free(k);
   return rc;
 }
