@@ -1237,6 +1237,25 @@ static void test_key_table(void) {
   static const char *const half[] = {"entr", NULL}; /* a prefix of a key is not the key */
   rc = nh_scene_keys_check("tools.0.trajectory", half);
   EXPECT(rc == NH_ERR_INTERNAL, "tools.0.trajectory.entr accepted as documented (rc %d)", rc);
+
+  /* Each key has one row: `needlehex keys` lists every key once (the
+   * limits.* rows were once documented twice, in two wordings). */
+  FILE *f = tmpfile();
+  EXPECT(f != NULL, "tmpfile failed");
+  if (!f) return;
+  nh_scene_keys_print(f);
+  rewind(f);
+  static char keys[2048][128];
+  int n = 0;
+  char line[4096];
+  while (fgets(line, sizeof line, f) && n < 2048) {
+    line[strcspn(line, "\n")] = '\0';
+    if (!line[0] || line[0] == ' ' || strchr(line, ' ')) continue; /* a key's notes, the header */
+    for (int i = 0; i < n; i++) EXPECT(strcmp(keys[i], line) != 0, "key %s documented twice", line);
+    snprintf(keys[n++], sizeof keys[0], "%.127s", line);
+  }
+  fclose(f);
+  EXPECT(n > 100, "only %d keys listed by nh_scene_keys_print", n);
 }
 
 int main(void) {
