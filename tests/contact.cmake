@@ -4,5 +4,7 @@ nh_add_c_test(test_coupled verify)
 nh_add_c_test(test_skull "verify;slow")
 # Skull contact points from the cut cells' surface quadrature: area order 2 on an off-centre sphere (tests/test_skull_surface.c).
 nh_add_c_test(test_skull_surface "unit;verify")
+# Skull contact points of leaves holding both walls of the brain's fissure (odd grids): on F = 0, in their leaf, mirror symmetric, on each wall facing the gap (tests/test_skull_fissure.c).
+nh_add_c_test(test_skull_fissure "unit;verify")
 # The tip disc: a point load's compliance diverges like 1/h, the disc's converges (tests/test_tip_disc.c).
 nh_add_c_test(test_tip_disc "unit;verify")

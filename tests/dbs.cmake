@@ -21,6 +21,10 @@ set_tests_properties(static_skull PROPERTIES LABELS "verify;slow")
 nh_add_py_test(skull_force verify skull_force.py)
 # The same under tissue.cut_cells: integrated (aggregated nodes, docs/theory.md §5c).
 nh_add_py_test(skull_force_integrated verify skull_force.py tissue.cut_cells=integrated)
+# On a grid with an odd cell count across x (a cell column holds both walls of
+# the fissure: one skull point per wall, docs/theory.md §5c), both modes.
+nh_add_py_test(skull_force_odd verify skull_force.py tissue.grid=[9,11,8] tissue.cut_cells=integrated)
+nh_add_py_test(skull_force_odd_scaled verify skull_force.py tissue.grid=[9,11,8] tissue.cut_cells=scaled)
 
 # The per-step reference of tools/study.py dbs-goal (tools/richardson.py; tests/study_reference.py):
 # Richardson through three meshes recovers f∞, the order and the error bar of

@@ -5,30 +5,39 @@
  * with φ(x) = F(x) / |∇F(x)| (F the domain's level function; φ is the signed
  * distance to first order, exactly for a sphere), the tissue must stay where
  * φ ≤ gap. Contact points are points of the immersed surface F = 0 of the
- * rest shape, one per cut leaf, each carrying the surface area it stands for
- * (docs/theory.md §5c, "Skull contact points"):
+ * rest shape, one per cut leaf, or one per cluster of its surface normals
+ * where they face apart, each carrying the surface area it stands for
+ * (docs/theory.md §5c, "Skull contact points"). A leaf's surface samples
+ * (weight w, point x, outward normal n):
  *   integrated cut cells (tissue.cut_cells: integrated, a box leaf): the
  *     surface quadrature of the cut cell (mesh/cutcell.c, depth
  *     NH_CUT_DEPTH): the pieces Γ_c of {I F = 0} (I F the piecewise linear
  *     interpolant of F on the Kuhn lattice, the boundary of the polyhedron
- *     the stiffness is integrated over) with points ξ_q and area vectors
- *     A_q; the leaf's point has the area A_c = Σ_q |A_q| and stands at the
- *     area-weighted mean ξ̄ = Σ_q |A_q| ξ_q / A_c, moved onto F = 0 along
- *     the normal by three steps x ← x − φ(x) n(x). Σ_c A_c is the area of
- *     the reconstructed surface: O(s²) from the true one (s = the sub-box
- *     edge). The point belongs to that leaf, whose tissue holds Γ_c, with
- *     its natural coordinates in it: never to a neighbour (a neighbour's
- *     sliver of tissue, held only by the stabilisation α, would take the
- *     contact force; tests/skull_force.py);
+ *     the stiffness is integrated over), points ξ_q with area vectors A_q:
+ *     w = |A_q|, n = A_q / |A_q|. Σ w is the area of the reconstructed
+ *     surface: O(s²) from the true one (s = the sub-box edge). The points
+ *     belong to that leaf, whose tissue holds Γ_c, with their natural
+ *     coordinates in it: never to a neighbour (a neighbour's sliver of
+ *     tissue, held only by the stabilisation α, would take the contact
+ *     force; tests/skull_force.py);
  *   scaled cut cells (and leaves that are not boxes): 6³ sub-cell midpoints
  *     xₛ of volume dvₛ and the one-sided smeared delta (inside only: the
  *     cells just outside the shape are not in the mesh)
  *       δ_ε(φ) = 2 max(0, 1 + φ/ε) / ε for φ ≤ 0,   ε = 1.5 × the sub-cell edge,
- *     A = Σₛ δ_ε(φₛ) dvₛ (→ ∫ δ(φ) dV, the area of the surface in the
- *     cell), the point the δ-weighted mean of the projections xₛ − φₛ
- *     n(xₛ), projected onto F = 0 by three more steps and located in the
- *     mesh (it may lie in a neighbour).
- * The points are material points (cell, ξ), found again after refinement.
+ *     w = δ_ε(φₛ) dvₛ (Σ w → ∫ δ(φ) dV, the area of the surface in the
+ *     cell) at the projection xₛ − φₛ n(xₛ); the points are located in the
+ *     mesh (they may lie in a neighbour).
+ * The samples form one cluster if every normal is within 45° of their
+ * weighted mean, else one per dominant direction of n (±x, ±y, ±z): the two
+ * walls of the brain's fissure in one leaf (a grid with an odd cell count
+ * across) or the faces of a crease. A cluster's point has the area A = Σ w
+ * and stands at the weighted mean of its samples, moved onto F = 0 along
+ * the normal by three steps x ← x − φ(x) n(x) (from the sample nearest the
+ * mean if that moves it by more than a quarter of the leaf or leaves it off
+ * F = 0). One mean for opposite walls lay in the gap, on
+ * whose mid-plane ∇F vanishes: φ = F/|∇F| sent the point 1e9 m away (measured, 17 × 21 × 16: 53
+ * points) and its row inverted cells at the first step. The points are material points (cell, ξ),
+ * found again after refinement.
  *
  * Each step, point i at its current position x = X + u(X) gives one row
  * of the constraint solver (nh_rows, no tool part):
@@ -53,6 +62,7 @@
 
 typedef struct {
   double X[3];  /* rest position on F = 0 */
+  double N[3];  /* outward unit normal there */
   double area;  /* m², the surface it stands for */
   int cell;     /* leaf holding X */
   double xi[3]; /* its natural coordinates */
@@ -62,13 +72,21 @@ typedef struct {
   int small;    /* its leaf's tissue fraction is below NH_FILL_MIN (merged away in the build) */
 } nh_skull_point;
 
-/* A leaf's surface sample as last computed: a function of its corners
- * only, so a leaf whose corners are bitwise the same gets it again without
- * the 6³ samples (area < 0: not computed). */
+/* At most one point per dominant direction of the outward normal (±x, ±y,
+ * ±z) in a leaf. */
+#define NH_SKULL_CLUSTERS 6
+/* cos 45°: the largest angle between a normal of a smooth piece and its mean */
+#define NH_SKULL_COS_CLUSTER 0.70710678118654752
+
+/* A leaf's surface points as last computed: a function of its corners
+ * only, so a leaf whose corners are bitwise the same gets them again
+ * without the samples (done = 0: not computed). */
 typedef struct {
-  double Xe[24], P[3], xi[3], area;
+  double Xe[24];
+  double P[NH_SKULL_CLUSTERS][3], xi[NH_SKULL_CLUSTERS][3], area[NH_SKULL_CLUSTERS];
+  int n_pt, done;
   double fraction; /* the leaf's tissue volume / its volume (integrated cut cells) */
-  int own;         /* the point belongs to this leaf at xi (integrated cut cell) */
+  int own;         /* the points belong to this leaf at xi (integrated cut cell) */
 } nh_skull_cell;
 
 struct nh_skull {
@@ -112,13 +130,112 @@ static double nh_skull_distance(const nh_domain *d, const double x[3], double n[
   return f / len;
 }
 
-/* The surface point and area of leaf c; 0 area if the surface misses it. */
-static double nh_cell_surface(const nh_domain *d, const double Xe[24], double P[3]) {
-  const int n = 6;
+/* A sample of a leaf's surface: its weight (m², the area it stands for),
+ * a physical point near F = 0 and the outward unit normal there. */
+typedef struct {
+  double w, x[3], n[3];
+} nh_skull_sample;
+
+/* The clusters of a leaf's samples (docs/theory.md §5c, "Skull contact
+ * points"): one if every normal lies within 45° of their weighted mean
+ * (a smooth piece of surface), else one per dominant direction of the
+ * normal, ±x, ±y, ±z (the largest |n_k|, ties to the lower k: the split
+ * is mirror symmetric). Two walls of a slot narrower than the leaf (the
+ * longitudinal fissure) or the faces of a crease have normals far apart:
+ * their common mean lies in the gap, where F/|∇F| is no distance (∇F
+ * vanishes on the gap's mid-plane). cls[q] in [0, n); returns n >= 1. */
+static int nh_skull_cluster(const nh_skull_sample *smp, int n, int *cls) {
+  double m[3] = {0, 0, 0};
+  for (int q = 0; q < n; q++)
+    for (int k = 0; k < 3; k++) m[k] += smp[q].w * smp[q].n[k];
+  double len = sqrt(m[0] * m[0] + m[1] * m[1] + m[2] * m[2]), wsum = 0.0;
+  for (int q = 0; q < n; q++) wsum += smp[q].w;
+  int coherent = len > NH_SKULL_COS_CLUSTER * wsum;
+  for (int q = 0; q < n && coherent; q++)
+    coherent =
+        smp[q].n[0] * m[0] + smp[q].n[1] * m[1] + smp[q].n[2] * m[2] >= NH_SKULL_COS_CLUSTER * len;
+  if (coherent) {
+    for (int q = 0; q < n; q++) cls[q] = 0;
+    return 1;
+  }
+  int id[NH_SKULL_CLUSTERS], n_cls = 0;
+  for (int c = 0; c < NH_SKULL_CLUSTERS; c++) id[c] = -1;
+  for (int q = 0; q < n; q++) {
+    int k = 0;
+    for (int j = 1; j < 3; j++)
+      if (fabs(smp[q].n[j]) > fabs(smp[q].n[k])) k = j;
+    const int c = 2 * k + (smp[q].n[k] < 0.0);
+    if (id[c] < 0) id[c] = n_cls++;
+    cls[q] = id[c];
+  }
+  return n_cls;
+}
+
+/* x moved onto F = 0 along the normal by three steps x ← x − φ(x) n(x);
+ * 1 if that moved it by at most a quarter of the leaf's edge and left
+ * |φ| <= 1e-6 of it. */
+static int nh_skull_project(const nh_domain *d, const double x[3], double edge, double P[3]) {
+  double phi = 0.0, move2 = 0.0, nrm[3];
+  memcpy(P, x, 3 * sizeof *P);
+  for (int it = 0; it < 3; it++) {
+    phi = nh_skull_distance(d, P, nrm);
+    for (int k = 0; k < 3; k++) P[k] -= phi * nrm[k];
+  }
+  phi = nh_skull_distance(d, P, nrm);
+  for (int k = 0; k < 3; k++) move2 += (P[k] - x[k]) * (P[k] - x[k]);
+  return sqrt(move2) <= 0.25 * edge && fabs(phi) <= 1e-6 * edge;
+}
+
+/* The point of cluster c (cls[q] == c): its area A = Σ w_q, at the
+ * weighted mean of its samples projected onto F = 0 (nh_skull_project).
+ * Where that fails, the mean was no place to project from (a cluster
+ * around a sharp edge): the cluster's sample nearest the mean, projected
+ * the same way (kept even if that fails too: beside a crease seen from
+ * inside, where the normal flips from step to step, `scaled`'s points may
+ * stay up to a few tenths of a millimetre inside). */
+static double nh_skull_cluster_point(const nh_domain *d, const nh_skull_sample *smp, int n,
+                                     const int *cls, int c, double edge, double P[3]) {
+  double a = 0.0, mean[3] = {0, 0, 0};
+  for (int q = 0; q < n; q++) {
+    if (cls[q] != c) continue;
+    a += smp[q].w;
+    for (int k = 0; k < 3; k++) mean[k] += smp[q].w * smp[q].x[k];
+  }
+  if (!(a > 0.0)) return 0.0;
+  for (int k = 0; k < 3; k++) mean[k] /= a;
+  if (nh_skull_project(d, mean, edge, P)) return a;
+  double near[3], best = INFINITY;
+  for (int q = 0; q < n; q++) {
+    if (cls[q] != c) continue;
+    double d2 = 0.0;
+    for (int k = 0; k < 3; k++) d2 += (smp[q].x[k] - mean[k]) * (smp[q].x[k] - mean[k]);
+    if (d2 < best) best = d2, memcpy(near, smp[q].x, sizeof near);
+  }
+  nh_skull_project(d, near, edge, P);
+  return a;
+}
+
+/* The clustered points of a leaf's samples: n_pt points P with areas. */
+static void nh_skull_cell_points(const nh_domain *d, const nh_skull_sample *smp, int n, int *cls,
+                                 double edge, nh_skull_cell *f) {
+  f->n_pt = 0;
+  if (n == 0) return;
+  const int n_cls = nh_skull_cluster(smp, n, cls);
+  for (int c = 0; c < n_cls; c++) {
+    double a = nh_skull_cluster_point(d, smp, n, cls, c, edge, f->P[f->n_pt]);
+    if (a > 0.0) f->area[f->n_pt++] = a;
+  }
+}
+
+/* The surface points of leaf Xe (n_pt = 0 if the surface misses it) from
+ * 6³ sub-cell midpoints and the one-sided smeared delta. */
+static int nh_cell_surface(const nh_domain *d, const double Xe[24], nh_skull_cell *f) {
+  enum { n = 6 };
   double edge = 0.0;
   for (int k = 0; k < 3; k++) edge = fmax(edge, fabs(Xe[18 + k] - Xe[k]));
   const double eps = 1.5 * edge / n;
-  double area = 0.0, acc[3] = {0, 0, 0};
+  nh_skull_sample smp[n * n * n];
+  int cls[n * n * n], ns = 0;
   for (int i = 0; i < n; i++)
     for (int j = 0; j < n; j++)
       for (int k = 0; k < n; k++) {
@@ -136,68 +253,74 @@ static double nh_cell_surface(const nh_domain *d, const double Xe[24], double P[
         double w =
             2.0 * fmax(0.0, 1.0 + phi / eps) / eps * fabs(nh_mat3_det(J)) * 8.0 / (n * n * n);
         if (w == 0.0) continue;
-        area += w;
-        for (int p = 0; p < 3; p++) acc[p] += w * (x[p] - phi * nrm[p]);
+        nh_skull_sample *s = &smp[ns++];
+        s->w = w;
+        for (int p = 0; p < 3; p++) s->x[p] = x[p] - phi * nrm[p], s->n[p] = nrm[p];
       }
-  if (area == 0.0) return 0.0;
-  for (int p = 0; p < 3; p++) P[p] = acc[p] / area;
-  for (int it = 0; it < 3; it++) {
-    double nrm[3], phi = nh_skull_distance(d, P, nrm);
-    for (int p = 0; p < 3; p++) P[p] -= phi * nrm[p];
-  }
-  return area;
+  nh_skull_cell_points(d, smp, ns, cls, edge, f);
+  return NH_OK;
 }
 
-/* The surface point of an integrated box leaf [lo, hi] from the cut-cell
- * quadrature: its area (0 if the surface misses the leaf), position P on
- * F = 0 and natural coordinates xi in the leaf. */
+/* The surface points of an integrated box leaf [lo, hi] from the cut-cell
+ * quadrature (n_pt = 0 if the surface misses the leaf): positions P on
+ * F = 0, natural coordinates xi in the leaf, areas; and its tissue
+ * fraction. */
 static int nh_cell_cut_surface(const nh_domain *d, const double lo[3], const double hi[3],
-                               double P[3], double xi[3], double *area, double *fraction) {
+                               nh_skull_cell *f) {
   nh_cut_spec spec;
   nh_cut_spec_domain(&spec, d, NH_CUT_DEPTH);
   nh_cut_moments mom;
   nh_cut_surface surf = {0, 0, NULL};
   int rc = nh_cut_cell(&spec, lo, hi, &mom, &surf, 0u);
-  double a = 0.0, acc[3] = {0, 0, 0};
+  nh_skull_sample *smp = rc ? NULL : nh_calloc((size_t)(surf.n ? surf.n : 1), sizeof *smp);
+  int *cls = smp ? nh_calloc((size_t)(surf.n ? surf.n : 1), sizeof *cls) : NULL;
+  if (!rc && !cls) rc = NH_ERR_MEMORY;
+  int ns = 0;
+  double edge = 0.0;
+  for (int k = 0; k < 3; k++) edge = fmax(edge, hi[k] - lo[k]);
   for (int q = 0; q < surf.n && !rc; q++) {
     const nh_cut_point *p = &surf.point[q];
     if (p->piece != -1) continue;
     const double w =
         sqrt(p->area[0] * p->area[0] + p->area[1] * p->area[1] + p->area[2] * p->area[2]);
-    a += w;
-    for (int k = 0; k < 3; k++) acc[k] += w * p->xi[k];
+    if (!(w > 0.0)) continue;
+    nh_skull_sample *s = &smp[ns++];
+    s->w = w;
+    for (int k = 0; k < 3; k++)
+      s->x[k] = 0.5 * (lo[k] + hi[k]) + 0.5 * (hi[k] - lo[k]) * p->xi[k], s->n[k] = p->area[k] / w;
   }
   nh_cut_surface_free(&surf);
-  *area = a;
-  *fraction = mom.volume / ((hi[0] - lo[0]) * (hi[1] - lo[1]) * (hi[2] - lo[2]));
-  if (rc || a == 0.0) return rc;
-  for (int k = 0; k < 3; k++) P[k] = 0.5 * (lo[k] + hi[k]) + 0.5 * (hi[k] - lo[k]) * acc[k] / a;
-  for (int it = 0; it < 3; it++) {
-    double nrm[3], phi = nh_skull_distance(d, P, nrm);
-    for (int k = 0; k < 3; k++) P[k] -= phi * nrm[k];
-  }
-  for (int k = 0; k < 3; k++) xi[k] = (2.0 * P[k] - lo[k] - hi[k]) / (hi[k] - lo[k]);
-  return NH_OK;
+  f->fraction = mom.volume / ((hi[0] - lo[0]) * (hi[1] - lo[1]) * (hi[2] - lo[2]));
+  if (!rc) nh_skull_cell_points(d, smp, ns, cls, edge, f);
+  free(smp), free(cls);
+  for (int i = 0; i < f->n_pt && !rc; i++)
+    for (int k = 0; k < 3; k++) f->xi[i][k] = (2.0 * f->P[i][k] - lo[k] - hi[k]) / (hi[k] - lo[k]);
+  return rc;
 }
 
 /* Aggregation of small cut parts: a point whose leaf holds less than
  * NH_FILL_MIN of its volume in tissue gives its area to the nearest point
- * of a leaf that holds more, and is dropped. Such a leaf's outer nodes are
- * held by the stabilisation α alone (and carry almost no mass): a contact
- * row there is met by moving them, not the tissue (a node 1 m away in one
+ * of a leaf that holds more and faces the same way (outward normals less
+ * than 90° apart: not the opposite wall of a slot; the nearest of any
+ * normal if none does), and is dropped. Such a leaf's outer nodes are held
+ * by the stabilisation α alone (and carry almost no mass): a contact row
+ * there is met by moving them, not the tissue (a node 1 m away in one
  * step, tests/skull_force.py). The total area is kept. */
 static void nh_skull_merge_small(nh_skull *s) {
   int n = 0;
   for (int i = 0; i < s->n; i++) {
     if (!s->p[i].small) continue;
-    int best = -1;
+    int best = -1, best_facing = 0;
     double d2best = INFINITY;
     for (int j = 0; j < s->n; j++) {
       if (s->p[j].small) continue;
-      double d2 = 0.0;
+      double d2 = 0.0, dot = 0.0;
       for (int k = 0; k < 3; k++)
-        d2 += (s->p[j].X[k] - s->p[i].X[k]) * (s->p[j].X[k] - s->p[i].X[k]);
-      if (d2 < d2best) d2best = d2, best = j;
+        d2 += (s->p[j].X[k] - s->p[i].X[k]) * (s->p[j].X[k] - s->p[i].X[k]),
+            dot += s->p[j].N[k] * s->p[i].N[k];
+      const int facing = dot > 0.0;
+      if (facing > best_facing || (facing == best_facing && d2 < d2best))
+        d2best = d2, best = j, best_facing = facing;
     }
     if (best < 0) return; /* no leaf holds enough tissue: keep every point */
     s->p[best].area += s->p[i].area;
@@ -210,59 +333,57 @@ static void nh_skull_merge_small(nh_skull *s) {
 
 int nh_skull_build(nh_skull *s, const nh_mesh *m) {
   s->n = 0;
-  /* each leaf's sample: kept from the last build where its corners are the
+  /* each leaf's points: kept from the last build where its corners are the
    * same (after a refinement, all but the new leaves), else computed */
   nh_skull_cell *fresh = nh_calloc((size_t)(m->n_cells ? m->n_cells : 1), sizeof *fresh);
   if (!fresh) return NH_ERR_MEMORY;
-  for (int c = 0; c < m->n_cells; c++) fresh[c].area = -1.0;
   for (int l = 0; l < m->n_leaves; l++) {
     int c = m->leaves[l];
-    double Xe[24], P[3], xi[3];
-    int cell;
+    double Xe[24];
     nh_mesh_cell_coords(m, m->X, c, Xe);
     nh_skull_cell *f = &fresh[c];
-    if (c < s->n_cell && s->cell[c].area >= 0.0 && !memcmp(s->cell[c].Xe, Xe, sizeof Xe)) {
+    if (c < s->n_cell && s->cell[c].done && !memcmp(s->cell[c].Xe, Xe, sizeof Xe)) {
       *f = s->cell[c];
     } else {
       double lo[3], hi[3];
       memset(f, 0, sizeof *f);
       memcpy(f->Xe, Xe, sizeof Xe);
       f->own = nh_domain_integrates_cuts(&s->domain) && nh_hex_is_box(Xe, lo, hi);
-      if (f->own) {
-        int rc = nh_cell_cut_surface(&s->domain, lo, hi, f->P, f->xi, &f->area, &f->fraction);
-        if (rc) {
-          free(fresh);
-          return rc;
-        }
-      } else {
-        f->area = nh_cell_surface(&s->domain, Xe, f->P);
+      int rc =
+          f->own ? nh_cell_cut_surface(&s->domain, lo, hi, f) : nh_cell_surface(&s->domain, Xe, f);
+      if (rc) {
+        free(fresh);
+        return rc;
       }
+      f->done = 1;
     }
-    double area = f->area;
-    memcpy(P, f->P, sizeof P);
-    if (area == 0.0) continue;
-    /* A point of the smeared delta may lie in a neighbour: locate it (it is
-     * on the surface, so inside a kept cell unless round-off puts it just
-     * outside). */
-    if (f->own) {
-      cell = c;
-      memcpy(xi, f->xi, sizeof xi);
-    } else if (nh_mesh_locate(m, P, &cell, xi) != NH_OK) {
-      cell = c;
-      if (nh_hex_invert(Xe, P, xi) != NH_OK) continue;
-    }
-    if (s->n >= s->cap && nh_grow((void **)&s->p, &s->cap, s->n + 1, sizeof *s->p)) {
-      free(fresh);
-      return NH_ERR_MEMORY;
-    }
-    nh_skull_point *p = &s->p[s->n++];
-    memcpy(p->X, P, sizeof P);
-    memcpy(p->xi, xi, sizeof xi);
-    p->area = area, p->cell = cell, p->lam = 0.0, p->row = -1;
-    p->small = f->own && f->fraction < NH_FILL_MIN;
     double edge = 0.0;
     for (int k = 0; k < 3; k++) edge = fmax(edge, fabs(Xe[18 + k] - Xe[k]));
-    p->edge = edge;
+    for (int i = 0; i < f->n_pt; i++) {
+      double xi[3];
+      int cell;
+      /* A point of the smeared delta may lie in a neighbour: locate it (it
+       * is on the surface, so inside a kept cell unless round-off puts it
+       * just outside). */
+      if (f->own) {
+        cell = c;
+        memcpy(xi, f->xi[i], sizeof xi);
+      } else if (nh_mesh_locate(m, f->P[i], &cell, xi) != NH_OK) {
+        cell = c;
+        if (nh_hex_invert(Xe, f->P[i], xi) != NH_OK) continue;
+      }
+      if (s->n >= s->cap && nh_grow((void **)&s->p, &s->cap, s->n + 1, sizeof *s->p)) {
+        free(fresh);
+        return NH_ERR_MEMORY;
+      }
+      nh_skull_point *p = &s->p[s->n++];
+      memcpy(p->X, f->P[i], sizeof p->X);
+      nh_skull_distance(&s->domain, p->X, p->N);
+      memcpy(p->xi, xi, sizeof xi);
+      p->area = f->area[i], p->cell = cell, p->lam = 0.0, p->row = -1;
+      p->small = f->own && f->fraction < NH_FILL_MIN;
+      p->edge = edge;
+    }
   }
   free(s->cell);
   s->cell = fresh, s->n_cell = m->n_cells;

@@ -1,0 +1,164 @@
+/* test_skull_fissure — skull contact points where one leaf holds surface
+ * pieces that face apart (contact/skull.c; docs/theory.md §5c, "Skull
+ * contact points"): the analytic brain of cases/dbs (size 140 × 170 × 130
+ * mm, centre 0), whose longitudinal fissure is the slab |x| < w = 0.02 a =
+ * 1.4 mm above z = e_z = 0.3 c = 19.5 mm (mesh/domain.c). On a grid with an
+ * odd number of cells across x a cell column straddles the midline and holds
+ * both walls of the fissure (outward normals −x on the wall x = +w, +x on
+ * x = −w); the mean of the two lies in the gap, where F/|∇F| is no
+ * distance. On 9 × 11 × 8 and 17 × 21 × 16 (odd) and 18 × 22 × 17 (even),
+ * with integrated cut cells, at rest with gap 0 (every point
+ * gets a row at u = 0, so the rows name each point's nodes, shape values
+ * and inward normal):
+ *  1. every point lies on the surface F = 0: |F(X)| <= 1e-6 h (a point is
+ *     accepted where |φ| = |F|/|∇F| <= 1e-6 of its leaf's largest edge,
+ *     and |∇F| <= 1: F is 1-Lipschitz, mesh/domain.c);
+ *  2. every point lies in its leaf up to the
+ *     projection's bounded move: |ξ_k| <= 1 + 2 (h_max / 4) / h_k (the
+ *     point starts in the leaf's hull and moves at most a quarter of the
+ *     leaf's largest edge);
+ *  3. the set of points is mirror symmetric about x = 0 (the brain is, and
+ *     so is the grid: F(mirror x) = F(x) bit for bit): every row has a
+ *     partner with mirrored position (1e-9 h) and mirrored direction
+ *     (1e-9), so the skull force of a mirror-symmetric state has f_x = 0;
+ *  4. on the odd grids both fissure walls carry points, as many on each,
+ *     every one pushing the tissue away from the gap: a point on the wall
+ *     x = ±w (|x| = w to 1e-9 h, z > e_z + 1e-9 h) has the row direction
+ *     (the inward normal) ±e_x to 1e-9;
+ *  5. the points' areas sum to the area of the reconstructed surface
+ *     {I F = 0} (Σ_c Σ_q |A_q| over the leaves' cut-cell
+ *     surface quadratures, nh_cut_cell, summed here independently of the
+ *     clustering) to 1e-12 relative: splitting a leaf's surface into
+ *     clusters and merging small parts loses no area.
+ * (`scaled`, whose samples are projected from inside, leaves points up to
+ * 0.7 mm inside F = 0 beside the creases: not checked here.)
+ * Silent on success; NH_VERBOSE=1 prints the numbers. */
+#include "check.h"
+#include "contact/contact.h"
+#include "mesh/mesh.h"
+#include "solve/solve.h"
+
+#include <string.h>
+
+int main(void) {
+  const int verbose = getenv("NH_VERBOSE") != NULL;
+  const double center[3] = {0, 0, 0}, size[3] = {0.14, 0.17, 0.13};
+  const double w = 0.02 * 0.5 * size[0], ez = 0.3 * 0.5 * size[2];
+  const int grids[3][3] = {{9, 11, 8}, {17, 21, 16}, {18, 22, 17}};
+  for (int mode = 1; mode < 2; mode++) /* integrated (1); scaled (0) misses 1 near creases */
+    for (int gi = 0; gi < 3; gi++) {
+      const int *grid = grids[gi], odd = grid[0] % 2;
+      const char *mname = mode ? "integrated" : "scaled";
+      nh_domain d;
+      nh_domain_brain(center, size, &d);
+      d.cut_cells = mode ? NH_CUT_CELLS_INTEGRATED : NH_CUT_CELLS_SCALED;
+      nh_mesh *m = NULL;
+      nh_skull *s = NULL;
+      CHECK_OK(nh_mesh_create(&d, grid, &m));
+      CHECK_OK(nh_skull_create(&m->domain, 0.0, &s));
+      CHECK_OK(nh_skull_build(s, m));
+      double hk[3], h = 0.0;
+      for (int k = 0; k < 3; k++) hk[k] = size[k] / grid[k], h = fmax(h, hk[k]);
+      nh_rows rows;
+      memset(&rows, 0, sizeof rows);
+      const int n = 3 * m->n_nodes;
+      double *u = calloc((size_t)n, sizeof(double)), *v = calloc((size_t)n, sizeof(double));
+      CHECK_OK(nh_skull_rows(s, m, u, v, 1e-3, &rows));
+      const int np = rows.m;
+      CHECK(np == nh_skull_points(s), "%s %dx%dx%d: %d rows for %d points at rest with gap 0",
+            mname, grid[0], grid[1], grid[2], np, nh_skull_points(s));
+      double *X = calloc(3 * (size_t)(np ? np : 1), sizeof(double));
+      int bad_on = 0, bad_xi = 0, walls[2] = {0, 0}, bad_wall = 0, unpaired = 0;
+      double worst_f = 0.0;
+      for (int r = 0; r < np; r++) {
+        const int *node = rows.node + rows.start[r];
+        const double *N = rows.N + rows.start[r], *dir = rows.dir + 3 * r;
+        for (int a = 0; a < 8; a++)
+          for (int k = 0; k < 3; k++) X[3 * r + k] += N[a] * m->X[3 * node[a] + k];
+        const double f = fabs(nh_domain_level(&m->domain, X + 3 * r));
+        worst_f = fmax(worst_f, f);
+        bad_on += f > 1e-6 * h;
+        if (mode) { /* 2. the leaf: the one whose 8 nodes the row names */
+          int cell = -1;
+          for (int l = 0; l < m->n_leaves && cell < 0; l++) {
+            int c = m->leaves[l], same = 1;
+            for (int a = 0; a < 8; a++) same &= m->cells[8 * c + a] == node[a];
+            if (same) cell = c;
+          }
+          double Xe[24], lo[3], hi[3];
+          CHECK(cell >= 0, "%s: row %d names no leaf", mname, r);
+          if (cell < 0) continue;
+          nh_mesh_cell_coords(m, m->X, cell, Xe);
+          CHECK(nh_hex_is_box(Xe, lo, hi), "leaf %d is not a box", cell);
+          for (int k = 0; k < 3; k++) {
+            const double xi = (2.0 * X[3 * r + k] - lo[k] - hi[k]) / (hi[k] - lo[k]);
+            bad_xi += fabs(xi) > 1.0 + 0.5 * h / (hi[k] - lo[k]) + 1e-12;
+          }
+        }
+        /* 4. the fissure's walls */
+        const double x = X[3 * r];
+        if (fabs(fabs(x) - w) <= 1e-9 * h && X[3 * r + 2] > ez + 1e-9 * h) {
+          walls[x > 0]++;
+          const double sx = x > 0 ? 1.0 : -1.0;
+          bad_wall += fabs(dir[0] - sx) > 1e-9 || fabs(dir[1]) > 1e-9 || fabs(dir[2]) > 1e-9;
+        }
+      }
+      /* 3. the mirror partner of every row */
+      for (int r = 0; r < np; r++) {
+        int found = 0;
+        for (int q = 0; q < np && !found; q++) {
+          const double *dr = rows.dir + 3 * r, *dq = rows.dir + 3 * q;
+          found = fabs(X[3 * q] + X[3 * r]) <= 1e-9 * h &&
+                  fabs(X[3 * q + 1] - X[3 * r + 1]) <= 1e-9 * h &&
+                  fabs(X[3 * q + 2] - X[3 * r + 2]) <= 1e-9 * h && fabs(dq[0] + dr[0]) <= 1e-9 &&
+                  fabs(dq[1] - dr[1]) <= 1e-9 && fabs(dq[2] - dr[2]) <= 1e-9;
+        }
+        unpaired += !found;
+      }
+      CHECK(bad_on == 0,
+            "%s %dx%dx%d: %d of %d points off F = 0 by more than 1e-6 h (worst %.3g m)", mname,
+            grid[0], grid[1], grid[2], bad_on, np, worst_f);
+      CHECK(bad_xi == 0, "%s %dx%dx%d: %d coordinates of points outside their leaf's bound", mname,
+            grid[0], grid[1], grid[2], bad_xi);
+      CHECK(unpaired == 0, "%s %dx%dx%d: %d of %d points without a mirror partner", mname, grid[0],
+            grid[1], grid[2], unpaired, np);
+      if (odd)
+        CHECK(walls[0] > 0 && walls[0] == walls[1] && bad_wall == 0,
+              "%s %dx%dx%d: fissure walls x = -w, +w: %d, %d points (expected as many, > 0), %d "
+              "not pushing away from the gap",
+              mname, grid[0], grid[1], grid[2], walls[0], walls[1], bad_wall);
+      /* 5. the area of the reconstructed surface, summed leaf by leaf */
+      double area = 0.0;
+      if (mode) {
+        nh_cut_spec spec;
+        nh_cut_spec_domain(&spec, &m->domain, NH_CUT_DEPTH);
+        for (int l = 0; l < m->n_leaves; l++) {
+          double Xe[24], lo[3], hi[3];
+          nh_mesh_cell_coords(m, m->X, m->leaves[l], Xe);
+          if (!nh_hex_is_box(Xe, lo, hi)) continue;
+          nh_cut_moments mom;
+          nh_cut_surface surf = {0, 0, NULL};
+          CHECK_OK(nh_cut_cell(&spec, lo, hi, &mom, &surf, 0u));
+          for (int q = 0; q < surf.n; q++)
+            if (surf.point[q].piece == -1) {
+              const double *A = surf.point[q].area;
+              area += sqrt(A[0] * A[0] + A[1] * A[1] + A[2] * A[2]);
+            }
+          nh_cut_surface_free(&surf);
+        }
+        CHECK(fabs(nh_skull_area(s) - area) <= 1e-12 * area,
+              "%s %dx%dx%d: points' area %.15g m², the reconstructed surface's %.15g m²", mname,
+              grid[0], grid[1], grid[2], nh_skull_area(s), area);
+      }
+      if (verbose)
+        printf("%-10s %2dx%2dx%2d: %4d points, area %.6g m² (surface %.6g), worst |F| %.2e m, "
+               "walls %d/%d\n",
+               mname, grid[0], grid[1], grid[2], np, nh_skull_area(s), area, worst_f, walls[0],
+               walls[1]);
+      nh_rows_free(&rows);
+      free(u), free(v), free(X);
+      nh_skull_destroy(&s);
+      nh_mesh_destroy(&m);
+    }
+  return nh_test_failures ? 1 : 0;
+}
