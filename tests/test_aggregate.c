@@ -24,7 +24,14 @@
  *     bound p (R + √3 h) / (3K) (1 + 1e-3) at every node with tissue, and
  *     the error against the field below 1e-3 of max |u| (as in item 2),
  *     with aggregation. Without it (the same solve, NH_VERBOSE prints it)
- *     the error is 0.45–0.74 of max |u|: the sliver nodes. */
+ *     the error is 0.45–0.74 of max |u|: the sliver nodes.
+ *  4. The least extrapolation: on the analytic brain of tests/anatomy.py
+ *     (brainstem 2 cells across) on 11 x 13 x 9 and 12 x 14 x 10 cells, every
+ *     aggregated node's weights have Σ |w| no larger than the smallest
+ *     Lebesgue constant Π_k max(1, |ξ_k|) of the well-posed ring-1 leaves,
+ *     enumerated here independently (ranking by max_k |ξ_k| took a root one
+ *     cell off in two axes, Σ |w| = 9, where one off in one axis, 3, was
+ *     available: the stalk's outer nodes hung on the layer above). */
 #include "check.h"
 #include "hanging_mesh.h"
 #include "fem/fem.h"
@@ -247,9 +254,84 @@ static void slivers(void) {
         fmax_all);
 }
 
+/* Item 4: the least extrapolation. The analytic brain of tests/anatomy.py
+ * (0.144 x 0.176 x 0.128 m; its brainstem, radius 13 mm, is 2 cells across)
+ * on box grids with no refinement: for every aggregated node v, the
+ * well-posed leaves of ring 1 (tissue, no corner with 0 < μ < μ₀, sharing a
+ * corner with a leaf of v) are enumerated here independently, each with the
+ * Lebesgue constant of extrapolating its trilinear field to X_v,
+ * Λ = Σ_a |N_a(ξ_v)| = Π_k max(1, |ξ_k|); expected: v's weights have
+ * Σ |w| <= the smallest Λ (its root's, or the mean of mirror-image roots'). */
+static void least_extrapolation(void) {
+  const double c0[3] = {0, 0, 0}, size[3] = {0.144, 0.176, 0.128};
+  nh_domain d;
+  nh_domain_brain(c0, size, &d);
+  d.cut_cells = NH_CUT_CELLS_INTEGRATED;
+  const int grids[2][3] = {{11, 13, 9}, {12, 14, 10}};
+  nh_material mat = {1e6, 0.45, 1040.0, NH_FORMULATION_FULL};
+  for (int gi = 0; gi < 2; gi++) {
+    nh_mesh *m = NULL;
+    nh_tissue *t = NULL;
+    CHECK_OK(nh_mesh_create(&d, grids[gi], &m));
+    CHECK_OK(nh_tissue_create(m, &mat, &t));
+    double *support = calloc((size_t)m->n_nodes, sizeof(double));
+    nh_hanging *h = aggregate(m, t, NULL, support);
+    int *start = NULL, *leaf = NULL, checked = 0, worse = 0;
+    CHECK_OK(nh_mesh_node_leaves(m, &start, &leaf));
+    for (int k = 0; k < h->n_hanging; k++) {
+      if (!h->aggregated[k]) continue;
+      const int v = h->node[k];
+      const double *Xv = m->X + 3 * v;
+      double best = INFINITY, sum = 0.0;
+      for (int p = h->start[k]; p < h->start[k + 1]; p++) sum += fabs(h->weight[p]);
+      for (int p = start[v]; p < start[v + 1]; p++) /* v's leaves */
+        for (int a = 0; a < 8; a++) {
+          const int u = m->cells[8 * leaf[p] + a];
+          for (int q = start[u]; q < start[u + 1]; q++) { /* ring 1 */
+            const int c = leaf[q];
+            int ok = nh_tissue_fraction(t, c) > 0.0;
+            for (int b = 0; b < 8 && ok; b++) {
+              const double mu = support[m->cells[8 * c + b]];
+              ok = !(mu > 0.0 && mu < NH_AGGREGATE_MIN);
+            }
+            if (!ok) continue;
+            double Xe[24], lam = 1.0;
+            nh_mesh_cell_coords(m, m->X, c, Xe);
+            for (int i = 0; i < 3; i++) {
+              const double lo = Xe[i], hi = Xe[18 + i]; /* corners 0 and 6 */
+              lam *= fmax(1.0, fabs((2 * Xv[i] - lo - hi) / (hi - lo)));
+            }
+            best = fmin(best, lam);
+          }
+        }
+      if (!isfinite(best)) continue; /* a root of ring 2 */
+      checked++;
+      if (!(sum <= best * (1 + 1e-9)) && worse++ < 3)
+        fprintf(stderr,
+                "brain %dx%dx%d: node %d at (%.1f, %.1f, %.1f) mm extrapolated with sum |w| = %g, "
+                "a ring-1 root offers %g\n",
+                grids[gi][0], grids[gi][1], grids[gi][2], v, 1e3 * Xv[0], 1e3 * Xv[1], 1e3 * Xv[2],
+                sum, best);
+    }
+    CHECK(checked > 0 && worse == 0,
+          "brain %dx%dx%d: %d of %d aggregated nodes extrapolated more than necessary",
+          grids[gi][0], grids[gi][1], grids[gi][2], worse, checked);
+    if (verbose)
+      printf("brain %dx%dx%d: %d aggregated nodes with a ring-1 root, none extrapolated beyond the "
+             "least Lebesgue constant\n",
+             grids[gi][0], grids[gi][1], grids[gi][2], checked);
+    free(start), free(leaf), free(support);
+    nh_hanging_destroy(&h);
+    nh_tissue_destroy(&t);
+    nh_mesh_destroy(&m);
+  }
+  nh_domain_release(&d);
+}
+
 int main(void) {
   verbose = getenv("NH_VERBOSE") != NULL;
   ball_grids();
   slivers();
+  least_extrapolation();
   return nh_test_failures ? 1 : 0;
 }

@@ -30,6 +30,11 @@
  *     STL icosphere: volumes of their reconstructions against the ball's,
  *     within the bound of 2. plus the shape's own distance from the ball
  *     (the polyhedron's exact volume; a shell of half a voxel diagonal).
+ *     The same ball stored flipped along i (negative x spacing, data
+ *     reversed) is the same set: its level function agrees at every point
+ *     of a cut lattice whose planes meet χ = 1/2 exactly (F = 0 at the same
+ *     points, |ΔF| <= 1e-12 of the level scale), and every cell's tissue
+ *     volume is zero in one iff in the other, else equal to 1e-12 of the cell.
  *  6. A sphere region of radius 0.5 mm in a 10 mm cell: its volume to 1 %.
  *  7. On a mesh with two levels (hex2 on half the cells), the slit error
  *     |Σ A n| / A with per-leaf lattices, and round-off with a lattice
@@ -545,16 +550,18 @@ static void test_brain(void) {
 
 /* NIfTI-1 (uint8, 0.5 mm voxels in mm, sform) of the ball: label 1 where the
  * voxel's centre lies inside. */
-static int write_ball_nifti(const char *path, const double c[3], double R, double vox, int n,
-                            const double origin[3]) {
+static int write_ball_nifti_as(const char *path, const double c[3], double R, double vox, int n,
+                               const double origin[3], int flip) {
   unsigned char h[352];
   memset(h, 0, sizeof h);
   const int32_t size = 348;
   const int16_t dim[8] = {3, (int16_t)n, (int16_t)n, (int16_t)n, 1, 1, 1, 1};
   const int16_t datatype = 2, bitpix = 8, qform = 0, sform = 1;
   const float mm = (float)(vox * 1e3), pixdim[8] = {1, mm, mm, mm, 1, 1, 1, 1}, offset = 352;
-  const float srow[12] = {mm, 0, 0,  (float)(origin[0] * 1e3), 0, mm, 0, (float)(origin[1] * 1e3),
-                          0,  0, mm, (float)(origin[2] * 1e3)};
+  /* flip: i runs towards −x from the last centre (data reversed along i) */
+  const float sx = flip ? -mm : mm, x0 = (float)((origin[0] + (flip ? (n - 1) * vox : 0.0)) * 1e3);
+  const float srow[12] = {
+      sx, 0, 0, x0, 0, mm, 0, (float)(origin[1] * 1e3), 0, 0, mm, (float)(origin[2] * 1e3)};
   memcpy(h, &size, 4), memcpy(h + 40, dim, 16), memcpy(h + 70, &datatype, 2);
   memcpy(h + 72, &bitpix, 2), memcpy(h + 76, pixdim, 32), memcpy(h + 108, &offset, 4);
   h[123] = 2; /* millimetres */
@@ -567,7 +574,7 @@ static int write_ball_nifti(const char *path, const double c[3], double R, doubl
     for (int j = 0; j < n; j++)
       for (int i = 0; i < n; i++) {
         /* the voxel centre as the reader maps it: float sform entries */
-        const double x[3] = {(srow[3] + mm * i) * 1e-3, (srow[7] + mm * j) * 1e-3,
+        const double x[3] = {(srow[3] + sx * i) * 1e-3, (srow[7] + mm * j) * 1e-3,
                              (srow[11] + mm * k) * 1e-3};
         unsigned char v = (x[0] - c[0]) * (x[0] - c[0]) + (x[1] - c[1]) * (x[1] - c[1]) +
                               (x[2] - c[2]) * (x[2] - c[2]) <
@@ -575,6 +582,11 @@ static int write_ball_nifti(const char *path, const double c[3], double R, doubl
         fwrite(&v, 1, 1, f);
       }
   return fclose(f) != 0;
+}
+
+static int write_ball_nifti(const char *path, const double c[3], double R, double vox, int n,
+                            const double origin[3]) {
+  return write_ball_nifti_as(path, c, R, vox, n, origin, 0);
 }
 
 /* Binary STL (mm) of the icosahedron subdivided `level` times, vertices on the ball. */
@@ -697,6 +709,80 @@ static void test_image_and_surface(const char *dir) {
   remove(nii), remove(stl);
 }
 
+/* 5b. The same ball mask stored flipped along i (negative x spacing, data
+ * reversed: the same set in world coordinates, as tests/anatomy.py's): with
+ * voxel faces on the cut lattice's planes (origin −29.75 mm, 0.5 mm voxels,
+ * cells of 7.5 mm over [−30, 30]³, sub-boxes of 1.875 mm) many lattice
+ * points lie midway between an inside and an outside centre, where
+ * χ = 1/2 exactly. Expected: the level function agrees at every lattice
+ * point of depth 2 (F = 0 at exactly the same points, the same sign
+ * elsewhere, |ΔF| ≤ 1e-12 of the level scale), and every cell's tissue
+ * volume is zero in one iff in the other, and equal to 1e-12 of the cell
+ * (the flip changes only the rounding of the voxel coordinates). */
+static void test_image_flip(const char *dir) {
+  const double c[3] = {0.00311, -0.00473, 0.00229}, R = 0.02, L = 0.03, vox = 0.0005;
+  const double origin[3] = {-0.02975, -0.02975, -0.02975};
+  char nii[2][1024];
+  nh_domain mask[2];
+  for (int f = 0; f < 2; f++) {
+    snprintf(nii[f], sizeof nii[f], "%s/cutcell_flip%d.nii", dir, f);
+    CHECK(write_ball_nifti_as(nii[f], c, R, vox, 120, origin, f) == 0, "cannot write %s", nii[f]);
+    memset(&mask[f], 0, sizeof mask[f]);
+    mask[f].kind = NH_DOMAIN_MASK;
+    CHECK_OK(nh_image_read(nii[f], 1, NULL, &mask[f].image));
+    const int label = 1;
+    CHECK_OK(nh_image_select(mask[f].image, &label, 1));
+    /* one box for both: the cut lattice's mirror point is its centre */
+    set_box(&mask[f], mask[0].image->box_min, mask[0].image->box_max);
+  }
+  const int n = 8, N = 4 * n;
+  int zeros = 0, rounded = 0, bad_level = 0, bad_cell = 0, empty = 0;
+  for (int k = 0; k <= N; k++)
+    for (int j = 0; j <= N; j++)
+      for (int i = 0; i <= N; i++) {
+        const double x[3] = {-L + 2 * L * i / N, -L + 2 * L * j / N, -L + 2 * L * k / N};
+        const double F0 = nh_domain_level(&mask[0], x), F1 = nh_domain_level(&mask[1], x);
+        zeros += F0 == 0.0;
+        for (int f = 0; f < 2; f++)
+          rounded += (f ? F1 : F0) == 0.0 && nh_image_indicator(mask[f].image, x) != 0.5;
+        if ((F0 == 0.0) != (F1 == 0.0) || (F0 < 0.0) != (F1 < 0.0) ||
+            fabs(F0 - F1) > 1e-12 * mask[0].image->level_scale) {
+          if (bad_level++ < 3)
+            fprintf(stderr, "flipped mask: F at (%g, %g, %g) mm: %.17g vs %.17g\n", 1e3 * x[0],
+                    1e3 * x[1], 1e3 * x[2], F0, F1);
+        }
+      }
+  CHECK(bad_level == 0, "flipped mask: the level function differs at %d lattice points", bad_level);
+  CHECK(zeros > 0, "the lattice meets no point with chi = 1/2: the test does not test");
+  const double lo[3] = {-L, -L, -L}, hi[3] = {L, L, L};
+  const int g[3] = {n, n, n};
+  nh_cut_spec spec[2];
+  for (int f = 0; f < 2; f++) nh_cut_spec_domain(&spec[f], &mask[f], 2);
+  for (int k = 0; k < n; k++)
+    for (int j = 0; j < n; j++)
+      for (int i = 0; i < n; i++) {
+        const int ijk[3] = {i, j, k};
+        double a[3], b[3];
+        nh_cut_moments out[2];
+        grid_cell(lo, hi, g, ijk, a, b);
+        for (int f = 0; f < 2; f++) CHECK_OK(nh_cut_cell(&spec[f], a, b, &out[f], NULL, 0));
+        const double Vc = (b[0] - a[0]) * (b[1] - a[1]) * (b[2] - a[2]);
+        empty += out[0].volume == 0.0;
+        if ((out[0].volume == 0.0) != (out[1].volume == 0.0) ||
+            fabs(out[0].volume - out[1].volume) > 1e-12 * Vc) {
+          if (bad_cell++ < 3)
+            fprintf(stderr, "flipped mask: cell (%d, %d, %d) tissue %.17g vs %.17g m^3\n", i, j, k,
+                    out[0].volume, out[1].volume);
+        }
+      }
+  CHECK(bad_cell == 0, "flipped mask: the tissue volume differs in %d cells", bad_cell);
+  if (verbose)
+    printf("flipped mask: %d lattice points with chi = 1/2 (%d of the raw values off 1/2 by "
+           "round-off), %d empty cells; level and volumes agree\n",
+           zeros, rounded, empty);
+  for (int f = 0; f < 2; f++) nh_domain_release(&mask[f]), remove(nii[f]);
+}
+
 /* ---- 6. regions smaller than a cell ---- */
 
 static void test_small_regions(void) {
@@ -808,6 +894,7 @@ int main(int argc, char **argv) {
   test_quadrics();
   test_brain();
   test_image_and_surface(argc > 1 ? argv[1] : ".");
+  test_image_flip(argc > 1 ? argv[1] : ".");
   test_small_regions();
   test_levels();
   TEST_END();

@@ -101,6 +101,11 @@ int nh_image_print(const nh_image *image, FILE *f);
 int nh_image_select(nh_image *image, const int *labels, int n);
 /* Trilinear χ of the selected voxels at x (0 outside the image). */
 double nh_image_indicator(const nh_image *image, const double x[3]);
+/* |χ − 1/2| at or below this is 1/2 in nh_image_level: far above χ's
+ * round-off (a voxel coordinate's, ≤ n · 1e-15 for n voxels along an axis,
+ * times |∂χ/∂p| ≤ 1, plus the 8-term sum's), far below any geometry (where
+ * |∇_p χ| ≥ g the surface χ = 1/2 moves by at most 1e-9/g of a voxel). */
+#define NH_IMAGE_CHI_ROUNDOFF 1e-9
 /* F(x) = max((1/2 − χ(x)) level_scale, I(distance)(x) − 2 reach, distance
  * from x to the bounding box of the selected voxels grown by half a voxel),
  * I the trilinear interpolation: negative exactly where χ > 1/2, and where

@@ -848,7 +848,17 @@ static double nh_image_distance_at(const nh_image *im, const double x[3]) {
 }
 
 double nh_image_level(const nh_image *im, const double x[3]) {
-  double f = (0.5 - nh_image_indicator(im, x)) * im->level_scale;
+  /* χ within NH_IMAGE_CHI_ROUNDOFF of 1/2 is 1/2: the voxel coordinates
+   * A⁻¹ (x − t) round differently for the same world point when the image
+   * is stored in another index order (flipped along i with a negative
+   * spacing) or at the mirror image of x, so χ = 1/2 exactly (a point
+   * midway between an inside and an outside centre, which every lattice of
+   * cell-aligned sub-boxes meets) came out as 1/2 ± ulps, F as 0 or ±1e-19:
+   * a lattice point in or out, a cell with no tissue or 1e-20 of it, a node
+   * free or aggregated (docs/anatomy.md, "Level function"). */
+  double chi = nh_image_indicator(im, x);
+  if (fabs(chi - 0.5) <= NH_IMAGE_CHI_ROUNDOFF) chi = 0.5;
+  double f = (0.5 - chi) * im->level_scale;
   if (f <= 0.0) return f;
   /* The distance bound: for each of the 8 centres v around x, d(x, S) ≥
    * D_v − |x − v| ≥ D_v − reach, so d(x, S) ≥ I(D)(x) − reach; and the

@@ -185,15 +185,21 @@ static int nh_find_raw(const nh_mesh *m, const unsigned char *skip, nh_raw *raw)
   return rc;
 }
 
-/* A candidate root's rank: nearer (smaller max_k |ξ_k|) first, then one
- * without a hanging corner, the larger tissue fraction, the centre nearer
- * the domain's centre in |x|, then |y|, then |z| (so that a mirror image of
- * the mesh about the domain's centre chooses the mirror image of the root:
- * the cell index is not mirror invariant), the lower index. Reals compare
- * with a relative tolerance of 1e-9 (mirror images agree to round-off). */
+/* A candidate root's rank: the smaller Lebesgue constant of the
+ * extrapolation first, Λ = Σ_a |N_a(ξ_v)| = Π_k max(1, |ξ_k|) (the factor by
+ * which the root's nodal values, and their errors, are amplified at the
+ * node; max_k |ξ_k| ranked a root one cell off in two axes, Λ = 9, with one
+ * off in a single axis, Λ = 3, and left the choice to the tissue fraction:
+ * the brainstem of tests/anatomy.py then hung each layer's outer nodes on
+ * the layer above, a chain that made the stalk up to 13 times too stiff on
+ * some grids, docs/theory.md §5c), then one without a hanging corner, the larger tissue fraction,
+ * the centre nearer the domain's centre in |x|, then |y|, then |z| (so that a mirror image of the
+ * mesh about the domain's centre chooses the mirror image of the root: the cell index is not mirror
+ * invariant), the lower index. Reals compare with a relative tolerance of 1e-9 (mirror images agree
+ * to round-off). */
 typedef struct {
   int cell, hanging;
-  double reach, fraction, xi[3], offset[3];
+  double lebesgue, fraction, xi[3], offset[3];
 } nh_root;
 
 static int nh_differ(double a, double b) {
@@ -204,7 +210,7 @@ static int nh_differ(double a, double b) {
  * mirror image of b about the domain's centre, as for a node on a mirror plane). */
 static int nh_root_order(const nh_root *a, const nh_root *b) {
   if (b->cell < 0) return 1;
-  if (nh_differ(a->reach, b->reach)) return a->reach < b->reach ? 1 : -1;
+  if (nh_differ(a->lebesgue, b->lebesgue)) return a->lebesgue < b->lebesgue ? 1 : -1;
   if (a->hanging != b->hanging) return a->hanging < b->hanging ? 1 : -1;
   if (nh_differ(a->fraction, b->fraction)) return a->fraction > b->fraction ? 1 : -1;
   for (int k = 0; k < 3; k++)
@@ -284,7 +290,8 @@ static int nh_find_aggregated(const nh_mesh *m, const unsigned char *skip,
             nh_root cand = {.cell = c, .fraction = agg->fraction[c]};
             nh_mesh_cell_coords(m, m->X, c, Xe);
             if (nh_natural(Xe, m->X + 3 * v, cand.xi)) continue;
-            cand.reach = fmax(fabs(cand.xi[0]), fmax(fabs(cand.xi[1]), fabs(cand.xi[2])));
+            cand.lebesgue = 1.0;
+            for (int k = 0; k < 3; k++) cand.lebesgue *= fmax(1.0, fabs(cand.xi[k]));
             for (int k = 0; k < 3; k++) {
               double ctr = 0.0;
               for (int b = 0; b < 8; b++) ctr += 0.125 * Xe[3 * b + k];

@@ -443,7 +443,8 @@ int nh_hanging_detect(const nh_mesh *mesh, const unsigned char *skip, nh_hanging
  * and no ill-posed corner) extrapolated to it: u_s = Σ_a N_a(ξ_s) u_a, ξ_s
  * its natural coordinates in the root (outside [−1, 1]³). The root is
  * searched in NH_AGGREGATE_RINGS rings of corner neighbours of the node's
- * leaves, the first ring with one; in it the smallest max_k |ξ_s,k| (ties:
+ * leaves, the first ring with one; in it the smallest Lebesgue constant of
+ * the extrapolation, Σ_a |N_a(ξ_s)| = Π_k max(1, |ξ_s,k|) (ties:
  * no hanging corner, then the larger tissue fraction, then the leaf centre
  * nearest the domain's centre in |x|, |y|, |z| (mirror invariant), then the
  * lower cell index). A node without one stays free. */
