@@ -28,7 +28,9 @@
  * - The smallest tissue fraction of all leaves, and its cell.
  *
  * The likely cause is the first that applies of: a rigid mode not held; a
- * rigid mode weakly held (whose huge steps then invert cells: the cause,
+ * rigid mode weakly held, in stiffness (ρ ≤ NH_DIAG_WEAK) or for the load (the
+ * first linearised step turns the body by more than NH_DIAG_TURN rad: the
+ * load's moment rᵀb over rᵀAr; whose huge steps then invert cells: the cause,
  * not the symptom); an inverted cell at the node; a cut cell at the node
  * with tissue fraction ≤ NH_DIAG_SMALL_FILL; otherwise the message says so. */
 #include "solve/system_impl.h"
@@ -38,8 +40,12 @@
 #include <stdio.h>
 #include <string.h>
 
-#define NH_DIAG_FREE       1e-10
-#define NH_DIAG_WEAK       1e-6
+#define NH_DIAG_FREE 1e-10
+#define NH_DIAG_WEAK 1e-6
+/* A rotation the first linearised step makes above this (rad) is beyond
+ * what a Newton from rest on the corotational tangent comes back from: a
+ * rotation by θ moves a point at distance d by 2 d sin(θ/2), not θ d. */
+#define NH_DIAG_TURN       1.0
 #define NH_DIAG_SMALL_FILL 0.1
 #define NH_DIAG_CELLS      4 /* cells listed around the node */
 
@@ -83,8 +89,8 @@ static int nh_diag_inverted(const nh_system *s, const double *u, int c) {
   return 0;
 }
 
-nh_rigid nh_system_rigid(nh_system *s, const double *u) {
-  nh_rigid out = {.mode = -1, .rho = INFINITY, .loose = 0};
+nh_rigid nh_system_rigid(nh_system *s, const double *u, const double *b) {
+  nh_rigid out = {.mode = -1, .rho = INFINITY, .loose = 0, .turn_mode = -1, .turn = 0.0};
   const int n = s->n_free, nn = s->n_nodes;
   const int *Ap = s->A->p, *Ai = s->A->i;
   const double *Ax = s->A->x, *X = s->tissue->mesh->X;
@@ -99,7 +105,7 @@ nh_rigid nh_system_rigid(nh_system *s, const double *u) {
     for (int i = 0; i < 3; i++) c[i] += (X[3 * v + i] + u[3 * v + i]) / nn;
   for (int i = 0; i < n; i++) count[s->dof_of[i] % 3] += 1.0;
   for (int k = 0; k < 6; k++) {
-    double rr = 0.0, rAr = 0.0, TAr[3] = {0, 0, 0}, Tr[3] = {0, 0, 0};
+    double rr = 0.0, rAr = 0.0, rb = 0.0, TAr[3] = {0, 0, 0}, Tr[3] = {0, 0, 0}, Tb[3] = {0, 0, 0};
     for (int i = 0; i < n; i++) {
       const int dof = s->dof_of[i], v = dof / 3, comp = dof % 3;
       if (k < 3) {
@@ -112,6 +118,7 @@ nh_rigid nh_system_rigid(nh_system *s, const double *u) {
       }
       rr += r[i] * r[i];
       Tr[comp] += r[i];
+      if (b) rb += r[i] * b[i], Tb[comp] += b[i];
     }
     if (rr == 0.0) continue; /* every DOF of that field is fixed */
     nh_system_apply(s, r, Ar);
@@ -127,7 +134,12 @@ nh_rigid nh_system_rigid(nh_system *s, const double *u) {
       for (int q = 0; q < 3; q++) {
         rAr -= t[q] * TAr[q];
         rr += -2.0 * t[q] * Tr[q] + t[q] * t[q] * count[q];
+        rb -= t[q] * Tb[q];
       }
+      /* the angle the linearised step turns the body by in this mode: the
+       * load's moment over the mode's stiffness (rad, r per unit angle) */
+      const double turn = b && rAr > 0.0 ? fabs(rb) / rAr : 0.0;
+      if (turn > out.turn) out.turn = turn, out.turn_mode = k;
     }
     double q = fabs(rAr) / (fmax(rr, 1e-300) * diag);
     if (q <= NH_DIAG_FREE) out.loose |= 1 << k;
@@ -173,7 +185,7 @@ nh_cause nh_system_diagnose(nh_system *s, const double *u, int dof, const nh_rig
   }
   if (small_cell >= 0 && small < 1.0)
     nh_diag_add(buf, size, "; the smallest tissue fraction is %.3g (cell %d)", small, small_cell);
-  const nh_rigid rg = rigid ? *rigid : nh_system_rigid(s, u);
+  const nh_rigid rg = rigid ? *rigid : nh_system_rigid(s, u, NULL);
   if (rg.mode >= 0)
     nh_diag_add(buf, size, "; the softest rigid mode, %s, has %.2g of the mean stiffness%s",
                 mode_name[rg.mode], rg.rho, rigid ? " at the step's start" : "");
@@ -194,6 +206,15 @@ nh_cause nh_system_diagnose(nh_system *s, const double *u, int dof, const nh_rig
                 "support far softer than the tissue (a fixed region small for its load: make "
                 "it larger, or add one)",
                 mode_name[rg.mode]);
+    return NH_CAUSE_WEAK;
+  }
+  if (rg.turn_mode >= 0 && rg.turn > NH_DIAG_TURN) {
+    nh_diag_add(buf, size,
+                ". Likely cause: the body is only weakly held for its load: the load's moment "
+                "over the supports' stiffness in the %s is %.3g rad, so the first linearised "
+                "step turns the body by that angle (a fixed region small for its load: make it "
+                "larger, or add one)",
+                mode_name[rg.turn_mode], rg.turn);
     return NH_CAUSE_WEAK;
   }
   if (inverted) {

@@ -164,7 +164,7 @@ int nh_solve_static(nh_system *s, const nh_integrator *in, const double *f_ext, 
       break;
     }
     if (rel <= in->tolerance || nh_norm(b, s->n_free) == 0.0) break;
-    if (it == 0) start = nh_system_rigid(s, u); /* the supports, at the step's start */
+    if (it == 0) start = nh_system_rigid(s, u, b); /* the supports, at the step's start */
     if (it <= NH_NEWTON_STALL_ITERATIONS) history[it] = rel;
     if (it == NH_NEWTON_STALL_ITERATIONS &&
         (rc = nh_static_progress(s, u, b, history, it, &start, stats)))

@@ -101,8 +101,11 @@ typedef struct {
   int mode;
   double rho;
   int loose;
+  int turn_mode; /* with a load b: the rotation the linearised step turns most (-1: none) */
+  double turn;   /* its angle |rᵀb| / rᵀAr, rad (r the unit-angle rotation, best centre) */
 } nh_rigid;
-nh_rigid nh_system_rigid(nh_system *s, const double *u);
+/* b: the step's residual (NULL: turn not computed). */
+nh_rigid nh_system_rigid(nh_system *s, const double *u, const double *b);
 /* The likely causes of a failed solve, as nh_system_diagnose names them. */
 typedef enum {
   NH_CAUSE_NONE,
