@@ -417,7 +417,8 @@ static int read_skull(const nh_ctx *c, const nh_key_site *k, void *base) {
 static const nh_key tissue_rows[] = {
     {NH_CUSTOM("domain", read_domain), .required = 1},
     {NH_CUSTOM("grid", read_grid)},
-    {NH_CHOICE("cut_cells", offsetof(nh_scene, tissue.cut_cells), NH_CUT_CELLS_SCALED, cut_cells)},
+    {NH_CHOICE("cut_cells", offsetof(nh_scene, tissue.cut_cells), NH_CUT_CELLS_INTEGRATED,
+               cut_cells)},
     {NH_MAP("material", material_rows), .required = 1},
     {NH_CUSTOM("materials", read_materials)},
     {NH_MAP("damping", damping_rows)},
