@@ -147,6 +147,10 @@ CASES = [
     ("fixed_axes.yaml", [], 10, "tissue.fixed.0.axes.1"),
     ("set_base.yaml", ["tissue.fixed.0.schedule=[[0, 0], [1, 1]]"], "--set:1",
      "tissue.fixed.0.schedule"),
+    # fixed.N.refine: a size, > 0 (zero, negative, not a number)
+    ("set_base.yaml", ["tissue.fixed.0.refine=0"], "--set:1", "tissue.fixed.0.refine"),
+    ("set_base.yaml", ["tissue.fixed.0.refine=-0.001"], "--set:1", "tissue.fixed.0.refine"),
+    ("set_base.yaml", ["tissue.fixed.0.refine=fine"], "--set:1", "tissue.fixed.0.refine"),
     ("traction_no_boundary.yaml", [], 11, "tissue.tractions.0"),
     ("traction_both.yaml", ["tissue.tractions.0={box: {min: [0, 0, 0], max: [1, 1, 1]}}"],
      "--set:1", "tissue.tractions.0"),

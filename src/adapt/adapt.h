@@ -173,6 +173,12 @@ int nh_adapt_refine_cells(nh_adapt *adapt, nh_mesh *mesh, const int *cells, int 
  * such call. */
 const nh_node_transfer *nh_adapt_last_transfer(const nh_adapt *adapt);
 
+/* Coarsening never makes a leaf coarser than fix[r].refine at region r
+ * (nh_mesh_cell_coarser_at; tissue.fixed.N.refine, 0: none): a family
+ * whose parent would be is never merged. The arrays are the caller's and
+ * must outlive the driver. */
+void nh_adapt_keep_regions(nh_adapt *adapt, int n, const nh_region *regions, const nh_fix *fix);
+
 /* What ended the last nh_adapt_step (steps.csv `refine_stop`). */
 typedef enum {
   NH_ADAPT_REFINED = 0,   /* every marked cell was refined */

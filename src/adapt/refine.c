@@ -44,7 +44,10 @@ struct nh_adapt {
   int max_cells;    /* limits.max_cells (0: none) */
   int warned_cells; /* the cap was met (warned once) */
   nh_template *tmpl;
-  double *eta_cell; /* per cell id, valid when have_eta */
+  int n_keep;             /* nh_adapt_keep_regions: coarsening's floor at regions */
+  const nh_region *keep;  /* n_keep regions ... */
+  const nh_fix *keep_fix; /* ... and their refine: the largest edge there (0: none) */
+  double *eta_cell;       /* per cell id, valid when have_eta */
   int cap_eta, have_eta;
   /* goal-oriented estimation (estimator goal) */
   int goal, grade;                /* estimator goal; refinement closed by the 2:1 rule */
@@ -343,6 +346,10 @@ static int nh_adapt_coarsen(nh_adapt *a, nh_mesh *m, int old_cells, double thres
       int c = m->leaves[l];
       const double *eta = a->goal ? a->eta_all : a->eta_cell;
       below[c] = c < old_cells && eta[c] < a->coarsen * threshold;
+      for (int r = 0; r < a->n_keep && below[c] && m->parent[c] >= 0; r++)
+        if (a->keep_fix[r].refine > 0.0 &&
+            nh_mesh_cell_coarser_at(m, m->parent[c], &a->keep[r], a->keep_fix[r].refine))
+          below[c] = 0;
     }
     int n = nh_mesh_coarsen_candidates(m, below, parents), old_nodes = m->n_nodes;
     if (n > 0 && !(rc = nh_mesh_coarsen(m, parents, n, map))) {
@@ -370,6 +377,10 @@ static void nh_adapt_transfer(const nh_mesh *m, const nh_refine_info *info, int 
       f[3 * (old_nodes + k) + i] = value;
     }
   }
+}
+
+void nh_adapt_keep_regions(nh_adapt *a, int n, const nh_region *regions, const nh_fix *fix) {
+  a->n_keep = n, a->keep = regions, a->keep_fix = fix;
 }
 
 int nh_adapt_refine_cells(nh_adapt *a, nh_mesh *m, const int *cells, int n, int n_fields,

@@ -223,6 +223,12 @@ double nh_region_distance(const nh_region *region, const double x[3]);
 /* "box [..] - [..]", "sphere centre [..] radius r", "cylinder [..] - [..] radius r", "label N". */
 void nh_region_describe(const nh_region *region, char *buf, size_t cap);
 
+/* True if cell c is coarser than h at the region (tissue.fixed.N.refine):
+ * the largest edge of its rest bounding box exceeds h and that box may meet
+ * the region (the boxes overlap and the region's distance from the box's
+ * centre is at most its half-diagonal: a cell that meets the region is
+ * never missed); 0 for a label region. */
+int nh_mesh_cell_coarser_at(const nh_mesh *mesh, int c, const nh_region *region, double h);
 /* Mark (flags[i] = 1) the nodes inside the region; returns how many nodes it
  * holds, flags may be NULL. */
 int nh_mesh_nodes_in_region(const nh_mesh *mesh, const nh_region *region, unsigned char *flags);

@@ -286,13 +286,11 @@ double nh_mesh_cell_fraction_above(const nh_mesh *m, int c, const double point[3
   return tissue > 0.0 ? above / tissue : all_above / all;
 }
 
-double nh_mesh_region_tie(const nh_mesh *m, int c, const nh_region *r, double T[64]) {
-  const int n = 6, immersed = m->domain.kind != NH_DOMAIN_BOX;
-  double Xe[24], x[3], N[8], dv, vol = 0.0;
-  for (int i = 0; i < 64; i++) T[i] = 0.0;
-  nh_mesh_cell_coords(m, m->X, c, Xe);
-  /* Skip cells far from the region: the bounding boxes do not overlap. */
-  double lo[3], hi[3], rlo[3], rhi[3];
+/* The bounding box [lo, hi] of the cell with corners Xe; true if it
+ * overlaps the region's bounding box (a box, sphere or cylinder). */
+static int nh_cell_box_overlaps(const double Xe[24], const nh_region *r, double lo[3],
+                                double hi[3]) {
+  double rlo[3], rhi[3];
   for (int k = 0; k < 3; k++) lo[k] = hi[k] = Xe[k];
   for (int a = 1; a < 8; a++)
     for (int k = 0; k < 3; k++)
@@ -305,8 +303,31 @@ double nh_mesh_region_tie(const nh_mesh *m, int c, const nh_region *r, double T[
       rhi[k] = fmax(r->start[k], r->end[k]) + r->radius;
     else
       rlo[k] = r->min[k], rhi[k] = r->max[k];
-    if (hi[k] < rlo[k] || lo[k] > rhi[k]) return 0.0;
+    if (hi[k] < rlo[k] || lo[k] > rhi[k]) return 0;
   }
+  return 1;
+}
+
+int nh_mesh_cell_coarser_at(const nh_mesh *m, int c, const nh_region *r, double h) {
+  double Xe[24], lo[3], hi[3], mid[3], half2 = 0.0, edge = 0.0;
+  if (r->kind == NH_REGION_LABEL) return 0;
+  nh_mesh_cell_coords(m, m->X, c, Xe);
+  if (!nh_cell_box_overlaps(Xe, r, lo, hi)) return 0;
+  for (int k = 0; k < 3; k++) {
+    mid[k] = 0.5 * (lo[k] + hi[k]), half2 += 0.25 * (hi[k] - lo[k]) * (hi[k] - lo[k]);
+    edge = fmax(edge, hi[k] - lo[k]);
+  }
+  return edge > h && nh_region_distance(r, mid) <= sqrt(half2);
+}
+
+double nh_mesh_region_tie(const nh_mesh *m, int c, const nh_region *r, double T[64]) {
+  const int n = 6, immersed = m->domain.kind != NH_DOMAIN_BOX;
+  double Xe[24], x[3], N[8], dv, vol = 0.0;
+  for (int i = 0; i < 64; i++) T[i] = 0.0;
+  nh_mesh_cell_coords(m, m->X, c, Xe);
+  /* Skip cells far from the region: the bounding boxes do not overlap. */
+  double lo[3], hi[3];
+  if (!nh_cell_box_overlaps(Xe, r, lo, hi)) return 0.0;
   if (nh_domain_integrates_cuts(&m->domain) && r->kind != NH_REGION_LABEL &&
       nh_hex_is_box(Xe, lo, hi)) {
     nh_cut_moments mom;

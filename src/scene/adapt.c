@@ -179,7 +179,13 @@ int nh_read_adapt(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   nh_read_defaults(adapt_rows, s);
   s->adapt.enabled = 0;
   s->adapt.n_goals = 0;
-  if (!nh_yaml_get(root, "adapt", &key)) return NH_OK;
+  if (!nh_yaml_get(root, "adapt", &key)) {
+    /* no adapt section: hex2's path, unchecked (tissue.fixed.N.refine loads it) */
+    char buf[NH_PATH_MAX];
+    snprintf(s->adapt.template_path, NH_PATH_MAX, "%.900s/hex2.tmpl",
+             nh_templates_dir(buf, sizeof buf));
+    return NH_OK;
+  }
   s->adapt.enabled = 1;
   nh_read_where(c, key, "adapt", s->adapt.where);
   NH_TRY(nh_read_section(c, root, "", "adapt", 0, &m));

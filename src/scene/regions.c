@@ -166,6 +166,7 @@ static const nh_key fixed_rows[] = {
     {NH_CUSTOM("axes", read_axes)},
     {NH_VEC3("displacement", offsetof(nh_fix, displacement))},
     {NH_CUSTOM("schedule", read_fix_schedule)},
+    {NH_NUMBER("refine", offsetof(nh_fix, refine), 0.0, NH_ABOVE, 0.0)},
     {0},
 };
 

@@ -74,6 +74,7 @@ typedef struct {
   int axes;               /* bit k set: component k fixed (7 without `axes`: all) */
   double displacement[3]; /* prescribed displacement, m, times the schedule (default 0) */
   nh_schedule schedule;   /* fixed[i].schedule (only with displacement) */
+  double refine; /* fixed[i].refine: largest edge of a cell meeting the region, m (0: none) */
 } nh_fix;
 
 /* tissue.tractions[i]: a surface load on the tissue's boundary inside a

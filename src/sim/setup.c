@@ -30,6 +30,47 @@ static int nh_sim_fixed_is_tie(const nh_scene *sc, int immersed, int r) {
          fx->displacement[0] == 0.0 && fx->displacement[1] == 0.0 && fx->displacement[2] == 0.0;
 }
 
+int nh_sim_refine_fixed(nh_sim *s) {
+  const nh_scene *sc = s->scene;
+  nh_mesh *m = s->mesh;
+  int any = 0, passes = 0, n_before = m->n_leaves;
+  for (int r = 0; r < sc->tissue.n_fixed; r++) any |= sc->tissue.fix[r].refine > 0.0;
+  if (!any) return NH_OK;
+  nh_template *tmpl = NULL;
+  int *marked = NULL, rc = nh_template_load(sc->adapt.template_path, &tmpl);
+  while (!rc) {
+    free(marked);
+    if (!(marked = nh_calloc((size_t)m->n_leaves, sizeof(int)))) {
+      rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: refining at the fixed regions");
+      break;
+    }
+    int n = 0, at = -1;
+    for (int l = 0; l < m->n_leaves; l++)
+      for (int r = 0; r < sc->tissue.n_fixed; r++) {
+        double h = sc->tissue.fix[r].refine;
+        if (h > 0.0 && nh_mesh_cell_coarser_at(m, m->leaves[l], &sc->tissue.fixed[r], h)) {
+          marked[n++] = m->leaves[l], at = r;
+          break;
+        }
+      }
+    if (n == 0) break;
+    if (sc->limits.max_cells > 0 && m->n_leaves + 7 * n > sc->limits.max_cells) {
+      rc = NH_ERROR(NH_ERR_INPUT,
+                    "%s.refine: refining the region to %g m needs more than limits.max_cells = %d "
+                    "cells",
+                    sc->tissue.fixed[at].where, sc->tissue.fix[at].refine, sc->limits.max_cells);
+      break;
+    }
+    if (!(rc = nh_mesh_grade_marks(m, marked, &n))) rc = nh_mesh_refine(m, tmpl, marked, n, NULL);
+    passes++;
+  }
+  if (!rc)
+    nh_log_info("fixed regions refined: %d passes, %d -> %d leaves", passes, n_before, m->n_leaves);
+  free(marked);
+  nh_template_destroy(&tmpl);
+  return rc;
+}
+
 /* The per-node arrays at the mesh's node count: none fixed, none moved. */
 static int nh_sim_resize_nodes(nh_sim *s) {
   const nh_scene *sc = s->scene;

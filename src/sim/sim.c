@@ -498,6 +498,7 @@ static int nh_sim_build(nh_sim *s) {
     int rc = nh_mesh_create(&domain, sc->tissue.grid, &s->mesh);
     nh_domain_release(&domain); /* the mesh holds its own reference */
     NH_TRY(rc);
+    NH_TRY(nh_sim_refine_fixed(s));
     s->u = nh_calloc(3 * (size_t)s->mesh->n_nodes, sizeof(double));
     s->v = nh_calloc(3 * (size_t)s->mesh->n_nodes, sizeof(double));
   }
@@ -507,7 +508,10 @@ static int nh_sim_build(nh_sim *s) {
   s->probe_xi = nh_calloc(3 * (size_t)(n_points ? n_points : 1), sizeof(double));
   if (!s->u || !s->v || !s->probe_cell || !s->probe_xi)
     return NH_ERROR(NH_ERR_MEMORY, "out of memory building the model (%d nodes)", nn);
-  if (sc->adapt.enabled) NH_TRY(nh_adapt_create(&sc->adapt, sc->limits.max_cells, &s->adapt));
+  if (sc->adapt.enabled) {
+    NH_TRY(nh_adapt_create(&sc->adapt, sc->limits.max_cells, &s->adapt));
+    nh_adapt_keep_regions(s->adapt, sc->tissue.n_fixed, sc->tissue.fixed, sc->tissue.fix);
+  }
   if (sc->adapt.enabled && sc->adapt.estimator == NH_ESTIMATOR_GOAL) {
     double points[3 * NH_MAX_GOALS];
     s->goal_of_point = nh_calloc((size_t)(n_points ? n_points : 1), sizeof(int));

@@ -154,6 +154,12 @@ void nh_progress_finish(nh_sim *sim, const double median[NH_PHASES]);
  * refinement (the tools' embedded points relocated too). Fails as the
  * builders it calls, NH_ERR_MEMORY. */
 int nh_sim_setup_mesh(nh_sim *sim, int first);
+/* tissue.fixed.N.refine: refine the new mesh's leaves by adapt.template
+ * (2:1 graded) until no leaf is coarser than N.refine at region N
+ * (nh_mesh_cell_coarser_at), before anything depends on the mesh.
+ * NH_ERR_INPUT (at the region) beyond limits.max_cells, as
+ * nh_template_load and nh_mesh_refine. */
+int nh_sim_refine_fixed(nh_sim *sim);
 
 /* ---- tools (sim/tools.c) ---- */
 /* Create the tools (NULL contact without tools) and their outputs' handles. */
