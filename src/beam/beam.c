@@ -47,7 +47,7 @@ int nh_beam_section_constants(const nh_beam_section *s, nh_beam_constants *out) 
            s->radius);
   NH_CHECK(s->density >= 0 && isfinite(s->density), NH_ERR_INPUT,
            "beam section: density = %g must be >= 0", s->density);
-  const double pi = 3.14159265358979323846, r = s->radius, ri = s->inner_radius;
+  const double pi = NH_PI, r = s->radius, ri = s->inner_radius;
   out->area = pi * (r * r - ri * ri);
   out->inertia = 0.25 * pi * (r * r * r * r - ri * ri * ri * ri);
   out->polar = 2.0 * out->inertia;

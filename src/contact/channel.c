@@ -293,7 +293,7 @@ int nh_tip_update(nh_contact *c, nh_group *G, const nh_mesh *m, const double *u,
     NH_TRY(nh_disc_build(&c->disc, m, &G->front, tt, rho));
     nh_disc_position(&c->disc, m, u, xf);
     d = fmax(0.0, nh_vec3_dot(tt, xt) - nh_vec3_dot(tt, xf));
-    const double h_bevel = d * tan(tl->spec->bevel * 3.14159265358979323846 / 180.0);
+    const double h_bevel = d * tan(tl->spec->bevel * NH_PI / 180.0);
     for (int i = 0; i < 3; i++) xt[i] += h_bevel * b[i];
   }
   nh_cpoint p = G->front;

@@ -118,7 +118,7 @@ int nh_disc_build(nh_disc *d, const nh_mesh *m, const nh_cpoint *p, const double
   for (int k = 1; k <= rings; k++) {
     const double r = rho * (k - 0.5) / rings, w = 2.0 * (k - 0.5) / ((double)rings * rings * 6 * k);
     for (int j = 0; j < 6 * k; j++) {
-      const double a = 2.0 * 3.14159265358979323846 * j / (6.0 * k), ca = cos(a), sa = sin(a);
+      const double a = 2.0 * NH_PI * j / (6.0 * k), ca = cos(a), sa = sin(a);
       double X[3];
       int in;
       for (int i = 0; i < 3; i++) X[i] = p->X[i] + r * (ca * e1[i] + sa * e2[i]);

@@ -15,6 +15,9 @@
 #define NH_VERSION "0.0.0"
 #endif
 
+/* π, the one home of the constant (C11 has no M_PI). */
+#define NH_PI 3.14159265358979323846
+
 typedef enum {
   NH_OK = 0,
   NH_ERR_INPUT,      /* bad scene, argument or template: the user can fix it (exit 2) */

@@ -416,8 +416,7 @@ static double nh_mask_volume(const nh_image *im) {
 }
 
 double nh_domain_volume(const nh_domain *d) {
-  if (d->kind == NH_DOMAIN_SPHERE)
-    return 4.0 / 3.0 * 3.14159265358979323846 * d->half[0] * d->half[0] * d->half[0];
+  if (d->kind == NH_DOMAIN_SPHERE) return 4.0 / 3.0 * NH_PI * d->half[0] * d->half[0] * d->half[0];
   if (d->kind == NH_DOMAIN_BOX)
     return (d->max[0] - d->min[0]) * (d->max[1] - d->min[1]) * (d->max[2] - d->min[2]);
   if (d->kind == NH_DOMAIN_MASK) return nh_mask_volume(d->image);

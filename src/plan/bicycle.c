@@ -41,7 +41,6 @@
 
 enum { NH_BIKE_SCAN = 200 };
 #define NH_BIKE_SAMPLE 2e-4 /* m between the model path's points for the clearance */
-#define NH_PI          3.14159265358979323846
 
 double nh_bike_depth_change(const nh_bike_plan *a, const nh_bike_plan *b) {
   if (a->n != b->n || a->sign0 != b->sign0) return INFINITY;

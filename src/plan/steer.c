@@ -77,8 +77,6 @@
 #include <string.h>
 #include <unistd.h>
 
-#define NH_PI 3.14159265358979323846
-
 enum { NH_Q = NH_TRUST_Q }; /* a_x, a_y, c* */
 
 /* One run of the plan. */

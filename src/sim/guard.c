@@ -93,8 +93,7 @@ static int nh_guard_disc(const nh_sim *s, char *msg, size_t size) {
       double lambda, mu;
       nh_tissue_cell_material(s->tissue, c, &lambda, &mu, NULL);
       const double E = mu * (3.0 * lambda + 2.0 * mu) / (lambda + mu);
-      const double pi = 3.14159265358979323846;
-      const double strain = d.force / (pi * d.radius * d.radius * E);
+      const double strain = d.force / (NH_PI * d.radius * d.radius * E);
       size_t len = strlen(msg);
       snprintf(msg + len, size - len,
                " at the tip disc of tool '%s' (cell %d): its %.3g N over the disc of radius "
