@@ -240,6 +240,17 @@ CASES = [
     ("tools_base.yaml", ["tools.0.elements=100001"], "--set:1", "tools.0.elements"),
 ]
 
+# Cases run with an environment of their own: (fixture, overrides, env,
+# where, key). tissue.fixed.N.refine without an adapt section refines by
+# hex2, so its template must be readable: with NH_TEMPLATES_DIR naming a
+# folder that does not exist, the refine key is the one reported; the same
+# fixture without the overrides (no refine key) needs no template and passes.
+ENV_CASES = [
+    ("set_base.yaml", ["tissue.fixed.0.refine=0.01"],
+     {"NH_TEMPLATES_DIR": "/nonexistent-needlehex-templates"}, "--set:1",
+     "tissue.fixed.0.refine"),
+]
+
 # Scenes that `needlehex plan` must refuse as `check` does, before any run.
 PLAN_CASES = [("tool_shorter_than_depth.yaml", [], 11, "tools.0.length")]
 
@@ -299,12 +310,13 @@ MAX_SECONDS, MAX_MB = 10.0, 600.0
 RECORD = []  # (seconds, MB, command) of every child
 
 
-def measured(args, cwd=None):
+def measured(args, cwd=None, env=None):
     """Run args; (exit status or None if killed at 60 s, stdout, stderr),
     its wall time and peak memory recorded in RECORD and checked by main."""
     with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
         start = time.monotonic()
-        p = subprocess.Popen(args, stdout=out, stderr=err, cwd=cwd, text=True)
+        p = subprocess.Popen(args, stdout=out, stderr=err, cwd=cwd, text=True,
+                             env=dict(os.environ, **env) if env else None)
         while True:
             pid, status, usage = os.wait4(p.pid, os.WNOHANG)
             if pid:
@@ -320,20 +332,20 @@ def measured(args, cwd=None):
         return rc, out.read(), err.read() if rc is not None else "killed after 60 s"
 
 
-def run(binary, path, overrides, command=("check",)):
+def run(binary, path, overrides, command=("check",), env=None):
     args = [binary, command[0], path] + list(command[1:])
     for o in overrides:
         args += ["--set", o]
-    rc, out, err = measured(args)
+    rc, out, err = measured(args, env=env)
     return rc, out, err, args
 
 
-def check_case(binary, bad_dir, fixture, overrides, where, key, command=("check",)):
+def check_case(binary, bad_dir, fixture, overrides, where, key, command=("check",), env=None):
     path = os.path.join(bad_dir, fixture)
     problems = []
     if not os.path.isfile(path):
         return ["fixture %s does not exist" % path]
-    status, _, err, args = run(binary, path, overrides, command)
+    status, _, err, args = run(binary, path, overrides, command, env)
     shown = " ".join(args)
     if status != 2:
         problems.append("exit status: expected 2, got %s" % status)
@@ -378,6 +390,17 @@ def main():
         if problems:
             failed += 1
             print("FAILED %s %s" % (fixture, overrides), file=sys.stderr)
+            for p in problems:
+                print("  " + p, file=sys.stderr)
+    for fixture, overrides, env, where, key in ENV_CASES:
+        problems = check_case(binary, bad_dir, fixture, overrides, where, key, env=env)
+        status, _, err, args = run(binary, os.path.join(bad_dir, fixture), [], env=env)
+        if status != 0 or err.strip():
+            problems.append("%s without the overrides: expected status 0 and no stderr, got "
+                            "%s, %r" % (" ".join(args), status, err))
+        if problems:
+            failed += 1
+            print("FAILED %s %s %s" % (fixture, overrides, env), file=sys.stderr)
             for p in problems:
                 print("  " + p, file=sys.stderr)
     for fixture, overrides, where, key in SIZE_CASES:
@@ -450,9 +473,10 @@ def main():
             print("FAILED %s: %.2f s, %.0f MB (at most %g s and %g MB)"
                   % (shown, seconds, mb, MAX_SECONDS, MAX_MB), file=sys.stderr)
     slowest, largest = max(RECORD), max(RECORD, key=lambda r: r[1])
-    print("bad_input: %d commands (%d bad scenes, %d size, %d plan, %d valid, %d command lines); "
+    print("bad_input: %d commands (%d bad scenes, %d with an environment, %d size, %d plan, "
+          "%d valid, %d command lines); "
           "slowest %.2f s (%s), largest %.0f MB (%s)"
-          % (len(RECORD), len(CASES), len(SIZE_CASES), len(PLAN_CASES), len(VALID),
+          % (len(RECORD), len(CASES), len(ENV_CASES), len(SIZE_CASES), len(PLAN_CASES), len(VALID),
              len(COMMAND_LINES), slowest[0], slowest[2].split(" ", 1)[1], largest[1],
              largest[2].split(" ", 1)[1]))
     if failed:

@@ -27,6 +27,22 @@
  *     initial grid (level 0: 2:1 grading widens the refined zone by less
  *     than Σ h₀/2ᵏ < h₀ per side); the mesh was refined at all; and, static
  *     under gravity, the tie forces balance the weight to 1e-8 as in 2.
+ *     Both with integrated and with scaled cut cells: the scene has no
+ *     adapt section, and the refined mesh's hanging nodes must still be
+ *     constrained (without, scaled cut cells stalled Newton at 0.83).
+ *  4. Coarsening keeps the refined region: the mesh of 3 with an adapt
+ *     section that refines nothing (max_level 0) and merges every family
+ *     whose children's SPR indicators are all below 0.9 of the largest
+ *     (adapt.coarsen.fraction; with nothing marked the threshold is the
+ *     largest indicator), static, two steps under gravity. Before the first
+ *     step four initial cells far from the region (more than 3 base cells)
+ *     are refined once, so that coarsening has families it may merge. After
+ *     each step every leaf that meets the region still has a largest edge
+ *     <= refine (the key's definition: coarsening never merges a family
+ *     whose parent would be coarser there; the tie's inner families, barely
+ *     strained, are below the threshold and would be merged without that
+ *     rule), and after the steps leaves were merged (n_leaves fell: nothing
+ *     can be refined at max_level 0), else the test would not test.
  * Silent on success; NH_VERBOSE=1 prints the numbers. */
 #include "check.h"
 
@@ -100,8 +116,9 @@ static void test_level_box(void) {
            off, exact_off);
 }
 
-/* Part 3's mesh checks (the region tissue.fixed[0], h its refine). */
-static void check_refined(const nh_scene *sc, const nh_mesh *m) {
+/* Part 3's mesh checks (the region tissue.fixed[0], h its refine); with
+ * `far`, also that the leaves far from the region are initial cells. */
+static void check_refined(const nh_scene *sc, const nh_mesh *m, int far_initial) {
   const nh_region *r = &sc->tissue.fixed[0];
   const double h = sc->tissue.fix[0].refine;
   double h0 = 0.0; /* the initial grid's largest edge */
@@ -137,7 +154,8 @@ static void check_refined(const nh_scene *sc, const nh_mesh *m) {
       near |= nh_region_distance(r, m->X + 3 * m->cells[8 * c + a]) <= 3 * h0;
     if (near) continue;
     far++;
-    CHECK(m->level[c] == 0, "leaf %d far from the region refined (level %d)", c, m->level[c]);
+    CHECK(!far_initial || m->level[c] == 0, "leaf %d far from the region refined (level %d)", c,
+          m->level[c]);
   }
   CHECK(refined > 0 && fine > 0 && far > 0, "refined %d, fine at the region %d, far %d", refined,
         fine, far);
@@ -146,13 +164,12 @@ static void check_refined(const nh_scene *sc, const nh_mesh *m) {
            m->n_leaves, refined, fine, far);
 }
 
-static void test_tie(const char *refine) {
+static void test_tie(const char *refine, const char *cut_cells) {
   nh_scene *sc;
   nh_sim *sim;
-  const char *sets[] = {"solver.tolerance=1e-10", refine,
-                        refine ? "tissue.cut_cells=integrated" : NULL, NULL};
+  const char *sets[] = {"solver.tolerance=1e-10", refine, cut_cells, NULL};
   open_brain(sets, &sc, &sim);
-  if (refine) check_refined(sc, nh_sim_mesh(sim));
+  if (refine) check_refined(sc, nh_sim_mesh(sim), 1);
   CHECK_OK(nh_sim_step(sim));
   const nh_mesh *m = nh_sim_mesh(sim);
   const nh_tissue *t = nh_sim_tissue(sim);
@@ -189,10 +206,50 @@ static void test_tie(const char *refine) {
   nh_scene_destroy(&sc);
 }
 
+/* Part 4: coarsening never merges the refined region's cells above refine. */
+static void test_coarsen_keeps(void) {
+  nh_scene *sc;
+  nh_sim *sim;
+  const char *sets[] = {"tissue.fixed.0.refine=0.005", "tissue.cut_cells=integrated",
+                        "time.steps=2", "adapt={max_level: 0, coarsen: {fraction: 0.9}}", NULL};
+  open_brain(sets, &sc, &sim);
+  const nh_mesh *m = nh_sim_mesh(sim);
+  check_refined(sc, m, 1);
+  /* four initial cells far from the region, refined once */
+  const nh_region *r = &sc->tissue.fixed[0];
+  const double h0 = fmax(m->spacing[0], fmax(m->spacing[1], m->spacing[2]));
+  int far[4], n_far = 0;
+  for (int l = 0; l < m->n_leaves && n_far < 4; l++) {
+    int c = m->leaves[l], near = m->level[c] != 0;
+    for (int a = 0; a < 8 && !near; a++)
+      near = nh_region_distance(r, m->X + 3 * m->cells[8 * c + a]) <= 3 * h0;
+    if (!near) far[n_far++] = c;
+  }
+  CHECK(n_far == 4, "only %d initial cells far from the region", n_far);
+  CHECK_OK(nh_sim_refine_cells(sim, far, n_far));
+  m = nh_sim_mesh(sim);
+  const int before = m->n_leaves;
+  for (int step = 0; step < 2; step++) {
+    CHECK_OK(nh_sim_step(sim));
+    check_refined(sc, nh_sim_mesh(sim), 0);
+  }
+  m = nh_sim_mesh(sim);
+  CHECK(m->n_leaves < before,
+        "no family merged (%d leaves before the steps, %d after): "
+        "coarsening did not run, the test does not test",
+        before, m->n_leaves);
+  if (getenv("NH_VERBOSE"))
+    printf("coarsen: %d leaves before the steps, %d after\n", before, m->n_leaves);
+  nh_sim_destroy(&sim);
+  nh_scene_destroy(&sc);
+}
+
 int main(void) {
   test_level_brain();
   test_level_box();
-  test_tie(NULL);
-  test_tie("tissue.fixed.0.refine=0.005");
+  test_tie(NULL, NULL);
+  test_tie("tissue.fixed.0.refine=0.005", "tissue.cut_cells=integrated");
+  test_tie("tissue.fixed.0.refine=0.005", "tissue.cut_cells=scaled");
+  test_coarsen_keeps();
   TEST_END();
 }

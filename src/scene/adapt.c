@@ -10,7 +10,9 @@
  * or ending in .tmpl is a path, relative to the scene file's folder unless
  * absolute (so a scene and its own template travel together). Only
  * readability is checked here; the template's contents are proved by
- * nh_template_load. */
+ * nh_template_load. Without an adapt section the default (hex2) is
+ * resolved only when a tissue.fixed.N.refine needs it, and a missing file
+ * is reported at that key. */
 #include "scene/scene_impl.h"
 
 #include <errno.h>
@@ -21,14 +23,14 @@
 
 /* adapt.template (text `value`, at node `at`, NULL for the default) to a
  * readable file; the error is reported at `at`, or at `section` for the
- * default. */
+ * default, under the dotted key `key`. */
 static int resolve_template(const nh_ctx *c, const nh_yaml_node *at, const nh_yaml_node *section,
-                            const char *value, char out[NH_PATH_MAX]) {
+                            const char *key, const char *value, char out[NH_PATH_MAX]) {
   const nh_yaml_node *where = at ? at : section;
   size_t len = strlen(value);
   int is_path = strchr(value, '/') || (len >= 5 && !strcmp(value + len - 5, ".tmpl"));
   int n;
-  if (len == 0) return nh_read_fail(c, where, "adapt.template", "expected a template name or path");
+  if (len == 0) return nh_read_fail(c, where, key, "expected a template name or path");
   if (!is_path) {
     char buf[NH_PATH_MAX];
     const char *dir = nh_templates_dir(buf, sizeof buf);
@@ -37,18 +39,17 @@ static int resolve_template(const nh_ctx *c, const nh_yaml_node *at, const nh_ya
     n = nh_read_relative(c, value, out);
   }
   if (n < 0 || n >= NH_PATH_MAX)
-    return nh_read_fail(c, where, "adapt.template",
-                        "the template's path is longer than %d characters", NH_PATH_MAX - 1);
+    return nh_read_fail(c, where, key, "the template's path is longer than %d characters",
+                        NH_PATH_MAX - 1);
   struct stat st;
   int err = access(out, R_OK) != 0 ? errno : 0;
   if (!err && stat(out, &st) == 0 && S_ISDIR(st.st_mode)) err = EISDIR;
   if (!err) return NH_OK;
   if (is_path)
-    return nh_read_fail(c, where, "adapt.template", "cannot read the template file %s: %s", out,
-                        strerror(err));
-  return nh_read_fail(c, where, "adapt.template",
+    return nh_read_fail(c, where, key, "cannot read the template file %s: %s", out, strerror(err));
+  return nh_read_fail(c, where, key,
                       "no template named '%s' (cannot read %s: %s; set NH_TEMPLATES_DIR to the "
-                      "templates folder, or give a path)",
+                      "templates folder, or give adapt.template a path)",
                       value, out, strerror(err));
 }
 
@@ -59,7 +60,7 @@ static int read_template(const nh_ctx *c, const nh_key_site *k, void *base) {
   const nh_yaml_node *at = k->at, *key;
   nh_yaml_get(c->root, "adapt", &key);
   if (at) NH_TRY(nh_read_string(c, at, "adapt.template", name, sizeof name));
-  NH_TRY(resolve_template(c, at, key, name, s->adapt.template_path));
+  NH_TRY(resolve_template(c, at, key, "adapt.template", name, s->adapt.template_path));
   nh_read_where(c, at ? at : key, "adapt.template", s->adapt.where_template);
   return NH_OK;
 }
@@ -180,10 +181,20 @@ int nh_read_adapt(const nh_ctx *c, const nh_yaml_node *root, nh_scene *s) {
   s->adapt.enabled = 0;
   s->adapt.n_goals = 0;
   if (!nh_yaml_get(root, "adapt", &key)) {
-    /* no adapt section: hex2's path, unchecked (tissue.fixed.N.refine loads it) */
-    char buf[NH_PATH_MAX];
-    snprintf(s->adapt.template_path, NH_PATH_MAX, "%.900s/hex2.tmpl",
-             nh_templates_dir(buf, sizeof buf));
+    /* no adapt section: tissue.fixed.N.refine refines by hex2, whose file
+     * must then be readable (reported at the first such key) */
+    s->adapt.template_path[0] = '\0';
+    for (int r = 0; r < s->tissue.n_fixed; r++) {
+      if (!(s->tissue.fix[r].refine > 0.0)) continue;
+      char item[NH_KEY_MAX];
+      snprintf(item, sizeof item, "tissue.fixed.%d.refine", r);
+      const nh_yaml_node *tissue = nh_yaml_get(root, "tissue", NULL);
+      const nh_yaml_node *list = tissue ? nh_yaml_get(tissue, "fixed", NULL) : NULL;
+      const nh_yaml_node *at = list && list->kind == NH_YAML_SEQ && r < list->n
+                                   ? nh_yaml_get(list->items[r], "refine", NULL)
+                                   : NULL;
+      return resolve_template(c, NULL, at ? at : list, item, "hex2", s->adapt.template_path);
+    }
     return NH_OK;
   }
   s->adapt.enabled = 1;

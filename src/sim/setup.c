@@ -133,14 +133,20 @@ static int nh_sim_fixed_nodes(nh_sim *s, int first) {
  * masters lie on the same fixed face); the Lagrange variant's rows take
  * whole nodes: there every fixed node is left out. With integrated cut
  * cells also the aggregated nodes (docs/theory.md §5c): the ill-posed nodes
- * without a fixed component, by the tissue's support measures. */
+ * without a fixed component, by the tissue's support measures. A mesh
+ * refined without an adapt section (tissue.fixed.N.refine) has hanging
+ * nodes too: left free, the refined zone would be joined to its coarse
+ * neighbours at their corners only (scaled cut cells: static Newton stalled
+ * at relative residual 0.83 on tests/data/brain.yaml refined to 5 mm). */
 static int nh_sim_hanging_nodes(nh_sim *s) {
   const nh_scene *sc = s->scene;
   const nh_mesh *m = s->mesh;
   const int nn = m->n_nodes, lagrange = sc->adapt.hanging == NH_HANGING_LAGRANGE;
   const int aggregate = nh_domain_integrates_cuts(&m->domain);
   nh_hanging_destroy(&s->hanging);
-  if (!sc->adapt.enabled && !aggregate) return NH_OK;
+  int refined = 0;
+  for (int l = 0; l < m->n_leaves && !refined; l++) refined = m->level[m->leaves[l]] > 0;
+  if (!sc->adapt.enabled && !aggregate && !refined) return NH_OK;
   const size_t n1 = (size_t)(nn ? nn : 1);
   unsigned char *in = nh_calloc(2 * n1, 1), *keep = in + n1;
   double *support = nh_calloc(n1 + (size_t)m->n_cells, sizeof(double)), *fraction = support + n1;
