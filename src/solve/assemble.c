@@ -57,10 +57,10 @@ void nh_system_set_tangent(nh_system *s, nh_tangent tangent) {
 }
 
 void nh_system_set_jacobian(nh_system *s, double cG, double cD, const double *v) {
+  if (v || s->jac_v) s->a_valid = 0; /* A's next assembly differs: afresh */
   s->jac_v = v;
   s->jac_cG = cG;
   s->jac_cD = cD;
-  s->a_valid = 0;
 }
 
 int nh_system_lazy_updates(const nh_system *s) {
