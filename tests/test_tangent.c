@@ -22,7 +22,13 @@
  * (10⁻¹² relative), the tangent is objective, K(Qx) = Q K(x) Qᵀ, and the
  * skew-symmetric part of K is at least 10⁻⁴ max |K₀| at these states (so
  * the solver must handle a non-symmetric tangent) while the variation of b
- * is symmetric to round-off. */
+ * is symmetric to round-off.
+ *
+ * The rate tangent D = ∂(K(u) w)/∂u (nh_hex_corot_rate_tangent, K the
+ * corotational tangent, w fixed: the stiffness-damping force's variation in
+ * the dynamic step's Jacobian, docs/theory.md §3) against the central
+ * differences (K(u + h eⱼ) w − K(u − h eⱼ) w) / 2h, same h and tolerance
+ * (the same error analysis: K w is as smooth in u as f). */
 #include "check.h"
 #include "fem/fem.h"
 
@@ -124,6 +130,27 @@ static void check_part(double nu, int part, double *worst, double *miss) {
   }
   double kws = maxabs(Kw, 24);
   for (int i = 0; i < 24; i++) CHECK_CLOSE(y[i], Kw[i], 1e-12 * kws, "apply vs Kt w");
+
+  /* The rate tangent D = ∂(K_corot(u) w)/∂u against central differences. */
+  double D[576], Dfd[576];
+  nh_hex_corot_rate_tangent(e.K0, e.G0, e.vp, frame, w, D);
+  for (int j = 0; j < 24; j++) {
+    double up[24], um[24], fr[NH_HEX_FRAME], yp[24], ym[24];
+    memcpy(up, u, sizeof up), memcpy(um, u, sizeof um);
+    up[j] += h, um[j] -= h;
+    nh_hex_corot_force(e.X, up, e.K0, e.G0, e.vp, fr, f);
+    nh_hex_frame_corotational(fr);
+    nh_hex_corot_apply(e.K0, e.G0, e.vp, fr, w, yp);
+    nh_hex_corot_force(e.X, um, e.K0, e.G0, e.vp, fr, f);
+    nh_hex_frame_corotational(fr);
+    nh_hex_corot_apply(e.K0, e.G0, e.vp, fr, w, ym);
+    for (int i = 0; i < 24; i++) Dfd[24 * i + j] = (yp[i] - ym[i]) / (2 * h);
+  }
+  double dscale = maxabs(Dfd, 576), derr = 0.0;
+  for (int i = 0; i < 576; i++) derr = fmax(derr, fabs(D[i] - Dfd[i]));
+  CHECK(dscale > 0.0 && derr <= 1e-7 * dscale,
+        "%s, nu %g: rate tangent d(K w)/du vs central differences: %.3g of %.3g > 1e-7",
+        part_name[part], nu, derr, dscale);
 
   /* Objectivity: the rigidly moved state x₂ = P x + t has K₂ = P K Pᵀ. */
   double P[9], r[3] = {nh_rand(), nh_rand(), nh_rand()}, u2[24], K2[576];

@@ -119,6 +119,15 @@ void nh_hex_corot_tangent(const double K0[576], const double G0[24], const nh_he
                           const double frame[NH_HEX_FRAME], double Kt[576]);
 void nh_hex_corot_apply(const double K0[576], const double G0[24], const nh_hex_volumetric *vol,
                         const double frame[NH_HEX_FRAME], const double w[24], double y[24]);
+/* D[576] = ∂(K(u) w)/∂u for a fixed w[24], K(u) the corotational tangent
+ * R K0 Rᵀ (+ κ V b bᵀ) at the frame's state (a consistent frame: its Y and
+ * F̄; zero spin drops the variation of R as nh_hex_corot_tangent does): the
+ * variation of the stiffness-damping force β K(u) v in the dynamic step's
+ * exact Jacobian (docs/theory.md §3, "Newton iterations in the dynamic
+ * step"). Row-major, not symmetric. */
+void nh_hex_corot_rate_tangent(const double K0[576], const double G0[24],
+                               const nh_hex_volumetric *vol, const double frame[NH_HEX_FRAME],
+                               const double w[24], double D[576]);
 
 /* Lamé parameters from E and ν. */
 void nh_lame(double young, double poisson, double *lambda, double *mu);
@@ -297,6 +306,11 @@ void nh_tissue_element(const nh_tissue *tissue, int c, const double *u, double f
  * frame without forming Kt. All scaled by φ, tie included. */
 void nh_tissue_element_force(const nh_tissue *tissue, int c, const double *u, double f[24],
                              double frame[NH_HEX_FRAME]);
+/* D[576] = ∂(Kt(u) w)/∂u of the corotational tangent (nh_hex_corot_rate_tangent;
+ * the tie is linear: no part), scaled by φ. */
+void nh_tissue_element_rate_tangent(const nh_tissue *tissue, int c,
+                                    const double frame[NH_HEX_FRAME], const double w[24],
+                                    double D[576]);
 void nh_tissue_element_tangent(const nh_tissue *tissue, int c, const double frame[NH_HEX_FRAME],
                                double Kt[576]);
 void nh_tissue_element_apply(const nh_tissue *tissue, int c, const double frame[NH_HEX_FRAME],

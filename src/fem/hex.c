@@ -220,6 +220,65 @@ static int nh_frame_spins(const double frame[NH_HEX_FRAME]) {
   return 0;
 }
 
+/* Kₐ_b += Gₐ Ω_b, the variation of R applied to R K0 d: δω = Σ_b Ω_b δu_b,
+ * Ω_b = Y [R g_b]×, and Gₐ = ∂(R K0 d)ₐ/∂ω = −[(R K0 d)ₐ]× + R (Σ_c K0ₐ_c
+ * [d_c]×) Rᵀ (docs/theory.md §2, "Consistent tangent"): d the corotated
+ * displacements for the force, Rᵀw for the variation of R K0 Rᵀ w. */
+static void nh_add_spin(const double K0[576], const double G0[24], const double frame[NH_HEX_FRAME],
+                        const double d[24], double Kt[576]) {
+  const double *R = frame + NH_FRAME_R, *Y = frame + NH_FRAME_SPIN;
+  double Om[72], G[72], q[24];
+  for (int b = 0; b < 8; b++) { /* Ω_b = Y [R g_b]× */
+    double Rg[3], S[9];
+    nh_mat3_vec(R, G0 + 3 * b, Rg);
+    nh_skew(Rg, S);
+    nh_mat3_mul(Y, S, Om + 9 * b);
+  }
+  for (int r = 0; r < 24; r++) {
+    double s = 0.0;
+    for (int c = 0; c < 24; c++) s += K0[24 * r + c] * d[c];
+    q[r] = s;
+  }
+  for (int a = 0; a < 8; a++) {
+    double M[9] = {0}, T[9], fa[3], S[9];
+    for (int c = 0; c < 8; c++) { /* M += K0ₐ_c [d_c]× */
+      const double *dc = d + 3 * c;
+      for (int i = 0; i < 3; i++) {
+        const double *k = K0 + 24 * (3 * a + i) + 3 * c;
+        M[3 * i] += k[1] * dc[2] - k[2] * dc[1];
+        M[3 * i + 1] += k[2] * dc[0] - k[0] * dc[2];
+        M[3 * i + 2] += k[0] * dc[1] - k[1] * dc[0];
+      }
+    }
+    nh_mat3_mul(R, M, T);
+    nh_mat3_mul_nt(T, R, G + 9 * a);
+    nh_mat3_vec(R, q + 3 * a, fa);
+    nh_skew(fa, S);
+    for (int i = 0; i < 9; i++) G[9 * a + i] -= S[i];
+  }
+  for (int a = 0; a < 8; a++)
+    for (int c = 0; c < 8; c++) {
+      double T[9];
+      nh_mat3_mul(G + 9 * a, Om + 9 * c, T);
+      for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++) Kt[24 * (3 * a + i) + 3 * c + j] += T[3 * i + j];
+    }
+}
+
+/* Kₐ_c += s [F̄ (ḡ_c × ḡₐ)]× = s Hₐ_c, Hₐ_c = ∂bₐ/∂u_c (B-bar). */
+static void nh_add_dilatation_variation(const nh_hex_volumetric *vol, const double Fbar[9],
+                                        double s, double Kt[576]) {
+  for (int a = 0; a < 8; a++)
+    for (int c = 0; c < 8; c++) {
+      double n[3], w[3], S[9];
+      nh_cross(vol->Gbar + 3 * c, vol->Gbar + 3 * a, n);
+      nh_mat3_vec(Fbar, n, w);
+      nh_skew(w, S);
+      for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++) Kt[24 * (3 * a + i) + 3 * c + j] += s * S[3 * i + j];
+    }
+}
+
 void nh_hex_corot_tangent(const double K0[576], const double G0[24], const nh_hex_volumetric *vol,
                           const double frame[NH_HEX_FRAME], double Kt[576]) {
   const double *R = frame + NH_FRAME_R;
@@ -233,65 +292,47 @@ void nh_hex_corot_tangent(const double K0[576], const double G0[24], const nh_he
       for (int i = 0; i < 3; i++)
         for (int j = 0; j < 3; j++) Kt[24 * (3 * a + i) + 3 * c + j] = B[3 * i + j];
     }
-  /* The variation of R: Kₐ_b += Gₐ Ω_b with δω = Σ_b Ω_b δu_b,
-   * Ω_b = Y [R g_b]×, and Gₐ = ∂fₐ/∂ω = −[fₐ]× + R (Σ_c K0ₐ_c [d_c]×) Rᵀ,
-   * fₐ = R (K0 d)ₐ (docs/theory.md §2, "Consistent tangent"). */
-  if (nh_frame_spins(frame)) {
-    const double *Y = frame + NH_FRAME_SPIN, *d = frame + NH_FRAME_D;
-    double Om[72], G[72], q[24];
-    for (int b = 0; b < 8; b++) { /* Ω_b = Y [R g_b]× */
-      double Rg[3], S[9];
-      nh_mat3_vec(R, G0 + 3 * b, Rg);
-      nh_skew(Rg, S);
-      nh_mat3_mul(Y, S, Om + 9 * b);
-    }
-    for (int r = 0; r < 24; r++) {
-      double s = 0.0;
-      for (int c = 0; c < 24; c++) s += K0[24 * r + c] * d[c];
-      q[r] = s;
-    }
-    for (int a = 0; a < 8; a++) {
-      double M[9] = {0}, T[9], fa[3], S[9];
-      for (int c = 0; c < 8; c++) { /* M += K0ₐ_c [d_c]× */
-        const double *dc = d + 3 * c;
-        for (int i = 0; i < 3; i++) {
-          const double *k = K0 + 24 * (3 * a + i) + 3 * c;
-          M[3 * i] += k[1] * dc[2] - k[2] * dc[1];
-          M[3 * i + 1] += k[2] * dc[0] - k[0] * dc[2];
-          M[3 * i + 2] += k[0] * dc[1] - k[1] * dc[0];
-        }
-      }
-      nh_mat3_mul(R, M, T);
-      nh_mat3_mul_nt(T, R, G + 9 * a);
-      nh_mat3_vec(R, q + 3 * a, fa);
-      nh_skew(fa, S);
-      for (int i = 0; i < 9; i++) G[9 * a + i] -= S[i];
-    }
-    for (int a = 0; a < 8; a++)
-      for (int c = 0; c < 8; c++) {
-        double T[9];
-        nh_mat3_mul(G + 9 * a, Om + 9 * c, T);
-        for (int i = 0; i < 3; i++)
-          for (int j = 0; j < 3; j++) Kt[24 * (3 * a + i) + 3 * c + j] += T[3 * i + j];
-      }
-  }
+  if (nh_frame_spins(frame)) nh_add_spin(K0, G0, frame, frame + NH_FRAME_D, Kt);
   /* B-bar: κ V (bₐ ⊗ b_b + θ̄ Hₐ_b), Hₐ_b = ∂bₐ/∂u_b = [F̄ (ḡ_b × ḡₐ)]×. */
   if (vol) {
     double b[24], kv = vol->kappa * vol->volume, theta = frame[NH_FRAME_THETA];
     for (int a = 0; a < 8; a++) nh_mat3_vec(frame + NH_FRAME_COF, vol->Gbar + 3 * a, b + 3 * a);
     for (int r = 0; r < 24; r++)
       for (int c = 0; c < 24; c++) Kt[24 * r + c] += kv * b[r] * b[c];
-    if (theta != 0.0)
-      for (int a = 0; a < 8; a++)
-        for (int c = 0; c < 8; c++) {
-          double n[3], w[3], S[9];
-          nh_cross(vol->Gbar + 3 * c, vol->Gbar + 3 * a, n);
-          nh_mat3_vec(frame + NH_FRAME_FBAR, n, w);
-          nh_skew(w, S);
-          for (int i = 0; i < 3; i++)
-            for (int j = 0; j < 3; j++)
-              Kt[24 * (3 * a + i) + 3 * c + j] += kv * theta * S[3 * i + j];
-        }
+    if (theta != 0.0) nh_add_dilatation_variation(vol, frame + NH_FRAME_FBAR, kv * theta, Kt);
+  }
+}
+
+void nh_hex_corot_rate_tangent(const double K0[576], const double G0[24],
+                               const nh_hex_volumetric *vol, const double frame[NH_HEX_FRAME],
+                               const double w[24], double D[576]) {
+  memset(D, 0, 576 * sizeof(double));
+  /* R K0 Rᵀ w: the variation of R with Rᵀw in place of d */
+  if (nh_frame_spins(frame)) {
+    double rw[24];
+    for (int a = 0; a < 8; a++) nh_mat3_tvec(frame + NH_FRAME_R, w + 3 * a, rw + 3 * a);
+    nh_add_spin(K0, G0, frame, rw, D);
+  }
+  /* κ V b (bᵀw): κ V [(bᵀw) Hₐ_c + bₐ ⊗ r_c], r_c = Σₐ Hₐ_cᵀ wₐ = Σₐ wₐ × (F̄ (ḡ_c × ḡₐ))
+   * (Hₐ_c = [F̄ (ḡ_c × ḡₐ)]×, skew: Hᵀ w = −h × w = w × h) */
+  if (vol) {
+    double b[24], bw = 0.0, kv = vol->kappa * vol->volume;
+    const double *Fbar = frame + NH_FRAME_FBAR;
+    for (int a = 0; a < 8; a++) nh_mat3_vec(frame + NH_FRAME_COF, vol->Gbar + 3 * a, b + 3 * a);
+    for (int i = 0; i < 24; i++) bw += b[i] * w[i];
+    nh_add_dilatation_variation(vol, Fbar, kv * bw, D);
+    for (int c = 0; c < 8; c++) {
+      double r[3] = {0, 0, 0};
+      for (int a = 0; a < 8; a++) {
+        double n[3], hv[3], x[3];
+        nh_cross(vol->Gbar + 3 * c, vol->Gbar + 3 * a, n);
+        nh_mat3_vec(Fbar, n, hv);
+        nh_cross(w + 3 * a, hv, x);
+        for (int k = 0; k < 3; k++) r[k] += x[k];
+      }
+      for (int i = 0; i < 24; i++)
+        for (int j = 0; j < 3; j++) D[24 * i + 3 * c + j] += kv * b[i] * r[j];
+    }
   }
 }
 

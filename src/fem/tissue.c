@@ -427,6 +427,18 @@ void nh_tissue_element_tangent(const nh_tissue *t, int c, const double frame[NH_
         for (int k = 0; k < 3; k++) Kt[24 * (3 * a + k) + 3 * b + k] += T[8 * a + b];
 }
 
+void nh_tissue_element_rate_tangent(const nh_tissue *t, int c, const double frame[NH_HEX_FRAME],
+                                    const double w[24], double D[576]) {
+  double Kc[576];
+  nh_hex_volumetric vol;
+  const nh_hex_volumetric *vp;
+  const double *K0 = nh_cell_data(t, c, Kc, &vol, &vp);
+  nh_hex_corot_rate_tangent(K0, nh_tissue_g0(t, c), vp, frame, w, D);
+  double phi = nh_tissue_cell_cut(t, c) ? 1.0 : nh_cell_phi(t, c);
+  if (phi != 1.0)
+    for (int i = 0; i < 576; i++) D[i] *= phi;
+}
+
 void nh_tissue_element_apply(const nh_tissue *t, int c, const double frame[NH_HEX_FRAME],
                              const double w[24], double y[24]) {
   double Kc[576];

@@ -56,6 +56,13 @@ void nh_system_set_tangent(nh_system *s, nh_tangent tangent) {
   s->consistent = consistent;
 }
 
+void nh_system_set_jacobian(nh_system *s, double cG, double cD, const double *v) {
+  if (v || s->jac_v) s->a_valid = 0; /* A's next assembly differs: afresh */
+  s->jac_v = v;
+  s->jac_cG = cG;
+  s->jac_cD = cD;
+}
+
 int nh_system_lazy_updates(const nh_system *s) {
   return s->lazy_updates;
 }
@@ -133,7 +140,8 @@ void nh_system_assemble(nh_system *s, const double *u, const double *v, double c
   const nh_tissue *t = s->tissue;
   const nh_mesh *m = t->mesh;
   const double tol = s->lazy_tolerance;
-  const int fresh = !s->a_valid || cM != s->a_cM || cK != s->a_cK;
+  const int jacobian = s->consistent && s->jac_v;
+  const int fresh = !s->a_valid || cM != s->a_cM || cK != s->a_cK || jacobian;
   memset(f_int, 0, sizeof(double) * 3 * (size_t)m->n_nodes);
   if (Kv) memset(Kv, 0, sizeof(double) * 3 * (size_t)m->n_nodes);
   int nt = threads > 0 ? threads : omp_get_max_threads();
@@ -210,7 +218,18 @@ void nh_system_assemble(nh_system *s, const double *u, const double *v, double c
         nh_tissue_element_tangent(t, c, frame, K);
         double me[8];
         nh_tissue_corner_masses(t, c, NULL, me); /* no plane: cannot fail */
-        for (int r = 0; r < 576; r++) K[r] *= cK;
+        if (jacobian) {                          /* nh_system_set_jacobian */
+          double fc[NH_HEX_FRAME], Kc[576], ve[24];
+          memcpy(fc, frame, sizeof fc);
+          nh_hex_frame_corotational(fc);
+          nh_tissue_element_tangent(t, c, fc, Kc);
+          nh_mesh_cell_coords(m, s->jac_v, c, ve);
+          nh_tissue_element_rate_tangent(t, c, frame, ve, N);
+          for (int r = 0; r < 576; r++)
+            K[r] = cK * Kc[r] + s->jac_cG * (K[r] - Kc[r]) + s->jac_cD * N[r];
+        } else {
+          for (int r = 0; r < 576; r++) K[r] *= cK;
+        }
         for (int r = 0; r < 24; r++) K[25 * r] += cM * me[r / 3];
       } else {
         double K_old[576];

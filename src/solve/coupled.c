@@ -469,10 +469,13 @@ static int nh_newton_wanted(const nh_integrator *in, const nh_step_stats *st, in
  * coupled step's phases again with A_k, the rows, their gaps and the tools'
  * blocks unchanged (the rows are linear in the velocities and the tools'
  * blocks are linearised once per step; their update moves by
- * A_j⁻¹ J_jᵀ (λ − λ_k)). A_k is the consistent tangent's symmetric part once
- * the residual is below NH_NEWTON_CONSISTENT (the corotational one where
- * that is indefinite: nh_system_factor_symmetric), as in the static Newton;
- * the residual is always that of the step's equations (corotational K in
+ * A_j⁻¹ J_jᵀ (λ − λ_k)). Once the residual is below NH_NEWTON_CONSISTENT
+ * A_k is the step's exact Jacobian (1 + hα) M + (hβ + h²) K_corot + h² (K −
+ * K_corot) + h²β ∂(K_corot v)/∂u (nh_system_set_jacobian), solved by LU
+ * without rows (Newton's quadratic rate), and its symmetric part without
+ * the last term with rows (Cholesky; the corotational tangent where that is
+ * indefinite: nh_system_factor_symmetric); the residual is always that of
+ * the step's equations (corotational K in
  * the damping). Hanging-node rows carry their multipliers' increments
  * (nh_system_solve_constrained). */
 static int nh_coupled_newton(nh_step_work *w) {
@@ -492,16 +495,34 @@ static int nh_coupled_newton(nh_step_work *w) {
     double t0 = nh_time_now();
     if (m)
       for (int i = 0; i < nf; i++) w->b[i] -= w->col[i]; /* R_k − J_tᵀ λ_k */
-    if (st->residual <= NH_NEWTON_CONSISTENT) {
+    /* Below NH_NEWTON_CONSISTENT the step's exact Jacobian: without rows
+     * all of it by LU; with rows (W needs the Cholesky factor) the
+     * symmetric part of the tangent's, without the damping's variation
+     * (its symmetric part alone slowed the iteration: docs/theory.md §3) */
+    const int exact = st->residual <= NH_NEWTON_CONSISTENT;
+    const int lu = exact && m == 0 && s->n_rows == 0;
+    if (exact) {
+      const double h2 = in->dt * in->dt;
       nh_system_set_tangent(s, NH_TANGENT_CONSISTENT);
+      nh_system_set_jacobian(s, h2, lu ? h2 * in->beta : 0.0, w->v);
+      if (lu && (rc = nh_system_keep_skew(s))) break;
       nh_system_assemble(s, w->u, NULL, cM, cK, s->work[0], NULL, in->threads);
+      nh_system_set_jacobian(s, 0.0, 0.0, NULL);
     }
     double t1 = nh_time_now();
     st->t_assemble += t1 - t0;
-    if ((rc = nh_system_factor_symmetric(s, in, w->u, NH_FACTOR_NEWTON, st))) break;
-    double t2 = nh_time_now();
-    if ((rc = nh_step_free_solve(s, in, w->b, w->dv, st))) break;
-    st->t_solve += nh_time_now() - t2;
+    if (lu) {
+      double tf = 0.0;
+      rc = nh_system_solve_lu(s, w->b, w->dv, &tf);
+      st->t_factor += tf;
+      st->factorised++;
+      if (rc) break;
+    } else {
+      if ((rc = nh_system_factor_symmetric(s, in, w->u, NH_FACTOR_NEWTON, st))) break;
+      double t2 = nh_time_now();
+      if ((rc = nh_step_free_solve(s, in, w->b, w->dv, st))) break;
+      st->t_solve += nh_time_now() - t2;
+    }
     if (m) {
       double tc = nh_time_now();
       memcpy(lam0, w->rows->lambda, sizeof(double) * (size_t)m);
@@ -530,14 +551,15 @@ static int nh_coupled_newton(nh_step_work *w) {
       w->u[i] += in->dt * delta[i];
       dvt[i] += delta[i];
     }
-    nh_system_set_tangent(s, NH_TANGENT_COROTATIONAL);
+    nh_system_tangent_restore(s, in, w->f_ext, w->u, 0, st); /* corotational, skew dropped */
     if (m) nh_rows_tissue_force(w->Jt, w->rows->lambda, w->col, nf);
     st->residual = nh_dynamic_residual(s, in, w->f_ext, w->u, w->v, dvt, m ? w->col : NULL, w->b);
     st->residual_floor = nh_system_residual_floor(s);
     st->t_assemble += nh_time_now() - t3;
     st->iterations++;
   }
-  nh_system_set_tangent(s, NH_TANGENT_COROTATIONAL);
+  nh_system_set_jacobian(s, 0.0, 0.0, NULL);
+  nh_system_tangent_restore(s, in, w->f_ext, w->u, 0, st);
   memcpy(w->full, dvt, sizeof(double) * (size_t)n); /* the step's nodal update, as documented */
   free(dvt);
   return rc;

@@ -72,6 +72,10 @@ struct nh_system {
   unsigned char *updated;
   int a_valid;
   double a_cM, a_cK;
+  /* nh_system_set_jacobian: the dynamic Newton's exact Jacobian (jac_v the
+   * nodal velocities of the damping force's variation, NULL: unset) */
+  const double *jac_v;
+  double jac_cG, jac_cD;
   int lazy_updates; /* leaves whose tangent the last assembly updated */
   int threads;      /* OpenMP threads of the last assembly (0: all), W's build uses them too */
 
@@ -249,6 +253,16 @@ void nh_step_update(nh_system *s, int statics, double h, const double *x, double
  * change starts the next assembly afresh. */
 typedef enum { NH_TANGENT_COROTATIONAL = 0, NH_TANGENT_CONSISTENT = 1 } nh_tangent;
 void nh_system_set_tangent(nh_system *s, nh_tangent tangent);
+
+/* The dynamic step's exact Jacobian (docs/theory.md §3, "Newton iterations
+ * in the dynamic step"): while v != NULL, an assembly with the consistent
+ * tangent puts into A, per leaf,
+ *     cM Mₑ + cK Kₑ,corot + cG (Kₑ − Kₑ,corot) + cD ∂(Kₑ,corot(u) vₑ)/∂u
+ * (cK = hβ + h², cG = h², cD = h²β: the damping force β K(u) v with the
+ * corotational K, and its variation, over the nodal velocities v, 3 per
+ * node, which the caller keeps alive) instead of cM Mₑ + cK Kₑ; every such
+ * assembly is afresh. v = NULL: back to the plain assembly. */
+void nh_system_set_jacobian(nh_system *s, double cG, double cD, const double *v);
 
 /* Keep the skew-symmetric part N of the consistent tangent beside A (on A's
  * upper-triangle pattern) from the next assembly on; A holds the symmetric
