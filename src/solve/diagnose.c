@@ -224,9 +224,10 @@ nh_cause nh_system_diagnose(nh_system *s, const double *u, int dof, const nh_rig
     return NH_CAUSE_INVERTED;
   }
   if (small_near) {
-    nh_diag_add(buf, size,
-                ". Likely cause: a cut cell with a tiny tissue fraction at that node (a sliver "
-                "of the domain: a finer or shifted grid, or tissue.cut_cells: integrated)");
+    nh_diag_add(
+        buf, size,
+        ". Likely cause: a cut cell with a tiny tissue fraction at that node (a sliver "
+        "of the domain: a finer or shifted grid; with tissue.cut_cells: scaled, integrated)");
     return NH_CAUSE_SLIVER;
   }
   nh_diag_add(buf, size,
