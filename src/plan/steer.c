@@ -340,7 +340,11 @@ static int nh_converged(const nh_steer *P, const nh_plan_options *o, const nh_st
 static int nh_steer_choose(const nh_steer *P, const double q[NH_Q], nh_bike_plan *plan,
                            int *active) {
   nh_bike_choice c;
-  double c_star = P->active ? fmax(q[2], 0.0) : P->c_goal;
+  /* c* may be negative (a path through the obstacle: the clearance is signed): a run
+     that cut through maps to its own depth of cut, and the step's change of c* acts
+     in full (clamped at 0, the best run's image and the step's plan both passed at
+     0 and the first turn did not move: docs/cases.md) */
+  double c_star = P->active ? q[2] : P->c_goal;
   /* active: the plan that passes at exactly c*, else one that keeps it */
   if (nh_bike_choose(&P->frame, q, c_star, P->active, &c) == 0 ||
       (P->active && nh_bike_choose(&P->frame, q, c_star, 0, &c) == 0)) {
