@@ -13,8 +13,10 @@
  *     (excursion about 1/(4 kappa) = 10 mm > radius + clearance) passes, it
  *     keeps one turn with at least the clearance asked; in exact mode it has
  *     two turns, ends on the target and passes the cylinder at exactly the
- *     clearance asked (the bisection's tolerance, 1e-9 m); asked for less
- *     clearance it stays closer (monotone);
+ *     clearance asked (the bisection's tolerance, 1e-9 m), also a negative
+ *     one (the signed distance: a path through the cylinder, what a run that
+ *     cut through it maps back to); asked for less clearance it stays closer
+ *     (monotone);
  *  3. region distances at hand-computed points (sphere, box outside and
  *     inside, finite cylinder beside, beyond an end, at a rim);
  *  4. a label obstacle: label 2 of cases/steering/obstacle.nii.gz, the
@@ -133,7 +135,7 @@ static void test_choose(void) {
      chooser keeps one turn; exact mode gives two turns at exactly the clearance asked */
   f.obstacles = ob;
   double T2[2] = {0.12, 0.0}, last = INFINITY;
-  for (double want = 0.003; want >= 0.0005; want -= 0.001) {
+  for (double want = 0.003; want >= -0.0025; want -= 0.001) { /* < 0: through the cylinder */
     CHECK(nh_bike_choose(&f, T2, want, 0, &c) == 0, "no plan around the cylinder (%g)", want);
     CHECK(c.plan.n == 2 && !c.active, "one turn expected: %d arcs, active %d", c.plan.n, c.active);
     CHECK(c.clearance >= want, "one turn: clearance %g below %g", c.clearance, want);

@@ -141,8 +141,9 @@ def plot_plan(args):
                 color="0.4", label="failed run")
     cl = np.array([1e3 * float(i.get("clearance", "nan")) for i in doc["iterations"]])
     if np.isfinite(cl[ok]).all():
+        neg = ", ".join(str(k) for k in n[ok][cl[ok] < 0])
         bx.plot(n[ok], np.maximum(np.abs(cl[ok]), 1e-3), "s--",
-                label="|clearance| (negative: runs 1, 2)" if (cl[ok] < 0).any() else "clearance")
+                label=f"|clearance| (negative: runs {neg})" if neg else "clearance")
     bx.axhline(1e3 * doc["tolerance"], color="C0", ls=":", lw=0.8, label="tolerance")
     bx.axhline(1e3 * doc["clearance_required"], color="C1", ls=":", lw=0.8,
                label="clearance required")

@@ -340,7 +340,11 @@ static int nh_converged(const nh_steer *P, const nh_plan_options *o, const nh_st
 static int nh_steer_choose(const nh_steer *P, const double q[NH_Q], nh_bike_plan *plan,
                            int *active) {
   nh_bike_choice c;
-  double c_star = P->active ? fmax(q[2], 0.0) : P->c_goal;
+  /* c* may be negative (a path through the obstacle: the clearance is signed): a run
+     that cut through maps to its own depth of cut, and the step's change of c* acts
+     in full (clamped at 0, the best run's image and the step's plan both passed at
+     0 and the first turn did not move: docs/cases.md) */
+  double c_star = P->active ? q[2] : P->c_goal;
   /* active: the plan that passes at exactly c*, else one that keeps it */
   if (nh_bike_choose(&P->frame, q, c_star, P->active, &c) == 0 ||
       (P->active && nh_bike_choose(&P->frame, q, c_star, 0, &c) == 0)) {
@@ -578,7 +582,8 @@ int nh_plan_steer(const char *scene_path, int n_sets, const char *const *sets,
            nh_obstacles_count(P.obstacles) == 1 ? "" : "s", P.kappa0,
            scene->plan.curvature > 0 ? "" : " (estimated)", o->max_runs, workers,
            workers == 1 ? "" : "s");
-  while (!rc && converged < 0 && n_runs < o->max_runs) {
+  int repeat = 0;
+  while (!rc && !repeat && converged < 0 && n_runs < o->max_runs) {
     /* the round's candidates: the step at q, probes around it */
     const int nc = workers < o->max_runs - n_runs ? workers : o->max_runs - n_runs;
     const int nq = P.active ? 3 : 2;
@@ -605,12 +610,29 @@ int nh_plan_steer(const char *scene_path, int n_sets, const char *const *sets,
         nh_steer_shift(&runs[best].plan, &from_b, &r->plan);
         r->delta = runs[best].delta;
       }
+      /* a step whose schedule repeats an earlier run's (the radius at its floor,
+         J = I, from the same best run): the simulation is deterministic, so it
+         would end as that run did; nothing new to learn, the plan stops */
+      int again = -1;
+      for (int k = 0; i == 0 && k < n_runs && again < 0; k++)
+        if (nh_bike_depth_change(&runs[k].plan, &r->plan) <= 1e-12 &&
+            fabs(runs[k].delta - r->delta) <= 1e-12)
+          again = k;
+      if (again >= 0) {
+        if (!o->quiet)
+          printf("plan: stopped: the trust region is at its floor (%.3g mm) and the next step "
+                 "repeats run %d's schedule\n",
+                 1e3 * tr.radius, again + 1);
+        repeat = 1;
+        break;
+      }
       nh_candidate *c = &cand[made];
       nh_candidate_free(c);
       snprintf(c->dir, sizeof c->dir, "%s/run_%02d", out, n_runs + made + 1);
       rc = nh_steer_candidate(&P, tool, r, c);
       made++;
     }
+    if (repeat) break;
     if (!rc)
       rc = nh_runs_execute(scene_path, n_sets, sets, made, cand, workers, P.tool->name,
                            scene->targets[target].name, res);
@@ -644,7 +666,7 @@ int nh_plan_steer(const char *scene_path, int n_sets, const char *const *sets,
     /* the trust region: its radius from the first best run's merit (a depth
        change of the order of the miss), then judged by each round's step */
     if (round == 0)
-      nh_trust_init(&tr, fmax(nh_merit(&P, &runs[best]), 2 * o->tolerance), 0.5 * o->tolerance,
+      nh_trust_init(&tr, fmax(nh_merit(&P, &runs[best]), 2 * o->tolerance), 0.1 * o->tolerance,
                     2 * fmax(nh_merit(&P, &runs[best]), 2 * o->tolerance));
     else
       nh_trust_judge(&tr, merit_b, nh_merit(&P, &runs[first]));
@@ -660,21 +682,6 @@ int nh_plan_steer(const char *scene_path, int n_sets, const char *const *sets,
                     "plan: round %d: the bicycle model has no path with at most two turns "
                     "within %.3g mm of run %d's depths",
                     round + 2, 1e3 * tr.radius, best + 1);
-      break;
-    }
-    /* a step that repeats a failed run (the radius at its floor, J = I):
-       nothing new to learn, the plan stops */
-    int again = -1;
-    for (int i = 0; i < n_runs && again < 0; i++)
-      if (runs[i].failed && fabs(runs[i].q[0] - q[0]) + fabs(runs[i].q[1] - q[1]) +
-                                    (P.active ? fabs(runs[i].q[2] - q[2]) : 0.0) <=
-                                1e-9)
-        again = i;
-    if (again >= 0) {
-      if (!o->quiet)
-        printf("plan: stopped: the trust region is at its floor (%.3g mm) and the next step "
-               "repeats run %d, which failed\n",
-               1e3 * tr.radius, again + 1);
       break;
     }
     round++;
