@@ -186,7 +186,10 @@ int nh_tip_rows(nh_contact *c, nh_group *G, const nh_mesh *mesh, const double *u
                 double h, double tau);
 int nh_tip_update(nh_contact *c, nh_group *G, const nh_mesh *mesh, const double *u, double tau,
                   nh_group_events *ev);
-int nh_shaft_rows(nh_contact *c, nh_group *G, const nh_mesh *mesh, const double *u, double tau);
+/* The shaft rows over t → t + h (the step's travel of the tools: the axial
+ * bounds of a dynamic step are those at its end, channel.c). */
+int nh_shaft_rows(nh_contact *c, nh_group *G, const nh_mesh *mesh, const double *u, double t,
+                  double h, double tau);
 void nh_shaft_update(nh_contact *c, nh_group *G, double tau, nh_group_events *ev);
 
 #endif

@@ -215,9 +215,10 @@ void nh_contact_report(const nh_contact *c, int k, nh_tool_report *r) {
   r->state = tl->state;
   r->depth = 0.0;
   if (G->punctured && G->n_chan > 0 && tl->state != NH_TOOL_OUTSIDE) {
-    /* the entry point's arc length on this tool */
+    /* the entry point's arc length on this tool (from its tie's, else from
+     * the tip: an untied entry is within half a spacing of the tip) */
     const nh_cpoint *e = &G->chan[0];
-    double s = nh_tool_project(tl->beam, G->entry_x, e->tool == k ? e->s : 0.0);
+    double s = nh_tool_project(tl->beam, G->entry_x, e->tool == k ? e->s : L);
     r->depth = fmax(0.0, L - fmax(s, 0.0));
   }
 }
