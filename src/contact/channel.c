@@ -104,9 +104,11 @@ static void nh_frame_normal(const double *T, const double t[3], double n1[3]) {
   nh_vec3_normalize(n1);
 }
 
-/* The bevel direction at the tip: the tip node's second director made
- * orthogonal to the tip tangent t (the n1 of the tip rows). */
-static void nh_tip_bevel_direction(nh_beam *beam, const double t[3], double b[3]) {
+/* The tip's frame normal: the tip node's second director made orthogonal
+ * to the tip tangent t (the n1 of the tip rows; the bevel direction, and
+ * where the tip disc's rings start: the disc turns with the tool, not with
+ * the round-off of t's small components, docs/interaction.md "Tip disc"). */
+static void nh_tip_normal(nh_beam *beam, const double t[3], double b[3]) {
   nh_frame_normal(nh_beam_directors(beam) + 9 * (nh_beam_nodes(beam) - 1), t, b);
 }
 
@@ -147,14 +149,14 @@ static int nh_tie_rows(nh_contact *c, const nh_mesh *m, const double *u, nh_cpoi
   double xb[3], t[3], J[36], xi, xp[3];
   int e;
   nh_beam_point(tl->beam, s, xb, t, &e, &xi, J);
+  double n1[3], n2[3];
+  nh_frame_normal(nh_beam_directors(tl->beam) + 9 * (xi < 0.5 ? e : e + 1), t, n1);
   if (tip) { /* the tip acts through its cross-section (docs/interaction.md, "Tip disc") */
-    if (nh_disc_build(&c->disc, m, p, t, nh_tip_radius(tl->spec))) return -1;
+    if (nh_disc_build(&c->disc, m, p, t, n1, nh_tip_radius(tl->spec))) return -1;
     nh_disc_position(&c->disc, m, u, xp);
   } else {
     nh_point_position(m, u, p, xp);
   }
-  double n1[3], n2[3];
-  nh_frame_normal(nh_beam_directors(tl->beam) + 9 * (xi < 0.5 ? e : e + 1), t, n1);
   nh_vec3_cross(t, n1, n2);
   const double *dirs[3] = {n1, n2, t};
   int first = -1;
@@ -230,10 +232,11 @@ int nh_tip_rows(nh_contact *c, nh_group *G, const nh_mesh *m, const double *u, d
   int lead = nh_leader(c, G, t, h);
   if (lead < 0 || c->tools[lead].dyn < 0) return NH_OK;
   nh_tool *tl = &c->tools[lead];
-  double xt[3], tt[3], xf[3];
+  double xt[3], tt[3], xf[3], nt[3];
   const double rho = nh_tip_radius(tl->spec);
   nh_beam_point(tl->beam, nh_beam_length(tl->beam), xt, tt, NULL, NULL, NULL);
-  NH_TRY(nh_disc_build(&c->disc, m, &G->front, tt, rho));
+  nh_tip_normal(tl->beam, tt, nt);
+  NH_TRY(nh_disc_build(&c->disc, m, &G->front, tt, nt, rho));
   nh_disc_position(&c->disc, m, u, xf);
   double ahead = nh_vec3_dot(tt, xf) - nh_vec3_dot(tt, xt),
          sp_f = nh_point_spacing(sp, m, &G->front);
@@ -244,7 +247,7 @@ int nh_tip_rows(nh_contact *c, nh_group *G, const nh_mesh *m, const double *u, d
     nh_cpoint p = G->front;
     double xa[3]; /* a bevel's front keeps its offset across the tip: it moves along t only */
     for (int i = 0; i < 3; i++) xa[i] = tl->spec->bevel > 0 ? xf[i] - ahead * tt[i] : xt[i];
-    int rc = nh_material_point(m, u, xa, G->front.X, tt, rho, &c->disc, &p);
+    int rc = nh_material_point(m, u, xa, G->front.X, tt, nt, rho, &c->disc, &p);
     if (rc == NH_ERR_MEMORY) return rc;
     if (!rc) {
       G->front = p, ahead = 0.0;
@@ -286,20 +289,19 @@ int nh_tip_update(nh_contact *c, nh_group *G, const nh_mesh *m, const double *u,
   /* cut and advance (Eq. 8): the front moves to the material point at the
    * tip; a bevel moves it on by d tan ψ along the tip's bevel direction
    * (d the tip's advance along its tangent past the old front) */
-  double xt[3], tt[3], xf[3];
+  double xt[3], tt[3], xf[3], nt[3];
   const double rho = nh_tip_radius(tl->spec);
   nh_beam_point(tl->beam, nh_beam_length(tl->beam), xt, tt, NULL, NULL, NULL);
+  nh_tip_normal(tl->beam, tt, nt);
   if (tl->spec->bevel > 0) {
-    double b[3], d;
-    nh_tip_bevel_direction(tl->beam, tt, b);
-    NH_TRY(nh_disc_build(&c->disc, m, &G->front, tt, rho));
+    NH_TRY(nh_disc_build(&c->disc, m, &G->front, tt, nt, rho));
     nh_disc_position(&c->disc, m, u, xf);
-    d = fmax(0.0, nh_vec3_dot(tt, xt) - nh_vec3_dot(tt, xf));
-    const double h_bevel = d * tan(tl->spec->bevel * NH_PI / 180.0);
-    for (int i = 0; i < 3; i++) xt[i] += h_bevel * b[i];
+    const double d = fmax(0.0, nh_vec3_dot(tt, xt) - nh_vec3_dot(tt, xf)),
+                 h_bevel = d * tan(tl->spec->bevel * NH_PI / 180.0);
+    for (int i = 0; i < 3; i++) xt[i] += h_bevel * nt[i];
   }
   nh_cpoint p = G->front;
-  int rc = nh_material_point(m, u, xt, G->front.X, tt, rho, &c->disc, &p);
+  int rc = nh_material_point(m, u, xt, G->front.X, tt, nt, rho, &c->disc, &p);
   if (rc) return rc == NH_ERR_MEMORY ? rc : NH_OK;
   double d[3] = {p.X[0] - G->front.X[0], p.X[1] - G->front.X[1], p.X[2] - G->front.X[2]};
   if (sqrt(nh_vec3_dot(d, d)) > 1e-9 * nh_point_spacing(sp, m, &G->front))
