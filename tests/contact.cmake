@@ -8,3 +8,5 @@ nh_add_c_test(test_skull_surface "unit;verify")
 nh_add_c_test(test_skull_fissure "unit;verify")
 # The tip disc: a point load's compliance diverges like 1/h, the disc's converges (tests/test_tip_disc.c).
 nh_add_c_test(test_tip_disc "unit;verify")
+# The contact geometry continuous in the state: closest points on a bent tool converged whatever their rounding, the tip disc's rings in the tool's frame (tests/test_contact_frame.c).
+nh_add_c_test(test_contact_frame "unit;verify")

@@ -22,3 +22,8 @@ nh_add_py_test(steering "verify;slow" steering.py)
 nh_add_py_test(channel_spacing verify channel_spacing.py)
 nh_add_py_test(channel_spacing_lock "verify;slow" channel_spacing.py --lock)
 set_tests_properties(channel_spacing_lock PROPERTIES TIMEOUT 900)
+# The shaft's friction as the line integral over the inserted length
+# (tests/shaft_friction.py): axial force = cutting force + friction_per_length
+# x depth while cutting, -friction_per_length x depth while withdrawing, to
+# 1e-9 N at every step, on two grids and two channel spacings.
+nh_add_py_test(shaft_friction verify shaft_friction.py)

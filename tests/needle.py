@@ -368,25 +368,29 @@ def test_reinsert():
     tr, st = tool_rows(res), step_rows(res)
     if not any(int(r["cut"]) > 0 for r in st if float(r["time"]) <= 0.4 + 1e-9):
         fail("reinsert: no cut during the first insertion")
-    second = [(a, b) for a, b in zip(tr, st) if 0.65 + 1e-9 < float(a["time"]) <= 0.75 + 1e-9]
-    spacing = 0.005  # channel points: one per cell edge (the default spacing)
-    for a, b in second:
+    # the re-insertion's steps, each with the previous step's tools row
+    second = [(a, b, p) for a, b, p in zip(tr[1:], st[1:], tr)
+              if 0.65 + 1e-9 < float(a["time"]) <= 0.75 + 1e-9]
+    travel = 0.02 * 0.01  # the base's advance per step
+    for a, b, p in second:
         if int(b["cut"]) != 0 or a["state"] == "cutting":
             fail("reinsert: step %s cut %s state %s during re-insertion, expected no cut"
                  % (b["step"], b["cut"], a["state"]))
         if a["state"] not in ("punctured",):
             fail("reinsert: step %s state %s during re-insertion, expected punctured"
                  % (b["step"], a["state"]))
-        F, d, lat = float(a["axial_force"]), float(a["depth"]), float(a["lateral_force"])
-        # Only shaft rows act: each channel point's axial row is bounded by
-        # mu |lateral| + friction_per_length * its spacing; the covered
-        # channel is at most depth + one spacing long, the needle straight
-        # (lateral forces ~ 0). The brief's bound (cutting + friction) is
-        # then implied with a margin of the whole cutting force.
-        shaft = FPL * (d + spacing) + MU * lat + 1e-9
+        F, lat = float(a["axial_force"]), float(a["lateral_force"])
+        # Only shaft rows act: their axial bounds are mu |lateral| +
+        # friction_per_length x the length each carries, which sum to
+        # friction_per_length x the inserted length the step's rows see: the
+        # previous step's depth + this step's travel (docs/interaction.md,
+        # "The line integral"). The needle is straight (lateral forces ~ 0).
+        # The brief's bound (cutting + friction) is then implied with a
+        # margin of the whole cutting force.
+        shaft = FPL * (float(p["depth"]) + travel) + MU * lat + 1e-9
         if F > shaft:
             fail("reinsert: step %s axial force %.6g > shaft friction bound %.6g (depth %.4g)"
-                 % (b["step"], F, shaft, d))
+                 % (b["step"], F, shaft, float(p["depth"])))
         if F > FC + shaft:
             fail("reinsert: step %s axial force %.6g > cutting + friction %.6g" % (b["step"], F, FC + shaft))
     if len(second) < 5:

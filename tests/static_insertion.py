@@ -20,18 +20,34 @@ Silent on success, one line per failure (expected, actual, tolerance), exit 1.
     displacements, (M/h^2 + C/h + K) du = f - f_int + ..., so the dynamic
     run tends to the static one as 1/k (damping and inertia forces scale
     with the speed):
-    a. the probes' displacement difference falls by at least 3x per 4x in k
-       (order 1) and is below 1e-3 of the largest probe displacement at
-       k = 64;
-    b. the tool tip: the dynamic step applies each shaft point's friction
-       force f = friction_per_length x spacing at the tool point where the
-       tissue point was at the start of the step, one step's travel d
-       towards the tip from where it is at the end (one linearisation per
-       step), so its needle is shorter by N f d / (E A) (N shaft points):
-       tip_dynamic - tip_static -> -N f d / (E A), checked at k = 64
-       within 10 % of that lag;
-    c. the axial force agrees to 1e-6 relative and the states are the same
-       at every step;
+    a. the probes' displacement difference is below 1e-3 of the largest
+       probe displacement at k = 64 (it fell by >= 3x per 4x in k while the
+       shaft's bounds were a staircase; with the line integral it is
+       2-15e-9 m at every k, transients after the steps where a point
+       joins, not resolved: issue 26's w8-shaft report);
+    b. the tool tip: the shaft's bounds are friction_per_length x w_i, the
+       line integral (docs/interaction.md, "The line integral"): with
+       points z_i = i x spacing from the entry and the tip at depth D,
+       a_i = D - z_i - spacing/2 (the entry: D), w_i = a_i - a_(i+1),
+       applied at the needle's arc length s_i = L - (D - z_i). The static
+       step writes its rows at the step's end (D its depth), the dynamic
+       step at its start (D' the previous step's depth + the travel, the
+       same D within the step's deformation) and applies the forces at
+       the start's arc lengths L - (D' - d - z_i), d the travel: the
+       needle is shortened by sum_i f_i r(s_i) / (E A), where r(s) is the
+       tip's axial response to a unit load at s through the beam's
+       interpolation (Hermite in position: a load at xi in an element of
+       length l moves the tip as one at s_e + l (3 xi^2 - 2 xi^3)), so
+           tip_dynamic - tip_static = (S(D) - S(D' - d, at D' - d)) / (E A)
+       with S the sum above, checked at k = 64 at every cutting step from
+       20 on except where the static run ties a new point (in a later
+       iteration of the step: its bound and slip start there) in that or
+       the previous step, within 3 % (measured: within 1.5 %);
+    c. the axial force: F_c + friction_per_length x the depth its bounds
+       see, the step's end (static) and the previous step's depth + the
+       travel (dynamic); both checked to 1e-9 N (static: not at the steps
+       that tie a new point), and the two runs' states are the same at
+       every step;
     d. with a 5x larger friction_per_length the lag grows 5x (the same
        check as b).
 """
@@ -116,36 +132,64 @@ def insertion(fpl, ks):
         return {p["name"]: [float(p[c]) for c in ("ux", "uy", "uz")]
                 for p in r["probes"] if int(p["step"]) == last}
 
+    def joining(i):  # static step i ties a new point in a later iteration, or a row sticks
+        rows = st["steps"]
+        return int(rows[i - 1]["stick"]) != 0 or (
+            i >= 2 and rows[i - 1]["constraints"] != rows[i - 2]["constraints"])
+
     ps = probes(st)
     umax = max(math.sqrt(sum(c * c for c in u)) for u in ps.values())
-    diff = {}
+    d = 0.02 * 0.01  # travel per step
     for k in ks:
         pd = probes(dyn[k])
-        diff[k] = max(math.sqrt(sum((a - b)**2 for a, b in zip(pd[n], ps[n]))) for n in ps)
+        diff = max(math.sqrt(sum((a - b)**2 for a, b in zip(pd[n], ps[n]))) for n in ps)
+        if k == ks[-1] and not diff <= 1e-3 * umax:
+            fail("fpl %g: probe difference to static %.3e m at k = %d, tolerance 1e-3 of %.3e m"
+                 % (fpl, diff, k, umax))
         if [t["state"] for t in dyn[k]["tools"]] != [t["state"] for t in st["tools"]]:
             fail("fpl %g, k = %d: the states differ from the static run's" % (fpl, k))
-        fa, fs = float(dyn[k]["tools"][-1]["axial_force"]), float(st["tools"][-1]["axial_force"])
-        if not abs(fa - fs) <= 1e-6 * abs(fs):
-            fail("fpl %g, k = %d: axial force %.9g N, static %.9g N, tolerance 1e-6 relative"
-                 % (fpl, k, fa, fs))
-    for a, b in zip(ks, ks[1:]):
-        if not diff[a] >= 3.0 * diff[b]:
-            fail("fpl %g: probe difference to static %.3e m at k = %d and %.3e m at k = %d: "
-                 "expected a fall by >= 3x (order 1 in 1/k)" % (fpl, diff[a], a, diff[b], b))
-    if not diff[ks[-1]] <= 1e-3 * umax:
-        fail("fpl %g: probe difference to static %.3e m at k = %d, tolerance 1e-3 of %.3e m"
-             % (fpl, diff[ks[-1]], ks[-1], umax))
-    # b. the tool tip: the dynamic step's lag of the shaft forces
-    n_rows = int(dyn[ks[-1]]["steps"][-1]["constraints"])
-    n_shaft = n_rows // 3 - 1  # three rows per tied point, the tip's among them
-    d = 0.02 * 0.01  # travel per step
+        # c. the axial force against the depth the bounds see
+        for who, rows, lead in (("static", st["tools"], 0.0), ("k = %d" % k, dyn[k]["tools"], d)):
+            for prev, row in zip(rows, rows[1:]):
+                if row["state"] != "cutting" or int(row["step"]) < 20:
+                    continue
+                D = float((prev if lead else row)["depth"]) + lead
+                F = float(row["axial_force"])
+                if not lead and joining(int(row["step"])):
+                    continue
+                if not abs(F - (0.2 + fpl * D)) <= 1e-9:
+                    fail("fpl %g, %s: step %s axial force %.12g N, expected F_c + "
+                         "friction_per_length x %.9g m = %.12g N, tolerance 1e-9 N"
+                         % (fpl, who, row["step"], F, D, 0.2 + fpl * D))
+    # b. the tool tip: the line integral's bounds at the dynamic step's start
     EA = E_NEEDLE * math.pi * R**2
-    lag = n_shaft * fpl * 0.0025 * d / EA
-    dtip = float(dyn[ks[-1]]["tools"][-1]["tip_x"]) - float(st["tools"][-1]["tip_x"])
-    if not abs(dtip + lag) <= 0.1 * lag:
-        fail("fpl %g: tip_x dynamic (k = %d) - static = %.4e m, expected -N f d/(EA) = %.4e m "
-             "(N = %d shaft points), tolerance 10 %%" % (fpl, ks[-1], dtip, -lag, n_shaft))
+    le, sp = L / N_EL, 0.0025
 
+    def response(s):  # the tip's axial motion per unit axial load at s, times E A
+        e = min(int(s / le), N_EL - 1)
+        xi = s / le - e
+        return e * le + le * (3 * xi**2 - 2 * xi**3)
+
+    def shortening(D, at):  # sum_i f_i r(s_i) for the tip at depth D, loads where it is `at`
+        z = [i * sp for i in range(int(D / sp) + 2) if D - i * sp >= sp / 2]
+        a = [D if i == 0 else D - zi - sp / 2 for i, zi in enumerate(z)]
+        w = [a[i] - (a[i + 1] if i + 1 < len(a) else 0.0) for i in range(len(a))]
+        return fpl * sum(wi * response(L - (at - zi)) for wi, zi in zip(w, z))
+
+    tools_st, tools_dy = st["tools"], dyn[ks[-1]]["tools"]
+    checked = 0
+    for i in range(20, len(tools_st)):
+        if tools_st[i]["state"] != "cutting" or joining(i) or joining(i - 1):
+            continue
+        D, Dd = float(tools_st[i]["depth"]), float(tools_dy[i - 1]["depth"]) + d
+        lag = (shortening(D, D) - shortening(Dd, Dd - d)) / EA
+        dtip = float(tools_dy[i]["tip_x"]) - float(tools_st[i]["tip_x"])
+        checked += 1
+        if not abs(dtip - lag) <= 0.03 * abs(lag):
+            fail("fpl %g: step %d tip_x dynamic (k = %d) - static = %.4e m, expected "
+                 "(S(D) - S(D')) / (E A) = %.4e m, tolerance 3 %%" % (fpl, i, ks[-1], dtip, lag))
+    if checked < 20:
+        fail("fpl %g: the tip checked at %d steps, expected >= 20" % (fpl, checked))
 
 gravity()
 insertion(5.0, [4, 16, 64])

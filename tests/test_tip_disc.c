@@ -66,7 +66,7 @@ static double compliance(int k, double rho, int weights_check) {
   const double X0[3] = {0.0, 0.02, 0.02}, nrm[3] = {-1, 0, 0};
   CHECK_OK(nh_point_set(m, &p, X0));
   nh_disc d = {0};
-  CHECK_OK(nh_disc_build(&d, m, &p, nrm, rho));
+  CHECK_OK(nh_disc_build(&d, m, &p, nrm, NULL, rho));
   if (weights_check) { /* 1: a partition of unity centred at X0, exact for linear fields */
     double sw = 0.0, sx[3] = {0, 0, 0}, lin = 0.0;
     for (int q = 0; q < d.n; q++) {

@@ -9,7 +9,9 @@
  * orthogonal to t, n2 = t × n1. Rows (nh_rows, solve/solve.h:
  * g = n · (x_P − x_tool), force on the tissue along +n):
  *   shaft point  n1, n2 bilateral (g the lateral offset); t friction with
- *                bound μ |(λ1, λ2)| + friction_per_length × spacing (g = 0;
+ *                bound μ |(λ1, λ2)| + friction_per_length × w, w the length
+ *                of channel the point carries (nh_shaft_bounds: Σ w is the
+ *                inserted length, the line integral) (g = 0;
  *                quasi-static: the slip s − s0 along the tool since the step's
  *                first iteration, so the law holds for the whole step):
  *                it sticks, or slides as the tool moves in or out; a point
@@ -102,9 +104,11 @@ static void nh_frame_normal(const double *T, const double t[3], double n1[3]) {
   nh_vec3_normalize(n1);
 }
 
-/* The bevel direction at the tip: the tip node's second director made
- * orthogonal to the tip tangent t (the n1 of the tip rows). */
-static void nh_tip_bevel_direction(nh_beam *beam, const double t[3], double b[3]) {
+/* The tip's frame normal: the tip node's second director made orthogonal
+ * to the tip tangent t (the n1 of the tip rows; the bevel direction, and
+ * where the tip disc's rings start: the disc turns with the tool, not with
+ * the round-off of t's small components, docs/interaction.md "Tip disc"). */
+static void nh_tip_normal(nh_beam *beam, const double t[3], double b[3]) {
   nh_frame_normal(nh_beam_directors(beam) + 9 * (nh_beam_nodes(beam) - 1), t, b);
 }
 
@@ -145,14 +149,14 @@ static int nh_tie_rows(nh_contact *c, const nh_mesh *m, const double *u, nh_cpoi
   double xb[3], t[3], J[36], xi, xp[3];
   int e;
   nh_beam_point(tl->beam, s, xb, t, &e, &xi, J);
+  double n1[3], n2[3];
+  nh_frame_normal(nh_beam_directors(tl->beam) + 9 * (xi < 0.5 ? e : e + 1), t, n1);
   if (tip) { /* the tip acts through its cross-section (docs/interaction.md, "Tip disc") */
-    if (nh_disc_build(&c->disc, m, p, t, nh_tip_radius(tl->spec))) return -1;
+    if (nh_disc_build(&c->disc, m, p, t, n1, nh_tip_radius(tl->spec))) return -1;
     nh_disc_position(&c->disc, m, u, xp);
   } else {
     nh_point_position(m, u, p, xp);
   }
-  double n1[3], n2[3];
-  nh_frame_normal(nh_beam_directors(tl->beam) + 9 * (xi < 0.5 ? e : e + 1), t, n1);
   nh_vec3_cross(t, n1, n2);
   const double *dirs[3] = {n1, n2, t};
   int first = -1;
@@ -228,10 +232,11 @@ int nh_tip_rows(nh_contact *c, nh_group *G, const nh_mesh *m, const double *u, d
   int lead = nh_leader(c, G, t, h);
   if (lead < 0 || c->tools[lead].dyn < 0) return NH_OK;
   nh_tool *tl = &c->tools[lead];
-  double xt[3], tt[3], xf[3];
+  double xt[3], tt[3], xf[3], nt[3];
   const double rho = nh_tip_radius(tl->spec);
   nh_beam_point(tl->beam, nh_beam_length(tl->beam), xt, tt, NULL, NULL, NULL);
-  NH_TRY(nh_disc_build(&c->disc, m, &G->front, tt, rho));
+  nh_tip_normal(tl->beam, tt, nt);
+  NH_TRY(nh_disc_build(&c->disc, m, &G->front, tt, nt, rho));
   nh_disc_position(&c->disc, m, u, xf);
   double ahead = nh_vec3_dot(tt, xf) - nh_vec3_dot(tt, xt),
          sp_f = nh_point_spacing(sp, m, &G->front);
@@ -242,7 +247,7 @@ int nh_tip_rows(nh_contact *c, nh_group *G, const nh_mesh *m, const double *u, d
     nh_cpoint p = G->front;
     double xa[3]; /* a bevel's front keeps its offset across the tip: it moves along t only */
     for (int i = 0; i < 3; i++) xa[i] = tl->spec->bevel > 0 ? xf[i] - ahead * tt[i] : xt[i];
-    int rc = nh_material_point(m, u, xa, G->front.X, tt, rho, &c->disc, &p);
+    int rc = nh_material_point(m, u, xa, G->front.X, tt, nt, rho, &c->disc, &p);
     if (rc == NH_ERR_MEMORY) return rc;
     if (!rc) {
       G->front = p, ahead = 0.0;
@@ -284,20 +289,19 @@ int nh_tip_update(nh_contact *c, nh_group *G, const nh_mesh *m, const double *u,
   /* cut and advance (Eq. 8): the front moves to the material point at the
    * tip; a bevel moves it on by d tan ψ along the tip's bevel direction
    * (d the tip's advance along its tangent past the old front) */
-  double xt[3], tt[3], xf[3];
+  double xt[3], tt[3], xf[3], nt[3];
   const double rho = nh_tip_radius(tl->spec);
   nh_beam_point(tl->beam, nh_beam_length(tl->beam), xt, tt, NULL, NULL, NULL);
+  nh_tip_normal(tl->beam, tt, nt);
   if (tl->spec->bevel > 0) {
-    double b[3], d;
-    nh_tip_bevel_direction(tl->beam, tt, b);
-    NH_TRY(nh_disc_build(&c->disc, m, &G->front, tt, rho));
+    NH_TRY(nh_disc_build(&c->disc, m, &G->front, tt, nt, rho));
     nh_disc_position(&c->disc, m, u, xf);
-    d = fmax(0.0, nh_vec3_dot(tt, xt) - nh_vec3_dot(tt, xf));
-    const double h_bevel = d * tan(tl->spec->bevel * NH_PI / 180.0);
-    for (int i = 0; i < 3; i++) xt[i] += h_bevel * b[i];
+    const double d = fmax(0.0, nh_vec3_dot(tt, xt) - nh_vec3_dot(tt, xf)),
+                 h_bevel = d * tan(tl->spec->bevel * NH_PI / 180.0);
+    for (int i = 0; i < 3; i++) xt[i] += h_bevel * nt[i];
   }
   nh_cpoint p = G->front;
-  int rc = nh_material_point(m, u, xt, G->front.X, tt, rho, &c->disc, &p);
+  int rc = nh_material_point(m, u, xt, G->front.X, tt, nt, rho, &c->disc, &p);
   if (rc) return rc == NH_ERR_MEMORY ? rc : NH_OK;
   double d[3] = {p.X[0] - G->front.X[0], p.X[1] - G->front.X[1], p.X[2] - G->front.X[2]};
   if (sqrt(nh_vec3_dot(d, d)) > 1e-9 * nh_point_spacing(sp, m, &G->front))
@@ -306,7 +310,59 @@ int nh_tip_update(nh_contact *c, nh_group *G, const nh_mesh *m, const double *u,
   return nh_channel_lay(G, sp, m, &G->front);
 }
 
-int nh_shaft_rows(nh_contact *c, nh_group *G, const nh_mesh *m, const double *u, double tau) {
+/* The constant part of the axial bounds (docs/interaction.md, "The line
+ * integral"): friction_per_length × w × τ per tied point, w the length of
+ * channel it carries. On the ramp's tool (the one with the tip rows, else,
+ * with no tip rows — retracting, or re-entering the channel — the tool of
+ * the deepest tied point) a point at d = L − s behind that tool's tip has
+ * progressed a = max(d − len/2, 0) past where it is tied (d = len/2; the
+ * entry point a = d: it carries the channel from the surface on), and
+ * carries w = a − a', a' the progress of the next deeper tied point: it
+ * joins with w = 0, grows with the tip's advance until the next point
+ * joins, then keeps the current length between the two; the bounds sum to
+ * friction_per_length × the entry's d, the inserted length, continuous in
+ * depth on every grid (the line integral of the shaft's friction). The
+ * deepest point carries at most two of its spacings (a tip beyond the
+ * channel's last point, as after leaving the tissue, adds no more). A point
+ * on another tool of the group carries its spacing, the entry point 1.5 of
+ * it. Until the entry point is tied (d below half its spacing) the tip's
+ * axial row carries that first part of the channel, friction_per_length ×
+ * d. A dynamic step's rows are written at its start: d is taken at its end,
+ * d + the ramp tool's prescribed travel over t → t + h (backward Euler, as
+ * the quasi-static step's last iteration, whose rows are written at the
+ * step's end), so the two modes agree. */
+static void nh_shaft_bounds(nh_contact *c, nh_group *G, const nh_mesh *m, const double *u, double t,
+                            double h, double tau) {
+  int ramp = G->tip_tool;
+  for (int i = G->n_chan - 1; ramp < 0 && i >= 0; i--)
+    if (G->chan[i].row >= 0) ramp = G->chan[i].tool;
+  const double travel = c->statics || ramp < 0 ? 0.0 : nh_tool_speed(c->tools[ramp].spec, t, h) * h;
+  double deeper = -1.0; /* the progress a' of the next deeper tied point (−1: none) */
+  for (int i = G->n_chan - 1; i >= 0; i--) {
+    const nh_cpoint *p = &G->chan[i];
+    if (p->row < 0) continue;
+    const nh_tool *tl = &c->tools[p->tool];
+    double w = i == 0 ? 1.5 * p->len : p->len;
+    if (p->tool == ramp) {
+      const double d = nh_beam_length(tl->beam) - p->s + travel,
+                   a = i == 0 ? fmax(d, 0.0) : fmax(d - 0.5 * p->len, 0.0);
+      w = deeper < 0.0 ? fmin(a, 2.0 * p->len) : fmax(a - deeper, 0.0);
+      deeper = a;
+    }
+    c->rows.law[p->row + 2].threshold = tl->spec->friction_per_length * w * tau;
+  }
+  if (G->tip_tool < 0 || G->n_chan == 0 || G->chan[0].row >= 0) return;
+  const nh_tool *tl = &c->tools[G->tip_tool];
+  const double L = nh_beam_length(tl->beam);
+  double xe[3];
+  nh_point_position(m, u, &G->chan[0], xe);
+  const double d = fmin(fmax(L - nh_tool_project(tl->beam, xe, L) + travel, 0.0),
+                        0.5 * G->chan[0].len + fmax(travel, 0.0));
+  c->rows.law[G->front.row + 2].threshold += tl->spec->friction_per_length * d * tau;
+}
+
+int nh_shaft_rows(nh_contact *c, nh_group *G, const nh_mesh *m, const double *u, double t, double h,
+                  double tau) {
   if (!G->punctured) return NH_OK;
   const double L = nh_beam_length(c->tools[G->outer].beam);
   for (int i = 0; i < G->n_chan; i++) {
@@ -326,10 +382,11 @@ int nh_shaft_rows(nh_contact *c, nh_group *G, const nh_mesh *m, const double *u,
       continue;
     }
     const nh_tool *tl = &c->tools[k];
-    if (nh_tie_rows(c, m, u, p, k, s, tl->spec->friction_per_length * p->len * tau,
-                    nh_torsion_threshold(c, tl, p, tau), 0) < 0)
+    /* the axial bound's constant part is set below, once the ramp's tool is known */
+    if (nh_tie_rows(c, m, u, p, k, s, 0.0, nh_torsion_threshold(c, tl, p, tau), 0) < 0)
       return NH_ERR_MEMORY;
   }
+  nh_shaft_bounds(c, G, m, u, t, h, tau);
   return NH_OK;
 }
 

@@ -113,7 +113,7 @@ static int nh_contact_begin_step(nh_contact *c, const nh_mesh *m, const double *
     nh_group *G = &c->groups[i];
     NH_TRY(nh_puncture_rows(c, G, m, u, tau));
     NH_TRY(nh_tip_rows(c, G, m, u, t, h, tau));
-    NH_TRY(nh_shaft_rows(c, G, m, u, tau));
+    NH_TRY(nh_shaft_rows(c, G, m, u, t, h, tau));
   }
   if (c->skull) NH_TRY(nh_skull_rows(c->skull, m, u, v, tau, &c->rows));
   return NH_OK;

@@ -150,20 +150,24 @@ int nh_point_set(const nh_mesh *mesh, nh_cpoint *p, const double X[3]);
  * nrm, by a ring rule fine enough for p's cell (sample points at most half
  * its edge apart, at most 8 rings), as the weights of the mesh nodes in
  * the disc's mean; samples outside the tissue are left out. rho = 0: the
- * point itself (its cell's shape values). NH_ERR_MEMORY. */
+ * point itself (its cell's shape values). The rings' first samples lie
+ * along ref's part across nrm (a tool's disc: the tool's frame, so the rule
+ * turns with the tool, continuously), or with ref NULL along the axis least
+ * aligned with nrm (a fixed normal). NH_ERR_MEMORY. */
 int nh_disc_build(nh_disc *d, const nh_mesh *mesh, const nh_cpoint *p, const double nrm[3],
-                  double rho);
+                  const double ref[3], double rho);
 void nh_disc_free(nh_disc *d);
 /* The disc's mean current position. */
 void nh_disc_position(const nh_disc *d, const nh_mesh *mesh, const double *u, double x[3]);
 /* The disc as the tissue part of row r (the last row). NH_ERR_MEMORY. */
 int nh_disc_row(nh_rows *rows, int r, const nh_disc *d);
-/* The material point p whose disc (nrm, rho, in d) has its mean at the
+/* The material point p whose disc (nrm, ref, rho, in d) has its mean at the
  * current position x (Newton on x̄(X) = x with F = I + ∂u/∂X of the cell at
  * X, starting from X0; rho = 0: X + u(X) = x). NH_ERR_INPUT if it leaves
  * the tissue, NH_ERR_MEMORY. */
 int nh_material_point(const nh_mesh *mesh, const double *u, const double x[3], const double X0[3],
-                      const double nrm[3], double rho, nh_disc *d, nh_cpoint *p);
+                      const double nrm[3], const double ref[3], double rho, nh_disc *d,
+                      nh_cpoint *p);
 /* Channel point spacing at p: nh_channel_spacing with the edge of p's cell. */
 double nh_point_spacing(const nh_tool_spec *spec, const nh_mesh *mesh, const nh_cpoint *p);
 /* The tissue part of row r: p's cell nodes and shape values. */
@@ -186,7 +190,10 @@ int nh_tip_rows(nh_contact *c, nh_group *G, const nh_mesh *mesh, const double *u
                 double h, double tau);
 int nh_tip_update(nh_contact *c, nh_group *G, const nh_mesh *mesh, const double *u, double tau,
                   nh_group_events *ev);
-int nh_shaft_rows(nh_contact *c, nh_group *G, const nh_mesh *mesh, const double *u, double tau);
+/* The shaft rows over t → t + h (the step's travel of the tools: the axial
+ * bounds of a dynamic step are those at its end, channel.c). */
+int nh_shaft_rows(nh_contact *c, nh_group *G, const nh_mesh *mesh, const double *u, double t,
+                  double h, double tau);
 void nh_shaft_update(nh_contact *c, nh_group *G, double tau, nh_group_events *ev);
 
 #endif

@@ -49,14 +49,15 @@ static int nh_point_gradient(const nh_mesh *m, const double *u, const nh_cpoint 
 }
 
 int nh_material_point(const nh_mesh *m, const double *u, const double x[3], const double X0[3],
-                      const double nrm[3], double rho, nh_disc *d, nh_cpoint *p) {
+                      const double nrm[3], const double ref[3], double rho, nh_disc *d,
+                      nh_cpoint *p) {
   double X[3] = {X0[0], X0[1], X0[2]};
   for (int it = 0; it < 20; it++) {
     if (nh_point_set(m, p, X)) return NH_ERR_INPUT;
     double G[9], xc[3], Fi[9], dX[3];
     if (nh_point_gradient(m, u, p, G)) return NH_ERR_INPUT;
     if (rho > 0.0) {
-      NH_TRY(nh_disc_build(d, m, p, nrm, rho));
+      NH_TRY(nh_disc_build(d, m, p, nrm, ref, rho));
       nh_disc_position(d, m, u, xc);
     } else {
       nh_point_position(m, u, p, xc);
@@ -98,18 +99,24 @@ static int nh_disc_sample(nh_disc *d, const nh_mesh *m, const double X[3], doubl
 }
 
 int nh_disc_build(nh_disc *d, const nh_mesh *m, const nh_cpoint *p, const double nrm[3],
-                  double rho) {
+                  const double ref[3], double rho) {
   d->n = 0;
   const double h = nh_mesh_cell_size(m, p->cell);
   const int rings = rho > 0.0 ? (int)fmin(8.0, fmax(1.0, ceil(2.0 * rho / h))) : 0;
-  /* e1, e2: unit vectors across nrm (exact for a normal along an axis) */
-  int low = 0;
-  for (int i = 1; i < 3; i++)
-    if (fabs(nrm[i]) < fabs(nrm[low])) low = i;
+  /* e1, e2: unit vectors across nrm, e1 along ref's part across nrm (the
+   * tool's frame: continuous in the tool's state), without ref the axis
+   * least aligned with nrm (exact for a normal along an axis) */
   double e1[3] = {0, 0, 0}, e2[3], nn[3] = {nrm[0], nrm[1], nrm[2]}, total = 0.0;
   nh_vec3_normalize(nn);
-  e1[low] = 1.0;
-  const double c = nn[low];
+  if (ref) {
+    memcpy(e1, ref, sizeof e1);
+  } else {
+    int low = 0;
+    for (int i = 1; i < 3; i++)
+      if (fabs(nrm[i]) < fabs(nrm[low])) low = i;
+    e1[low] = 1.0;
+  }
+  const double c = nh_vec3_dot(e1, nn);
   for (int i = 0; i < 3; i++) e1[i] -= c * nn[i];
   nh_vec3_normalize(e1);
   nh_vec3_cross(nn, e1, e2);

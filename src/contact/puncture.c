@@ -79,7 +79,7 @@ int nh_puncture_rows(nh_contact *c, nh_group *G, const nh_mesh *m, const double 
   nh_beam_point(b, nh_beam_length(b), xt, tt, &e, &xi, J);
   /* the tool's cross-section pressing on the surface: the disc in the
    * surface's plane (docs/interaction.md, "Tip disc") */
-  NH_TRY(nh_disc_build(&c->disc, m, &G->entry, G->n_out, nh_tip_radius(sp)));
+  NH_TRY(nh_disc_build(&c->disc, m, &G->entry, G->n_out, NULL, nh_tip_radius(sp)));
   nh_disc_position(&c->disc, m, u, xp);
   if (!nh_puncture_near(G, tl, m, xt, xp, h)) {
     memset(G->entry.lam, 0, sizeof G->entry.lam);

@@ -185,16 +185,23 @@ void nh_tool_add_force(nh_tool *tl, const nh_rows *rows, int r, double tau, doub
   }
 }
 
+/* Newton on t(s) · (x − x(s)) = 0, each iterate clamped to the tool
+ * [0, L]; beyond an end the answer is the end's tangent extrapolation
+ * (an iterate clamped to the end whose correction points out again: the
+ * next iteration would repeat it). The stop depends on the corrections
+ * only, not on how s's rounding went: a tolerance-sized change of x or of
+ * the tool (an iterative solve's) changes s by as little. */
 double nh_tool_project(const nh_beam *b, const double x[3], double s0) {
   const double L = nh_beam_length(b);
   double s = s0;
   for (int it = 0; it < 8; it++) {
     double xs[3], t[3], sc = fmin(fmax(s, 0.0), L);
+    const int clamped = sc != s;
     nh_beam_point(b, sc, xs, t, NULL, NULL, NULL);
     double d[3] = {x[0] - xs[0], x[1] - xs[1], x[2] - xs[2]};
     double ds = nh_vec3_dot(t, d);
     s = sc + ds;
-    if (fabs(ds) < 1e-13 * L || (sc != s - ds)) break;
+    if (fabs(ds) < 1e-13 * L || (clamped && (s < 0.0 || s > L))) break;
   }
   return s;
 }
@@ -215,9 +222,10 @@ void nh_contact_report(const nh_contact *c, int k, nh_tool_report *r) {
   r->state = tl->state;
   r->depth = 0.0;
   if (G->punctured && G->n_chan > 0 && tl->state != NH_TOOL_OUTSIDE) {
-    /* the entry point's arc length on this tool */
+    /* the entry point's arc length on this tool (from its tie's, else from
+     * the tip: an untied entry is within half a spacing of the tip) */
     const nh_cpoint *e = &G->chan[0];
-    double s = nh_tool_project(tl->beam, G->entry_x, e->tool == k ? e->s : 0.0);
+    double s = nh_tool_project(tl->beam, G->entry_x, e->tool == k ? e->s : L);
     r->depth = fmax(0.0, L - fmax(s, 0.0));
   }
 }
