@@ -70,6 +70,8 @@ typedef struct {
   double lam;   /* last impulse (N s), warm start */
   int row;      /* its row this step, or −1 */
   int small;    /* its leaf's tissue fraction is below NH_FILL_MIN (merged away in the build) */
+  int crease;   /* it (or its skull point) lies on a crease of F even after the split: its row
+                   keeps the rest normal N as its direction */
 } nh_skull_point;
 
 /* At most one point per dominant direction of the outward normal (±x, ±y,
@@ -95,6 +97,7 @@ typedef struct {
 typedef struct {
   double Xe[24];
   double P[NH_SKULL_MAX_PT][3], xi[NH_SKULL_MAX_PT][3], area[NH_SKULL_MAX_PT];
+  int crease[NH_SKULL_MAX_PT];
   int n_pt, done;
   double fraction; /* the leaf's tissue volume / its volume (integrated cut cells) */
   int own;         /* the points belong to this leaf at xi (integrated cut cell) */
@@ -251,6 +254,29 @@ static double nh_skull_kink(const nh_domain *d, const double x[3], double edge, 
   return worst;
 }
 
+/* cos of the angle of the sharper crease through P or through its skull
+ * point P + gap n(P) (1: neither is on a crease), and m = na − nb, the
+ * normal of that crease's bisecting plane. */
+static double nh_skull_crease(const nh_domain *d, double gap, const double P[3], double edge,
+                              double m[3]) {
+  double Q[3], nrm[3], na[3], nb[3], ma[3], mb[3];
+  nh_skull_distance(d, P, nrm);
+  for (int k = 0; k < 3; k++) Q[k] = P[k] + gap * nrm[k];
+  const double cp = nh_skull_kink(d, P, edge, na, nb),
+               cq = gap > 0.0 ? nh_skull_kink(d, Q, edge, ma, mb) : 1.0;
+  for (int k = 0; k < 3; k++) m[k] = cp <= cq ? na[k] - nb[k] : ma[k] - mb[k];
+  return fmin(cp, cq);
+}
+
+/* Point i of leaf f: position P, area, whether it is on a crease. */
+static void nh_skull_cell_add(const nh_domain *d, double gap, double edge, const double P[3],
+                              double area, nh_skull_cell *f) {
+  double m[3];
+  memcpy(f->P[f->n_pt], P, 3 * sizeof *P);
+  f->area[f->n_pt] = area;
+  f->crease[f->n_pt++] = nh_skull_crease(d, gap, P, edge, m) < 1.0;
+}
+
 /* The clustered points of a leaf's samples: n_pt points P with areas.
  * A point on a crease gets the row direction of whichever side round-off
  * puts it on, and that direction pushes it further that way where the
@@ -261,9 +287,11 @@ static double nh_skull_kink(const nh_domain *d, const double x[3], double edge, 
  * whose skull point P + gap n(P) does (the offset of a smooth piece of
  * surface may have one: beside the brainstem, the hemispheres' crease
  * 1 mm out), gives one point per side instead: each sample goes to the
- * side of the crease's bisecting plane (normal na − nb through P or the
- * skull point) it lies on, half to each if on it, so a leaf symmetric about
- * a mirror plane through the crease keeps mirror-symmetric points. */
+ * side of the crease's bisecting plane (normal na − nb through P) it lies
+ * on, half to each if on it, so a leaf symmetric about a mirror plane
+ * through the crease keeps mirror-symmetric points. A point still on a
+ * crease after that (a sliver of surface within 1e-3 edges of a sharp
+ * notch) is flagged: its row keeps the rest normal. */
 static int nh_skull_cell_points(const nh_domain *d, double gap, const nh_skull_sample *smp, int n,
                                 int *cls, double edge, nh_skull_cell *f) {
   f->n_pt = 0;
@@ -274,24 +302,20 @@ static int nh_skull_cell_points(const nh_domain *d, double gap, const nh_skull_s
   double *side = part + n;
   for (int c = 0; c < n_cls; c++) {
     for (int q = 0; q < n; q++) part[q] = cls[q] == c;
-    double P[3], Q[3], nrm[3], na[3], nb[3], ma[3], mb[3];
+    double P[3], m[3];
     const double a = nh_skull_cluster_point(d, smp, n, part, edge, P);
     if (!(a > 0.0)) continue;
-    nh_skull_distance(d, P, nrm);
-    for (int k = 0; k < 3; k++) Q[k] = P[k] + gap * nrm[k];
-    const double cp = nh_skull_kink(d, P, edge, na, nb),
-                 cq = gap > 0.0 ? nh_skull_kink(d, Q, edge, ma, mb) : 1.0;
-    if (fmin(cp, cq) < 1.0) {
-      double m[3];
-      for (int k = 0; k < 3; k++) m[k] = cp <= cq ? na[k] - nb[k] : ma[k] - mb[k];
+    if (nh_skull_crease(d, gap, P, edge, m) < 1.0) {
+      double tie = 0.0;
+      for (int k = 0; k < 3; k++) tie += fabs(m[k]);
+      tie *= 1e-9 * edge; /* on the plane up to P's round-off */
       for (int q = 0; q < n; q++) {
         if (cls[q] != c) {
           part[q] = side[q] = 0.0;
           continue;
         }
-        double t = 0.0, tie = 0.0;
-        for (int k = 0; k < 3; k++) t += (smp[q].x[k] - P[k]) * m[k], tie += fabs(m[k]);
-        tie *= 1e-9 * edge; /* on the plane up to P's round-off */
+        double t = 0.0;
+        for (int k = 0; k < 3; k++) t += (smp[q].x[k] - P[k]) * m[k];
         part[q] = t > tie ? 1.0 : (t < -tie ? 0.0 : 0.5);
         side[q] = 1.0 - part[q];
       }
@@ -299,12 +323,12 @@ static int nh_skull_cell_points(const nh_domain *d, double gap, const nh_skull_s
       const double aa = nh_skull_cluster_point(d, smp, n, part, edge, Pa),
                    ab = nh_skull_cluster_point(d, smp, n, side, edge, Pb);
       if (aa > 0.0 && ab > 0.0) {
-        memcpy(f->P[f->n_pt], Pa, sizeof Pa), f->area[f->n_pt++] = aa;
-        memcpy(f->P[f->n_pt], Pb, sizeof Pb), f->area[f->n_pt++] = ab;
+        nh_skull_cell_add(d, gap, edge, Pa, aa, f);
+        nh_skull_cell_add(d, gap, edge, Pb, ab, f);
         continue;
       }
     }
-    memcpy(f->P[f->n_pt], P, sizeof P), f->area[f->n_pt++] = a;
+    nh_skull_cell_add(d, gap, edge, P, a, f);
   }
   free(part);
   return NH_OK;
@@ -464,6 +488,7 @@ int nh_skull_build(nh_skull *s, const nh_mesh *m) {
       memcpy(p->xi, xi, sizeof xi);
       p->area = f->area[i], p->cell = cell, p->lam = 0.0, p->row = -1;
       p->small = f->own && f->fraction < NH_FILL_MIN;
+      p->crease = f->crease[i];
       p->edge = edge;
     }
   }
@@ -511,6 +536,7 @@ int nh_skull_rows(nh_skull *s, const nh_mesh *m, const double *u, const double *
     double x[3], N[8], nrm[3], vn = 0.0;
     nh_skull_position(m, u, p, x, N);
     double g = s->gap - nh_skull_distance(&s->domain, x, nrm);
+    if (p->crease) memcpy(nrm, p->N, sizeof nrm); /* no direction from round-off's side */
     const int *e = m->cells + 8 * p->cell;
     for (int a = 0; a < 8; a++)
       for (int k = 0; k < 3; k++) vn += N[a] * v[3 * e[a] + k] * nrm[k];
