@@ -36,8 +36,11 @@
  * mean if that moves it by more than a quarter of the leaf or leaves it off
  * F = 0). One mean for opposite walls lay in the gap, on
  * whose mid-plane ∇F vanishes: φ = F/|∇F| sent the point 1e9 m away (measured, 17 × 21 × 16: 53
- * points) and its row inverted cells at the first step. The points are material points (cell, ξ),
- * found again after refinement.
+ * points) and its row inverted cells at the first step. A cluster whose
+ * point lies on a crease of F, or faces one on the skull, gives one point
+ * per side of it (nh_skull_cell_points: a row on a crease takes its
+ * direction from round-off, docs/theory.md §5c, "Points on a crease"). The
+ * points are material points (cell, ξ), found again after refinement.
  *
  * Each step, point i at its current position x = X + u(X) gives one row
  * of the constraint solver (nh_rows, no tool part):
