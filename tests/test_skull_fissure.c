@@ -6,7 +6,7 @@
  * odd number of cells across x a cell column straddles the midline and holds
  * both walls of the fissure (outward normals −x on the wall x = +w, +x on
  * x = −w); the mean of the two lies in the gap, where F/|∇F| is no
- * distance. On 9 × 11 × 8 and 17 × 21 × 16 (odd) and 18 × 22 × 17 (even),
+ * distance. On 9 × 11 × 8, 11 × 13 × 10 and 17 × 21 × 16 (odd) and 18 × 22 × 17 (even),
  * with integrated cut cells, at rest with gap 0 (every point
  * gets a row at u = 0, so the rows name each point's nodes, shape values
  * and inward normal):
@@ -30,6 +30,18 @@
  *     surface quadratures, nh_cut_cell, summed here independently of the
  *     clustering) to 1e-12 relative: splitting a leaf's surface into
  *     clusters and merging small parts loses no area.
+ *  6. with the gap of cases/dbs/dbs-skull.yaml (1 mm), no row turns its
+ *     direction by more than 2° when the whole tissue is shifted by
+ *     δ = 2e-3 h along x, y or z. A smooth skull turns a row by δ / R
+ *     (R its radius of curvature; 2° needs R below 0.06 h); a point on a
+ *     crease of F, or whose skull point X + gap n is on one, turns by the
+ *     crease's angle once the shift takes it across: it gets the direction
+ *     of whichever side round-off puts it on, and on the mirror plane of
+ *     an odd grid that direction pushed it further to that side, so the
+ *     antisymmetric part of the displacement grew 1e3-fold per step
+ *     (docs/dbs.md; 42° at the hemispheres' crease on 17 × 21 × 16, 8° at
+ *     1 mm beside the brainstem on 11 × 13 × 10). The points of this skull
+ *     are mirror symmetric too (as 3.).
  * (`scaled`, whose samples are projected from inside, leaves points up to
  * 0.7 mm inside F = 0 beside the creases: not checked here.)
  * Silent on success; NH_VERBOSE=1 prints the numbers. */
@@ -38,15 +50,61 @@
 #include "mesh/mesh.h"
 #include "solve/solve.h"
 
+#include <stdint.h>
 #include <string.h>
+
+/* Rows of every point of skull s at displacement u (v = 0): the points'
+ * rest positions X (3 per row, from the rows' nodes and shape values) and
+ * the rows themselves. A positive warm start makes every point take its
+ * row whatever its gap. */
+static void rest_rows(nh_skull *s, const nh_mesh *m, const double *u, nh_rows *rows, double **X) {
+  const int np = nh_skull_points(s), n = 3 * m->n_nodes;
+  nh_bytes b = {NULL, 0, 0, 0};
+  int32_t count = np, active = 0;
+  const double one = 1.0, force[3] = {0, 0, 0};
+  nh_bytes_put(&b, &count, sizeof count);
+  for (int i = 0; i < np; i++) nh_bytes_put(&b, &one, sizeof one);
+  nh_bytes_put(&b, force, sizeof force);
+  nh_bytes_put(&b, &active, sizeof active);
+  nh_byte_reader r = {b.data, b.data + b.len, 0};
+  CHECK_OK(nh_skull_state_load(s, &r));
+  free(b.data);
+  double *v = calloc((size_t)n, sizeof(double));
+  memset(rows, 0, sizeof *rows);
+  CHECK_OK(nh_skull_rows(s, m, u, v, 1e-3, rows));
+  *X = calloc(3 * (size_t)(rows->m ? rows->m : 1), sizeof(double));
+  for (int q = 0; q < rows->m; q++)
+    for (int a = 0; a < 8; a++)
+      for (int k = 0; k < 3; k++)
+        (*X)[3 * q + k] +=
+            rows->N[rows->start[q] + a] * m->X[3 * rows->node[rows->start[q] + a] + k];
+  free(v);
+}
+
+/* Rows without a mirror partner (position to 1e-9 h, direction to 1e-9). */
+static int unpaired_rows(const nh_rows *rows, const double *X, double h) {
+  int unpaired = 0;
+  for (int r = 0; r < rows->m; r++) {
+    int found = 0;
+    for (int q = 0; q < rows->m && !found; q++) {
+      const double *dr = rows->dir + 3 * r, *dq = rows->dir + 3 * q;
+      found = fabs(X[3 * q] + X[3 * r]) <= 1e-9 * h &&
+              fabs(X[3 * q + 1] - X[3 * r + 1]) <= 1e-9 * h &&
+              fabs(X[3 * q + 2] - X[3 * r + 2]) <= 1e-9 * h && fabs(dq[0] + dr[0]) <= 1e-9 &&
+              fabs(dq[1] - dr[1]) <= 1e-9 && fabs(dq[2] - dr[2]) <= 1e-9;
+    }
+    unpaired += !found;
+  }
+  return unpaired;
+}
 
 int main(void) {
   const int verbose = getenv("NH_VERBOSE") != NULL;
   const double center[3] = {0, 0, 0}, size[3] = {0.14, 0.17, 0.13};
   const double w = 0.02 * 0.5 * size[0], ez = 0.3 * 0.5 * size[2];
-  const int grids[3][3] = {{9, 11, 8}, {17, 21, 16}, {18, 22, 17}};
+  const int grids[4][3] = {{9, 11, 8}, {11, 13, 10}, {17, 21, 16}, {18, 22, 17}};
   for (int mode = 1; mode < 2; mode++) /* integrated (1); scaled (0) misses 1 near creases */
-    for (int gi = 0; gi < 3; gi++) {
+    for (int gi = 0; gi < 4; gi++) {
       const int *grid = grids[gi], odd = grid[0] % 2;
       const char *mname = mode ? "integrated" : "scaled";
       nh_domain d;
@@ -104,17 +162,7 @@ int main(void) {
         }
       }
       /* 3. the mirror partner of every row */
-      for (int r = 0; r < np; r++) {
-        int found = 0;
-        for (int q = 0; q < np && !found; q++) {
-          const double *dr = rows.dir + 3 * r, *dq = rows.dir + 3 * q;
-          found = fabs(X[3 * q] + X[3 * r]) <= 1e-9 * h &&
-                  fabs(X[3 * q + 1] - X[3 * r + 1]) <= 1e-9 * h &&
-                  fabs(X[3 * q + 2] - X[3 * r + 2]) <= 1e-9 * h && fabs(dq[0] + dr[0]) <= 1e-9 &&
-                  fabs(dq[1] - dr[1]) <= 1e-9 && fabs(dq[2] - dr[2]) <= 1e-9;
-        }
-        unpaired += !found;
-      }
+      unpaired = unpaired_rows(&rows, X, h);
       CHECK(bad_on == 0,
             "%s %dx%dx%d: %d of %d points off F = 0 by more than 1e-6 h (worst %.3g m)", mname,
             grid[0], grid[1], grid[2], bad_on, np, worst_f);
@@ -150,11 +198,52 @@ int main(void) {
               "%s %dx%dx%d: points' area %.15g m², the reconstructed surface's %.15g m²", mname,
               grid[0], grid[1], grid[2], nh_skull_area(s), area);
       }
+      /* 6. no row turns by more than 2° under a shift of 2e-3 h (gap 1 mm) */
+      const double gap = 1e-3;
+      nh_skull *sg = NULL;
+      nh_rows rg;
+      double *Xg = NULL, worst_turn = 0.0;
+      int turned = 0;
+      CHECK_OK(nh_skull_create(&m->domain, gap, &sg));
+      CHECK_OK(nh_skull_build(sg, m));
+      rest_rows(sg, m, u, &rg, &Xg);
+      CHECK(rg.m == nh_skull_points(sg), "%s %dx%dx%d, gap 1 mm: %d rows for %d points", mname,
+            grid[0], grid[1], grid[2], rg.m, nh_skull_points(sg));
+      for (int axis = 0; axis < 3; axis++) {
+        double *us = calloc((size_t)n, sizeof(double)), *Xs = NULL;
+        for (int i = 0; i < m->n_nodes; i++) us[3 * i + axis] = 2e-3 * h;
+        nh_rows rs;
+        rest_rows(sg, m, us, &rs, &Xs);
+        for (int r = 0; r < rg.m && r < rs.m; r++) {
+          const double *d0 = rg.dir + 3 * r, *d1 = rs.dir + 3 * r;
+          const double turn =
+              acos(fmin(1.0, d0[0] * d1[0] + d0[1] * d1[1] + d0[2] * d1[2])) * 180.0 / M_PI;
+          worst_turn = fmax(worst_turn, turn);
+          if (turn > 2.0) {
+            if (verbose)
+              printf("  row turns %.1f deg (shift along %c): X = (%.4f, %.4f, %.4f) mm\n", turn,
+                     "xyz"[axis], 1e3 * Xg[3 * r], 1e3 * Xg[3 * r + 1], 1e3 * Xg[3 * r + 2]);
+            turned++;
+          }
+        }
+        nh_rows_free(&rs);
+        free(us), free(Xs);
+      }
+      CHECK(turned == 0,
+            "%s %dx%dx%d, gap 1 mm: %d row directions turn by more than 2 deg (up to %.1f) "
+            "under a shift of 2e-3 h: points on a crease",
+            mname, grid[0], grid[1], grid[2], turned, worst_turn);
+      const int unpaired_g = unpaired_rows(&rg, Xg, h), np_g = rg.m;
+      CHECK(unpaired_g == 0, "%s %dx%dx%d, gap 1 mm: %d of %d points without a mirror partner",
+            mname, grid[0], grid[1], grid[2], unpaired_g, rg.m);
+      nh_rows_free(&rg);
+      free(Xg);
+      nh_skull_destroy(&sg);
       if (verbose)
         printf("%-10s %2dx%2dx%2d: %4d points, area %.6g m² (surface %.6g), worst |F| %.2e m, "
-               "walls %d/%d\n",
+               "walls %d/%d; gap 1 mm: %d points, largest turn %.2f deg\n",
                mname, grid[0], grid[1], grid[2], np, nh_skull_area(s), area, worst_f, walls[0],
-               walls[1]);
+               walls[1], np_g, worst_turn);
       nh_rows_free(&rows);
       free(u), free(v), free(X);
       nh_skull_destroy(&s);

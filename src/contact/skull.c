@@ -36,8 +36,11 @@
  * mean if that moves it by more than a quarter of the leaf or leaves it off
  * F = 0). One mean for opposite walls lay in the gap, on
  * whose mid-plane ∇F vanishes: φ = F/|∇F| sent the point 1e9 m away (measured, 17 × 21 × 16: 53
- * points) and its row inverted cells at the first step. The points are material points (cell, ξ),
- * found again after refinement.
+ * points) and its row inverted cells at the first step. A cluster whose
+ * point lies on a crease of F, or faces one on the skull, gives one point
+ * per side of it (nh_skull_cell_points: a row on a crease takes its
+ * direction from round-off, docs/theory.md §5c, "Points on a crease"). The
+ * points are material points (cell, ξ), found again after refinement.
  *
  * Each step, point i at its current position x = X + u(X) gives one row
  * of the constraint solver (nh_rows, no tool part):
@@ -70,6 +73,8 @@ typedef struct {
   double lam;   /* last impulse (N s), warm start */
   int row;      /* its row this step, or −1 */
   int small;    /* its leaf's tissue fraction is below NH_FILL_MIN (merged away in the build) */
+  int crease;   /* it (or its skull point) lies on a crease of F even after the split: its row
+                   keeps the rest normal N as its direction */
 } nh_skull_point;
 
 /* At most one point per dominant direction of the outward normal (±x, ±y,
@@ -77,13 +82,25 @@ typedef struct {
 #define NH_SKULL_CLUSTERS 6
 /* cos 45°: the largest angle between a normal of a smooth piece and its mean */
 #define NH_SKULL_COS_CLUSTER 0.70710678118654752
+/* A crease of F through a cluster's point (nh_skull_kink): the outward
+ * normals a step NH_SKULL_KINK_STEP × the leaf's edge to either side of it,
+ * along some axis, more than 2° apart (cos 2°). A smooth surface turns its
+ * normal by 2 × 1e-3 edge / R there, 2° only for a radius of curvature R
+ * below 0.06 edges; F's own gradient is a central difference of step 1e-6
+ * of the domain's largest edge (mesh/domain.c), so the two normals are
+ * those of the crease's two sides. */
+#define NH_SKULL_KINK_STEP 1e-3
+#define NH_SKULL_COS_KINK  0.99939082701909573
+/* At most two points per cluster (split once at a crease). */
+#define NH_SKULL_MAX_PT (2 * NH_SKULL_CLUSTERS)
 
 /* A leaf's surface points as last computed: a function of its corners
  * only, so a leaf whose corners are bitwise the same gets them again
  * without the samples (done = 0: not computed). */
 typedef struct {
   double Xe[24];
-  double P[NH_SKULL_CLUSTERS][3], xi[NH_SKULL_CLUSTERS][3], area[NH_SKULL_CLUSTERS];
+  double P[NH_SKULL_MAX_PT][3], xi[NH_SKULL_MAX_PT][3], area[NH_SKULL_MAX_PT];
+  int crease[NH_SKULL_MAX_PT];
   int n_pt, done;
   double fraction; /* the leaf's tissue volume / its volume (integrated cut cells) */
   int own;         /* the points belong to this leaf at xi (integrated cut cell) */
@@ -186,27 +203,29 @@ static int nh_skull_project(const nh_domain *d, const double x[3], double edge, 
   return sqrt(move2) <= 0.25 * edge && fabs(phi) <= 1e-6 * edge;
 }
 
-/* The point of cluster c (cls[q] == c): its area A = Σ w_q, at the
- * weighted mean of its samples projected onto F = 0 (nh_skull_project).
- * Where that fails, the mean was no place to project from (a cluster
- * around a sharp edge): the cluster's sample nearest the mean, projected
- * the same way (kept even if that fails too: beside a crease seen from
- * inside, where the normal flips from step to step, `scaled`'s points may
- * stay up to a few tenths of a millimetre inside). */
+/* The point of a cluster, sample q taken with the fraction part[q] of its
+ * weight (0: not in the cluster; ½: a sample shared by the two sides of a
+ * crease): its area A = Σ part_q w_q, at the weighted mean of its samples
+ * projected onto F = 0 (nh_skull_project). Where that fails, the mean was
+ * no place to project from (a cluster around a sharp edge): the cluster's
+ * sample nearest the mean, projected the same way (kept even if that fails
+ * too: beside a crease seen from inside, where the normal flips from step
+ * to step, `scaled`'s points may stay up to a few tenths of a millimetre
+ * inside). */
 static double nh_skull_cluster_point(const nh_domain *d, const nh_skull_sample *smp, int n,
-                                     const int *cls, int c, double edge, double P[3]) {
+                                     const double *part, double edge, double P[3]) {
   double a = 0.0, mean[3] = {0, 0, 0};
   for (int q = 0; q < n; q++) {
-    if (cls[q] != c) continue;
-    a += smp[q].w;
-    for (int k = 0; k < 3; k++) mean[k] += smp[q].w * smp[q].x[k];
+    if (!(part[q] > 0.0)) continue;
+    a += part[q] * smp[q].w;
+    for (int k = 0; k < 3; k++) mean[k] += part[q] * smp[q].w * smp[q].x[k];
   }
   if (!(a > 0.0)) return 0.0;
   for (int k = 0; k < 3; k++) mean[k] /= a;
   if (nh_skull_project(d, mean, edge, P)) return a;
   double near[3], best = INFINITY;
   for (int q = 0; q < n; q++) {
-    if (cls[q] != c) continue;
+    if (!(part[q] > 0.0)) continue;
     double d2 = 0.0;
     for (int k = 0; k < 3; k++) d2 += (smp[q].x[k] - mean[k]) * (smp[q].x[k] - mean[k]);
     if (d2 < best) best = d2, memcpy(near, smp[q].x, sizeof near);
@@ -215,21 +234,112 @@ static double nh_skull_cluster_point(const nh_domain *d, const nh_skull_sample *
   return a;
 }
 
-/* The clustered points of a leaf's samples: n_pt points P with areas. */
-static void nh_skull_cell_points(const nh_domain *d, const nh_skull_sample *smp, int n, int *cls,
-                                 double edge, nh_skull_cell *f) {
-  f->n_pt = 0;
-  if (n == 0) return;
-  const int n_cls = nh_skull_cluster(smp, n, cls);
-  for (int c = 0; c < n_cls; c++) {
-    double a = nh_skull_cluster_point(d, smp, n, cls, c, edge, f->P[f->n_pt]);
-    if (a > 0.0) f->area[f->n_pt++] = a;
+/* The normals of F on the two sides of a crease through x, if one runs
+ * there (docs/theory.md §5c, "Points on a crease"): along the axis k whose
+ * normals n(x − s e_k), n(x + s e_k) (s = NH_SKULL_KINK_STEP × edge) are
+ * furthest apart, when they are more than 2° apart (ties to the lower k, so
+ * a crease on a mirror plane x = c is found along x). Returns cos of their
+ * angle (1: none). */
+static double nh_skull_kink(const nh_domain *d, const double x[3], double edge, double na[3],
+                            double nb[3]) {
+  const double step = NH_SKULL_KINK_STEP * edge;
+  double worst = 1.0;
+  for (int k = 0; k < 3; k++) {
+    double xm[3], xp[3], nm[3], np[3];
+    memcpy(xm, x, sizeof xm), memcpy(xp, x, sizeof xp);
+    xm[k] -= step, xp[k] += step;
+    nh_skull_distance(d, xm, nm);
+    nh_skull_distance(d, xp, np);
+    const double c = nm[0] * np[0] + nm[1] * np[1] + nm[2] * np[2];
+    if (c < worst && c < NH_SKULL_COS_KINK)
+      worst = c, memcpy(na, nm, sizeof nm), memcpy(nb, np, sizeof np);
   }
+  return worst;
+}
+
+/* cos of the angle of the sharper crease through P or through its skull
+ * point P + gap n(P) (1: neither is on a crease), and m = na − nb, the
+ * normal of that crease's bisecting plane. */
+static double nh_skull_crease(const nh_domain *d, double gap, const double P[3], double edge,
+                              double m[3]) {
+  double Q[3], nrm[3], na[3], nb[3], ma[3], mb[3];
+  nh_skull_distance(d, P, nrm);
+  for (int k = 0; k < 3; k++) Q[k] = P[k] + gap * nrm[k];
+  const double cp = nh_skull_kink(d, P, edge, na, nb),
+               cq = gap > 0.0 ? nh_skull_kink(d, Q, edge, ma, mb) : 1.0;
+  for (int k = 0; k < 3; k++) m[k] = cp <= cq ? na[k] - nb[k] : ma[k] - mb[k];
+  return fmin(cp, cq);
+}
+
+/* Point i of leaf f: position P, area, whether it is on a crease. */
+static void nh_skull_cell_add(const nh_domain *d, double gap, double edge, const double P[3],
+                              double area, nh_skull_cell *f) {
+  double m[3];
+  memcpy(f->P[f->n_pt], P, 3 * sizeof *P);
+  f->area[f->n_pt] = area;
+  f->crease[f->n_pt++] = nh_skull_crease(d, gap, P, edge, m) < 1.0;
+}
+
+/* The clustered points of a leaf's samples: n_pt points P with areas.
+ * A point on a crease gets the row direction of whichever side round-off
+ * puts it on, and that direction pushes it further that way where the
+ * crease is a ridge of the skull: the lateral force grows like λ δ / ε
+ * with the point's lateral offset δ (ε the gradient's difference step,
+ * 1e-7 m), an unstable mode that grew 1e3-fold per step on the odd grids
+ * (docs/dbs.md). So a cluster whose point P lies on a crease of F, or
+ * whose skull point P + gap n(P) does (the offset of a smooth piece of
+ * surface may have one: beside the brainstem, the hemispheres' crease
+ * 1 mm out), gives one point per side instead: each sample goes to the
+ * side of the crease's bisecting plane (normal na − nb through P) it lies
+ * on, half to each if on it, so a leaf symmetric about a mirror plane
+ * through the crease keeps mirror-symmetric points. A point still on a
+ * crease after that (a sliver of surface within 1e-3 edges of a sharp
+ * notch) is flagged: its row keeps the rest normal. */
+static int nh_skull_cell_points(const nh_domain *d, double gap, const nh_skull_sample *smp, int n,
+                                int *cls, double edge, nh_skull_cell *f) {
+  f->n_pt = 0;
+  if (n == 0) return NH_OK;
+  const int n_cls = nh_skull_cluster(smp, n, cls);
+  double *part = nh_calloc(2 * (size_t)n, sizeof *part);
+  if (!part) return NH_ERROR(NH_ERR_MEMORY, "out of memory: skull points");
+  double *side = part + n;
+  for (int c = 0; c < n_cls; c++) {
+    for (int q = 0; q < n; q++) part[q] = cls[q] == c;
+    double P[3], m[3];
+    const double a = nh_skull_cluster_point(d, smp, n, part, edge, P);
+    if (!(a > 0.0)) continue;
+    if (nh_skull_crease(d, gap, P, edge, m) < 1.0) {
+      double tie = 0.0;
+      for (int k = 0; k < 3; k++) tie += fabs(m[k]);
+      tie *= 1e-9 * edge; /* on the plane up to P's round-off */
+      for (int q = 0; q < n; q++) {
+        if (cls[q] != c) {
+          part[q] = side[q] = 0.0;
+          continue;
+        }
+        double t = 0.0;
+        for (int k = 0; k < 3; k++) t += (smp[q].x[k] - P[k]) * m[k];
+        part[q] = t > tie ? 1.0 : (t < -tie ? 0.0 : 0.5);
+        side[q] = 1.0 - part[q];
+      }
+      double Pa[3], Pb[3];
+      const double aa = nh_skull_cluster_point(d, smp, n, part, edge, Pa),
+                   ab = nh_skull_cluster_point(d, smp, n, side, edge, Pb);
+      if (aa > 0.0 && ab > 0.0) {
+        nh_skull_cell_add(d, gap, edge, Pa, aa, f);
+        nh_skull_cell_add(d, gap, edge, Pb, ab, f);
+        continue;
+      }
+    }
+    nh_skull_cell_add(d, gap, edge, P, a, f);
+  }
+  free(part);
+  return NH_OK;
 }
 
 /* The surface points of leaf Xe (n_pt = 0 if the surface misses it) from
  * 6³ sub-cell midpoints and the one-sided smeared delta. */
-static int nh_cell_surface(const nh_domain *d, const double Xe[24], nh_skull_cell *f) {
+static int nh_cell_surface(const nh_domain *d, double gap, const double Xe[24], nh_skull_cell *f) {
   enum { n = 6 };
   double edge = 0.0;
   for (int k = 0; k < 3; k++) edge = fmax(edge, fabs(Xe[18 + k] - Xe[k]));
@@ -257,16 +367,15 @@ static int nh_cell_surface(const nh_domain *d, const double Xe[24], nh_skull_cel
         s->w = w;
         for (int p = 0; p < 3; p++) s->x[p] = x[p] - phi * nrm[p], s->n[p] = nrm[p];
       }
-  nh_skull_cell_points(d, smp, ns, cls, edge, f);
-  return NH_OK;
+  return nh_skull_cell_points(d, gap, smp, ns, cls, edge, f);
 }
 
 /* The surface points of an integrated box leaf [lo, hi] from the cut-cell
  * quadrature (n_pt = 0 if the surface misses the leaf): positions P on
  * F = 0, natural coordinates xi in the leaf, areas; and its tissue
  * fraction. */
-static int nh_cell_cut_surface(const nh_domain *d, const double lo[3], const double hi[3],
-                               nh_skull_cell *f) {
+static int nh_cell_cut_surface(const nh_domain *d, double gap, const double lo[3],
+                               const double hi[3], nh_skull_cell *f) {
   nh_cut_spec spec;
   nh_cut_spec_domain(&spec, d, NH_CUT_DEPTH);
   nh_cut_moments mom;
@@ -291,7 +400,7 @@ static int nh_cell_cut_surface(const nh_domain *d, const double lo[3], const dou
   }
   nh_cut_surface_free(&surf);
   f->fraction = mom.volume / ((hi[0] - lo[0]) * (hi[1] - lo[1]) * (hi[2] - lo[2]));
-  if (!rc) nh_skull_cell_points(d, smp, ns, cls, edge, f);
+  if (!rc) rc = nh_skull_cell_points(d, gap, smp, ns, cls, edge, f);
   free(smp), free(cls);
   for (int i = 0; i < f->n_pt && !rc; i++)
     for (int k = 0; k < 3; k++) f->xi[i][k] = (2.0 * f->P[i][k] - lo[k] - hi[k]) / (hi[k] - lo[k]);
@@ -349,8 +458,8 @@ int nh_skull_build(nh_skull *s, const nh_mesh *m) {
       memset(f, 0, sizeof *f);
       memcpy(f->Xe, Xe, sizeof Xe);
       f->own = nh_domain_integrates_cuts(&s->domain) && nh_hex_is_box(Xe, lo, hi);
-      int rc =
-          f->own ? nh_cell_cut_surface(&s->domain, lo, hi, f) : nh_cell_surface(&s->domain, Xe, f);
+      int rc = f->own ? nh_cell_cut_surface(&s->domain, s->gap, lo, hi, f)
+                      : nh_cell_surface(&s->domain, s->gap, Xe, f);
       if (rc) {
         free(fresh);
         return rc;
@@ -382,6 +491,7 @@ int nh_skull_build(nh_skull *s, const nh_mesh *m) {
       memcpy(p->xi, xi, sizeof xi);
       p->area = f->area[i], p->cell = cell, p->lam = 0.0, p->row = -1;
       p->small = f->own && f->fraction < NH_FILL_MIN;
+      p->crease = f->crease[i];
       p->edge = edge;
     }
   }
@@ -429,6 +539,7 @@ int nh_skull_rows(nh_skull *s, const nh_mesh *m, const double *u, const double *
     double x[3], N[8], nrm[3], vn = 0.0;
     nh_skull_position(m, u, p, x, N);
     double g = s->gap - nh_skull_distance(&s->domain, x, nrm);
+    if (p->crease) memcpy(nrm, p->N, sizeof nrm); /* no direction from round-off's side */
     const int *e = m->cells + 8 * p->cell;
     for (int a = 0; a < 8; a++)
       for (int k = 0; k < 3; k++) vn += N[a] * v[3 * e[a] + k] * nrm[k];
