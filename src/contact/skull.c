@@ -271,13 +271,11 @@ static double nh_skull_crease(const nh_domain *d, double gap, const double P[3],
   return fmin(cp, cq);
 }
 
-/* Point i of leaf f: position P, area, whether it is on a crease. */
-static void nh_skull_cell_add(const nh_domain *d, double gap, double edge, const double P[3],
-                              double area, nh_skull_cell *f) {
-  double m[3];
+/* The next point of leaf f: position P, area, whether it is on a crease. */
+static void nh_skull_cell_add(const double P[3], double area, int crease, nh_skull_cell *f) {
   memcpy(f->P[f->n_pt], P, 3 * sizeof *P);
   f->area[f->n_pt] = area;
-  f->crease[f->n_pt++] = nh_skull_crease(d, gap, P, edge, m) < 1.0;
+  f->crease[f->n_pt++] = crease;
 }
 
 /* The clustered points of a leaf's samples: n_pt points P with areas.
@@ -308,7 +306,8 @@ static int nh_skull_cell_points(const nh_domain *d, double gap, const nh_skull_s
     double P[3], m[3];
     const double a = nh_skull_cluster_point(d, smp, n, part, edge, P);
     if (!(a > 0.0)) continue;
-    if (nh_skull_crease(d, gap, P, edge, m) < 1.0) {
+    const int crease = nh_skull_crease(d, gap, P, edge, m) < 1.0;
+    if (crease) {
       double tie = 0.0;
       for (int k = 0; k < 3; k++) tie += fabs(m[k]);
       tie *= 1e-9 * edge; /* on the plane up to P's round-off */
@@ -326,12 +325,13 @@ static int nh_skull_cell_points(const nh_domain *d, double gap, const nh_skull_s
       const double aa = nh_skull_cluster_point(d, smp, n, part, edge, Pa),
                    ab = nh_skull_cluster_point(d, smp, n, side, edge, Pb);
       if (aa > 0.0 && ab > 0.0) {
-        nh_skull_cell_add(d, gap, edge, Pa, aa, f);
-        nh_skull_cell_add(d, gap, edge, Pb, ab, f);
+        double unused[3];
+        nh_skull_cell_add(Pa, aa, nh_skull_crease(d, gap, Pa, edge, unused) < 1.0, f);
+        nh_skull_cell_add(Pb, ab, nh_skull_crease(d, gap, Pb, edge, unused) < 1.0, f);
         continue;
       }
     }
-    nh_skull_cell_add(d, gap, edge, P, a, f);
+    nh_skull_cell_add(P, a, crease, f);
   }
   free(part);
   return NH_OK;

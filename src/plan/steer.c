@@ -583,7 +583,7 @@ int nh_plan_steer(const char *scene_path, int n_sets, const char *const *sets,
            scene->plan.curvature > 0 ? "" : " (estimated)", o->max_runs, workers,
            workers == 1 ? "" : "s");
   int repeat = 0;
-  while (!rc && !repeat && converged < 0 && n_runs < o->max_runs) {
+  while (!rc && converged < 0 && n_runs < o->max_runs) {
     /* the round's candidates: the step at q, probes around it */
     const int nc = workers < o->max_runs - n_runs ? workers : o->max_runs - n_runs;
     const int nq = P.active ? 3 : 2;
