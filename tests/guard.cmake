@@ -23,6 +23,9 @@ endif()
 # iterations); a hard but converging Newton (the cantilever at 0.2 N) is not
 # stopped by the rule.
 nh_add_py_test(static_failures verify static_failures.py)
+if(NH_SANITIZE)
+  set_property(TEST static_failures APPEND PROPERTY ENVIRONMENT NH_SANITIZED=1)
+endif()
 
 # counters.py: steps.csv's factorised and tangent_updates count every
 # Newton correction's factorisation and every load step of a static step.
