@@ -26,6 +26,13 @@ diagnosed"), instead of 30 iterations in up to 16 load steps.
    first residuals (1, 1, 0.998, 0.553) meet the no-progress test but with
    no cause (clamped, no cell inverted), must converge: exit 0, residual
    <= the tolerance 1e-8, more than 3 iterations.
+4. An inverted cell is not final: cases/dbs/dbs.yaml's brain (ties at the
+   brainstem and the optic nerves) under its whole weight (buoyancy lost
+   entirely) in one static step. The first linearised step from rest
+   inverts a cut cell at the brain's rim and the no-progress rule names
+   it; a load step too large is what load splitting exists for, so the step
+   must be solved again in smaller load steps (steps.csv: splits) and
+   converge: exit 0, residual <= the tolerance 1e-8, splits >= 1.
 Silent on success; exit 1 on failure.
 """
 import csv
@@ -91,5 +98,17 @@ if tables:
           and float(row["splits"]) == 0,
           "cantilever 0.2 N: residual %s, iterations %s, splits %s: expected <= 1e-8, > 3, 0"
           % (row["residual"], row["iterations"], row["splits"]))
+
+out = os.path.join(WORK, "brain_weight")
+p, _ = run_process(os.path.join(SRC, "cases/dbs/dbs.yaml"), out,
+                   ["time.mode=static", "time.step=1", "time.end=1", "tools=[]", "targets=[]",
+                    "tissue.buoyancy.after=0", "adapt.every=1000000"])
+check(p.returncode == 0, "whole weight: exit %d, expected 0: %s" % (p.returncode, p.stderr))
+if p.returncode == 0:
+    with open(os.path.join(out, "steps.csv")) as f:
+        row = list(csv.DictReader(f))[-1]
+    check(float(row["residual"]) <= 1e-8 and int(float(row["splits"])) >= 1,
+          "whole weight: residual %s, splits %s: expected <= 1e-8, >= 1"
+          % (row["residual"], row["splits"]))
 
 finish()

@@ -47,12 +47,14 @@ int nh_step_dynamic(nh_system *s, const nh_integrator *in, const double *f_ext, 
 /* No progress (docs/reliability.md, "Failures diagnosed"): after
  * NH_NEWTON_STALL_ITERATIONS iterations no relative residual has fallen
  * below NH_NEWTON_STALL times the step's first, and the diagnosis names a
- * cause that more iterations or smaller load steps cannot remove: a rigid
- * mode not held or held only by a support far softer than the tissue (at
- * the step's start), or an inverted cell at the largest residual. Without
- * such a cause the iteration goes on: a large load's Newton can stall that
- * long and converge (the cantilever of cases/cantilever.yaml at 0.2 N: 1, 1,
- * 0.998, 0.553, then 0.072 and 1e-13 at the 9th iteration). */
+ * cause: a rigid mode not held, or held only by a support far softer than
+ * the tissue (at the step's start) — final, since more iterations or
+ * smaller load steps cannot remove it — or an inverted cell at the largest
+ * residual — a load step too large, solved again in smaller load steps
+ * (sim.c). Without a cause the iteration goes on: a large load's Newton
+ * can stall that long and converge (the cantilever of
+ * cases/cantilever.yaml at 0.2 N: 1, 1, 0.998, 0.553, then 0.072 and 1e-13
+ * at the 9th iteration). */
 #define NH_NEWTON_STALL_ITERATIONS 3
 #define NH_NEWTON_STALL            0.5
 
@@ -84,7 +86,9 @@ static int nh_static_progress(nh_system *s, const double *u, const double *b, co
   nh_cause cause = nh_static_where(s, u, b, start, msg, sizeof msg);
   if (cause != NH_CAUSE_NOT_HELD && cause != NH_CAUSE_WEAK && cause != NH_CAUSE_INVERTED)
     return NH_OK;
-  if (stats) stats->diagnosed = 1;
+  /* a support missing or too soft is final; an iterate that inverted a cell
+   * is a load step too large, which smaller load steps can cure (sim.c) */
+  if (stats) stats->diagnosed = cause != NH_CAUSE_INVERTED;
   return NH_ERROR(NH_ERR_NUMERIC, "%s", msg);
 }
 
