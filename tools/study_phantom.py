@@ -179,6 +179,49 @@ def tip_split(u, ref, names, times, probe_x, tip_x):
     return rms(near), rms(away)
 
 
+def cost_split(st):
+    """Where a run's step time goes (steps.csv columns st): factorisations, those at the first
+    step on a new mesh (cells changed since the step before), the mesh changes, PCG iterations,
+    and the shares of the summed t_step spent in the factorisation, the constraints and the
+    adaptation (the estimate, marking and refinement)."""
+    changed = np.concatenate([[False], st["cells"][1:] != st["cells"][:-1]])
+    fact = st["factorised"] > 0
+    tot = st["t_step"].sum()
+    return {"steps": len(fact), "factorised": int(fact.sum()), "changes": int(changed.sum()),
+            "after_change": int((fact & changed).sum()), "pcg": int(st["pcg_iterations"].sum()),
+            "factor": st["t_factor"].sum() / tot, "constraints": st["t_constraints"].sum() / tot,
+            "adapt": st["t_adapt"].sum() / tot}
+
+
+def probe_rms(u, ref, names):
+    """{probe: RMS over the steps of |u − u_ref|}."""
+    return {n: float(np.sqrt(np.mean(np.sum((u[n][:, :3] - ref[n][:, :3]) ** 2, axis=1))))
+            for n in names}
+
+
+def breakdown(runs, ref, names, times, st, p):
+    """The runs the goals name: where their step time goes (cost_split) and where their error
+    sits (per probe; the tip within 5 mm along x of the probe or farther)."""
+    probe_x = {n: 1e3 * st["probe_x"][n] for n in names}
+    tip_x = 1e3 * np.array([st["tip_x"](t) for t in times])
+    p("")
+    p("Where the cost and the error go (the runs the goals name; shares of the summed t_step):")
+    p("")
+    for line in engine.table_head("run", "factorisations / steps", "of them at a mesh change",
+                                  "mesh changes", "PCG its", "factor", "constraints", "adapt",
+                                  "RMS µm: tip within 5 mm", "tip farther",
+                                  "probe RMS µm: " + ", ".join(names)):
+        p(line)
+    for r in runs:
+        c = r["cost"]
+        near, away = tip_split(r["u"], ref, names, times, probe_x, tip_x)
+        pr = probe_rms(r["u"], ref, names)
+        p("| %s | %d / %d | %d | %d | %d | %.0f %% | %.0f %% | %.0f %% | %.3f | %.3f | %s |" % (
+            r["label"], c["factorised"], c["steps"], c["after_change"], c["changes"], c["pcg"],
+            100 * c["factor"], 100 * c["constraints"], 100 * c["adapt"], 1e6 * near, 1e6 * away,
+            ", ".join("%.3f" % (1e6 * pr[n]) for n in names)))
+
+
 def converged_reference(fine, hs, names, order):
     """The converged reference from three uniform runs (coarse first; cell edges hs): per probe,
     component and step, tools/richardson.py's per_step_reference. Returns {name: {"u": (steps,
@@ -342,8 +385,10 @@ def run(a, binary):
         if len(steps) != len(ref_steps):
             raise SystemExit("%s has %d steps, the reference %d: run the reference with the "
                              "same steps (--fresh-reference)" % (name, len(steps), len(ref_steps)))
+        sd = read_steps(d)
         r = {"name": name, "label": label, "kind": kind, "u": u, "steps": steps, "times": times,
-             "speed": speed(read_steps(d)), "wall": info["wall"], "style": style(name)}
+             "speed": speed(sd), "cost": cost_split(sd), "wall": info["wall"],
+             "style": style(name)}
         r["err_max"], r["err_rms"] = probe_error(u, ref_u, names)
         runs.append(r)
 
@@ -412,6 +457,9 @@ def run(a, binary):
             beaten.append("%s (by %s)" % (r["label"], ", ".join(by)))
     p("- Adaptive runs beaten by a uniform run that is both faster and more accurate: %s." % (
         "; ".join(beaten) if beaten else "none"))
+    breakdown([byname[n] for n in ("uniform-16x8x8", "uniform-32x16x16", "adaptive-hex2",
+                                   "goal-hex2-l2", "goal-hex2-l2-every4") if n in byname],
+              ref_u, names, ref_times, st, p)
     uconv, uerrs, udiffs = convergence(st, out, conv, names, ref_times, p)
     engine.write_report(out, lines)
 
