@@ -44,6 +44,7 @@
  * bent needle turned 9° per step (docs/beam.md §2, tests/test_beam.c test 8). */
 #include "beam/beam_impl.h"
 
+#include <cblas.h>
 #include <lapacke.h>
 #include <math.h>
 #include <stdlib.h>
@@ -309,18 +310,28 @@ int nh_beam_dynamic_prepare(nh_beam *b, const nh_beam_dynamic_options *o, const 
     if (!rc && LAPACKE_dsyev(LAPACK_ROW_MAJOR, 'V', 'U', m, Kf, m, w))
       rc = NH_ERROR(NH_ERR_NUMERIC, "beam dynamic step: eigen-decomposition of the tangent failed");
     if (!rc) {
+      /* P = V W₊ Vᵀ = C Cᵀ with C the columns of V (Kf after dsyev) scaled
+       * by √w₊, the kept ones only: one BLAS-3 product (m = 96 for the
+       * needle: by hand, with fmax in the innermost loop, this was 4 ms, the
+       * largest part of a small tissue's step; docs/phantom.md "Results") */
       double *P = nh_calloc((size_t)m * m, sizeof(double));
+      double *C = nh_calloc((size_t)m * m, sizeof(double));
       const double floor = cM > 0 ? 0.0 : 1e-9 * fmax(w[m - 1], 0.0); /* dsyev: ascending */
-      if (!P) rc = NH_ERR_MEMORY;
-      for (int i = 0; i < m && !rc; i++)
-        for (int j = 0; j < m; j++) {
-          double v = 0.0;
-          for (int k = 0; k < m; k++) {
-            const double wk = fmax(w[k], floor);
-            if (wk > 0) v += Kf[(size_t)i * m + k] * wk * Kf[(size_t)j * m + k];
-          }
-          P[(size_t)i * m + j] = v;
-        }
+      if (!P || !C) rc = NH_ERR_MEMORY;
+      int kept = 0;
+      for (int k = 0; k < m && !rc; k++) {
+        const double wk = fmax(w[k], floor);
+        if (!(wk > 0)) continue;
+        const double r = sqrt(wk);
+        for (int i = 0; i < m; i++) C[(size_t)i * m + kept] = Kf[(size_t)i * m + k] * r;
+        kept++;
+      }
+      if (!rc) {
+        cblas_dsyrk(CblasRowMajor, CblasLower, CblasNoTrans, m, kept, 1.0, C, m, 0.0, P, m);
+        for (int i = 0; i < m; i++) /* the upper triangle, for nh_beam_form_factor */
+          for (int j = 0; j < i; j++) P[(size_t)j * m + i] = P[(size_t)i * m + j];
+      }
+      free(C);
       if (!rc && nh_beam_form_factor(s, P, cM, cK))
         rc =
             NH_ERROR(NH_ERR_NUMERIC, "beam dynamic step: the step matrix is not positive definite");
