@@ -27,3 +27,6 @@ set_tests_properties(channel_spacing_lock PROPERTIES TIMEOUT 900)
 # x depth while cutting, -friction_per_length x depth while withdrawing, to
 # 1e-9 N at every step, on two grids and two channel spacings.
 nh_add_py_test(shaft_friction verify shaft_friction.py)
+# A needle at constant speed cuts at every step, its axial force F_c + the
+# shaft's friction (tests/cut_steady.py; issue 29's chatter).
+nh_add_py_test(cut_steady verify cut_steady.py)
