@@ -6,7 +6,10 @@ through the finest three (observed order per step; the 5 mm value with the
 10, 7 mm triple reported beside it) is the reference, and on goal-driven and
 SPR-driven meshes from 14 mm: the electrode tip–STN distance's error at every
 step after the target is reached, the effectivity of error_estimate and
-distance_error_estimate, median ms/step against the 7 mm mesh's;
+distance_error_estimate, median ms/step against the 7 mm mesh's; the goal
+estimate on the uniform 14 and 10 mm meshes (not refined), and per phase
+(shift, insertion, hold, retraction) the estimate and its geometry part G
+(targets.csv geometry_estimate) against the true error;
 dbs_goal_error.png, dbs_goal_cost.png, dbs_goal_effectivity.png.
 """
 import os
@@ -59,6 +62,15 @@ DBS_GOAL = {
         # the hand-over); with the hand-over allowance and integrated cut cells it finishes
         ("goal-l2", "goal from 14 mm, 2 levels",
          ["adapt.estimator=goal", "tissue.grid=[10,12,9]", "adapt.max_level=2"], "goal"),
+        # the goal estimate on the uniform 14 and 10 mm meshes, which it does not refine (a
+        # budget of the initial dofs; the functional's box that of 1 level, as goal-l1's): its
+        # effectivity and its parts against the true error of a mesh in the reference's family
+        ("estimate-14mm", "goal estimate on uniform 14 mm, no refinement",
+         ["adapt.estimator=goal", "tissue.grid=[10,12,9]", "adapt.max_level=1",
+          "adapt.max_dofs=3039"], "estimate"),
+        ("estimate-10mm", "goal estimate on uniform 10 mm, no refinement",
+         ["adapt.estimator=goal", "tissue.grid=[14,17,13]", "adapt.max_level=1",
+          "adapt.max_dofs=7248"], "estimate"),
     ],
     "target": "STN",
     "cannula": "cannula",
@@ -92,6 +104,9 @@ def run(a, binary):
                 "x": pos[st["target"]][:, :3], "d": pos[st["target"]][:, 3],
                 "est": np.array([float(r.get("error_estimate", "nan")) for r in rows]),
                 "dest": np.array([float(r.get("distance_error_estimate", "nan")) for r in rows]),
+                "geo": np.array([float(r.get("geometry_estimate", "nan")) for r in rows]),
+                "dgeo": np.array([float(r.get("distance_geometry_estimate", "nan"))
+                                  for r in rows]),
                 "speed": speed(sr), "rows": int(sr["constraints"].max()), "st": sr,
                 "i_shift": i_shift, "i_top": i_top, "i_back": i_back,
                 "load": infos[name].get("load", [])}
@@ -201,7 +216,7 @@ def run(a, binary):
       "|run − reference| at the steps where that error exceeds %g× the reference's bar.)" % (
           i0, U[0]["times"][i0], st["resolved"]))
     p("")
-    for r in runs[len(U):]:
+    for r in [r for r in runs[len(U):] if r["kind"] != "estimate"]:
         p("- %s: max |d − d_ref| %.4f mm after the target (goal ≤ 0.3 mm: %s); median ms/step "
           "%.1f, %.3f of the 7 mm mesh's %.1f (goal ≤ 1/4: %s)." % (
               r["label"], 1e3 * r["max"], "met" if r["max"] <= 3e-4 else "missed",
@@ -209,6 +224,34 @@ def run(a, binary):
     lost = [nm for nm, *_ in st["adaptive"] if nm not in infos and (not a.only or nm in a.only)]
     if lost:
         p("- not complete (the reason above, on stderr): %s." % ", ".join(lost))
+    est_runs = [r for r in runs if r["kind"] in ("goal", "estimate")]
+    if est_runs:
+        p("")
+        p("The estimate and its geometry part G against the true error, per phase (medians over "
+          "the phase's steps, mm; the phases of the run's own tools.csv: the shift until the "
+          "cannula touches the brain, the insertion until the target depth, the hold, the "
+          "retraction; ratio: the median of estimate / true error over the phase's steps):")
+        p("")
+        lines.extend(engine.table_head(
+            "run", "phase (steps)", "\\|x − x_ref\\|", "error_estimate", "of it G", "ratio",
+            "\\|d − d_ref\\|", "distance_error_estimate", "of it G", "ratio"))
+        for r in est_runs:
+            for what, lo, hi in (("shift", 1, r["i_shift"] + 1),
+                                 ("insertion", r["i_shift"] + 1, r["i_top"]),
+                                 ("hold", r["i_top"], r["i_back"] + 1),
+                                 ("retraction", r["i_back"] + 1, n)):
+                sl = slice(lo, hi)
+                if hi <= lo:
+                    continue
+                cells = []
+                for err, est, geo in ((r["xerr"], r["est"], r["geo"]),
+                                      (r["err"], r["dest"], r["dgeo"])):
+                    cells += ["%.4f" % (1e3 * np.median(err[sl])),
+                              "%.4f" % (1e3 * np.nanmedian(est[sl])),
+                              "%.4f" % (1e3 * np.nanmedian(geo[sl])),
+                              "%.2f" % np.nanmedian(est[sl] / err[sl])]
+                p("| %s | %s (%d–%d) | %s |" % (r["label"], what, lo, hi - 1, " | ".join(cells)))
+        p("")
     loads = [x for r in runs for x in r["load"]]
     if loads:
         p("- 1-minute load average at the runs' starts and ends: %.1f–%.1f (2 cores)." % (
@@ -224,7 +267,8 @@ def run(a, binary):
     t = U[0]["times"]
     fig, ax = plt.subplots(figsize=(11, 4.8))
     band(ax, d_bar)
-    for r in runs:  # goal solid and thick, SPR dashed, uniform thin
+    meshes = [r for r in runs if r["kind"] != "estimate"]  # the estimate runs are U's meshes
+    for r in meshes:  # goal solid and thick, SPR dashed, uniform thin
         ax.semilogy(t[1:], np.maximum(1e3 * r["err"][1:], 1e-6),
                     {"uniform": "-", "spr": "--", "goal": "-"}[r["kind"]], color=colors[r["name"]],
                     lw={"uniform": 0.9, "spr": 1.1, "goal": 1.6}[r["kind"]],
@@ -240,7 +284,7 @@ def run(a, binary):
     save(fig, os.path.join(img, "dbs_goal_error.png"), legend=ax)
 
     fig, ax = plt.subplots(figsize=FIGSIZE)
-    for r in runs:
+    for r in meshes:
         ax.loglog(r["speed"]["median"], 1e3 * r["max"], MARKER[r["kind"]], color=colors[r["name"]],
                   ms=8,
                   label="%s (%d dofs)" % (r["label"], r["speed"]["max_dofs"]))
@@ -252,7 +296,7 @@ def run(a, binary):
                 "max |d − d_ref| after the target (mm)",
                 "dbs-skull, whole procedure: error against cost")
 
-    gor = [r for r in runs if r["kind"] == "goal"]
+    gor = [r for r in runs if r["kind"] in ("goal", "estimate")]
     if gor:
         fig, axes = plt.subplots(1, 2, figsize=(13, 4.2))
         for ax, key, ekey, bar, title in (

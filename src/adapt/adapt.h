@@ -214,6 +214,10 @@ void nh_adapt_set_geometry_loads(nh_adapt *adapt, const nh_geometry_loads *loads
 const double *nh_adapt_goal_errors(const nh_adapt *adapt);
 /* The signed E_pk (3 per goal, m) of the last goal estimate, or NULL. */
 const double *nh_adapt_goal_estimates(const nh_adapt *adapt);
+/* The geometry part G_pk (3 per goal, m; included in the estimates) of the
+ * last goal estimate (dwr.c, "Geometry"; 0 without cut cells, NaN after a
+ * combined estimate, which does not split it), or NULL. */
+const double *nh_adapt_goal_geometry(const nh_adapt *adapt);
 
 /* ---- goal-oriented estimate: the dual-weighted residual (adapt/dwr.c) ---- */
 

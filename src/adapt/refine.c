@@ -59,6 +59,7 @@ struct nh_adapt {
   double radius;                  /* half-width of the averaging box */
   double *goal_error;             /* per goal: |E_p| of the last estimate, valid when have_eta */
   double *goal_est;               /* per goal: the signed E_pk (3), valid when have_eta */
+  double *goal_geo;               /* per goal: its geometry part G_pk (3, in goal_est) */
   double *goal_ind;               /* n_goals x cap_eta */
   double *eta_all;    /* per cell: Σ over every goal (coarsening: a goal below tolerance still
                          needs its cells) */
@@ -112,6 +113,7 @@ void nh_adapt_destroy(nh_adapt **adapt) {
   free((*adapt)->goal_points);
   free((*adapt)->goal_error);
   free((*adapt)->goal_est);
+  free((*adapt)->goal_geo);
   free((*adapt)->goal_ind);
   free((*adapt)->eta_all);
   nh_node_transfer_free(&(*adapt)->transfer);
@@ -134,12 +136,15 @@ int nh_adapt_estimate(nh_adapt *a, const nh_mesh *m, const nh_tissue *tissue, co
 
 int nh_adapt_set_goals(nh_adapt *a, const nh_mesh *m, int n, const double *points) {
   free(a->goal_points), free(a->goal_error), free(a->goal_est), free(a->weight), free(a->sep_est);
+  free(a->goal_geo);
   a->goal_points = nh_calloc(3 * (size_t)(n ? n : 1), sizeof(double));
   a->goal_error = nh_calloc((size_t)(n ? n : 1), sizeof(double));
   a->goal_est = nh_calloc(3 * (size_t)(n ? n : 1), sizeof(double));
+  a->goal_geo = nh_calloc(3 * (size_t)(n ? n : 1), sizeof(double));
   a->weight = nh_calloc(3 * (size_t)(n ? n : 1), sizeof(double));
   a->sep_est = nh_calloc(3 * (size_t)(n ? n : 1), sizeof(double));
-  if (!a->goal_points || !a->goal_error || !a->goal_est || !a->weight || !a->sep_est)
+  if (!a->goal_points || !a->goal_error || !a->goal_est || !a->goal_geo || !a->weight ||
+      !a->sep_est)
     return NH_ERROR(NH_ERR_MEMORY, "out of memory: goals");
   a->have_weights = 0;
   memcpy(a->goal_points, points, sizeof(double) * 3 * (size_t)n);
@@ -166,8 +171,11 @@ int nh_adapt_estimate_goal(nh_adapt *a, nh_system *sys, const nh_rows *rows, dou
   }
   a->have_eta = 0; /* until this estimate is complete */
   const int combined = a->have_weights && a->since_separate + 1 < a->separate_every;
-  nh_dwr_result r = {
-      .estimate = a->goal_est, .norm = a->goal_error, .indicator = a->goal_ind, .loads = a->loads};
+  nh_dwr_result r = {.estimate = a->goal_est,
+                     .norm = a->goal_error,
+                     .indicator = a->goal_ind,
+                     .loads = a->loads,
+                     .geometry = a->goal_geo};
   if (!combined) {
     NH_TRY(nh_dwr_estimate(sys, rows, scale, m, tissue, hanging, u, a->n_goals, a->goal_points,
                            a->radius, NULL, &r));
@@ -185,7 +193,7 @@ int nh_adapt_estimate_goal(nh_adapt *a, nh_system *sys, const nh_rows *rows, dou
     a->since_separate = 0;
   } else {
     double Ec = 0.0;
-    r.estimate = &Ec, r.norm = NULL;
+    r.estimate = &Ec, r.norm = NULL, r.geometry = NULL;
     NH_TRY(nh_dwr_estimate_combined(sys, rows, scale, m, tissue, hanging, u, a->n_goals,
                                     a->goal_points, a->radius, NULL, a->weight, &r));
     /* each goal's estimate carried from the last separate one by the
@@ -194,6 +202,7 @@ int nh_adapt_estimate_goal(nh_adapt *a, nh_system *sys, const nh_rows *rows, dou
     for (int p = 0; p < a->n_goals; p++) {
       double *e = a->goal_est + 3 * p;
       for (int k = 0; k < 3; k++) e[k] = rho * a->sep_est[3 * p + k];
+      for (int k = 0; k < 3; k++) a->goal_geo[3 * p + k] = NAN; /* not split */
       a->goal_error[p] = sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]);
     }
     a->since_separate++;
@@ -225,6 +234,10 @@ const double *nh_adapt_goal_errors(const nh_adapt *a) {
 
 const double *nh_adapt_goal_estimates(const nh_adapt *a) {
   return a && a->goal && a->have_eta ? a->goal_est : NULL;
+}
+
+const double *nh_adapt_goal_geometry(const nh_adapt *a) {
+  return a && a->goal && a->have_eta ? a->goal_geo : NULL;
 }
 
 const nh_node_transfer *nh_adapt_last_transfer(const nh_adapt *a) {

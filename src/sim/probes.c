@@ -52,12 +52,26 @@ void nh_sim_target_miss(const nh_sim *s, int i, double x[3], double miss[3]) {
   for (int k = 0; k < 3; k++) miss[k] = r.tip[k] - x[k];
 }
 
-double nh_sim_target_distance_error(const nh_sim *s, int i) {
-  const double *E = nh_adapt_goal_estimates(s->adapt);
+/* |−n · E| of target i's goal for the per-goal vectors E (3 each), or NaN. */
+static double nh_sim_target_distance_part(const nh_sim *s, int i, const double *E) {
   const int g = s->goal_of_point ? s->goal_of_point[s->scene->n_probes + i] : -1;
   if (!E || g < 0) return NAN;
   double x[3], miss[3], tip[3];
   nh_sim_target_miss(s, i, x, miss);
   for (int k = 0; k < 3; k++) tip[k] = x[k] + miss[k];
   return fabs(nh_dwr_distance_estimate(E + 3 * g, x, tip));
+}
+
+double nh_sim_target_distance_error(const nh_sim *s, int i) {
+  return nh_sim_target_distance_part(s, i, nh_adapt_goal_estimates(s->adapt));
+}
+
+void nh_sim_target_geometry_error(const nh_sim *s, int i, double *position, double *distance) {
+  const double *G = nh_adapt_goal_geometry(s->adapt);
+  const int g = s->goal_of_point ? s->goal_of_point[s->scene->n_probes + i] : -1;
+  *position = *distance = NAN;
+  if (!G || g < 0) return;
+  const double *v = G + 3 * g;
+  *position = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+  *distance = nh_sim_target_distance_part(s, i, G);
 }

@@ -67,6 +67,12 @@ void nh_sim_target_miss(const nh_sim *sim, int i, double x[3], double miss[3]);
  * from the target's goal estimate of this step's solution), else NaN
  * (targets.csv `distance_error_estimate`). */
 double nh_sim_target_distance_error(const nh_sim *sim, int i);
+/* Under adapt.estimator goal, target i a goal: the geometry term's part of
+ * its estimates (dwr.c, "Geometry"): |G| of the position (m) and |−n · G|
+ * of the distance (m); 0 without cut cells, NaN otherwise or after a
+ * combined estimate (targets.csv `geometry_estimate`,
+ * `distance_geometry_estimate`). */
+void nh_sim_target_geometry_error(const nh_sim *sim, int i, double *position, double *distance);
 /* Refine the n leaves cells[] by the scene's adapt.template, as a
  * refinement after a step would: u and v carried to the new nodes
  * (Eq. 17), everything that depends on the mesh rebuilt, the tools'

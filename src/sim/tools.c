@@ -12,8 +12,17 @@
 static const char *const nh_tool_columns[] = {"step",          "time",  "name",  "tip_x",
                                               "tip_y",         "tip_z", "depth", "axial_force",
                                               "lateral_force", "state", "twist"};
-static const char *const nh_target_columns[] = {
-    "step", "time", "name", "x", "y", "z", "distance", "error_estimate", "distance_error_estimate"};
+static const char *const nh_target_columns[] = {"step",
+                                                "time",
+                                                "name",
+                                                "x",
+                                                "y",
+                                                "z",
+                                                "distance",
+                                                "error_estimate",
+                                                "distance_error_estimate",
+                                                "geometry_estimate",
+                                                "distance_geometry_estimate"};
 
 /* The tools' twist is written (tools.csv `twist`, the HDF5 series'
  * component, the frames' point field) when a tool's channel resists its
@@ -119,7 +128,7 @@ int nh_sim_tools_open(nh_sim *s) {
   if (sc->n_targets > 0) {
     snprintf(path, sizeof path, "%s/targets.csv", sc->output.dir);
     int goal = sc->adapt.enabled && sc->adapt.estimator == NH_ESTIMATOR_GOAL;
-    int nc = goal ? 9 : 7;
+    int nc = goal ? 11 : 7;
     NH_TRY(resume ? nh_csv_resume(path, nc, nh_target_columns, s->step, &s->targets_csv)
                   : nh_csv_create(path, nc, nh_target_columns, &s->targets_csv));
   }
@@ -168,12 +177,14 @@ int nh_sim_tools_rows(nh_sim *s) {
       double x[3], d[3];
       nh_sim_target_miss(s, i, x, d);
       double dist = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-      if (sc->adapt.enabled && sc->adapt.estimator == NH_ESTIMATOR_GOAL)
-        rc =
-            nh_csv_row(s->targets_csv, "%d,%.17g,%s,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g", s->step,
-                       s->time, tg->name, x[0], x[1], x[2], dist,
-                       nh_sim_point_error(s, sc->n_probes + i), nh_sim_target_distance_error(s, i));
-      else
+      if (sc->adapt.enabled && sc->adapt.estimator == NH_ESTIMATOR_GOAL) {
+        double geo, geo_d;
+        nh_sim_target_geometry_error(s, i, &geo, &geo_d);
+        rc = nh_csv_row(
+            s->targets_csv, "%d,%.17g,%s,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g", s->step,
+            s->time, tg->name, x[0], x[1], x[2], dist, nh_sim_point_error(s, sc->n_probes + i),
+            nh_sim_target_distance_error(s, i), geo, geo_d);
+      } else
         rc = nh_csv_row(s->targets_csv, "%d,%.17g,%s,%.17g,%.17g,%.17g,%.17g", s->step, s->time,
                         tg->name, x[0], x[1], x[2], dist);
       vals[4 * i] = x[0], vals[4 * i + 1] = x[1], vals[4 * i + 2] = x[2], vals[4 * i + 3] = dist;
