@@ -9,6 +9,10 @@ nh_add_c_test(test_brainshift verify)
 # volumes and moments against closed forms and Monte Carlo, closed surfaces.
 file(MAKE_DIRECTORY ${CMAKE_CURRENT_BINARY_DIR}/cutcell_scratch)
 nh_add_c_test(test_cutcell "unit;verify" ${CMAKE_CURRENT_BINARY_DIR}/cutcell_scratch)
+# Connected components of a cut cell's tissue (tests/test_cut_components.c):
+# a slot through a middle column (closed form), the brain's fissure in the
+# middle column of odd grids, none beside x = 0 on an even one.
+nh_add_c_test(test_cut_components "unit;verify")
 # Cut cells in the tissue (tests/test_fcm.c): immersed patch test to round-off,
 # O(α) consistency, closed pressure, a tie smaller than a cell holds a ball.
 nh_add_c_test(test_fcm "unit;verify")

@@ -755,3 +755,106 @@ void nh_cut_shape_integrals(const double w[27], double N[8], double NN[64]) {
     }
   }
 }
+
+/* ---- connected components of a cut cell's tissue ----
+ * The reconstruction I F is linear on each Kuhn tetrahedron, so a sub-box of
+ * the lattice holds tissue iff one of its 8 corners has F < 0, and the
+ * tissue of two face neighbours meets iff a corner of their common face has
+ * F < 0 (I F on that face is the linear interpolant of its 4 corners: no
+ * negative corner, no tissue on the face). A sub-box with tissue counts as
+ * one piece (at depth 2 a piece narrower than a sub-box could split it: not
+ * resolved, as the quadrature does not resolve it either). Union-find with
+ * path halving over the (2^depth)³ sub-boxes. */
+static int nh_find(int *parent, int i) {
+  while (parent[i] != i) i = parent[i] = parent[parent[i]];
+  return i;
+}
+
+int nh_cut_components(const nh_cut_spec *spec, const double lo[3], const double hi[3],
+                      int *n_components, int *label) {
+  NH_CHECK(spec->depth >= 0 && spec->depth <= NH_CUT_DEPTH_MAX, NH_ERR_INTERNAL,
+           "cut cell: depth %d outside 0..%d", spec->depth, NH_CUT_DEPTH_MAX);
+  const int n = 1 << spec->depth, p = n + 1;
+  const size_t n_boxes = (size_t)n * n * n, n_points = (size_t)p * p * p;
+  unsigned char *neg = nh_calloc(n_points, 1);
+  int *parent = nh_calloc(n_boxes, sizeof(int));
+  if (!neg || !parent) {
+    free(neg), free(parent);
+    return NH_ERROR(NH_ERR_MEMORY, "out of memory: components of a cut cell");
+  }
+  for (int k = 0; k < p; k++)
+    for (int j = 0; j < p; j++)
+      for (int i = 0; i < p; i++) {
+        const int I[3] = {i, j, k};
+        double x[3];
+        for (int a = 0; a < 3; a++)
+          x[a] = (lo[a] * (n - I[a]) + hi[a] * I[a]) / n; /* the points of nh_cut_x */
+        neg[i + p * (j + p * k)] = spec->level(spec->ctx, x) < 0.0;
+      }
+#define NH_NEG(i, j, k) neg[(i) + p * ((j) + p * (k))]
+#define NH_BOX(i, j, k) ((i) + n * ((j) + n * (k)))
+  for (int k = 0; k < n; k++)
+    for (int j = 0; j < n; j++)
+      for (int i = 0; i < n; i++) {
+        int any = 0;
+        for (int b = 0; b < 8; b++) any |= NH_NEG(i + (b & 1), j + (b >> 1 & 1), k + (b >> 2));
+        parent[NH_BOX(i, j, k)] = any ? NH_BOX(i, j, k) : -1;
+      }
+  for (int k = 0; k < n; k++)
+    for (int j = 0; j < n; j++)
+      for (int i = 0; i < n; i++) {
+        const int here = NH_BOX(i, j, k);
+        if (parent[here] < 0) continue;
+        for (int axis = 0; axis < 3; axis++) {
+          int I[3] = {i, j, k};
+          if (++I[axis] == n) continue;
+          const int there = NH_BOX(I[0], I[1], I[2]);
+          if (parent[there] < 0) continue;
+          /* the common face: corners with coordinate I[axis] along axis */
+          int meet = 0;
+          for (int b = 0; b < 4; b++) {
+            int C[3] = {i, j, k};
+            C[axis] = I[axis];
+            C[(axis + 1) % 3] += b & 1;
+            C[(axis + 2) % 3] += b >> 1;
+            meet |= NH_NEG(C[0], C[1], C[2]);
+          }
+          if (meet) parent[nh_find(parent, here)] = nh_find(parent, there);
+        }
+      }
+#undef NH_NEG
+#undef NH_BOX
+  /* roots first (find compresses paths), then number them in box order */
+  for (size_t b = 0; b < n_boxes; b++)
+    if (parent[b] >= 0) parent[b] = nh_find(parent, (int)b);
+  int count = 0; /* a root's entry becomes −2 − its number; its members still point at it */
+  for (size_t b = 0; b < n_boxes; b++)
+    if (parent[b] == (int)b) parent[b] = -2 - count++;
+  if (label)
+    for (size_t b = 0; b < n_boxes; b++)
+      label[b] = parent[b] == -1 ? -1 : -2 - (parent[b] >= 0 ? parent[parent[b]] : parent[b]);
+  *n_components = count;
+  free(neg), free(parent);
+  return NH_OK;
+}
+
+int nh_mesh_split_cells(const nh_mesh *m, int *n_split, int *max_components) {
+  *n_split = 0;
+  if (max_components) *max_components = m->n_leaves > 0;
+  if (m->domain.kind == NH_DOMAIN_BOX) return NH_OK;
+  nh_cut_spec spec;
+  nh_cut_spec_domain(&spec, &m->domain, NH_CUT_DEPTH);
+  for (int l = 0; l < m->n_leaves; l++) {
+    double Xe[24], lo[3], hi[3], mid[3], diag = 0.0;
+    nh_mesh_cell_coords(m, m->X, m->leaves[l], Xe);
+    if (!nh_hex_is_box(Xe, lo, hi)) continue;
+    for (int k = 0; k < 3; k++)
+      mid[k] = 0.5 * (lo[k] + hi[k]), diag += 0.25 * (hi[k] - lo[k]) * (hi[k] - lo[k]);
+    if (fabs(nh_domain_level(&m->domain, mid)) > sqrt(diag)) continue; /* 1-Lipschitz: not cut */
+    int n = 0;
+    NH_TRY(nh_cut_components(&spec, lo, hi, &n, NULL));
+    if (n > 1) ++*n_split;
+    if (max_components && n > *max_components) *max_components = n;
+  }
+  return NH_OK;
+}

@@ -309,6 +309,22 @@ int nh_cut_cell(const nh_cut_spec *spec, const double lo[3], const double hi[3],
 void nh_cut_points(double xi[81]);
 void nh_cut_fit(const double m[27], double w[27]);
 void nh_cut_surface_free(nh_cut_surface *surface);
+/* The connected components of the tissue {I level < 0} in the box cell
+ * [lo, hi] on the lattice of spec->depth (the level only; region, plane and
+ * mirror are ignored): sub-boxes with a corner inside are joined across a
+ * face with a corner inside (cutcell.c). *n_components: 0 for no tissue; if
+ * label is not NULL, per sub-box (i + n (j + n k), n = 2^depth) its
+ * component 0 .. *n_components − 1, or −1 (no tissue). One element per cell
+ * glues components that are apart in the tissue (docs/theory.md §5c,
+ * "Disconnected cut cells"). NH_ERR_INTERNAL for a depth out of range,
+ * NH_ERR_MEMORY. */
+int nh_cut_components(const nh_cut_spec *spec, const double lo[3], const double hi[3],
+                      int *n_components, int *label);
+/* The box leaves of m whose tissue (the domain's, at depth NH_CUT_DEPTH) is
+ * in several components (nh_cut_components): their number, and the largest
+ * component count of a leaf (may be NULL). 0 for a box domain. Fails as
+ * nh_cut_components. */
+int nh_mesh_split_cells(const nh_mesh *m, int *n_split, int *max_components);
 /* The lattice depth of the mesh's cut cells: 2^NH_CUT_DEPTH sub-boxes per
  * cell edge for stiffness, mass, loads, ties and drainage (fem/tissue.c,
  * mesh/region.c), the sub-lattice of the immersed surface (fem/traction.c),
