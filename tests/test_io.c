@@ -75,7 +75,7 @@ static const char *const written[] = {
     "long.csv",          "hello.txt",         "bad.vtu",           "full.vtu",
     "full.txt",          "named.vtu",         "named3.vtu",        "single.vtu",
     "framed.pvd",        "framed_000000.vtu", "framed_000005.vtu", "framed_000010.vtu",
-    "notpvd.xml",
+    "notpvd.xml",        "resume.csv",        "resume.csv.old",    "same.csv",
 };
 enum { N_WRITTEN = sizeof written / sizeof written[0] };
 
@@ -397,6 +397,57 @@ static void write_csvs(void) {
   EXPECT_OK(nh_write_text(in_dir("hello.txt"), "hello\nworld\n"));
 }
 
+static char *read_all(const char *path) {
+  FILE *f = fopen(path, "r");
+  if (!f) return NULL;
+  char *s = calloc(1 << 16, 1);
+  size_t n = s ? fread(s, 1, (1 << 16) - 1, f) : 0;
+  if (s) s[n] = '\0';
+  fclose(f);
+  return s;
+}
+
+/* Continuing a table (nh_csv_resume): with the same columns the rows up to
+ * the step are kept byte for byte; with another version's columns they are
+ * mapped by name (quoted fields included), a new column is empty, and the
+ * old file survives as .old, unchanged. */
+static void resume_csvs(void) {
+  const char *same_text = "step,x\n0,1.5\n1,2.5\n2,3.5\n";
+  EXPECT_OK(nh_write_text(in_dir("same.csv"), same_text));
+  const char *same_columns[] = {"step", "x"};
+  nh_csv *csv = NULL;
+  EXPECT_OK(nh_csv_resume(in_dir("same.csv"), 2, same_columns, 1, &csv));
+  if (csv) EXPECT_OK(nh_csv_row(csv, "2,9"));
+  nh_csv_destroy(&csv);
+  char *got = read_all(in_dir("same.csv"));
+  EXPECT(got && strcmp(got, "step,x\n0,1.5\n1,2.5\n2,9\n") == 0, "same.csv resumed: '%s'",
+         got ? got : "(unreadable)");
+  free(got);
+  EXPECT(!file_exists(in_dir("same.csv.old")), "same columns: the file was moved aside");
+
+  const char *old_text = "step,time,\"note, quoted\",gone\n"
+                         "0,0,\"a, \"\"0\"\"\",g0\n"
+                         "1,0.5,\"a, \"\"1\"\"\",g1\n"
+                         "2,1,plain,g2\n"
+                         "3,1.5,late,g3\n";
+  EXPECT_OK(nh_write_text(in_dir("resume.csv"), old_text));
+  const char *columns[] = {"step", "time", "added", "note, quoted"};
+  EXPECT_OK(nh_csv_resume(in_dir("resume.csv"), 4, columns, 2, &csv));
+  nh_csv_destroy(&csv);
+  got = read_all(in_dir("resume.csv"));
+  const char *want = "step,time,added,\"note, quoted\"\n"
+                     "0,0,,\"a, \"\"0\"\"\"\n"
+                     "1,0.5,,\"a, \"\"1\"\"\"\n"
+                     "2,1,,plain\n";
+  EXPECT(got && strcmp(got, want) == 0, "resume.csv mapped by name:\n%s\nexpected:\n%s",
+         got ? got : "(unreadable)", want);
+  free(got);
+  got = read_all(in_dir("resume.csv.old"));
+  EXPECT(got && strcmp(got, old_text) == 0, "resume.csv.old is not the old file: '%s'",
+         got ? got : "(missing)");
+  free(got);
+}
+
 /* Every writer fails with NH_ERR_IO and a message naming the path. */
 static void check_failures(void) {
   const char *missing = in_dir("no/such/folder/x.vtu");
@@ -503,6 +554,7 @@ int main(int argc, char **argv) {
   write_vtus();
   write_pvds();
   write_csvs();
+  resume_csvs();
   check_failures();
   check_no_tmp();
 

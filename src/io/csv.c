@@ -18,8 +18,9 @@
  *
  * nh_csv_resume re-creates a table from the rows of an interrupted run's
  * file up to a step (the checkpoint's), so that a continued run's table is
- * the uninterrupted one's. All failures return NH_ERR_IO with a message
- * naming the path and strerror(errno). */
+ * the uninterrupted one's; a file written with other columns (another
+ * version) has its rows mapped by column name and is kept as PATH.old. All failures return
+ * NH_ERR_IO with a message naming the path and strerror(errno). */
 #include "io/io_impl.h"
 
 #include <errno.h>
@@ -148,8 +149,54 @@ int nh_csv_values(nh_csv *csv, int n, const double *values) {
   return nh_csv_row(csv, "%s", line);
 }
 
+/* Split one CSV line (no newline) into its fields, in place: quotes are
+ * removed and "" becomes ". Returns the number of fields (at most max). */
+static int split_csv_line(char *line, char **fields, int max) {
+  int n = 0;
+  char *r = line;
+  while (n < max) {
+    char *w = r;
+    fields[n++] = w;
+    if (*r == '"') {
+      for (++r; *r; ++r) {
+        if (*r == '"' && r[1] == '"')
+          *w++ = '"', ++r;
+        else if (*r == '"') {
+          ++r;
+          break;
+        } else
+          *w++ = *r;
+      }
+      while (*r && *r != ',') ++r; /* stray text after the closing quote */
+    } else {
+      while (*r && *r != ',') *w++ = *r++;
+    }
+    int more = *r == ',';
+    *w = '\0';
+    if (!more) break;
+    ++r;
+  }
+  return n;
+}
+
+/* PATH.old, or .old.2, .old.3, ... if taken (NULL: none free). */
+static char *aside_name(const char *path) {
+  size_t n = strlen(path) + 32;
+  char *p = nh_calloc(n, 1);
+  for (int k = 1; p && k < 1000; ++k) {
+    snprintf(p, n, k == 1 ? "%s.old" : "%s.old.%d", path, k);
+    if (access(p, F_OK) != 0) return p;
+  }
+  free(p);
+  return NULL;
+}
+
+enum { CSV_MAX_COLUMNS = 256 };
+
 int nh_csv_resume(const char *path, int n_columns, const char *const *columns, int step,
                   nh_csv **out) {
+  NH_CHECK(path && out && n_columns >= 1 && n_columns <= CSV_MAX_COLUMNS && columns,
+           NH_ERR_INTERNAL, "nh_csv_resume: bad arguments");
   FILE *f = fopen(path, "r");
   char *text = NULL;
   size_t len = 0;
@@ -166,13 +213,61 @@ int nh_csv_resume(const char *path, int n_columns, const char *const *columns, i
     text[len] = '\0';
     fclose(f);
   }
+  /* The old header: if it names other columns (a table written by another
+   * version of needlehex), the old rows are mapped by column name (a column
+   * the old file lacks is left empty) and the old file is kept as PATH.old,
+   * so that a column this version no longer writes is not lost. */
+  char *line = text ? strchr(text, '\n') : NULL;
+  int map[CSV_MAX_COLUMNS], same = 1, n_old = 0;
+  char *old_names[CSV_MAX_COLUMNS];
+  if (line) {
+    *line = '\0';
+    if (line > text && line[-1] == '\r') line[-1] = '\0';
+    n_old = split_csv_line(text, old_names, CSV_MAX_COLUMNS);
+    same = n_old == n_columns;
+    for (int j = 0; j < n_columns; ++j) {
+      map[j] = -1;
+      for (int i = 0; i < n_old && map[j] < 0; ++i)
+        if (strcmp(old_names[i], columns[j] ? columns[j] : "") == 0) map[j] = i;
+      same = same && map[j] == j;
+    }
+  }
+  if (!same) {
+    char *aside = aside_name(path);
+    if (!aside || rename(path, aside) != 0) {
+      int rc = NH_ERROR(NH_ERR_IO,
+                        "cannot resume '%s' (written with other columns) nor move it "
+                        "aside to '%s.old': %s",
+                        path, path, aside ? strerror(errno) : "no free name");
+      free(aside);
+      free(text);
+      return rc;
+    }
+    nh_log_warn("'%s' was written with other columns (another version of needlehex): its rows "
+                "up to step %d are kept under this version's columns, matched by name, and the "
+                "old file is '%s'",
+                path, step, aside);
+    free(aside);
+  }
   int rc = nh_csv_create(path, n_columns, columns, out);
-  char *line = text ? strchr(text, '\n') : NULL; /* skip the header */
   while (!rc && line && line[1]) {
     char *start = line + 1, *end = strchr(start, '\n');
     if (end) *end = '\0';
-    if (atoi(start) <= step && start[0] >= '0' && start[0] <= '9')
-      rc = nh_csv_row(*out, "%s", start);
+    if (atoi(start) <= step && start[0] >= '0' && start[0] <= '9') {
+      if (same) {
+        rc = nh_csv_row(*out, "%s", start);
+      } else {
+        char *fields[CSV_MAX_COLUMNS];
+        int nf = split_csv_line(start, fields, CSV_MAX_COLUMNS);
+        nh_text row = {0};
+        for (int j = 0; j < n_columns && !rc; ++j) {
+          if (j) rc = nh_text_printf(&row, ",");
+          if (!rc && map[j] >= 0 && map[j] < nf) rc = put_csv_field(&row, fields[map[j]]);
+        }
+        if (!rc) rc = nh_csv_row(*out, "%s", row.s ? row.s : "");
+        free(row.s);
+      }
+    }
     line = end;
   }
   free(text);

@@ -85,8 +85,12 @@ int nh_csv_values(nh_csv *csv, int n, const double *values);
 void nh_csv_destroy(nh_csv **csv);
 /* Continue the table `path` of an interrupted run at step `step`: re-create
  * it (nh_csv_create) and re-append the rows of the old file whose first
- * field, the step, is at most `step` (a missing file: just the header).
- * Fails as nh_csv_create and nh_csv_row, NH_ERR_MEMORY. */
+ * field, the step, is at most `step` (a missing file: just the header). A
+ * file whose header names other columns (another version's) keeps its rows,
+ * mapped by column name (empty where it has no such column), and is itself
+ * kept as `path`.old (a warning names it).
+ * Fails as nh_csv_create and nh_csv_row, NH_ERR_MEMORY; NH_ERR_IO if such
+ * a file cannot be moved aside. */
 int nh_csv_resume(const char *path, int n_columns, const char *const *columns, int step,
                   nh_csv **out);
 
