@@ -22,9 +22,10 @@
  *     partner with mirrored position (1e-9 h) and mirrored direction
  *     (1e-9), so the skull force of a mirror-symmetric state has f_x = 0;
  *  4. on the odd grids both fissure walls carry points, as many on each,
- *     every one pushing the tissue away from the gap: a point on the wall
- *     x = ±w (|x| = w to 1e-9 h, z > e_z + 1e-9 h) has the row direction
- *     (the inward normal) ±e_x to 1e-9;
+ *     none facing the skull: a point on the wall x = ±w (|x| = w to
+ *     1e-9 h, z > e_z + 1e-9 h) has a gap g > 0 to it (the skull is the
+ *     offset of the hull U, the brain with its fissure filled, and the
+ *     walls lie inside U);
  *  5. the points' areas sum to the area of the reconstructed surface
  *     {I F = 0} (Σ_c Σ_q |A_q| over the leaves' cut-cell
  *     surface quadratures, nh_cut_cell, summed here independently of the
@@ -42,6 +43,28 @@
  *     (docs/dbs.md; 42° at the hemispheres' crease on 17 × 21 × 16, 8° at
  *     1 mm beside the brainstem on 11 × 13 × 10). The points of this skull
  *     are mirror symmetric too (as 3.).
+ *  7. the fissure's floor (z = e_z, |x| < w) and walls get no row with gap
+ *     1 mm, at rest or with the whole tissue lifted by the gap: every such
+ *     point where the hemisphere ellipsoid's E <= −2 mm (most of them; E the
+ *     closed form below) is that far inside the hull (|∇U| <= 1), so at
+ *     least 1 mm from the skull after the lift. There are such points on
+ *     every grid, on the floor on the odd ones (on the even ones the floor's
+ *     few samples join the walls' clusters). (The skull of F reached into
+ *     the fissure as a plate 1 mm above the floor, docs/dbs.md: the lifted
+ *     floor of the odd grids touched it.)
+ * And at points, before any mesh, the skull's level function φ_skull =
+ * U/|∇U| (nh_skull_level) against closed forms of the hemisphere
+ * ellipsoid E = ρ (q − 1) (mesh/domain.c; ρ = rₓ = 0.55 a here):
+ *  0a. on the lateral axis, x = ±(a + t), y = 0, z = e_z: φ_skull = t,
+ *      n = ±e_x; above the vertex, x = ±eₓ, y = 0, z = c + t: φ_skull = t,
+ *      n = e_z (t from −3 to +2.5 mm); there F = U, so the tissue's own
+ *      φ = F/|∇F| is the same;
+ *  0b. in the fissure (|x| = w/2, y = 0 and 20 mm, z = 30 and 40 mm: above
+ *      the floor, below the hemispheres' crease): F = w − |x| > 0 (the gap,
+ *      outside the tissue) while φ_skull = E/|∇E| < 0 (inside the skull's
+ *      cavity), ∇E in closed form;
+ *  0c. mirror symmetry: φ_skull(−x, y, z) = φ_skull(x, y, z) bit for bit,
+ *      the normal's x component flipped.
  * (`scaled`, whose samples are projected from inside, leaves points up to
  * 0.7 mm inside F = 0 beside the creases: not checked here.)
  * Silent on success; NH_VERBOSE=1 prints the numbers. */
@@ -81,6 +104,73 @@ static void rest_rows(nh_skull *s, const nh_mesh *m, const double *u, nh_rows *r
   free(v);
 }
 
+/* The brain of cases/dbs (size 140 × 170 × 130 mm, centre 0): half sizes and
+ * the hemisphere ellipsoid's constants (mesh/domain.c). */
+static const double A = 0.07, B = 0.085, C = 0.065;
+#define RX (0.55 * A)
+#define EX (0.45 * A)
+#define RZ (0.7 * C)
+#define EZ (0.3 * C)
+
+/* The hemisphere ellipsoid E = ρ (q − 1) at P (ρ = rₓ, the smallest
+ * radius), and its gradient if g is not NULL. */
+static double hemisphere_grad(const double P[3], double *g) {
+  const double qx = (fabs(P[0]) - EX) / RX, qy = P[1] / B, qz = (P[2] - EZ) / RZ;
+  const double q = sqrt(qx * qx + qy * qy + qz * qz);
+  if (g) {
+    g[0] = RX * qx / RX / q * (P[0] < 0 ? -1.0 : 1.0);
+    g[1] = RX * qy / B / q;
+    g[2] = RX * qz / RZ / q;
+  }
+  return RX * (q - 1.0);
+}
+
+static double hemisphere(const double P[3]) {
+  return hemisphere_grad(P, NULL);
+}
+
+/* 0. The skull's level function at points (closed forms). */
+static void check_level(void) {
+  const double center[3] = {0, 0, 0}, size[3] = {2 * A, 2 * B, 2 * C}, w = 0.02 * A;
+  nh_domain d;
+  nh_skull *s = NULL;
+  nh_domain_brain(center, size, &d);
+  CHECK_OK(nh_skull_create(&d, 1e-3, &s));
+  const double ts[4] = {-3e-3, 0.0, 1e-3, 2.5e-3};
+  for (int i = 0; i < 4; i++)
+    for (int side = -1; side <= 1; side += 2) {
+      const double t = ts[i];
+      const double P[2][3] = {{side * (A + t), 0.0, EZ}, {side * EX, 0.0, C + t}};
+      const double nexp[2][3] = {{side, 0, 0}, {0, 0, 1}};
+      for (int j = 0; j < 2; j++) {
+        double n[3], g[3];
+        const double phi = nh_skull_level(s, P[j], n);
+        const double f = nh_domain_gradient(&d, P[j], g);
+        const double phi_f = f / sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
+        CHECK_CLOSE(phi, t, 1e-12, j ? "phi_skull above the vertex" : "phi_skull lateral");
+        CHECK_CLOSE(phi_f, phi, 1e-15, "the tissue's phi = phi_skull outside the fissure");
+        for (int k = 0; k < 3; k++) CHECK_CLOSE(n[k], nexp[j][k], 1e-9, "skull normal");
+      }
+    }
+  const double ys[2] = {0.0, 0.02}, zs[2] = {0.03, 0.04};
+  for (int iy = 0; iy < 2; iy++)
+    for (int iz = 0; iz < 2; iz++) {
+      const double P[3] = {0.5 * w, ys[iy], zs[iz]}, M[3] = {-0.5 * w, ys[iy], zs[iz]};
+      double n[3], nm[3], g[3];
+      const double e = hemisphere_grad(P, g);
+      const double expect = e / sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
+      const double phi = nh_skull_level(s, P, n), phi_m = nh_skull_level(s, M, nm);
+      CHECK(expect < 0.0, "the fissure point (%g, %g, %g) mm lies outside the ellipsoid",
+            1e3 * P[0], 1e3 * P[1], 1e3 * P[2]);
+      CHECK_CLOSE(phi, expect, 1e-12, "phi_skull in the fissure (E/|grad E|)");
+      CHECK_CLOSE(nh_domain_level(&d, P), w - fabs(P[0]), 1e-15, "F in the fissure (w - |x|)");
+      CHECK(phi_m == phi && nm[0] == -n[0] && nm[1] == n[1] && nm[2] == n[2],
+            "mirror: phi_skull %.17g / %.17g, n (%g, %g, %g) / (%g, %g, %g)", phi, phi_m, n[0],
+            n[1], n[2], nm[0], nm[1], nm[2]);
+    }
+  nh_skull_destroy(&s);
+}
+
 /* Rows without a mirror partner (position to 1e-9 h, direction to 1e-9). */
 static int unpaired_rows(const nh_rows *rows, const double *X, double h) {
   int unpaired = 0;
@@ -100,6 +190,7 @@ static int unpaired_rows(const nh_rows *rows, const double *X, double h) {
 
 int main(void) {
   const int verbose = getenv("NH_VERBOSE") != NULL;
+  check_level();
   const double center[3] = {0, 0, 0}, size[3] = {0.14, 0.17, 0.13};
   const double w = 0.02 * 0.5 * size[0], ez = 0.3 * 0.5 * size[2];
   const int grids[4][3] = {{9, 11, 8}, {11, 13, 10}, {17, 21, 16}, {18, 22, 17}};
@@ -118,21 +209,17 @@ int main(void) {
       double hk[3], h = 0.0;
       for (int k = 0; k < 3; k++) hk[k] = size[k] / grid[k], h = fmax(h, hk[k]);
       nh_rows rows;
-      memset(&rows, 0, sizeof rows);
+      double *X = NULL;
       const int n = 3 * m->n_nodes;
-      double *u = calloc((size_t)n, sizeof(double)), *v = calloc((size_t)n, sizeof(double));
-      CHECK_OK(nh_skull_rows(s, m, u, v, 1e-3, &rows));
+      double *u = calloc((size_t)n, sizeof(double));
+      rest_rows(s, m, u, &rows, &X);
       const int np = rows.m;
       CHECK(np == nh_skull_points(s), "%s %dx%dx%d: %d rows for %d points at rest with gap 0",
             mname, grid[0], grid[1], grid[2], np, nh_skull_points(s));
-      double *X = calloc(3 * (size_t)(np ? np : 1), sizeof(double));
       int bad_on = 0, bad_xi = 0, walls[2] = {0, 0}, bad_wall = 0, unpaired = 0;
       double worst_f = 0.0;
       for (int r = 0; r < np; r++) {
         const int *node = rows.node + rows.start[r];
-        const double *N = rows.N + rows.start[r], *dir = rows.dir + 3 * r;
-        for (int a = 0; a < 8; a++)
-          for (int k = 0; k < 3; k++) X[3 * r + k] += N[a] * m->X[3 * node[a] + k];
         const double f = fabs(nh_domain_level(&m->domain, X + 3 * r));
         worst_f = fmax(worst_f, f);
         bad_on += f > 1e-6 * h;
@@ -157,8 +244,7 @@ int main(void) {
         const double x = X[3 * r];
         if (fabs(fabs(x) - w) <= 1e-9 * h && X[3 * r + 2] > ez + 1e-9 * h) {
           walls[x > 0]++;
-          const double sx = x > 0 ? 1.0 : -1.0;
-          bad_wall += fabs(dir[0] - sx) > 1e-9 || fabs(dir[1]) > 1e-9 || fabs(dir[2]) > 1e-9;
+          bad_wall += !(rows.gap[r] > 0.0); /* inside the hull: no skull in the fissure */
         }
       }
       /* 3. the mirror partner of every row */
@@ -173,7 +259,7 @@ int main(void) {
       if (odd)
         CHECK(walls[0] > 0 && walls[0] == walls[1] && bad_wall == 0,
               "%s %dx%dx%d: fissure walls x = -w, +w: %d, %d points (expected as many, > 0), %d "
-              "not pushing away from the gap",
+              "with gap <= 0 to the skull (expected > 0: inside the hull)",
               mname, grid[0], grid[1], grid[2], walls[0], walls[1], bad_wall);
       /* 5. the area of the reconstructed surface, summed leaf by leaf */
       double area = 0.0;
@@ -236,16 +322,59 @@ int main(void) {
       const int unpaired_g = unpaired_rows(&rg, Xg, h), np_g = rg.m;
       CHECK(unpaired_g == 0, "%s %dx%dx%d, gap 1 mm: %d of %d points without a mirror partner",
             mname, grid[0], grid[1], grid[2], unpaired_g, rg.m);
+      /* 7. the fissure's floor gets no row, at rest or with the tissue
+       * lifted by the gap (its vertex then presses on the skull): a floor
+       * point where the hemisphere ellipsoid has E <= -2 mm is at least 2 mm
+       * inside the hull (|∇U| <= 1), so 1 mm from the skull after the lift
+       * (the offset of F reached into the fissure as a plate 1 mm above the
+       * floor: g = 0 there after the lift) */
+      int fissure_pts = 0, floor_pts = 0, floor_rows = 0;
+      for (int lift = 0; lift < 2; lift++) {
+        nh_skull *sf = NULL;
+        nh_rows rf;
+        memset(&rf, 0, sizeof rf);
+        double *ul = calloc((size_t)n, sizeof(double)), *vl = calloc((size_t)n, sizeof(double));
+        for (int i = 0; i < m->n_nodes; i++) ul[3 * i + 2] = lift * gap;
+        CHECK_OK(nh_skull_create(&m->domain, gap, &sf));
+        CHECK_OK(nh_skull_build(sf, m));
+        CHECK_OK(nh_skull_rows(sf, m, ul, vl, 1e-3, &rf));
+        if (lift)
+          CHECK(rf.m > 0, "%dx%dx%d: no skull row with the tissue lifted by the gap", grid[0],
+                grid[1], grid[2]);
+        for (int q = 0; q < rg.m; q++) {
+          const double *P = Xg + 3 * q;
+          if (!(fabs(P[0]) <= w + 1e-9 * h && P[2] >= ez - 1e-9 * h && hemisphere(P) <= -2e-3))
+            continue;
+          fissure_pts += !lift;
+          floor_pts += !lift && fabs(P[2] - ez) <= 1e-9 * h;
+          for (int r = 0; r < rf.m; r++) {
+            double Y[3] = {0, 0, 0};
+            for (int a = 0; a < 8; a++)
+              for (int k = 0; k < 3; k++)
+                Y[k] += rf.N[rf.start[r] + a] * m->X[3 * rf.node[rf.start[r] + a] + k];
+            floor_rows += fabs(Y[0] - P[0]) + fabs(Y[1] - P[1]) + fabs(Y[2] - P[2]) <= 1e-12;
+          }
+        }
+        nh_rows_free(&rf);
+        free(ul), free(vl);
+        nh_skull_destroy(&sf);
+      }
+      CHECK(fissure_pts > 0 && (floor_pts > 0 || !odd) && floor_rows == 0,
+            "%dx%dx%d, gap 1 mm: %d points on the fissure's walls and floor (expected > 0), %d on "
+            "its floor (expected > 0 on odd grids), %d rows of them at rest or lifted by the gap "
+            "(expected 0)",
+            grid[0], grid[1], grid[2], fissure_pts, floor_pts, floor_rows);
       nh_rows_free(&rg);
       free(Xg);
       nh_skull_destroy(&sg);
       if (verbose)
         printf("%-10s %2dx%2dx%2d: %4d points, area %.6g m² (surface %.6g), worst |F| %.2e m, "
-               "walls %d/%d; gap 1 mm: %d points, largest turn %.2f deg\n",
+               "walls %d/%d; gap 1 mm: %d points, largest turn %.2f deg, %d deep fissure points "
+               "(%d on the floor)\n",
                mname, grid[0], grid[1], grid[2], np, nh_skull_area(s), area, worst_f, walls[0],
-               walls[1], np_g, worst_turn);
+               walls[1], np_g, worst_turn, fissure_pts, floor_pts);
       nh_rows_free(&rows);
-      free(u), free(v), free(X);
+      free(u), free(X);
       nh_skull_destroy(&s);
       nh_mesh_destroy(&m);
     }

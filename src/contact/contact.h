@@ -171,7 +171,12 @@ void nh_skull_end_step(nh_skull *skull, const nh_rows *rows, double h);
 /* The last step's total contact force on the tissue (N) and the number of
  * rows that pushed (may be NULL). */
 void nh_skull_force(const nh_skull *skull, double force[3], int *active);
-/* The largest penetration φ(x) − gap over all points at u (m, 0 if none). */
+/* The skull's level function at x: φ_skull = U/|∇U| (m; the skull is
+ * {φ_skull ≥ gap}), U the domain's outer hull (nh_domain_hull_level: the
+ * analytic brain without its fissure, so the skull stays out of it; a mask's
+ * or surface's own F), and n[3] = ∇U/|∇U|, its outward unit normal. */
+double nh_skull_level(const nh_skull *skull, const double x[3], double n[3]);
+/* The largest penetration φ_skull(x) − gap over all points at u (m, 0 if none). */
 double nh_skull_penetration(const nh_skull *skull, const nh_mesh *mesh, const double *u);
 /* The skull's state for a checkpoint (contact/state.c): each point's warm
  * start λ and the last step's force. The points themselves are rebuilt from

@@ -1,10 +1,19 @@
 /* skull.c — frictionless unilateral contact of the brain with a rigid skull
  * (docs/interaction.md, "Skull contact"; docs/theory.md §5c).
  *
- * The skull is the tissue's implicit surface offset outwards by the CSF gap:
- * with φ(x) = F(x) / |∇F(x)| (F the domain's level function; φ is the signed
- * distance to first order, exactly for a sphere), the tissue must stay where
- * φ ≤ gap. Contact points are points of the immersed surface F = 0 of the
+ * The skull is the tissue's outer hull offset outwards by the CSF gap: with
+ * φ_skull(x) = U(x) / |∇U(x)| (U the domain's hull level, nh_domain_hull_level:
+ * for the analytic brain its F without the fissure term, for a mask or a
+ * surface F itself; φ_skull is the signed distance to first order, exactly
+ * for a sphere), the tissue must stay where φ_skull ≤ gap. The hull keeps
+ * the skull out of the brain's longitudinal fissure: the offset of F itself
+ * reached into it as a rigid plate 2 (w − gap) = 0.8 mm thick whose lower
+ * edge, 1 mm above the fissure's floor, held the floor on some grids and
+ * not on others (docs/dbs.md, "Isolating the odd grids' offset"); the falx
+ * cerebri there (a dural fold, stiff in tension only) is not modelled. The
+ * fissure's walls and floor are tissue surface and keep their points; they
+ * lie inside the hull (φ_skull < 0) and get no row unless they move out to
+ * the skull. Contact points are points of the immersed surface F = 0 of the
  * rest shape, one per cut leaf, or one per cluster of its surface normals
  * where they face apart, each carrying the surface area it stands for
  * (docs/theory.md §5c, "Skull contact points"). A leaf's surface samples
@@ -32,7 +41,8 @@
  * walls of the brain's fissure in one leaf (a grid with an odd cell count
  * across) or the faces of a crease. A cluster's point has the area A = Σ w
  * and stands at the weighted mean of its samples, moved onto F = 0 along
- * the normal by three steps x ← x − φ(x) n(x) (from the sample nearest the
+ * the normal by three steps x ← x − φ(x) n(x) (φ = F/|∇F|, the tissue's
+ * own surface; from the sample nearest the
  * mean if that moves it by more than a quarter of the leaf or leaves it off
  * F = 0). One mean for opposite walls lay in the gap, on
  * whose mid-plane ∇F vanishes: φ = F/|∇F| sent the point 1e9 m away (measured, 17 × 21 × 16: 53
@@ -44,7 +54,7 @@
  *
  * Each step, point i at its current position x = X + u(X) gives one row
  * of the constraint solver (nh_rows, no tool part):
- *   g = gap − φ(x),   direction n = −∇F/|∇F| at x (inwards),   λ ≥ 0,
+ *   g = gap − φ_skull(x),   direction n = −∇U/|∇U| at x (inwards),   λ ≥ 0,
  * so the step enforces n·v + g/h ≥ 0 with λ (w = 0) complementary: the
  * point ends the step inside the skull, and only pushes are transmitted
  * (frictionless: no tangential row). The normal is re-evaluated at the
@@ -73,8 +83,8 @@ typedef struct {
   double lam;   /* last impulse (N s), warm start */
   int row;      /* its row this step, or −1 */
   int small;    /* its leaf's tissue fraction is below NH_FILL_MIN (merged away in the build) */
-  int crease;   /* it (or its skull point) lies on a crease of F even after the split: its row
-                   keeps the rest normal N as its direction */
+  int crease;   /* it (or its skull point) lies on a crease even after the split: its row
+                   keeps the skull's normal at X as its direction */
 } nh_skull_point;
 
 /* At most one point per dominant direction of the outward normal (±x, ±y,
@@ -138,13 +148,32 @@ void nh_skull_destroy(nh_skull **skull) {
   *skull = NULL;
 }
 
-/* φ = F/|∇F| and the outward unit normal at x. */
-static double nh_skull_distance(const nh_domain *d, const double x[3], double n[3]) {
-  double g[3], f = nh_domain_gradient(d, x, g);
+/* f / |g| and the unit vector g / |g| (+z where g vanishes). */
+static double nh_skull_normalise(double f, double g[3], double n[3]) {
   double len = sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
   if (!(len > 0)) len = 1.0, g[0] = g[1] = 0.0, g[2] = 1.0;
   for (int k = 0; k < 3; k++) n[k] = g[k] / len;
   return f / len;
+}
+
+/* The tissue's φ = F/|∇F| and its outward unit normal at x: where the
+ * contact points are (on F = 0, the fissure's walls and floor included). */
+static double nh_skull_distance(const nh_domain *d, const double x[3], double n[3]) {
+  double g[3], f = nh_domain_gradient(d, x, g);
+  return nh_skull_normalise(f, g, n);
+}
+
+/* The skull's level function φ_skull = U/|∇U| (U the domain's outer hull,
+ * nh_domain_hull_level: the brain's F without its fissure, F itself for a
+ * mask or surface) and its outward unit normal at x: the skull is
+ * {φ_skull ≥ gap}. */
+static double nh_skull_wall(const nh_domain *d, const double x[3], double n[3]) {
+  double g[3], f = nh_domain_hull_gradient(d, x, g);
+  return nh_skull_normalise(f, g, n);
+}
+
+double nh_skull_level(const nh_skull *s, const double x[3], double n[3]) {
+  return nh_skull_wall(&s->domain, x, n);
 }
 
 /* A sample of a leaf's surface: its weight (m², the area it stands for),
@@ -240,16 +269,17 @@ static double nh_skull_cluster_point(const nh_domain *d, const nh_skull_sample *
  * furthest apart, when they are more than 2° apart (ties to the lower k, so
  * a crease on a mirror plane x = c is found along x). Returns cos of their
  * angle (1: none). */
-static double nh_skull_kink(const nh_domain *d, const double x[3], double edge, double na[3],
-                            double nb[3]) {
+static double nh_skull_kink(const nh_domain *d,
+                            double (*level)(const nh_domain *, const double *, double *),
+                            const double x[3], double edge, double na[3], double nb[3]) {
   const double step = NH_SKULL_KINK_STEP * edge;
   double worst = 1.0;
   for (int k = 0; k < 3; k++) {
     double xm[3], xp[3], nm[3], np[3];
     memcpy(xm, x, sizeof xm), memcpy(xp, x, sizeof xp);
     xm[k] -= step, xp[k] += step;
-    nh_skull_distance(d, xm, nm);
-    nh_skull_distance(d, xp, np);
+    level(d, xm, nm);
+    level(d, xp, np);
     const double c = nm[0] * np[0] + nm[1] * np[1] + nm[2] * np[2];
     if (c < worst && c < NH_SKULL_COS_KINK)
       worst = c, memcpy(na, nm, sizeof nm), memcpy(nb, np, sizeof np);
@@ -265,8 +295,8 @@ static double nh_skull_crease(const nh_domain *d, double gap, const double P[3],
   double Q[3], nrm[3], na[3], nb[3], ma[3], mb[3];
   nh_skull_distance(d, P, nrm);
   for (int k = 0; k < 3; k++) Q[k] = P[k] + gap * nrm[k];
-  const double cp = nh_skull_kink(d, P, edge, na, nb),
-               cq = gap > 0.0 ? nh_skull_kink(d, Q, edge, ma, mb) : 1.0;
+  const double cp = nh_skull_kink(d, nh_skull_distance, P, edge, na, nb),
+               cq = nh_skull_kink(d, nh_skull_wall, Q, edge, ma, mb);
   for (int k = 0; k < 3; k++) m[k] = cp <= cq ? na[k] - nb[k] : ma[k] - mb[k];
   return fmin(cp, cq);
 }
@@ -527,7 +557,7 @@ double nh_skull_penetration(const nh_skull *s, const nh_mesh *m, const double *u
   for (int i = 0; i < s->n; i++) {
     double x[3], N[8], nrm[3];
     nh_skull_position(m, u, &s->p[i], x, N);
-    worst = fmax(worst, nh_skull_distance(&s->domain, x, nrm) - s->gap);
+    worst = fmax(worst, nh_skull_wall(&s->domain, x, nrm) - s->gap);
   }
   return worst;
 }
@@ -538,8 +568,9 @@ int nh_skull_rows(nh_skull *s, const nh_mesh *m, const double *u, const double *
     nh_skull_point *p = &s->p[i];
     double x[3], N[8], nrm[3], vn = 0.0;
     nh_skull_position(m, u, p, x, N);
-    double g = s->gap - nh_skull_distance(&s->domain, x, nrm);
-    if (p->crease) memcpy(nrm, p->N, sizeof nrm); /* no direction from round-off's side */
+    double g = s->gap - nh_skull_wall(&s->domain, x, nrm);
+    if (p->crease) /* no direction from round-off's side: the skull's at the rest position */
+      nh_skull_wall(&s->domain, p->X, nrm);
     const int *e = m->cells + 8 * p->cell;
     for (int a = 0; a < 8; a++)
       for (int k = 0; k < 3; k++) vn += N[a] * v[3 * e[a] + k] * nrm[k];
@@ -629,7 +660,7 @@ double nh_skull_missed(const nh_skull *s, const nh_mesh *m, const double *u) {
     if (s->p[i].row >= 0) continue;
     double x[3], N[8], nrm[3];
     nh_skull_position(m, u, &s->p[i], x, N);
-    worst = fmax(worst, (nh_skull_distance(&s->domain, x, nrm) - s->gap) / s->p[i].edge);
+    worst = fmax(worst, (nh_skull_wall(&s->domain, x, nrm) - s->gap) / s->p[i].edge);
   }
   return worst;
 }

@@ -21,6 +21,9 @@
  *   fissure      P = max(X − w, e_z − Z), w = 0.02 a  (the slab |x − cx| < w
  *                above z = cz + e_z)
  *   F = max(U, −P).
+ * U alone is the brain's outer hull (nh_domain_hull_level): the shape with
+ * its fissure filled, whose offset is the skull (contact/skull.c; the falx
+ * in the fissure is not modelled). Every other kind is its own hull.
  * The extremes are exact: x = cx ± a and z = cz + c at the hemispheres'
  * outer poles, y = cy ± b at their front and back, z = cz − c at the
  * brainstem's flat bottom, so `size` is the bounding box of the shape.
@@ -187,24 +190,31 @@ const char *nh_domain_name(const nh_domain *d) {
   return names[d->kind];
 }
 
-/* F of the brain at (X, Y, Z) relative to the centre, X = |x − cx| >= 0. */
-static double nh_brain_level(const double half[3], double X, double Y, double Z) {
+/* U of the brain (its outer hull: hemispheres and brainstem, the fissure
+ * filled) at (X, Y, Z) relative to the centre, X = |x − cx| >= 0. */
+static double nh_brain_hull(const double half[3], double X, double Y, double Z) {
   const double a = half[0], b = half[1], c = half[2];
   const double rx = 0.55 * a, ex = 0.45 * a, ry = b, rz = 0.7 * c, ez = 0.3 * c;
   const double rho = fmin(rx, fmin(ry, rz));
-  const double ys = -0.15 * b, rs = 0.18 * fmin(a, b), k = 0.25 * rs, w = 0.02 * a;
+  const double ys = -0.15 * b, rs = 0.18 * fmin(a, b), k = 0.25 * rs;
   double qx = (X - ex) / rx, qy = Y / ry, qz = (Z - ez) / rz;
   double E = rho * (sqrt(qx * qx + qy * qy + qz * qz) - 1.0);
   double S = fmax(sqrt(X * X + (Y - ys) * (Y - ys)) - rs, fmax(-c - Z, Z - ez));
   double h = fmax(k - fabs(E - S), 0.0) / k;
-  double U = fmin(E, S) - 0.25 * k * h * h;
-  double P = fmax(X - w, ez - Z);
-  return fmax(U, -P);
+  return fmin(E, S) - 0.25 * k * h * h;
 }
 
-/* F at centre + r. */
-static double nh_level_rel(const nh_domain *d, const double r[3]) {
-  if (d->kind == NH_DOMAIN_BRAIN) return nh_brain_level(d->half, fabs(r[0]), r[1], r[2]);
+/* F of the brain at (X, Y, Z) relative to the centre, X = |x − cx| >= 0. */
+static double nh_brain_level(const double half[3], double X, double Y, double Z) {
+  const double w = 0.02 * half[0], ez = 0.3 * half[2];
+  double P = fmax(X - w, ez - Z);
+  return fmax(nh_brain_hull(half, X, Y, Z), -P);
+}
+
+/* F at centre + r (hull: U for the brain, F for the other kinds). */
+static double nh_level_rel(const nh_domain *d, const double r[3], int hull) {
+  if (d->kind == NH_DOMAIN_BRAIN)
+    return (hull ? nh_brain_hull : nh_brain_level)(d->half, fabs(r[0]), r[1], r[2]);
   if (d->kind == NH_DOMAIN_MASK || d->kind == NH_DOMAIN_SURFACE) {
     double x[3] = {d->center[0] + r[0], d->center[1] + r[1], d->center[2] + r[2]};
     return d->kind == NH_DOMAIN_MASK ? nh_image_level(d->image, x)
@@ -219,7 +229,12 @@ static double nh_level_rel(const nh_domain *d, const double r[3]) {
 
 double nh_domain_level(const nh_domain *d, const double x[3]) {
   double r[3] = {x[0] - d->center[0], x[1] - d->center[1], x[2] - d->center[2]};
-  return nh_level_rel(d, r);
+  return nh_level_rel(d, r, 0);
+}
+
+double nh_domain_hull_level(const nh_domain *d, const double x[3]) {
+  double r[3] = {x[0] - d->center[0], x[1] - d->center[1], x[2] - d->center[2]};
+  return nh_level_rel(d, r, 1);
 }
 
 int nh_domain_inside(const nh_domain *d, const double x[3]) {
@@ -323,15 +338,26 @@ int nh_domain_ray_entry(const nh_domain *d, const double base[3], const double d
   return 1;
 }
 
-double nh_domain_gradient(const nh_domain *d, const double x[3], double g[3]) {
-  /* central differences of step 1e-6 of the largest edge */
+/* level(x) and its gradient by central differences of step 1e-6 of the
+ * largest edge. */
+static double nh_level_gradient(const nh_domain *d,
+                                double (*level)(const nh_domain *, const double *),
+                                const double x[3], double g[3]) {
   const double e = 1e-6 * nh_largest_edge(d);
   for (int i = 0; i < 3; i++) {
     double p[3] = {x[0], x[1], x[2]}, m[3] = {x[0], x[1], x[2]};
     p[i] += e, m[i] -= e;
-    g[i] = (nh_domain_level(d, p) - nh_domain_level(d, m)) / (2 * e);
+    g[i] = (level(d, p) - level(d, m)) / (2 * e);
   }
-  return nh_domain_level(d, x);
+  return level(d, x);
+}
+
+double nh_domain_gradient(const nh_domain *d, const double x[3], double g[3]) {
+  return nh_level_gradient(d, nh_domain_level, x, g);
+}
+
+double nh_domain_hull_gradient(const nh_domain *d, const double x[3], double g[3]) {
+  return nh_level_gradient(d, nh_domain_hull_level, x, g);
 }
 
 double nh_domain_segment_distance(const nh_domain *d, const double a[3], const double b[3]) {
@@ -473,7 +499,7 @@ double nh_domain_cell_fill(const nh_domain *d, const double Xe[24], int *meets) 
           if (nh_domain_inside(d, x)) inside += dv, near = 1;
           continue;
         }
-        double f = nh_level_rel(d, r);
+        double f = nh_level_rel(d, r, 0);
         if (f < 0) inside += dv;
         if (f <= radius * (1 + 1e-12)) near = 1;
       }
@@ -522,7 +548,7 @@ double nh_domain_lattice_fill(const nh_domain *d, const int grid[3], const int i
   for (int k = 0; k < n; k++)
     for (int j = 0; j < n; j++)
       for (int i = 0; i < n; i++) {
-        double r[3] = {off[0][i], off[1][j], off[2][k]}, f = nh_level_rel(d, r);
+        double r[3] = {off[0][i], off[1][j], off[2][k]}, f = nh_level_rel(d, r, 0);
         inside += f < 0;
         near |= f <= radius;
       }

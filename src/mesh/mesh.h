@@ -101,6 +101,14 @@ double nh_domain_level(const nh_domain *domain, const double x[3]);
 /* F(x), and its gradient g[3] by central differences (step 1e-6 of the
  * largest edge). */
 double nh_domain_gradient(const nh_domain *domain, const double x[3], double g[3]);
+/* The level function of the domain's outer hull: the analytic brain's U
+ * (mesh/domain.c: hemispheres and brainstem, the longitudinal fissure
+ * filled), F for every other kind (a mask or surface is the only geometry
+ * it has). U <= F, equal outside the fissure; 1-Lipschitz. */
+double nh_domain_hull_level(const nh_domain *domain, const double x[3]);
+/* U(x) of nh_domain_hull_level, and its gradient g[3] by the central
+ * differences of nh_domain_gradient. */
+double nh_domain_hull_gradient(const nh_domain *domain, const double x[3], double g[3]);
 /* True if x lies strictly inside (box: min < x < max componentwise; else F < 0). */
 int nh_domain_inside(const nh_domain *domain, const double x[3]);
 
