@@ -456,7 +456,8 @@ static int nh_steer_write(const char *out, const char *scene_path, const nh_stee
              "# tip path's least distance to an obstacle's surface; aim = the point the\n"
              "# bicycle model's path of the schedule ends at; depths are the tip's in the\n"
              "# tissue (planned; realized: read back at the turns and the end); curvature:\n"
-             "# the model's per arc (first, after one turn, after two), last fitted.\n");
+             "# the model's per arc (first, after one turn, after two), last fitted; roll:\n"
+             "# the last half turn's angle beyond pi (rad, right-handed about the heading).\n");
   fprintf(f, "scene: %s\ntarget: %s\ntool: %s\ntarget_point: ", scene_path, g->name, P->tool->name);
   nh_plan_put_vec(f, g->point);
   fprintf(f, "\nentry: ");
