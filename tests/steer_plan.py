@@ -44,6 +44,20 @@ Derived expectations:
     turn by up to L0 and l1); plan.yaml records each iteration's
     schedule and the clearance (+inf written as .inf: no obstacles); the
     final link is the converged run.
+ (c) out of the plane: plan.curvature = kappa, T = (18, 2, 1) mm, 1 mm off
+    the bevel's plane towards z = x × y. The bicycle model in 3-D: the first
+    arc (in the plane) ends at P(d1) with heading t; a half turn of the base
+    by pi + theta (right-handed about the heading) points the bevel along
+    n = -m cos(theta) - z sin(theta) (m: the heading's left normal in the
+    plane, towards the first arc's centre), so the second arc of radius R
+    lies in the plane through P spanned by t and n, and reaches T when T's
+    coordinates u = (T - P).t, v = |T - P - u t| in it satisfy
+        u^2 + v^2 = 2 R v   (the circle through P tangent to t),
+    solved for d1 by bisection (the smaller root), then
+        theta = atan2(-Tz, -(T - P).m),  D = d1 + R atan2(u, R - v).
+    The planner's first iterate has one turn at d1, depth D and roll theta
+    (to 1e-9), and it converges in one run within tol_a of this case (the
+    same lags, in the tilted plane of the second arc).
 """
 import math
 import os
@@ -88,6 +102,33 @@ def one_turn(kappa, X, Y):
     cx, cy = 2 * R * math.sin(phi), R - 2 * R * math.cos(phi)
     sweep = (phi + math.pi / 2 - math.atan2(Y - cy, X - cx)) % (2 * math.pi)
     return R * phi, R * (phi + sweep)
+
+
+def one_turn_rolled(kappa, X, Y, Z):
+    """The bicycle model's one-turn path to (X, Y, Z) in 3-D: turn depth,
+    depth and roll theta (the turn's spin beyond pi)."""
+    R = 1.0 / kappa
+
+    def g(d):
+        h = d / R
+        P = np.array([R * math.sin(h), R * (1 - math.cos(h)), 0.0])
+        t = np.array([math.cos(h), math.sin(h), 0.0])
+        w = np.array([X, Y, Z]) - P
+        u = w @ t
+        v = np.linalg.norm(w - u * t)
+        return w @ w - 2 * R * v, t, w, u, v
+
+    ds = np.linspace(1e-9, math.hypot(X, Y), 4001)
+    gs = [g(d)[0] for d in ds]
+    i = next(i for i in range(len(ds) - 1) if gs[i] * gs[i + 1] <= 0)
+    lo, hi = ds[i], ds[i + 1]
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (lo, mid) if g(lo)[0] * g(mid)[0] <= 0 else (mid, hi)
+    d = 0.5 * (lo + hi)
+    _, t, w, u, v = g(d)
+    m = np.array([-t[1], t[0], 0.0])
+    return d, d + R * (math.atan2(u, R - v) % (2 * math.pi)), math.atan2(-Z, -(w @ m))
 
 
 def read_plan(path):
@@ -146,6 +187,29 @@ if doc is not None:
     if not (doc["converged"] and doc["runs"] == 1):
         fail("(a) expected convergence in one run (miss <= %.4g m), got runs %d, converged %s, "
              "miss %.4g m" % (tol_a, doc["runs"], doc["converged"], it["miss"]))
+
+# (c) out of the plane: the roll
+Tc = (0.018, 0.002, 0.001)
+d1, D, theta = one_turn_rolled(kappa, *Tc)
+tol_c = kappa * L0 * D + 2 * math.tan(math.radians(PSI)) * (D - d1)
+doc, out = plan("rolled", ENTRY + list(Tc), ["plan.curvature=%r" % kappa],
+                ["--tolerance", repr(tol_c), "--max-runs", "3"])
+if doc is not None:
+    it = doc["iterations"][0]
+    sch = it["schedule"]
+    say("(c) closed form: turn %.6f mm, depth %.6f mm, roll %.6f deg; planner's first: %s mm, "
+        "%.6f mm, %.6f deg; miss %.4g mm (%s mm; tolerance %.4g mm), runs %d" %
+        (1e3 * d1, 1e3 * D, math.degrees(theta), [1e3 * x for x in sch["turns"]],
+         1e3 * sch["depth"], math.degrees(sch["roll"]), 1e3 * it["miss"],
+         ["%.3g" % (1e3 * x) for x in it["miss_vector"]], 1e3 * tol_c, doc["runs"]))
+    if (len(sch["turns"]) != 1 or abs(sch["turns"][0] - d1) > 1e-9 or abs(sch["depth"] - D) > 1e-9
+            or abs(sch["roll"] - theta) > 1e-9):
+        fail("(c) first iterate: turns %s depth %r roll %r, expected [%r], %r and %r (the 3-D "
+             "bicycle closed form; tolerance 1e-9)" % (sch["turns"], sch["depth"], sch["roll"],
+                                                       d1, D, theta))
+    if not (doc["converged"] and doc["runs"] == 1):
+        fail("(c) expected convergence in one run (miss <= %.4g m), got runs %d, converged %s, "
+             "miss %.4g m" % (tol_c, doc["runs"], doc["converged"], it["miss"]))
 
 # (b) kappa estimated and fitted: the turn depth against the closed form
 Tb = (0.018, 0.003)

@@ -767,7 +767,7 @@ static void test_stick_slide(void) {
   trial(&F, vmax, NH_ROW_BILATERAL, &o);
   double c = 0.5 * fabs(o.lambda[2]) - mu * hypot(o.lambda[0], o.lambda[1]);
   CHECK(c > 0.0, "lateral force too large for the sweep: c = %g", c);
-  F.rows.law[2] = (nh_row_law){NH_ROW_FRICTION, 0, 1, mu, c, -1, 0.0, 0};
+  F.rows.law[2] = (nh_row_law){NH_ROW_FRICTION, 0, 1, mu, c, -1, 0.0, 0, 0};
 
   /* Predicted switch: the stick solution's margin crosses 0. */
   double lo = 0.0, hi = vmax;

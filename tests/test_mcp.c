@@ -3,7 +3,10 @@
  *  2. unilateral LCPs (m = 1..6, random SPD W) equal the solution found by
  *     enumerating the active sets;
  *  3. one normal + one tangential row: stick → slide exactly at the Coulomb
- *     bound, continuous there (diagonal and coupled W);
+ *     bound, continuous there (diagonal and coupled W); a one-sided row
+ *     (λ_t ∈ [0, bound]) the same where the two-sided λ_t ≥ 0, and where it
+ *     would be negative λ_t = 0, λ_n = −r_n / W_nn (the normal alone) with
+ *     w_t ≥ 0 (the complementarity of the lower side);
  *  4. a stiff needle block (×1e6) coupled to soft tissue (×1e-6) converges in
  *     the same sweeps and to the same relative accuracy as the unscaled one;
  *  5. a warm start at the solution costs 0-1 sweeps;
@@ -28,7 +31,7 @@
 #define MAXM 64
 
 static nh_row_law law(nh_row_kind kind) {
-  nh_row_law l = {kind, -1, -1, 0.0, 0.0, -1, 0.0, 0};
+  nh_row_law l = {kind, -1, -1, 0.0, 0.0, -1, 0.0, 0, 0};
   return l;
 }
 
@@ -138,11 +141,11 @@ static void test_unilateral(void) {
 
 /* One normal row (0, unilateral) and one tangential row (1, friction on 0):
  * sweep r_t through the stick-slide switch. */
-static void friction_case(double Wnn, double Wnt, double Wtt, double mu, double c) {
+static void friction_case(double Wnn, double Wnt, double Wtt, double mu, double c, int one_sided) {
   double W[4] = {Wnn, Wnt, Wnt, Wtt}, det = Wnn * Wtt - Wnt * Wnt;
   double rn = -1.0;
   nh_row_law laws[2] = {law(NH_ROW_UNILATERAL), law(NH_ROW_FRICTION)};
-  laws[1].normal = 0, laws[1].mu = mu, laws[1].threshold = c;
+  laws[1].normal = 0, laws[1].mu = mu, laws[1].threshold = c, laws[1].one_sided = one_sided;
   /* Stick: λ = −W⁻¹ r = a + b r_t. */
   double an = -(Wtt * rn) / det, at = -(-Wnt * rn) / det;
   double bn = -(-Wnt) / det, bt = -(Wnn) / det;
@@ -159,6 +162,13 @@ static void friction_case(double Wnn, double Wnt, double Wtt, double mu, double 
       double stick_n = an + bn * rt, stick_t = at + bt * rt;
       int stick = fabs(stick_t) <= mu * stick_n + c;
       double en, et;
+      if (one_sided && stick_t < 0.0) {
+        /* it would pull: λ_t = 0, the normal alone (w_n = 0), and w_t >= 0 */
+        CHECK_CLOSE(lam[0], -rn / Wnn, 1e-10, "one-sided: normal force");
+        CHECK_CLOSE(lam[1], 0.0, 1e-10, "one-sided: no pull");
+        CHECK(w[1] >= -1e-10, "one-sided: w_t = %g < 0 at lambda_t = 0 (r_t = %g)", w[1], rt);
+        continue;
+      }
       if (stick) {
         en = stick_n, et = stick_t;
       } else {
@@ -186,10 +196,12 @@ static void friction_case(double Wnn, double Wnt, double Wtt, double mu, double 
 }
 
 static void test_friction(void) {
-  friction_case(2.0, 0.0, 0.5, 0.3, 0.0);
-  friction_case(2.0, 0.0, 0.5, 0.3, 0.2);
-  friction_case(2.0, 0.4, 0.5, 0.3, 0.1);
-  friction_case(1.0, -0.3, 3.0, 0.5, 0.05);
+  for (int one_sided = 0; one_sided < 2; one_sided++) {
+    friction_case(2.0, 0.0, 0.5, 0.3, 0.0, one_sided);
+    friction_case(2.0, 0.0, 0.5, 0.3, 0.2, one_sided);
+    friction_case(2.0, 0.4, 0.5, 0.3, 0.1, one_sided);
+    friction_case(1.0, -0.3, 3.0, 0.5, 0.05, one_sided);
+  }
 }
 
 /* A needle block (rows 0..nn-1) and a tissue block, bilateral, unilateral and

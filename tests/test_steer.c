@@ -28,8 +28,8 @@
  *     model with the same schedule (golden section to 1e-7 relative);
  *  6. the planner's iteration (trust.c), driven as steer.c drives it (step
  *     from the best point, radius judged by each step's merit):
- *     (a) on affine F(q) = A (q − q*) (A = I + E, |E_ij| <= 0.3, n = 2 and
- *     3, no radius limit, no secant skipped) every secant equation is
+ *     (a) on affine F(q) = A (q − q*) (A = I + E, |E_ij| <= 0.3, n = 2, 3
+ *     and 4, no radius limit, no secant skipped) every secant equation is
  *     exact, so once n
  *     secants in general position are in J, J = A: point n + 2 is the root
  *     (to 1e-9 of |F_1|; 50 random A, q*);
@@ -46,7 +46,14 @@
  *     most half as long and starts from the same best; the radius (first
  *     |F_1|) reaches 2 mm after at most ⌈log2(|F_1| / 2 mm)⌉ + 1 failures,
  *     the steps then cover the ≤ 2|F_1| of depth at >= 1 mm each, and (b)'s
- *     end game follows: converged (1e-6 m) within 30 points. */
+ *     end game follows: converged (1e-6 m) within 30 points.
+ *  7. the roll (nh_bike_end3): a frame (heading, bevel) carried along the
+ *     plan in 3-D, each arc bending towards the bevel, each half turn
+ *     spinning it about the heading by π (the last by π + θ), ends where
+ *     the closed form (the last arc turned by θ about the tangent at the
+ *     last turn) says, to 1e-12 m (40 random plans, |θ| <= 1); ∂z/∂θ at θ
+ *     = 0 by central differences equals the lever (the end's offset from
+ *     that tangent in the plane). */
 #include "check.h"
 #include "mesh/mesh.h"
 #include "plan/plan_impl.h"
@@ -222,11 +229,53 @@ static void test_fit(void) {
   for (int j = 0; j < 3; j++) CHECK_CLOSE(k[j], kappa[j], 1e-7 * kappa[j], "fitted curvature");
 }
 
+/* 7. The roll: the tip's frame (heading t, bevel n) carried along in 3-D,
+ * each arc bending towards n, each turn spinning n about t (π, the last
+ * π + θ), ends where nh_bike_end3 says; and ∂z/∂θ at θ = 0 is the lever. */
+static void frame_arc(double p[3], double t[3], double n[3], double k, double l) {
+  const double c = cos(k * l), s = sin(k * l);
+  for (int i = 0; i < 3; i++) {
+    double ti = t[i], ni = n[i];
+    p[i] += (fabs(k) > 0 ? s / k : l) * ti + (fabs(k) > 0 ? (1 - c) / k : 0) * ni;
+    t[i] = c * ti + s * ni, n[i] = -s * ti + c * ni;
+  }
+}
+
+static void frame_spin(const double t[3], double n[3], double a) {
+  double b[3] = {t[1] * n[2] - t[2] * n[1], t[2] * n[0] - t[0] * n[2], t[0] * n[1] - t[1] * n[0]};
+  for (int i = 0; i < 3; i++) n[i] = cos(a) * n[i] + sin(a) * b[i];
+}
+
+static void test_roll(void) {
+  srand(7);
+  for (int trial = 0; trial < 40; trial++) {
+    nh_bike_plan p = {.n = 2 + trial % 2, .sign0 = trial % 4 < 2 ? 1 : -1};
+    double kappa[3];
+    for (int j = 0; j < 3; j++) kappa[j] = urand(5, 40), p.len[j] = urand(0.005, 0.05);
+    p.roll = urand(-1, 1);
+    double x[3] = {0, 0, 0}, t[3] = {1, 0, 0}, n[3] = {0, 1, 0}, end[3];
+    if (p.sign0 < 0) frame_spin(t, n, M_PI);
+    for (int j = 0; j < p.n; j++) {
+      frame_arc(x, t, n, kappa[j], p.len[j]);
+      if (j + 1 < p.n) frame_spin(t, n, M_PI + (j + 2 == p.n ? p.roll : 0));
+    }
+    nh_bike_end3(&p, kappa, end);
+    for (int i = 0; i < 3; i++) CHECK_CLOSE(end[i], x[i], 1e-12, "rolled end (3-D frame)");
+    double turn[2], h, along, lever, e0[3], e1[3];
+    CHECK(nh_bike_roll_lever(&p, kappa, turn, &h, &along, &lever) == 1, "no lever");
+    p.roll = 1e-6;
+    nh_bike_end3(&p, kappa, e1);
+    p.roll = -1e-6;
+    nh_bike_end3(&p, kappa, e0);
+    CHECK_CLOSE((e1[2] - e0[2]) / 2e-6, lever, 1e-9, "dz/droll at 0 against the lever");
+  }
+}
+
 /* The synthetic planner's problem of test 6. */
 typedef struct {
   int kind; /* 0 affine, 1 bicycle */
   int n;    /* unknowns */
-  double A[9], q0[3];
+  double A[NH_TRUST_Q * NH_TRUST_Q], q0[NH_TRUST_Q];
   nh_bike_frame f; /* the model (bicycle) */
   double kappa[3]; /* the true curvatures */
   double T[2];
@@ -244,9 +293,9 @@ static int synth_plan(const synth *S, const double *q, nh_bike_plan *p) {
 /* F(q); −1: no plan (bicycle). */
 static int synth_F(const synth *S, const double *q, double *F) {
   if (S->kind == 0) {
-    for (int i = 0; i < 3; i++) {
+    for (int i = 0; i < NH_TRUST_Q; i++) {
       F[i] = 0;
-      for (int j = 0; j < S->n; j++) F[i] += S->A[3 * i + j] * (q[j] - S->q0[j]);
+      for (int j = 0; j < S->n; j++) F[i] += S->A[NH_TRUST_Q * i + j] * (q[j] - S->q0[j]);
     }
     return 0;
   }
@@ -254,15 +303,15 @@ static int synth_F(const synth *S, const double *q, double *F) {
   if (synth_plan(S, q, &p)) return -1;
   double end[2];
   nh_bike_end(&p, S->kappa, end, NULL);
-  F[0] = end[0] - S->T[0], F[1] = end[1] - S->T[1], F[2] = 0;
+  F[0] = end[0] - S->T[0], F[1] = end[1] - S->T[1], F[2] = F[3] = 0;
   return 0;
 }
 
 static double synth_length(void *ctx, const double *qb, const double *d, double t) {
   synth *S = ctx;
-  double q[3] = {0};
-  for (int i = 0; i < S->n; i++) q[i] = qb[i] + t * d[i];
-  if (S->kind == 0) return t * sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+  double q[NH_TRUST_Q] = {0}, dd = 0;
+  for (int i = 0; i < S->n; i++) q[i] = qb[i] + t * d[i], dd += d[i] * d[i];
+  if (S->kind == 0) return t * sqrt(dd);
   nh_bike_plan p;
   return synth_plan(S, q, &p) ? INFINITY : nh_bike_depth_change(&p, &S->from);
 }
@@ -272,19 +321,22 @@ static double synth_length(void *ctx, const double *qb, const double *d, double 
 static int synth_run(synth *S, const double *q1, double radius, double tol, int max,
                      const char *what) {
   enum { M = 40 };
-  double Q[3 * M] = {0}, F[3 * M] = {0}, merit[M], lens[M];
+  enum { S4 = NH_TRUST_Q };
+  double Q[S4 * M] = {0}, F[S4 * M] = {0}, merit[M], lens[M];
   int ok[M] = {0}, best = -1, from[M];
   nh_trust tr;
   nh_trust_init(&tr, radius, 0, 2 * radius);
   if (S->kind == 0) tr.skip = 1e-6; /* every secant (exact) */
-  memcpy(Q, q1, 3 * sizeof(double));
+  memcpy(Q, q1, S4 * sizeof(double));
   if (max > M) max = M;
   for (int k = 0; k < max; k++) {
-    double *q = Q + 3 * k, *Fk = F + 3 * k;
+    double *q = Q + S4 * k, *Fk = F + S4 * k;
     int failed = synth_F(S, q, Fk) != 0;
     if (!failed && S->fail_len > 0 && k > 0 && lens[k - 1] > S->fail_len) failed = 1;
     ok[k] = !failed;
-    merit[k] = failed ? INFINITY : sqrt(Fk[0] * Fk[0] + Fk[1] * Fk[1] + Fk[2] * Fk[2]);
+    double ff = 0;
+    for (int i = 0; i < S4; i++) ff += Fk[i] * Fk[i];
+    merit[k] = failed ? INFINITY : sqrt(ff);
     if (!failed && merit[k] <= tol) return k + 1;
     const double merit_b = best >= 0 ? merit[best] : INFINITY;
     if (k > 0) nh_trust_judge(&tr, merit_b, merit[k]);
@@ -295,9 +347,9 @@ static int synth_run(synth *S, const double *q1, double radius, double tol, int 
       /* after a failure: from the same best, at most half as long */
       CHECK(from[k - 1] == best, "%s: point %d failed and the best moved", what, k + 1);
     }
-    if (S->kind == 1) synth_plan(S, Q + 3 * best, &S->from);
+    if (S->kind == 1) synth_plan(S, Q + S4 * best, &S->from);
     if (k + 1 >= max) break;
-    if (nh_trust_step(&tr, S->n, k + 1, Q, F, ok, best, synth_length, S, Q + 3 * (k + 1))) {
+    if (nh_trust_step(&tr, S->n, k + 1, Q, F, ok, best, synth_length, S, Q + S4 * (k + 1))) {
       CHECK(0, "%s: no step from point %d", what, best + 1);
       return 0;
     }
@@ -314,13 +366,15 @@ static int synth_run(synth *S, const double *q1, double radius, double tol, int 
 static void test_trust(void) {
   srand(11);
   for (int trial = 0; trial < 50; trial++) {
-    synth S = {.kind = 0, .n = 2 + trial % 2};
-    for (int i = 0; i < 9; i++) S.A[i] = (i % 4 == 0 ? 1.0 : 0.0) + urand(-0.3, 0.3);
-    for (int i = 0; i < 3; i++) S.q0[i] = i < S.n ? urand(-1, 1) : 0;
-    double q1[3] = {0}, F1[3];
+    synth S = {.kind = 0, .n = 2 + trial % 3};
+    for (int i = 0; i < NH_TRUST_Q * NH_TRUST_Q; i++)
+      S.A[i] = (i % (NH_TRUST_Q + 1) == 0 ? 1.0 : 0.0) + urand(-0.3, 0.3);
+    for (int i = 0; i < NH_TRUST_Q; i++) S.q0[i] = i < S.n ? urand(-1, 1) : 0;
+    double q1[NH_TRUST_Q] = {0}, F1[NH_TRUST_Q], ff = 0;
     for (int i = 0; i < S.n; i++) q1[i] = urand(-1, 1);
     synth_F(&S, q1, F1);
-    const double tol = 1e-9 * sqrt(F1[0] * F1[0] + F1[1] * F1[1] + F1[2] * F1[2]);
+    for (int i = 0; i < NH_TRUST_Q; i++) ff += F1[i] * F1[i];
+    const double tol = 1e-9 * sqrt(ff);
     int at = synth_run(&S, q1, INFINITY, tol, S.n + 2, "affine");
     CHECK(at > 0 && at <= S.n + 2,
           "affine F, n = %d: root expected at point %d, got %d (0: not "
@@ -331,7 +385,7 @@ static void test_trust(void) {
   synth S = {.kind = 1, .n = 2, .T = {0.1, 0.01}, .kappa = {34.5, 27, 36}};
   for (int j = 0; j < 3; j++) S.f.kappa[j] = 30;
   S.f.ex[0] = 1, S.f.ey[1] = 1;
-  double q1[3] = {S.T[0], S.T[1], 0}, F1[3];
+  double q1[NH_TRUST_Q] = {S.T[0], S.T[1], 0, 0}, F1[NH_TRUST_Q];
   CHECK(synth_F(&S, q1, F1) == 0, "bicycle: no plan to T");
   CHECK(synth_plan(&S, q1, &S.from) == 0, "bicycle: no plan to T");
   S.f.side = S.from.sign0 < 0 ? -1 : 1, S.f.turns = S.from.n - 1; /* as steer.c: one class */
@@ -354,5 +408,6 @@ int main(void) {
   test_label();
   test_fit();
   test_trust();
+  test_roll();
   return nh_test_failures ? 1 : 0;
 }

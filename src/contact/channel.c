@@ -22,7 +22,9 @@
  *                torsion_per_length × spacing × τ: the tissue resists a turn
  *                of the base, which reaches the tip with a lag;
  *   tip          the same at the front with bound μ |(λ1, λ2)| + cutting
- *                force × τ and g = t · (x_P − x_tip).
+ *                force × τ and g = t · (x_P − x_tip), the axial row
+ *                one-sided (λ ≥ 0: it resists the tip's advance, it does
+ *                not pull a tip moving back; docs/interaction.md, "Tip").
  * τ is the rows' time scale: the step h (dynamic: λ are impulses), or 1
  * (quasi-static: λ are forces); thresholds are force × τ, forces λ / τ.
  * A bevel tip (tools.N.bevel, Chentanez et al. 2009 §3.5) cuts off its
@@ -129,7 +131,7 @@ static int nh_torsion_row(nh_rows *rows, const nh_tool *tl, const nh_cpoint *p, 
   double *J = rows->J + 36 * r; /* row-major 3 x 12: (δx1, δw1, δx2, δw2) -> ω(s) */
   for (int i = 0; i < 3; i++) J[12 * i + 3 + i] = 1.0 - xi, J[12 * i + 9 + i] = xi;
   rows->lambda[r] = p->lam[3];
-  rows->law[r] = (nh_row_law){NH_ROW_FRICTION, -1, -1, 0.0, threshold, -1, 0.0, 1};
+  rows->law[r] = (nh_row_law){NH_ROW_FRICTION, -1, -1, 0.0, threshold, -1, 0.0, 1, 0};
   return r;
 }
 
@@ -182,10 +184,10 @@ static int nh_tie_rows(nh_contact *c, const nh_mesh *m, const double *u, nh_cpoi
       rows->gap[r] = s - p->s0;
     }
     rows->lambda[r] = p->lam[q];
-    if (q == 2)
+    if (q == 2) /* the tip's axial row resists advance, it cannot pull: one-sided */
       rows->law[r] = (nh_row_law){NH_ROW_FRICTION,           first,     first + 1,
                                   tl->spec->friction,        threshold, -1,
-                                  tl->spec->friction_static, p->slid};
+                                  tl->spec->friction_static, p->slid,   tip};
   }
   if (torsion > 0.0 && nh_torsion_row(rows, tl, p, e, xi, t, torsion) < 0) return -1;
   p->row = first, p->tool = k, p->s = s;

@@ -112,10 +112,10 @@ int nh_puncture_rows(nh_contact *c, nh_group *G, const nh_mesh *m, const double 
     rows->lambda[r] = G->entry.lam[q];
     /* The normal yields at the puncture force (Eq. 6 within the step). */
     rows->law[r] =
-        q == 0
-            ? (nh_row_law){NH_ROW_UNILATERAL, -1, -1, 0.0, sp->puncture_force * h, -1, 0.0, 0}
-            : (nh_row_law){NH_ROW_FRICTION,  G->entry_row,        -1,           sp->friction, 0.0,
-                           G->entry_row + 1, sp->friction_static, G->entry.slid};
+        q == 0 ? (nh_row_law){NH_ROW_UNILATERAL, -1, -1, 0.0, sp->puncture_force * h, -1, 0.0, 0, 0}
+               : (nh_row_law){NH_ROW_FRICTION,     G->entry_row,  -1,
+                              sp->friction,        0.0,           G->entry_row + 1,
+                              sp->friction_static, G->entry.slid, 0};
   }
   return NH_OK;
 }

@@ -586,7 +586,7 @@ int nh_skull_rows(nh_skull *s, const nh_mesh *m, const double *u, const double *
     for (int k = 0; k < 3; k++) rows->dir[3 * r + k] = -nrm[k];
     rows->tool[r] = -1, rows->elem[r] = -1;
     rows->gap[r] = g;
-    rows->law[r] = (nh_row_law){NH_ROW_UNILATERAL, -1, -1, 0.0, 0.0, -1, 0.0, 0};
+    rows->law[r] = (nh_row_law){NH_ROW_UNILATERAL, -1, -1, 0.0, 0.0, -1, 0.0, 0, 0};
     rows->lambda[r] = p->lam;
     p->row = r;
   }

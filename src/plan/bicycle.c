@@ -33,7 +33,17 @@
  * the feasible one of least excursion chosen, and, if its neighbour of
  * smaller excursion is infeasible, the first arc bisected between them to
  * clearance = c* exactly: the plan then passes the obstacle at c*, and it
- * moves smoothly with T and c* (what Broyden's method in steer.c needs). */
+ * moves smoothly with T and c* (what Broyden's method in steer.c needs).
+ *
+ * Out of the plane (the roll): the last turn spins the base by π + θ
+ * instead of π. A spin about the tip's heading commutes with the half turns
+ * after it, so the whole path after the turn point P turns rigidly by θ
+ * about the tangent line there (right-handed about the heading t). With m
+ * the heading's left normal in the plane and e₀ the planar end (θ = 0),
+ * u = (e₀ − P)·t and ℓ = (e₀ − P)·m:
+ *     e(θ) = P + u t + ℓ (cos θ m + sin θ e_z),   ∂e_z/∂θ = ℓ cos θ,
+ * so a roll moves the end out of the plane by ℓ sin θ and into it only by
+ * ℓ (1 − cos θ) (nh_bike_end3; docs/cases.md, "Out of the plane"). */
 #include "plan/plan_impl.h"
 
 #include <math.h>
@@ -81,6 +91,30 @@ static double nh_bike_length(const nh_bike_plan *p) {
 
 void nh_bike_end(const nh_bike_plan *p, const double *kappa, double end[2], double *heading) {
   nh_bike_point(p, kappa, nh_bike_length(p), end, heading);
+}
+
+int nh_bike_roll_lever(const nh_bike_plan *p, const double *kappa, double turn[2], double *heading,
+                       double *along, double *lever) {
+  if (p->n < 2) return 0;
+  double end[2], s = nh_bike_length(p) - p->len[p->n - 1];
+  nh_bike_point(p, kappa, s, turn, heading);
+  nh_bike_end(p, kappa, end, NULL);
+  const double c = cos(*heading), sn = sin(*heading), dx = end[0] - turn[0], dy = end[1] - turn[1];
+  *along = c * dx + sn * dy, *lever = -sn * dx + c * dy;
+  return 1;
+}
+
+void nh_bike_end3(const nh_bike_plan *p, const double *kappa, double end[3]) {
+  double turn[2], h, along, lever;
+  if (!nh_bike_roll_lever(p, kappa, turn, &h, &along, &lever)) {
+    nh_bike_end(p, kappa, end, NULL);
+    end[2] = 0;
+    return;
+  }
+  const double m = lever * cos(p->roll);
+  end[0] = turn[0] + along * cos(h) - m * sin(h);
+  end[1] = turn[1] + along * sin(h) + m * cos(h);
+  end[2] = lever * sin(p->roll);
 }
 
 int nh_bike_finish(const double start[2], double heading, double sign, double kappa_a,

@@ -37,6 +37,8 @@ typedef struct {
   int n;                        /* arcs (1 + turns) */
   double sign0;                 /* σ_0: +1 the bevel's side at t = 0, −1 after a turn at 0 */
   double len[NH_BIKE_MAX_ARCS]; /* ℓ_j, m */
+  double roll; /* θ: the last turn spins the base by π + θ (right-handed about the heading),
+                  so the last arc turns by θ about the tangent there, out of the plane */
 } nh_bike_plan;
 
 /* End point (x, y) and heading of a plan with the curvatures κ_j of its
@@ -46,6 +48,18 @@ void nh_bike_end(const nh_bike_plan *p, const double *kappa, double end[2], doub
  * length) and, if not NULL, the heading there. */
 void nh_bike_point(const nh_bike_plan *p, const double *kappa, double s, double xy[2],
                    double *heading);
+/* The roll's lever: the plan's last turn (before its last arc, n >= 2) at
+ * point turn[] with heading h, and the plan's planar end e (roll 0):
+ * along = (e − turn)·t, lever = (e − turn)·m, t = (cos h, sin h) and m =
+ * (−sin h, cos h) its left normal. A roll θ turns the last arc about the
+ * tangent line, so the end is turn + along t + lever (cos θ m + sin θ e_z):
+ * ∂z_end/∂θ = lever cos θ (docs/cases.md, "Out of the plane"). Returns 0
+ * when the plan has no turn (n = 1: no roll), else 1. */
+int nh_bike_roll_lever(const nh_bike_plan *p, const double *kappa, double turn[2], double *heading,
+                       double *along, double *lever);
+/* End point of a plan with its roll: x, y in the plane, z along e_z = e_x ×
+ * e_y (the formula above; the planar end when n = 1). */
+void nh_bike_end3(const nh_bike_plan *p, const double *kappa, double end[3]);
 /* The two-arc finish: from (x0, y0) with heading θ0, an arc of curvature
  * σκ_a then one of −σκ_b that ends at `target`; their lengths in len[2],
  * the first the shorter of the two solutions. 0 on success, −1 when the
@@ -102,7 +116,7 @@ void nh_bike_fit(const nh_bike_plan *p, int n, const double *xy, const double *s
 double nh_bike_depth_change(const nh_bike_plan *a, const nh_bike_plan *b);
 
 /* ---- trust.c: Broyden's method in a trust region (the theory at its top) ---- */
-enum { NH_TRUST_Q = 3, NH_TRUST_MAX_POINTS = 256 };
+enum { NH_TRUST_Q = 4, NH_TRUST_MAX_POINTS = 256 };
 typedef struct {
   double radius, radius_min, radius_max; /* Δ and its bounds (the caller's length unit) */
   double J[NH_TRUST_Q * NH_TRUST_Q];     /* the last step's Jacobian */
@@ -115,7 +129,7 @@ typedef struct {
 /* The caller's length of the step q_b + t d (+inf where it has none). */
 typedef double (*nh_trust_length)(void *ctx, const double *qb, const double *d, double t);
 void nh_trust_init(nh_trust *tr, double radius, double radius_min, double radius_max);
-/* J = I updated with the secants of points q[3 i], residuals F[3 i] (ok[i]:
+/* J = I updated with the secants of points q[NH_TRUST_Q i], residuals F[NH_TRUST_Q i] (ok[i]:
  * it has one) against point `best`, nearest first (n unknowns used). */
 void nh_trust_jacobian(int n, int m, const double *q, const double *F, const int *ok, int best,
                        double skip, double J[NH_TRUST_Q * NH_TRUST_Q]);

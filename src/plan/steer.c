@@ -15,9 +15,21 @@
  * clearance). This change of variables is the bicycle model's Jacobian: in
  * the model's limit (a tissue much stiffer than the needle, κ right) a run
  * ends where its q says, so the residual
- *     F(q) = (miss along x, miss along y, measured clearance − c_goal)
+ *     F(q) = (miss along x, miss along y, measured clearance − c_goal, miss along z)
  * is q − (T, c_goal), its Jacobian is I, and the first iterate, the bicycle
  * model's solution q₀ = (T, c_goal), is on the target: one run.
+ *
+ * Out of the plane: the last half turn spins the base by π + θ, which turns
+ * the last arc about the tangent at that turn by θ (bicycle.c), so the
+ * virtual target a has a z (along e_x × e_y) too: q = (a_x, a_y, c*, a_z),
+ * F gains the miss along z, and the kinematic planner maps a to the planar
+ * plan ending at a' and the roll θ = atan(a_z / ℓ) (ℓ: a's offset in the
+ * plane from the last turn's tangent, ∂z/∂θ = ℓ at θ = 0), a' the point the
+ * rotation carries to a; a run's realized schedule maps back through the
+ * same rotation, so J = I holds for z as for x and y in the model's limit.
+ * A target off the bevel's plane is reached this way; in a tissue that
+ * pushes the tip out of the plane (friction, the mesh's asymmetry), the
+ * roll corrects that part of the miss, which half turns in the plane cannot.
  *
  * The model learns. After every round the curvature of each arc is fitted
  * to the best run's tip path (nh_bike_fit: in a soft gel the needle's path
@@ -32,7 +44,8 @@
  * Broyden with the secants of every run that has a residual (nearest b
  * first, orthogonalised so that all these secant equations hold), t ≤ 1
  * the largest fraction whose schedule changes no depth (turns, end) of b's
- * by more than the radius Δ; the candidate's schedule is b's (as it ran)
+ * (or the end's z, |Δa_z|, the roll's effect) by more than the radius Δ;
+ * the candidate's schedule is b's (as it ran)
  * moved by the model's change from its schedule at q_b to that at q. Δ starts at the first run's
  * miss, halves (to half the step) after a step that gained less than a quarter of what the linear
  * model predicts, or whose simulation failed (a constraint solve that stalls, cells inverted: exit
@@ -57,7 +70,7 @@
  *
  * Rounds: with --workers N, each round runs N candidates at once
  * (runs.c): the Broyden step and N − 1 probes at the step plus 2 ×
- * tolerance along one coordinate of q each, which give J more secants per
+ * tolerance along one unknown of q each, which give J more secants per
  * round.
  *
  * Torsion: with interaction.torsion_per_length τ the tip lags the base; a
@@ -77,12 +90,12 @@
 #include <string.h>
 #include <unistd.h>
 
-enum { NH_Q = NH_TRUST_Q }; /* a_x, a_y, c* */
+enum { NH_Q = NH_TRUST_Q }; /* a_x, a_y, c*, a_z */
 
 /* One run of the plan. */
 typedef struct {
   int round, probe;
-  double q[NH_Q];        /* the candidate's q (a in the plane, c*) */
+  double q[NH_Q];        /* the candidate's q (a in the plane, c*, a's z) */
   nh_bike_plan plan;     /* the schedule it ran (model lengths) */
   nh_bike_plan realized; /* the one it realized (depths read back) */
   double delta;          /* the depth lag its base travel allowed for */
@@ -123,9 +136,17 @@ static void nh_to_plane(const nh_steer *P, const double x[3], double xy[2]) {
   xy[0] = dot3(d, P->frame.ex), xy[1] = dot3(d, P->frame.ey);
 }
 
-static void nh_to_world(const nh_steer *P, const double xy[2], double x[3]) {
+/* World point of q's virtual target (its plane coordinates and its z, q[3]). */
+static void nh_to_world(const nh_steer *P, const double q[NH_Q], double x[3]) {
   for (int k = 0; k < 3; k++)
-    x[k] = P->frame.entry[k] + xy[0] * P->frame.ex[k] + xy[1] * P->frame.ey[k];
+    x[k] = P->frame.entry[k] + q[0] * P->frame.ex[k] + q[1] * P->frame.ey[k] + q[3] * P->ez[k];
+}
+
+/* The components of q the iteration solves for, in its order: a_x, a_y, a_z,
+ * then c* when the clearance equation is on. Returns their number. */
+static int nh_steer_unknowns(const nh_steer *P, int idx[NH_Q]) {
+  idx[0] = 0, idx[1] = 1, idx[2] = 3, idx[3] = 2;
+  return P->active ? 4 : 3;
 }
 
 /* The steady twist lag of a straight needle with inserted length L. */
@@ -232,8 +253,8 @@ static int nh_steer_candidate(const nh_steer *P, int tool, nh_steer_run *r, nh_c
       done = travel;
       NH_SEG("%s{until: %.17g, speed: %.17g}", seg++ ? ", " : "", t, P->speed);
     }
-    if (j + 1 < p->n) { /* a half turn, the lag of the channel made up for */
-      double lag = nh_lag(P, depth), angle = NH_PI + lag - lag_prev;
+    if (j + 1 < p->n) { /* a half turn, the lag of the channel made up for; the last one rolls */
+      double lag = nh_lag(P, depth), angle = NH_PI + lag - lag_prev + (j + 2 == p->n ? p->roll : 0);
       lag_prev = lag;
       r->turn_angle[j + (p->sign0 < 0)] = angle;
       t += P->turn_time;
@@ -307,11 +328,15 @@ static int nh_steer_read(const nh_steer *P, nh_steer_run *r, const nh_run_result
 /* q of the realized schedule and the residual, with the current model. */
 static void nh_steer_residual(const nh_steer *P, nh_steer_run *r) {
   if (r->failed) return;
-  nh_bike_end(&r->realized, P->frame.kappa, r->qr, NULL);
+  double end[3];
+  nh_bike_end3(&r->realized, P->frame.kappa, end);
+  r->qr[0] = end[0], r->qr[1] = end[1];
   r->qr[2] = P->active ? nh_bike_clearance(&P->frame, &r->realized) : r->q[2];
+  r->qr[3] = end[2];
   r->F[0] = dot3(r->miss, P->frame.ex);
   r->F[1] = dot3(r->miss, P->frame.ey);
   r->F[2] = P->active ? r->clearance - P->c_goal : 0.0;
+  r->F[3] = dot3(r->miss, P->ez);
 }
 
 /* The model from run r: each arc's curvature fitted to its path, and the
@@ -345,14 +370,34 @@ static int nh_steer_choose(const nh_steer *P, const double q[NH_Q], nh_bike_plan
      in full (clamped at 0, the best run's image and the step's plan both passed at
      0 and the first turn did not move: docs/cases.md) */
   double c_star = P->active ? q[2] : P->c_goal;
-  /* active: the plan that passes at exactly c*, else one that keeps it */
-  if (nh_bike_choose(&P->frame, q, c_star, P->active, &c) == 0 ||
-      (P->active && nh_bike_choose(&P->frame, q, c_star, 0, &c) == 0)) {
-    *plan = c.plan;
-    if (active) *active = c.active;
-    return 0;
+  /* the roll: the planar plan ends at a', the last arc turned by θ about the
+     tangent at the last turn ends at a = (q_x, q_y, q_z): with a's coordinates
+     (u, ℓ) along that tangent and its left normal, θ = atan(q_z / ℓ) and a' =
+     turn + u t + (ℓ / cos θ) m (a rotation keeps the distance from its axis);
+     a' moves the turn, so a fixed point (a' − a is O(θ² ℓ): a few iterations) */
+  double a[2] = {q[0], q[1]};
+  for (int it = 0; it < 50; it++) {
+    /* active: the plan that passes at exactly c*, else one that keeps it */
+    if (nh_bike_choose(&P->frame, a, c_star, P->active, &c) != 0 &&
+        !(P->active && nh_bike_choose(&P->frame, a, c_star, 0, &c) == 0))
+      return -1;
+    double turn[2], h, along, lever;
+    c.plan.roll = 0;
+    if (!nh_bike_roll_lever(&c.plan, P->frame.kappa, turn, &h, &along, &lever)) break;
+    const double ct = cos(h), st = sin(h), dx = q[0] - turn[0], dy = q[1] - turn[1];
+    const double u = ct * dx + st * dy, l = -st * dx + ct * dy, theta = atan(q[3] / l);
+    if (!(fabs(theta) <= NH_PI / 3))
+      return -1; /* a on (near) the tangent line: no roll reaches it */
+    c.plan.roll = theta;
+    const double L = l / cos(theta), b[2] = {turn[0] + u * ct - L * st, turn[1] + u * st + L * ct};
+    const double moved = hypot(b[0] - a[0], b[1] - a[1]);
+    a[0] = b[0], a[1] = b[1];
+    if (moved <= 1e-13) break;
+    if (it == 49) return -1;
   }
-  return -1;
+  *plan = c.plan;
+  if (active) *active = c.active;
+  return 0;
 }
 
 /* The schedule for q; the step from `from` is halved until the kinematic
@@ -384,7 +429,7 @@ static void put_depths(FILE *f, const nh_bike_plan *p) {
     d += p->len[j];
     fprintf(f, "%s%.17g", j ? ", " : "", d);
   }
-  fprintf(f, "], depth: %.17g}", d + p->len[p->n - 1]);
+  fprintf(f, "], depth: %.17g, roll: %.17g}", d + p->len[p->n - 1], p->roll);
 }
 
 /* The model's curvatures as a YAML list. */
@@ -411,7 +456,8 @@ static int nh_steer_write(const char *out, const char *scene_path, const nh_stee
              "# tip path's least distance to an obstacle's surface; aim = the point the\n"
              "# bicycle model's path of the schedule ends at; depths are the tip's in the\n"
              "# tissue (planned; realized: read back at the turns and the end); curvature:\n"
-             "# the model's per arc (first, after one turn, after two), last fitted.\n");
+             "# the model's per arc (first, after one turn, after two), last fitted; roll:\n"
+             "# the last half turn's angle beyond pi (rad, right-handed about the heading).\n");
   fprintf(f, "scene: %s\ntarget: %s\ntool: %s\ntarget_point: ", scene_path, g->name, P->tool->name);
   nh_plan_put_vec(f, g->point);
   fprintf(f, "\nentry: ");
@@ -465,8 +511,8 @@ static void nh_steer_print(const nh_steer_run *r, int k) {
   double d = 0;
   printf("run %d (round %d, %s): turns at", k + 1, r->round + 1, r->probe ? "probe" : "step");
   for (int j = 0; j + 1 < r->plan.n; j++) printf(" %.2f", 1e3 * (d += r->plan.len[j]));
-  printf(" mm%s, depth %.2f mm: ", r->plan.sign0 < 0 ? " (turned at the entry)" : "",
-         1e3 * (d + r->plan.len[r->plan.n - 1]));
+  printf(" mm%s, roll %.3f deg, depth %.2f mm: ", r->plan.sign0 < 0 ? " (turned at the entry)" : "",
+         r->plan.roll * 180 / NH_PI, 1e3 * (d + r->plan.len[r->plan.n - 1]));
   if (r->failed)
     printf("FAILED (%s), %.1f s\n", r->message, r->seconds);
   else
@@ -487,23 +533,35 @@ static void nh_steer_shift(const nh_bike_plan *b, const nh_bike_plan *from, nh_b
     double d = fmax(prev, cb + cp - cf);
     out.len[j] = d - prev, prev = d;
   }
+  out.roll = b->roll + p->roll - from->roll;
   *p = out;
 }
 
 /* The trust region's step length: the largest change of a depth (turns,
- * end) from the best run's schedule. */
+ * end) from the best run's schedule, or of the end's z (the roll's effect,
+ * |Δa_z|), whichever is larger. qb and d hold the unknowns (idx). */
 typedef struct {
   const nh_steer *P;
   nh_bike_plan from;
+  double qb[NH_Q]; /* the best run's q, all components */
+  int n, idx[NH_Q];
 } nh_steer_span;
+
+/* q = the best run's with the unknowns at qb + t d. */
+static void nh_steer_unpack(const nh_steer_span *c, const double *qb, const double *d, double t,
+                            double q[NH_Q]) {
+  memcpy(q, c->qb, sizeof c->qb);
+  for (int k = 0; k < c->n; k++) q[c->idx[k]] = qb[k] + t * d[k];
+  if (!c->P->active) q[2] = c->P->c_goal;
+}
 
 static double nh_steer_length(void *ctx, const double *qb, const double *d, double t) {
   const nh_steer_span *c = ctx;
   double q[NH_Q];
   nh_bike_plan p;
-  for (int i = 0; i < NH_Q; i++) q[i] = qb[i] + t * d[i];
-  if (!c->P->active) q[2] = c->P->c_goal;
-  return nh_steer_choose(c->P, q, &p, NULL) ? INFINITY : nh_bike_depth_change(&p, &c->from);
+  nh_steer_unpack(c, qb, d, t, q);
+  if (nh_steer_choose(c->P, q, &p, NULL)) return INFINITY;
+  return fmax(nh_bike_depth_change(&p, &c->from), fabs(q[3] - c->qb[3]));
 }
 
 /* The next round's q: the trust region's Broyden step from the best run b
@@ -511,29 +569,37 @@ static double nh_steer_length(void *ctx, const double *qb, const double *d, doub
 static int nh_steer_step(const nh_steer *P, nh_trust *tr, const nh_steer_run *runs, int n_runs,
                          int best, double *Q, double *F, int *ok, double q[NH_Q],
                          nh_bike_plan *from) {
-  const int nq = P->active ? 3 : 2;
+  nh_steer_span span = {.P = P, .from = runs[best].realized};
+  span.n = nh_steer_unknowns(P, span.idx);
+  memcpy(span.qb, runs[best].qr, sizeof span.qb);
   for (int i = 0; i < n_runs; i++) {
-    memcpy(Q + NH_Q * i, runs[i].qr, sizeof runs[i].qr);
-    memcpy(F + NH_Q * i, runs[i].F, sizeof runs[i].F);
+    for (int k = 0; k < span.n; k++)
+      Q[NH_Q * i + k] = runs[i].qr[span.idx[k]], F[NH_Q * i + k] = runs[i].F[span.idx[k]];
     ok[i] = !runs[i].failed;
   }
-  nh_steer_span span = {.P = P, .from = runs[best].realized};
   nh_steer_choose(P, runs[best].qr, &span.from, NULL); /* else the realized schedule */
   *from = span.from;
-  if (nh_trust_step(tr, nq, n_runs, Q, F, ok, best, nh_steer_length, &span, q)) return -1;
-  if (!P->active) q[2] = P->c_goal;
+  double step[NH_Q], zero[NH_Q] = {0};
+  if (nh_trust_step(tr, span.n, n_runs, Q, F, ok, best, nh_steer_length, &span, step)) return -1;
+  nh_steer_unpack(&span, step, zero, 0, q);
   if (getenv("NH_PLAN_DEBUG")) {
     for (int i = 0; i < n_runs; i++)
-      fprintf(stderr, "  run %d: q [%.6g %.6g %.6g] qr [%.6g %.6g %.6g] F [%.6g %.6g %.6g]\n",
-              i + 1, 1e3 * runs[i].q[0], 1e3 * runs[i].q[1], 1e3 * runs[i].q[2],
-              1e3 * runs[i].qr[0], 1e3 * runs[i].qr[1], 1e3 * runs[i].qr[2], 1e3 * runs[i].F[0],
-              1e3 * runs[i].F[1], 1e3 * runs[i].F[2]);
-    const double *J = tr->J;
-    fprintf(stderr,
-            "  best %d, active %d, J [%.4g %.4g %.4g; %.4g %.4g %.4g; %.4g %.4g %.4g], t %.3g, "
-            "step %.3g mm, radius %.3g mm, next q [%.6g %.6g %.6g]\n",
-            best + 1, P->active, J[0], J[1], J[2], J[3], J[4], J[5], J[6], J[7], J[8], tr->t,
-            1e3 * tr->length, 1e3 * tr->radius, 1e3 * q[0], 1e3 * q[1], 1e3 * q[2]);
+      fprintf(stderr,
+              "  run %d: q [%.6g %.6g %.6g %.6g] qr [%.6g %.6g %.6g %.6g] F [%.6g %.6g %.6g "
+              "%.6g]\n",
+              i + 1, 1e3 * runs[i].q[0], 1e3 * runs[i].q[1], 1e3 * runs[i].q[2], 1e3 * runs[i].q[3],
+              1e3 * runs[i].qr[0], 1e3 * runs[i].qr[1], 1e3 * runs[i].qr[2], 1e3 * runs[i].qr[3],
+              1e3 * runs[i].F[0], 1e3 * runs[i].F[1], 1e3 * runs[i].F[2], 1e3 * runs[i].F[3]);
+    fprintf(stderr, "  best %d, active %d, J [", best + 1, P->active);
+    for (int i = 0; i < span.n; i++)
+      for (int k = 0; k < span.n; k++)
+        fprintf(stderr, "%.4g%s", tr->J[NH_TRUST_Q * i + k],
+                k + 1 < span.n   ? " "
+                : i + 1 < span.n ? "; "
+                                 : "");
+    fprintf(stderr, "], t %.3g, step %.3g mm, radius %.3g mm, next q [%.6g %.6g %.6g %.6g]\n",
+            tr->t, 1e3 * tr->length, 1e3 * tr->radius, 1e3 * q[0], 1e3 * q[1], 1e3 * q[2],
+            1e3 * q[3]);
   }
   return 0;
 }
@@ -542,10 +608,6 @@ int nh_plan_steer(const char *scene_path, int n_sets, const char *const *sets,
                   const nh_scene *scene, int target, const nh_plan_options *o, const char *out) {
   nh_steer P = {0};
   NH_TRY(nh_steer_setup(&P, scene, target));
-  NH_CHECK(fabs(P.off_plane) <= o->tolerance, NH_ERR_INPUT,
-           "%s: plan: the target lies %.3g mm off the plane of the insertion direction and the "
-           "bevel (tools.%d.bevel.toward): the planner turns the bevel by half turns in that plane",
-           scene->targets[target].where, 1e3 * fabs(P.off_plane), scene->targets[target].tool);
   NH_TRY(nh_obstacles_create(scene, &P.obstacles));
   P.frame.obstacles = P.obstacles;
   P.c_goal = scene->plan.clearance + o->tolerance;
@@ -560,7 +622,7 @@ int nh_plan_steer(const char *scene_path, int n_sets, const char *const *sets,
       runs && cand && res && Q && F && ok ? NH_OK : NH_ERROR(NH_ERR_MEMORY, "out of memory: plan");
   nh_trust tr;
   nh_trust_init(&tr, INFINITY, 0, INFINITY);
-  double t0 = nh_time_now(), q[NH_Q] = {P.T[0], P.T[1], P.c_goal};
+  double t0 = nh_time_now(), q[NH_Q] = {P.T[0], P.T[1], P.c_goal, P.off_plane};
   int n_runs = 0, converged = -1, best = -1, round = 0, active0 = 0;
   nh_bike_plan plan = {0}, from_b = {0};
   if (!rc && nh_steer_plan(&P, q, q, &plan, &active0))
@@ -586,14 +648,15 @@ int nh_plan_steer(const char *scene_path, int n_sets, const char *const *sets,
   while (!rc && converged < 0 && n_runs < o->max_runs) {
     /* the round's candidates: the step at q, probes around it */
     const int nc = workers < o->max_runs - n_runs ? workers : o->max_runs - n_runs;
-    const int nq = P.active ? 3 : 2;
+    int idx[NH_Q];
+    const int nq = nh_steer_unknowns(&P, idx);
     int made = 0;
     for (int i = 0; i < nc && !rc; i++) {
       nh_steer_run *r = &runs[n_runs + made];
       memset(r, 0, sizeof *r);
       r->round = round, r->probe = i > 0, r->delta = P.delta;
       memcpy(r->q, q, sizeof r->q);
-      if (i > 0) r->q[(round + i - 1) % nq] += 2 * o->tolerance;
+      if (i > 0) r->q[idx[(round + i - 1) % nq]] += 2 * o->tolerance;
       double qq[NH_Q];
       memcpy(qq, r->q, sizeof qq);
       if (nh_steer_plan(&P, best >= 0 ? runs[best].qr : q, qq, &r->plan, NULL)) {
@@ -616,6 +679,7 @@ int nh_plan_steer(const char *scene_path, int n_sets, const char *const *sets,
       int again = -1;
       for (int k = 0; i == 0 && k < n_runs && again < 0; k++)
         if (nh_bike_depth_change(&runs[k].plan, &r->plan) <= 1e-12 &&
+            fabs(runs[k].plan.roll - r->plan.roll) <= 1e-12 &&
             fabs(runs[k].delta - r->delta) <= 1e-12)
           again = k;
       if (again >= 0) {

@@ -14,7 +14,7 @@
  * within 11.5° of the span of the earlier ones; `skip`) is skipped: along it, y_i's
  * error over |u_i| would enter J. For an affine F every secant equation is
  * exact (y = A s), so once the secants span R^n, J = A and the next step
- * lands on the root: with no secant skipped the n + 2-th point is the root (n = 2 or 3 unknowns;
+ * lands on the root: with no secant skipped the n + 2-th point is the root (n = 2 to 4 unknowns;
  * tests/test_steer.c).
  *
  * Step: d solves J d = −F_b (d = −F_b when J is singular), and the step
@@ -37,7 +37,7 @@
 #include <math.h>
 #include <string.h>
 
-/* Solve J d = F (n x n, n <= 3) by Gaussian elimination with pivoting; −1 if singular. */
+/* Solve J d = F (n x n, n <= NH_TRUST_Q) by Gaussian elimination with pivoting; −1 if singular. */
 static int nh_solve_small(int n, const double J[NH_TRUST_Q * NH_TRUST_Q],
                           const double F[NH_TRUST_Q], double d[NH_TRUST_Q]) {
   double A[NH_TRUST_Q][NH_TRUST_Q + 1];

@@ -131,6 +131,8 @@ static int nh_mcp_check_laws(int m, const nh_row_law *laws) {
              NH_ERR_INPUT,
              "friction row %d: mu = %g, mu_static = %g and threshold = %g must be finite and >= 0",
              i, l->mu, l->mu_static, l->threshold);
+    NH_CHECK(!l->one_sided || l->group < 0, NH_ERR_INPUT,
+             "friction row %d: a one-sided row must not be in a disc pair", i);
     if (l->group < 0) continue;
     int g = l->group;
     NH_CHECK(g == i || g == i - 1, NH_ERR_INPUT,
@@ -159,6 +161,11 @@ double nh_mcp_bound(const nh_mcp_work *ws, const nh_row_law *l) {
 
 static double nh_clamp(double x, double b) {
   return x > b ? b : (x < -b ? -b : x);
+}
+
+/* Projection onto a one-dimensional friction row's set: [−b, b], or [0, b] one-sided. */
+static double nh_mcp_friction_clamp(const nh_row_law *l, double x, double b) {
+  return l->one_sided ? (x < 0.0 ? 0.0 : (x > b ? b : x)) : nh_clamp(x, b);
 }
 
 /* Scaled upper bound of a unilateral row: threshold / d_i, or none (∞) for
@@ -262,7 +269,7 @@ double nh_mcp_residual(const nh_mcp_work *ws, const double *W, const nh_row_law 
       e = fabs(lam - nh_mcp_unilateral(lam - w, nh_mcp_cap(ws, l, i)));
     } else if (l->group < 0) {
       double b = nh_mcp_bound(ws, l) / ws->d[i];
-      e = fabs(lam - nh_clamp(lam - w, b));
+      e = fabs(lam - nh_mcp_friction_clamp(l, lam - w, b));
     } else {
       if (l->group != i) continue; /* the pair is measured at its first row */
       /* Unscaled x, w, then the isotropic scale s: x/s, w·s. */
@@ -340,7 +347,7 @@ static void nh_mcp_sweep(nh_mcp_work *ws, const double *W, const nh_row_law *law
       double diag = ws->Wt[(size_t)i * m + i];
       if (!(diag > 0.0)) continue;
       double b = nh_mcp_bound(ws, l) / ws->d[i];
-      nh_mcp_move(ws, i, nh_clamp(ws->lt[i] - ws->wt[i] / diag, b) - ws->lt[i]);
+      nh_mcp_move(ws, i, nh_mcp_friction_clamp(l, ws->lt[i] - ws->wt[i] / diag, b) - ws->lt[i]);
     } else if (l->group == i) {
       int j = i + 1;
       double di = ws->d[i], dj = ws->d[j];
@@ -366,7 +373,7 @@ void nh_mcp_project(nh_mcp_work *ws, const double *W, const nh_row_law *laws) {
     const nh_row_law *l = &laws[i];
     if (l->kind != NH_ROW_FRICTION) continue;
     if (l->group < 0) {
-      ws->lt[i] = nh_clamp(ws->lt[i], nh_mcp_bound(ws, l) / ws->d[i]);
+      ws->lt[i] = nh_mcp_friction_clamp(l, ws->lt[i], nh_mcp_bound(ws, l) / ws->d[i]);
     } else if (l->group == i) { /* radially, in unscaled coordinates */
       double x0 = ws->d[i] * ws->lt[i], x1 = ws->d[i + 1] * ws->lt[i + 1];
       double b = nh_mcp_bound(ws, l), n = hypot(x0, x1);
@@ -403,7 +410,7 @@ static double nh_mcp_subspace(nh_mcp_work *ws, const double *W, const nh_row_law
       in = ws->lt[i] > 0.0 && ws->lt[i] < nh_mcp_cap(ws, l, i) * (1.0 - 1e-12);
     } else {
       double b = nh_mcp_bound(ws, l), f = nh_mcp_friction_size(ws, l, i);
-      in = f < b * (1.0 - 1e-12);
+      in = f < b * (1.0 - 1e-12) && !(l->one_sided && ws->lt[i] <= 0.0);
     }
     if (in && ws->Wt[(size_t)i * m + i] > 0.0) ws->free_rows[nf++] = i;
   }

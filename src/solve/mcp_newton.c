@@ -122,7 +122,10 @@ static void nh_newton_pieces(const nh_mcp_work *ws, const double *W, const nh_ro
       pc = y <= 0.0 ? NH_PIECE_LOW : y >= nh_mcp_cap(ws, l, i) ? NH_PIECE_CAP : NH_PIECE_FREE;
     } else if (l->kind == NH_ROW_FRICTION && l->group < 0) {
       double b = nh_mcp_bound(ws, l) / ws->d[i];
-      pc = fabs(y) <= b ? NH_PIECE_FREE : y > 0.0 ? NH_PIECE_PLUS : NH_PIECE_MINUS;
+      if (l->one_sided && y <= 0.0)
+        pc = NH_PIECE_LOW; /* it does not pull: λ = 0 */
+      else
+        pc = fabs(y) <= b ? NH_PIECE_FREE : y > 0.0 ? NH_PIECE_PLUS : NH_PIECE_MINUS;
     } else if (l->kind == NH_ROW_FRICTION && l->group == i) {
       double x[2], v[2], s, b = nh_pair(ws, W, l, i, x, v, &s);
       pc = hypot(x[0] - v[0], x[1] - v[1]) <= b ? NH_PIECE_FREE : NH_PIECE_SLIDE;

@@ -62,7 +62,7 @@ int nh_rows_add(nh_rows *r) {
   r->tool[i] = -1, r->elem[i] = 0;
   memset(r->J + 36 * i, 0, 36 * sizeof(double));
   r->gap[i] = 0.0, r->lambda[i] = 0.0;
-  r->law[i] = (nh_row_law){NH_ROW_BILATERAL, -1, -1, 0.0, 0.0, -1, 0.0, 0};
+  r->law[i] = (nh_row_law){NH_ROW_BILATERAL, -1, -1, 0.0, 0.0, -1, 0.0, 0, 0};
   return i;
 }
 

@@ -261,7 +261,7 @@ int nh_solve_static(nh_system *sys, const nh_integrator *in, const double *f_ext
  * that did not starts with the static bound mu_static |λ_normal| + threshold
  * and, if its force reaches it, breaks away: its bound drops to the kinetic
  * one within the same solve. out: whether the row slides at the solution (on
- * its bound; a disc pair's two rows alike). Fields other than kind (and
+ * its bound; a disc pair's two rows alike). one_sided: see the field. Fields other than kind (and
  * threshold, for a unilateral row) are ignored for non-friction rows. */
 typedef enum { NH_ROW_BILATERAL = 0, NH_ROW_UNILATERAL = 1, NH_ROW_FRICTION = 2 } nh_row_kind;
 typedef struct {
@@ -272,6 +272,8 @@ typedef struct {
   int group;
   double mu_static;
   int sliding;
+  int one_sided; /* FRICTION, group -1: λ_i ∈ [0, bound] (w_i ≥ 0 at λ_i = 0): the row resists
+                    one way only (a cutting tip resists advance, it does not pull) */
 } nh_row_law;
 
 /* The method that solved the constraints (nh_mcp_stats.method; steps.csv
