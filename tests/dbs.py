@@ -136,7 +136,8 @@ def finite_csvs(out, name):
             for key, v in r.items():
                 if key in ("name", "state", "eta", "eta_rel", "error_estimate",
                            "distance_error_estimate", "geometry_estimate",
-                           "distance_geometry_estimate", "refine_stop"):
+                           "distance_geometry_estimate", "constraint_estimate",
+                           "distance_constraint_estimate", "refine_stop"):
                     continue
                 if not math.isfinite(float(v)):
                     fail("%s: %s.csv step %s: %s = %s" % (name, k, r["step"], key, v))

@@ -4,3 +4,5 @@ nh_add_c_test(test_dwr "verify;slow")
 nh_add_c_test(test_resolve verify)
 # The constrained dual (active skull/tool/tie rows) and the combined dual of several goals (tests/test_dwr_rows.c).
 nh_add_c_test(test_dwr_rows verify)
+# The constraint-data term against the skull points one lattice finer, run both ways (tests/test_dwr_skull.c).
+nh_add_c_test(test_dwr_skull verify)

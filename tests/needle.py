@@ -453,7 +453,8 @@ def test_hard():
                         if any(v.strip().lower() in ("nan", "-nan", "inf", "-inf") for kk, v in r.items()
                                if kk not in ("eta", "eta_rel", "name", "state", "error_estimate",
                                               "distance_error_estimate", "geometry_estimate",
-                                              "distance_geometry_estimate", "refine_stop")):
+                                              "distance_geometry_estimate", "constraint_estimate",
+                                              "distance_constraint_estimate", "refine_stop")):
                             fail("%s: non-finite value in %s.csv step %s" % (name, k, r["step"]))
                             break
                 for r in step_rows(res):

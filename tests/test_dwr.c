@@ -168,7 +168,7 @@ static void test_identity(void) {
   double Jh[3], *uh = malloc(sizeof(double) * n), *zh = malloc(sizeof(double) * 3 * n);
   for (int k = 0; k < 3; k++) Jh[k] = dwr_dot(n, p.j + (size_t)n * k, p.u);
   memcpy(uh, p.u, sizeof(double) * n);
-  CHECK_OK(nh_dwr_duals(p.s, NULL, 1.0, nc, 3, p.j, zh, NULL));
+  CHECK_OK(nh_dwr_duals(p.s, NULL, 1.0, nc, 3, p.j, zh, NULL, NULL));
 
   /* V_f: every leaf refined once. */
   nh_refine_info info = {0};
@@ -181,7 +181,7 @@ static void test_identity(void) {
   solve(&p);
   int nfn = 3 * p.m->n_nodes;
   double *zf = malloc(sizeof(double) * 3 * nfn);
-  CHECK_OK(nh_dwr_duals(p.s, NULL, 1.0, p.m->n_nodes, 3, p.j, zf, NULL));
+  CHECK_OK(nh_dwr_duals(p.s, NULL, 1.0, p.m->n_nodes, 3, p.j, zf, NULL, NULL));
   for (int k = 0; k < 3; k++) {
     const double *jk = p.j + (size_t)nfn * k, *zk = zf + (size_t)nfn * k;
     double JPuh = dwr_dot(nfn, jk, Puh), Juf = dwr_dot(nfn, jk, p.u);
@@ -208,7 +208,7 @@ static void test_identity(void) {
   }
   double *jD = malloc(sizeof(double) * nfn), *zD = malloc(sizeof(double) * nfn);
   CHECK_OK(nh_goal_distance_functional(p.m, probe, nh_, RADIUS, "probe", jD));
-  CHECK_OK(nh_dwr_duals(p.s, NULL, 1.0, p.m->n_nodes, 1, jD, zD, NULL));
+  CHECK_OK(nh_dwr_duals(p.s, NULL, 1.0, p.m->n_nodes, 1, jD, zD, NULL, NULL));
   double lhs = distance(Jf, NULL) - Dh,
          rhs = dwr_dot(nfn, p.f, zD) - dwr_energy_product(p.m, p.t, Puh, zD);
   CHECK_CLOSE(rhs, lhs, 1e-9 * fabs(lhs) + e2 / Dh,

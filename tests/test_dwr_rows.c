@@ -61,8 +61,9 @@ typedef struct {
   double *f, *j; /* load, the first goal's 3 functionals (3 n each) */
 } problem;
 
-/* The six rows of the header on the current mesh. */
-static void make_rows(problem *p) {
+/* The six rows of the header on the current mesh, each point moved by
+ * shift[i] (may be NULL) and given the gap g[i] (may be NULL: 0). */
+static void make_rows_data(problem *p, const double (*shift)[3], const double *g) {
   static const double X[NROWS][3] = {{0.007, 0.006, 0.0},   {0.013, 0.014, 0.0},
                                      {0.011, 0.009, 0.0},   {0.022, 0.010, 0.020},
                                      {0.015, 0.005, 0.010}, {0.009, 0.012, 0.0}};
@@ -75,8 +76,9 @@ static void make_rows(problem *p) {
   for (int i = 0; i < NROWS; i++) {
     int r = nh_rows_add(&p->rows), c;
     CHECK(r == i, "row %d added as %d", i, r);
-    double xi[3], N[8], Xe[24], x[3] = {0, 0, 0};
-    CHECK_OK(nh_mesh_locate(p->m, X[i], &c, xi));
+    double xi[3], N[8], Xe[24], x[3] = {0, 0, 0}, P[3];
+    for (int k = 0; k < 3; k++) P[k] = X[i][k] + (shift ? shift[i][k] : 0.0);
+    CHECK_OK(nh_mesh_locate(p->m, P, &c, xi));
     nh_hex_shape(xi, N);
     nh_mesh_cell_coords(p->m, p->m->X, c, Xe);
     for (int a = 0; a < 8; a++) {
@@ -84,14 +86,18 @@ static void make_rows(problem *p) {
       p->rows.N[8 * r + a] = N[a];
       for (int k = 0; k < 3; k++) x[k] += N[a] * Xe[3 * a + k];
     }
-    for (int k = 0; k < 3; k++) CHECK_CLOSE(x[k], X[i][k], 1e-15, "row point located");
+    for (int k = 0; k < 3; k++) CHECK_CLOSE(x[k], P[k], 1e-15, "row point located");
     memcpy(p->rows.dir + 3 * r, dir[i], sizeof dir[i]);
     p->rows.tool[r] = -1;
-    p->rows.gap[r] = 0.0;
+    p->rows.gap[r] = g ? g[i] : 0.0;
     p->rows.law[r].kind = kind[i];
     p->rows.law[r].sliding = i == 5;
     p->rows.lambda[r] = lambda[i];
   }
+}
+
+static void make_rows(problem *p) {
+  make_rows_data(p, NULL, NULL);
 }
 
 static void setup(problem *p) {
@@ -124,7 +130,7 @@ static int active_row(int i) {
 
 /* The constrained solution by a dense LU solve of [K Jᵀ; J 0] [u; λ] =
  * [f; 0] over the unfixed DOFs (K from the element matrices at rest). */
-static void dense_solve(const problem *p, double *u) {
+static void dense_solve(const problem *p, double *u, double *lambda) {
   const nh_mesh *m = p->m;
   int n = 3 * m->n_nodes, *dof = malloc(sizeof(int) * n), nf = 0;
   for (int i = 0; i < n; i++) dof[i] = p->fixed[i / 3] ? -1 : nf++;
@@ -156,11 +162,13 @@ static void dense_solve(const problem *p, double *u) {
         A[(size_t)d * N + row] += v;
         A[(size_t)row * N + d] += v;
       }
+    b[row] = -p->rows.gap[i]; /* the row's gap c(u) = J u + g, held at 0 */
     row++;
   }
   int *piv = malloc(sizeof(int) * N);
   CHECK(LAPACKE_dgesv(LAPACK_COL_MAJOR, N, 1, A, N, piv, b, N) == 0, "dense KKT solve");
   for (int i = 0; i < n; i++) u[i] = dof[i] >= 0 ? b[dof[i]] : 0.0;
+  for (int i = 0, row = nf; i < NROWS && lambda; i++) lambda[i] = active_row(i) ? b[row++] : 0.0;
   free(dof), free(A), free(b), free(zero), free(piv);
 }
 
@@ -172,6 +180,8 @@ static double row_value(const nh_rows *rows, int i, const double *w) {
       s += rows->N[8 * i + a] * rows->dir[3 * i + k] * w[3 * rows->node[8 * i + a] + k];
   return s;
 }
+
+static int rows_n3; /* 3 n_nodes of the fields row_change is given */
 
 static void destroy(problem *p) {
   nh_system_destroy(&p->s);
@@ -205,13 +215,91 @@ static void test_combined(problem *p, const double *uh) {
   free(ind), free(indc);
 }
 
+/* Part 3 on the fine problem: its rows' data changed (points moved, gaps
+ * set), as a finer sampling of a constraint changes them. With u_f, λ_f
+ * the solution for the rows J u = 0 and u_f' the one for the new rows
+ * J' u = −g' (dense, independent: K u + Jᵀλ = f), and z', μ' the dual for
+ * the new rows (nh_dwr_duals: A z' + J'ᵀμ' = j, J' z' = 0),
+ *   J(u_f') − J(u_f) = z'ᵀK(u_f' − u_f) + μ'ᵀJ'(u_f' − u_f)
+ *                    = λ_fᵀ(J − J') z' − μ'ᵀ c'(u_f),   c'(v) = J' v + g',
+ * exactly (docs/theory.md §6.6, "Constraint data"). The code's term, given
+ * the rows' forces Λ = −λ_f, δc_i = c'_i(u_f) and δ(J w)_i = (J' − J)_i w,
+ * must be that (both parts of it matter here: the test fails without
+ * either), and the open and the sliding rows (not in the dual) must not
+ * count through μ. */
+typedef struct {
+  const nh_rows *old, *new;
+} row_pair;
+
+static int row_change(void *ctx, int n, const double *w, double *out) {
+  const row_pair *rp = ctx;
+  const int m = rp->new->m;
+  for (int q = 0; q < n; q++)
+    for (int i = 0; i < m; i++)
+      out[(size_t)m * q + i] = row_value(rp->new, i, w + (size_t)q * rows_n3) -
+                               row_value(rp->old, i, w + (size_t)q * rows_n3);
+  return NH_OK;
+}
+
+static void test_data_change(problem *p) {
+  const double shift[NROWS][3] = {{4e-4, -3e-4, 0}, {-5e-4, 2e-4, 0},    {3e-4, 3e-4, 0},
+                                  {0, 0, 0},        {2e-4, 1e-4, -3e-4}, {0, 0, 0}};
+  const double g[NROWS] = {2e-9, -1e-9, 5e-10, 7e-9, 1e-9, 3e-9};
+  const int n = 3 * p->m->n_nodes;
+  rows_n3 = n;
+  double *uf = malloc(sizeof(double) * n), *uf2 = malloc(sizeof(double) * n);
+  double *z = malloc(sizeof(double) * 3 * n), lambda[NROWS], lambda2[NROWS];
+  double mu[3 * NROWS], dc[NROWS], force[NROWS], E[3], norm, C[3];
+  dense_solve(p, uf, lambda);
+  nh_rows old = p->rows;
+  p->rows = (nh_rows){0};
+  make_rows_data(p, shift, g);
+  dense_solve(p, uf2, lambda2);
+  CHECK_OK(nh_dwr_duals(p->s, &p->rows, 1.0, p->m->n_nodes, 3, p->j, z, mu, NULL));
+  for (int i = 0; i < NROWS; i++) {
+    dc[i] = row_value(&p->rows, i, uf) + p->rows.gap[i];
+    force[i] = -lambda[i];
+  }
+  row_pair rp = {&old, &p->rows};
+  nh_constraint_data data = {.change = dc, .force = force, .linear = row_change, .ctx = &rp};
+  nh_dwr_result r = {.estimate = E, .norm = &norm, .data = &data, .constraint = C};
+  CHECK_OK(nh_dwr_estimate(p->s, &p->rows, 1.0, p->m, p->t, p->h, uf, 1, points, RADIUS, NULL, &r));
+  double primal_max = 0.0;
+  for (int k = 0; k < 3; k++) {
+    const double *zk = z + (size_t)n * k, *jk = p->j + (size_t)n * k;
+    const double lhs = dwr_dot(n, jk, uf2) - dwr_dot(n, jk, uf);
+    double primal = 0.0, dual = 0.0;
+    for (int i = 0; i < NROWS; i++) {
+      if (!active_row(i))
+        CHECK(mu[NROWS * k + i] == 0.0, "k=%d: row %d is not in the dual but has mu %g", k, i,
+              mu[NROWS * k + i]);
+      primal += lambda[i] * (row_value(&old, i, zk) - row_value(&p->rows, i, zk));
+      dual -= mu[NROWS * k + i] * dc[i];
+    }
+    CHECK_CLOSE(primal + dual, lhs, 1e-9 * fabs(lhs),
+                "J(u_f') - J(u_f) = lambda_f (J - J') z' - mu' c'(u_f)");
+    CHECK_CLOSE(C[k], primal + dual, 1e-10 * fabs(lhs), "the code's constraint-data term");
+    CHECK(fabs(dual) > 0.05 * fabs(lhs), "k=%d: the mu part is %.1e of the change: no test", k,
+          dual / lhs);
+    primal_max = fmax(primal_max, fabs(primal / lhs));
+    if (getenv("NH_VERBOSE"))
+      printf("data change k=%d: J(u_f')-J(u_f) = %.6e, lambda part %.6e, mu part %.6e, code %.6e "
+             "(rel diff %.1e)\n",
+             k, lhs, primal, dual, C[k], fabs(C[k] - lhs) / fabs(lhs));
+  }
+  CHECK(primal_max > 0.05, "the lambda part is at most %.1e of the change: no test", primal_max);
+  nh_rows_free(&p->rows);
+  p->rows = old;
+  free(uf), free(uf2), free(z);
+}
+
 int main(void) {
   problem p = {0};
   CHECK_OK(nh_mesh_create_box(lo, hi, grid, &p.m));
   setup(&p);
   int nc = p.m->n_nodes, n = 3 * nc;
   double Jh[3], *uh = malloc(sizeof(double) * n);
-  dense_solve(&p, uh);
+  dense_solve(&p, uh, NULL);
   for (int k = 0; k < 3; k++) Jh[k] = dwr_dot(n, p.j + (size_t)n * k, uh);
   for (int i = 0; i < NROWS; i++)
     if (active_row(i))
@@ -229,11 +317,11 @@ int main(void) {
   int nfn = 3 * p.m->n_nodes;
   double *uf = malloc(sizeof(double) * nfn), *zf = malloc(sizeof(double) * 3 * nfn);
   double *z0 = malloc(sizeof(double) * 3 * nfn);
-  dense_solve(&p, uf);
+  dense_solve(&p, uf, NULL);
   int used = -1;
-  CHECK_OK(nh_dwr_duals(p.s, &p.rows, 1.0, p.m->n_nodes, 3, p.j, zf, &used));
+  CHECK_OK(nh_dwr_duals(p.s, &p.rows, 1.0, p.m->n_nodes, 3, p.j, zf, NULL, &used));
   CHECK(used == 4, "active rows in the dual: %d, expected 4", used);
-  CHECK_OK(nh_dwr_duals(p.s, NULL, 1.0, p.m->n_nodes, 3, p.j, z0, NULL));
+  CHECK_OK(nh_dwr_duals(p.s, NULL, 1.0, p.m->n_nodes, 3, p.j, z0, NULL, NULL));
   for (int k = 0; k < 3; k++) {
     const double *jk = p.j + (size_t)nfn * k, *zk = zf + (size_t)nfn * k,
                  *z0k = z0 + (size_t)nfn * k;
@@ -260,6 +348,7 @@ int main(void) {
              "tissue-alone dual %.6e (rel diff %.1e)\n",
              k, lhs, rhs, fabs(lhs - rhs) / fabs(lhs), rhs0, fabs(lhs - rhs0) / fabs(lhs));
   }
+  test_data_change(&p);
   nh_refine_info_free(&info);
   nh_template_destroy(&t2);
   free(all), free(uh), free(Puh), free(uf), free(zf), free(z0);

@@ -8,8 +8,9 @@ SPR-driven meshes from 14 mm: the electrode tip–STN distance's error at every
 step after the target is reached, the effectivity of error_estimate and
 distance_error_estimate, median ms/step against the 7 mm mesh's; the goal
 estimate on the uniform 14 and 10 mm meshes (not refined), and per phase
-(shift, insertion, hold, retraction) the estimate and its geometry part G
-(targets.csv geometry_estimate) against the true error;
+(shift, insertion, hold, retraction) the estimate, its geometry part G
+(targets.csv geometry_estimate) and its constraint-data part C
+(constraint_estimate) against the true error;
 dbs_goal_error.png, dbs_goal_cost.png, dbs_goal_effectivity.png.
 """
 import os
@@ -17,7 +18,7 @@ import os
 import numpy as np
 
 import study_engine as engine
-from outputs import read_csv, read_points, read_steps, speed
+from outputs import read_csv, read_points, read_steps, read_tools, speed
 from plotstyle import FIGSIZE, MARKER, plt, save, save_loglog
 from richardson import observed, per_step_reference
 from study_dbs import phase_lines, phases
@@ -62,6 +63,10 @@ DBS_GOAL = {
         # the hand-over); with the hand-over allowance and integrated cut cells it finishes
         ("goal-l2", "goal from 14 mm, 2 levels",
          ["adapt.estimator=goal", "tissue.grid=[10,12,9]", "adapt.max_level=2"], "goal"),
+        # tolerance mode with a tolerance the reference can judge (about its bar), two levels
+        ("goal-tol50", "goal from 14 mm, 2 levels, tolerance 50 µm, ≤ 20000 dofs",
+         ["adapt.estimator=goal", "tissue.grid=[10,12,9]", "adapt.max_level=2",
+          "adapt.tolerance=5e-5", "adapt.max_dofs=20000"], "goal"),
         # the goal estimate on the uniform 14 and 10 mm meshes, which it does not refine (a
         # budget of the initial dofs; the functional's box that of 1 level, as goal-l1's): its
         # effectivity and its parts against the true error of a mesh in the reference's family
@@ -74,6 +79,12 @@ DBS_GOAL = {
     ],
     "target": "STN",
     "cannula": "cannula",
+    "electrode": "electrode",
+    # a step is on another branch of the tools' model (the electrode released past the
+    # cannula's tip, docs/dbs.md) when the electrode tip's distance from the cannula's tip
+    # differs from the finest mesh's by more than this (m): on one branch the meshes differ by
+    # at most 0.006–0.019 mm, across branches by 1.2 mm
+    "branch": 5e-5,
     "order": (1.0, 5.99),  # a per-step order is used inside [1, 6): per_step_reference
     "resolved": 3.0,  # effectivity only where the true error exceeds 3× the reference's bar
 }
@@ -100,6 +111,8 @@ def run(a, binary):
         rows = [r for r in read_csv(os.path.join(d, "targets.csv")) if r["name"] == st["target"]]
         sr = read_steps(d)
         i_shift, i_top, i_back = phases(d, st["cannula"])
+        can, ele = read_tools(d, st["cannula"]), read_tools(d, st["electrode"])
+        sep = np.linalg.norm(np.array([ele["tip_" + k] - can["tip_" + k] for k in "xyz"]), axis=0)
         return {"name": name, "label": label, "kind": kind, "times": times, "steps": steps,
                 "x": pos[st["target"]][:, :3], "d": pos[st["target"]][:, 3],
                 "est": np.array([float(r.get("error_estimate", "nan")) for r in rows]),
@@ -107,8 +120,11 @@ def run(a, binary):
                 "geo": np.array([float(r.get("geometry_estimate", "nan")) for r in rows]),
                 "dgeo": np.array([float(r.get("distance_geometry_estimate", "nan"))
                                   for r in rows]),
+                "con": np.array([float(r.get("constraint_estimate", "nan")) for r in rows]),
+                "dcon": np.array([float(r.get("distance_constraint_estimate", "nan"))
+                                  for r in rows]),
                 "speed": speed(sr), "rows": int(sr["constraints"].max()), "st": sr,
-                "i_shift": i_shift, "i_top": i_top, "i_back": i_back,
+                "i_shift": i_shift, "i_top": i_top, "i_back": i_back, "sep": sep,
                 "load": infos[name].get("load", [])}
 
     U = [dict(load(nm, l, "uniform"), h=h) for nm, l, _, h in st["uniform"]]
@@ -132,7 +148,15 @@ def run(a, binary):
     ref = reference(U[-3:])  # the finest three
     prev = reference(U[:3]) if len(U) > 3 else None  # the coarser triple, for comparison
     d_ref, d_bar, x_ref, x_bar = ref["d"], ref["d_bar"], ref["x"], ref["x_bar"]
-    runs = U + [load(nm, l, k) for nm, l, _, k in st["adaptive"] if nm in infos]
+    runs = U + [dict(load(nm, l, k), sets=sets) for nm, l, sets, k in st["adaptive"]
+                if nm in infos]
+    # the tools' branch (st["branch"]): steps where a reference mesh or the run itself is on
+    # another branch than the finest mesh are not judged (their error is not a discretisation
+    # error of the tissue)
+    finest = U[-1]["sep"]
+    ref_off = np.any([np.abs(r["sep"] - finest) > st["branch"] for r in U[-3:]], axis=0)
+    for r in runs:
+        r["off"] = ref_off | (np.abs(r["sep"] - finest) > st["branch"])
     base = [r for r in U if r["name"] == st["baseline"]][0]
     ref_ms = base["speed"]["median"]
     for r in runs:
@@ -145,11 +169,12 @@ def run(a, binary):
         r["rms"] = float(np.sqrt(np.mean(e ** 2)))
         r["ratio"] = r["speed"]["median"] / ref_ms
 
-    def eff(est, err, bar):
+    def eff(est, err, bar, off):
         """Effectivity est / err over the steps ≥ 1 with an estimate whose true error the
-        reference resolves (err > st["resolved"] × its bar): (median, min, max, steps, of)."""
+        reference resolves (err > st["resolved"] × its bar) on the reference's branch (not
+        off): (median, min, max, steps, of)."""
         ok = np.isfinite(est) & (np.arange(n) >= 1)
-        use = ok & (err > st["resolved"] * bar)
+        use = ok & (err > st["resolved"] * bar) & ~off
         if not use.any():
             return None
         v = est[use] / err[use]
@@ -204,7 +229,7 @@ def run(a, binary):
         s = r["speed"]
         cells = []
         for est, err, bar in ((r["est"], r["xerr"], x_bar), (r["dest"], r["err"], d_bar)):
-            e = eff(est, err, bar)
+            e = eff(est, err, bar, r["off"])
             r.setdefault("eff", []).append(e)
             cells.append("%.2f (%.2f–%.2f; %d of %d)" % e if e else "–")
         p("| %s | %d | %d | %.1f | %.3f | %.1f | %.4f (%.2f) | %.4f | %.4f | %s | %s |" % (
@@ -221,20 +246,43 @@ def run(a, binary):
           "%.1f, %.3f of the 7 mm mesh's %.1f (goal ≤ 1/4: %s)." % (
               r["label"], 1e3 * r["max"], "met" if r["max"] <= 3e-4 else "missed",
               r["speed"]["median"], r["ratio"], ref_ms, "met" if r["ratio"] <= 0.25 else "missed"))
+    off = np.nonzero(ref_off)[0]
+    p("- The tools' branch: the reference's meshes are on different branches at %d steps%s; "
+      "those steps, and a run's steps on another branch than the 5 mm mesh's, are not judged "
+      "(effectivity, tolerance)." % (len(off), " (%d–%d)" % (off[0], off[-1]) if len(off) else ""))
+    for r in runs[len(U):]:
+        tol = [float(x.split("=")[1]) for x in r["sets"] if x.startswith("adapt.tolerance=")]
+        if not tol:
+            continue
+        judged = (np.arange(n) >= 1) & ~r["off"]
+        below = r["xerr"] <= tol[0]
+        sure = judged & (np.abs(r["xerr"] - tol[0]) > x_bar)
+        p("- %s: the true STN error below the tolerance %.3g mm at %d of %d judged steps "
+          "(%.0f %%; goal ≥ 90 %%); certain (|error − tolerance| > the bar) at %d of them, %d "
+          "below; per phase %s." % (
+              r["label"], 1e3 * tol[0], int((below & judged).sum()), int(judged.sum()),
+              100.0 * (below & judged).sum() / max(judged.sum(), 1), int(sure.sum()),
+              int((sure & below).sum()), ", ".join(
+                  "%s %d/%d" % (w, int((below & judged)[lo:hi].sum()), int(judged[lo:hi].sum()))
+                  for w, lo, hi in (("shift", 1, r["i_shift"] + 1),
+                                    ("insertion", r["i_shift"] + 1, r["i_top"]),
+                                    ("hold", r["i_top"], r["i_back"] + 1),
+                                    ("retraction", r["i_back"] + 1, n)))))
     lost = [nm for nm, *_ in st["adaptive"] if nm not in infos and (not a.only or nm in a.only)]
     if lost:
         p("- not complete (the reason above, on stderr): %s." % ", ".join(lost))
     est_runs = [r for r in runs if r["kind"] in ("goal", "estimate")]
     if est_runs:
         p("")
-        p("The estimate and its geometry part G against the true error, per phase (medians over "
+        p("The estimate, its geometry part G and its constraint-data part C against the true "
+          "error, per phase (medians over "
           "the phase's steps, mm; the phases of the run's own tools.csv: the shift until the "
           "cannula touches the brain, the insertion until the target depth, the hold, the "
           "retraction; ratio: the median of estimate / true error over the phase's steps):")
         p("")
         lines.extend(engine.table_head(
-            "run", "phase (steps)", "\\|x − x_ref\\|", "error_estimate", "of it G", "ratio",
-            "\\|d − d_ref\\|", "distance_error_estimate", "of it G", "ratio"))
+            "run", "phase (steps)", "\\|x − x_ref\\|", "error_estimate", "of it G", "of it C",
+            "ratio", "\\|d − d_ref\\|", "distance_error_estimate", "of it G", "of it C", "ratio"))
         for r in est_runs:
             for what, lo, hi in (("shift", 1, r["i_shift"] + 1),
                                  ("insertion", r["i_shift"] + 1, r["i_top"]),
@@ -244,11 +292,12 @@ def run(a, binary):
                 if hi <= lo:
                     continue
                 cells = []
-                for err, est, geo in ((r["xerr"], r["est"], r["geo"]),
-                                      (r["err"], r["dest"], r["dgeo"])):
+                for err, est, geo, con in ((r["xerr"], r["est"], r["geo"], r["con"]),
+                                           (r["err"], r["dest"], r["dgeo"], r["dcon"])):
                     cells += ["%.4f" % (1e3 * np.median(err[sl])),
                               "%.4f" % (1e3 * np.nanmedian(est[sl])),
                               "%.4f" % (1e3 * np.nanmedian(geo[sl])),
+                              "%.4f" % (1e3 * np.nanmedian(con[sl])),
                               "%.2f" % np.nanmedian(est[sl] / err[sl])]
                 p("| %s | %s (%d–%d) | %s |" % (r["label"], what, lo, hi - 1, " | ".join(cells)))
         p("")

@@ -210,6 +210,21 @@ int nh_adapt_estimate_goal(nh_adapt *adapt, nh_system *sys, const nh_rows *rows,
 /* The loads the next goal estimates' geometry term uses (dwr.c,
  * "Geometry"); kept by pointer, NULL: the elastic part only. */
 void nh_adapt_set_geometry_loads(nh_adapt *adapt, const nh_geometry_loads *loads);
+/* The change of a constrained step's rows when their constraints are
+ * sampled one level finer (dwr.c, "Constraint data"), one value per row of
+ * the rows the estimate is given: */
+typedef struct {
+  const double *change; /* δc_i: the change of row i's gap at the solution u, m */
+  const double *force;  /* Λ_i: the force of row i on the tissue along its direction, N */
+  /* δ(J w)_i: the change of row i's linearisation applied to n fields w
+   * (3 n_nodes each); out: rows->m per field. 0 or an error code. */
+  int (*linear)(void *ctx, int n, const double *w, double *out);
+  void *ctx;
+} nh_constraint_data;
+
+/* The constraint data the next goal estimates' constraint-data term uses
+ * (dwr.c, "Constraint data"); kept by pointer, NULL: no term. */
+void nh_adapt_set_constraint_data(nh_adapt *adapt, const nh_constraint_data *data);
 /* |E_p| per goal of the last goal estimate (m), or NULL (none for this mesh). */
 const double *nh_adapt_goal_errors(const nh_adapt *adapt);
 /* The signed E_pk (3 per goal, m) of the last goal estimate, or NULL. */
@@ -218,6 +233,11 @@ const double *nh_adapt_goal_estimates(const nh_adapt *adapt);
  * last goal estimate (dwr.c, "Geometry"; 0 without cut cells, NaN after a
  * combined estimate, which does not split it), or NULL. */
 const double *nh_adapt_goal_geometry(const nh_adapt *adapt);
+/* The constraint-data part C_pk (3 per goal, m; included in the estimates)
+ * of the last goal estimate (dwr.c, "Constraint data"; 0 without
+ * constraint rows whose data change, NaN after a combined estimate), or
+ * NULL. */
+const double *nh_adapt_goal_constraint(const nh_adapt *adapt);
 
 /* ---- goal-oriented estimate: the dual-weighted residual (adapt/dwr.c) ---- */
 
@@ -252,11 +272,12 @@ void nh_dwr_active_rows(const nh_rows *rows, unsigned char *active);
  *   A z_q + J_tᵀ μ_q = scale Pᵀ j_q,  J_t z_q = 0  (nh_system_solve_rows),
  * z_q = P (the free part) for j[3 n_nodes n] (q-th at j + 3 n_nodes q), z
  * likewise (fixed DOFs 0, hanging nodes their masters' interpolation).
- * *n_rows (may be NULL): the active rows used.
+ * mu (may be NULL): the multipliers μ_q, rows->m per dual (0 on the rows
+ * not active). *n_rows (may be NULL): the active rows used.
  * Fails with NH_ERR_INPUT (message) if the system carries constraint rows
  * (hanging nodes by Lagrange multipliers), NH_ERR_MEMORY, NH_ERR_NUMERIC. */
 int nh_dwr_duals(nh_system *sys, const nh_rows *rows, double scale, int n_nodes, int n,
-                 const double *j, double *z, int *n_rows);
+                 const double *j, double *z, double *mu, int *n_rows);
 
 /* What nh_dwr_estimate returns (arrays allocated by the caller). */
 typedef struct {
@@ -272,6 +293,11 @@ typedef struct {
    * term, G_q (included in estimate). */
   const nh_geometry_loads *loads;
   double *geometry;
+  /* The constraint-data term (dwr.c, "Constraint data"): in, data (may be
+   * NULL: no term); out, constraint (may be NULL) the part of each
+   * estimate that is the term, C_q (included in estimate). */
+  const nh_constraint_data *data;
+  double *constraint;
 } nh_dwr_result;
 
 /* Goal-oriented estimate of the displacement at n_points points[3 each]

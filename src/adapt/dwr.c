@@ -123,6 +123,18 @@
  * half its parent's). It vanishes on a box domain, with `scaled`, and in
  * every cell whose level set is planar (the interpolant is exact there).
  *
+ * Constraint data (docs/theory.md §6.6, "Constraint data"). The skull's
+ * rows are a sampling of the surface that changes with the mesh, outside the
+ * identity above. With δc_i the change of row i's gap at u when its leaf's
+ * points are taken one lattice finer and δ(J w)_i that of its
+ * linearisation applied to w (nh_contact_data_change, weights of the finer
+ * points by area), the Lagrangian of the step gives, to first order,
+ *     C_q = Σ_i ( Λ_i δ(J z_q)_i − μ_qi δc_i / c_K )
+ * (Λ_i the row's force, μ_q the dual's multipliers of nh_dwr_duals): the
+ * primal's force on the dual through the moved directions and the dual's
+ * pressure on the coarse solution's gaps at the finer points. C_q is added
+ * to E_q (not to the marking indicators); the tools' rows have δ = 0.
+ *
  * Workspace: the duals (3 per point, 3 per node each), the centre samples
  * and recovered nodal stresses of the 1 + 3 n_points fields (6 per cell or
  * node each), one value per leaf and field for the ordered sums. The cell
@@ -220,8 +232,30 @@ void nh_dwr_active_rows(const nh_rows *rows, unsigned char *active) {
   }
 }
 
+/* The constraint-data term of the nz duals z (header "Constraint data"),
+ *   C_q = Σ_i (Λ_i δ(J z_q)_i − μ_qi δc_i / c_K),
+ * μ the duals' multipliers (rows->m each, 0 on the rows a dual dropped;
+ * followed by as much workspace), added to out->estimate and stored in
+ * out->constraint (if not NULL). */
+static int nh_dwr_constraint_term(const nh_rows *rows, const double *z, double *mu,
+                                  const nh_constraint_data *data, double scale, int nz,
+                                  nh_dwr_result *out) {
+  const int m = rows->m;
+  double *dz = mu + (size_t)m * nz;
+  int rc = data->linear(data->ctx, nz, z, dz);
+  if (rc) return NH_ERROR(rc, "goal estimate: the constraints' finer data failed");
+  for (int q = 0; q < nz; q++) {
+    double s = 0.0;
+    for (int i = 0; i < m; i++)
+      s += data->force[i] * dz[(size_t)m * q + i] - mu[(size_t)m * q + i] * data->change[i] / scale;
+    out->estimate[q] += s;
+    if (out->constraint) out->constraint[q] = s;
+  }
+  return NH_OK;
+}
+
 int nh_dwr_duals(nh_system *sys, const nh_rows *rows, double scale, int n_nodes, int n,
-                 const double *j, double *z, int *n_rows) {
+                 const double *j, double *z, double *mu, int *n_rows) {
   const int nf = nh_system_free_dofs(sys);
   if (n_rows) *n_rows = 0;
   NH_CHECK(nh_system_constraint_rows(sys) == 0, NH_ERR_INPUT,
@@ -237,7 +271,7 @@ int nh_dwr_duals(nh_system *sys, const nh_rows *rows, double scale, int n_nodes,
     for (int i = 0; i < nf; i++) b[(size_t)nf * q + i] *= scale;
   }
   if (!rc && active) nh_dwr_active_rows(rows, active);
-  if (!rc) rc = nh_system_solve_rows(sys, active ? rows : NULL, active, n, b, x, n_rows);
+  if (!rc) rc = nh_system_solve_rows(sys, active ? rows : NULL, active, n, b, x, mu, n_rows);
   for (int q = 0; q < n && !rc; q++)
     nh_system_scatter(sys, x + (size_t)nf * q, z + 3 * (size_t)n_nodes * q);
   free(b);
@@ -263,13 +297,19 @@ static int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale,
   double *cell_err2 = nh_calloc((size_t)(nl ? nl : 1), sizeof(double));
   double *cell_norm2 = nh_calloc((size_t)(nl ? nl : 1), sizeof(double));
   double *cell_geo = NULL; /* nz per leaf: the geometry term (header "Geometry") */
+  double *mu = NULL;       /* the duals' multipliers (header "Constraint data") */
   int rc = NH_OK;
   if (!z || !samples || !star || !cell_eps || !cell_err2 || !cell_norm2) {
     rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: goal-oriented estimate (%d duals, %d nodes)", nz,
                   nn);
     goto done;
   }
-  if ((rc = nh_dwr_duals(sys, rows, scale, nn, nz, j, z, &out->n_rows))) goto done;
+  const int with_data = out->data && rows && rows->m > 0;
+  if (with_data && !(mu = nh_calloc(2 * (size_t)rows->m * (size_t)nz, sizeof(double)))) {
+    rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: the duals' multipliers (%d rows)", rows->m);
+    goto done;
+  }
+  if ((rc = nh_dwr_duals(sys, rows, scale, nn, nz, j, z, mu, &out->n_rows))) goto done;
 
     /* Centre samples: the primal's corotational stress, each dual's tangent stress. */
 #pragma omp parallel for schedule(static) if (nl >= NH_DWR_PARALLEL_MIN)
@@ -402,7 +442,9 @@ static int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale,
   for (int q = 0; q < nz; q++) {
     out->estimate[q] = 0.0;
     if (out->geometry) out->geometry[q] = 0.0;
+    if (out->constraint) out->constraint[q] = 0.0;
   }
+  if (with_data && (rc = nh_dwr_constraint_term(rows, z, mu, out->data, scale, nz, out))) goto done;
   for (int l = 0; l < nl; l++) {
     sum_err += cell_err2[l];
     sum_norm += cell_norm2[l];
@@ -429,7 +471,7 @@ static int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale,
 
 done:
   free(z), free(samples), free(star), free(cell_eps), free(cell_err2), free(cell_norm2);
-  free(cell_geo);
+  free(cell_geo), free(mu);
   return rc;
 }
 

@@ -53,6 +53,7 @@ struct nh_adapt {
   int goal, grade;                /* estimator goal; refinement closed by the 2:1 rule */
   double tolerance;               /* m (0: none) */
   const nh_geometry_loads *loads; /* the geometry term's loads (may be NULL) */
+  const nh_constraint_data *data; /* the constraint-data term's data (may be NULL) */
   double coarsen;                 /* fraction of the marking threshold (0: none) */
   int n_goals;                    /* goal points */
   double *goal_points;            /* 3 per goal */
@@ -60,6 +61,7 @@ struct nh_adapt {
   double *goal_error;             /* per goal: |E_p| of the last estimate, valid when have_eta */
   double *goal_est;               /* per goal: the signed E_pk (3), valid when have_eta */
   double *goal_geo;               /* per goal: its geometry part G_pk (3, in goal_est) */
+  double *goal_cons;              /* per goal: its constraint-data part C_pk (3, in goal_est) */
   double *goal_ind;               /* n_goals x cap_eta */
   double *eta_all;    /* per cell: Σ over every goal (coarsening: a goal below tolerance still
                          needs its cells) */
@@ -114,6 +116,7 @@ void nh_adapt_destroy(nh_adapt **adapt) {
   free((*adapt)->goal_error);
   free((*adapt)->goal_est);
   free((*adapt)->goal_geo);
+  free((*adapt)->goal_cons);
   free((*adapt)->goal_ind);
   free((*adapt)->eta_all);
   nh_node_transfer_free(&(*adapt)->transfer);
@@ -136,15 +139,16 @@ int nh_adapt_estimate(nh_adapt *a, const nh_mesh *m, const nh_tissue *tissue, co
 
 int nh_adapt_set_goals(nh_adapt *a, const nh_mesh *m, int n, const double *points) {
   free(a->goal_points), free(a->goal_error), free(a->goal_est), free(a->weight), free(a->sep_est);
-  free(a->goal_geo);
+  free(a->goal_geo), free(a->goal_cons);
   a->goal_points = nh_calloc(3 * (size_t)(n ? n : 1), sizeof(double));
   a->goal_error = nh_calloc((size_t)(n ? n : 1), sizeof(double));
   a->goal_est = nh_calloc(3 * (size_t)(n ? n : 1), sizeof(double));
   a->goal_geo = nh_calloc(3 * (size_t)(n ? n : 1), sizeof(double));
+  a->goal_cons = nh_calloc(3 * (size_t)(n ? n : 1), sizeof(double));
   a->weight = nh_calloc(3 * (size_t)(n ? n : 1), sizeof(double));
   a->sep_est = nh_calloc(3 * (size_t)(n ? n : 1), sizeof(double));
-  if (!a->goal_points || !a->goal_error || !a->goal_est || !a->goal_geo || !a->weight ||
-      !a->sep_est)
+  if (!a->goal_points || !a->goal_error || !a->goal_est || !a->goal_geo || !a->goal_cons ||
+      !a->weight || !a->sep_est)
     return NH_ERROR(NH_ERR_MEMORY, "out of memory: goals");
   a->have_weights = 0;
   memcpy(a->goal_points, points, sizeof(double) * 3 * (size_t)n);
@@ -156,6 +160,10 @@ int nh_adapt_set_goals(nh_adapt *a, const nh_mesh *m, int n, const double *point
 
 void nh_adapt_set_geometry_loads(nh_adapt *a, const nh_geometry_loads *loads) {
   a->loads = loads;
+}
+
+void nh_adapt_set_constraint_data(nh_adapt *a, const nh_constraint_data *data) {
+  a->data = data;
 }
 
 int nh_adapt_estimate_goal(nh_adapt *a, nh_system *sys, const nh_rows *rows, double scale,
@@ -175,7 +183,9 @@ int nh_adapt_estimate_goal(nh_adapt *a, nh_system *sys, const nh_rows *rows, dou
                      .norm = a->goal_error,
                      .indicator = a->goal_ind,
                      .loads = a->loads,
-                     .geometry = a->goal_geo};
+                     .geometry = a->goal_geo,
+                     .data = a->data,
+                     .constraint = a->goal_cons};
   if (!combined) {
     NH_TRY(nh_dwr_estimate(sys, rows, scale, m, tissue, hanging, u, a->n_goals, a->goal_points,
                            a->radius, NULL, &r));
@@ -193,7 +203,7 @@ int nh_adapt_estimate_goal(nh_adapt *a, nh_system *sys, const nh_rows *rows, dou
     a->since_separate = 0;
   } else {
     double Ec = 0.0;
-    r.estimate = &Ec, r.norm = NULL, r.geometry = NULL;
+    r.estimate = &Ec, r.norm = NULL, r.geometry = NULL, r.constraint = NULL;
     NH_TRY(nh_dwr_estimate_combined(sys, rows, scale, m, tissue, hanging, u, a->n_goals,
                                     a->goal_points, a->radius, NULL, a->weight, &r));
     /* each goal's estimate carried from the last separate one by the
@@ -202,7 +212,8 @@ int nh_adapt_estimate_goal(nh_adapt *a, nh_system *sys, const nh_rows *rows, dou
     for (int p = 0; p < a->n_goals; p++) {
       double *e = a->goal_est + 3 * p;
       for (int k = 0; k < 3; k++) e[k] = rho * a->sep_est[3 * p + k];
-      for (int k = 0; k < 3; k++) a->goal_geo[3 * p + k] = NAN; /* not split */
+      for (int k = 0; k < 3; k++) /* not split */
+        a->goal_geo[3 * p + k] = a->goal_cons[3 * p + k] = NAN;
       a->goal_error[p] = sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]);
     }
     a->since_separate++;
@@ -238,6 +249,10 @@ const double *nh_adapt_goal_estimates(const nh_adapt *a) {
 
 const double *nh_adapt_goal_geometry(const nh_adapt *a) {
   return a && a->goal && a->have_eta ? a->goal_geo : NULL;
+}
+
+const double *nh_adapt_goal_constraint(const nh_adapt *a) {
+  return a && a->goal && a->have_eta ? a->goal_cons : NULL;
 }
 
 const nh_node_transfer *nh_adapt_last_transfer(const nh_adapt *a) {

@@ -374,6 +374,14 @@ const nh_rows *nh_contact_rows(const nh_contact *c) {
   return c ? &c->rows : NULL;
 }
 
+int nh_contact_data_change(nh_contact *c, const nh_mesh *m, const double *u, int n_fields,
+                           const double *w, double *dc, double *dw) {
+  const int rm = c->rows.m;
+  if (dc) memset(dc, 0, sizeof(double) * (size_t)rm);
+  if (dw) memset(dw, 0, sizeof(double) * (size_t)rm * (size_t)n_fields);
+  return c->skull ? nh_skull_data_change(c->skull, m, u, dw ? n_fields : 0, w, rm, dc, dw) : NH_OK;
+}
+
 void nh_contact_stats_get(const nh_contact *c, nh_contact_stats *st) {
   st->rows = c->rows.m;
   st->cut = c->cut;

@@ -127,6 +127,16 @@ void nh_contact_stats_get(const nh_contact *c, nh_contact_stats *stats);
 /* The constraint rows of the last step with their forces (the goal
  * estimate's constrained dual, adapt/dwr.c); NULL for c = NULL. */
 const nh_rows *nh_contact_rows(const nh_contact *c);
+/* The change of the rows' constraints when sampled one lattice finer, at
+ * the tissue state u (the goal estimate's constraint-data term,
+ * docs/theory.md §6.6, "Constraint data"; nh_skull_data_change for the
+ * skull's rows, 0 for the tools' rows, whose data are not re-sampled):
+ * dc (may be NULL) the change of each row's gap at u, dw the change of its
+ * linearisation applied to the fields w (3 n_nodes each), rows->m per
+ * field (rows = nh_contact_rows(c)). NH_ERR_MEMORY, or the cut-cell
+ * quadrature's failure. */
+int nh_contact_data_change(nh_contact *c, const nh_mesh *mesh, const double *u, int n_fields,
+                           const double *w, double *dc, double *dw);
 
 /* Force per row of a tool's points for output: for each node of tool k,
  * the sum of the constraint forces (N, on the tool) distributed to its
@@ -153,6 +163,11 @@ typedef struct nh_skull nh_skull;
  * message: the caller adds it), NH_ERR_MEMORY. */
 int nh_skull_create(const nh_domain *domain, double gap, nh_skull **out);
 void nh_skull_destroy(nh_skull **skull);
+/* The lattice depth of the integrated leaves' surface quadrature the points
+ * come from (default NH_CUT_DEPTH; the environment variable NH_SKULL_DEPTH
+ * sets it at creation, a diagnostic: docs/dbs.md); the next nh_skull_build
+ * uses it. NH_ERR_INPUT outside 0 ..= NH_CUT_DEPTH_MAX − 1. */
+int nh_skull_set_depth(nh_skull *skull, int depth);
 /* The contact points of the mesh's surface (rest shape), after creation;
  * nh_skull_relocate after refinement keeps the warm starts. */
 int nh_skull_build(nh_skull *skull, const nh_mesh *mesh);
@@ -189,5 +204,19 @@ int nh_skull_state_load(nh_skull *skull, nh_byte_reader *r);
  * moved a point through the skull without its row (quasi-static Newton
  * iterations check it and solve again with the point's approach known). */
 double nh_skull_missed(const nh_skull *skull, const nh_mesh *mesh, const double *u);
+/* For each point with a row in the last nh_skull_rows (index p->row of that
+ * row set), the change of its constraint when its leaf's points are taken
+ * one lattice finer (the surface quadrature at depth + 1, or 12³ sub-cells
+ * for `scaled`; docs/theory.md §6.6, "Constraint data"): the finer points
+ * nearest to it, with weights ω_j = A_j / Σ A_j of their areas, give
+ *   dc[row] = Σ_j ω_j (g_j(u) − g(u))                (may be NULL)
+ *   dw[stride q + row] = Σ_j ω_j (n_j·w_q(P_j) − n·w_q(P)),  q < n_fields
+ * with g = gap − φ(x) at the current positions x = P + u(P) and n the
+ * rows' inward normals there (the rest normal on a crease): the change of
+ * the gap at u and of the row's linearisation applied to the fields w
+ * (3 n_nodes each). Other entries are not touched. The finer points are
+ * cached per leaf. NH_ERR_MEMORY, or the cut-cell quadrature's failure. */
+int nh_skull_data_change(nh_skull *skull, const nh_mesh *mesh, const double *u, int n_fields,
+                         const double *w, int stride, double *dc, double *dw);
 
 #endif

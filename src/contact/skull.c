@@ -65,7 +65,13 @@
  * W = J A⁻¹ Jᵀ small; one that closes faster gets its row the next step
  * (and its violation g < 0 is then removed within that step). λ is warm-started
  * from the point's previous step. The rows' impulses λ / h are the contact
- * forces; λ / (h A) is the contact pressure. */
+ * forces; λ / (h A) is the contact pressure.
+ *
+ * The points one lattice finer (nh_skull_data_change): the same leaf's
+ * points at depth + 1 (`scaled`: 12³ sub-cells), computed once per leaf,
+ * each given to the nearest point of its leaf facing its way; the change of
+ * each row's gap and direction between them and the row is the goal
+ * estimate's constraint data (docs/theory.md §6.6, "Constraint data"). */
 #include "contact/contact.h"
 
 #include <math.h>
@@ -85,6 +91,7 @@ typedef struct {
   int small;    /* its leaf's tissue fraction is below NH_FILL_MIN (merged away in the build) */
   int crease;   /* it (or its skull point) lies on a crease even after the split: its row
                    keeps the skull's normal at X as its direction */
+  int leaf;     /* the leaf whose surface samples made it (cell may be a neighbour: `scaled`) */
 } nh_skull_point;
 
 /* At most one point per dominant direction of the outward normal (±x, ±y,
@@ -119,10 +126,13 @@ typedef struct {
 struct nh_skull {
   nh_domain domain;
   double gap;
+  int depth; /* the lattice of the integrated leaves' surface quadrature (NH_CUT_DEPTH) */
   nh_skull_point *p;
   int n, cap;
   nh_skull_cell *cell; /* by cell index of the mesh last built on */
   int n_cell;
+  nh_skull_cell *fine; /* the same leaves' points one lattice finer (nh_skull_data_change) */
+  int n_fine;
   double force[3]; /* last step's total contact force on the tissue, N */
   int active;      /* rows with λ > 0 in the last step */
 };
@@ -136,7 +146,25 @@ int nh_skull_create(const nh_domain *domain, double gap, nh_skull **out) {
   if (!s) return NH_ERR_MEMORY;
   s->domain = *domain;
   s->gap = gap;
+  s->depth = NH_CUT_DEPTH;
+  /* diagnostic (docs/dbs.md, "Effectivity of the estimates"): the points
+   * from another lattice, e.g. NH_SKULL_DEPTH=3 for the constraint-data
+   * term's measured counterpart */
+  const char *env = getenv("NH_SKULL_DEPTH");
+  if (env && *env) {
+    char *end = NULL;
+    long d = strtol(env, &end, 10);
+    if (*end == '\0') nh_skull_set_depth(s, (int)d);
+  }
   *out = s;
+  return NH_OK;
+}
+
+int nh_skull_set_depth(nh_skull *s, int depth) {
+  NH_CHECK(depth >= 0 && depth < NH_CUT_DEPTH_MAX, NH_ERR_INPUT,
+           "skull points: lattice depth %d outside 0..%d", depth, NH_CUT_DEPTH_MAX - 1);
+  s->depth = depth;
+  s->n_cell = s->n_fine = 0; /* every leaf's points again */
   return NH_OK;
 }
 
@@ -144,6 +172,7 @@ void nh_skull_destroy(nh_skull **skull) {
   if (!skull || !*skull) return;
   free((*skull)->p);
   free((*skull)->cell);
+  free((*skull)->fine);
   free(*skull);
   *skull = NULL;
 }
@@ -368,14 +397,19 @@ static int nh_skull_cell_points(const nh_domain *d, double gap, const nh_skull_s
 }
 
 /* The surface points of leaf Xe (n_pt = 0 if the surface misses it) from
- * 6³ sub-cell midpoints and the one-sided smeared delta. */
-static int nh_cell_surface(const nh_domain *d, double gap, const double Xe[24], nh_skull_cell *f) {
-  enum { n = 6 };
+ * n³ sub-cell midpoints (n = 6 << fine) and the one-sided smeared delta. */
+static int nh_cell_surface(const nh_domain *d, double gap, const double Xe[24], int fine,
+                           nh_skull_cell *f) {
+  const int n = 6 << fine;
   double edge = 0.0;
   for (int k = 0; k < 3; k++) edge = fmax(edge, fabs(Xe[18 + k] - Xe[k]));
   const double eps = 1.5 * edge / n;
-  nh_skull_sample smp[n * n * n];
-  int cls[n * n * n], ns = 0;
+  nh_skull_sample *smp = nh_calloc((size_t)(n * n * n), sizeof *smp);
+  int *cls = nh_calloc((size_t)(n * n * n), sizeof *cls), ns = 0;
+  if (!smp || !cls) {
+    free(smp), free(cls);
+    return NH_ERROR(NH_ERR_MEMORY, "out of memory: skull points");
+  }
   for (int i = 0; i < n; i++)
     for (int j = 0; j < n; j++)
       for (int k = 0; k < n; k++) {
@@ -397,17 +431,19 @@ static int nh_cell_surface(const nh_domain *d, double gap, const double Xe[24], 
         s->w = w;
         for (int p = 0; p < 3; p++) s->x[p] = x[p] - phi * nrm[p], s->n[p] = nrm[p];
       }
-  return nh_skull_cell_points(d, gap, smp, ns, cls, edge, f);
+  int rc = nh_skull_cell_points(d, gap, smp, ns, cls, edge, f);
+  free(smp), free(cls);
+  return rc;
 }
 
 /* The surface points of an integrated box leaf [lo, hi] from the cut-cell
- * quadrature (n_pt = 0 if the surface misses the leaf): positions P on
+ * quadrature at lattice depth `depth` (n_pt = 0 if the surface misses the leaf): positions P on
  * F = 0, natural coordinates xi in the leaf, areas; and its tissue
  * fraction. */
-static int nh_cell_cut_surface(const nh_domain *d, double gap, const double lo[3],
+static int nh_cell_cut_surface(const nh_domain *d, double gap, int depth, const double lo[3],
                                const double hi[3], nh_skull_cell *f) {
   nh_cut_spec spec;
-  nh_cut_spec_domain(&spec, d, NH_CUT_DEPTH);
+  nh_cut_spec_domain(&spec, d, depth);
   nh_cut_moments mom;
   nh_cut_surface surf = {0, 0, NULL};
   int rc = nh_cut_cell(&spec, lo, hi, &mom, &surf, 0u);
@@ -445,22 +481,30 @@ static int nh_cell_cut_surface(const nh_domain *d, double gap, const double lo[3
  * by the stabilisation α alone (and carry almost no mass): a contact row
  * there is met by moving them, not the tissue (a node 1 m away in one
  * step, tests/skull_force.py). The total area is kept. */
+/* The point of p[first ..= last], not small, nearest to X among those whose
+ * outward normal is less than 90° from N (the nearest of any if none is);
+ * −1 if there is none. */
+static int nh_skull_nearest_facing(const nh_skull_point *p, int first, int last, const double X[3],
+                                   const double N[3]) {
+  int best = -1, best_facing = 0;
+  double d2best = INFINITY;
+  for (int j = first; j <= last; j++) {
+    if (p[j].small) continue;
+    double d2 = 0.0, dot = 0.0;
+    for (int k = 0; k < 3; k++)
+      d2 += (p[j].X[k] - X[k]) * (p[j].X[k] - X[k]), dot += p[j].N[k] * N[k];
+    const int facing = dot > 0.0;
+    if (facing > best_facing || (facing == best_facing && d2 < d2best))
+      d2best = d2, best = j, best_facing = facing;
+  }
+  return best;
+}
+
 static void nh_skull_merge_small(nh_skull *s) {
   int n = 0;
   for (int i = 0; i < s->n; i++) {
     if (!s->p[i].small) continue;
-    int best = -1, best_facing = 0;
-    double d2best = INFINITY;
-    for (int j = 0; j < s->n; j++) {
-      if (s->p[j].small) continue;
-      double d2 = 0.0, dot = 0.0;
-      for (int k = 0; k < 3; k++)
-        d2 += (s->p[j].X[k] - s->p[i].X[k]) * (s->p[j].X[k] - s->p[i].X[k]),
-            dot += s->p[j].N[k] * s->p[i].N[k];
-      const int facing = dot > 0.0;
-      if (facing > best_facing || (facing == best_facing && d2 < d2best))
-        d2best = d2, best = j, best_facing = facing;
-    }
+    const int best = nh_skull_nearest_facing(s->p, 0, s->n - 1, s->p[i].X, s->p[i].N);
     if (best < 0) return; /* no leaf holds enough tissue: keep every point */
     s->p[best].area += s->p[i].area;
     s->p[i].area = 0.0;
@@ -468,6 +512,19 @@ static void nh_skull_merge_small(nh_skull *s) {
   for (int i = 0; i < s->n; i++)
     if (s->p[i].area > 0.0) s->p[n++] = s->p[i];
   s->n = n;
+}
+
+/* The points of leaf Xe: from the lattice s->depth + finer (integrated box
+ * leaves), else from (6 << finer)³ sub-cells. */
+static int nh_skull_leaf(const nh_skull *s, const double Xe[24], int finer, nh_skull_cell *f) {
+  double lo[3], hi[3];
+  memset(f, 0, sizeof *f);
+  memcpy(f->Xe, Xe, sizeof f->Xe);
+  f->own = nh_domain_integrates_cuts(&s->domain) && nh_hex_is_box(Xe, lo, hi);
+  NH_TRY(f->own ? nh_cell_cut_surface(&s->domain, s->gap, s->depth + finer, lo, hi, f)
+                : nh_cell_surface(&s->domain, s->gap, Xe, finer, f));
+  f->done = 1;
+  return NH_OK;
 }
 
 int nh_skull_build(nh_skull *s, const nh_mesh *m) {
@@ -484,17 +541,11 @@ int nh_skull_build(nh_skull *s, const nh_mesh *m) {
     if (c < s->n_cell && s->cell[c].done && !memcmp(s->cell[c].Xe, Xe, sizeof Xe)) {
       *f = s->cell[c];
     } else {
-      double lo[3], hi[3];
-      memset(f, 0, sizeof *f);
-      memcpy(f->Xe, Xe, sizeof Xe);
-      f->own = nh_domain_integrates_cuts(&s->domain) && nh_hex_is_box(Xe, lo, hi);
-      int rc = f->own ? nh_cell_cut_surface(&s->domain, s->gap, lo, hi, f)
-                      : nh_cell_surface(&s->domain, s->gap, Xe, f);
+      int rc = nh_skull_leaf(s, Xe, 0, f);
       if (rc) {
         free(fresh);
         return rc;
       }
-      f->done = 1;
     }
     double edge = 0.0;
     for (int k = 0; k < 3; k++) edge = fmax(edge, fabs(Xe[18 + k] - Xe[k]));
@@ -523,6 +574,7 @@ int nh_skull_build(nh_skull *s, const nh_mesh *m) {
       p->small = f->own && f->fraction < NH_FILL_MIN;
       p->crease = f->crease[i];
       p->edge = edge;
+      p->leaf = c;
     }
   }
   free(s->cell);
@@ -663,4 +715,83 @@ double nh_skull_missed(const nh_skull *s, const nh_mesh *m, const double *u) {
     worst = fmax(worst, (nh_skull_wall(&s->domain, x, nrm) - s->gap) / s->p[i].edge);
   }
   return worst;
+}
+
+/* A point's gap g = gap − φ_skull(x) at its current position x = P + u(P)
+ * (P at natural coordinates xi of cell c) and its row's direction there,
+ * as nh_skull_rows makes them (the skull's inward normal; at the rest
+ * position P for a point on a crease), with its shape values N. */
+static double nh_skull_gap_at(const nh_skull *s, const nh_mesh *m, const double *u, int c,
+                              const double xi[3], const double P[3], int crease, double dir[3],
+                              double N[8]) {
+  nh_skull_point q = {.cell = c};
+  double x[3], nrm[3];
+  memcpy(q.X, P, sizeof q.X);
+  memcpy(q.xi, xi, sizeof q.xi);
+  nh_skull_position(m, u, &q, x, N);
+  const double g = s->gap - nh_skull_wall(&s->domain, x, nrm);
+  if (crease) nh_skull_wall(&s->domain, P, nrm);
+  for (int k = 0; k < 3; k++) dir[k] = -nrm[k];
+  return g;
+}
+
+/* n·w at a point of cell c with shape values N, for field w. */
+static double nh_skull_normal_value(const nh_mesh *m, const double *w, int c, const double N[8],
+                                    const double dir[3]) {
+  double s = 0.0;
+  for (int a = 0; a < 8; a++)
+    for (int k = 0; k < 3; k++) s += N[a] * dir[k] * w[3 * m->cells[8 * c + a] + k];
+  return s;
+}
+
+/* The constraint-data term's fine data (docs/theory.md §6.6, "Constraint
+ * data"): each leaf's points one lattice finer, each given to the nearest
+ * point of the same leaf whose normal faces its way (the nearest of any if
+ * none does), weighted by its share of the areas the point receives. */
+int nh_skull_data_change(nh_skull *s, const nh_mesh *m, const double *u, int n_fields,
+                         const double *w, int stride, double *dc, double *dw) {
+  if (s->n_fine < m->n_cells) {
+    NH_TRY(nh_realloc((void **)&s->fine, (size_t)m->n_cells, sizeof *s->fine));
+    memset(s->fine + s->n_fine, 0, sizeof *s->fine * (size_t)(m->n_cells - s->n_fine));
+    s->n_fine = m->n_cells;
+  }
+  const size_t n3 = 3 * (size_t)m->n_nodes;
+  for (int i = 0; i < s->n; i++) {
+    const nh_skull_point *p = &s->p[i];
+    if (p->row < 0) continue;
+    const int c = p->leaf;
+    double Xe[24];
+    nh_mesh_cell_coords(m, m->X, c, Xe);
+    nh_skull_cell *f = &s->fine[c];
+    if (!f->done || memcmp(f->Xe, Xe, sizeof Xe)) NH_TRY(nh_skull_leaf(s, Xe, 1, f));
+    int first = i, last = i; /* the leaf's points: consecutive (nh_skull_build) */
+    while (first > 0 && s->p[first - 1].leaf == c) first--;
+    while (last + 1 < s->n && s->p[last + 1].leaf == c) last++;
+    double dir_i[3], N_i[8];
+    const double g_i = nh_skull_gap_at(s, m, u, p->cell, p->xi, p->X, p->crease, dir_i, N_i);
+    double area = 0.0, sum_g = 0.0;
+    for (int q = 0; q < n_fields; q++) dw[(size_t)stride * q + p->row] = 0.0;
+    for (int j = 0; j < f->n_pt; j++) {
+      double nrm[3], xi[3], dir[3], N[8];
+      nh_skull_distance(&s->domain, f->P[j], nrm);
+      if (nh_skull_nearest_facing(s->p, first, last, f->P[j], nrm) != i) continue;
+      if (f->own)
+        memcpy(xi, f->xi[j], sizeof xi);
+      else if (nh_hex_invert(Xe, f->P[j], xi) != NH_OK)
+        continue;
+      /* differences to the row's own values: 0 to the last bit where the
+       * points are the same */
+      area += f->area[j];
+      sum_g += f->area[j] * (nh_skull_gap_at(s, m, u, c, xi, f->P[j], p->crease, dir, N) - g_i);
+      for (int q = 0; q < n_fields; q++) {
+        const double *wq = w + n3 * q;
+        dw[(size_t)stride * q + p->row] +=
+            f->area[j] * (nh_skull_normal_value(m, wq, c, N, dir) -
+                          nh_skull_normal_value(m, wq, p->cell, N_i, dir_i));
+      }
+    }
+    if (dc) dc[p->row] = area > 0.0 ? sum_g / area : 0.0;
+    for (int q = 0; q < n_fields; q++) dw[(size_t)stride * q + p->row] /= area > 0.0 ? area : 1.0;
+  }
+  return NH_OK;
 }

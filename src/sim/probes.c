@@ -66,12 +66,21 @@ double nh_sim_target_distance_error(const nh_sim *s, int i) {
   return nh_sim_target_distance_part(s, i, nh_adapt_goal_estimates(s->adapt));
 }
 
-void nh_sim_target_geometry_error(const nh_sim *s, int i, double *position, double *distance) {
-  const double *G = nh_adapt_goal_geometry(s->adapt);
+/* |v| and |−n · v| of target i's part v (3 per goal) of its estimates, or NaN. */
+static void nh_sim_target_part(const nh_sim *s, int i, const double *G, double *position,
+                               double *distance) {
   const int g = s->goal_of_point ? s->goal_of_point[s->scene->n_probes + i] : -1;
   *position = *distance = NAN;
   if (!G || g < 0) return;
   const double *v = G + 3 * g;
   *position = sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
   *distance = nh_sim_target_distance_part(s, i, G);
+}
+
+void nh_sim_target_geometry_error(const nh_sim *s, int i, double *position, double *distance) {
+  nh_sim_target_part(s, i, nh_adapt_goal_geometry(s->adapt), position, distance);
+}
+
+void nh_sim_target_constraint_error(const nh_sim *s, int i, double *position, double *distance) {
+  nh_sim_target_part(s, i, nh_adapt_goal_constraint(s->adapt), position, distance);
 }

@@ -616,6 +616,12 @@ static int nh_output_failed(int rc, int step) {
   snprintf(reason, sizeof reason, "%s", nh_error_message());
   return NH_ERROR(rc, "step %d: writing the outputs failed: %s", step, reason);
 }
+/* The constraint-data term's linearised change of the rows (dwr.c, "Constraint data"). */
+static int nh_sim_rows_linear(void *ctx, int n, const double *w, double *out) {
+  nh_sim *s = ctx;
+  return nh_contact_data_change(s->contact, s->mesh, s->u, n, w, NULL, out);
+}
+
 /* The error estimate of this step's solution: SPR, or goal-oriented with the
  * step's factor (the coefficient of K in A: 1 static, hβ + h² dynamic). */
 static int nh_sim_estimate(nh_sim *s) {
@@ -639,10 +645,26 @@ static int nh_sim_estimate(nh_sim *s) {
     loads.body_share = buf + nt;
   }
   nh_adapt_set_geometry_loads(s->adapt, &loads);
-  int rc = nh_adapt_estimate_goal(s->adapt, s->system, nh_contact_rows(s->contact), scale, s->mesh,
-                                  s->tissue, s->u, s->hanging, &s->eta, &s->eta_rel);
+  /* the constraint-data term: the rows one level finer (§6.6, "Constraint data") */
+  const nh_rows *rows = nh_contact_rows(s->contact);
+  const int rm = rows ? rows->m : 0;
+  double *dc = rm > 0 ? nh_calloc(2 * (size_t)rm, sizeof(double)) : NULL;
+  int rc = rm > 0 && !dc ? NH_ERROR(NH_ERR_MEMORY, "out of memory: constraint data") : NH_OK;
+  nh_constraint_data data = {
+      .change = dc, .force = dc ? dc + rm : NULL, .linear = nh_sim_rows_linear, .ctx = s};
+  if (!rc && dc) {
+    /* the rows' forces: impulses per τ (h, or 1 quasi-static) */
+    const double tau = sc->time.mode == NH_MODE_STATIC ? 1.0 : h;
+    for (int i = 0; i < rm; i++) dc[rm + i] = rows->lambda[i] / tau;
+    rc = nh_contact_data_change(s->contact, s->mesh, s->u, 0, NULL, dc, NULL);
+  }
+  nh_adapt_set_constraint_data(s->adapt, dc ? &data : NULL);
+  if (!rc)
+    rc = nh_adapt_estimate_goal(s->adapt, s->system, rows, scale, s->mesh, s->tissue, s->u,
+                                s->hanging, &s->eta, &s->eta_rel);
   nh_adapt_set_geometry_loads(s->adapt, NULL);
-  free(buf);
+  nh_adapt_set_constraint_data(s->adapt, NULL);
+  free(buf), free(dc);
   return rc;
 }
 

@@ -73,6 +73,10 @@ double nh_sim_target_distance_error(const nh_sim *sim, int i);
  * combined estimate (targets.csv `geometry_estimate`,
  * `distance_geometry_estimate`). */
 void nh_sim_target_geometry_error(const nh_sim *sim, int i, double *position, double *distance);
+/* The same for the constraint-data term (dwr.c, "Constraint data";
+ * targets.csv `constraint_estimate`, `distance_constraint_estimate`): 0
+ * without rows whose data change (no skull), NaN as above. */
+void nh_sim_target_constraint_error(const nh_sim *sim, int i, double *position, double *distance);
 /* Refine the n leaves cells[] by the scene's adapt.template, as a
  * refinement after a step would: u and v carried to the new nodes
  * (Eq. 17), everything that depends on the mesh rebuilt, the tools'

@@ -22,7 +22,9 @@ static const char *const nh_target_columns[] = {"step",
                                                 "error_estimate",
                                                 "distance_error_estimate",
                                                 "geometry_estimate",
-                                                "distance_geometry_estimate"};
+                                                "distance_geometry_estimate",
+                                                "constraint_estimate",
+                                                "distance_constraint_estimate"};
 
 /* The tools' twist is written (tools.csv `twist`, the HDF5 series'
  * component, the frames' point field) when a tool's channel resists its
@@ -128,7 +130,7 @@ int nh_sim_tools_open(nh_sim *s) {
   if (sc->n_targets > 0) {
     snprintf(path, sizeof path, "%s/targets.csv", sc->output.dir);
     int goal = sc->adapt.enabled && sc->adapt.estimator == NH_ESTIMATOR_GOAL;
-    int nc = goal ? 11 : 7;
+    int nc = goal ? 13 : 7;
     NH_TRY(resume ? nh_csv_resume(path, nc, nh_target_columns, s->step, &s->targets_csv)
                   : nh_csv_create(path, nc, nh_target_columns, &s->targets_csv));
   }
@@ -178,12 +180,14 @@ int nh_sim_tools_rows(nh_sim *s) {
       nh_sim_target_miss(s, i, x, d);
       double dist = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
       if (sc->adapt.enabled && sc->adapt.estimator == NH_ESTIMATOR_GOAL) {
-        double geo, geo_d;
+        double geo, geo_d, con, con_d;
         nh_sim_target_geometry_error(s, i, &geo, &geo_d);
-        rc = nh_csv_row(
-            s->targets_csv, "%d,%.17g,%s,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g", s->step,
-            s->time, tg->name, x[0], x[1], x[2], dist, nh_sim_point_error(s, sc->n_probes + i),
-            nh_sim_target_distance_error(s, i), geo, geo_d);
+        nh_sim_target_constraint_error(s, i, &con, &con_d);
+        rc = nh_csv_row(s->targets_csv,
+                        "%d,%.17g,%s,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g",
+                        s->step, s->time, tg->name, x[0], x[1], x[2], dist,
+                        nh_sim_point_error(s, sc->n_probes + i), nh_sim_target_distance_error(s, i),
+                        geo, geo_d, con, con_d);
       } else
         rc = nh_csv_row(s->targets_csv, "%d,%.17g,%s,%.17g,%.17g,%.17g,%.17g", s->step, s->time,
                         tg->name, x[0], x[1], x[2], dist);

@@ -540,9 +540,10 @@ void nh_system_add_reactions(const nh_system *s, double *b) {
  * compacted into a row set of their own, W of it, and the pivoted Cholesky
  * factor of D W D (D = diag(W)^−½) for the multipliers. */
 int nh_system_solve_rows(nh_system *s, const nh_rows *rows, const unsigned char *active, int ncol,
-                         const double *b, double *x, int *n_used) {
+                         const double *b, double *x, double *mu_out, int *n_used) {
   const int n = s->n_free;
   if (n_used) *n_used = 0;
+  if (mu_out && rows) memset(mu_out, 0, sizeof(double) * (size_t)rows->m * (size_t)ncol);
   NH_TRY(nh_system_solve_many(s, ncol, b, x));
   int m = 0;
   for (int i = 0; rows && i < rows->m; i++) m += !active || active[i];
@@ -609,6 +610,8 @@ int nh_system_solve_rows(nh_system *s, const nh_rows *rows, const unsigned char 
         memset(mq, 0, sizeof(double) * (size_t)m);
         for (int i = 0; i < rank; i++) mq[piv[i] - 1] = d[piv[i] - 1] * c[(size_t)rank * q + i];
         nh_rows_tissue_force(Jt, mq, f + (size_t)n * q, n);
+        for (int i = 0, k = 0; mu_out && i < rows->m; i++)
+          if (!active || active[i]) mu_out[(size_t)rows->m * q + i] = mq[k++];
       }
       rc = nh_system_solve_many(s, ncol, f, y);
       for (size_t i = 0; !rc && i < (size_t)n * (size_t)ncol; i++) x[i] -= y[i];

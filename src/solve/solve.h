@@ -383,11 +383,12 @@ int nh_rows_widen(nh_rows *rows, int count);
  * rigid tool). x = A⁻¹ b − A⁻¹ J_tᵀ μ with W μ = J_t A⁻¹ b,
  * W = J_t A⁻¹ J_tᵀ (nh_system_compliance_add), solved by a pivoted
  * Cholesky factorisation of the diagonally scaled W truncated at relative
- * pivots below 1e-12 (dependent rows: J_tᵀ μ is still unique). b, x:
- * column-major n_free x ncol. *n_used (may be NULL): the active rows.
- * NH_ERR_MEMORY, NH_ERR_NUMERIC. */
+ * pivots below 1e-12 (dependent rows: J_tᵀ μ is still unique, μ is not:
+ * the truncated rows get 0). b, x: column-major n_free x ncol. mu (may be
+ * NULL): the multipliers, rows->m per column (0 on the inactive rows).
+ * *n_used (may be NULL): the active rows. NH_ERR_MEMORY, NH_ERR_NUMERIC. */
 int nh_system_solve_rows(nh_system *sys, const nh_rows *rows, const unsigned char *active, int ncol,
-                         const double *b, double *x, int *n_used);
+                         const double *b, double *x, double *mu, int *n_used);
 
 /* A tool in the coupled step: its beam and the prescribed base velocity at
  * the end of the step (linear, angular). */
