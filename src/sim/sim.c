@@ -838,9 +838,7 @@ static int nh_sim_estimate_step(nh_sim *s, nh_sim_record *r) {
   double ta = nh_time_now();
   s->eta = s->eta_rel = NAN; /* nan in steps.csv: not estimated at this step */
   int rc = r->adapt_now ? nh_sim_estimate(s) : NH_OK;
-  int factorised, pcg;
-  nh_system_take_counts(s->system, &factorised, &pcg); /* the duals' */
-  r->st.factorised += factorised, r->st.pcg_iterations += pcg;
+  r->st.factorised += nh_system_take_later_factorisations(s->system); /* the duals' */
   if (!rc && r->resolve) {
     const nh_step_stats *st = &r->st;
     double t_solves = st->t_assemble + st->t_factor + st->t_solve + st->t_constraints;

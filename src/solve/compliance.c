@@ -536,35 +536,19 @@ void nh_system_add_reactions(const nh_system *s, double *b) {
     for (int p = Jp[j]; p < Jp[j + 1]; p++) b[Ji[p]] += Jx[p] * s->lambda_total[j];
 }
 
-/* x = A⁻¹ b for ncol columns: the factor's solve when it is A's, else PCG
- * on it to the step's tolerance (*failed set, the error cleared, when one
- * does not converge). */
-static int nh_rows_solve_a(nh_system *s, int ncol, const double *b, double *x, int *failed) {
-  if (nh_system_factor_serves(s)) return nh_system_solve_many(s, ncol, b, x);
-  const size_t n = (size_t)s->n_free;
-  for (int q = 0; q < ncol && !*failed; q++) {
-    int its = 0, rc = nh_system_pcg(s, b + n * q, x + n * q, 0, s->tolerance, NH_PCG_MAX, &its);
-    s->later_pcg += its;
-    if (rc == NH_ERR_NUMERIC) {
-      nh_error_clear();
-      *failed = 1;
-    } else if (rc) {
-      return rc;
-    }
-  }
-  return NH_OK;
-}
-
-/* The dual of a constrained step (solve.h) with the factor as it is: the
- * active rows' tissue parts compacted into a row set of their own, W of it
- * (W₀ of a reused factor), the pivoted Cholesky factor of D W D
- * (D = diag(W)^−½) for the multipliers, and with a reused factor the outer
- * corrections; *failed: a PCG or the corrections did not converge. */
-static int nh_rows_dual(nh_system *s, const nh_rows *rows, const unsigned char *active, int m,
-                        int ncol, const double *b, double *x, int *failed) {
+/* The dual of a constrained step (solve.h): the active rows' tissue parts
+ * compacted into a row set of their own, W of it, and the pivoted Cholesky
+ * factor of D W D (D = diag(W)^−½) for the multipliers; A factorised first
+ * when the factor is a reused one. */
+int nh_system_solve_rows(nh_system *s, const nh_rows *rows, const unsigned char *active, int ncol,
+                         const double *b, double *x, int *n_used) {
   const int n = s->n_free;
-  NH_TRY(nh_rows_solve_a(s, ncol, b, x, failed));
-  if (m == 0 || ncol <= 0 || *failed) return NH_OK;
+  if (n_used) *n_used = 0;
+  if (ncol > 0 && !nh_system_factor_serves(s)) NH_TRY(nh_system_factor_later(s));
+  NH_TRY(nh_system_solve_many(s, ncol, b, x));
+  int m = 0;
+  for (int i = 0; rows && i < rows->m; i++) m += !active || active[i];
+  if (m == 0 || ncol <= 0) return NH_OK;
   int slots = 0;
   for (int i = 0; i < rows->m; i++)
     if (!active || active[i]) slots += rows->start[i + 1] - rows->start[i];
@@ -577,15 +561,13 @@ static int nh_rows_dual(nh_system *s, const nh_rows *rows, const unsigned char *
   double *W = nh_calloc((size_t)m * (size_t)m, sizeof(double));
   double *d = nh_calloc((size_t)m, sizeof(double));
   double *mu = nh_calloc((size_t)m * (size_t)ncol, sizeof(double));
-  double *mt = nh_calloc((size_t)m * (size_t)ncol, sizeof(double));
   double *c = nh_calloc((size_t)m * (size_t)ncol, sizeof(double));
   double *f = nh_calloc((size_t)n * (size_t)ncol, sizeof(double));
   double *y = nh_calloc((size_t)n * (size_t)ncol, sizeof(double));
   cholmod_sparse *Jt = NULL;
-  int rc =
-      sub.start && sub.node && sub.N && sub.dir && mark && piv && W && d && mu && mt && c && f && y
-          ? NH_OK
-          : NH_ERROR(NH_ERR_MEMORY, "out of memory: constrained dual (%d rows)", m);
+  int rc = sub.start && sub.node && sub.N && sub.dir && mark && piv && W && d && mu && c && f && y
+               ? NH_OK
+               : NH_ERROR(NH_ERR_MEMORY, "out of memory: constrained dual (%d rows)", m);
   if (!rc) {
     for (int i = 0, k = 0; i < rows->m; i++) {
       if (active && !active[i]) continue;
@@ -601,66 +583,43 @@ static int nh_rows_dual(nh_system *s, const nh_rows *rows, const unsigned char *
     if (!Jt) rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: constrained dual (%d rows)", m);
   }
   if (!rc) rc = nh_system_compliance_add(s, Jt, W);
-  int rank = 0;
   if (!rc) {
+    const int *Jp = Jt->p, *Ji = Jt->i;
+    const double *Jx = Jt->x;
     for (int j = 0; j < m; j++) {
       double w = W[(size_t)j * m + j];
       d[j] = w > 0.0 ? 1.0 / sqrt(w) : 0.0; /* a row without free DOFs: dropped */
     }
     for (int j = 0; j < m; j++)
       for (int i = 0; i < m; i++) W[(size_t)j * m + i] *= d[i] * d[j];
-    /* Pᵀ W̃ P = L Lᵀ up to rank r; L₁₁ L₁₁ᵀ y₁ = (Pᵀ c)₁, y₂ = 0, μ = D P y. */
-    int info = (int)LAPACKE_dpstrf(LAPACK_COL_MAJOR, 'L', m, W, m, piv, &rank, 1e-12);
-    if (info < 0) rc = NH_ERROR(NH_ERR_NUMERIC, "constrained dual: dpstrf failed (%d)", info);
-  }
-  const int *Jp = Jt ? Jt->p : NULL, *Ji = Jt ? Jt->i : NULL;
-  const double *Jx = Jt ? Jt->x : NULL;
-  for (int k = 0; !rc && rank > 0; k++) {
-    for (int q = 0; q < ncol; q++) /* D J x: A⁻¹ b at the first pass, the rows' rates later */
+    for (int q = 0; q < ncol; q++) /* D J A⁻¹ b */
       for (int j = 0; j < m; j++) {
         double v = 0.0;
         for (int p = Jp[j]; p < Jp[j + 1]; p++) v += Jx[p] * x[(size_t)n * q + Ji[p]];
         mu[(size_t)m * q + j] = d[j] * v;
       }
-    for (int q = 0; q < ncol; q++)
-      for (int i = 0; i < rank; i++) c[(size_t)rank * q + i] = mu[(size_t)m * q + piv[i] - 1];
-    LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', rank, ncol, W, m, c, rank);
-    int converged = 1;
-    for (int q = 0; q < ncol; q++) {
-      double *mq = mu + (size_t)m * q, *tq = mt + (size_t)m * q, inc = 0.0, tot = 0.0;
-      memset(mq, 0, sizeof(double) * (size_t)m);
-      for (int i = 0; i < rank; i++) mq[piv[i] - 1] = d[piv[i] - 1] * c[(size_t)rank * q + i];
-      for (int j = 0; j < m; j++) {
-        tq[j] += mq[j];
-        inc = fmax(inc, fabs(mq[j])), tot = fmax(tot, fabs(tq[j]));
+    /* Pᵀ W̃ P = L Lᵀ up to rank r; L₁₁ L₁₁ᵀ y₁ = (Pᵀ c)₁, y₂ = 0, μ = D P y. */
+    int rank = 0;
+    int info = (int)LAPACKE_dpstrf(LAPACK_COL_MAJOR, 'L', m, W, m, piv, &rank, 1e-12);
+    if (info < 0) rc = NH_ERROR(NH_ERR_NUMERIC, "constrained dual: dpstrf failed (%d)", info);
+    if (!rc && rank > 0) {
+      for (int q = 0; q < ncol; q++)
+        for (int i = 0; i < rank; i++) c[(size_t)rank * q + i] = mu[(size_t)m * q + piv[i] - 1];
+      LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', rank, ncol, W, m, c, rank);
+      for (int q = 0; q < ncol; q++) {
+        double *mq = mu + (size_t)m * q;
+        memset(mq, 0, sizeof(double) * (size_t)m);
+        for (int i = 0; i < rank; i++) mq[piv[i] - 1] = d[piv[i] - 1] * c[(size_t)rank * q + i];
+        nh_rows_tissue_force(Jt, mq, f + (size_t)n * q, n);
       }
-      converged &= inc <= s->tolerance * tot;
-      nh_rows_tissue_force(Jt, mq, f + (size_t)n * q, n);
+      rc = nh_system_solve_many(s, ncol, f, y);
+      for (size_t i = 0; !rc && i < (size_t)n * (size_t)ncol; i++) x[i] -= y[i];
     }
-    if (!(rc = nh_rows_solve_a(s, ncol, f, y, failed)) && !*failed)
-      for (size_t i = 0; i < (size_t)n * (size_t)ncol; i++) x[i] -= y[i];
-    /* the factor of A: exact in one pass */
-    if (rc || *failed || nh_system_factor_serves(s) || converged) break;
-    if (k + 1 == NH_OUTER_MAX) *failed = 1;
   }
+  if (!rc && n_used) *n_used = m;
   if (Jt) cholmod_free_sparse(&Jt, &s->cm);
   free(sub.start), free(sub.node), free(sub.N), free(sub.dir), free(mark), free(piv), free(W),
-      free(d), free(mu), free(mt);
+      free(d), free(mu);
   free(c), free(f), free(y);
   return rc;
-}
-
-int nh_system_solve_rows(nh_system *s, const nh_rows *rows, const unsigned char *active, int ncol,
-                         const double *b, double *x, int *n_used) {
-  if (n_used) *n_used = 0;
-  int m = 0, failed = 0;
-  for (int i = 0; rows && i < rows->m; i++) m += !active || active[i];
-  NH_TRY(nh_system_factor_for_solves(s, ncol, m));
-  NH_TRY(nh_rows_dual(s, rows, active, m, ncol, b, x, &failed));
-  if (failed) { /* the reused factor did not serve: this A's, then directly */
-    NH_TRY(nh_system_factor_later(s));
-    NH_TRY(nh_rows_dual(s, rows, active, m, ncol, b, x, &failed));
-  }
-  if (n_used && m > 0 && ncol > 0) *n_used = m;
-  return NH_OK;
 }

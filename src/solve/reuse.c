@@ -102,7 +102,6 @@ int nh_system_factor_or_reuse(nh_system *s, const nh_integrator *in, nh_factor_r
      * `every` factorises at every step, as asked */
     if (s->factor_current && in->reuse) need = 0;
   }
-  if (rule == NH_FACTOR_STEP) s->tolerance = in->tolerance;
   if (need) {
     NH_TRY(nh_system_factor(s));
     st->t_factor_reference = nh_time_now() - t0;
@@ -137,7 +136,7 @@ int nh_system_pcg(nh_system *s, const double *b, double *x, int guess, double to
     if (rz <= tolerance * tolerance * ref2) {
       /* converged: z = M⁻¹ r is one refinement step more */
       for (int i = 0; i < n; i++) x[i] += z[i];
-      *iterations = s->pcg_last = it;
+      *iterations = it;
       return NH_OK;
     }
     if (it == max_iterations) break;
@@ -203,19 +202,8 @@ void nh_system_account(nh_system *s, const nh_step_stats *st) {
   if (extra > s->cycle_cost / s->cycle_steps) s->refactor_due = 1;
 }
 
-/* The duals' PCG, guessed from the last solve's iterations (one more for
- * the start), against F; with rows, the outer corrections (coupled.c's
- * measured 1–5 on the skull) counted as two more passes. */
 int nh_system_factor_serves(const nh_system *s) {
   return s->factor_current || (s->L && s->factor_age == 0);
-}
-
-int nh_system_factor_for_solves(nh_system *s, int ncol, int m) {
-  if (nh_system_factor_serves(s) || ncol <= 0) return NH_OK;
-  const double its = (s->pcg_last > 1 ? s->pcg_last : 1) + 1.0;
-  const double pcg = ncol * its * (m > 0 ? 3.0 : 1.0) * s->flops_iteration * NH_SOLVE_FLOP_COST;
-  if ((s->L || s->inh) && !(pcg > s->flops_factor)) return NH_OK;
-  return nh_system_factor_later(s);
 }
 
 int nh_system_factor_later(nh_system *s) {
@@ -227,9 +215,10 @@ int nh_system_factor_later(nh_system *s) {
   return NH_OK;
 }
 
-void nh_system_take_counts(nh_system *s, int *factorised, int *pcg_iterations) {
-  *factorised = s->later_factorised, *pcg_iterations = s->later_pcg;
-  s->later_factorised = s->later_pcg = 0;
+int nh_system_take_later_factorisations(nh_system *s) {
+  int n = s->later_factorised;
+  s->later_factorised = 0;
+  return n;
 }
 
 int nh_system_solve_reuse(nh_system *s, const double *b, double *x, double tolerance,

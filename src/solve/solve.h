@@ -381,22 +381,18 @@ int nh_rows_widen(nh_rows *rows, int count);
  * rigid tool). x = A⁻¹ b − A⁻¹ J_tᵀ μ with W μ = J_t A⁻¹ b,
  * W = J_t A⁻¹ J_tᵀ (nh_system_compliance_add), solved by a pivoted
  * Cholesky factorisation of the diagonally scaled W truncated at relative
- * pivots below 1e-12 (dependent rows: J_tᵀ μ is still unique). With the
- * factor of A, directly. With a reused (or inherited) factor M of an
- * earlier A₀ (solver.refactor: auto), unless nh_system_factor_for_solves
- * finds a factorisation cheaper: A⁻¹ by PCG on M to the step's tolerance,
- * and with rows the outer correction of the coupled step,
- *     μ_{k+1} = μ_k + W₀⁺ J_t x_k,   x_{k+1} = A⁻¹ (b − J_tᵀ μ_{k+1}),
- * W₀ = J_t M⁻¹ J_tᵀ, until max|μ_{k+1} − μ_k| <= tol max|μ_{k+1}| (its
- * fixed point is the exact solution; it contracts at ‖W₀⁻¹(W − W₀)‖); a
- * PCG or a correction that does not converge (NH_PCG_MAX, NH_OUTER_MAX)
- * factorises A and solves directly. b, x: column-major n_free x ncol.
- * *n_used (may be NULL): the active rows. NH_ERR_MEMORY, NH_ERR_NUMERIC. */
+ * pivots below 1e-12 (dependent rows: J_tᵀ μ is still unique). A⁻¹ is the
+ * step's factor: the one the step made, or with a reused or inherited
+ * factor (solver.refactor: auto) A factorised here first, which starts a
+ * new cycle of the renewal rule (PCG on the reused factor was measured
+ * 2–3.5 × dearer, docs/performance.md "Goal-oriented runs"). b, x:
+ * column-major n_free x ncol. *n_used (may be NULL): the active rows.
+ * NH_ERR_MEMORY, NH_ERR_NUMERIC. */
 int nh_system_solve_rows(nh_system *sys, const nh_rows *rows, const unsigned char *active, int ncol,
                          const double *b, double *x, int *n_used);
-/* The factorisations and PCG iterations of the solves since the last call
- * made after the step (nh_system_solve_rows), and reset them. */
-void nh_system_take_counts(nh_system *sys, int *factorised, int *pcg_iterations);
+/* The factorisations nh_system_solve_rows made since the last call, and
+ * reset the count. */
+int nh_system_take_later_factorisations(nh_system *sys);
 
 /* A tool in the coupled step: its beam and the prescribed base velocity at
  * the end of the step (linear, angular). */

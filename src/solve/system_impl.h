@@ -42,11 +42,9 @@ struct nh_system {
   double flops_factor;    /* one numeric factorisation (CHOLMOD's count at analysis) */
   double flops_solve;     /* one solve: two triangular solves with L */
   double flops_iteration; /* one PCG iteration: a solve and a product with A */
-  double tolerance;       /* the reused factor's solves (in->tolerance of the last step) */
-  int pcg_last;           /* PCG iterations of the last solve with a reused factor */
-  /* solves after the step (nh_system_solve_rows: the goal estimate's duals):
-   * their factorisations and PCG iterations, until nh_system_take_counts */
-  int later_factorised, later_pcg;
+  /* factorisations after the step (nh_system_solve_rows: the goal
+   * estimate's duals), until nh_system_take_later_factorisations */
+  int later_factorised;
   /* Across a mesh change (inherit.c): the old mesh's factor extended to the
    * new unknowns, the preconditioner while L is NULL; rows_hint: the
    * constraint rows of the coming step (coupled.c), whose W₀ it would cost */
@@ -175,17 +173,11 @@ int nh_system_factor_or_reuse(nh_system *s, const nh_integrator *in, nh_factor_r
                               nh_step_stats *st);
 
 /* Whether the factor serves the solves after the step (the goal estimate's
- * duals) directly: it factorises A, or the step factorised (factor_age 0)
- * the A it solved with, which the step's closing assembly at its new state
- * may have moved since (the duals take the A of the step's solution, as
- * before reuse was allowed in goal runs). */
+ * duals, nh_system_solve_rows): it factorises A, or the step factorised
+ * (factor_age 0) the A it solved with, which the step's closing assembly at
+ * its new state may have moved since (the duals take the A of the step's
+ * solution, as before reuse was allowed in goal runs). */
 int nh_system_factor_serves(const nh_system *s);
-/* Before ncol solves with the step's A after the step (the goal estimate's
- * duals; m constraint rows): with a reused factor, factorise A now when the
- * PCG iterations they would take cost more than a factorisation (operation
- * counts as the renewal rule's, reuse.c), and start a new cycle. Fails as
- * nh_system_factor. */
-int nh_system_factor_for_solves(nh_system *s, int ncol, int m);
 /* Factorise the step's A after the step (counted in later_factorised) and
  * start a new cycle of the renewal rule. Fails as nh_system_factor. */
 int nh_system_factor_later(nh_system *s);
