@@ -20,8 +20,8 @@ the skull (cases/dbs/dbs-skull.yaml on a 10×12×9 grid, uniform, 30 steps:
 up to ~180 skull rows), where the auto run must also have made steps with
 several outer corrections (the renewal rule counts their constraint solves);
 the phantom goal-oriented (hex2, 2 levels, the estimate every 4 steps), 40
-steps, whose duals take the step's factor or, after a reused one, a
-factorisation of A (nh_system_solve_rows): there the estimates
+steps, whose duals take a factorisation of A at the step's solution
+(nh_system_solve_rows), which the next step reuses: there the estimates
 (probes.csv error_estimate) are compared too, relative to their largest.
 """
 import csv
@@ -95,7 +95,8 @@ def compare(case, scene, sets, corrections=0):
     fact = sum(int(float(r["factorised"])) for r in steps)
     if not fact < n:
         fail("%s: the auto run factorised at %d of %d steps: nothing was reused" % (case, fact, n))
-    if sum(int(float(r["factorised"])) for r in read(every, "steps")) != n:
+    # (a goal run's every also factorises for the duals at the step's solution)
+    if sum(int(float(r["factorised"])) for r in read(every, "steps")) < n:
         fail("%s: the every run did not factorise at every step" % case)
     a, e = series(auto), series(every)
     if set(a) != set(e) or not a:

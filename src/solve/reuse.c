@@ -202,10 +202,6 @@ void nh_system_account(nh_system *s, const nh_step_stats *st) {
   if (extra > s->cycle_cost / s->cycle_steps) s->refactor_due = 1;
 }
 
-int nh_system_factor_serves(const nh_system *s) {
-  return s->factor_current || (s->L && s->factor_age == 0);
-}
-
 int nh_system_factor_later(nh_system *s) {
   NH_TRY(nh_system_factor(s));
   s->later_factorised++;

@@ -381,11 +381,14 @@ int nh_rows_widen(nh_rows *rows, int count);
  * rigid tool). x = A⁻¹ b − A⁻¹ J_tᵀ μ with W μ = J_t A⁻¹ b,
  * W = J_t A⁻¹ J_tᵀ (nh_system_compliance_add), solved by a pivoted
  * Cholesky factorisation of the diagonally scaled W truncated at relative
- * pivots below 1e-12 (dependent rows: J_tᵀ μ is still unique). A⁻¹ is the
- * step's factor: the one the step made, or with a reused or inherited
- * factor (solver.refactor: auto) A factorised here first, which starts a
- * new cycle of the renewal rule (PCG on the reused factor was measured
- * 2–3.5 × dearer, docs/performance.md "Goal-oriented runs"). b, x:
+ * pivots below 1e-12 (dependent rows: J_tᵀ μ is still unique). A is the
+ * matrix as the step left it, assembled at the step's solution (its closing
+ * residual): the tangent at the state the goal estimate integrates at. When
+ * the factor is not A's (a reused or inherited one, or the step's own of
+ * the A at its start), A is factorised here first, which starts a new
+ * cycle of the renewal rule: the next step, assembling at the same state,
+ * takes it as A's own factor (PCG on the reused factor was measured
+ * 1.7–3.5 × dearer, docs/performance.md "Goal-oriented runs"). b, x:
  * column-major n_free x ncol. *n_used (may be NULL): the active rows.
  * NH_ERR_MEMORY, NH_ERR_NUMERIC. */
 int nh_system_solve_rows(nh_system *sys, const nh_rows *rows, const unsigned char *active, int ncol,

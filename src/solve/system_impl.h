@@ -172,12 +172,6 @@ typedef enum { NH_FACTOR_STEP, NH_FACTOR_NEWTON } nh_factor_rule;
 int nh_system_factor_or_reuse(nh_system *s, const nh_integrator *in, nh_factor_rule rule,
                               nh_step_stats *st);
 
-/* Whether the factor serves the solves after the step (the goal estimate's
- * duals, nh_system_solve_rows): it factorises A, or the step factorised
- * (factor_age 0) the A it solved with, which the step's closing assembly at
- * its new state may have moved since (the duals take the A of the step's
- * solution, as before reuse was allowed in goal runs). */
-int nh_system_factor_serves(const nh_system *s);
 /* Factorise the step's A after the step (counted in later_factorised) and
  * start a new cycle of the renewal rule. Fails as nh_system_factor. */
 int nh_system_factor_later(nh_system *s);
