@@ -27,6 +27,11 @@
  *     round-off (1e-9 of Σ_K |r_K|) although each r_K is not: the
  *     geometry term sees no error where the geometry does not change the
  *     solution.
+ *  5. The cache of the finer data (nh_tissue_set_geometry_cache) on a
+ *     refining and coarsening ball: at every stage r_K of a tissue with the
+ *     cache equals, bit for bit, r_K of a tissue without it on the same
+ *     mesh (which integrates the finer lattice afresh), with the body force,
+ *     and every cut entry holds its finer data.
  * Argument: a scratch folder for the STL. NH_VERBOSE=1 prints numbers. */
 #include "check.h"
 #include "fem/fem.h"
@@ -337,12 +342,89 @@ static void test_ball_patch(int g) {
   nh_domain_release(&d);
 }
 
+/* ---- 5. the cache of the finer data on a refining and coarsening mesh ---- */
+
+/* Leaves whose r_K differ between the cached tissue t and the uncached t0
+ * (bit for bit), after updating both; the cut leaves in *n_cut. */
+static int cache_mismatches(const nh_mesh *m, nh_tissue *t, nh_tissue *t0, int *n_cut) {
+  CHECK_OK(nh_tissue_update(t));
+  CHECK_OK(nh_tissue_update(t0));
+  const size_t n3 = 3 * (size_t)m->n_nodes;
+  double *u = calloc(n3, sizeof(double));
+  for (int i = 0; i < m->n_nodes; i++) { /* a smooth nonlinear field, 0.1–1 mm */
+    const double *X = m->X + 3 * i;
+    u[3 * i] = 1e-4 * sin(40.0 * X[1]) + 2e-5;
+    u[3 * i + 1] = 5e-4 * X[0] * X[2] / (R * R);
+    u[3 * i + 2] = -1e-3 * (X[0] - c0[0]) * (X[0] - c0[0]) / (R * R);
+  }
+  nh_geometry_loads loads = {{0.3, -1.1, -9.81}, NULL, 0, NULL, NULL};
+  int bad = 0;
+  *n_cut = 0;
+  for (int l = 0; l < m->n_leaves; l++) {
+    const int c = m->leaves[l];
+    double r[24], r0[24];
+    const int k = nh_tissue_geometry_residual(t, c, u, &loads, r);
+    const int k0 = nh_tissue_geometry_residual(t0, c, u, &loads, r0);
+    CHECK(k >= 0 && k == k0, "leaf %d: cached returns %d, uncached %d", c, k, k0);
+    *n_cut += k == 1;
+    bad += k == 1 && memcmp(r, r0, sizeof r) != 0;
+  }
+  CHECK(t->fine && t0->fine == NULL, "the cache is not where it was set");
+  for (int e = 0; e < t->n_cut; e++)
+    CHECK(t->fine[e].lambda == t->lambda, "cut entry %d has no finer data", e);
+  free(u);
+  return bad;
+}
+
+static void test_cache(void) {
+  nh_domain d;
+  nh_mesh *m = NULL;
+  nh_tissue *t = NULL, *t0 = NULL;
+  ball_tissue(8, &d, &m, &t);
+  nh_material mat = {3000.0, 0.45, 1000.0, NH_FORMULATION_BBAR};
+  CHECK_OK(nh_tissue_create(m, &mat, &t0));
+  CHECK_OK(nh_tissue_set_geometry_cache(t, 1));
+  const char *src = getenv("NH_SOURCE_DIR");
+  char path[4096];
+  snprintf(path, sizeof path, "%s/templates/hex2.tmpl", src ? src : ".");
+  nh_template *tmpl = NULL;
+  CHECK_OK(nh_template_load(path, &tmpl));
+  int n_cut, bad = cache_mismatches(m, t, t0, &n_cut), cut0 = n_cut;
+  CHECK(n_cut > 0 && bad == 0, "ball 8³: %d of %d cut leaves differ with the cache", bad, n_cut);
+  /* refine the cut leaves with x below the centre */
+  int *cells = calloc((size_t)m->n_leaves, sizeof(int)), n = 0;
+  for (int l = 0; l < m->n_leaves; l++) {
+    const int c = m->leaves[l];
+    const nh_tissue_cut *cut = nh_tissue_cell_cut(t, c);
+    if (cut && cut->hi[0] <= c0[0]) cells[n++] = c;
+  }
+  CHECK(n > 0 && n < cut0, "%d of %d cut leaves to refine", n, cut0);
+  CHECK_OK(nh_mesh_refine(m, tmpl, cells, n, NULL));
+  bad = cache_mismatches(m, t, t0, &n_cut);
+  CHECK(bad == 0, "refined: %d of %d cut leaves differ with the cache", bad, n_cut);
+  if (verbose) printf("cache: %d cut leaves, %d refined, then %d cut leaves\n", cut0, n, n_cut);
+  /* merge them again */
+  int *map = calloc((size_t)m->n_nodes, sizeof(int)), n_before = n_cut;
+  CHECK_OK(nh_mesh_coarsen(m, cells, n, map));
+  bad = cache_mismatches(m, t, t0, &n_cut);
+  CHECK(bad == 0 && n_cut == cut0, "coarsened: %d of %d cut leaves differ (%d before refining)",
+        bad, n_cut, cut0);
+  if (verbose) printf("cache: coarsened %d -> %d cut leaves, all equal\n", n_before, n_cut);
+  free(cells), free(map);
+  nh_template_destroy(&tmpl);
+  nh_tissue_destroy(&t0);
+  nh_tissue_destroy(&t);
+  nh_mesh_destroy(&m);
+  nh_domain_release(&d);
+}
+
 int main(int argc, char **argv) {
   verbose = getenv("NH_VERBOSE") != NULL;
   test_exact_domains();
   test_planar(argc > 1 ? argv[1] : ".");
   test_ball_order();
   test_ball_patch(7);
+  test_cache();
   test_ball_patch(10);
   return nh_test_failures ? 1 : 0;
 }

@@ -51,6 +51,11 @@ DBS_GOAL = {
          ["tissue.grid=[10,12,9]", "adapt.max_level=1", "adapt.max_dofs=4300"], "spr"),
         ("goal-l1", "goal from 14 mm, 1 level",
          ["adapt.estimator=goal", "tissue.grid=[10,12,9]", "adapt.max_level=1"], "goal"),
+        # the estimate (and the refinement) every 4th step: the steps between reuse the
+        # factorisation (issue 26; docs/performance.md, "Goal-oriented runs")
+        ("goal-l1-every4", "goal from 14 mm, 1 level, every 4",
+         ["adapt.estimator=goal", "tissue.grid=[10,12,9]", "adapt.max_level=1", "adapt.every=4"],
+         "goal"),
         ("goal-l1-theta0.3", "goal from 14 mm, 1 level, θ = 0.3",
          ["adapt.estimator=goal", "tissue.grid=[10,12,9]", "adapt.max_level=1",
           "adapt.marking={strategy: max, theta: 0.3}"], "goal"),

@@ -20,10 +20,12 @@
  * A (1 static, hβ + h² dynamic): for the quasi-static steps of our cases
  * (h²K ≫ M), z ≈ K⁻¹ j, the influence function of J. The factor is the
  * step's: every dual costs one forward and one backward triangular solve,
- * all of them in one multi-column pass (nh_system_solve_many); no new
- * factorisation. Fixed DOFs carry z = 0, hanging nodes their masters'
- * interpolation (z lies in the discrete space). The hanging-node rows of
- * `adapt.hanging: lagrange` are not supported (use elimination).
+ * all of them in one multi-column pass (nh_system_solve_many). After a step
+ * that reused an earlier factor (solver.refactor: auto), A is factorised
+ * first (nh_system_solve_rows), and the next steps reuse that factor.
+ * Fixed DOFs carry z = 0, hanging nodes their masters' interpolation (z
+ * lies in the discrete space). The hanging-node rows of `adapt.hanging:
+ * lagrange` are not supported (use elimination).
  *
  * Constraints. A step with constraint rows (skull, the tools' puncture, tip
  * and shaft rows) solves A u + Jᵀλ = f, J u = g on its active rows
@@ -122,6 +124,9 @@
  * cells are refined where the geometry dominates (a child's sub-boxes are
  * half its parent's). It vanishes on a box domain, with `scaled`, and in
  * every cell whose level set is planar (the interpolant is exact there).
+ * The leaf's data one lattice finer depend only on its rest box and
+ * material: the tissue keeps them per cut leaf (nh_tissue_set_geometry_cache)
+ * and only the forces at u are evaluated here.
  *
  * Constraint data (docs/theory.md §6.6, "Constraint data"). The skull's
  * rows are a sampling of the surface that changes with the mesh, outside the

@@ -229,6 +229,10 @@ typedef struct nh_tissue {
   int *cell_cut, cap_cell_cut;
   nh_tissue_cut *cut;
   int n_cut, cap_cut;
+  /* the goal estimate's geometry term (nh_tissue_set_geometry_cache): per
+   * cut entry its data one lattice finer (NH_CUT_DEPTH + 1), kept with the
+   * entry; NULL when not cached */
+  nh_tissue_cut *fine;
 } nh_tissue;
 enum { NH_CUT_NONE = -1, NH_CUT_WHOLE = -2 };
 
@@ -242,6 +246,13 @@ double nh_tissue_fraction(const nh_tissue *tissue, int c);
  * L it is a corner of (a cut cell's ∫ N_v from its quadrature, any other
  * leaf's φ V_L / 8 over V_L / 8); 0 for a node of no leaf. NH_ERR_MEMORY. */
 int nh_tissue_node_support(const nh_tissue *tissue, double *support);
+/* Keep (on != 0) or drop the cut cells' data one lattice finer, which the
+ * goal estimate's geometry term (nh_tissue_geometry_residual) compares with
+ * theirs: computed here for every cut leaf and afterwards, in
+ * nh_tissue_update, for the new ones only (a kept leaf keeps its entry).
+ * They depend only on the leaf's rest box, its material and α, as the cut
+ * entry does. NH_ERR_MEMORY, or the cut-cell quadrature's failure. */
+int nh_tissue_set_geometry_cache(nh_tissue *tissue, int on);
 /* Set the stabilisation α >= 0 and recompute every cut cell. NH_ERR_MEMORY. */
 int nh_tissue_set_stabilisation(nh_tissue *tissue, double alpha);
 /* The natural points where leaf c holds tissue, for the inversion check:
@@ -346,7 +357,9 @@ typedef struct nh_geometry_loads {
  * over the leaf's 8 nodes (r[24]): the elastic force (K0, B-bar's mean
  * gradients and volume, the centroid's frame), the body force on its mass
  * and the immersed tractions (loads may be NULL: elastic part only). Ties
- * and drainage planes are not re-integrated. Returns 1 for a cut leaf, 0
+ * and drainage planes are not re-integrated. The finer data come from the
+ * cache of nh_tissue_set_geometry_cache when it is on (bit for bit what
+ * would be computed). Returns 1 for a cut leaf, 0
  * (r zero) otherwise (a box domain, `scaled`, whole or not a box cell), or
  * a negative NH_ERR_* code. */
 int nh_tissue_geometry_residual(const nh_tissue *tissue, int c, const double *u,

@@ -51,6 +51,7 @@ void nh_tissue_destroy(nh_tissue **tissue) {
   free(t->tie);
   free(t->cell_cut);
   free(t->cut);
+  free(t->fine);
   free(t);
   *tissue = NULL;
 }
@@ -598,6 +599,37 @@ static int nh_cut_data(const nh_tissue *t, int c, const double Xe[24], const nh_
   return NH_OK;
 }
 
+/* Leaf c's cut data one lattice finer (depth NH_CUT_DEPTH + 1), the
+ * geometry term's (nh_tissue_geometry_residual). */
+static int nh_cut_fine(const nh_tissue *t, int c, nh_tissue_cut *fine) {
+  const nh_mesh *m = t->mesh;
+  double Xe[24], lo[3], hi[3], w[27];
+  nh_cut_moments mom;
+  nh_mesh_cell_coords(m, m->X, c, Xe);
+  nh_hex_is_box(Xe, lo, hi);
+  int rc = nh_cut_domain_cell_at(&m->domain, NH_CUT_DEPTH + 1, lo, hi, NULL, NULL, &mom, w);
+  return rc ? rc : nh_cut_data(t, c, Xe, &mom, w, fine);
+}
+
+/* The finer data of every cut entry that has none yet (λ NaN), the leaves
+ * in parallel (each writes its own entry). */
+static int nh_tissue_fine_fill(nh_tissue *t) {
+  const nh_mesh *m = t->mesh;
+  int bad = 0, bad_rc = NH_OK;
+#pragma omp parallel for schedule(dynamic, 8)
+  for (int l = 0; l < m->n_leaves; l++) {
+    int c = m->leaves[l], k = c < t->cap_cell_cut ? t->cell_cut[c] : NH_CUT_NONE;
+    if (k < 0 || t->fine[k].lambda == t->fine[k].lambda) continue;
+    int rc = nh_cut_fine(t, c, t->fine + k);
+    if (rc) {
+#pragma omp critical(nh_tissue_fine_fill)
+      bad = c, bad_rc = rc;
+    }
+  }
+  if (bad_rc) return NH_ERROR(bad_rc, "cut cell %d: its quadrature one lattice finer failed", bad);
+  return NH_OK;
+}
+
 /* The cut cells of every leaf: kept where the leaf's box and material are
  * those an entry was computed for, else computed. */
 static int nh_tissue_cuts(nh_tissue *t) {
@@ -614,9 +646,14 @@ static int nh_tissue_cuts(nh_tissue *t) {
     return NH_OK;
   }
   int *index = nh_calloc((size_t)t->cap_cell_cut, sizeof(int));
+  /* the entry each new one was kept from (-1: computed), for the cache */
+  int *from = t->fine ? nh_calloc((size_t)m->n_leaves + 1, sizeof(int)) : NULL;
   nh_tissue_cut *cut = NULL;
   int n_cut = 0, cap_cut = 0, rc = NH_OK;
-  if (!index) return NH_ERROR(NH_ERR_MEMORY, "out of memory: cut cells");
+  if (!index || (t->fine && !from)) {
+    free(index), free(from);
+    return NH_ERROR(NH_ERR_MEMORY, "out of memory: cut cells");
+  }
   for (int c = 0; c < t->cap_cell_cut; c++) index[c] = NH_CUT_NONE;
   for (int l = 0; l < m->n_leaves && !rc; l++) {
     int c = m->leaves[l];
@@ -640,6 +677,7 @@ static int nh_tissue_cuts(nh_tissue *t) {
     if (old && !memcmp(old->lo, lo, sizeof lo) && !memcmp(old->hi, hi, sizeof hi) &&
         old->lambda == lambda && old->mu == mu) {
       *e = *old;
+      if (from) from[n_cut] = (int)(old - t->cut);
       index[c] = n_cut++;
       continue;
     }
@@ -654,16 +692,42 @@ static int nh_tissue_cuts(nh_tissue *t) {
     rc = nh_cut_data(t, c, Xe, &mom, w, e);
     if (rc)
       NH_ERROR(rc, "cut cell %d (level %d) has a non-positive Jacobian", c, m->level[c]);
-    else
+    else {
+      if (from) from[n_cut] = -1;
       index[c] = n_cut++;
+    }
   }
+  nh_tissue_cut *fine = NULL;
+  if (!rc && t->fine) { /* the kept entries keep their finer data */
+    fine = nh_calloc((size_t)(cap_cut ? cap_cut : 1), sizeof *fine);
+    if (!fine) rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: cut cells' finer data");
+    for (int k = 0; k < n_cut && fine; k++)
+      if (from[k] >= 0)
+        fine[k] = t->fine[from[k]];
+      else
+        fine[k].lambda = NAN;
+  }
+  free(from);
   if (rc) {
     free(index), free(cut);
     return rc;
   }
   free(t->cell_cut), free(t->cut);
   t->cell_cut = index, t->cut = cut, t->n_cut = n_cut, t->cap_cut = cap_cut;
-  return NH_OK;
+  if (!fine) return NH_OK;
+  free(t->fine);
+  t->fine = fine;
+  return nh_tissue_fine_fill(t);
+}
+
+int nh_tissue_set_geometry_cache(nh_tissue *t, int on) {
+  free(t->fine);
+  t->fine = NULL;
+  if (!on) return NH_OK;
+  t->fine = nh_calloc((size_t)(t->cap_cut ? t->cap_cut : 1), sizeof *t->fine);
+  if (!t->fine) return NH_ERROR(NH_ERR_MEMORY, "out of memory: cut cells' finer data");
+  for (int k = 0; k < t->n_cut; k++) t->fine[k].lambda = NAN;
+  return nh_tissue_fine_fill(t);
 }
 
 int nh_tissue_set_stabilisation(nh_tissue *t, double alpha) {
@@ -699,23 +763,23 @@ int nh_tissue_geometry_residual(const nh_tissue *t, int c, const double *u,
   const nh_tissue_cut *cut = nh_tissue_cell_cut(t, c);
   memset(r, 0, 24 * sizeof(double));
   if (!cut) return 0;
-  double Xe[24], lo[3], hi[3], w[27], f0[24], f1[24];
-  nh_cut_moments mom;
-  nh_tissue_cut fine;
-  nh_mesh_cell_coords(m, m->X, c, Xe);
-  nh_hex_is_box(Xe, lo, hi);
-  int rc = nh_cut_domain_cell_at(&m->domain, NH_CUT_DEPTH + 1, lo, hi, NULL, NULL, &mom, w);
-  if (!rc) rc = nh_cut_data(t, c, Xe, &mom, w, &fine);
-  if (rc) return -rc;
+  double f0[24], f1[24];
+  nh_tissue_cut computed;
+  const nh_tissue_cut *fine = t->fine ? t->fine + (cut - t->cut) : NULL;
+  if (!fine || fine->lambda != fine->lambda) { /* not cached */
+    int rc = nh_cut_fine(t, c, &computed);
+    if (rc) return -rc;
+    fine = &computed;
+  }
   nh_cut_force(t, c, cut, u, f0);
-  nh_cut_force(t, c, &fine, u, f1);
+  nh_cut_force(t, c, fine, u, f1);
   for (int i = 0; i < 24; i++) r[i] = f0[i] - f1[i];
   if (!loads) return 1;
   double rho;
   nh_tissue_cell_material(t, c, NULL, NULL, &rho);
   for (int a = 0; a < 8; a++) {
     const double share = loads->body_share ? loads->body_share[m->cells[8 * c + a]] : 1.0;
-    const double dm = rho * share * (fine.corner[a] - cut->corner[a]);
+    const double dm = rho * share * (fine->corner[a] - cut->corner[a]);
     for (int k = 0; k < 3; k++) r[3 * a + k] += dm * loads->body[k];
   }
   for (int q = 0; q < loads->n_tractions; q++) {

@@ -178,7 +178,11 @@ static int nh_sim_tissue_build(nh_sim *s, int first) {
   nh_material mat = {sc->tissue.young, sc->tissue.poisson, sc->tissue.density,
                      sc->tissue.formulation};
   NH_TRY(nh_tissue_create(s->mesh, &mat, &s->tissue));
-  if (!sc->tissue.n_materials) return NH_OK;
+  /* the goal estimate's geometry term: the cut cells one lattice finer,
+   * computed once per leaf (adapt/dwr.c, "Geometry"), with their materials */
+  const int cache = sc->adapt.enabled && sc->adapt.estimator == NH_ESTIMATOR_GOAL &&
+                    nh_domain_integrates_cuts(&s->mesh->domain);
+  if (!sc->tissue.n_materials) return cache ? nh_tissue_set_geometry_cache(s->tissue, 1) : NH_OK;
   int n = sc->tissue.n_materials, *labels = nh_calloc((size_t)n, sizeof(int));
   nh_material *mats = nh_calloc((size_t)n, sizeof(nh_material));
   int rc = labels && mats ? NH_OK : NH_ERROR(NH_ERR_MEMORY, "out of memory: materials");
@@ -189,6 +193,7 @@ static int nh_sim_tissue_build(nh_sim *s, int first) {
   }
   if (!rc) rc = nh_tissue_set_label_materials(s->tissue, n, labels, mats);
   free(labels), free(mats);
+  if (!rc && cache) rc = nh_tissue_set_geometry_cache(s->tissue, 1);
   return rc;
 }
 

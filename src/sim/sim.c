@@ -538,9 +538,8 @@ static int nh_sim_build(nh_sim *s) {
       .tolerance = sc->solver.tolerance,
       .max_iterations = sc->solver.max_iterations,
       .threads = sc->solver.threads,
-      /* the goal estimate's duals need this step's factor */
-      .reuse = sc->solver.refactor == NH_REFACTOR_AUTO &&
-               !(sc->adapt.enabled && sc->adapt.estimator == NH_ESTIMATOR_GOAL),
+      /* the goal estimate's duals take the reused factor too (nh_system_solve_rows) */
+      .reuse = sc->solver.refactor == NH_REFACTOR_AUTO,
       .time_factor = getenv("NH_TIME_FACTOR") != NULL,
       /* without solver.newton: only unsolved steps iterate */
       .newton_iterations = sc->solver.newton_given ? sc->solver.newton_iterations : -1,
@@ -861,6 +860,7 @@ static int nh_sim_estimate_step(nh_sim *s, nh_sim_record *r) {
   double ta = nh_time_now();
   s->eta = s->eta_rel = NAN; /* nan in steps.csv: not estimated at this step */
   int rc = r->adapt_now ? nh_sim_estimate(s) : NH_OK;
+  r->st.factorised += nh_system_take_later_factorisations(s->system); /* the duals' */
   if (!rc && r->resolve) {
     const nh_step_stats *st = &r->st;
     double t_solves = st->t_assemble + st->t_factor + st->t_solve + st->t_constraints;

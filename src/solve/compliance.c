@@ -538,12 +538,14 @@ void nh_system_add_reactions(const nh_system *s, double *b) {
 
 /* The dual of a constrained step (solve.h): the active rows' tissue parts
  * compacted into a row set of their own, W of it, and the pivoted Cholesky
- * factor of D W D (D = diag(W)^−½) for the multipliers. */
+ * factor of D W D (D = diag(W)^−½) for the multipliers; A factorised first
+ * when the factor is not A's. */
 int nh_system_solve_rows(nh_system *s, const nh_rows *rows, const unsigned char *active, int ncol,
                          const double *b, double *x, double *mu_out, int *n_used) {
   const int n = s->n_free;
   if (n_used) *n_used = 0;
   if (mu_out && rows) memset(mu_out, 0, sizeof(double) * (size_t)rows->m * (size_t)ncol);
+  if (ncol > 0 && !s->factor_current) NH_TRY(nh_system_factor_later(s));
   NH_TRY(nh_system_solve_many(s, ncol, b, x));
   int m = 0;
   for (int i = 0; rows && i < rows->m; i++) m += !active || active[i];

@@ -202,6 +202,21 @@ void nh_system_account(nh_system *s, const nh_step_stats *st) {
   if (extra > s->cycle_cost / s->cycle_steps) s->refactor_due = 1;
 }
 
+int nh_system_factor_later(nh_system *s) {
+  NH_TRY(nh_system_factor(s));
+  s->later_factorised++;
+  s->cycle_cost = s->flops_factor; /* a new cycle (nh_system_account) */
+  s->cycle_steps = 1;
+  s->refactor_due = 0;
+  return NH_OK;
+}
+
+int nh_system_take_later_factorisations(nh_system *s) {
+  int n = s->later_factorised;
+  s->later_factorised = 0;
+  return n;
+}
+
 int nh_system_solve_reuse(nh_system *s, const double *b, double *x, double tolerance,
                           int *iterations, double *t_factor) {
   if (iterations) *iterations = 0;

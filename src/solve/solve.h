@@ -378,17 +378,27 @@ int nh_rows_widen(nh_rows *rows, int count);
 
 /* The dual of a constrained step: ncol problems
  *     A x + J_tᵀ μ = b,   J_t x = 0
- * with the current factor of A and J_t the tissue part of the rows with
+ * with A the step's matrix and J_t the tissue part of the rows with
  * active[i] != 0 (active NULL: every row); the tools' parts are held (a
  * rigid tool). x = A⁻¹ b − A⁻¹ J_tᵀ μ with W μ = J_t A⁻¹ b,
  * W = J_t A⁻¹ J_tᵀ (nh_system_compliance_add), solved by a pivoted
  * Cholesky factorisation of the diagonally scaled W truncated at relative
  * pivots below 1e-12 (dependent rows: J_tᵀ μ is still unique, μ is not:
- * the truncated rows get 0). b, x: column-major n_free x ncol. mu (may be
+ * the truncated rows get 0). A is the matrix as the step left it, assembled
+ * at the step's solution (its closing residual): the tangent at the state
+ * the goal estimate integrates at. When the factor is not A's (a reused or
+ * inherited one, or the step's own of the A at its start), A is factorised
+ * here first, which starts a new cycle of the renewal rule: the next step,
+ * assembling at the same state, takes it as A's own factor (PCG on the
+ * reused factor was measured 1.7–3.5 × dearer, docs/performance.md
+ * "Goal-oriented runs"). b, x: column-major n_free x ncol. mu (may be
  * NULL): the multipliers, rows->m per column (0 on the inactive rows).
  * *n_used (may be NULL): the active rows. NH_ERR_MEMORY, NH_ERR_NUMERIC. */
 int nh_system_solve_rows(nh_system *sys, const nh_rows *rows, const unsigned char *active, int ncol,
                          const double *b, double *x, double *mu, int *n_used);
+/* The factorisations nh_system_solve_rows made since the last call, and
+ * reset the count. */
+int nh_system_take_later_factorisations(nh_system *sys);
 
 /* A tool in the coupled step: its beam and the prescribed base velocity at
  * the end of the step (linear, angular). */

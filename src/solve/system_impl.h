@@ -42,6 +42,9 @@ struct nh_system {
   double flops_factor;    /* one numeric factorisation (CHOLMOD's count at analysis) */
   double flops_solve;     /* one solve: two triangular solves with L */
   double flops_iteration; /* one PCG iteration: a solve and a product with A */
+  /* factorisations after the step (nh_system_solve_rows: the goal
+   * estimate's duals), until nh_system_take_later_factorisations */
+  int later_factorised;
   /* Across a mesh change (inherit.c): the old mesh's factor extended to the
    * new unknowns, the preconditioner while L is NULL; rows_hint: the
    * constraint rows of the coming step (coupled.c), whose W₀ it would cost */
@@ -168,6 +171,10 @@ void nh_system_account(nh_system *s, const nh_step_stats *st);
 typedef enum { NH_FACTOR_STEP, NH_FACTOR_NEWTON } nh_factor_rule;
 int nh_system_factor_or_reuse(nh_system *s, const nh_integrator *in, nh_factor_rule rule,
                               nh_step_stats *st);
+
+/* Factorise the step's A after the step (counted in later_factorised) and
+ * start a new cycle of the renewal rule. Fails as nh_system_factor. */
+int nh_system_factor_later(nh_system *s);
 
 /* Solve A x = b: directly when the factor is current, else by PCG with the
  * factor as preconditioner to `tolerance` (relative, in the M⁻¹-norm), and if
