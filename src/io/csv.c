@@ -179,18 +179,6 @@ static int split_csv_line(char *line, char **fields, int max) {
   return n;
 }
 
-/* PATH.old, or .old.2, .old.3, ... if taken (NULL: none free). */
-static char *aside_name(const char *path) {
-  size_t n = strlen(path) + 32;
-  char *p = nh_calloc(n, 1);
-  for (int k = 1; p && k < 1000; ++k) {
-    snprintf(p, n, k == 1 ? "%s.old" : "%s.old.%d", path, k);
-    if (access(p, F_OK) != 0) return p;
-  }
-  free(p);
-  return NULL;
-}
-
 enum { CSV_MAX_COLUMNS = 256 };
 
 int nh_csv_resume(const char *path, int n_columns, const char *const *columns, int step,
@@ -233,7 +221,7 @@ int nh_csv_resume(const char *path, int n_columns, const char *const *columns, i
     }
   }
   if (!same) {
-    char *aside = aside_name(path);
+    char *aside = nh_text_aside_name(path, "old");
     if (!aside || rename(path, aside) != 0) {
       int rc = NH_ERROR(NH_ERR_IO,
                         "cannot resume '%s' (written with other columns) nor move it "

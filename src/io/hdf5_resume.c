@@ -487,18 +487,6 @@ done:
   return rc;
 }
 
-/* DIR/results.h5.damaged, or .damaged.2, .3, ... if taken (NULL: none free). */
-static char *damaged_name(const char *path) {
-  size_t n = strlen(path) + 32;
-  char *p = nh_calloc(n, 1);
-  for (int k = 1; p && k < 1000; ++k) {
-    snprintf(p, n, k == 1 ? "%s.damaged" : "%s.damaged.%d", path, k);
-    if (access(p, F_OK) != 0) return p;
-  }
-  free(p);
-  return NULL;
-}
-
 int nh_h5_resume(const char *dir, const char *scene_text, const char *version, int n_step_columns,
                  const char *const *step_columns, int step, nh_h5 **out) {
   NH_CHECK(dir && out && n_step_columns > 0 && step_columns && step >= 0, NH_ERR_INTERNAL,
@@ -535,7 +523,7 @@ int nh_h5_resume(const char *dir, const char *scene_text, const char *version, i
   if (foreign) {
     nh_log_warn("%s; it is replaced by a new results file", reason);
   } else {
-    char *aside = damaged_name(path);
+    char *aside = nh_text_aside_name(path, "damaged");
     if (!aside || rename(path, aside) != 0) {
       rc = NH_ERROR(NH_ERR_IO, "cannot resume '%s' (%s) nor move it aside to '%s.damaged': %s",
                     path, reason, path, aside ? strerror(errno) : "no free name");

@@ -21,6 +21,9 @@ int nh_text_put_xml(nh_text *b, const char *s);
 /* A copy of s; "DIR/NAME". NULL when out of memory (recorded, nh_calloc). */
 char *nh_text_copy(const char *s);
 char *nh_text_join_path(const char *dir, const char *name);
+/* A free name to move `path` aside to: PATH.SUFFIX, or PATH.SUFFIX.2, .3,
+ * ... if taken (NULL: none free below 1000, or out of memory). */
+char *nh_text_aside_name(const char *path, const char *suffix);
 
 /* ---- the XDMF index of the HDF5 frames (io/xdmf.c) ---- */
 typedef struct {

@@ -7,6 +7,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 int nh_text_printf(nh_text *b, const char *fmt, ...) {
   va_list ap;
@@ -60,4 +61,18 @@ char *nh_text_join_path(const char *dir, const char *name) {
   char *p = nh_calloc(n, 1);
   if (p) snprintf(p, n, "%s/%s", dir, name);
   return p;
+}
+
+char *nh_text_aside_name(const char *path, const char *suffix) {
+  size_t n = strlen(path) + strlen(suffix) + 32;
+  char *p = nh_calloc(n, 1);
+  for (int k = 1; p && k < 1000; ++k) {
+    if (k == 1)
+      snprintf(p, n, "%s.%s", path, suffix);
+    else
+      snprintf(p, n, "%s.%s.%d", path, suffix, k);
+    if (access(p, F_OK) != 0) return p;
+  }
+  free(p);
+  return NULL;
 }
