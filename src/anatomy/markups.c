@@ -322,44 +322,6 @@ static const char *const nh_fcsv_columns[] = {
     "oz", "vis", "sel", "lock", "label", "desc", "associatedNodeID"};
 enum { NH_FCSV_COLUMNS = 14, NH_FCSV_FIELDS = 64 };
 
-/* Split a row (NUL-terminated, modified in place) into at most
- * NH_FCSV_FIELDS fields; a field in double quotes may hold commas and ""
- * (a quote). Returns the count, -1 for an unterminated quote. */
-static int nh_fcsv_split(char *row, char **field) {
-  int n = 0;
-  char *p = row;
-  for (;;) {
-    if (n == NH_FCSV_FIELDS) return n;
-    if (*p == '"') {
-      char *w = ++p;
-      field[n++] = w;
-      for (;;) {
-        if (*p == '\0') return -1;
-        if (*p == '"' && p[1] == '"')
-          *w++ = '"', p += 2;
-        else if (*p == '"')
-          break;
-        else
-          *w++ = *p++;
-      }
-      *w = '\0';
-      p++;
-      if (*p != ',' && *p != '\0') return -1;
-    } else {
-      field[n++] = p;
-      while (*p && *p != ',') p++;
-    }
-    if (*p == '\0') return n;
-    *p++ = '\0';
-  }
-}
-
-static int nh_fcsv_column(char **names, int n, const char *name) {
-  for (int i = 0; i < n; i++)
-    if (strcmp(names[i], name) == 0) return i;
-  return -1;
-}
-
 static char *nh_trim(char *s) {
   while (*s == ' ' || *s == '\t') s++;
   size_t n = strlen(s);
@@ -412,10 +374,10 @@ static int nh_markups_from_fcsv(nh_markups *m, char *buf) {
         NH_CHECK(strlen(value) < sizeof columns_line, NH_ERR_INPUT, "%s:%d: columns line too long",
                  m->path, line);
         strcpy(columns_line, value);
-        n_names = nh_fcsv_split(columns_line, names);
+        n_names = nh_csv_split(columns_line, names, NH_FCSV_FIELDS);
         for (int i = 0; i < n_names; i++) names[i] = nh_trim(names[i]);
-        ix = nh_fcsv_column(names, n_names, "x"), iy = nh_fcsv_column(names, n_names, "y");
-        iz = nh_fcsv_column(names, n_names, "z"), il = nh_fcsv_column(names, n_names, "label");
+        ix = nh_csv_column(names, n_names, "x"), iy = nh_csv_column(names, n_names, "y");
+        iz = nh_csv_column(names, n_names, "z"), il = nh_csv_column(names, n_names, "label");
         NH_CHECK(ix >= 0 && iy >= 0 && iz >= 0, NH_ERR_INPUT,
                  "%s:%d: the columns have no x, y and z", m->path, line);
       }
@@ -423,7 +385,7 @@ static int nh_markups_from_fcsv(nh_markups *m, char *buf) {
     }
     if (*nh_trim(row) == '\0') continue;
     char *field[NH_FCSV_FIELDS];
-    int n = nh_fcsv_split(row, field);
+    int n = nh_csv_split(row, field, NH_FCSV_FIELDS);
     NH_CHECK(n >= 0, NH_ERR_INPUT, "%s:%d: a quoted field is not closed", m->path, line);
     int need = ix > iy ? ix : iy;
     if (iz > need) need = iz;

@@ -92,6 +92,15 @@ typedef struct {
 /* Read n bytes into out. */
 void nh_bytes_get(nh_byte_reader *r, void *out, size_t n);
 
+/* ---- the fields of a comma-separated line (csv_fields.c) ---- */
+/* Split `line` in place (a trailing newline dropped) into at most `max`
+ * fields; a field in double quotes may hold commas and "" (a quote), and
+ * loses its quotes. Returns the count, or -1 for an unclosed quote or text
+ * after a closing one. */
+int nh_csv_split(char *line, char **field, int max);
+/* The index of `name` among names[0..n), or -1. */
+int nh_csv_column(char *const *names, int n, const char *name);
+
 /* ---- limits on the files a scene names (limits.c) ----
  * Every reader of a user's file (NIfTI images, STL surfaces, refinement
  * templates, checkpoints) checks what a file's header implies against these

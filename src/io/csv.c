@@ -149,36 +149,6 @@ int nh_csv_values(nh_csv *csv, int n, const double *values) {
   return nh_csv_row(csv, "%s", line);
 }
 
-/* Split one CSV line (no newline) into its fields, in place: quotes are
- * removed and "" becomes ". Returns the number of fields (at most max). */
-static int split_csv_line(char *line, char **fields, int max) {
-  int n = 0;
-  char *r = line;
-  while (n < max) {
-    char *w = r;
-    fields[n++] = w;
-    if (*r == '"') {
-      for (++r; *r; ++r) {
-        if (*r == '"' && r[1] == '"')
-          *w++ = '"', ++r;
-        else if (*r == '"') {
-          ++r;
-          break;
-        } else
-          *w++ = *r;
-      }
-      while (*r && *r != ',') ++r; /* stray text after the closing quote */
-    } else {
-      while (*r && *r != ',') *w++ = *r++;
-    }
-    int more = *r == ',';
-    *w = '\0';
-    if (!more) break;
-    ++r;
-  }
-  return n;
-}
-
 enum { CSV_MAX_COLUMNS = 256 };
 
 int nh_csv_resume(const char *path, int n_columns, const char *const *columns, int step,
@@ -211,7 +181,8 @@ int nh_csv_resume(const char *path, int n_columns, const char *const *columns, i
   if (line) {
     *line = '\0';
     if (line > text && line[-1] == '\r') line[-1] = '\0';
-    n_old = split_csv_line(text, old_names, CSV_MAX_COLUMNS);
+    n_old = nh_csv_split(text, old_names, CSV_MAX_COLUMNS);
+    if (n_old < 0) n_old = 0; /* not a header: nothing matches, the old file is kept */
     same = n_old == n_columns;
     for (int j = 0; j < n_columns; ++j) {
       map[j] = -1;
@@ -245,14 +216,15 @@ int nh_csv_resume(const char *path, int n_columns, const char *const *columns, i
       if (same) {
         rc = nh_csv_row(*out, "%s", start);
       } else {
+        /* a row that does not split (a broken quote) is only in the .old file */
         char *fields[CSV_MAX_COLUMNS];
-        int nf = split_csv_line(start, fields, CSV_MAX_COLUMNS);
+        int nf = nh_csv_split(start, fields, CSV_MAX_COLUMNS);
         nh_text row = {0};
         for (int j = 0; j < n_columns && !rc; ++j) {
           if (j) rc = nh_text_printf(&row, ",");
           if (!rc && map[j] >= 0 && map[j] < nf) rc = put_csv_field(&row, fields[map[j]]);
         }
-        if (!rc) rc = nh_csv_row(*out, "%s", row.s ? row.s : "");
+        if (!rc && nf > 0) rc = nh_csv_row(*out, "%s", row.s ? row.s : "");
         free(row.s);
       }
     }

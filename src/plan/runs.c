@@ -67,27 +67,6 @@ void nh_run_result_free(nh_run_result *r) {
 
 /* ---- reading the folder ---- */
 
-/* Split a CSV line in place; returns the number of fields (at most max). */
-static int nh_split(char *line, char **field, int max) {
-  int n = 0;
-  for (char *p = line; n < max;) {
-    field[n++] = p;
-    char *comma = strchr(p, ',');
-    if (!comma) break;
-    *comma = '\0', p = comma + 1;
-  }
-  char *end = field[n - 1] + strcspn(field[n - 1], "\r\n");
-  *end = '\0';
-  return n;
-}
-
-/* Column index of `name` in a header (−1). */
-static int nh_column(char **field, int n, const char *name) {
-  for (int i = 0; i < n; i++)
-    if (!strcmp(field[i], name)) return i;
-  return -1;
-}
-
 enum { NH_CSV_FIELDS = 32 };
 
 static int nh_read_tools(const char *dir, const char *tool, nh_run_result *r) {
@@ -98,14 +77,14 @@ static int nh_read_tools(const char *dir, const char *tool, nh_run_result *r) {
   int col[7] = {-1, -1, -1, -1, -1, -1, -1}, cap = 0, rc = NH_OK;
   static const char *const names[7] = {"name", "tip_x", "tip_y", "tip_z", "depth", "twist", "time"};
   if (fgets(line, sizeof line, in)) {
-    int n = nh_split(line, f, NH_CSV_FIELDS);
-    for (int k = 0; k < 7; k++) col[k] = nh_column(f, n, names[k]);
+    int n = nh_csv_split(line, f, NH_CSV_FIELDS);
+    for (int k = 0; k < 7; k++) col[k] = nh_csv_column(f, n, names[k]);
   }
   for (int k = 0; k < 7 && !rc; k++) /* twist: only with torsion (docs/outputs.md) */
     if (col[k] < 0 && k != 5) rc = NH_ERROR(NH_ERR_IO, "plan: %s has no column %s", path, names[k]);
   r->n = 0;
   while (!rc && fgets(line, sizeof line, in)) {
-    int n = nh_split(line, f, NH_CSV_FIELDS);
+    int n = nh_csv_split(line, f, NH_CSV_FIELDS);
     if (n <= col[5] || n <= col[6] || n <= col[4] || strcmp(f[col[0]], tool)) continue;
     double x[3] = {atof(f[col[1]]), atof(f[col[2]]), atof(f[col[3]])}, d = atof(f[col[4]]);
     memcpy(r->tip, x, sizeof x);
@@ -135,11 +114,11 @@ static int nh_read_target(const char *dir, const char *target, nh_run_result *r)
   int col[4] = {-1, -1, -1, -1}, found = 0;
   static const char *const names[4] = {"name", "x", "y", "z"};
   if (fgets(line, sizeof line, in)) {
-    int n = nh_split(line, f, NH_CSV_FIELDS);
-    for (int k = 0; k < 4; k++) col[k] = nh_column(f, n, names[k]);
+    int n = nh_csv_split(line, f, NH_CSV_FIELDS);
+    for (int k = 0; k < 4; k++) col[k] = nh_csv_column(f, n, names[k]);
   }
   while (col[0] >= 0 && col[3] >= 0 && fgets(line, sizeof line, in)) {
-    int n = nh_split(line, f, NH_CSV_FIELDS);
+    int n = nh_csv_split(line, f, NH_CSV_FIELDS);
     if (n <= col[3] || strcmp(f[col[0]], target)) continue;
     for (int k = 0; k < 3; k++) r->target[k] = atof(f[col[k + 1]]);
     found = 1;
