@@ -1,9 +1,10 @@
 """tools/study.py dbs-goal (docs/dbs.md, "Goal-oriented refinement of the whole
 procedure"): the whole procedure of cases/dbs/dbs-skull.yaml (270 steps) on
-uniform 14, 10, 7, 5 mm grids, whose per-step Richardson extrapolation
-through the finest three (observed order per step; the 5 mm value with the
-7 → 5 mm difference as its error bar where the order is not sane; the 14,
-10, 7 mm triple reported beside it) is the reference, and on goal-driven and
+uniform 14, 10, 7, 5, 4 mm grids, whose per-step Richardson extrapolation
+through the finest three (observed order per step; the 4 mm value with the
+5 → 4 mm difference as its error bar where the order is not sane; the
+previous triple, 10, 7, 5 mm, reported beside it; the bar per phase) is the
+reference, and on goal-driven and
 SPR-driven meshes from 14 mm: the electrode tip–STN distance's error at every
 step after the target is reached, the effectivity of error_estimate and
 distance_error_estimate, median ms/step against the 7 mm mesh's; the goal
@@ -38,6 +39,8 @@ DBS_GOAL = {
          ["adapt.every=1000000", "tissue.grid=[20,25,19]"], 7.0),
         ("uniform-5mm", "uniform 28×34×26 (5 mm)",
          ["adapt.every=1000000", "tissue.grid=[28,34,26]"], 5.0),
+        ("uniform-4mm", "uniform 35×43×33 (4 mm)",
+         ["adapt.every=1000000", "tissue.grid=[35,43,33]"], 4.0),
     ],
     "baseline": "uniform-7mm",  # the goal's cost is measured against this mesh's ms/step
     # name, label, overrides, kind: adaptive runs from the 14 mm grid (hex2, max θ = 0.6 as the
@@ -93,6 +96,14 @@ DBS_GOAL = {
     "order": (1.0, 5.99),  # a per-step order is used inside [1, 6): per_step_reference
     "resolved": 3.0,  # effectivity only where the true error exceeds 3× the reference's bar
 }
+
+
+def phase_slices(r, n):
+    """The non-empty phases of a run r (its tools.csv's i_shift, i_top, i_back; n steps) as
+    (name, slice of step indices), step 0 left out: shift, insertion, hold, retraction."""
+    cuts = (("shift", 1, r["i_shift"] + 1), ("insertion", r["i_shift"] + 1, r["i_top"]),
+            ("hold", r["i_top"], r["i_back"] + 1), ("retraction", r["i_back"] + 1, n))
+    return [(w, slice(lo, hi)) for w, lo, hi in cuts if hi > lo]
 
 
 def run(a, binary):
@@ -151,7 +162,7 @@ def run(a, binary):
                 "x_ok": xs[0][3] & xs[1][3] & xs[2][3]}
 
     ref = reference(U[-3:])  # the finest three
-    prev = reference(U[:3]) if len(U) > 3 else None  # the coarser triple, for comparison
+    prev = reference(U[-4:-1]) if len(U) > 3 else None  # the next coarser triple, for comparison
     d_ref, d_bar, x_ref, x_bar = ref["d"], ref["d_bar"], ref["x"], ref["x_bar"]
     runs = U + [dict(load(nm, l, k), sets=sets) for nm, l, sets, k in st["adaptive"]
                 if nm in infos]
@@ -172,13 +183,15 @@ def run(a, binary):
         e = r["err"][after]
         r["max"], r["at"] = float(e.max()), i0 + int(np.argmax(e))
         r["rms"] = float(np.sqrt(np.mean(e ** 2)))
+        on = r["err"][after & ~r["off"]]  # on the reference's branch
+        r["max_on"] = float(on.max()) if len(on) else float("nan")
         r["ratio"] = r["speed"]["median"] / ref_ms
 
-    def eff(est, err, bar, off):
-        """Effectivity est / err over the steps ≥ 1 with an estimate whose true error the
-        reference resolves (err > st["resolved"] × its bar) on the reference's branch (not
-        off): (median, min, max, steps, of)."""
-        ok = np.isfinite(est) & (np.arange(n) >= 1)
+    def eff(est, err, bar, off, sl=slice(1, None)):
+        """Effectivity est / err over the steps in sl (default: ≥ 1) with an estimate whose
+        true error the reference resolves (err > st["resolved"] × its bar) on the reference's
+        branch (not off): (median, min, max, steps, of)."""
+        ok = np.isfinite(est) & np.isin(np.arange(n), np.arange(n)[sl])
         use = ok & (err > st["resolved"] * bar) & ~off
         if not use.any():
             return None
@@ -187,7 +200,7 @@ def run(a, binary):
 
     lines = []
     p = lines.append
-    for R, what in ((ref, "the reference"), (prev, "the coarser triple")):
+    for R, what in ((ref, "the reference"), (prev, "the next coarser triple")):
         if R is None:
             continue
         pa = R["d_p"][after & R["d_ok"]]
@@ -210,10 +223,22 @@ def run(a, binary):
         p("")
     if prev is not None:
         dd = np.abs(prev["d"] - d_ref)[after]
-        p("The coarser triple's distance reference against the finest three's after the target: "
+        p("The next coarser triple's distance reference against the finest three's after the target: "
           "max difference %.4f mm (t = %.2f s), median %.4f mm." % (
               1e3 * dd.max(), U[0]["times"][i0 + int(np.argmax(dd))], 1e3 * np.median(dd)))
         p("")
+    lines += engine.table_head(
+        "phase (steps)", "d: sane orders", "d: bar median, max (mm)", "x: sane orders",
+        "x: bar median, max (mm)")
+    for what, sl in phase_slices(U[-1], n):
+        p("| %s (%d–%d) | %d | %.4f, %.4f | %d | %.4f, %.4f |" % (
+            what, sl.start, sl.stop - 1, ref["d_ok"][sl].sum(), 1e3 * np.median(d_bar[sl]),
+            1e3 * d_bar[sl].max(), ref["x_ok"][sl].sum(), 1e3 * np.median(x_bar[sl]),
+            1e3 * x_bar[sl].max()))
+    p("")
+    p("(the reference's bar per phase of the finest mesh's tools.csv; sane: an observed order "
+      "in [%g, 6), for x in all three components.)" % st["order"][0])
+    p("")
     i_s = base["i_shift"]
     shift = [float(np.linalg.norm(r["x"][i_s] - r["x"][0])) for r in U]
     ps, s_ref = observed(ref["h"], shift[-3:])  # of the magnitude, as dbs_convergence.py
@@ -247,14 +272,20 @@ def run(a, binary):
           i0, U[0]["times"][i0], st["resolved"]))
     p("")
     for r in [r for r in runs[len(U):] if r["kind"] != "estimate"]:
-        p("- %s: max |d − d_ref| %.4f mm after the target (goal ≤ 0.3 mm: %s); median ms/step "
-          "%.1f, %.3f of the 7 mm mesh's %.1f (goal ≤ 1/4: %s)." % (
+        p("- %s: max |d − d_ref| %.4f mm after the target (issue 14's goal ≤ 0.3 mm: %s; "
+          "issue 26's ≤ 0.1 mm: %s), %.4f mm over its steps on the reference's branch (≤ 0.1 "
+          "mm: %s); median ms/step %.1f, %.3f of the 7 mm mesh's %.1f (goal "
+          "≤ 1/4: %s); %.1f steps/s over Σ t_step (issue 26's goal ≥ 25: %s)." % (
               r["label"], 1e3 * r["max"], "met" if r["max"] <= 3e-4 else "missed",
-              r["speed"]["median"], r["ratio"], ref_ms, "met" if r["ratio"] <= 0.25 else "missed"))
+              "met" if r["max"] <= 1e-4 else "missed", 1e3 * r["max_on"],
+              "met" if r["max_on"] <= 1e-4 else "missed", r["speed"]["median"], r["ratio"],
+              ref_ms, "met" if r["ratio"] <= 0.25 else "missed", n / r["speed"]["total"],
+              "met" if n / r["speed"]["total"] >= 25 else "missed"))
     off = np.nonzero(ref_off)[0]
     p("- The tools' branch: the reference's meshes are on different branches at %d steps%s; "
-      "those steps, and a run's steps on another branch than the 5 mm mesh's, are not judged "
-      "(effectivity, tolerance)." % (len(off), " (%d–%d)" % (off[0], off[-1]) if len(off) else ""))
+      "those steps, and a run's steps on another branch than the %g mm mesh's, are not judged "
+      "(effectivity, tolerance)." % (len(off), " (%d–%d)" % (off[0], off[-1]) if len(off) else "",
+                                     U[-1]["h"]))
     for r in runs[len(U):]:
         tol = [float(x.split("=")[1]) for x in r["sets"] if x.startswith("adapt.tolerance=")]
         if not tol:
@@ -268,11 +299,8 @@ def run(a, binary):
               r["label"], 1e3 * tol[0], int((below & judged).sum()), int(judged.sum()),
               100.0 * (below & judged).sum() / max(judged.sum(), 1), int(sure.sum()),
               int((sure & below).sum()), ", ".join(
-                  "%s %d/%d" % (w, int((below & judged)[lo:hi].sum()), int(judged[lo:hi].sum()))
-                  for w, lo, hi in (("shift", 1, r["i_shift"] + 1),
-                                    ("insertion", r["i_shift"] + 1, r["i_top"]),
-                                    ("hold", r["i_top"], r["i_back"] + 1),
-                                    ("retraction", r["i_back"] + 1, n)))))
+                  "%s %d/%d" % (w, int((below & judged)[sl].sum()), int(judged[sl].sum()))
+                  for w, sl in phase_slices(r, n))))
     lost = [nm for nm, *_ in st["adaptive"] if nm not in infos and (not a.only or nm in a.only)]
     if lost:
         p("- not complete (the reason above, on stderr): %s." % ", ".join(lost))
@@ -283,28 +311,28 @@ def run(a, binary):
           "error, per phase (medians over "
           "the phase's steps, mm; the phases of the run's own tools.csv: the shift until the "
           "cannula touches the brain, the insertion until the target depth, the hold, the "
-          "retraction; ratio: the median of estimate / true error over the phase's steps):")
+          "retraction; ratio: the median of estimate / true error over the phase's steps; "
+          "judged: its median over the judged steps, the effectivity's, and their number):")
         p("")
         lines.extend(engine.table_head(
             "run", "phase (steps)", "\\|x − x_ref\\|", "error_estimate", "of it G", "of it C",
-            "ratio", "\\|d − d_ref\\|", "distance_error_estimate", "of it G", "of it C", "ratio"))
+            "ratio", "judged (steps)", "\\|d − d_ref\\|", "distance_error_estimate", "of it G",
+            "of it C", "ratio", "judged (steps)"))
         for r in est_runs:
-            for what, lo, hi in (("shift", 1, r["i_shift"] + 1),
-                                 ("insertion", r["i_shift"] + 1, r["i_top"]),
-                                 ("hold", r["i_top"], r["i_back"] + 1),
-                                 ("retraction", r["i_back"] + 1, n)):
-                sl = slice(lo, hi)
-                if hi <= lo:
-                    continue
+            for what, sl in phase_slices(r, n):
                 cells = []
-                for err, est, geo, con in ((r["xerr"], r["est"], r["geo"], r["con"]),
-                                           (r["err"], r["dest"], r["dgeo"], r["dcon"])):
+                for err, est, geo, con, bar in (
+                        (r["xerr"], r["est"], r["geo"], r["con"], x_bar),
+                        (r["err"], r["dest"], r["dgeo"], r["dcon"], d_bar)):
+                    e = eff(est, err, bar, r["off"], sl)
                     cells += ["%.4f" % (1e3 * np.median(err[sl])),
                               "%.4f" % (1e3 * np.nanmedian(est[sl])),
                               "%.4f" % (1e3 * np.nanmedian(geo[sl])),
                               "%.4f" % (1e3 * np.nanmedian(con[sl])),
-                              "%.2f" % np.nanmedian(est[sl] / err[sl])]
-                p("| %s | %s (%d–%d) | %s |" % (r["label"], what, lo, hi - 1, " | ".join(cells)))
+                              "%.2f" % np.nanmedian(est[sl] / err[sl]),
+                              "%.2f (%d)" % (e[0], e[3]) if e else "– (0)"]
+                p("| %s | %s (%d–%d) | %s |" % (r["label"], what, sl.start, sl.stop - 1,
+                                               " | ".join(cells)))
         p("")
     loads = [x for r in runs for x in r["load"]]
     if loads:
