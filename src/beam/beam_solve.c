@@ -307,16 +307,19 @@ int nh_beam_dynamic_prepare(nh_beam *b, const nh_beam_dynamic_options *o, const 
      * stays exact, A stays positive definite. */
     double *w = nh_calloc((size_t)m, sizeof(double));
     if (!w) rc = NH_ERR_MEMORY;
-    if (!rc && LAPACKE_dsyev(LAPACK_ROW_MAJOR, 'V', 'U', m, Kf, m, w))
+    /* divide and conquer (dsyevd): the eigenvectors of the 96 x 96 tangent
+     * in a fraction of dsyev's QR iterations, whose rotations (dlasr) were
+     * 7 % of an adaptive phantom run (docs/performance.md) */
+    if (!rc && LAPACKE_dsyevd(LAPACK_ROW_MAJOR, 'V', 'U', m, Kf, m, w))
       rc = NH_ERROR(NH_ERR_NUMERIC, "beam dynamic step: eigen-decomposition of the tangent failed");
     if (!rc) {
-      /* P = V W₊ Vᵀ = C Cᵀ with C the columns of V (Kf after dsyev) scaled
+      /* P = V W₊ Vᵀ = C Cᵀ with C the columns of V (Kf after dsyevd) scaled
        * by √w₊, the kept ones only: one BLAS-3 product (m = 96 for the
        * needle: by hand, with fmax in the innermost loop, this was 4 ms, the
        * largest part of a small tissue's step; docs/phantom.md "Results") */
       double *P = nh_calloc((size_t)m * m, sizeof(double));
       double *C = nh_calloc((size_t)m * m, sizeof(double));
-      const double floor = cM > 0 ? 0.0 : 1e-9 * fmax(w[m - 1], 0.0); /* dsyev: ascending */
+      const double floor = cM > 0 ? 0.0 : 1e-9 * fmax(w[m - 1], 0.0); /* ascending */
       if (!P || !C) rc = NH_ERR_MEMORY;
       int kept = 0;
       for (int k = 0; k < m && !rc; k++) {
