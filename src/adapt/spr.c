@@ -183,11 +183,12 @@ static int nh_spr_reserve_int(int **p, int *cap, int need) {
 
 /* Replace the patch by every leaf that shares a corner with one of its cells,
  * in ascending order (the order of the fit's sums). The corners' lists hold
- * each cell up to 8 times over (a grown face patch: 32 corners of 8 cells
- * each, 26 distinct), so duplicates are dropped as they come, by a mark per
- * cell, and the few distinct cells sorted by insertion: a qsort of the whole
- * list was a tenth of an adaptive phantom run (docs/performance.md, "The SPR
- * hex2 step"). */
+ * a cell up to 8 times over (a face node's 4 cells list 32 corners with up
+ * to 8 cells each, 32 cells distinct), so duplicates are dropped as they
+ * come, by a mark per cell, and the distinct cells sorted by insertion (the
+ * lists arrive in ascending runs): a qsort of the whole
+ * list was a tenth of an adaptive phantom run (docs/phantom.md, "Again
+ * after the SPR patch growth and the needle's LAPACK calls"). */
 static int nh_spr_grow(const nh_spr_ctx *x, nh_spr_work *w) {
   if (!w->in && !(w->in = calloc((size_t)(x->m->n_cells > 0 ? x->m->n_cells : 1), 1)))
     return NH_ERR_MEMORY;

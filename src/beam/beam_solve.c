@@ -236,7 +236,7 @@ void nh_beam_system_destroy(nh_beam_system **ps) {
  * (lower, row-major = upper column-major for LAPACK, called as the latter:
  * LAPACKE's row-major path transposes the matrix in and out and scans it
  * for NaN at every call, 2 % of an adaptive phantom run with the solves
- * below). Returns 0 on success. */
+ * below; docs/phantom.md). Returns 0 on success. */
 static int nh_beam_form_factor(nh_beam_system *s, const double *K, double cM, double cK) {
   const int m = s->m;
   for (int i = 0; i < m; i++) {
@@ -312,7 +312,8 @@ int nh_beam_dynamic_prepare(nh_beam *b, const nh_beam_dynamic_options *o, const 
     if (!w) rc = NH_ERR_MEMORY;
     /* divide and conquer (dsyevd): the eigenvectors of the 96 x 96 tangent
      * in a fraction of dsyev's QR iterations, whose rotations (dlasr) were
-     * 7 % of an adaptive phantom run (docs/performance.md) */
+     * 7 % of an adaptive phantom run (docs/phantom.md, "Again after the SPR
+     * patch growth and the needle's LAPACK calls") */
     if (!rc && LAPACKE_dsyevd(LAPACK_COL_MAJOR, 'V', 'L', m, Kf, m, w))
       rc = NH_ERROR(NH_ERR_NUMERIC, "beam dynamic step: eigen-decomposition of the tangent failed");
     if (!rc) {
