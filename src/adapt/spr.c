@@ -190,8 +190,7 @@ static int nh_spr_reserve_int(int **p, int *cap, int need) {
  * list was a tenth of an adaptive phantom run (docs/phantom.md, "Again
  * after the SPR patch growth and the needle's LAPACK calls"). */
 static int nh_spr_grow(const nh_spr_ctx *x, nh_spr_work *w) {
-  if (!w->in && !(w->in = calloc((size_t)(x->m->n_cells > 0 ? x->m->n_cells : 1), 1)))
-    return NH_ERR_MEMORY;
+  if (!w->in && !(w->in = nh_calloc((size_t)x->m->n_cells, 1))) return NH_ERR_MEMORY;
   int n = 0;
   for (int i = 0; i < w->n_patch; i++) {
     const int *corner = x->m->cells + 8 * w->patch[i];
