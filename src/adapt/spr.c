@@ -164,10 +164,11 @@ typedef struct {
   int n_patch, cap_patch, cap_cand;
   double *points, *values;
   int cap_samples;
+  unsigned char *in; /* per cell: 1 while the cell is in cand (all 0 between growths) */
 } nh_spr_work;
 
 static void nh_spr_work_free(nh_spr_work *w) {
-  free(w->patch), free(w->cand), free(w->points), free(w->values);
+  free(w->patch), free(w->cand), free(w->points), free(w->values), free(w->in);
   memset(w, 0, sizeof *w);
 }
 
@@ -180,29 +181,34 @@ static int nh_spr_reserve_int(int **p, int *cap, int need) {
   return 0;
 }
 
-static int nh_cmp_int(const void *a, const void *b) {
-  int x = *(const int *)a, y = *(const int *)b;
-  return (x > y) - (x < y);
-}
-
-/* Replace the patch by every leaf that shares a corner with one of its cells. */
+/* Replace the patch by every leaf that shares a corner with one of its cells,
+ * in ascending order (the order of the fit's sums). The corners' lists hold
+ * a cell up to 8 times over (a face node's 4 cells list 32 corners with up
+ * to 8 cells each, 32 cells distinct), so duplicates are dropped as they
+ * come, by a mark per cell, and the distinct cells sorted by insertion (the
+ * lists arrive in ascending runs): a qsort of the whole
+ * list was a tenth of an adaptive phantom run (docs/phantom.md, "Again
+ * after the SPR patch growth and the needle's LAPACK calls"). */
 static int nh_spr_grow(const nh_spr_ctx *x, nh_spr_work *w) {
+  if (!w->in && !(w->in = nh_calloc((size_t)x->m->n_cells, 1))) return NH_ERR_MEMORY;
   int n = 0;
   for (int i = 0; i < w->n_patch; i++) {
     const int *corner = x->m->cells + 8 * w->patch[i];
     for (int a = 0; a < 8; a++) {
       int v = corner[a], len = x->start[v + 1] - x->start[v];
       if (nh_spr_reserve_int(&w->cand, &w->cap_cand, n + len)) return NH_ERR_MEMORY;
-      memcpy(w->cand + n, x->adj + x->start[v], sizeof(int) * (size_t)len);
-      n += len;
+      for (const int *c = x->adj + x->start[v], *e = c + len; c < e; c++)
+        if (!w->in[*c]) w->in[*c] = 1, w->cand[n++] = *c;
     }
   }
-  qsort(w->cand, (size_t)n, sizeof(int), nh_cmp_int);
-  int u = 0;
-  for (int i = 0; i < n; i++)
-    if (u == 0 || w->cand[i] != w->cand[u - 1]) w->cand[u++] = w->cand[i];
+  for (int i = 1; i < n; i++) {
+    int c = w->cand[i], j = i;
+    for (; j > 0 && w->cand[j - 1] > c; j--) w->cand[j] = w->cand[j - 1];
+    w->cand[j] = c;
+  }
+  for (int i = 0; i < n; i++) w->in[w->cand[i]] = 0;
   int *t = w->patch, tc = w->cap_patch;
-  w->patch = w->cand, w->cap_patch = w->cap_cand, w->n_patch = u;
+  w->patch = w->cand, w->cap_patch = w->cap_cand, w->n_patch = n;
   w->cand = t, w->cap_cand = tc;
   return NH_OK;
 }

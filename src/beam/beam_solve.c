@@ -233,7 +233,10 @@ void nh_beam_system_destroy(nh_beam_system **ps) {
 }
 
 /* A = (1 + hα) M + cK K over the free DOFs into s->A; Cholesky in place
- * (lower, row-major = upper column-major for LAPACK). Returns 0 on success. */
+ * (lower, row-major = upper column-major for LAPACK, called as the latter:
+ * LAPACKE's row-major path transposes the matrix in and out and scans it
+ * for NaN at every call, 2 % of an adaptive phantom run with the solves
+ * below; docs/phantom.md). Returns 0 on success. */
 static int nh_beam_form_factor(nh_beam_system *s, const double *K, double cM, double cK) {
   const int m = s->m;
   for (int i = 0; i < m; i++) {
@@ -241,7 +244,7 @@ static int nh_beam_form_factor(nh_beam_system *s, const double *K, double cM, do
     for (int j = 0; j < m; j++) row[j] = cK * K[(size_t)i * m + j];
     row[i] += cM * s->M[i + 6];
   }
-  return LAPACKE_dpotrf(LAPACK_ROW_MAJOR, 'L', m, s->A, m);
+  return LAPACKE_dpotrf_work(LAPACK_COL_MAJOR, 'U', m, s->A, m);
 }
 
 int nh_beam_dynamic_prepare(nh_beam *b, const nh_beam_dynamic_options *o, const double *f_ext,
@@ -307,23 +310,27 @@ int nh_beam_dynamic_prepare(nh_beam *b, const nh_beam_dynamic_options *o, const 
      * stays exact, A stays positive definite. */
     double *w = nh_calloc((size_t)m, sizeof(double));
     if (!w) rc = NH_ERR_MEMORY;
-    if (!rc && LAPACKE_dsyev(LAPACK_ROW_MAJOR, 'V', 'U', m, Kf, m, w))
+    /* divide and conquer (dsyevd): the eigenvectors of the 96 x 96 tangent
+     * in a fraction of dsyev's QR iterations, whose rotations (dlasr) were
+     * 7 % of an adaptive phantom run (docs/phantom.md, "Again after the SPR
+     * patch growth and the needle's LAPACK calls") */
+    if (!rc && LAPACKE_dsyevd(LAPACK_COL_MAJOR, 'V', 'L', m, Kf, m, w))
       rc = NH_ERROR(NH_ERR_NUMERIC, "beam dynamic step: eigen-decomposition of the tangent failed");
     if (!rc) {
-      /* P = V W₊ Vᵀ = C Cᵀ with C the columns of V (Kf after dsyev) scaled
+      /* P = V W₊ Vᵀ = C Cᵀ with C the columns of V (Kf after dsyevd, column-major) scaled
        * by √w₊, the kept ones only: one BLAS-3 product (m = 96 for the
        * needle: by hand, with fmax in the innermost loop, this was 4 ms, the
        * largest part of a small tissue's step; docs/phantom.md "Results") */
       double *P = nh_calloc((size_t)m * m, sizeof(double));
       double *C = nh_calloc((size_t)m * m, sizeof(double));
-      const double floor = cM > 0 ? 0.0 : 1e-9 * fmax(w[m - 1], 0.0); /* dsyev: ascending */
+      const double floor = cM > 0 ? 0.0 : 1e-9 * fmax(w[m - 1], 0.0); /* ascending */
       if (!P || !C) rc = NH_ERR_MEMORY;
       int kept = 0;
       for (int k = 0; k < m && !rc; k++) {
         const double wk = fmax(w[k], floor);
         if (!(wk > 0)) continue;
         const double r = sqrt(wk);
-        for (int i = 0; i < m; i++) C[(size_t)i * m + kept] = Kf[(size_t)i * m + k] * r;
+        for (int i = 0; i < m; i++) C[(size_t)i * m + kept] = Kf[(size_t)k * m + i] * r;
         kept++;
       }
       if (!rc) {
@@ -348,7 +355,7 @@ void nh_beam_system_solve(const nh_beam_system *s, double *y) {
   if (s->lu)
     LAPACKE_dgetrs(LAPACK_ROW_MAJOR, 'N', s->m, 1, s->A, s->m, s->piv, y, 1);
   else
-    LAPACKE_dpotrs(LAPACK_ROW_MAJOR, 'L', s->m, 1, s->A, s->m, y, 1);
+    LAPACKE_dpotrs_work(LAPACK_COL_MAJOR, 'U', s->m, 1, s->A, s->m, y, s->m);
 }
 
 int nh_beam_system_projected(const nh_beam_system *s) {
