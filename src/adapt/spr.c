@@ -158,7 +158,7 @@ typedef struct {
   const unsigned char *hangs; /* per node: 1 if hanging */
 } nh_spr_ctx;
 
-/* Per-thread workspace (plain malloc: nh_error_set is not thread-safe). */
+/* Per-thread workspace: one per OpenMP thread (its error slot is its own, core/error.c). */
 typedef struct {
   int *patch, *cand;
   int n_patch, cap_patch, cap_cand;
