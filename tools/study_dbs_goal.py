@@ -191,7 +191,9 @@ def run(a, binary):
         """Effectivity est / err over the steps in sl (default: ≥ 1) with an estimate whose
         true error the reference resolves (err > st["resolved"] × its bar) on the reference's
         branch (not off): (median, min, max, steps, of)."""
-        ok = np.isfinite(est) & np.isin(np.arange(n), np.arange(n)[sl])
+        ok = np.zeros(n, dtype=bool)
+        ok[sl] = True
+        ok &= np.isfinite(est)
         use = ok & (err > st["resolved"] * bar) & ~off
         if not use.any():
             return None
