@@ -36,11 +36,14 @@ double nh_tool_speed(const nh_tool_spec *sp, double t, double h) {
 
 /* NH_ERR_INPUT if the tool starts inside the tissue, its tip never comes
  * within one cell of it over its motion, or its motion carries its base
- * into the tissue (a tool shorter than the depth it is pushed to). */
-static int nh_tool_check_reach(const nh_scene *sc, const nh_mesh *m, const nh_tool_spec *sp) {
-  double dmax = 0.0, T = sc->time.steps * sc->time.step;
+ * into the tissue (a tool shorter than the depth it is pushed to). The whole
+ * motion is checked, not the part the run's steps cover: these are faults of
+ * the scene, and a run cut short (`time.steps`, `time.end`) before the tool
+ * arrives is a valid run of a valid scene. */
+static int nh_tool_check_reach(const nh_mesh *m, const nh_tool_spec *sp) {
+  double dmax = 0.0;
   for (int i = 0; i < sp->n_motion; i++)
-    dmax = fmax(dmax, nh_motion_distance(sp, fmin(sp->motion[i].until, T)));
+    dmax = fmax(dmax, nh_motion_distance(sp, sp->motion[i].until));
   double tip0[3], tip1[3], base1[3], cell = fmax(m->spacing[0], fmax(m->spacing[1], m->spacing[2]));
   for (int i = 0; i < 3; i++) {
     tip0[i] = sp->base[i] + sp->length * sp->direction[i];
@@ -113,7 +116,7 @@ int nh_tool_init(nh_contact *c, int k, const nh_mesh *m) {
   }
   tl->f_node = nh_calloc(3 * (size_t)nh_beam_nodes(tl->beam), sizeof(double));
   if (!tl->f_node) return NH_ERR_MEMORY;
-  if (tl->host < 0) return nh_tool_check_reach(c->scene, m, sp);
+  if (tl->host < 0) return nh_tool_check_reach(m, sp);
   const nh_tool_spec *hs = &c->scene->tools[tl->host];
   double d[3] = {sp->base[0] - hs->base[0], sp->base[1] - hs->base[1], sp->base[2] - hs->base[2]};
   tl->offset = nh_vec3_dot(d, hs->direction);
