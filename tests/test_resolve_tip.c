@@ -16,8 +16,11 @@
  *  - the default (true): the puncture force sits at the tip, and the goal
  *    indicators' maximum with it, so the max marking splits the tip's
  *    leaves until they reach max_level: every leaf holding the tip is at
- *    level 2, and the step was re-solved max_level = 2 times (the key's
- *    bound, one level per re-solve).
+ *    level 2 (reached by max_level = 2 re-solves, one level each).
+ *  - the default with adapt.every 4: step 3 is no estimate step of the
+ *    schedule (steps 4, 8, ...), but the step in which a tool punctures is
+ *    estimated whatever the schedule says, so its tip's leaves are at
+ *    level 2 as well (without that rule: level 0, no estimate at all).
  * The tip is taken from the scene's prescribed motion (base + (length +
  * speed t) direction), not from the contact module: the needle's
  * deflection is micrometres, far below the 1e-3 of a cell the leaves'
@@ -48,10 +51,14 @@ static void tip_levels(const nh_mesh *m, const double x[3], int *lo, int *hi, in
 }
 
 /* Three steps of the phantom with the overrides; the levels of the tip's leaves after them. */
-static void run(const char *resolve_tip, int *lo, int *hi, int *n, int *dofs) {
-  const char *sets[] = {"adapt.estimator=goal", "adapt.template=hex2",
-                        "adapt.max_level=2",    resolve_tip,
-                        "time.steps=3",         NULL};
+static void run(const char *resolve_tip, const char *every, int *lo, int *hi, int *n, int *dofs) {
+  const char *sets[] = {"adapt.estimator=goal",
+                        "adapt.template=hex2",
+                        "adapt.max_level=2",
+                        resolve_tip,
+                        every,
+                        "time.steps=3",
+                        NULL};
   nh_scene *scene;
   nh_sim *sim;
   nh_case_open("phantom/phantom.yaml", sets, &scene, &sim);
@@ -71,15 +78,20 @@ static void run(const char *resolve_tip, int *lo, int *hi, int *n, int *dofs) {
 
 int main(void) {
   int lo, hi, n, dofs;
-  run("adapt.resolve_tip=false", &lo, &hi, &n, &dofs);
+  run("adapt.resolve_tip=false", "adapt.every=1", &lo, &hi, &n, &dofs);
   CHECK(dofs == 675 && n > 0 && hi == 0,
         "resolve_tip false: step 3 solved on %d dofs, the tip's %d leaves at levels %d-%d; "
         "expected the 8x4x4 grid (675 dofs, level 0): the lag",
         dofs, n, lo, hi);
-  run("adapt.resolve_tip=true", &lo, &hi, &n, &dofs);
+  run("adapt.resolve_tip=true", "adapt.every=1", &lo, &hi, &n, &dofs);
   CHECK(n > 0 && lo == 2 && hi == 2,
         "resolve_tip true: the tip's %d leaves at step 3 are at levels %d-%d, expected all at "
         "max_level 2 (%d dofs)",
+        n, lo, hi, dofs);
+  run("adapt.resolve_tip=true", "adapt.every=4", &lo, &hi, &n, &dofs);
+  CHECK(n > 0 && lo == 2 && hi == 2,
+        "resolve_tip true, every 4: the tip's %d leaves at the puncture step 3 are at levels "
+        "%d-%d, expected all at max_level 2 (%d dofs)",
         n, lo, hi, dofs);
   TEST_END();
 }

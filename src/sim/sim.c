@@ -729,6 +729,18 @@ static int nh_sim_resolves_tip(const nh_sim *s) {
          sc->n_tools > 0;
 }
 
+/* How many tools have punctured the tissue (punctured, cutting or
+ * retracting: inside it). */
+static int nh_sim_tools_inside(const nh_sim *s) {
+  int n = 0;
+  for (int k = 0; s->contact && k < s->scene->n_tools; k++) {
+    nh_tool_report tool;
+    nh_contact_report(s->contact, k, &tool);
+    n += tool.state >= NH_TOOL_PUNCTURED;
+  }
+  return n;
+}
+
 /* adapt.resolve_tip: does the refinement the last estimate asks for
  * (nh_adapt_planned) split a leaf that holds a tool's tip? A leaf holds
  * the tip when its rest box, widened by 1e-3 of its edges, contains the
@@ -839,6 +851,7 @@ int nh_sim_create(const nh_scene *scene, const nh_sim_options *options, nh_sim *
 typedef struct {
   double t_new;           /* the time the step solves for */
   int adapt_now, resolve; /* estimate (and refine) at this step; re-solve on the refined mesh */
+  int inside;             /* adapt.resolve_tip: tools inside the tissue at the step's start */
   double *start[2];       /* re-solves: u, v at the step's start */
   nh_step_stats st;       /* the solve's (the re-solves' phases added) */
   int resolves;
@@ -889,7 +902,8 @@ static int nh_sim_predict(nh_sim *s, nh_sim_record *r) {
     if (s->solver_start.failed)
       return NH_ERROR(NH_ERR_MEMORY, "out of memory: step %d start state", s->step + 1);
   }
-  if (!r->resolve) return NH_OK;
+  /* with resolve_tip every step keeps them: a puncture makes it an adapt step */
+  if (!r->resolve && !nh_sim_resolves_tip(s)) return NH_OK;
   r->start[0] = nh_calloc(n, sizeof(double)), r->start[1] = nh_calloc(n, sizeof(double));
   if (!r->start[0] || !r->start[1]) {
     free(r->start[0]), free(r->start[1]);
@@ -1087,6 +1101,7 @@ int nh_sim_step(nh_sim *s) {
   nh_sim_record r = {.t0 = nh_time_now(), .t_new = (s->step + 1) * sc->time.step};
   r.adapt_now = sc->adapt.enabled && (s->step + 1) % sc->adapt.every == 0;
   r.resolve = r.adapt_now && (sc->adapt.resolve > 0 || nh_sim_resolves_tip(s));
+  r.inside = nh_sim_tools_inside(s);
   NH_TRY(nh_sim_predict(s, &r));
   int rc = nh_sim_solve(s, r.t_new, &r.st);
   /* A stop that cut the residual's assembly short left u and v updated but
@@ -1098,6 +1113,12 @@ int nh_sim_step(nh_sim *s) {
     free(r.start[0]), free(r.start[1]);
     return rc;
   }
+  /* adapt.resolve_tip: the step in which a tool punctures is estimated (and
+   * re-solved at the tip) whatever adapt.every says: its tip meets cells no
+   * estimate has seen (docs/theory.md §6.7) */
+  if (!rc && !r.adapt_now && sc->adapt.enabled && nh_sim_resolves_tip(s) &&
+      nh_sim_tools_inside(s) > r.inside)
+    r.adapt_now = r.resolve = 1;
   r.adapt_now = r.adapt_now && !rc, r.resolve = r.resolve && !rc;
   int rc_estimate = nh_sim_estimate_step(s, &r);
   if (rc || (rc = rc_estimate)) return nh_sim_step_failed(s, rc, r.t_new);
