@@ -497,7 +497,8 @@ def run(a, binary):
                                    "goal-hex2-l2", "goal-hex2-l2-every4") if n in byname],
               ref_u, names, ref_times, st, p)
     early_steps([byname[n] for n in ("uniform-32x16x16", "goal-hex2-l2", "goal-hex2-l2-lag",
-                                     "goal-hex2-l2-resolve") if n in byname], ref_u, st, p)
+                                     "goal-hex2-l2-resolve", "goal-hex2-l2-every4")
+                 if n in byname], ref_u, st, p)
     uconv, uerrs, udiffs = convergence(st, out, conv, names, ref_times, p)
     engine.write_report(out, lines)
 
