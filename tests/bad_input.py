@@ -87,6 +87,10 @@ CASES = [
     ("set_base.yaml", ["adapt.every=2", "adapt.marking.theta=1.5"], "--set:2",
      "adapt.marking.theta"),
     ("set_base.yaml", ["adapt.hanging=both"], "--set:1", "adapt.hanging"),
+    # adapt.resolve_tip with the spr estimator (the default), and not a boolean.
+    ("set_base.yaml", ["adapt.resolve_tip=false"], "--set:1", "adapt.resolve_tip"),
+    ("set_base.yaml", ["adapt.estimator=goal", "adapt.resolve_tip=2"], "--set:2",
+     "adapt.resolve_tip"),
     ("set_base.yaml", ["tissue.material.formulation=[bbar]"], "--set:1",
      "tissue.material.formulation"),
     # tools and targets: an unknown key, a missing length, a negative radius,

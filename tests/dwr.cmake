@@ -2,6 +2,8 @@
 nh_add_c_test(test_dwr "verify;slow")
 # adapt.resolve: a re-solved step equals the direct solve on its final mesh (tests/test_resolve.c).
 nh_add_c_test(test_resolve verify)
+# adapt.resolve_tip: the puncture step solved with the tip's leaves at max_level (tests/test_resolve_tip.c).
+nh_add_c_test(test_resolve_tip verify)
 # The constrained dual (active skull/tool/tie rows) and the combined dual of several goals (tests/test_dwr_rows.c).
 nh_add_c_test(test_dwr_rows verify)
 # The constraint-data term against the skull points one lattice finer, run both ways (tests/test_dwr_skull.c).

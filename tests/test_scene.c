@@ -393,6 +393,9 @@ static void test_adapt(void) {
            "max_level %d every %d max_dofs %d", s->adapt.max_level, s->adapt.every,
            s->adapt.max_dofs);
     EXPECT(s->adapt.hanging == NH_HANGING_ELIMINATE, "hanging %d", (int)s->adapt.hanging);
+    EXPECT(s->adapt.resolve == 0 && s->adapt.resolve_tip == 1,
+           "resolve %d resolve_tip %d: expected 0 and 1 (docs/scene.md)", s->adapt.resolve,
+           s->adapt.resolve_tip);
     snprintf(expected, sizeof expected, "%s/hex2.tmpl", templates_dir);
     EXPECT_STR(s->adapt.template_path, expected);
     snprintf(expected, sizeof expected, "%s:6: adapt", path);

@@ -17,8 +17,9 @@ A study, with the parsed options `a` of tools/study.py:
     write_report(out, lines)                      # printed and OUT/report.md
 
 Each variant runs in OUT.partial and is renamed to OUT once needlehex exits
-0, with OUT/run.json recording its command, wall time, host, date, exit code
-and the machine's 1-minute load average at its start and end: a
+0, with OUT/run.json recording its command, wall time, CPU time (user +
+sys), host, date, exit code and the machine's 1-minute load average at its
+start and end: a
 folder OUT with a run.json is a complete variant, anything else is not.
 With skip_complete, a variant whose OUT/run.json records the same command
 is not run again (a restart after an interruption, or a sweep grown by new
@@ -42,6 +43,7 @@ cluster's workers); needs Debian's python3-distributed for Dask; use
 import ctypes
 import json
 import os
+import resource
 import shutil
 import signal
 import socket
@@ -74,12 +76,15 @@ def execute(name, out, cmd, threads=1, accept=(0,)):
     env = dict(os.environ, OMP_NUM_THREADS=str(threads), OPENBLAS_NUM_THREADS=str(threads))
     argv = list(cmd) + ["--out", part]
     t0, load0 = time.time(), os.getloadavg()[0]
+    ru0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     p = subprocess.run(argv, env=env, capture_output=True, text=True, preexec_fn=_die_with_parent)
     wall = time.time() - t0
+    ru1 = resource.getrusage(resource.RUSAGE_CHILDREN)  # the run's CPU: load does not inflate it
+    cpu = (ru1.ru_utime - ru0.ru_utime) + (ru1.ru_stime - ru0.ru_stime)
     tail = " / ".join((p.stderr or p.stdout).strip().splitlines()[-3:])
     if p.returncode not in accept:
         raise RuntimeError("needlehex exit %d: %s" % (p.returncode, tail))
-    info = {"cmd": list(cmd), "wall": wall, "host": socket.gethostname(), "pid": os.getpid(),
+    info = {"cmd": list(cmd), "wall": wall, "cpu": cpu, "host": socket.gethostname(), "pid": os.getpid(),
             "date": time.strftime("%Y-%m-%d %H:%M:%S"), "returncode": p.returncode,
             "load": [load0, os.getloadavg()[0]]}  # 1-min load average at the start and end
     if p.returncode != 0:

@@ -91,6 +91,10 @@ PHANTOM = {
         ("goal-hex2-l2-tol-coarsen", "goal hex2, 2 levels, tolerance 0.03 µm, ≤ 9000 dofs, coarsen 0.05",
          goal(extra=["adapt.tolerance=3e-8", "adapt.max_dofs=9000", "adapt.coarsen={fraction: 0.05}"]),
          "goal"),
+        # the defaults without adapt.resolve_tip: the puncture step solved on the mesh of the step
+        # before (the one-step lag at the tip)
+        ("goal-hex2-l2-lag", "goal hex2, 2 levels, resolve_tip false",
+         goal(extra=["adapt.resolve_tip=false"]), "goal"),
         # each step re-solved once on the mesh its estimate asked for (no one-step lag)
         ("goal-hex2-l2-resolve", "goal hex2, 2 levels, resolve 1", goal(extra=["adapt.resolve=1"]),
          "goal"),
@@ -163,7 +167,8 @@ def style(name):
             # goal-oriented runs dashed: their colours repeat those of the SPR runs
             "goal-hex2-l2": "C4--", "goal-hex2-l2-every4": "C5--", "goal-hex2-l2-tol": "C6--",
             "goal-hex2-l2-resolve": "C3--", "goal-hex2-l3": "C0--",
-            "goal-hex2-l3-every4": "C1--", "goal-hex2-l2-tol-coarsen": "C2--"}.get(name, "C7--")
+            "goal-hex2-l3-every4": "C1--", "goal-hex2-l2-tol-coarsen": "C2--",
+            "goal-hex2-l2-lag": "C8--"}.get(name, "C7--")
 
 
 def tip_split(u, ref, names, times, probe_x, tip_x):
@@ -220,6 +225,33 @@ def breakdown(runs, ref, names, times, st, p):
             r["label"], c["factorised"], c["steps"], c["after_change"], c["changes"], c["pcg"],
             100 * c["factor"], 100 * c["constraints"], 100 * c["adapt"], 1e6 * near, 1e6 * away,
             ", ".join("%.3f" % (1e6 * pr[n]) for n in names)))
+
+
+def early_steps(runs, ref, st, p, last=4):
+    """Per probe group (along the shaft 1–4, ahead of the final tip 5–7, the normal 1A–1E): the
+    RMS error and the share of its Σ e² in steps 0–`last` (the puncture is step 3), with the
+    re-solves and CPU time of each run (adapt.resolve_tip, docs/phantom.md)."""
+    groups = (("1–4", st["axis"][:4]), ("5–7", st["axis"][4:]), ("1A–1E", st["radial"]))
+    p("")
+    p("Error in the puncture steps 0–%d (share of each probe group's Σ e²):" % last)
+    p("")
+    head = ["run", "steps re-solved (re-solves)", "CPU s"]
+    for g, _ in groups:
+        head += ["%s RMS µm" % g, "%s steps 0–%d" % (g, last)]
+    for line in engine.table_head(*head + ["all: steps 0–%d" % last]):
+        p(line)
+    for r in runs:
+        sd = r["steps_csv"]
+        cells = ["%d (%d)" % (int((sd["resolves"] > 0).sum()), int(sd["resolves"].sum())),
+                 "%.2f" % r["cpu"]]
+        tot = early = 0.0
+        for _, names in groups:
+            e2 = np.concatenate([np.sum((r["u"][n][:, :3] - ref[n][:, :3]) ** 2, axis=1)[None]
+                                 for n in names])
+            cells += ["%.4f" % (1e6 * np.sqrt(e2.mean())),
+                      "%.0f %%" % (100 * e2[:, :last + 1].sum() / e2.sum())]
+            tot, early = tot + e2.sum(), early + e2[:, :last + 1].sum()
+        p("| %s | %s | %.0f %% |" % (r["label"], " | ".join(cells), 100 * early / tot))
 
 
 def converged_reference(fine, hs, names, order):
@@ -387,7 +419,9 @@ def run(a, binary):
                              "same steps (--fresh-reference)" % (name, len(steps), len(ref_steps)))
         sd = read_steps(d)
         r = {"name": name, "label": label, "kind": kind, "u": u, "steps": steps, "times": times,
+             "steps_csv": sd,
              "speed": speed(sd), "cost": cost_split(sd), "wall": info["wall"],
+             "cpu": info.get("cpu", float("nan")),
              "style": style(name)}
         r["err_max"], r["err_rms"] = probe_error(u, ref_u, names)
         runs.append(r)
@@ -435,11 +469,13 @@ def run(a, binary):
         U = byname["uniform-32x16x16"]
         ratio = U["speed"]["median"] / r["speed"]["median"]
         p("- %s vs uniform 32×16×16: error RMS %.3f vs %.3f µm (%s), max %.3f vs %.3f µm; "
-          "median ms/step %.2f vs %.2f, %.1f× faster (goal ≥ 10× at no larger RMS error: %s)." % (
+          "median ms/step %.2f vs %.2f, %.1f× faster (goal ≥ 10× at no larger RMS error: %s); "
+          "CPU of the whole run %.2f vs %.2f s, %.1f×." % (
               r["label"], 1e6 * r["err_rms"], 1e6 * U["err_rms"],
               "reached" if r["err_rms"] <= U["err_rms"] else "not reached",
               1e6 * r["err_max"], 1e6 * U["err_max"], r["speed"]["median"], U["speed"]["median"],
-              ratio, "met" if ratio >= 10 and r["err_rms"] <= U["err_rms"] else "missed"))
+              ratio, "met" if ratio >= 10 and r["err_rms"] <= U["err_rms"] else "missed",
+              r["cpu"], U["cpu"], U["cpu"] / r["cpu"]))
         eff = effectivity(r["u"], ref_u, names)
         if eff is not None:
             p("  Effectivity |estimate| / |u_ref − u| of its error_estimate over probes and "
@@ -460,6 +496,9 @@ def run(a, binary):
     breakdown([byname[n] for n in ("uniform-16x8x8", "uniform-32x16x16", "adaptive-hex2",
                                    "goal-hex2-l2", "goal-hex2-l2-every4") if n in byname],
               ref_u, names, ref_times, st, p)
+    early_steps([byname[n] for n in ("uniform-32x16x16", "goal-hex2-l2", "goal-hex2-l2-lag",
+                                     "goal-hex2-l2-resolve", "goal-hex2-l2-every4")
+                 if n in byname], ref_u, st, p)
     uconv, uerrs, udiffs = convergence(st, out, conv, names, ref_times, p)
     engine.write_report(out, lines)
 

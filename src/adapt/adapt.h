@@ -157,6 +157,11 @@ const double *nh_adapt_indicators(const nh_adapt *adapt);
  * mesh may be refined but the fields not transferred. */
 int nh_adapt_step(nh_adapt *adapt, nh_mesh *mesh, int n_fields, double **fields, int *n_refined);
 
+/* The leaves the next nh_adapt_step would refine (marking, budget, 2:1
+ * closure; coarsening aside), without refining them: cells[] (room for
+ * mesh->n_leaves ids), *n their count. Mesh and indicators untouched.
+ * Fails as nh_adapt_step's marking, NH_ERR_INTERNAL without an estimate. */
+int nh_adapt_planned(nh_adapt *adapt, const nh_mesh *mesh, int *cells, int *n);
 /* Refine the n leaves cells[] by the driver's template (nh_mesh_refine, in
  * that order) and carry the n_fields nodal fields to the new nodes by
  * Eq. 17 (fields[f] reallocated); the last estimate no longer applies.

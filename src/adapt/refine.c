@@ -427,52 +427,68 @@ int nh_adapt_refine_cells(nh_adapt *a, nh_mesh *m, const int *cells, int n, int 
   return rc;
 }
 
+/* Steps 1 and 2 and the 2:1 closure: the cells nh_adapt_step refines
+ * (marked[], room for m->n_leaves; ascending unless a budget sorted them),
+ * the smallest marked η (coarsening's reference; nothing marked: the
+ * largest) and what ends the refinement. Changes nothing in a or m. */
+static int nh_adapt_select(nh_adapt *a, const nh_mesh *m, int *marked, int *n_marked,
+                           double *threshold, nh_adapt_stop *stop) {
+  *n_marked = 0;
+  *threshold = 0.0;
+  for (int l = 0; l < m->n_leaves; l++) /* nothing marked: the largest indicator */
+    *threshold = fmax(*threshold, (a->goal ? a->eta_all : a->eta_cell)[m->leaves[l]]);
+  if (a->goal && a->n_active == 0) {
+    *stop = NH_ADAPT_TOLERANCE;
+    return NH_OK;
+  }
+  /* Tolerance mode: θ and the fraction refer to the cells that can still
+   * be refined, so that the goal error is chased below the tolerance
+   * (mark.c applies the limits after selection: a goal whose largest
+   * contributions sit at max_level would refine nothing more). */
+  const double *eta = a->eta_cell;
+  double *eligible = NULL;
+  if (a->goal && a->tolerance > 0) {
+    eligible = nh_calloc((size_t)m->n_cells, sizeof(double));
+    if (!eligible) return NH_ERROR(NH_ERR_MEMORY, "out of memory: marking");
+    double ratio = a->mark.child_ratio > 0.0 ? a->mark.child_ratio : 0.5;
+    for (int l = 0; l < m->n_leaves; l++) {
+      int c = m->leaves[l];
+      int limit = m->level[c] >= a->mark.max_level ||
+                  (a->mark.min_size > 0.0 && ratio * nh_mesh_cell_size(m, c) < a->mark.min_size);
+      eligible[c] = limit ? 0.0 : a->eta_cell[c];
+    }
+    eta = eligible;
+  }
+  int rc = nh_mark_cells(m, eta, &a->mark, marked, n_marked);
+  free(eligible);
+  *stop = *n_marked > 0 ? NH_ADAPT_REFINED : NH_ADAPT_LIMIT;
+  for (int i = 0; i < *n_marked; i++) *threshold = fmin(*threshold, a->eta_cell[marked[i]]);
+  int wanted = *n_marked;
+  /* (marked cells keep mark order, and the mesh its numbering, unless a budget binds) */
+  int over_cap =
+      a->max_cells > 0 && m->n_leaves + (long)*n_marked * (a->tmpl->n_children - 1) > a->max_cells;
+  if (!rc && (a->max_dofs > 0 || over_cap) && *n_marked > 0)
+    rc = nh_adapt_budget(a, m, marked, n_marked);
+  if (!rc && a->grade && *n_marked > 0) rc = nh_adapt_close(a, m, marked, n_marked);
+  if (!rc && *n_marked < wanted) *stop = NH_ADAPT_BUDGET;
+  return rc;
+}
+
+int nh_adapt_planned(nh_adapt *a, const nh_mesh *m, int *cells, int *n) {
+  *n = 0;
+  NH_CHECK(a->have_eta, NH_ERR_INTERNAL, "refinement without error indicators");
+  double threshold;
+  nh_adapt_stop stop;
+  return nh_adapt_select(a, m, cells, n, &threshold, &stop);
+}
+
 int nh_adapt_step(nh_adapt *a, nh_mesh *m, int n_fields, double **fields, int *n_refined) {
   *n_refined = 0;
   NH_CHECK(a->have_eta, NH_ERR_INTERNAL, "refinement without error indicators");
   int *marked = nh_calloc((size_t)(m->n_leaves ? m->n_leaves : 1), sizeof(int)), n_marked = 0;
   if (!marked) return NH_ERROR(NH_ERR_MEMORY, "out of memory: marking");
-  int rc = NH_OK;
-  double threshold = 0.0;               /* the smallest marked η (coarsening's reference) */
-  for (int l = 0; l < m->n_leaves; l++) /* nothing marked: the largest indicator */
-    threshold = fmax(threshold, (a->goal ? a->eta_all : a->eta_cell)[m->leaves[l]]);
-  if (a->goal && a->n_active == 0) {
-    a->stop = NH_ADAPT_TOLERANCE;
-  } else {
-    /* Tolerance mode: θ and the fraction refer to the cells that can still
-     * be refined, so that the goal error is chased below the tolerance
-     * (mark.c applies the limits after selection: a goal whose largest
-     * contributions sit at max_level would refine nothing more). */
-    const double *eta = a->eta_cell;
-    double *eligible = NULL;
-    if (a->goal && a->tolerance > 0) {
-      eligible = nh_calloc((size_t)m->n_cells, sizeof(double));
-      if (!eligible) {
-        free(marked);
-        return NH_ERROR(NH_ERR_MEMORY, "out of memory: marking");
-      }
-      double ratio = a->mark.child_ratio > 0.0 ? a->mark.child_ratio : 0.5;
-      for (int l = 0; l < m->n_leaves; l++) {
-        int c = m->leaves[l];
-        int limit = m->level[c] >= a->mark.max_level ||
-                    (a->mark.min_size > 0.0 && ratio * nh_mesh_cell_size(m, c) < a->mark.min_size);
-        eligible[c] = limit ? 0.0 : a->eta_cell[c];
-      }
-      eta = eligible;
-    }
-    rc = nh_mark_cells(m, eta, &a->mark, marked, &n_marked);
-    free(eligible);
-    a->stop = n_marked > 0 ? NH_ADAPT_REFINED : NH_ADAPT_LIMIT;
-    for (int i = 0; i < n_marked; i++) threshold = fmin(threshold, a->eta_cell[marked[i]]);
-    int wanted = n_marked;
-    /* (marked cells keep mark order, and the mesh its numbering, unless a budget binds) */
-    int over_cap =
-        a->max_cells > 0 && m->n_leaves + (long)n_marked * (a->tmpl->n_children - 1) > a->max_cells;
-    if (!rc && (a->max_dofs > 0 || over_cap) && n_marked > 0)
-      rc = nh_adapt_budget(a, m, marked, &n_marked);
-    if (!rc && a->grade && n_marked > 0) rc = nh_adapt_close(a, m, marked, &n_marked);
-    if (!rc && n_marked < wanted) a->stop = NH_ADAPT_BUDGET;
-  }
+  double threshold = 0.0;
+  int rc = nh_adapt_select(a, m, marked, &n_marked, &threshold, &a->stop);
   if (rc) {
     free(marked);
     return rc;

@@ -249,8 +249,8 @@ static void print_adapt(FILE *f, const nh_scene *s) {
       fprintf(f, "%g m", a->tolerance);
     else
       fprintf(f, "none");
-    fprintf(f, ", resolve %d, separate duals every %d estimates, graded (2:1)\n", a->resolve,
-            a->separate_every);
+    fprintf(f, ", resolve %d%s, separate duals every %d estimates, graded (2:1)\n", a->resolve,
+            a->resolve_tip ? " (and at the tools' tips)" : "", a->separate_every);
   }
   if (a->coarsen > 0)
     fprintf(f, "          coarsen below %g of the marking threshold\n", a->coarsen);

@@ -205,6 +205,8 @@ typedef struct {
                              else every probe) */
   double tolerance;       /* adapt.tolerance, m, on each goal's estimate (>= 0; 0: none) */
   int resolve;            /* adapt.resolve: re-solves of a step on its refined mesh (>= 0) */
+  int resolve_tip;        /* adapt.resolve_tip: goal only, re-solve while the refinement splits
+                             a leaf holding a tool's tip (default 1) */
   int separate_every; /* adapt.separate_every: every N-th goal estimate solves each goal's duals,
                          the others one combined dual (>= 1, default 1) */
   double coarsen;     /* adapt.coarsen.fraction (0: no coarsening; in (0, 1)) */

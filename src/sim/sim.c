@@ -722,22 +722,80 @@ static int nh_sim_solve(nh_sim *s, double t_new, nh_step_stats *st) {
                     : nh_step_dynamic(s->system, &s->integrator, s->f_ext, s->u, s->v, st);
 }
 
+/* adapt.resolve_tip applies: estimator goal and tools. */
+static int nh_sim_resolves_tip(const nh_sim *s) {
+  const nh_scene *sc = s->scene;
+  return sc->adapt.estimator == NH_ESTIMATOR_GOAL && sc->adapt.resolve_tip && s->contact &&
+         sc->n_tools > 0;
+}
+
+/* How many tools have punctured the tissue (punctured, cutting or
+ * retracting: inside it). */
+static int nh_sim_tools_inside(const nh_sim *s) {
+  int n = 0;
+  for (int k = 0; s->contact && k < s->scene->n_tools; k++) {
+    nh_tool_report tool;
+    nh_contact_report(s->contact, k, &tool);
+    n += tool.state >= NH_TOOL_PUNCTURED;
+  }
+  return n;
+}
+
+/* adapt.resolve_tip: does the refinement the last estimate asks for
+ * (nh_adapt_planned) split a leaf that holds a tool's tip? A leaf holds
+ * the tip when its rest box, widened by 1e-3 of its edges, contains the
+ * tip's current position (a tip on a face or edge belongs to the leaves on
+ * every side; the displacements are far below 1e-3 of a cell). */
+static int nh_sim_tip_split(nh_sim *s, int *hit) {
+  const nh_scene *sc = s->scene;
+  const nh_mesh *m = s->mesh;
+  *hit = 0;
+  int *cells = nh_calloc((size_t)(m->n_leaves ? m->n_leaves : 1), sizeof(int)), n = 0;
+  if (!cells) return NH_ERROR(NH_ERR_MEMORY, "out of memory: refinement plan");
+  int rc = nh_adapt_planned(s->adapt, m, cells, &n);
+  for (int k = 0; !rc && k < sc->n_tools && !*hit; k++) {
+    nh_tool_report tool;
+    nh_contact_report(s->contact, k, &tool);
+    for (int i = 0; i < n && !*hit; i++) {
+      const int *e = m->cells + 8 * cells[i];
+      int inside = 1;
+      for (int d = 0; d < 3 && inside; d++) {
+        double lo = m->X[3 * e[0] + d], hi = lo;
+        for (int c = 1; c < 8; c++)
+          lo = fmin(lo, m->X[3 * e[c] + d]), hi = fmax(hi, m->X[3 * e[c] + d]);
+        double pad = 1e-3 * (hi - lo);
+        inside = tool.tip[d] >= lo - pad && tool.tip[d] <= hi + pad;
+      }
+      *hit = inside;
+    }
+  }
+  free(cells);
+  return rc;
+}
+
 /* adapt.resolve: while a goal estimate exceeds the tolerance (or, without
  * tolerance, up to N times), refine and solve the step again from its start
  * state carried to the new mesh (Eq. 17) and the tools' start state, so the
- * step's written solution is on the mesh its estimate asked for. Times add
- * up in *st. */
+ * step's written solution is on the mesh its estimate asked for. Then, with
+ * adapt.resolve_tip, the same while the refinement would split a leaf
+ * holding a tool's tip (nh_sim_tip_split; at most max_level times, as each
+ * splits the tip's leaf one level further): the step that brings the tip
+ * into coarse cells (the puncture, a new region) is solved on the cells
+ * its own estimate gives the tip, not on those of the step before. Times
+ * add up in *st. */
 static int nh_sim_resolve(nh_sim *s, double t_new, double *const start_in[2], nh_step_stats *st,
                           int *resolves) {
   const nh_scene *sc = s->scene;
+  const int most = sc->adapt.resolve + (nh_sim_resolves_tip(s) ? sc->adapt.max_level : 0);
   const int n = 3 * s->mesh->n_nodes;
   double *start[2] = {nh_calloc(n, sizeof(double)), nh_calloc(n, sizeof(double))};
   int rc = start[0] && start[1] ? NH_OK : NH_ERROR(NH_ERR_MEMORY, "out of memory: re-solve");
   if (!rc)
     memcpy(start[0], start_in[0], sizeof(double) * n),
         memcpy(start[1], start_in[1], sizeof(double) * n);
-  for (int r = 0; r < sc->adapt.resolve && !rc; r++) {
-    int changed = 0;
+  for (int r = 0; r < most && !rc; r++) {
+    int changed = 0, tip = 0;
+    if (r >= sc->adapt.resolve && ((rc = nh_sim_tip_split(s, &tip)) || !tip)) break;
     if ((rc = nh_sim_refine(s, start, &changed)) || !changed) break;
     memcpy(s->u, start[0], sizeof(double) * 3 * s->mesh->n_nodes);
     memcpy(s->v, start[1], sizeof(double) * 3 * s->mesh->n_nodes);
@@ -793,6 +851,7 @@ int nh_sim_create(const nh_scene *scene, const nh_sim_options *options, nh_sim *
 typedef struct {
   double t_new;           /* the time the step solves for */
   int adapt_now, resolve; /* estimate (and refine) at this step; re-solve on the refined mesh */
+  int inside;             /* adapt.resolve_tip: tools inside the tissue at the step's start */
   double *start[2];       /* re-solves: u, v at the step's start */
   nh_step_stats st;       /* the solve's (the re-solves' phases added) */
   int resolves;
@@ -843,7 +902,8 @@ static int nh_sim_predict(nh_sim *s, nh_sim_record *r) {
     if (s->solver_start.failed)
       return NH_ERROR(NH_ERR_MEMORY, "out of memory: step %d start state", s->step + 1);
   }
-  if (!r->resolve) return NH_OK;
+  /* with resolve_tip every step keeps them: a puncture makes it an adapt step */
+  if (!r->resolve && !nh_sim_resolves_tip(s)) return NH_OK;
   r->start[0] = nh_calloc(n, sizeof(double)), r->start[1] = nh_calloc(n, sizeof(double));
   if (!r->start[0] || !r->start[1]) {
     free(r->start[0]), free(r->start[1]);
@@ -914,8 +974,9 @@ static void nh_sim_adapt_mesh(nh_sim *s, nh_sim_record *r) {
   }
   int last = s->step >= sc->time.steps;
   r->refine_rc = r->adapt_now && !last ? nh_sim_refine(s, NULL, NULL) : NH_OK;
-  r->refine_stop =
-      r->adapt_now && (!last || r->resolve) ? (double)nh_adapt_last_stop(s->adapt) : NAN;
+  r->refine_stop = r->adapt_now && (!last || sc->adapt.resolve > 0 || r->resolves > 0)
+                       ? (double)nh_adapt_last_stop(s->adapt)
+                       : NAN;
   if (r->refine_rc) snprintf(r->refine_reason, sizeof r->refine_reason, "%s", nh_error_message());
 }
 
@@ -1039,7 +1100,8 @@ int nh_sim_step(nh_sim *s) {
   NH_TRY(nh_sim_timing_reserve(s));
   nh_sim_record r = {.t0 = nh_time_now(), .t_new = (s->step + 1) * sc->time.step};
   r.adapt_now = sc->adapt.enabled && (s->step + 1) % sc->adapt.every == 0;
-  r.resolve = r.adapt_now && sc->adapt.resolve > 0;
+  r.resolve = r.adapt_now && (sc->adapt.resolve > 0 || nh_sim_resolves_tip(s));
+  r.inside = nh_sim_tools_inside(s);
   NH_TRY(nh_sim_predict(s, &r));
   int rc = nh_sim_solve(s, r.t_new, &r.st);
   /* A stop that cut the residual's assembly short left u and v updated but
@@ -1051,6 +1113,12 @@ int nh_sim_step(nh_sim *s) {
     free(r.start[0]), free(r.start[1]);
     return rc;
   }
+  /* adapt.resolve_tip: the step in which a tool punctures is estimated (and
+   * re-solved at the tip) whatever adapt.every says: its tip meets cells no
+   * estimate has seen (docs/theory.md §6.7) */
+  if (!rc && !r.adapt_now && sc->adapt.enabled && nh_sim_resolves_tip(s) &&
+      nh_sim_tools_inside(s) > r.inside)
+    r.adapt_now = r.resolve = 1;
   r.adapt_now = r.adapt_now && !rc, r.resolve = r.resolve && !rc;
   int rc_estimate = nh_sim_estimate_step(s, &r);
   if (rc || (rc = rc_estimate)) return nh_sim_step_failed(s, rc, r.t_new);
