@@ -98,9 +98,7 @@ static int nh_channel_lay(nh_group *G, const nh_tool_spec *spec, const nh_mesh *
   }
 }
 
-/* n1 of the rows' frame: the second director of the node T made
- * orthogonal to the tangent t and normalised. */
-static void nh_frame_normal(const double *T, const double t[3], double n1[3]) {
+void nh_frame_normal(const double *T, const double t[3], double n1[3]) {
   double d = T[1] * t[0] + T[4] * t[1] + T[7] * t[2];
   n1[0] = T[1] - d * t[0], n1[1] = T[4] - d * t[1], n1[2] = T[7] - d * t[2];
   nh_vec3_normalize(n1);
