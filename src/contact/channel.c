@@ -199,7 +199,11 @@ static int nh_in_group(const nh_contact *c, const nh_group *G, int k) {
 }
 
 /* Which tool of group G covers P, and where: the outermost one whose axis
- * passes P at an arc length in [0, L − clearance]. Returns the tool or −1. */
+ * passes P at an arc length in [0, L − clearance]. A point alongside a tool
+ * but within its clearance (s in (L − clearance, L]) is covered by none:
+ * the tools inside it are in its bore, held by it (nest.c), and a point
+ * tied to one of them there would tie the tissue a fraction of a spacing
+ * behind the tip rows to the same rigid section. Returns the tool or −1. */
 static int nh_cover(const nh_contact *c, const nh_group *G, const double xp[3], double s0,
                     double clear_tip, double *s_out) {
   for (int k = 0; k < c->n; k++) {
@@ -212,6 +216,7 @@ static int nh_cover(const nh_contact *c, const nh_group *G, const double xp[3], 
       *s_out = s;
       return k;
     }
+    if (s >= 0.0 && s <= L) return -1; /* within its tip's clearance */
   }
   return -1;
 }
