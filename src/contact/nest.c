@@ -109,6 +109,7 @@ int nh_nest_rows(nh_contact *c) {
   }
   return NH_OK;
 }
+
 void nh_contact_nest_force(const nh_contact *c, int k, double tau, double f[3]) {
   const nh_tool *tl = &c->tools[k];
   const nh_rows *rows = &c->rows;
