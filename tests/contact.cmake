@@ -10,3 +10,5 @@ nh_add_c_test(test_skull_fissure "unit;verify")
 nh_add_c_test(test_tip_disc "unit;verify")
 # The contact geometry continuous in the state: closest points on a bent tool converged whatever their rounding, the tip disc's rings in the tool's frame (tests/test_contact_frame.c).
 nh_add_c_test(test_contact_frame "unit;verify")
+# A released nested tool hangs in its host's bore: on the host's axis, its weight carried by the host (composite section), a free cantilever once the host is drawn back (tests/test_nest.c).
+nh_add_c_test(test_nest "verify")

@@ -98,9 +98,7 @@ static int nh_channel_lay(nh_group *G, const nh_tool_spec *spec, const nh_mesh *
   }
 }
 
-/* n1 of the rows' frame: the second director of the node T made
- * orthogonal to the tangent t and normalised. */
-static void nh_frame_normal(const double *T, const double t[3], double n1[3]) {
+void nh_frame_normal(const double *T, const double t[3], double n1[3]) {
   double d = T[1] * t[0] + T[4] * t[1] + T[7] * t[2];
   n1[0] = T[1] - d * t[0], n1[1] = T[4] - d * t[1], n1[2] = T[7] - d * t[2];
   nh_vec3_normalize(n1);
@@ -201,7 +199,11 @@ static int nh_in_group(const nh_contact *c, const nh_group *G, int k) {
 }
 
 /* Which tool of group G covers P, and where: the outermost one whose axis
- * passes P at an arc length in [0, L − clearance]. Returns the tool or −1. */
+ * passes P at an arc length in [0, L − clearance]. A point alongside a tool
+ * but within its clearance (s in (L − clearance, L]) is covered by none:
+ * the tools inside it are in its bore, held by it (nest.c), and a point
+ * tied to one of them there would tie the tissue a fraction of a spacing
+ * behind the tip rows to the same rigid section. Returns the tool or −1. */
 static int nh_cover(const nh_contact *c, const nh_group *G, const double xp[3], double s0,
                     double clear_tip, double *s_out) {
   for (int k = 0; k < c->n; k++) {
@@ -214,6 +216,7 @@ static int nh_cover(const nh_contact *c, const nh_group *G, const double xp[3], 
       *s_out = s;
       return k;
     }
+    if (s >= 0.0 && s <= L) return -1; /* within its tip's clearance */
   }
   return -1;
 }

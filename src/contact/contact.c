@@ -5,7 +5,8 @@
  *   1. begin: the coupled solve's block of every dynamic tool (tools.c),
  *      then per group the rows of each constraint in its current state:
  *      puncture (not punctured yet: the entry point, puncture.c), tip (the
- *      channel's front) and shaft (the channel points; channel.c);
+ *      channel's front) and shaft (the channel points; channel.c); then a
+ *      released nested tool's rows with its host (nest.c);
  *   2. the coupled step of tissue and tools (nh_step_coupled, Algorithm 1);
  *   3. end: each constraint reads its rows' forces into the group's events
  *      (and the tip cuts forward), the state machine below moves every
@@ -115,6 +116,7 @@ static int nh_contact_begin_step(nh_contact *c, const nh_mesh *m, const double *
     NH_TRY(nh_tip_rows(c, G, m, u, t, h, tau));
     NH_TRY(nh_shaft_rows(c, G, m, u, t, h, tau));
   }
+  NH_TRY(nh_nest_rows(c));
   if (c->skull) NH_TRY(nh_skull_rows(c->skull, m, u, v, tau, &c->rows));
   return NH_OK;
 }

@@ -113,6 +113,12 @@ typedef struct {
 } nh_tip_disc;
 void nh_contact_tip_disc(const nh_contact *c, int tool, double tau, nh_tip_disc *d);
 
+/* The host's force on released nested tool k in the last step (N, summed
+ * over its rows holding it on the host's axis, docs/interaction.md "Nested
+ * tools"; τ the rows' time scale: h, or 1 quasi-static); zero for a tool
+ * that had none. The host carries −f. */
+void nh_contact_nest_force(const nh_contact *c, int tool, double tau, double f[3]);
+
 /* Of the last step: the constraint rows, the groups whose tip cut (slid
  * forward and moved the front), the channel points laid so far, and what
  * the coupled solve did (timings; sweeps, residual, friction rows sticking

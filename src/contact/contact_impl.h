@@ -11,6 +11,8 @@
  *               its rows, its force against the puncture force
  *   channel.c   the tip constraint (stick or cut and advance) and the shaft
  *               constraint (channel points, stick/slide ties, retraction)
+ *   nest.c      a released nested tool held on its host's axis (rows
+ *               between two tools)
  *
  * Each constraint has a rows/update pair: nh_X_rows writes its rows for the
  * step (nothing in a state where it does not act), nh_X_update reads their
@@ -48,9 +50,11 @@ typedef struct {
   double offset; /* nested: arc length of its base along the host */
   int dyn;       /* its block in this step's coupled solve (−1: kinematic) */
   double base_v[6];
-  double F[3];         /* the tissue's force on the tool in the last step, N */
-  double *f_node;      /* 3 per node: F distributed to the nearest nodes */
-  nh_tool_state state; /* an outer tool's: its group's */
+  double F[3];          /* the tissue's force on the tool in the last step, N */
+  double *f_node;       /* 3 per node: F distributed to the nearest nodes */
+  nh_tool_state state;  /* an outer tool's: its group's */
+  int nest_row, nest_n; /* released nested: its rows with its host in the last step (nest.c):
+                           the first (−1: none) and how many */
 } nh_tool;
 
 /* The tissue part of a tip or puncture row: the mean over the tool's
@@ -195,5 +199,14 @@ int nh_tip_update(nh_contact *c, nh_group *G, const nh_mesh *mesh, const double 
 int nh_shaft_rows(nh_contact *c, nh_group *G, const nh_mesh *mesh, const double *u, double t,
                   double h, double tau);
 void nh_shaft_update(nh_contact *c, nh_group *G, double tau, nh_group_events *ev);
+/* n1 of a tie's frame: the second director of the node T made orthogonal
+ * to the tangent t and normalised. */
+void nh_frame_normal(const double *T, const double t[3], double n1[3]);
+
+/* ---- nest.c ---- */
+/* The rows holding every released nested tool's nodes on its host's axis
+ * where the host covers them (after the blocks: both tools dynamic).
+ * NH_ERR_MEMORY. */
+int nh_nest_rows(nh_contact *c);
 
 #endif

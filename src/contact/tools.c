@@ -102,6 +102,7 @@ int nh_tool_init(nh_contact *c, int k, const nh_mesh *m) {
   const nh_tool_spec *sp = &c->scene->tools[k];
   tl->spec = sp;
   tl->host = sp->inside;
+  tl->nest_row = -1;
   nh_beam_spec bs = {.section = {sp->young, sp->poisson, sp->radius, sp->inner_radius, sp->density},
                      .length = sp->length,
                      .elements = sp->elements};

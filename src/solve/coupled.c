@@ -15,7 +15,9 @@
  *      tool's base at its prescribed velocity), λ from w = W λ + r and the
  *      rows' laws (nh_mcp_solve, warm-started with the previous λ);
  *   4. dv = dv_free + A⁻¹ Jᵀ λ per block, then v and positions updated.
- J's tissue and tool parts of a row: rows.c. Without tools and rows this
+ J's tissue and tool parts of a row: rows.c; a row between two tools (a
+ * nested tool held by its host) has a part in each tool's block, so its
+ * W_ii sums both beams' compliances and its λ corrects both. Without tools and rows this
  * is nh_step_dynamic (which may carry hanging-node rows instead).
  *
  * Quasi-static (in->quasi_static): the same four steps are one Newton
@@ -59,6 +61,7 @@ typedef struct {
   int mfree;  /* free DOFs of the tool */
   double *dv; /* mfree: the free update, then the corrected one */
   int *rows;  /* the rows touching this tool */
+  int *side;  /* the side of each (nh_row_tool_coef: 1 for a row's second tool) */
   int nrows;
   double *X;    /* mfree x nrows, column-major: A_k⁻¹ J_kᵀ */
   double *vnew; /* all DOFs: end-of-step velocity (base prescribed) */
@@ -95,7 +98,7 @@ typedef struct {
 
 static void nh_tool_work_free(nh_tool_work *w) {
   nh_beam_system_destroy(&w->sys);
-  free(w->dv), free(w->rows), free(w->X), free(w->vnew);
+  free(w->dv), free(w->rows), free(w->side), free(w->X), free(w->vnew);
 }
 
 static int nh_finite(const double *a, int n) {
@@ -125,7 +128,8 @@ static int nh_step_work_alloc(nh_step_work *w) {
     t->dv = nh_calloc((size_t)t->mfree, sizeof(double));
     t->vnew = nh_calloc((size_t)t->mfree + 6, sizeof(double));
     t->rows = nh_calloc((size_t)(m > 0 ? m : 1), sizeof(int));
-    if (!t->dv || !t->vnew || !t->rows) return NH_ERR_MEMORY;
+    t->side = nh_calloc((size_t)(m > 0 ? m : 1), sizeof(int));
+    if (!t->dv || !t->vnew || !t->rows || !t->side) return NH_ERR_MEMORY;
     NH_TRY(nh_beam_system_create(w->tools[k].beam, &t->sys));
   }
   return NH_OK;
@@ -199,13 +203,13 @@ static int nh_tool_compliance(nh_step_work *w, nh_tool_work *t) {
   if (!t->X) return NH_ERR_MEMORY;
   for (int a = 0; a < t->nrows; a++) {
     double *x = t->X + (size_t)a * t->mfree;
-    nh_row_tool_column(rows, t->rows[a], x);
+    nh_row_tool_column(rows, t->rows[a], t->side[a], x);
     nh_beam_system_solve(t->sys, x);
   }
   for (int a = 0; a < t->nrows; a++) {
-    const int i = t->rows[a], d0 = 6 * rows->elem[i] - 6;
+    const int i = t->rows[a], d0 = 6 * nh_row_elem(rows, i, t->side[a]) - 6;
     double coef[12];
-    nh_row_tool_coef(rows, i, coef);
+    nh_row_tool_coef(rows, i, t->side[a], coef);
     for (int c = 0; c < t->nrows; c++) {
       const double *x = t->X + (size_t)c * t->mfree;
       double sum = 0.0;
@@ -223,14 +227,17 @@ static int nh_coupled_compliance(nh_step_work *w) {
   const nh_rows *rows = w->rows;
   if (!(w->Jt = nh_rows_tissue_jt(w->s, rows, w->mark)))
     return NH_ERROR(NH_ERR_MEMORY, "out of memory: constraint rows (%d)", w->m);
-  for (int i = 0; i < w->m; i++) {
-    int k = rows->tool[i];
-    if (k < 0) continue;
-    NH_CHECK(
-        k < w->n_tools && rows->elem[i] >= 0 && rows->elem[i] < nh_beam_elements(w->tools[k].beam),
-        NH_ERR_INTERNAL, "constraint row %d: tool %d element %d out of range", i, k, rows->elem[i]);
-    w->tw[k].rows[w->tw[k].nrows++] = i;
-  }
+  for (int i = 0; i < w->m; i++)
+    for (int side = 0; side < 2; side++) { /* a row's tool, then its second tool (if any) */
+      const int k = side ? rows->tool2[i] : rows->tool[i], e = nh_row_elem(rows, i, side);
+      if (k < 0) continue;
+      NH_CHECK(k < w->n_tools && e >= 0 && e < nh_beam_elements(w->tools[k].beam), NH_ERR_INTERNAL,
+               "constraint row %d: tool %d element %d out of range", i, k, e);
+      NH_CHECK(side == 0 || k != rows->tool[i], NH_ERR_INTERNAL,
+               "constraint row %d: both its tool parts on tool %d", i, k);
+      nh_tool_work *t = &w->tw[k];
+      t->rows[t->nrows] = i, t->side[t->nrows++] = side;
+    }
   for (int k = 0; k < w->n_tools; k++)
     if (w->tw[k].nrows) NH_TRY(nh_tool_compliance(w, &w->tw[k]));
   return nh_tissue_compliance(w);
@@ -247,7 +254,7 @@ static void nh_coupled_tool_rates(nh_step_work *w) {
     memcpy(t->vnew, w->tools[k].base_velocity, 6 * sizeof(double));
     for (int q = 0; q < t->mfree; q++) t->vnew[6 + q] = vb[6 + q] + t->dv[q];
     for (int a = 0; a < t->nrows; a++)
-      w->r_tools[t->rows[a]] += nh_row_tool_rate(rows, t->rows[a], t->vnew);
+      w->r_tools[t->rows[a]] += nh_row_tool_rate(rows, t->rows[a], t->side[a], t->vnew);
   }
 }
 

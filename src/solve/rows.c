@@ -7,7 +7,9 @@
  * the unknowns by Pᵀ (hanging masters, fixed nodes dropped): J_t, kept as
  * J_tᵀ (sparse, n_free x m) for the compliance and the corrections. Its tool
  * part is −n · J_beam on the element's 12 DOFs, the base node's dropped
- * (prescribed): J_k, dense per tool. */
+ * (prescribed): J_k, dense per tool. A row between two tools has a second
+ * tool part in place of the tissue's, +n · J_beam of the other tool (side 1,
+ * tool2): each side is a column of its own tool's block. */
 #include "solve/system_impl.h"
 
 #include <stdlib.h>
@@ -19,7 +21,7 @@ void nh_rows_clear(nh_rows *r) {
 
 void nh_rows_free(nh_rows *r) {
   free(r->start), free(r->node), free(r->N), free(r->dir), free(r->tool), free(r->elem), free(r->J);
-  free(r->gap), free(r->law), free(r->lambda);
+  free(r->tool2), free(r->elem2), free(r->J2), free(r->gap), free(r->law), free(r->lambda);
   memset(r, 0, sizeof *r);
 }
 
@@ -48,6 +50,9 @@ int nh_rows_add(nh_rows *r) {
     NH_GROW(r->tool, cap);
     NH_GROW(r->elem, cap);
     NH_GROW(r->J, 36 * cap);
+    NH_GROW(r->tool2, cap);
+    NH_GROW(r->elem2, cap);
+    NH_GROW(r->J2, 36 * cap);
     NH_GROW(r->gap, cap);
     NH_GROW(r->law, cap);
     NH_GROW(r->lambda, cap);
@@ -61,6 +66,8 @@ int nh_rows_add(nh_rows *r) {
   memset(r->dir + 3 * i, 0, 3 * sizeof(double));
   r->tool[i] = -1, r->elem[i] = 0;
   memset(r->J + 36 * i, 0, 36 * sizeof(double));
+  r->tool2[i] = -1, r->elem2[i] = 0;
+  memset(r->J2 + 36 * i, 0, 36 * sizeof(double));
   r->gap[i] = 0.0, r->lambda[i] = 0.0;
   r->law[i] = (nh_row_law){NH_ROW_BILATERAL, -1, -1, 0.0, 0.0, -1, 0.0, 0, 0};
   return i;
@@ -76,24 +83,28 @@ int nh_rows_widen(nh_rows *r, int count) {
   return NH_OK;
 }
 
-void nh_row_tool_coef(const nh_rows *r, int i, double c[12]) {
-  const double *n = r->dir + 3 * i, *J = r->J + 36 * i;
-  for (int j = 0; j < 12; j++) c[j] = -(n[0] * J[j] + n[1] * J[12 + j] + n[2] * J[24 + j]);
+int nh_row_elem(const nh_rows *r, int i, int side) {
+  return side ? r->elem2[i] : r->elem[i];
 }
 
-double nh_row_tool_rate(const nh_rows *r, int i, const double *v) {
+void nh_row_tool_coef(const nh_rows *r, int i, int side, double c[12]) {
+  const double *n = r->dir + 3 * i, *J = (side ? r->J2 : r->J) + 36 * i, sg = side ? 1.0 : -1.0;
+  for (int j = 0; j < 12; j++) c[j] = sg * (n[0] * J[j] + n[1] * J[12 + j] + n[2] * J[24 + j]);
+}
+
+double nh_row_tool_rate(const nh_rows *r, int i, int side, const double *v) {
   double c[12], sum = 0.0;
-  nh_row_tool_coef(r, i, c);
-  const double *ve = v + 6 * r->elem[i];
+  nh_row_tool_coef(r, i, side, c);
+  const double *ve = v + 6 * nh_row_elem(r, i, side);
   for (int j = 0; j < 12; j++) sum += c[j] * ve[j];
   return sum;
 }
 
-void nh_row_tool_column(const nh_rows *r, int i, double *col) {
+void nh_row_tool_column(const nh_rows *r, int i, int side, double *col) {
   double c[12];
-  nh_row_tool_coef(r, i, c);
+  nh_row_tool_coef(r, i, side, c);
   for (int j = 0; j < 12; j++) {
-    int d = 6 * r->elem[i] + j - 6;
+    int d = 6 * nh_row_elem(r, i, side) + j - 6;
     if (d >= 0) col[d] += c[j];
   }
 }

@@ -360,9 +360,16 @@ typedef struct {
   double *dir;      /* 3 per row: n */
   int *tool, *elem; /* tool index (−1: none) and element */
   double *J;        /* 36 per row: d x_tool / d (element DOFs), row-major 3 x 12 */
-  double *gap;      /* g */
-  nh_row_law *law;  /* law; normal indices refer to rows of this set */
-  double *lambda;   /* in: warm start; out: the forces of the step */
+  /* A row between two tools (tool2 >= 0; −1 otherwise): a point of tool2 in
+   * place of the tissue point (the row's tissue slots stay unused),
+   *   g_i = n_i · (x_tool2(s2_i) − x_tool(s_i)),
+   * its force λ_i on tool2's point along +n_i (a nested tool held by its
+   * host: contact/nest.c). Element and Jacobian as tool's. */
+  int *tool2, *elem2;
+  double *J2;
+  double *gap;     /* g */
+  nh_row_law *law; /* law; normal indices refer to rows of this set */
+  double *lambda;  /* in: warm start; out: the forces of the step */
 } nh_rows;
 
 void nh_rows_clear(nh_rows *rows);

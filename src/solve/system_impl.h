@@ -202,13 +202,17 @@ int nh_system_compliance_add_spsolve(nh_system *s, cholmod_sparse *Jt, double *W
 
 /* ---- constraint rows, their tissue and tool parts (rows.c) ---- */
 
-/* Row i's tool part as 12 coefficients on the element's DOFs: −nᵀ J. */
-void nh_row_tool_coef(const nh_rows *rows, int i, double c[12]);
-/* The tool's part of row i applied to the tool's velocities v (all DOFs). */
-double nh_row_tool_rate(const nh_rows *rows, int i, const double *v);
-/* Add row i's tool coefficients to a free-DOF column of the tool (base
+/* Row i's tool parts: side 0 the tool (rows->tool), side 1 the second tool
+ * of a row between two tools (rows->tool2). Its element on that side. */
+int nh_row_elem(const nh_rows *rows, int i, int side);
+/* The part of side `side` as 12 coefficients on the element's DOFs: −nᵀ J
+ * (side 0), +nᵀ J2 (side 1). */
+void nh_row_tool_coef(const nh_rows *rows, int i, int side, double c[12]);
+/* That part applied to its tool's velocities v (all DOFs). */
+double nh_row_tool_rate(const nh_rows *rows, int i, int side, const double *v);
+/* Add that part's coefficients to a free-DOF column of its tool (base
  * dropped). */
-void nh_row_tool_column(const nh_rows *rows, int i, double *col);
+void nh_row_tool_column(const nh_rows *rows, int i, int side, double *col);
 /* The tissue part of the rows as J_tᵀ over the unknowns (CSC, n_free x m,
  * sorted); mark: n_free ints, all −1 on entry and on return. NULL when out
  * of memory. */
