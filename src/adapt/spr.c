@@ -397,16 +397,16 @@ int nh_spr_estimate(const nh_mesh *m, const nh_tissue *t, const double *u, const
 #pragma omp parallel for schedule(static) if (nl >= NH_SPR_PARALLEL_MIN)
   for (int l = 0; l < nl; l++) {
     int c = m->leaves[l];
-    double Xe[24], ue[24], s9[54];
+    double Xe[24], ue[24], s9[54], det9[9];
     nh_mesh_cell_coords(m, m->X, c, Xe);
     nh_mesh_cell_coords(m, u, c, ue);
     double lambda, mu;
     nh_tissue_cell_material(t, c, &lambda, &mu, NULL);
     const double *G0 = t->G0 + 24 * t->cell_shape[c];
     const int centre = nh_tissue_g0(t, c) == G0;
-    nh_hex_stress_at(Xe, ue, G0, nh_tissue_gbar(t, c), lambda, mu, centre ? 9 : 8, xi, s9,
-                     detJ + 8 * (size_t)l);
+    nh_hex_stress_at(Xe, ue, G0, nh_tissue_gbar(t, c), lambda, mu, centre ? 9 : 8, xi, s9, det9);
     memcpy(sh + 48 * (size_t)l, s9, 48 * sizeof(double));
+    memcpy(detJ + 8 * (size_t)l, det9, 8 * sizeof(double));
     if (centre)
       memcpy(stress + 6 * (size_t)c, s9 + 48, 6 * sizeof(double));
     else
