@@ -522,15 +522,21 @@ static void test_section(void) {
   nh_error_clear();
 }
 
-/* 8. A bent beam's base turned by π: the centre line stays, the tip turns. */
-static void test_spin(void) {
-  const double x_dir[3] = {1, 0, 0}, L = 0.16, h = 0.05;
-  const int n = 32, N = 6 * (n + 1), steps = 20;
+/* A needle-like tool along x (tests 8 and 9). */
+static nh_beam_spec needle_spec(double L, int n) {
   nh_beam_spec sp = {
       .section = {.young = 50e9, .poisson = 0.33, .radius = 4.15e-4, .density = 6450},
       .length = L,
-      .elements = n};
-  memcpy(sp.direction, x_dir, sizeof sp.direction);
+      .elements = n,
+      .direction = {1, 0, 0}};
+  return sp;
+}
+
+/* 8. A bent beam's base turned by π: the centre line stays, the tip turns. */
+static void test_spin(void) {
+  const double L = 0.16, h = 0.05;
+  const int n = 32, N = 6 * (n + 1), steps = 20;
+  const nh_beam_spec sp = needle_spec(L, n);
   const double EI = sp.section.young * M_PI * pow(sp.section.radius, 4) / 4;
   const double loads[3] = {0.01, 0.5, 2.0};
   for (int c = 0; c < 3; c++) {
@@ -585,13 +591,9 @@ static double backward_error(const double *A, int m, const double *y, const doub
 
 /* 9. Band and projected factorisations against dense LAPACK. */
 static void test_step_operator(void) {
-  const double x_dir[3] = {1, 0, 0}, L = 0.16, h = 0.01;
+  const double L = 0.16, h = 0.01;
   const int n = 32, N = 6 * (n + 1), m = N - 6;
-  nh_beam_spec sp = {
-      .section = {.young = 50e9, .poisson = 0.33, .radius = 4.15e-4, .density = 6450},
-      .length = L,
-      .elements = n};
-  memcpy(sp.direction, x_dir, sizeof sp.direction);
+  const nh_beam_spec sp = needle_spec(L, n);
   const double EI = sp.section.young * M_PI * pow(sp.section.radius, 4) / 4;
   const double EA = sp.section.young * M_PI * pow(sp.section.radius, 2);
   nh_beam *b;
