@@ -50,10 +50,24 @@
  *     −d2 + 2 (d2·t) t, i.e. −d2 for the d2 ⟂ t of the rest beam (1e-6).
  *     The step with the symmetrised tangent on the right-hand side fails
  *     this by 10¹⁰⁰ (the spin turned into a lateral load growing twentyfold
- *     per step). */
+ *     per step).
+ *  9. The step operator's linear algebra against an independent dense one,
+ *     on the needle-like beam of 8 bent by PL²/EI = 0.5: A = (1 + hα) M +
+ *     (hβ + h²) K_sym from nh_beam_mass and nh_beam_internal_force, solved
+ *     here by LAPACK's dense dposv; (a) as bent (A positive definite: the
+ *     band Cholesky of nh_beam_dynamic_prepare); (b) then shortened along
+ *     its chord to 20 × the cantilever's buckling force (A indefinite: the
+ *     positive part, eigenpairs below 0 only), against K₊ = V max(Λ, 0) Vᵀ
+ *     from the full decomposition (dsyevd) here. Both solvers are backward
+ *     stable, so each one's solution leaves a residual ‖A y − r‖ ≤ c ε ‖A‖
+ *     ‖y‖ in the other's A (asserted 1e-12, against m ε = 2e-14; a wrong
+ *     projection leaves up to (hβ + h²) |λ_min(K)| ‖y‖, 5e-10 of max|A| in
+ *     (b): asserted ≥ 1e-10), and the two agree to cond(A) ε (LAPACK's
+ *     dpocon estimate, 100 ε cond asserted). */
 #include "beam/beam.h"
 #include "check.h"
 
+#include <lapacke.h>
 #include <string.h>
 
 static nh_beam_section section(void) {
@@ -508,15 +522,21 @@ static void test_section(void) {
   nh_error_clear();
 }
 
-/* 8. A bent beam's base turned by π: the centre line stays, the tip turns. */
-static void test_spin(void) {
-  const double x_dir[3] = {1, 0, 0}, L = 0.16, h = 0.05;
-  const int n = 32, N = 6 * (n + 1), steps = 20;
+/* A needle-like tool along x (tests 8 and 9). */
+static nh_beam_spec needle_spec(double L, int n) {
   nh_beam_spec sp = {
       .section = {.young = 50e9, .poisson = 0.33, .radius = 4.15e-4, .density = 6450},
       .length = L,
-      .elements = n};
-  memcpy(sp.direction, x_dir, sizeof sp.direction);
+      .elements = n,
+      .direction = {1, 0, 0}};
+  return sp;
+}
+
+/* 8. A bent beam's base turned by π: the centre line stays, the tip turns. */
+static void test_spin(void) {
+  const double L = 0.16, h = 0.05;
+  const int n = 32, N = 6 * (n + 1), steps = 20;
+  const nh_beam_spec sp = needle_spec(L, n);
   const double EI = sp.section.young * M_PI * pow(sp.section.radius, 4) / 4;
   const double loads[3] = {0.01, 0.5, 2.0};
   for (int c = 0; c < 3; c++) {
@@ -557,6 +577,106 @@ static void test_spin(void) {
   }
 }
 
+/* max_i |(A y − r)_i| / (‖A‖_max ‖y‖_∞), A dense m x m row-major. */
+static double backward_error(const double *A, int m, const double *y, const double *r) {
+  double e = 0.0, amax = 0.0, ymax = 0.0;
+  for (int i = 0; i < m; i++) {
+    double s = -r[i];
+    for (int j = 0; j < m; j++)
+      s += A[(size_t)i * m + j] * y[j], amax = fmax(amax, fabs(A[i * m + j]));
+    e = fmax(e, fabs(s)), ymax = fmax(ymax, fabs(y[i]));
+  }
+  return e / (amax * ymax);
+}
+
+/* 9. Band and projected factorisations against dense LAPACK. */
+static void test_step_operator(void) {
+  const double L = 0.16, h = 0.01;
+  const int n = 32, N = 6 * (n + 1), m = N - 6;
+  const nh_beam_spec sp = needle_spec(L, n);
+  const double EI = sp.section.young * M_PI * pow(sp.section.radius, 4) / 4;
+  const double EA = sp.section.young * M_PI * pow(sp.section.radius, 2);
+  nh_beam *b;
+  CHECK_OK(nh_beam_create(&sp, &b));
+  double *f = calloc(N, sizeof(double)), *K = calloc((size_t)N * N, sizeof(double));
+  double *M = calloc(N, sizeof(double)), *A = calloc((size_t)m * m, sizeof(double));
+  double *F = calloc((size_t)m * m, sizeof(double)), *w = calloc(m, sizeof(double));
+  double *r = calloc(m, sizeof(double)), *y = calloc(m, sizeof(double));
+  double *z = calloc(m, sizeof(double)), *fi = calloc(N, sizeof(double));
+  double *d = calloc(N, sizeof(double));
+  f[6 * n + 1] = 0.5 * EI / (L * L);
+  nh_beam_static_options o = opts(10, 1e-12);
+  CHECK_OK(nh_beam_solve_static(b, &o, f, NULL));
+  nh_beam_system *S;
+  CHECK_OK(nh_beam_system_create(b, &S));
+  const nh_beam_dynamic_options dyn = {.dt = h, .alpha = 0.5, .beta = 0.002};
+  const double cM = 1 + h * dyn.alpha, cK = h * dyn.beta + h * h, still[6] = {0};
+  for (int c = 0; c < 2; c++) {
+    if (c == 1) { /* shorten along the chord: axial force 20 x π² EI / (4 L²) */
+      const double strain = 20 * M_PI * M_PI * EI / (4 * L * L) / EA;
+      const double *x = nh_beam_positions(b);
+      for (int a = 1; a <= n; a++)
+        for (int k = 0; k < 3; k++) d[6 * a + k] = -strain * (x[3 * a + k] - x[k]);
+      nh_beam_increment(b, d);
+    }
+    CHECK_OK(nh_beam_dynamic_prepare(b, &dyn, NULL, still, S, z));
+    CHECK(nh_beam_system_projected(S) == c, "case %d: projected %d", c,
+          nh_beam_system_projected(S));
+    nh_beam_internal_force(b, fi, K, 1);
+    nh_beam_mass(b, M);
+    for (int i = 0; i < m; i++)
+      for (int j = 0; j < m; j++) A[(size_t)i * m + j] = K[(size_t)(i + 6) * N + j + 6];
+    double wneg = 0.0;
+    if (c == 1) { /* K₊ = V max(Λ, 0) Vᵀ by the full decomposition */
+      memcpy(F, A, sizeof(double) * m * m);
+      CHECK(LAPACKE_dsyevd(LAPACK_ROW_MAJOR, 'V', 'U', m, F, m, w) == 0, "dsyevd failed");
+      wneg = -w[0];
+      for (int i = 0; i < m; i++)
+        for (int j = 0; j < m; j++) {
+          double s = 0.0;
+          for (int k = 0; k < m; k++)
+            s += F[(size_t)i * m + k] * fmax(w[k], 0.0) * F[(size_t)j * m + k];
+          A[(size_t)i * m + j] = s;
+        }
+    }
+    for (int i = 0; i < m; i++) {
+      for (int j = 0; j < m; j++) A[(size_t)i * m + j] *= cK;
+      A[(size_t)i * m + i] += cM * M[i + 6];
+    }
+    double amax = 0.0;
+    for (size_t k = 0; k < (size_t)m * m; k++) amax = fmax(amax, fabs(A[k]));
+    /* a projection that missed the negative part would leave a residual up
+     * to cK |λ_min| ‖y‖: above the tolerance below by 100 */
+    CHECK(c == 0 || cK * wneg > 1e-10 * amax,
+          "case 1: the negative part %g of max|A| %g is too small", cK * wneg, amax);
+    for (int i = 0; i < m; i++) r[i] = nh_rand();
+    memcpy(y, r, sizeof(double) * m);
+    nh_beam_system_solve(S, y);
+    memcpy(F, A, sizeof(double) * m * m), memcpy(z, r, sizeof(double) * m);
+    CHECK(LAPACKE_dposv(LAPACK_ROW_MAJOR, 'L', m, 1, F, m, z, 1) == 0, "case %d: dposv failed", c);
+    double anorm = 0.0, rcond = 0.0;
+    for (int i = 0; i < m; i++) {
+      double s = 0.0;
+      for (int j = 0; j < m; j++) s += fabs(A[(size_t)i * m + j]);
+      anorm = fmax(anorm, s);
+    }
+    CHECK(LAPACKE_dpocon(LAPACK_ROW_MAJOR, 'L', m, F, m, anorm, &rcond) == 0, "dpocon failed");
+    char what[96];
+    snprintf(what, sizeof what, "case %d: the beam's solve's backward error in the dense A", c);
+    CHECK_CLOSE(backward_error(A, m, y, r), 0.0, 1e-12, what);
+    snprintf(what, sizeof what, "case %d: dposv's backward error", c);
+    CHECK_CLOSE(backward_error(A, m, z, r), 0.0, 1e-12, what);
+    double diff = 0.0, zmax = 0.0;
+    for (int i = 0; i < m; i++) diff = fmax(diff, fabs(y[i] - z[i])), zmax = fmax(zmax, fabs(z[i]));
+    snprintf(what, sizeof what, "case %d: |y_beam - y_dense| / |y| (cond %.2g)", c, 1.0 / rcond);
+    CHECK_CLOSE(diff / zmax, 0.0, 100 * 2.2e-16 / rcond, what);
+  }
+  nh_beam_system_destroy(&S);
+  free(f), free(K), free(M), free(A), free(F), free(w), free(r), free(y), free(z), free(fi),
+      free(d);
+  nh_beam_destroy(&b);
+}
+
 int main(void) {
   test_section();
   test_derivatives();
@@ -569,5 +689,6 @@ int main(void) {
   test_hermite();
   test_dynamic();
   test_spin();
+  test_step_operator();
   TEST_END();
 }

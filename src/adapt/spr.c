@@ -370,39 +370,61 @@ done:
 
 int nh_spr_estimate(const nh_mesh *m, const nh_tissue *t, const double *u, const nh_hanging *h,
                     double *eta_cell, double *eta, double *eta_rel) {
-  int nl = m ? m->n_leaves : 0;
-  double *sigma_star =
-      nh_calloc(6 * (size_t)(m && m->n_nodes > 0 ? m->n_nodes : 1), sizeof(double));
-  double *err2 = nh_calloc((size_t)(nl > 0 ? nl : 1), sizeof(double));
-  double *norm2 = nh_calloc((size_t)(nl > 0 ? nl : 1), sizeof(double));
+  NH_TRY(nh_spr_check(m, t, h));
+  int nl = m->n_leaves;
+  const size_t nl1 = (size_t)(nl > 0 ? nl : 1);
+  double *sigma_star = nh_calloc(6 * (size_t)(m->n_nodes > 0 ? m->n_nodes : 1), sizeof(double));
+  double *err2 = nh_calloc(nl1, sizeof(double)), *norm2 = nh_calloc(nl1, sizeof(double));
+  double *stress = nh_calloc(6 * (size_t)(m->n_cells ? m->n_cells : 1), sizeof(double));
+  double *sh = nh_calloc(48 * nl1, sizeof(double)), *detJ = nh_calloc(8 * nl1, sizeof(double));
   int rc = NH_OK;
-  if (!sigma_star || !err2 || !norm2) {
+  if (!sigma_star || !err2 || !norm2 || !stress || !sh || !detJ) {
     rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: SPR estimate");
     goto done;
   }
-  rc = nh_spr_recover(m, t, u, h, sigma_star);
-  if (rc) goto done;
 
+  /* σₕ at the 8 Gauss points and, where the cell's rotation is the one
+   * nh_tissue_cell_stress uses (every cell but a cut one), at the centre in
+   * the same call (the 9th point): one polar decomposition per leaf and
+   * step instead of two, the same numbers */
   static const double q = 0.57735026918962576451; /* 1/√3 */
-  double xi[24], N[8][8];
+  double xi[27], N[8][8];
   for (int g = 0; g < 8; g++) {
     for (int k = 0; k < 3; k++) xi[3 * g + k] = q * nh_hex_corner[g][k];
     nh_hex_shape(xi + 3 * g, N[g]);
   }
+  xi[24] = xi[25] = xi[26] = 0.0;
+#pragma omp parallel for schedule(static) if (nl >= NH_SPR_PARALLEL_MIN)
+  for (int l = 0; l < nl; l++) {
+    int c = m->leaves[l];
+    double Xe[24], ue[24], s9[54], det9[9];
+    nh_mesh_cell_coords(m, m->X, c, Xe);
+    nh_mesh_cell_coords(m, u, c, ue);
+    double lambda, mu;
+    nh_tissue_cell_material(t, c, &lambda, &mu, NULL);
+    const double *G0 = t->G0 + 24 * t->cell_shape[c];
+    const int centre = nh_tissue_g0(t, c) == G0;
+    nh_hex_stress_at(Xe, ue, G0, nh_tissue_gbar(t, c), lambda, mu, centre ? 9 : 8, xi, s9, det9);
+    memcpy(sh + 48 * (size_t)l, s9, 48 * sizeof(double));
+    memcpy(detJ + 8 * (size_t)l, det9, 8 * sizeof(double));
+    if (centre)
+      memcpy(stress + 6 * (size_t)c, s9 + 48, 6 * sizeof(double));
+    else
+      nh_tissue_cell_stress(t, c, u, stress + 6 * (size_t)c);
+  }
+  rc = nh_spr_recover_fields(m, t, h, 1, stress, sigma_star);
+  if (rc) goto done;
+
   int bad_cell = -1;
 #pragma omp parallel for schedule(static) if (nl >= NH_SPR_PARALLEL_MIN)
   for (int l = 0; l < nl; l++) {
     int c = m->leaves[l];
     const int *corner = m->cells + 8 * c;
-    double Xe[24], ue[24], sh[48], detJ[8], e2 = 0.0, n2 = 0.0;
-    nh_mesh_cell_coords(m, m->X, c, Xe);
-    nh_mesh_cell_coords(m, u, c, ue);
-    double lambda, mu;
+    const double *shl = sh + 48 * (size_t)l, *dJ = detJ + 8 * (size_t)l;
+    double e2 = 0.0, n2 = 0.0, lambda, mu;
     nh_tissue_cell_material(t, c, &lambda, &mu, NULL);
-    nh_hex_stress_at(Xe, ue, t->G0 + 24 * t->cell_shape[c], nh_tissue_gbar(t, c), lambda, mu, 8, xi,
-                     sh, detJ);
     for (int g = 0; g < 8; g++) {
-      if (!(detJ[g] > 0.0)) {
+      if (!(dJ[g] > 0.0)) {
 #pragma omp atomic write
         bad_cell = c;
       }
@@ -410,16 +432,16 @@ int nh_spr_estimate(const nh_mesh *m, const nh_tissue *t, const double *u, const
       for (int k = 0; k < 6; k++) {
         double s = 0.0;
         for (int a = 0; a < 8; a++) s += N[g][a] * sigma_star[6 * corner[a] + k];
-        diff[k] = s - sh[6 * g + k];
+        diff[k] = s - shl[6 * g + k];
       }
       nh_voigt_compliance(lambda, mu, diff, e);
       double de = 0.0;
       for (int k = 0; k < 6; k++) de += diff[k] * e[k];
-      nh_voigt_compliance(lambda, mu, sh + 6 * g, e);
+      nh_voigt_compliance(lambda, mu, shl + 6 * g, e);
       double dn = 0.0;
-      for (int k = 0; k < 6; k++) dn += sh[6 * g + k] * e[k];
-      e2 += detJ[g] * de;
-      n2 += detJ[g] * dn;
+      for (int k = 0; k < 6; k++) dn += shl[6 * g + k] * e[k];
+      e2 += dJ[g] * de;
+      n2 += dJ[g] * dn;
     }
     err2[l] = m->fill[c] * e2;
     norm2[l] = m->fill[c] * n2;
@@ -445,6 +467,6 @@ int nh_spr_estimate(const nh_mesh *m, const nh_tissue *t, const double *u, const
   if (eta_rel) *eta_rel = sum_err + sum_norm > 0.0 ? sqrt(sum_err / (sum_norm + sum_err)) : 0.0;
 
 done:
-  free(sigma_star), free(err2), free(norm2);
+  free(sigma_star), free(err2), free(norm2), free(stress), free(sh), free(detJ);
   return rc;
 }

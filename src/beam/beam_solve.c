@@ -5,9 +5,11 @@
  * Static: the consistent tangent is not symmetric (and near a buckling load
  * indefinite), so it is factorised dense by LU with partial pivoting.
  * Dynamic: A = (1 + hα) M + (hβ + h²) K with the symmetrised K is
- * factorised by dense Cholesky (LAPACK), the tangent's positive part
- * replacing K when A is indefinite (nh_beam_dynamic_prepare). Cost (6n)³/3
- * flops: 0.07 GFlop for n = 100, milliseconds. The same step quasi-static
+ * banded (an element couples its two nodes' 12 DOFs: half-bandwidth 11) and
+ * factorised by LAPACK's band Cholesky (dpbtrf, 6n · 12² flops); when that
+ * finds A indefinite, the tangent's positive part replaces K and A, now
+ * dense, is factorised by dense Cholesky ((6n)³/3 flops: 0.07 GFlop for
+ * n = 100, milliseconds; nh_beam_dynamic_prepare). The same step quasi-static
  * (a Newton iteration of the coupled equilibrium, A = K): the full
  * consistent tangent by LU (LAPACK dgetrf) when its symmetric part is
  * positive definite, else the symmetric part's positive part as above.
@@ -198,12 +200,18 @@ int nh_beam_solve_static(nh_beam *b, const nh_beam_static_options *o, const doub
   return rc;
 }
 
+/* A's half-bandwidth in the free DOFs: an element couples the 12 DOFs of
+ * its two nodes, so K_ij = 0 for |i − j| > 11. */
+#define NH_BEAM_BAND 11
+
 struct nh_beam_system {
   int N, m;               /* all DOFs, free DOFs (N − 6) */
   double *K, *A, *M, *Kv; /* N x N tangent, m x m factor of A, N mass, N work */
+  double *B;              /* (NH_BEAM_BAND + 1) x m: A's band Cholesky factor when banded */
   int *piv;               /* m: A's LU pivots when lu */
   int projected;          /* the last prepare clipped negative tangent eigenvalues */
   int lu;                 /* A holds the LU factor of the full (unsymmetric) tangent */
+  int banded;             /* B holds the band Cholesky factor of A (A unused) */
 };
 
 int nh_beam_system_create(const nh_beam *b, nh_beam_system **out) {
@@ -213,10 +221,11 @@ int nh_beam_system_create(const nh_beam *b, nh_beam_system **out) {
   s->N = 6 * (b->n + 1), s->m = s->N - 6;
   s->K = nh_calloc((size_t)s->N * s->N, sizeof(double));
   s->A = nh_calloc((size_t)s->m * s->m, sizeof(double));
+  s->B = nh_calloc((size_t)(NH_BEAM_BAND + 1) * s->m, sizeof(double));
   s->M = nh_calloc((size_t)s->N, sizeof(double));
   s->Kv = nh_calloc((size_t)s->N, sizeof(double));
   s->piv = nh_calloc((size_t)s->m, sizeof(int));
-  if (!s->K || !s->A || !s->M || !s->Kv || !s->piv) {
+  if (!s->K || !s->A || !s->B || !s->M || !s->Kv || !s->piv) {
     nh_beam_system_destroy(&s);
     return NH_ERR_MEMORY;
   }
@@ -227,7 +236,7 @@ int nh_beam_system_create(const nh_beam *b, nh_beam_system **out) {
 void nh_beam_system_destroy(nh_beam_system **ps) {
   nh_beam_system *s = *ps;
   if (!s) return;
-  free(s->K), free(s->A), free(s->M), free(s->Kv), free(s->piv);
+  free(s->K), free(s->A), free(s->B), free(s->M), free(s->Kv), free(s->piv);
   free(s);
   *ps = NULL;
 }
@@ -236,15 +245,77 @@ void nh_beam_system_destroy(nh_beam_system **ps) {
  * (lower, row-major = upper column-major for LAPACK, called as the latter:
  * LAPACKE's row-major path transposes the matrix in and out and scans it
  * for NaN at every call, 2 % of an adaptive phantom run with the solves
- * below; docs/phantom.md). Returns 0 on success. */
+ * below; docs/phantom.md). Only K's lower row-major triangle is read.
+ * Returns 0 on success. */
 static int nh_beam_form_factor(nh_beam_system *s, const double *K, double cM, double cK) {
   const int m = s->m;
   for (int i = 0; i < m; i++) {
     double *row = s->A + (size_t)i * m;
-    for (int j = 0; j < m; j++) row[j] = cK * K[(size_t)i * m + j];
+    for (int j = 0; j <= i; j++) row[j] = cK * K[(size_t)i * m + j];
     row[i] += cM * s->M[i + 6];
   }
   return LAPACKE_dpotrf_work(LAPACK_COL_MAJOR, 'U', m, s->A, m);
+}
+
+/* The same A (K symmetric) in LAPACK's lower band storage, column-major,
+ * B[(i − j) + (NH_BEAM_BAND + 1) j] = A_ij for 0 <= i − j <= NH_BEAM_BAND,
+ * and its band Cholesky factor in place (dpbtrf: m (kd + 1)² flops against
+ * m³/3 dense, 13 000 against 295 000 for the needle's m = 96). *definite:
+ * 1 when A is positive definite (the factor is in s->B), else 0. Returns
+ * NH_ERR_INTERNAL (with a message) when K has an entry outside the band. */
+static int nh_beam_form_band_factor(nh_beam_system *s, const double *K, double cM, double cK,
+                                    int *definite) {
+  *definite = 0;
+  const int m = s->m, ld = NH_BEAM_BAND + 1;
+  for (int i = 0; i < m; i++)
+    for (int j = 0; j < i - NH_BEAM_BAND; j++)
+      if (K[(size_t)i * m + j] != 0.0)
+        return NH_ERROR(NH_ERR_INTERNAL, "beam: tangent entry (%d, %d) outside the band %d", i, j,
+                        NH_BEAM_BAND);
+  for (int j = 0; j < m; j++)
+    for (int i = j; i < m && i <= j + NH_BEAM_BAND; i++)
+      s->B[(i - j) + (size_t)ld * j] =
+          cK * K[(size_t)i * m + j] + (i == j ? cM * s->M[i + 6] : 0.0);
+  *definite = LAPACKE_dpbtrf_work(LAPACK_COL_MAJOR, 'L', m, NH_BEAM_BAND, s->B, ld) == 0;
+  return NH_OK;
+}
+
+/* The positive part of the symmetric K0 (m x m, row-major; K: m x m
+ * work), eigenvalues below floor raised to it (cM > 0: floor 0, the negative part
+ * dropped; cM = 0: 10⁻⁹ of the largest eigenvalue), into P's lower
+ * row-major triangle:
+ *   P = Σₖ max(wₖ, floor) vₖvₖᵀ = K + Σ_{wₖ < floor} (floor − wₖ) vₖvₖᵀ,
+ * so only the eigenpairs below the floor are computed (dsyevr over the
+ * interval (−‖K‖∞ − 1, floor], MRRR), a few for a compressed needle,
+ * instead of all of them (dsyevd, then P = C Cᵀ by dsyrk). */
+static int nh_beam_positive_part(const double *K0, double *K, int m, double cM, double *P) {
+  double *w = nh_calloc((size_t)m, sizeof(double)), *Z = nh_calloc((size_t)m * m, sizeof(double));
+  int *support = nh_calloc(2 * (size_t)m, sizeof(int)), found = 0, rc = NH_OK;
+  if (!w || !Z || !support) rc = NH_ERR_MEMORY;
+  double norm = 0.0, floor = 0.0;
+  for (int i = 0; i < m && !rc; i++) {
+    double r = 0.0;
+    for (int j = 0; j < m; j++) r += fabs(K0[(size_t)i * m + j]);
+    norm = fmax(norm, r);
+  }
+  memcpy(P, K0, sizeof(double) * (size_t)m * m);
+  if (!rc && cM == 0.0) { /* the largest eigenvalue, for the floor */
+    memcpy(K, K0, sizeof(double) * (size_t)m * m);
+    if (LAPACKE_dsyevr(LAPACK_COL_MAJOR, 'N', 'I', 'L', m, K, m, 0.0, 0.0, m, m, 0.0, &found, w, Z,
+                       m, support) ||
+        found != 1)
+      rc = NH_ERROR(NH_ERR_NUMERIC, "beam: the largest eigenvalue of the tangent failed");
+    else
+      floor = 1e-9 * fmax(w[0], 0.0);
+  }
+  memcpy(K, K0, sizeof(double) * (size_t)m * m);
+  if (!rc && LAPACKE_dsyevr(LAPACK_COL_MAJOR, 'V', 'V', 'L', m, K, m, -norm - 1.0, floor, 0, 0, 0.0,
+                            &found, w, Z, m, support))
+    rc = NH_ERROR(NH_ERR_NUMERIC, "beam dynamic step: eigen-decomposition of the tangent failed");
+  for (int k = 0; k < found && !rc; k++) /* column k of Z (column-major): vₖ */
+    cblas_dsyr(CblasRowMajor, CblasLower, m, floor - w[k], Z + (size_t)k * m, 1, P, m);
+  free(w), free(Z), free(support);
+  return rc;
 }
 
 int nh_beam_dynamic_prepare(nh_beam *b, const nh_beam_dynamic_options *o, const double *f_ext,
@@ -279,7 +350,7 @@ int nh_beam_dynamic_prepare(nh_beam *b, const nh_beam_dynamic_options *o, const 
   }
   nh_beam_free_block(s->K, N, Kf);
   int rc = NH_OK;
-  s->projected = s->lu = 0;
+  s->projected = s->lu = s->banded = 0;
   double *Kfull = NULL; /* quasi-static: the free block of the full tangent */
   if (o->quasi_static) {
     Kfull = nh_calloc((size_t)m * m, sizeof(double));
@@ -294,58 +365,33 @@ int nh_beam_dynamic_prepare(nh_beam *b, const nh_beam_dynamic_options *o, const 
       const double k = 0.5 * (Kf[(size_t)i * m + j] + Kf[(size_t)j * m + i]);
       Kf[(size_t)i * m + j] = Kf[(size_t)j * m + i] = k;
     }
-  if (!nh_beam_form_factor(s, Kf, cM, cK)) {
-    /* the symmetric part is positive definite; quasi-static: factorise the
-     * full tangent by LU (A = K, no mass), for Newton's rate */
+  int definite = 0;
+  rc = nh_beam_form_band_factor(s, Kf, cM, cK, &definite);
+  if (!rc && definite) {
+    /* the symmetric part is positive definite: A's band factor serves,
+     * quasi-static: factorise the full tangent by LU (A = K, no mass), for
+     * Newton's rate */
+    s->banded = !Kfull;
     if (Kfull) {
       for (size_t k = 0; k < (size_t)m * m; k++) s->A[k] = cK * Kfull[k];
       if (LAPACKE_dgetrf(LAPACK_ROW_MAJOR, m, m, s->A, m, s->piv) != 0)
         rc = NH_ERROR(NH_ERR_NUMERIC, "beam quasi-static step: the tangent is singular");
       s->lu = 1;
     }
-  } else {
+  } else if (!rc) {
     /* A is indefinite: the tool is compressed beyond a buckling load of
      * the step operator. Use the tangent's positive part (eigenvalues
      * clipped at 0, or without mass at 1e-9 of the largest): the residual
-     * stays exact, A stays positive definite. */
-    double *w = nh_calloc((size_t)m, sizeof(double));
-    if (!w) rc = NH_ERR_MEMORY;
-    /* divide and conquer (dsyevd): the eigenvectors of the 96 x 96 tangent
-     * in a fraction of dsyev's QR iterations, whose rotations (dlasr) were
-     * 7 % of an adaptive phantom run (docs/phantom.md, "Again after the SPR
-     * patch growth and the needle's LAPACK calls") */
-    if (!rc && LAPACKE_dsyevd(LAPACK_COL_MAJOR, 'V', 'L', m, Kf, m, w))
-      rc = NH_ERROR(NH_ERR_NUMERIC, "beam dynamic step: eigen-decomposition of the tangent failed");
-    if (!rc) {
-      /* P = V W₊ Vᵀ = C Cᵀ with C the columns of V (Kf after dsyevd, column-major) scaled
-       * by √w₊, the kept ones only: one BLAS-3 product (m = 96 for the
-       * needle: by hand, with fmax in the innermost loop, this was 4 ms, the
-       * largest part of a small tissue's step; docs/phantom.md "Results") */
-      double *P = nh_calloc((size_t)m * m, sizeof(double));
-      double *C = nh_calloc((size_t)m * m, sizeof(double));
-      const double floor = cM > 0 ? 0.0 : 1e-9 * fmax(w[m - 1], 0.0); /* ascending */
-      if (!P || !C) rc = NH_ERR_MEMORY;
-      int kept = 0;
-      for (int k = 0; k < m && !rc; k++) {
-        const double wk = fmax(w[k], floor);
-        if (!(wk > 0)) continue;
-        const double r = sqrt(wk);
-        for (int i = 0; i < m; i++) C[(size_t)i * m + kept] = Kf[(size_t)k * m + i] * r;
-        kept++;
-      }
-      if (!rc) {
-        cblas_dsyrk(CblasRowMajor, CblasLower, CblasNoTrans, m, kept, 1.0, C, m, 0.0, P, m);
-        for (int i = 0; i < m; i++) /* the upper triangle, for nh_beam_form_factor */
-          for (int j = 0; j < i; j++) P[(size_t)j * m + i] = P[(size_t)i * m + j];
-      }
-      free(C);
-      if (!rc && nh_beam_form_factor(s, P, cM, cK))
-        rc =
-            NH_ERROR(NH_ERR_NUMERIC, "beam dynamic step: the step matrix is not positive definite");
-      s->projected = 1;
-      free(P);
-    }
-    free(w);
+     * stays exact, A stays positive definite (dense: the eigenvectors are
+     * not local). */
+    double *P = nh_calloc((size_t)m * m, sizeof(double));
+    double *work = nh_calloc((size_t)m * m, sizeof(double));
+    if (!P || !work) rc = NH_ERR_MEMORY;
+    if (!rc) rc = nh_beam_positive_part(Kf, work, m, cM, P);
+    if (!rc && nh_beam_form_factor(s, P, cM, cK))
+      rc = NH_ERROR(NH_ERR_NUMERIC, "beam dynamic step: the step matrix is not positive definite");
+    s->projected = 1;
+    free(P), free(work);
   }
   free(fi), free(Kf), free(Kfull);
   return rc;
@@ -354,6 +400,9 @@ int nh_beam_dynamic_prepare(nh_beam *b, const nh_beam_dynamic_options *o, const 
 void nh_beam_system_solve(const nh_beam_system *s, double *y) {
   if (s->lu)
     LAPACKE_dgetrs(LAPACK_ROW_MAJOR, 'N', s->m, 1, s->A, s->m, s->piv, y, 1);
+  else if (s->banded)
+    LAPACKE_dpbtrs_work(LAPACK_COL_MAJOR, 'L', s->m, NH_BEAM_BAND, 1, s->B, NH_BEAM_BAND + 1, y,
+                        s->m);
   else
     LAPACKE_dpotrs_work(LAPACK_COL_MAJOR, 'U', s->m, 1, s->A, s->m, y, s->m);
 }

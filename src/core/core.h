@@ -174,6 +174,9 @@ void nh_mat3_tvec(const double A[9], const double x[3], double y[3]); /* y = A�
 double nh_mat3_det(const double A[9]);
 /* Inverse; returns NH_ERR_NUMERIC if |det| <= tiny (no message recorded). */
 int nh_mat3_inverse(const double A[9], double Ainv[9]);
+/* 1 when A, of determinant det, is too close to singular for nh_mat3_inverse
+ * (|det| <= 1e-14 max|Aᵢⱼ|³ or <= 1e-300), else 0. */
+int nh_mat3_singular(const double A[9], double det);
 /* Rotation matrix from a rotation vector (axis * angle), Rodrigues' formula. */
 void nh_mat3_rotation(const double rotvec[3], double R[9]);
 

@@ -91,11 +91,15 @@ double nh_mat3_det(const double A[9]) {
          A[2] * (A[3] * A[7] - A[4] * A[6]);
 }
 
-int nh_mat3_inverse(const double A[9], double Ainv[9]) {
-  double det = nh_mat3_det(A);
+int nh_mat3_singular(const double A[9], double det) {
   double scale = 0.0;
   for (int i = 0; i < 9; i++) scale = fmax(scale, fabs(A[i]));
-  if (!(fabs(det) > 1e-300 && fabs(det) > 1e-14 * scale * scale * scale)) return NH_ERR_NUMERIC;
+  return !(fabs(det) > 1e-300 && fabs(det) > 1e-14 * scale * scale * scale);
+}
+
+int nh_mat3_inverse(const double A[9], double Ainv[9]) {
+  double det = nh_mat3_det(A);
+  if (nh_mat3_singular(A, det)) return NH_ERR_NUMERIC;
   double T[9] = {A[4] * A[8] - A[5] * A[7], A[2] * A[7] - A[1] * A[8], A[1] * A[5] - A[2] * A[4],
                  A[5] * A[6] - A[3] * A[8], A[0] * A[8] - A[2] * A[6], A[2] * A[3] - A[0] * A[5],
                  A[3] * A[7] - A[4] * A[6], A[1] * A[6] - A[0] * A[7], A[0] * A[4] - A[1] * A[3]};

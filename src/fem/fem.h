@@ -51,6 +51,9 @@ void nh_hex_point_stiffness(const double g[24], double w, double lambda, double 
  * g is written only when det J > 0 and J is invertible; otherwise g is left
  * untouched and the return value is <= 0. */
 double nh_hex_gradients(const double X[24], const double xi[3], double g[24]);
+/* det J at ξ as nh_hex_gradients returns it (0 where det J > 0 but J is not
+ * invertible), without the gradients: for checks of the sign alone. */
+double nh_hex_det(const double X[24], const double xi[3]);
 
 /* F = I + Σ uₐ ⊗ G0ₐ, its polar rotation R[9], and the corotated nodal
  * displacements d[24] = Rᵀ uₐ + (Rᵀ − I)(Xₐ − X̄) (= Rᵀxₐ − Xₐ up to a

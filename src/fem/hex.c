@@ -36,13 +36,26 @@ void nh_lame(double E, double nu, double *lambda, double *mu) {
   *mu = E / (2 * (1 + nu));
 }
 
-double nh_hex_gradients(const double X[24], const double xi[3], double g[24]) {
-  double dN[8][3], J[9] = {0}, Jinv[9];
+/* J = Σₐ Xₐ ⊗ ∇_ξ Nₐ(ξ) (∇_ξ Nₐ in dN) and its determinant. */
+static double nh_hex_jacobian(const double X[24], const double xi[3], double dN[8][3],
+                              double J[9]) {
+  memset(J, 0, 9 * sizeof(double));
   nh_hex_dshape(xi, dN);
   for (int a = 0; a < 8; a++)
     for (int i = 0; i < 3; i++)
       for (int j = 0; j < 3; j++) J[3 * i + j] += X[3 * a + i] * dN[a][j];
-  double det = nh_mat3_det(J);
+  return nh_mat3_det(J);
+}
+
+double nh_hex_det(const double X[24], const double xi[3]) {
+  double dN[8][3], J[9];
+  const double det = nh_hex_jacobian(X, xi, dN, J);
+  return det > 0.0 && nh_mat3_singular(J, det) ? 0.0 : det;
+}
+
+double nh_hex_gradients(const double X[24], const double xi[3], double g[24]) {
+  double dN[8][3], J[9], Jinv[9];
+  const double det = nh_hex_jacobian(X, xi, dN, J);
   if (!(det > 0.0) || nh_mat3_inverse(J, Jinv)) return det > 0.0 ? 0.0 : det;
   /* g_a = J⁻ᵀ ∇_ξ N_a */
   for (int a = 0; a < 8; a++) nh_mat3_tvec(Jinv, dN[a], g + 3 * a);

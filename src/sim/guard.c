@@ -39,7 +39,7 @@
 static int nh_cell_inverted(const nh_sim *s, int c) {
   static const double g = 0.57735026918962576; /* 1/sqrt(3) */
   const nh_mesh *m = s->mesh;
-  double X[24], x[24], grad[24];
+  double X[24], x[24];
   nh_mesh_cell_coords(m, m->X, c, X);
   nh_mesh_cell_coords(m, s->u, c, x);
   for (int i = 0; i < 24; i++) x[i] += X[i];
@@ -47,11 +47,11 @@ static int nh_cell_inverted(const nh_sim *s, int c) {
   double pts[3];
   int n_pts = nh_tissue_tissue_points(s->tissue, c, pts);
   if (n_pts >= 0) /* a cut cell: where its tissue is */
-    for (int p = 0; p < n_pts && !bad; p++) bad = !(nh_hex_gradients(x, pts + 3 * p, grad) > 0.0);
+    for (int p = 0; p < n_pts && !bad; p++) bad = !(nh_hex_det(x, pts + 3 * p) > 0.0);
   for (int p = 0; p < 16 && !bad && n_pts < 0; p++) {
     double a = p < 8 ? 1.0 : g;
     double xi[3] = {(p & 1) ? a : -a, (p & 2) ? a : -a, (p & 4) ? a : -a};
-    bad = !(nh_hex_gradients(x, xi, grad) > 0.0);
+    bad = !(nh_hex_det(x, xi) > 0.0);
   }
   return bad;
 }

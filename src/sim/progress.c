@@ -48,11 +48,12 @@ void nh_progress_finish(nh_sim *s, const double t[NH_PHASES]) {
   fprintf(stderr,
           "%s: %d steps, %d dofs (%d free), %d cells, %.2f s\n"
           "  median ms/step: assemble %.3f  factor %.3f  solve %.3f  constraints %.3f  "
-          "adapt %.3f  output %.3f  | step %.3f\n",
+          "tools %.3f  guard %.3f  adapt %.3f  output %.3f  | step %.3f\n",
           s->scene->name, done, 3 * s->mesh->n_nodes, nh_system_free_dofs(s->system),
           s->mesh->n_leaves, nh_time_now() - s->progress.t_start, 1e3 * t[NH_PHASE_ASSEMBLE],
           1e3 * t[NH_PHASE_FACTOR], 1e3 * t[NH_PHASE_SOLVE], 1e3 * t[NH_PHASE_CONSTRAINTS],
-          1e3 * t[NH_PHASE_ADAPT], 1e3 * t[NH_PHASE_OUTPUT], 1e3 * t[NH_PHASE_STEP]);
+          1e3 * t[NH_PHASE_TOOLS], 1e3 * t[NH_PHASE_GUARD], 1e3 * t[NH_PHASE_ADAPT],
+          1e3 * t[NH_PHASE_OUTPUT], 1e3 * t[NH_PHASE_STEP]);
   if (s->max_goal_point >= 0) {
     const nh_scene *sc = s->scene;
     int i = s->max_goal_point;

@@ -84,7 +84,9 @@ static const char *const nh_step_columns[] = {"step",
                                               "constraint_sweeps",
                                               "constraint_method",
                                               "splits",
-                                              "unsolved"};
+                                              "unsolved",
+                                              "t_tools",
+                                              "t_guard"};
 static const char *const nh_probe_columns[] = {"step", "time", "name", "x",  "y",
                                                "z",    "ux",   "uy",   "uz", "error_estimate"};
 
@@ -202,7 +204,7 @@ static int nh_cmp_double(const void *a, const void *b) {
   return (x > y) - (x < y);
 }
 
-void nh_sim_median_times(const nh_sim *s, double t[7]) {
+void nh_sim_median_times(const nh_sim *s, double t[NH_SIM_PHASES]) {
   for (int p = 0; p < NH_PHASES; p++) t[p] = 0.0;
   const int first = s->first_step, n = s->step - first; /* steps this process timed */
   if (n <= 0) return;
@@ -857,7 +859,10 @@ typedef struct {
   int resolves;
   double t0;         /* the clock at the step's start */
   double t_estimate; /* s: estimate and re-solves, their solves not counted */
-  double t_output;   /* s: rows, frame and checkpoint */
+  double t_output;   /* s: counts, rows, frame and checkpoint */
+  double t_tools;    /* s: the start state saved and the solve's time outside the solver's
+                        phases (external forces; the tools' rows, tips and states) */
+  double t_guard;    /* s: nh_sim_guard */
   /* steps.csv: the mesh the step was solved on (before any refinement) */
   int dofs, free_dofs, cells, hanging, rows;
   nh_contact_stats cc; /* all zero without tools */
@@ -996,6 +1001,8 @@ static double *nh_sim_record_times(nh_sim *s, const nh_sim_record *r, double t_e
   pt[NH_PHASE_FACTOR] = st->t_factor;
   pt[NH_PHASE_SOLVE] = st->t_solve;
   pt[NH_PHASE_CONSTRAINTS] = st->t_constraints;
+  pt[NH_PHASE_TOOLS] = r->t_tools;
+  pt[NH_PHASE_GUARD] = r->t_guard;
   pt[NH_PHASE_ADAPT] = s->t_adapt;
   pt[NH_PHASE_OUTPUT] = r->t_output;
   pt[NH_PHASE_STEP] = t_end - r->t0 - st->t_aside;
@@ -1075,7 +1082,9 @@ static int nh_sim_write_row(nh_sim *s, const nh_sim_record *r, double t_end) {
                         cs->mcp.sweeps,
                         cs->mcp.method,
                         log2(st->load_steps > 0 ? st->load_steps : 1),
-                        unsolved};
+                        unsolved,
+                        r->t_tools,
+                        r->t_guard};
   enum { NH_STEP_COLUMNS = sizeof nh_step_columns / sizeof *nh_step_columns };
   _Static_assert(sizeof row / sizeof *row == NH_STEP_COLUMNS, "one value per steps.csv column");
   if (!s->options.dry_run)
@@ -1104,6 +1113,10 @@ int nh_sim_step(nh_sim *s) {
   r.inside = nh_sim_tools_inside(s);
   NH_TRY(nh_sim_predict(s, &r));
   int rc = nh_sim_solve(s, r.t_new, &r.st);
+  const double t_solved = nh_time_now();
+  /* what the solver's phases leave of the step so far: the tools' part */
+  r.t_tools = t_solved - r.t0 - r.st.t_assemble - r.st.t_factor - r.st.t_solve -
+              r.st.t_constraints - r.st.t_aside;
   /* A stop that cut the residual's assembly short left u and v updated but
    * the step's residual unknown (NaN): the step is not complete, and goes
    * back to its start like one stopped earlier, so that a continued run
@@ -1113,6 +1126,7 @@ int nh_sim_step(nh_sim *s) {
     free(r.start[0]), free(r.start[1]);
     return rc;
   }
+  r.t_guard = nh_time_now() - t_solved;
   /* adapt.resolve_tip: the step in which a tool punctures is estimated (and
    * re-solved at the tip) whatever adapt.every says: its tip meets cells no
    * estimate has seen (docs/theory.md §6.7) */
@@ -1124,8 +1138,8 @@ int nh_sim_step(nh_sim *s) {
   if (rc || (rc = rc_estimate)) return nh_sim_step_failed(s, rc, r.t_new);
   s->step++;
   s->time = r.t_new;
-  nh_sim_count(s, &r);
   double t1 = nh_time_now();
+  nh_sim_count(s, &r);
   NH_TRY(nh_sim_write_solution(s));
   double t2 = nh_time_now();
   nh_sim_adapt_mesh(s, &r);

@@ -87,7 +87,8 @@ int nh_sim_refine_cells(nh_sim *sim, const int *cells, int n);
 /* Kinetic energy ½ vᵀ M v. */
 double nh_sim_kinetic_energy(const nh_sim *sim);
 /* Median seconds per step of each phase so far (assemble, factor, solve,
- * constraints, adapt, output, step). */
-void nh_sim_median_times(const nh_sim *sim, double t[7]);
+ * constraints, tools, guard, adapt, output, step: steps.csv's t_* columns). */
+#define NH_SIM_PHASES 9
+void nh_sim_median_times(const nh_sim *sim, double t[NH_SIM_PHASES]);
 
 #endif

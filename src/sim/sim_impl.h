@@ -17,11 +17,14 @@ enum {
   NH_PHASE_FACTOR,
   NH_PHASE_SOLVE,
   NH_PHASE_CONSTRAINTS,
+  NH_PHASE_TOOLS,
+  NH_PHASE_GUARD,
   NH_PHASE_ADAPT,
   NH_PHASE_OUTPUT,
   NH_PHASE_STEP,
   NH_PHASES
 };
+_Static_assert(NH_PHASES == NH_SIM_PHASES, "sim.h counts the phases");
 
 typedef struct {
   double t_start, t_last_print;
