@@ -26,7 +26,8 @@
  * warm start; the state carried to the new nodes by one refinement at a
  * time in B and by one or two in A differs by round-off on shared faces).
  * Not restoring the tools' state would advance them twice within the step:
- * an O(1) difference. */
+ * an O(1) difference. The same comparison on dbs-skull.yaml's brain shift
+ * (a skull, whose contact points are rebuilt on the refined leaves). */
 #include "sim_util.h"
 
 #include "adapt/adapt.h"
@@ -45,22 +46,19 @@ static void compare(int n, const double *a, const double *b, double *diff, doubl
     *diff = fmax(*diff, fabs(a[i] - b[i])), *scale = fmax(*scale, fabs(a[i]));
 }
 
-static void test_tools(void) {
-  enum { K = 30 };
-  /* resolve_tip off in both: it would make the puncture step an adapt step
-   * (test_resolve_tip), and this comparison needs the first K − 1 steps on 8x4x4 */
-  const char *sets_a[] = {"adapt.estimator=goal",    "adapt.every=30", "adapt.resolve=2",
-                          "adapt.resolve_tip=false", "time.steps=30",  NULL};
-  const char *sets_b[] = {"adapt.estimator=goal", "adapt.every=30", "adapt.resolve_tip=false",
-                          "time.steps=30", NULL};
+/* Run A (sets_a: re-solves at step K) against run B (sets_b: none; its
+ * mesh refined to A's final one after K − 1 steps, then step K solved
+ * directly); dofs0 the start mesh's dofs. */
+static void test_tools(const char *name, const char *const *sets_a, const char *const *sets_b,
+                       int K, int dofs0) {
   nh_scene *sa, *sb;
   nh_sim *a, *b;
-  nh_case_open("needle-phantom.yaml", sets_a, &sa, &a);
-  nh_case_open("needle-phantom.yaml", sets_b, &sb, &b);
+  nh_case_open(name, sets_a, &sa, &a);
+  nh_case_open(name, sets_b, &sb, &b);
   for (int k = 0; k < K; k++) CHECK_OK(nh_sim_step(a));
   for (int k = 0; k < K - 1; k++) CHECK_OK(nh_sim_step(b));
   const nh_mesh *ma = nh_sim_mesh(a);
-  CHECK(3 * ma->n_nodes > 675, "the step was not refined (%d dofs)", 3 * ma->n_nodes);
+  CHECK(3 * ma->n_nodes > dofs0, "%s: the step was not refined (%d dofs)", name, 3 * ma->n_nodes);
   for (int next = 0; next < ma->n_cells; next++)
     for (int c = 0; c < ma->n_cells; c++)
       if (ma->first_child[c] == next) CHECK_OK(nh_sim_refine_cells(b, &c, 1));
@@ -74,30 +72,54 @@ static void test_tools(void) {
   double diff, scale;
   compare(n, nh_sim_displacements(a), nh_sim_displacements(b), &diff, &scale);
   CHECK(diff <= 1e-9 * scale,
-        "with tools: u of the re-solved step against the direct solve: max "
+        "%s: u of the re-solved step against the direct solve: max "
         "|diff| %.3e, expected <= %.3e (1e-9 of max |u| %.3e)",
-        diff, 1e-9 * scale, scale);
+        name, diff, 1e-9 * scale, scale);
   compare(n, nh_sim_velocities(a), nh_sim_velocities(b), &diff, &scale);
   CHECK(diff <= 1e-9 * scale,
-        "with tools: v of the re-solved step against the direct solve: max "
+        "%s: v of the re-solved step against the direct solve: max "
         "|diff| %.3e, expected <= %.3e (1e-9 of max |v| %.3e)",
-        diff, 1e-9 * scale, scale);
+        name, diff, 1e-9 * scale, scale);
   double xa[3], xb[3], miss_a[3], miss_b[3];
   nh_sim_target_miss(a, 0, xa, miss_a);
   nh_sim_target_miss(b, 0, xb, miss_b);
   double tip_a[3], tip_b[3];
   for (int k = 0; k < 3; k++) tip_a[k] = xa[k] + miss_a[k], tip_b[k] = xb[k] + miss_b[k];
   compare(3, tip_a, tip_b, &diff, &scale);
-  CHECK(diff <= 1e-9 * scale, "with tools: the needle's tip: max |diff| %.3e m, expected <= %.3e",
-        diff, 1e-9 * scale);
+  CHECK(diff <= 1e-9 * scale, "%s: the tool's tip: max |diff| %.3e m, expected <= %.3e", name, diff,
+        1e-9 * scale);
   if (getenv("NH_VERBOSE"))
-    printf("with tools: %d dofs, tip (%.9f, %.9f, %.9f) m\n", n, tip_a[0], tip_a[1], tip_a[2]);
+    printf("%s: %d dofs, tip (%.9f, %.9f, %.9f) m\n", name, n, tip_a[0], tip_a[1], tip_a[2]);
   nh_sim_destroy(&a), nh_sim_destroy(&b);
   nh_scene_destroy(&sa), nh_scene_destroy(&sb);
 }
 
 int main(void) {
-  test_tools();
+  /* resolve_tip off in both: it would make the puncture step an adapt step
+   * (test_resolve_tip), and this comparison needs the first K − 1 steps on 8x4x4 */
+  const char *needle_a[] = {"adapt.estimator=goal",    "adapt.every=30", "adapt.resolve=2",
+                            "adapt.resolve_tip=false", "time.steps=30",  NULL};
+  const char *needle_b[] = {"adapt.estimator=goal", "adapt.every=30", "adapt.resolve_tip=false",
+                            "time.steps=30", NULL};
+  test_tools("needle-phantom.yaml", needle_a, needle_b, 30, 675);
+  /* With the skull: its points are rebuilt on the refined leaves, each with
+   * the warm start of the nearest old point. The re-solve must carry the
+   * step's START state there (as B's refinement carries its step K − 1 end
+   * state), not the solved one; restoring the start state saved on the old
+   * mesh after the refinement failed ("the checkpoint's skull has 686
+   * contact points, the restored mesh 752"). The brain shift of
+   * dbs-skull.yaml, 14 mm grid, re-solved at step 15 (the tools outside). */
+  const char *skull_a[] = {
+      "tissue.grid=[10,12,9]", "adapt.estimator=goal",    "adapt.max_level=1", "adapt.every=15",
+      "adapt.resolve=1",       "adapt.resolve_tip=false", "time.steps=15",     NULL};
+  const char *skull_b[] = {"tissue.grid=[10,12,9]",
+                           "adapt.estimator=goal",
+                           "adapt.max_level=1",
+                           "adapt.every=15",
+                           "adapt.resolve_tip=false",
+                           "time.steps=15",
+                           NULL};
+  test_tools("dbs/dbs-skull.yaml", skull_a, skull_b, 15, 3039);
   const char *sets[] = {"adapt.estimator=goal", "adapt.resolve=2", "time.steps=1", NULL};
   nh_scene *scene;
   nh_sim *sim;

@@ -798,16 +798,29 @@ static int nh_sim_resolve(nh_sim *s, double t_new, double *const start_in[2], nh
   for (int r = 0; r < most && !rc; r++) {
     int changed = 0, tip = 0;
     if (r >= sc->adapt.resolve && ((rc = nh_sim_tip_split(s, &tip)) || !tip)) break;
-    if ((rc = nh_sim_refine(s, start, &changed)) || !changed) break;
+    /* The tools' start state is loaded before the refinement, on the mesh it
+     * was saved on: the refinement then carries it to the new mesh as it
+     * carries a solved state (the path points found again, the skull's
+     * points rebuilt on the new leaves with their warm starts). The solved
+     * state is kept for a refinement that changes nothing. */
+    unsigned char *solved = NULL;
+    size_t solved_size = 0;
+    if (s->contact &&
+        ((rc = nh_contact_state_save(s->contact, &solved, &solved_size)) ||
+         (rc = nh_contact_state_load(s->contact, s->tools_start, s->tools_start_size)))) {
+      free(solved);
+      break;
+    }
+    rc = nh_sim_refine(s, start, &changed);
+    if (s->contact && !rc && !changed) rc = nh_contact_state_load(s->contact, solved, solved_size);
+    free(solved);
+    if (rc || !changed) break;
     memcpy(s->u, start[0], sizeof(double) * 3 * s->mesh->n_nodes);
     memcpy(s->v, start[1], sizeof(double) * 3 * s->mesh->n_nodes);
     /* a stop inside the re-solve restores the start state on this mesh */
     memcpy(s->u_start, start[0], sizeof(double) * 3 * s->mesh->n_nodes);
     memcpy(s->v_start, start[1], sizeof(double) * 3 * s->mesh->n_nodes);
-    if (s->contact) { /* the tools' start state, its embedded points on this mesh */
-      if ((rc = nh_contact_state_load(s->contact, s->tools_start, s->tools_start_size)) ||
-          (rc = nh_contact_relocate(s->contact, s->mesh)))
-        break;
+    if (s->contact) { /* the tools' start state on this mesh */
       free(s->tools_start);
       s->tools_start = NULL;
       if ((rc = nh_contact_state_save(s->contact, &s->tools_start, &s->tools_start_size))) break;
