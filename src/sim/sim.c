@@ -785,16 +785,15 @@ static int nh_sim_tip_split(nh_sim *s, int *hit) {
  * into coarse cells (the puncture, a new region) is solved on the cells
  * its own estimate gives the tip, not on those of the step before. Times
  * add up in *st. */
-static int nh_sim_resolve(nh_sim *s, double t_new, double *const start_in[2], nh_step_stats *st,
-                          int *resolves) {
+static int nh_sim_resolve(nh_sim *s, double t_new, nh_step_stats *st, int *resolves) {
   const nh_scene *sc = s->scene;
   const int most = sc->adapt.resolve + (nh_sim_resolves_tip(s) ? sc->adapt.max_level : 0);
   const int n = 3 * s->mesh->n_nodes;
   double *start[2] = {nh_calloc(n, sizeof(double)), nh_calloc(n, sizeof(double))};
   int rc = start[0] && start[1] ? NH_OK : NH_ERROR(NH_ERR_MEMORY, "out of memory: re-solve");
   if (!rc)
-    memcpy(start[0], start_in[0], sizeof(double) * n),
-        memcpy(start[1], start_in[1], sizeof(double) * n);
+    memcpy(start[0], s->u_start, sizeof(double) * n),
+        memcpy(start[1], s->v_start, sizeof(double) * n);
   for (int r = 0; r < most && !rc; r++) {
     int changed = 0, tip = 0;
     if (r >= sc->adapt.resolve && ((rc = nh_sim_tip_split(s, &tip)) || !tip)) break;
@@ -867,7 +866,6 @@ typedef struct {
   double t_new;           /* the time the step solves for */
   int adapt_now, resolve; /* estimate (and refine) at this step; re-solve on the refined mesh */
   int inside;             /* adapt.resolve_tip: tools inside the tissue at the step's start */
-  double *start[2];       /* re-solves: u, v at the step's start */
   nh_step_stats st;       /* the solve's (the re-solves' phases added) */
   int resolves;
   double t0;         /* the clock at the step's start */
@@ -899,8 +897,8 @@ static int nh_sim_timing_reserve(nh_sim *s) {
 
 /* Predict: the prescribed motion at t_new (the loads at t_new: nh_sim_solve),
  * and the step's start state saved: u, v, the tools' (a few kB: beams and
- * channels) and the factor reuse's, for a stop inside the step; a copy of
- * u, v for the re-solves. */
+ * channels) and the factor reuse's, for a stop inside the step and for the
+ * re-solves. */
 static int nh_sim_predict(nh_sim *s, nh_sim_record *r) {
   const size_t n = 3 * (size_t)s->mesh->n_nodes;
   nh_sim_prescribe(s, r->t_new);
@@ -920,14 +918,6 @@ static int nh_sim_predict(nh_sim *s, nh_sim_record *r) {
     if (s->solver_start.failed)
       return NH_ERROR(NH_ERR_MEMORY, "out of memory: step %d start state", s->step + 1);
   }
-  /* with resolve_tip every step keeps them: a puncture makes it an adapt step */
-  if (!r->resolve && !nh_sim_resolves_tip(s)) return NH_OK;
-  r->start[0] = nh_calloc(n, sizeof(double)), r->start[1] = nh_calloc(n, sizeof(double));
-  if (!r->start[0] || !r->start[1]) {
-    free(r->start[0]), free(r->start[1]);
-    return NH_ERROR(NH_ERR_MEMORY, "out of memory: step %d start state", s->step + 1);
-  }
-  memcpy(r->start[0], s->u, sizeof(double) * n), memcpy(r->start[1], s->v, sizeof(double) * n);
   return NH_OK;
 }
 
@@ -942,11 +932,9 @@ static int nh_sim_estimate_step(nh_sim *s, nh_sim_record *r) {
   if (!rc && r->resolve) {
     const nh_step_stats *st = &r->st;
     double t_solves = st->t_assemble + st->t_factor + st->t_solve + st->t_constraints;
-    rc = nh_sim_resolve(s, r->t_new, r->start, &r->st, &r->resolves);
+    rc = nh_sim_resolve(s, r->t_new, &r->st, &r->resolves);
     ta += st->t_assemble + st->t_factor + st->t_solve + st->t_constraints - t_solves;
   }
-  free(r->start[0]), free(r->start[1]);
-  r->start[0] = r->start[1] = NULL;
   r->t_estimate = nh_time_now() - ta;
   return rc;
 }
@@ -1135,10 +1123,7 @@ int nh_sim_step(nh_sim *s) {
    * back to its start like one stopped earlier, so that a continued run
    * computes it again and reports what the uninterrupted run reports. */
   if (!rc && isnan(r.st.residual) && nh_stop_requested()) rc = nh_stop_check();
-  if (!rc && (rc = nh_sim_guard(s, s->u_start))) { /* its message names the step */
-    free(r.start[0]), free(r.start[1]);
-    return rc;
-  }
+  if (!rc && (rc = nh_sim_guard(s, s->u_start))) return rc; /* its message names the step */
   r.t_guard = nh_time_now() - t_solved;
   /* adapt.resolve_tip: the step in which a tool punctures is estimated (and
    * re-solved at the tip) whatever adapt.every says: its tip meets cells no
