@@ -24,8 +24,16 @@
  * one thread (OPENBLAS_NUM_THREADS=1); the cores go to OpenMP teams: the
  * assembly's, and the compliance W's, whose tasks call BLAS on one thread
  * each (solve/compliance.c). Measured in docs/performance.md ("Threads").
- * Both libraries read the variables before main runs, so when the user has
- * set neither we set them and re-execute ourselves once. */
+ * CHOLMOD's supernodal factorisation (SuiteSparse 5) opens OpenMP teams of
+ * a compiled-in 4 threads (CHOLMOD_OMP_NUM_THREADS) for its per-supernode
+ * loops whatever OMP_NUM_THREADS says; with passive waits each team wakes
+ * three sleeping threads, and on a loaded machine waits for them: 40 % of a
+ * small factorisation (the adaptive phantom's 700-1300 unknowns) went to
+ * those wake-ups. OMP_THREAD_LIMIT caps every team, CHOLMOD's too, at the
+ * threads asked for (OMP_NUM_THREADS, else the cores); the loops it splits
+ * write disjoint entries, so the factor is bitwise the same.
+ * The libraries read the variables before main runs, so when the user has
+ * set none we set them and re-execute ourselves once. */
 #include "core/core.h"
 #include "plan/plan.h"
 #include "scene/scene.h"
@@ -181,13 +189,21 @@ static int nh_fail(int code) {
   return nh_error_exit_status(code);
 }
 
-/* Set OMP_WAIT_POLICY=passive and OPENBLAS_NUM_THREADS=1 where the user
- * has not chosen, and re-execute if either was set. On failure to
+/* Set OMP_WAIT_POLICY=passive, OPENBLAS_NUM_THREADS=1 and OMP_THREAD_LIMIT
+ * (OMP_NUM_THREADS's first value if set, else the online cores) where the
+ * user has not chosen, and re-execute if any was set. On failure to
  * re-execute, carry on with the libraries' defaults. */
 static void nh_thread_policy(char **argv) {
   int changed = 0;
   if (!getenv("OMP_WAIT_POLICY")) changed |= setenv("OMP_WAIT_POLICY", "passive", 1) == 0;
   if (!getenv("OPENBLAS_NUM_THREADS")) changed |= setenv("OPENBLAS_NUM_THREADS", "1", 1) == 0;
+  if (!getenv("OMP_THREAD_LIMIT")) {
+    const char *asked = getenv("OMP_NUM_THREADS");
+    long limit = asked ? strtol(asked, NULL, 10) : sysconf(_SC_NPROCESSORS_ONLN);
+    char text[32];
+    if (limit > 0 && snprintf(text, sizeof text, "%ld", limit) < (int)sizeof text)
+      changed |= setenv("OMP_THREAD_LIMIT", text, 1) == 0;
+  }
   if (changed) execv("/proc/self/exe", argv);
 }
 

@@ -189,18 +189,21 @@ static int nh_spawn(const char *scene_path, int n_user, const char *const *user,
   for (int i = 0; i < c->n_sets; i++) argv[a++] = "--set", argv[a++] = c->sets[i];
   argv[a++] = "--out", argv[a++] = (char *)c->dir, argv[a++] = "--overwrite";
   argv[a++] = "--quiet", argv[a] = NULL;
-  /* the environment with OMP_NUM_THREADS=1, built before the fork */
+  /* the environment with OMP_NUM_THREADS=1 and OMP_THREAD_LIMIT=1 (main.c's
+   * thread policy: CHOLMOD's teams too), built before the fork */
   int ne = 0;
   while (environ[ne]) ne++;
-  char **envp = nh_calloc((size_t)ne + 2, sizeof(char *));
+  char **envp = nh_calloc((size_t)ne + 3, sizeof(char *));
   if (!envp) {
     free(argv);
     return NH_ERROR(NH_ERR_MEMORY, "out of memory: plan run");
   }
   int m = 0;
   for (int i = 0; i < ne; i++)
-    if (strncmp(environ[i], "OMP_NUM_THREADS=", 16)) envp[m++] = environ[i];
+    if (strncmp(environ[i], "OMP_NUM_THREADS=", 16) && strncmp(environ[i], "OMP_THREAD_LIMIT=", 17))
+      envp[m++] = environ[i];
   envp[m++] = "OMP_NUM_THREADS=1";
+  envp[m++] = "OMP_THREAD_LIMIT=1";
   int fd = open(ch->log, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
   if (fd < 0) {
     free(argv), free(envp);
