@@ -20,7 +20,9 @@
  *     the estimator integrates by Gauss points, equals twice the
  *     corotational energy ½ dᵀK₀d (K₀ is the same quadrature).
  *  4. Marking against hand-built ηₑ; Dörfler's minimal count against a
- *     brute-force search over all subsets. */
+ *     brute-force search over all subsets.
+ *  5. The cache of the mesh-dependent weights: the estimate equals the one
+ *     that makes them node by node, through refinement and coarsening. */
 #include "check.h"
 #include "adapt/adapt.h"
 #include "fem/fem.h"
@@ -556,6 +558,92 @@ static void test_marking(void) {
   nh_mesh_destroy(&m);
 }
 
+/* Test 7: SPR's cache of weights (nh_spr_estimate_cached) against the
+ * estimate that makes them node by node (nh_spr_estimate), on a 4x3x3 grid
+ * through a refinement of corner cell A, its coarsening together with a
+ * refinement of the opposite corner cell B (every count — nodes, cells,
+ * leaves, hanging nodes — as with A refined, whose weights the cache
+ * holds), and B's coarsening back to the grid. At each mesh, for two displacement
+ * fields: ηₑ, η and η_rel equal to the uncached ones to round-off, and the
+ * weights made again exactly when the mesh changed (a stale cache gives
+ * the previous mesh's patches: differences of the order of ηₑ). */
+static void check_cached(nh_spr_cache *k, const nh_mesh *m, const nh_tissue *t, int builds,
+                         const char *what) {
+  nh_hanging *h;
+  CHECK_OK(nh_hanging_detect(m, NULL, &h));
+  double *u = malloc(sizeof(double) * 3 * m->n_nodes);
+  double *e1 = calloc((size_t)m->n_cells, sizeof(double)),
+         *e2 = calloc((size_t)m->n_cells, sizeof(double));
+  for (int field = 0; field < 2; field++) {
+    for (int i = 0; i < 3 * m->n_nodes; i++) u[i] = 1e-4 * nh_rand();
+    if (h->n_hanging) /* hanging nodes follow their masters, as in a run */
+      for (int j = 0; j < h->n_hanging; j++)
+        for (int i = 0; i < 3; i++) {
+          double v = 0.0;
+          for (int p = h->start[j]; p < h->start[j + 1]; p++)
+            v += h->weight[p] * u[3 * h->master[p] + i];
+          u[3 * h->node[j] + i] = v;
+        }
+    double eta1, eta2, r1, r2, scale = 0.0, diff = 0.0;
+    CHECK_OK(nh_spr_estimate(m, t, u, h, e1, &eta1, &r1));
+    CHECK_OK(nh_spr_estimate_cached(k, m, t, u, h, e2, &eta2, &r2));
+    for (int l = 0; l < m->n_leaves; l++) {
+      int c = m->leaves[l];
+      scale = fmax(scale, e1[c]);
+      diff = fmax(diff, fabs(e2[c] - e1[c]));
+    }
+    CHECK(scale > 0.0, "%s: the test field has eta_e = 0", what);
+    CHECK_CLOSE(diff / scale, 0.0, 1e-14, what);
+    CHECK_CLOSE(eta2, eta1, 1e-14 * eta1, what);
+    CHECK_CLOSE(r2, r1, 1e-14 * r1, what);
+    CHECK(nh_spr_cache_builds(k) == builds, "%s: the weights were made %d times, expected %d", what,
+          nh_spr_cache_builds(k), builds);
+    if (getenv("NH_VERBOSE"))
+      printf("cache, %s, field %d: %d leaves, %d hanging, max |eta_e cached - uncached| / max "
+             "eta_e %.2e\n",
+             what, field, m->n_leaves, h->n_hanging, diff / scale);
+  }
+  free(u), free(e1), free(e2);
+  nh_hanging_destroy(&h);
+}
+
+static void test_cache(void) {
+  const double lo[3] = {0, 0, 0}, hi[3] = {0.04, 0.03, 0.03};
+  const int grid[3] = {4, 3, 3};
+  nh_test_rng = 2718;
+  nh_mesh *m;
+  CHECK_OK(nh_mesh_create_box(lo, hi, grid, &m));
+  nh_tissue *t;
+  CHECK_OK(nh_tissue_create(m, &mat, &t));
+  nh_template *tmpl = regular_template(2);
+  nh_spr_cache *k;
+  CHECK_OK(nh_spr_cache_create(&k));
+  check_cached(k, m, t, 1, "the grid");
+  int A = 0, B = 3 + 4 * (2 + 3 * 2); /* cells (0,0,0) and (3,2,2) */
+  CHECK_OK(nh_mesh_refine(m, tmpl, &A, 1, NULL));
+  CHECK_OK(nh_tissue_update(t));
+  check_cached(k, m, t, 2, "corner A refined");
+  const int counts[3] = {m->n_nodes, m->n_cells, m->n_leaves};
+  int *map = malloc(sizeof(int) * m->n_nodes);
+  CHECK_OK(nh_mesh_coarsen(m, &A, 1, map)); /* no estimate between: the cache holds A's */
+  CHECK_OK(nh_mesh_refine(m, tmpl, &B, 1, NULL));
+  CHECK_OK(nh_tissue_update(t));
+  CHECK(m->n_nodes == counts[0] && m->n_cells == counts[1] && m->n_leaves == counts[2],
+        "corner B refined: %d nodes, %d cells, %d leaves; A refined had %d, %d, %d (the test "
+        "needs equal counts)",
+        m->n_nodes, m->n_cells, m->n_leaves, counts[0], counts[1], counts[2]);
+  check_cached(k, m, t, 3, "A coarsened, corner B refined");
+  CHECK_OK(nh_mesh_coarsen(m, &B, 1, map));
+  CHECK_OK(nh_tissue_update(t));
+  check_cached(k, m, t, 4, "B coarsened: the grid again");
+  nh_spr_cache_destroy(&k);
+  CHECK(k == NULL, "nh_spr_cache_destroy leaves the pointer set");
+  free(map);
+  nh_template_destroy(&tmpl);
+  nh_tissue_destroy(&t);
+  nh_mesh_destroy(&m);
+}
+
 int main(void) {
   test_element_stress(NH_FORMULATION_BBAR);
   test_element_stress(NH_FORMULATION_FULL);
@@ -583,6 +671,7 @@ int main(void) {
   test_linear_stress();
   for (int n = 2; n <= 4; n++) test_nonconforming(n);
   test_threads();
+  test_cache();
   test_marking();
   TEST_END();
 }

@@ -90,6 +90,24 @@ int nh_spr_recover_fields(const nh_mesh *mesh, const nh_tissue *tissue, const nh
 int nh_spr_estimate(const nh_mesh *mesh, const nh_tissue *tissue, const double *u,
                     const nh_hanging *hanging, double *eta_cell, double *eta, double *eta_rel);
 
+/* The part of SPR that depends on the mesh only, kept between steps: every
+ * node's patch and fit weights (σ*(n) = Σ_i w_i σ_i over its patch's centre
+ * stresses), checked against the mesh at every use (leaves, corners, rest
+ * positions, φV, hanging nodes; exactly) and made again when it changed;
+ * also the estimate's workspace. */
+typedef struct nh_spr_cache nh_spr_cache;
+/* An empty cache. Fails with NH_ERR_MEMORY. */
+int nh_spr_cache_create(nh_spr_cache **out);
+/* Free and set *cache = NULL (accepts NULL). */
+void nh_spr_cache_destroy(nh_spr_cache **cache);
+/* How many times the weights were made (0 for NULL): the tests' window. */
+int nh_spr_cache_builds(const nh_spr_cache *cache);
+/* nh_spr_estimate with the weights from cache (made again first if the
+ * mesh is not theirs): bitwise the same results. Fails as nh_spr_estimate. */
+int nh_spr_estimate_cached(nh_spr_cache *cache, const nh_mesh *mesh, const nh_tissue *tissue,
+                           const double *u, const nh_hanging *hanging, double *eta_cell,
+                           double *eta, double *eta_rel);
+
 /* Marking parameters (the scene's adapt section). */
 typedef struct {
   int strategy;    /* NH_MARK_MAX | NH_MARK_DORFLER (scene/scene.h) */

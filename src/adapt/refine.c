@@ -49,6 +49,7 @@ struct nh_adapt {
   const nh_fix *keep_fix; /* ... and their refine: the largest edge there (0: none) */
   double *eta_cell;       /* per cell id, valid when have_eta */
   int cap_eta, have_eta;
+  nh_spr_cache *spr; /* SPR's weights of the current mesh (spr.c) */
   /* goal-oriented estimation (estimator goal) */
   int goal, grade;                /* estimator goal; refinement closed by the 2:1 rule */
   double tolerance;               /* m (0: none) */
@@ -111,6 +112,7 @@ int nh_adapt_create(const nh_adapt_spec *spec, int max_cells, nh_adapt **out) {
 void nh_adapt_destroy(nh_adapt **adapt) {
   if (!adapt || !*adapt) return;
   nh_template_destroy(&(*adapt)->tmpl);
+  nh_spr_cache_destroy(&(*adapt)->spr);
   free((*adapt)->eta_cell);
   free((*adapt)->goal_points);
   free((*adapt)->goal_error);
@@ -132,7 +134,8 @@ int nh_adapt_estimate(nh_adapt *a, const nh_mesh *m, const nh_tissue *tissue, co
     NH_TRY(nh_realloc((void **)&a->eta_cell, (size_t)m->n_cells, sizeof(double)));
     a->cap_eta = m->n_cells;
   }
-  NH_TRY(nh_spr_estimate(m, tissue, u, hanging, a->eta_cell, eta, eta_rel));
+  if (!a->spr) NH_TRY(nh_spr_cache_create(&a->spr));
+  NH_TRY(nh_spr_estimate_cached(a->spr, m, tissue, u, hanging, a->eta_cell, eta, eta_rel));
   a->have_eta = 1;
   return NH_OK;
 }

@@ -65,13 +65,27 @@
  *       η_rel = η / (‖u‖²_E + η²)^½   (0 when both vanish).
  *     ‖u‖²_E is twice the strain energy of the corotational model.
  *
+ * Cache. Steps 2-4 are linear in the centre stresses with weights that
+ * depend on the mesh only: σ*(n) = v̄ + Σ_i c_i (v_i − v̄) over the patch's
+ * samples (the fit), or Σ φV v / Σ φV (the fallback). nh_spr_estimate_cached
+ * keeps every node's patch and weights (nh_spr_cache) and makes them again
+ * only when the mesh is not the one they were made for: the key (leaves,
+ * their corners, rest positions, φV, hanging nodes) is compared exactly at
+ * every use, which costs one pass over the leaves. The adaptive phantom
+ * (hex2) changes its mesh 5 times in 120 steps and made every patch, its
+ * growth and its 3x3 eigen-decomposition at every step. A step then only
+ * combines the stored weights with the new samples, by the same functions
+ * in the same order as the node-by-node path: the results are bitwise the
+ * same (tests/test_spr.c, through refinement and coarsening).
+ *
  * Workspace: per cell a centre, a centre stress and a weight (10 doubles);
  * the node-to-leaf adjacency (CSR, 8 ints per leaf); per thread the patch
- * lists, grown on demand. Nodes and cells are processed in parallel with
- * OpenMP; every node's fit depends only on its own sorted patch and every
- * cell's integral only on its own data, and the global sums are taken in
- * leaf order after the parallel loop, so the results are bitwise
- * independent of the number of threads.
+ * lists, grown on demand; with a cache, the patches' weights (a cell and a
+ * double per sample) and the estimate's arrays, kept between steps. Nodes
+ * and cells are processed in parallel with OpenMP; every node's fit depends
+ * only on its own sorted patch and every cell's integral only on its own
+ * data, and the global sums are taken in leaf order after the parallel
+ * loop, so the results are bitwise independent of the number of threads.
  *
  * Failure: NH_ERR_MEMORY if a workspace cannot be allocated (also inside the
  * parallel region, reported after it), NH_ERR_INTERNAL for inconsistent
@@ -86,13 +100,22 @@
 /* Loops shorter than this run serially (thread start-up costs more). */
 #define NH_SPR_PARALLEL_MIN 512
 
+static int nh_spr_recover_cached(nh_spr_cache *cache, const nh_mesh *m, const nh_tissue *t,
+                                 const nh_hanging *h, int n_fields, const double *stress,
+                                 double *sigma_star);
+static int nh_spr_estimate_with(nh_spr_cache *ws, nh_spr_cache *weights, const nh_mesh *m,
+                                const nh_tissue *t, const double *u, const nh_hanging *h,
+                                double *eta_cell, double *eta, double *eta_rel);
+
 int nh_spr_fit_patch(int n, const double *points, const double *values, const double x0[3],
                      double out[6]) {
   return nh_spr_fit_patch_n(n, points, 6, values, x0, out);
 }
 
-int nh_spr_fit_patch_n(int n, const double *points, int m, const double *values, const double x0[3],
-                       double *out) {
+/* The sample weights of a patch's fit at x0 (see nh_spr_fit_patch_n):
+ * p(x0) = v̄ + Σ_i c_i (v_i − v̄) for any values v_i at the points. They
+ * depend on the points only. NH_ERR_NUMERIC (no message) as nh_spr_fit_patch. */
+static int nh_spr_fit_weights(int n, const double *points, const double x0[3], double *c) {
   if (n < 4) return NH_ERR_NUMERIC;
   double xbar[3] = {0, 0, 0};
   for (int i = 0; i < n; i++)
@@ -126,9 +149,7 @@ int nh_spr_fit_patch_n(int n, const double *points, int m, const double *values,
   if (!(leverage <= NH_SPR_MAX_LEVERAGE)) return NH_ERR_NUMERIC;
   /* p(x0) = v̄ + y0ᵀ C⁻¹ b = v̄ + Σ_i c_i (v_i − v̄), b = Σ_i y_i (v_i − v̄), with the
    * sample weights c_i = y_iᵀ C⁻¹ y0 = Σ_j (V_jᵀ y_i)(V_jᵀ y0) / w_j shared by
-   * all m components. */
-  double c_stack[256], *c = n <= 256 ? c_stack : nh_calloc((size_t)n, sizeof(double));
-  if (!c) return NH_ERR_MEMORY;
+   * all components. */
   for (int i = 0; i < n; i++) {
     double y[3];
     for (int k = 0; k < 3; k++) y[k] = (points[3 * i + k] - xbar[k]) / h;
@@ -136,15 +157,44 @@ int nh_spr_fit_patch_n(int n, const double *points, int m, const double *values,
     for (int j = 0; j < 3; j++)
       c[i] += (V[j] * y[0] + V[3 + j] * y[1] + V[6 + j] * y[2]) * vy[j] / w[j];
   }
+  return NH_OK;
+}
+
+/* out[k] = v̄ + Σ_i c_i (v_i − v̄) for the m components of the samples
+ * values[m id_i + k], id_i = cells[i] (or i if cells is NULL). */
+static void nh_spr_fit_combine(int n, const int *cells, const double *c, int m,
+                               const double *values, double *out) {
   for (int k = 0; k < m; k++) {
     double vbar = 0.0, fit = 0.0;
-    for (int i = 0; i < n; i++) vbar += values[(size_t)m * i + k];
+    for (int i = 0; i < n; i++) vbar += values[(size_t)m * (cells ? cells[i] : i) + k];
     vbar /= n;
-    for (int i = 0; i < n; i++) fit += c[i] * (values[(size_t)m * i + k] - vbar);
+    for (int i = 0; i < n; i++)
+      fit += c[i] * (values[(size_t)m * (cells ? cells[i] : i) + k] - vbar);
     out[k] = vbar + fit;
   }
+}
+
+/* The fallback: out[k] = Σ_i w_i v_i / Σ_i w_i over cells[0..n). */
+static void nh_spr_mean(int n, const int *cells, const double *w, int m, const double *values,
+                        double *out) {
+  double wsum = 0.0;
+  for (int k = 0; k < m; k++) out[k] = 0.0;
+  for (int i = 0; i < n; i++) {
+    for (int k = 0; k < m; k++) out[k] += w[i] * values[(size_t)m * cells[i] + k];
+    wsum += w[i];
+  }
+  for (int k = 0; k < m; k++) out[k] /= wsum;
+}
+
+int nh_spr_fit_patch_n(int n, const double *points, int m, const double *values, const double x0[3],
+                       double *out) {
+  if (n < 4) return NH_ERR_NUMERIC;
+  double c_stack[256], *c = n <= 256 ? c_stack : nh_calloc((size_t)n, sizeof(double));
+  if (!c) return NH_ERR_MEMORY;
+  int rc = nh_spr_fit_weights(n, points, x0, c);
+  if (!rc) nh_spr_fit_combine(n, NULL, c, m, values, out);
   if (c != c_stack) free(c);
-  return NH_OK;
+  return rc;
 }
 
 /* Shared, read-only data of a recovery. */
@@ -152,8 +202,6 @@ typedef struct {
   const nh_mesh *m;
   const int *start, *adj;     /* node -> leaves having it as a corner (CSR, ascending) */
   const double *centre;       /* 3 per cell */
-  const double *stress;       /* nv per cell: the centre stresses of the fields */
-  int nv;                     /* values per sample: 6 per field */
   const double *weight;       /* per cell: φ V */
   const unsigned char *hangs; /* per node: 1 if hanging */
 } nh_spr_ctx;
@@ -162,13 +210,13 @@ typedef struct {
 typedef struct {
   int *patch, *cand;
   int n_patch, cap_patch, cap_cand;
-  double *points, *values;
+  double *points, *c; /* the patch's centres (3 each) and sample weights */
   int cap_samples;
   unsigned char *in; /* per cell: 1 while the cell is in cand (all 0 between growths) */
 } nh_spr_work;
 
 static void nh_spr_work_free(nh_spr_work *w) {
-  free(w->patch), free(w->cand), free(w->points), free(w->values), free(w->in);
+  free(w->patch), free(w->cand), free(w->points), free(w->c), free(w->in);
   memset(w, 0, sizeof *w);
 }
 
@@ -181,6 +229,15 @@ static int nh_spr_reserve_int(int **p, int *cap, int need) {
   return 0;
 }
 
+static int nh_spr_reserve_samples(nh_spr_work *w, int n) {
+  if (n <= w->cap_samples) return NH_OK;
+  int c = w->cap_samples ? w->cap_samples : 64;
+  while (c < n) c *= 2;
+  NH_TRY(nh_realloc((void **)&w->points, 3 * (size_t)c, sizeof(double)));
+  NH_TRY(nh_realloc((void **)&w->c, (size_t)c, sizeof(double)));
+  w->cap_samples = c;
+  return NH_OK;
+}
 /* Replace the patch by every leaf that shares a corner with one of its cells,
  * in ascending order (the order of the fit's sums). The corners' lists hold
  * a cell up to 8 times over (a face node's 4 cells list 32 corners with up
@@ -213,9 +270,13 @@ static int nh_spr_grow(const nh_spr_ctx *x, nh_spr_work *w) {
   return NH_OK;
 }
 
-/* σ*(node) for a non-hanging node with at least one leaf. */
-static int nh_spr_node(const nh_spr_ctx *x, int node, nh_spr_work *w, double *out) {
-  const int nv = x->nv;
+/* How σ*(node) is made from the centre samples, for a non-hanging node with at
+ * least one leaf: the fit of its patch, grown as the file's essay says
+ * (*fitted = 1: the cells w->patch[0..n_patch) with the fit's sample weights
+ * w->c, nh_spr_fit_combine), or, every patch refused, the φV-weighted mean of
+ * its own leaves (*fitted = 0: the cells in w->patch, their φV in w->c,
+ * nh_spr_mean). It depends on the mesh only. NH_ERR_MEMORY (no message). */
+static int nh_spr_node_weights(const nh_spr_ctx *x, int node, nh_spr_work *w, int *fitted) {
   const int *own = x->adj + x->start[node];
   int n_own = x->start[node + 1] - x->start[node];
   if (nh_spr_reserve_int(&w->patch, &w->cap_patch, n_own)) return NH_ERR_MEMORY;
@@ -226,30 +287,133 @@ static int nh_spr_node(const nh_spr_ctx *x, int node, nh_spr_work *w, double *ou
     if (ring > 0 && nh_spr_grow(x, w)) return NH_ERR_MEMORY;
     int n = w->n_patch;
     if (n < 4) continue;
-    if (n > w->cap_samples) {
-      int c = w->cap_samples ? w->cap_samples : 64;
-      while (c < n) c *= 2;
-      NH_TRY(nh_realloc((void **)&w->points, 3 * (size_t)c, sizeof(double)));
-      NH_TRY(nh_realloc((void **)&w->values, (size_t)nv * (size_t)c, sizeof(double)));
-      w->cap_samples = c;
+    NH_TRY(nh_spr_reserve_samples(w, n));
+    for (int i = 0; i < n; i++)
+      memcpy(w->points + 3 * i, x->centre + 3 * w->patch[i], 3 * sizeof(double));
+    int rc = nh_spr_fit_weights(n, w->points, X0, w->c);
+    if (rc != NH_ERR_NUMERIC) {
+      *fitted = 1;
+      return rc;
     }
-    for (int i = 0; i < n; i++) {
-      int c = w->patch[i];
-      memcpy(w->points + 3 * i, x->centre + 3 * c, 3 * sizeof(double));
-      memcpy(w->values + (size_t)nv * i, x->stress + (size_t)nv * c, (size_t)nv * sizeof(double));
-    }
-    int rc = nh_spr_fit_patch_n(n, w->points, nv, w->values, X0, out);
-    if (rc != NH_ERR_NUMERIC) return rc;
   }
   /* Still rank-deficient: the φV-weighted mean of the node's own patch. */
-  double wsum = 0.0;
-  for (int k = 0; k < nv; k++) out[k] = 0.0;
-  for (int i = 0; i < n_own; i++) {
-    int c = own[i];
-    for (int k = 0; k < nv; k++) out[k] += x->weight[c] * x->stress[(size_t)nv * c + k];
-    wsum += x->weight[c];
+  NH_TRY(nh_spr_reserve_samples(w, n_own));
+  memcpy(w->patch, own, sizeof(int) * (size_t)n_own);
+  w->n_patch = n_own;
+  for (int i = 0; i < n_own; i++) w->c[i] = x->weight[own[i]];
+  *fitted = 0;
+  return NH_OK;
+}
+
+/* The mesh-dependent part of a recovery (nh_spr_cache): every node's
+ * weights as nh_spr_node_weights makes them, in node order (CSR), and the
+ * key they were made for: the counts, the leaves, their corners, the rest
+ * positions, each leaf's φV and the hanging nodes, compared exactly, so any
+ * change of the mesh (a refinement and a coarsening that leave the counts as
+ * they were included) makes them again. The workspace of nh_spr_estimate
+ * lives here too, so a step allocates nothing. */
+struct nh_spr_cache {
+  int valid, builds;
+  /* the key */
+  int n_nodes, n_leaves, n_hanging;
+  int *leaves, *corners, *hanging; /* n_leaves, 8 n_leaves, n_hanging */
+  double *X, *weight;              /* 3 n_nodes, n_leaves */
+  /* the weights: node v's samples are cell[start[v] .. start[v + 1]) with coef[];
+   * fitted[v]: 1 a fit (nh_spr_fit_combine), 0 the mean (nh_spr_mean), -1 no σ* (0) */
+  int *start, *cell;
+  signed char *fitted;
+  double *coef;
+  int cap_coef;
+  /* nh_spr_estimate's workspace, sized by the mesh */
+  double *sigma_star, *err2, *norm2, *stress, *sh, *detJ;
+  int cap_ws_nodes, cap_ws_cells, cap_ws_leaves;
+};
+
+int nh_spr_cache_create(nh_spr_cache **out) {
+  *out = nh_calloc(1, sizeof **out);
+  return *out ? NH_OK : NH_ERROR(NH_ERR_MEMORY, "out of memory: SPR cache");
+}
+
+void nh_spr_cache_destroy(nh_spr_cache **cache) {
+  if (!cache || !*cache) return;
+  nh_spr_cache *k = *cache;
+  free(k->leaves), free(k->corners), free(k->hanging), free(k->X), free(k->weight);
+  free(k->start), free(k->cell), free(k->fitted), free(k->coef);
+  free(k->sigma_star), free(k->err2), free(k->norm2), free(k->stress), free(k->sh), free(k->detJ);
+  free(k);
+  *cache = NULL;
+}
+
+int nh_spr_cache_builds(const nh_spr_cache *cache) {
+  return cache ? cache->builds : 0;
+}
+
+/* Whether the cache's weights are those of this mesh (weight[c]: φV per cell). */
+static int nh_spr_cache_matches(const nh_spr_cache *k, const nh_mesh *m, const double *weight,
+                                const nh_hanging *h) {
+  const int nh = h ? h->n_hanging : 0;
+  if (!k->valid || k->n_nodes != m->n_nodes || k->n_leaves != m->n_leaves || k->n_hanging != nh)
+    return 0;
+  if (memcmp(k->leaves, m->leaves, sizeof(int) * (size_t)m->n_leaves) ||
+      memcmp(k->X, m->X, 3 * sizeof(double) * (size_t)m->n_nodes) ||
+      (nh && memcmp(k->hanging, h->node, sizeof(int) * (size_t)nh)))
+    return 0;
+  for (int l = 0; l < m->n_leaves; l++) {
+    const int c = m->leaves[l];
+    if (memcmp(k->corners + 8 * l, m->cells + 8 * c, 8 * sizeof(int)) ||
+        memcmp(k->weight + l, weight + c, sizeof(double)))
+      return 0;
   }
-  for (int k = 0; k < nv; k++) out[k] /= wsum;
+  return 1;
+}
+
+/* Make every node's weights (serially: this runs once per mesh) and the key. */
+static int nh_spr_cache_build(nh_spr_cache *k, const nh_spr_ctx *x, const nh_hanging *h) {
+  const nh_mesh *m = x->m;
+  const int nn = m->n_nodes, nl = m->n_leaves, nh = h ? h->n_hanging : 0;
+  k->valid = 0;
+  NH_TRY(nh_realloc((void **)&k->leaves, (size_t)nl + 1, sizeof(int)));
+  NH_TRY(nh_realloc((void **)&k->corners, 8 * (size_t)nl + 1, sizeof(int)));
+  NH_TRY(nh_realloc((void **)&k->weight, (size_t)nl + 1, sizeof(double)));
+  NH_TRY(nh_realloc((void **)&k->hanging, (size_t)nh + 1, sizeof(int)));
+  NH_TRY(nh_realloc((void **)&k->X, 3 * (size_t)nn + 1, sizeof(double)));
+  NH_TRY(nh_realloc((void **)&k->start, (size_t)nn + 1, sizeof(int)));
+  NH_TRY(nh_realloc((void **)&k->fitted, (size_t)nn + 1, 1));
+  nh_spr_work w;
+  memset(&w, 0, sizeof w);
+  int rc = NH_OK, used = 0;
+  for (int v = 0; v < nn && !rc; v++) {
+    k->start[v] = used;
+    k->fitted[v] = -1;
+    if (x->hangs[v] || x->start[v + 1] == x->start[v]) continue;
+    int fitted;
+    if ((rc = nh_spr_node_weights(x, v, &w, &fitted))) break;
+    k->fitted[v] = (signed char)fitted;
+    if (used + w.n_patch > k->cap_coef) {
+      int c = k->cap_coef ? k->cap_coef : 1024;
+      while (c < used + w.n_patch) c *= 2;
+      if ((rc = nh_realloc((void **)&k->cell, (size_t)c, sizeof(int))) ||
+          (rc = nh_realloc((void **)&k->coef, (size_t)c, sizeof(double))))
+        break;
+      k->cap_coef = c;
+    }
+    memcpy(k->cell + used, w.patch, sizeof(int) * (size_t)w.n_patch);
+    memcpy(k->coef + used, w.c, sizeof(double) * (size_t)w.n_patch);
+    used += w.n_patch;
+  }
+  nh_spr_work_free(&w);
+  if (rc) return rc;
+  k->start[nn] = used;
+  k->n_nodes = nn, k->n_leaves = nl, k->n_hanging = nh;
+  memcpy(k->leaves, m->leaves, sizeof(int) * (size_t)nl);
+  for (int l = 0; l < nl; l++) {
+    memcpy(k->corners + 8 * l, m->cells + 8 * m->leaves[l], 8 * sizeof(int));
+    k->weight[l] = x->weight[m->leaves[l]];
+  }
+  if (nh) memcpy(k->hanging, h->node, sizeof(int) * (size_t)nh);
+  memcpy(k->X, m->X, 3 * sizeof(double) * (size_t)nn);
+  k->valid = 1;
+  k->builds++;
   return NH_OK;
 }
 
@@ -292,8 +456,13 @@ int nh_spr_recover(const nh_mesh *m, const nh_tissue *t, const double *u, const 
   return rc;
 }
 
-int nh_spr_recover_fields(const nh_mesh *m, const nh_tissue *t, const nh_hanging *h, int n_fields,
-                          const double *stress, double *sigma_star) {
+/* nh_spr_recover_fields with the mesh-dependent weights from the cache
+ * (made again when the mesh is not the one they were made for), or, cache
+ * NULL, made node by node as the recovery goes. Bitwise the same either way:
+ * the same weights, combined by the same functions. */
+static int nh_spr_recover_cached(nh_spr_cache *cache, const nh_mesh *m, const nh_tissue *t,
+                                 const nh_hanging *h, int n_fields, const double *stress,
+                                 double *sigma_star) {
   NH_TRY(nh_spr_check(m, t, h));
   const int nv = 6 * n_fields;
   int nn = m->n_nodes, nl = m->n_leaves;
@@ -301,8 +470,8 @@ int nh_spr_recover_fields(const nh_mesh *m, const nh_tissue *t, const nh_hanging
   double *weight = nh_calloc((size_t)m->n_cells, sizeof(double));
   int *start = NULL, *adj = NULL; /* node -> leaves (CSR, ascending) */
   unsigned char *hangs = nh_calloc((size_t)nn, 1);
-  int rc = nh_mesh_node_leaves(m, &start, &adj);
-  if (!rc && (!centre || !weight || !hangs))
+  int rc = NH_OK;
+  if (!centre || !weight || !hangs)
     rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: SPR workspace (%d nodes, %d cells)", nn,
                   m->n_cells);
   if (rc) goto done;
@@ -310,16 +479,8 @@ int nh_spr_recover_fields(const nh_mesh *m, const nh_tissue *t, const nh_hanging
 #pragma omp parallel for schedule(static) if (nl >= NH_SPR_PARALLEL_MIN)
   for (int l = 0; l < nl; l++) {
     int c = m->leaves[l];
-    double Xe[24];
-    nh_mesh_cell_coords(m, m->X, c, Xe);
-    for (int k = 0; k < 3; k++) {
-      double s = 0.0;
-      for (int a = 0; a < 8; a++) s += Xe[3 * a + k];
-      centre[3 * c + k] = 0.125 * s;
-    }
     weight[c] = m->fill[c] * t->volume[t->cell_shape[c]];
   }
-
   if (h)
     for (int k = 0; k < h->n_hanging; k++) hangs[h->node[k]] = 1;
   if (h)
@@ -331,25 +492,63 @@ int nh_spr_recover_fields(const nh_mesh *m, const nh_tissue *t, const nh_hanging
           goto done;
         }
 
-  nh_spr_ctx x = {m, start, adj, centre, stress, nv, weight, hangs};
-  int failed = 0;
-#pragma omp parallel if (nn >= NH_SPR_PARALLEL_MIN)
-  {
-    nh_spr_work w;
-    memset(&w, 0, sizeof w);
-#pragma omp for schedule(dynamic, 64)
-    for (int v = 0; v < nn; v++) {
-      double *out = sigma_star + (size_t)nv * v;
-      if (hangs[v] || start[v + 1] == start[v]) {
-        memset(out, 0, (size_t)nv * sizeof(double));
-        continue;
-      }
-      if (nh_spr_node(&x, v, &w, out)) {
-#pragma omp atomic write
-        failed = 1;
+  const int cached = cache && nh_spr_cache_matches(cache, m, weight, h);
+  if (!cached) { /* the patches' geometry: centres and the node-to-leaf lists */
+    if ((rc = nh_mesh_node_leaves(m, &start, &adj))) goto done;
+#pragma omp parallel for schedule(static) if (nl >= NH_SPR_PARALLEL_MIN)
+    for (int l = 0; l < nl; l++) {
+      int c = m->leaves[l];
+      double Xe[24];
+      nh_mesh_cell_coords(m, m->X, c, Xe);
+      for (int k = 0; k < 3; k++) {
+        double s = 0.0;
+        for (int a = 0; a < 8; a++) s += Xe[3 * a + k];
+        centre[3 * c + k] = 0.125 * s;
       }
     }
-    nh_spr_work_free(&w);
+  }
+  nh_spr_ctx x = {m, start, adj, centre, weight, hangs};
+  if (cache && !cached) {
+    if ((rc = nh_spr_cache_build(cache, &x, h))) {
+      rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: SPR cache (%d nodes)", nn);
+      goto done;
+    }
+  }
+  int failed = 0;
+  if (cache) {
+    const nh_spr_cache *k = cache;
+#pragma omp parallel for schedule(static) if (nn >= NH_SPR_PARALLEL_MIN)
+    for (int v = 0; v < nn; v++) {
+      double *out = sigma_star + (size_t)nv * v;
+      const int b = k->start[v], n = k->start[v + 1] - b;
+      if (k->fitted[v] == 1)
+        nh_spr_fit_combine(n, k->cell + b, k->coef + b, nv, stress, out);
+      else if (k->fitted[v] == 0)
+        nh_spr_mean(n, k->cell + b, k->coef + b, nv, stress, out);
+      else
+        memset(out, 0, (size_t)nv * sizeof(double));
+    }
+  } else {
+#pragma omp parallel if (nn >= NH_SPR_PARALLEL_MIN)
+    {
+      nh_spr_work w;
+      memset(&w, 0, sizeof w);
+#pragma omp for schedule(dynamic, 64)
+      for (int v = 0; v < nn; v++) {
+        double *out = sigma_star + (size_t)nv * v;
+        int fitted;
+        if (hangs[v] || start[v + 1] == start[v])
+          memset(out, 0, (size_t)nv * sizeof(double));
+        else if (nh_spr_node_weights(&x, v, &w, &fitted)) {
+#pragma omp atomic write
+          failed = 1;
+        } else if (fitted)
+          nh_spr_fit_combine(w.n_patch, w.patch, w.c, nv, stress, out);
+        else
+          nh_spr_mean(w.n_patch, w.patch, w.c, nv, stress, out);
+      }
+      nh_spr_work_free(&w);
+    }
   }
   if (failed) {
     rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: SPR patch workspace");
@@ -368,20 +567,62 @@ done:
   return rc;
 }
 
+int nh_spr_recover_fields(const nh_mesh *m, const nh_tissue *t, const nh_hanging *h, int n_fields,
+                          const double *stress, double *sigma_star) {
+  return nh_spr_recover_cached(NULL, m, t, h, n_fields, stress, sigma_star);
+}
+
 int nh_spr_estimate(const nh_mesh *m, const nh_tissue *t, const double *u, const nh_hanging *h,
                     double *eta_cell, double *eta, double *eta_rel) {
+  nh_spr_cache *ws = NULL; /* the workspace of this call; the weights made node by node */
+  int rc = nh_spr_cache_create(&ws);
+  if (!rc) rc = nh_spr_estimate_with(ws, NULL, m, t, u, h, eta_cell, eta, eta_rel);
+  nh_spr_cache_destroy(&ws);
+  return rc;
+}
+
+/* nh_spr_estimate's workspace in the cache, grown to the mesh. */
+static int nh_spr_workspace(nh_spr_cache *k, const nh_mesh *m) {
+  const int nn = m->n_nodes > 0 ? m->n_nodes : 1, nc = m->n_cells ? m->n_cells : 1,
+            nl = m->n_leaves > 0 ? m->n_leaves : 1;
+  if (nn > k->cap_ws_nodes) {
+    NH_TRY(nh_realloc((void **)&k->sigma_star, 6 * (size_t)nn, sizeof(double)));
+    k->cap_ws_nodes = nn;
+  }
+  if (nc > k->cap_ws_cells) {
+    NH_TRY(nh_realloc((void **)&k->stress, 6 * (size_t)nc, sizeof(double)));
+    k->cap_ws_cells = nc;
+  }
+  if (nl > k->cap_ws_leaves) {
+    NH_TRY(nh_realloc((void **)&k->err2, (size_t)nl, sizeof(double)));
+    NH_TRY(nh_realloc((void **)&k->norm2, (size_t)nl, sizeof(double)));
+    NH_TRY(nh_realloc((void **)&k->sh, 48 * (size_t)nl, sizeof(double)));
+    NH_TRY(nh_realloc((void **)&k->detJ, 8 * (size_t)nl, sizeof(double)));
+    k->cap_ws_leaves = nl;
+  }
+  return NH_OK;
+}
+
+int nh_spr_estimate_cached(nh_spr_cache *cache, const nh_mesh *m, const nh_tissue *t,
+                           const double *u, const nh_hanging *h, double *eta_cell, double *eta,
+                           double *eta_rel) {
+  return nh_spr_estimate_with(cache, cache, m, t, u, h, eta_cell, eta, eta_rel);
+}
+
+/* The estimate with the workspace of ws and the recovery's weights from
+ * weights (nh_spr_recover_cached; NULL: node by node). */
+static int nh_spr_estimate_with(nh_spr_cache *ws, nh_spr_cache *weights, const nh_mesh *m,
+                                const nh_tissue *t, const double *u, const nh_hanging *h,
+                                double *eta_cell, double *eta, double *eta_rel) {
   NH_TRY(nh_spr_check(m, t, h));
   int nl = m->n_leaves;
-  const size_t nl1 = (size_t)(nl > 0 ? nl : 1);
-  double *sigma_star = nh_calloc(6 * (size_t)(m->n_nodes > 0 ? m->n_nodes : 1), sizeof(double));
-  double *err2 = nh_calloc(nl1, sizeof(double)), *norm2 = nh_calloc(nl1, sizeof(double));
-  double *stress = nh_calloc(6 * (size_t)(m->n_cells ? m->n_cells : 1), sizeof(double));
-  double *sh = nh_calloc(48 * nl1, sizeof(double)), *detJ = nh_calloc(8 * nl1, sizeof(double));
+  if (nh_spr_workspace(ws, m))
+    return NH_ERROR(NH_ERR_MEMORY, "out of memory: SPR estimate (%d leaves)", nl);
+  /* every entry read below is written first (σ* of every node, the
+   * samples and sums of every leaf) */
+  double *sigma_star = ws->sigma_star, *err2 = ws->err2, *norm2 = ws->norm2, *stress = ws->stress,
+         *sh = ws->sh, *detJ = ws->detJ;
   int rc = NH_OK;
-  if (!sigma_star || !err2 || !norm2 || !stress || !sh || !detJ) {
-    rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: SPR estimate");
-    goto done;
-  }
 
   /* σₕ at the 8 Gauss points and, where the cell's rotation is the one
    * nh_tissue_cell_stress uses (every cell but a cut one), at the centre in
@@ -412,8 +653,8 @@ int nh_spr_estimate(const nh_mesh *m, const nh_tissue *t, const double *u, const
     else
       nh_tissue_cell_stress(t, c, u, stress + 6 * (size_t)c);
   }
-  rc = nh_spr_recover_fields(m, t, h, 1, stress, sigma_star);
-  if (rc) goto done;
+  rc = nh_spr_recover_cached(weights, m, t, h, 1, stress, sigma_star);
+  if (rc) return rc;
 
   int bad_cell = -1;
 #pragma omp parallel for schedule(static) if (nl >= NH_SPR_PARALLEL_MIN)
@@ -446,27 +687,20 @@ int nh_spr_estimate(const nh_mesh *m, const nh_tissue *t, const double *u, const
     err2[l] = m->fill[c] * e2;
     norm2[l] = m->fill[c] * n2;
   }
-  if (bad_cell >= 0) {
-    rc = NH_ERROR(NH_ERR_INTERNAL, "SPR: leaf %d has a non-positive Jacobian at a Gauss point",
-                  bad_cell);
-    goto done;
-  }
+  if (bad_cell >= 0)
+    return NH_ERROR(NH_ERR_INTERNAL, "SPR: leaf %d has a non-positive Jacobian at a Gauss point",
+                    bad_cell);
   double sum_err = 0.0, sum_norm = 0.0;
   for (int l = 0; l < nl; l++) {
     sum_err += err2[l];
     sum_norm += norm2[l];
     if (eta_cell) eta_cell[m->leaves[l]] = sqrt(fmax(err2[l], 0.0));
   }
-  if (!isfinite(sum_err) || !isfinite(sum_norm)) {
-    rc =
-        NH_ERROR(NH_ERR_NUMERIC, "SPR: the error estimate is not finite (eta^2 = %g, |u|_E^2 = %g)",
-                 sum_err, sum_norm);
-    goto done;
-  }
+  if (!isfinite(sum_err) || !isfinite(sum_norm))
+    return NH_ERROR(NH_ERR_NUMERIC,
+                    "SPR: the error estimate is not finite (eta^2 = %g, |u|_E^2 = %g)", sum_err,
+                    sum_norm);
   if (eta) *eta = sqrt(sum_err);
   if (eta_rel) *eta_rel = sum_err + sum_norm > 0.0 ? sqrt(sum_err / (sum_norm + sum_err)) : 0.0;
-
-done:
-  free(sigma_star), free(err2), free(norm2), free(stress), free(sh), free(detJ);
   return rc;
 }
