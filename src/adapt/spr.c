@@ -76,7 +76,10 @@
  * growth and its 3x3 eigen-decomposition at every step. A step then only
  * combines the stored weights with the new samples, by the same functions
  * in the same order as the node-by-node path: the results are bitwise the
- * same (tests/test_spr.c, through refinement and coarsening).
+ * same (tests/test_spr.c, through refinement and coarsening). The cache
+ * also keeps every leaf's rest gradients and det J at the indicator's 9
+ * points (nh_hex_rest_gradients), which step 5 recomputed at every step;
+ * σₕ then comes from nh_hex_stress_with, the same arithmetic.
  *
  * Workspace: per cell a centre, a centre stress and a weight (10 doubles);
  * the node-to-leaf adjacency (CSR, 8 ints per leaf); per thread the patch
@@ -99,6 +102,19 @@
 
 /* Loops shorter than this run serially (thread start-up costs more). */
 #define NH_SPR_PARALLEL_MIN 512
+
+/* The indicator's points: the 2x2x2 Gauss points, then the centre. */
+#define NH_SPR_POINTS 9
+#define NH_SPR_Q      0.57735026918962576451 /* 1/√3 */
+static const double *nh_spr_points(void) {
+  /* ±1/√3 in nh_hex_corner's order */
+  static const double xi[3 * NH_SPR_POINTS] = {
+      -NH_SPR_Q, -NH_SPR_Q, -NH_SPR_Q, NH_SPR_Q, -NH_SPR_Q, -NH_SPR_Q, NH_SPR_Q,
+      NH_SPR_Q,  -NH_SPR_Q, -NH_SPR_Q, NH_SPR_Q, -NH_SPR_Q, -NH_SPR_Q, -NH_SPR_Q,
+      NH_SPR_Q,  NH_SPR_Q,  -NH_SPR_Q, NH_SPR_Q, NH_SPR_Q,  NH_SPR_Q,  NH_SPR_Q,
+      -NH_SPR_Q, NH_SPR_Q,  NH_SPR_Q,  0,        0,         0};
+  return xi;
+}
 
 static int nh_spr_recover_cached(nh_spr_cache *cache, const nh_mesh *m, const nh_tissue *t,
                                  const nh_hanging *h, int n_fields, const double *stress,
@@ -200,6 +216,7 @@ int nh_spr_fit_patch_n(int n, const double *points, int m, const double *values,
 /* Shared, read-only data of a recovery. */
 typedef struct {
   const nh_mesh *m;
+  const nh_tissue *t;
   const int *start, *adj;     /* node -> leaves having it as a corner (CSR, ascending) */
   const double *centre;       /* 3 per cell */
   const double *weight;       /* per cell: φ V */
@@ -324,6 +341,9 @@ struct nh_spr_cache {
   signed char *fitted;
   double *coef;
   int cap_coef;
+  /* per leaf the rest gradients at the indicator's 9 points (the 8 Gauss
+   * points, then the centre; nh_hex_rest_gradients) and det J there */
+  double *grad, *grad_det;
   /* nh_spr_estimate's workspace, sized by the mesh */
   double *sigma_star, *err2, *norm2, *stress, *sh, *detJ;
   int cap_ws_nodes, cap_ws_cells, cap_ws_leaves;
@@ -338,7 +358,7 @@ void nh_spr_cache_destroy(nh_spr_cache **cache) {
   if (!cache || !*cache) return;
   nh_spr_cache *k = *cache;
   free(k->leaves), free(k->corners), free(k->hanging), free(k->X), free(k->weight);
-  free(k->start), free(k->cell), free(k->fitted), free(k->coef);
+  free(k->start), free(k->cell), free(k->fitted), free(k->coef), free(k->grad), free(k->grad_det);
   free(k->sigma_star), free(k->err2), free(k->norm2), free(k->stress), free(k->sh), free(k->detJ);
   free(k);
   *cache = NULL;
@@ -412,6 +432,18 @@ static int nh_spr_cache_build(nh_spr_cache *k, const nh_spr_ctx *x, const nh_han
   }
   if (nh) memcpy(k->hanging, h->node, sizeof(int) * (size_t)nh);
   memcpy(k->X, m->X, 3 * sizeof(double) * (size_t)nn);
+  NH_TRY(nh_realloc((void **)&k->grad, NH_SPR_POINTS * 24 * (size_t)nl + 1, sizeof(double)));
+  NH_TRY(nh_realloc((void **)&k->grad_det, NH_SPR_POINTS * (size_t)nl + 1, sizeof(double)));
+  const double *xi = nh_spr_points();
+  for (int l = 0; l < nl; l++) {
+    const int c = m->leaves[l];
+    double Xe[24];
+    nh_mesh_cell_coords(m, m->X, c, Xe);
+    const double *G0 = x->t->G0 + 24 * x->t->cell_shape[c];
+    for (int p = 0; p < NH_SPR_POINTS; p++)
+      k->grad_det[NH_SPR_POINTS * (size_t)l + p] =
+          nh_hex_rest_gradients(Xe, G0, xi + 3 * p, k->grad + 24 * (NH_SPR_POINTS * (size_t)l + p));
+  }
   k->valid = 1;
   k->builds++;
   return NH_OK;
@@ -459,7 +491,8 @@ int nh_spr_recover(const nh_mesh *m, const nh_tissue *t, const double *u, const 
 /* nh_spr_recover_fields with the mesh-dependent weights from the cache
  * (made again when the mesh is not the one they were made for), or, cache
  * NULL, made node by node as the recovery goes. Bitwise the same either way:
- * the same weights, combined by the same functions. */
+ * the same weights, combined by the same functions. n_fields = 0: only
+ * bring the cache to this mesh (stress and sigma_star unused). */
 static int nh_spr_recover_cached(nh_spr_cache *cache, const nh_mesh *m, const nh_tissue *t,
                                  const nh_hanging *h, int n_fields, const double *stress,
                                  double *sigma_star) {
@@ -507,7 +540,7 @@ static int nh_spr_recover_cached(nh_spr_cache *cache, const nh_mesh *m, const nh
       }
     }
   }
-  nh_spr_ctx x = {m, start, adj, centre, weight, hangs};
+  nh_spr_ctx x = {m, t, start, adj, centre, weight, hangs};
   if (cache && !cached) {
     if ((rc = nh_spr_cache_build(cache, &x, h))) {
       rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: SPR cache (%d nodes)", nn);
@@ -515,6 +548,7 @@ static int nh_spr_recover_cached(nh_spr_cache *cache, const nh_mesh *m, const nh
     }
   }
   int failed = 0;
+  if (n_fields == 0) goto done; /* the cache brought to this mesh only */
   if (cache) {
     const nh_spr_cache *k = cache;
 #pragma omp parallel for schedule(static) if (nn >= NH_SPR_PARALLEL_MIN)
@@ -628,13 +662,11 @@ static int nh_spr_estimate_with(nh_spr_cache *ws, nh_spr_cache *weights, const n
    * nh_tissue_cell_stress uses (every cell but a cut one), at the centre in
    * the same call (the 9th point): one polar decomposition per leaf and
    * step instead of two, the same numbers */
-  static const double q = 0.57735026918962576451; /* 1/√3 */
-  double xi[27], N[8][8];
-  for (int g = 0; g < 8; g++) {
-    for (int k = 0; k < 3; k++) xi[3 * g + k] = q * nh_hex_corner[g][k];
-    nh_hex_shape(xi + 3 * g, N[g]);
-  }
-  xi[24] = xi[25] = xi[26] = 0.0;
+  const double *xi = nh_spr_points();
+  double N[8][8];
+  for (int g = 0; g < 8; g++) nh_hex_shape(xi + 3 * g, N[g]);
+  /* with a cache, its rest gradients at the 9 points (made for this mesh first) */
+  if (weights) NH_TRY(nh_spr_recover_cached(weights, m, t, h, 0, NULL, NULL));
 #pragma omp parallel for schedule(static) if (nl >= NH_SPR_PARALLEL_MIN)
   for (int l = 0; l < nl; l++) {
     int c = m->leaves[l];
@@ -645,7 +677,14 @@ static int nh_spr_estimate_with(nh_spr_cache *ws, nh_spr_cache *weights, const n
     nh_tissue_cell_material(t, c, &lambda, &mu, NULL);
     const double *G0 = t->G0 + 24 * t->cell_shape[c];
     const int centre = nh_tissue_g0(t, c) == G0;
-    nh_hex_stress_at(Xe, ue, G0, nh_tissue_gbar(t, c), lambda, mu, centre ? 9 : 8, xi, s9, det9);
+    if (weights) {
+      const size_t at = NH_SPR_POINTS * (size_t)l;
+      nh_hex_stress_with(Xe, ue, G0, nh_tissue_gbar(t, c), lambda, mu, centre ? 9 : 8,
+                         weights->grad + 24 * at, s9);
+      memcpy(det9, weights->grad_det + at, 8 * sizeof(double));
+    } else {
+      nh_hex_stress_at(Xe, ue, G0, nh_tissue_gbar(t, c), lambda, mu, centre ? 9 : 8, xi, s9, det9);
+    }
     memcpy(sh + 48 * (size_t)l, s9, 48 * sizeof(double));
     memcpy(detJ + 8 * (size_t)l, det9, 8 * sizeof(double));
     if (centre)

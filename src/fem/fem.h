@@ -153,6 +153,16 @@ void nh_lame(double young, double poisson, double *lambda, double *mu);
 void nh_hex_stress_at(const double X[24], const double u[24], const double G0[24],
                       const double *Gbar, double lambda, double mu, int n, const double *xi,
                       double *s, double *detJ);
+/* The rest gradients at the natural point xi that nh_hex_stress_at uses:
+ * g[24] = ∇N_a(ξ) (G0 where det J <= 0); returns det J there. */
+double nh_hex_rest_gradients(const double X[24], const double G0[24], const double xi[3],
+                             double g[24]);
+/* nh_hex_stress_at with the rest gradients of its n points given (g[24 n],
+ * nh_hex_rest_gradients: they depend on the rest shape only, so a caller
+ * that keeps them skips their computation); bitwise the same s. */
+void nh_hex_stress_with(const double X[24], const double u[24], const double G0[24],
+                        const double *Gbar, double lambda, double mu, int n, const double *g,
+                        double *s);
 
 /* σ = R (λ tr ε I + 2 μ ε) Rᵀ, ε = sym(Σₐ dₐ ⊗ gₐ), for element rotation
  * R[9], corotated nodal values d[24] and shape-function gradients g[24] at a

@@ -66,18 +66,33 @@ void nh_hex_rotated_stress(const double R[9], const double d[24], const double g
 void nh_hex_stress_at(const double X[24], const double u[24], const double G0[24],
                       const double *Gbar, double lambda, double mu, int n, const double *xi,
                       double *s, double *detJ) {
+  double g[24 * 9];
+  for (int p0 = 0; p0 < n; p0 += 9) { /* 9 points at a time (callers ask for 1, 8 or 9) */
+    const int k = n - p0 < 9 ? n - p0 : 9;
+    for (int p = 0; p < k; p++) {
+      double det = nh_hex_rest_gradients(X, G0, xi + 3 * (p0 + p), g + 24 * p);
+      if (detJ) detJ[p0 + p] = det;
+    }
+    nh_hex_stress_with(X, u, G0, Gbar, lambda, mu, k, g, s + 6 * p0);
+  }
+}
+
+double nh_hex_rest_gradients(const double X[24], const double G0[24], const double xi[3],
+                             double g[24]) {
+  memcpy(g, G0, 24 * sizeof(double));
+  return nh_hex_gradients(X, xi, g);
+}
+
+void nh_hex_stress_with(const double X[24], const double u[24], const double G0[24],
+                        const double *Gbar, double lambda, double mu, int n, const double *g,
+                        double *s) {
   /* The rotation and corotated displacements of the element, as hex.c. */
   double R[9], d[24];
   nh_hex_corotated(X, u, G0, R, d);
   /* B-bar: the mean volume change θ̄ = det F̄ − 1, one per element. */
   double mean_dilatation = Gbar ? nh_hex_mean_dilatation(u, Gbar, NULL) : 0.0;
-  for (int p = 0; p < n; p++) {
-    double g[24];
-    memcpy(g, G0, sizeof g);
-    double det = nh_hex_gradients(X, xi + 3 * p, g);
-    if (detJ) detJ[p] = det;
-    nh_point_stress(R, d, g, lambda, mu, Gbar ? &mean_dilatation : NULL, s + 6 * p);
-  }
+  for (int p = 0; p < n; p++)
+    nh_point_stress(R, d, g + 24 * p, lambda, mu, Gbar ? &mean_dilatation : NULL, s + 6 * p);
 }
 
 void nh_voigt_compliance(double lambda, double mu, const double s[6], double e[6]) {
