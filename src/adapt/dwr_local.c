@@ -39,21 +39,26 @@
  * largest dropped (dependent rows: C_fᵀ μ is unique, μ is not).
  *
  * The estimate. With u_f, z_f the constrained solutions of a nested fine
- * space (J_f(u_f − P u_h) = 0 for point rows, J_f z_f = 0):
- *     J(u_f) − J(u_h) = f(z_f) − a(P u_h, z_f)            (dwr.c, §6.6)
- * and the coarse equations give f(z_h) − a(u_h, z_h) = λᵀ J_h z_h = 0
- * (z_h satisfies the held rows; inertia neglected). Taking for z_f the
- * patch's z̃ (z_f in ω, z_h outside), w = z̃ − z_h vanishes outside ω and
- *     L = f(w) − a(u_h, w) = Σ_{fine cells} ∫ (ρ b · w − σ_h(u_h) : ε(w)) dV,
- * σ_h(u_h) the primal's discrete stress of the leaf under the fine cell
- * (its corotated stress, B-bar's mean pressure), ε(w) the fine field's
- * strain in the same frame (D⁻¹ of its full stress), b the body force
- * per unit mass of the step (loads; 0 without). No multipliers enter: the
- * rows' forces do work only through J_f w, and the derivation above has
- * them cancel against J_f z_f = 0 and J_h z_h = 0. L replaces the recovered
- * terms ε_K of the leaves whose centre lies in ω (it is the patch's part of
- * a(u − u_h, z − z_h)); the terms outside ω, the geometry and the
- * constraint-data terms stay.
+ * space (the rows holding the same points, J_f z_f = 0):
+ *     J(u_f) − J(u_h) = f(z_f) − a(P u_h, z_f)            (dwr.c, §6.6).
+ * Take for z_f the patch's z̃ (z_f in ω, z_h outside) and w = z̃ − z_h
+ * (0 outside ω). The coarse equations R_h(u_h)(v_h) = f(v_h) − a(u_h, v_h)
+ * + Σ_i Λ_i (J_h v_h)_i = 0 for all v_h (Λ_i the rows' forces on the
+ * tissue) give f(z_h) − a(u_h, z_h) = 0 on the active rows, and so
+ *     L = R(u_h)(w − I_h w) = Σ_cells φ ∫ (ρ b · w' − σ_h(u_h) : ε(w')) dV
+ *                             + Σ_i Λ_i n_i · w'(row i's points),
+ * w' = w − P I_h w, I_h w the mesh's nodal interpolant of w (at the nodes
+ * whose leaves all lie in ω; 0 elsewhere, hanging nodes their masters'):
+ * what the lattice's residual gets wrong on coarse functions (body force
+ * lumping and drained share, cut cells, inertia: left out or
+ * approximated) is weighted only by the fine part of w. σ_h(u_h): the
+ * primal's discrete stress of the leaf under the lattice cell (corotated,
+ * B-bar's mean pressure); ε(w'): the lattice field's strain in the same
+ * frame (D⁻¹ of its full stress); b: the step's body force per unit mass
+ * (loads; 0 without); Λ: nh_constraint_data.force (none without data).
+ * L replaces the recovered terms ε_K of the leaves whose centre lies in ω
+ * (the patch's part of a(u − u_h, z − z_h)); the terms outside ω, the
+ * geometry and the constraint-data terms stay.
  *
  * Applied only where a seed exists (a goal's cell holding a tool row);
  * elsewhere nothing is computed. Skipped (applied = 0) when the lattice
@@ -606,7 +611,7 @@ int nh_dwr_local_term(const nh_mesh *m, const nh_tissue *t, const nh_hanging *h,
       int inside = node_start[v + 1] > node_start[v];
       for (int k = node_start[v]; k < node_start[v + 1] && inside; k++) {
         double lo[3], hi[3];
-        nh_leaf_box(m, m->leaves[node_leaf[k]], lo, hi);
+        nh_leaf_box(m, node_leaf[k], lo, hi); /* cell ids */
         for (int d = 0; d < 3; d++)
           inside &= lo[d] >= L.lo[d] - 1e-9 * L.h && hi[d] <= L.lo[d] + L.h * L.n[d] + 1e-9 * L.h;
       }
