@@ -8,3 +8,5 @@ nh_add_c_test(test_resolve_tip verify)
 nh_add_c_test(test_dwr_rows verify)
 # The constraint-data term against the skull points one lattice finer, run both ways (tests/test_dwr_skull.c).
 nh_add_c_test(test_dwr_skull verify)
+# The local enriched dual where a held tool row and the goal share a cell, against nested fine solves (tests/test_dwr_local.c).
+nh_add_c_test(test_dwr_local verify)

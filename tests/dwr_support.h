@@ -9,6 +9,7 @@
 
 #include "fem/fem.h"
 #include "mesh/mesh.h"
+#include "solve/solve.h"
 
 __attribute__((unused)) static double dwr_dot(int n, const double *a, const double *b) {
   double s = 0.0;
@@ -23,6 +24,30 @@ __attribute__((unused)) static int dwr_block_load(const nh_mesh *m, double *f) {
   nh_region load = {.min = {0.009, 0.009, 0.009}, .max = {0.011, 0.011, 0.011}};
   double force[3] = {0, 0, -1e-6};
   return nh_mesh_region_load(m, &load, force, f);
+}
+
+/* The block's system on mesh m (the tests' block, clamped at x = 4 cm):
+ * tissue of `mat`, the clamp's flags, hanging nodes, and the rest
+ * stiffness assembled and factorised; the objects in *t, *fixed, *h, *s are
+ * replaced. 0 or the first failure's code. */
+__attribute__((unused)) static int dwr_block_system(const nh_mesh *m, const nh_material *mat,
+                                                    nh_tissue **t, unsigned char **fixed,
+                                                    nh_hanging **h, nh_system **s) {
+  nh_tissue_destroy(t);
+  nh_hanging_destroy(h);
+  nh_system_destroy(s);
+  int rc = nh_tissue_create(m, mat, t);
+  unsigned char *fx = realloc(*fixed, (size_t)m->n_nodes);
+  if (!fx) return NH_ERR_MEMORY;
+  *fixed = fx;
+  for (int i = 0; i < m->n_nodes; i++) fx[i] = m->X[3 * i] > 0.0399;
+  if (!rc) rc = nh_hanging_detect(m, fx, h);
+  if (!rc) rc = nh_system_create(*t, fx, *h, s);
+  double *zero = calloc(3 * (size_t)m->n_nodes, sizeof(double));
+  if (!rc) nh_system_assemble(*s, zero, NULL, 0.0, 1.0, zero, NULL, 0);
+  if (!rc) rc = nh_system_factor(*s);
+  free(zero);
+  return rc;
 }
 
 /* a(v, w) = Σ_leaves v_eᵀ φ K₀ w_e, element by element (R = I at rest). */

@@ -103,19 +103,8 @@ static void make_rows(problem *p) {
 static void setup(problem *p) {
   nh_mesh *m = p->m;
   int n = 3 * m->n_nodes;
-  nh_tissue_destroy(&p->t);
   nh_material mat = {1.0e4, 0.3, 1000, NH_FORMULATION_FULL};
-  CHECK_OK(nh_tissue_create(m, &mat, &p->t));
-  p->fixed = realloc(p->fixed, m->n_nodes);
-  for (int i = 0; i < m->n_nodes; i++) p->fixed[i] = m->X[3 * i] > 0.0399;
-  nh_hanging_destroy(&p->h);
-  CHECK_OK(nh_hanging_detect(m, p->fixed, &p->h));
-  nh_system_destroy(&p->s);
-  CHECK_OK(nh_system_create(p->t, p->fixed, p->h, &p->s));
-  double *zero = calloc(n, sizeof(double));
-  nh_system_assemble(p->s, zero, NULL, 0.0, 1.0, zero, NULL, 0);
-  CHECK_OK(nh_system_factor(p->s));
-  free(zero);
+  CHECK_OK(dwr_block_system(m, &mat, &p->t, &p->fixed, &p->h, &p->s));
   p->f = realloc(p->f, sizeof(double) * n);
   p->j = realloc(p->j, sizeof(double) * 3 * n);
   CHECK_OK(dwr_block_load(m, p->f));

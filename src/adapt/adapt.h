@@ -321,6 +321,14 @@ typedef struct {
    * estimate that is the term, C_q (included in estimate). */
   const nh_constraint_data *data;
   double *constraint;
+  /* The local enriched dual where a goal's cell holds tool rows
+   * (dwr_local.c): in, local (0: off); out, local_term (may be NULL) the
+   * patch's term L_q (0 where not applied; included in estimate, in place
+   * of the recovered terms of the patch's leaves) and local_applied (1 if
+   * a patch was solved). */
+  int local;
+  double *local_term;
+  int local_applied;
 } nh_dwr_result;
 
 /* Goal-oriented estimate of the displacement at n_points points[3 each]

@@ -13,4 +13,34 @@ typedef struct {
 /* qsort order of nh_mark_entry: decreasing η, then increasing cell id. */
 int nh_mark_entry_compare(const void *a, const void *b);
 
+/* The goals of nz functionals: n_points points, the boxes' half-width,
+ * weights[3 n_points q + 3p + k] the weight of J_pk in functional q. */
+typedef struct {
+  int n_points;
+  const double *points;
+  double radius;
+  const double *weights;
+} nh_dwr_goals;
+
+/* The local enriched dual where a goal's box and an active tool row share a
+ * leaf (dwr_local.c; docs/theory.md §6.6, "Held rows in the goal's cell").
+ * In: the step's state (mesh, tissue, hanging (may be NULL), u, rows and
+ * the rows' forces on the tissue, force[rows->m] (N; may be NULL: no row
+ * forces in the residual)), free_mask (3 per node: 1
+ * on the system's free DOFs, 0 on fixed ones; NULL: all free), the nz
+ * coarse duals z
+ * (3 n_nodes each), the goals (n_points points, box half-width radius) and
+ * the functionals' weights (3 n_points per functional: functional q =
+ * Σ_pk weights[3 n_points q + 3p + k] J_pk), the body force (loads, may be
+ * NULL). Out: *applied 1 if a patch was solved (else 0 and nothing
+ * written); then L[nz] the patch's term and replaced[n_leaves] (may be
+ * NULL) 1 for the leaves whose recovered terms it replaces.
+ * Fails with NH_ERR_MEMORY, NH_ERR_NUMERIC (the lattice's matrix). */
+int nh_dwr_local_term(const nh_mesh *mesh, const nh_tissue *tissue, const nh_hanging *hanging,
+                      const double *u, const nh_rows *rows, const double *force,
+                      const double *free_mask, int nz, const double *z, int n_points,
+                      const double *points, double radius, const double *weights,
+                      const nh_geometry_loads *loads, double *L, unsigned char *replaced,
+                      int *applied);
+
 #endif

@@ -140,12 +140,20 @@
  * pressure on the coarse solution's gaps at the finer points. C_q is added
  * to E_q (not to the marking indicators); the tools' rows have δ = 0.
  *
+ * Held rows in the goal's cell (docs/theory.md §6.6; dwr_local.c). Where
+ * an active tool row and a goal's box share a leaf, z_h is pinned to ≈ 0
+ * there and its recovered error sees nothing; with out->local the dual is
+ * solved again on a finer lattice over a patch around that leaf, z_h as
+ * its boundary data, and the patch's residual weighted by z_f − z_h
+ * replaces the patch leaves' recovered terms (the marking indicators are
+ * not changed).
+ *
  * Workspace: the duals (3 per point, 3 per node each), the centre samples
  * and recovered nodal stresses of the 1 + 3 n_points fields (6 per cell or
  * node each), one value per leaf and field for the ordered sums. The cell
  * loop runs in parallel (OpenMP); sums are taken in leaf order afterwards,
  * so results do not depend on the thread count. */
-#include "adapt/adapt.h"
+#include "adapt/adapt_impl.h"
 
 #include <math.h>
 #include <stdio.h>
@@ -291,7 +299,8 @@ int nh_dwr_duals(nh_system *sys, const nh_rows *rows, double scale, int n_nodes,
  * group); out->estimate receives the nz E_q, out->norm is not touched. */
 static int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale, const nh_mesh *m,
                               const nh_tissue *t, const nh_hanging *h, const double *u, int nz,
-                              int group, const double *j, nh_dwr_result *out) {
+                              int group, const double *j, const nh_dwr_goals *goals,
+                              nh_dwr_result *out) {
   const int nn = m->n_nodes, nl = m->n_leaves, nfld = 1 + nz, ng = nz / group;
   const size_t n3 = 3 * (size_t)nn;
   double *z = nh_calloc(n3 * (size_t)(nz ? nz : 1), sizeof(double));
@@ -301,10 +310,12 @@ static int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale,
   double *cell_eps = nh_calloc((size_t)(nz ? nz : 1) * (size_t)(nl ? nl : 1), sizeof(double));
   double *cell_err2 = nh_calloc((size_t)(nl ? nl : 1), sizeof(double));
   double *cell_norm2 = nh_calloc((size_t)(nl ? nl : 1), sizeof(double));
-  double *cell_geo = NULL; /* nz per leaf: the geometry term (header "Geometry") */
-  double *mu = NULL;       /* the duals' multipliers (header "Constraint data") */
+  double *cell_geo = NULL;        /* nz per leaf: the geometry term (header "Geometry") */
+  double *mu = NULL;              /* the duals' multipliers (header "Constraint data") */
+  unsigned char *replaced = NULL; /* per leaf: its term replaced by the local dual's */
+  double *cell_loc = nh_calloc((size_t)(nz ? nz : 1), sizeof(double)), *free_mask = NULL;
   int rc = NH_OK;
-  if (!z || !samples || !star || !cell_eps || !cell_err2 || !cell_norm2) {
+  if (!z || !samples || !star || !cell_eps || !cell_err2 || !cell_norm2 || !cell_loc) {
     rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: goal-oriented estimate (%d duals, %d nodes)", nz,
                   nn);
     goto done;
@@ -450,13 +461,43 @@ static int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale,
     if (out->constraint) out->constraint[q] = 0.0;
   }
   if (with_data && (rc = nh_dwr_constraint_term(rows, z, mu, out->data, scale, nz, out))) goto done;
+  /* where a goal's cell holds tool rows: the local enriched dual's term in
+   * place of the patch's recovered terms (dwr_local.c) */
+  out->local_applied = 0;
+  if (out->local && (replaced = nh_calloc((size_t)(nl ? nl : 1), 1)) == NULL) {
+    rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: the local dual's leaves");
+    goto done;
+  }
+  if (out->local && rows && rows->m > 0) { /* the free DOFs as a nodal mask */
+    const int nf = nh_system_free_dofs(sys);
+    double *ones = nh_calloc((size_t)(nf ? nf : 1), sizeof(double));
+    if (!ones || !(free_mask = nh_calloc(n3, sizeof(double)))) {
+      free(ones);
+      rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: the local dual's mask");
+      goto done;
+    }
+    for (int i = 0; i < nf; i++) ones[i] = 1.0;
+    nh_system_scatter(sys, ones, free_mask);
+    free(ones);
+  }
+  if (out->local &&
+      (rc = nh_dwr_local_term(m, t, h, u, rows, out->data ? out->data->force : NULL, free_mask, nz,
+                              z, goals->n_points, goals->points, goals->radius, goals->weights,
+                              out->loads, cell_loc, replaced, &out->local_applied)))
+    goto done;
+  for (int q = 0; q < nz; q++) {
+    double loc = out->local_applied ? cell_loc[q] : 0.0;
+    out->estimate[q] += loc;
+    if (out->local_term) out->local_term[q] = loc;
+  }
   for (int l = 0; l < nl; l++) {
     sum_err += cell_err2[l];
     sum_norm += cell_norm2[l];
     if (out->eta_cell) out->eta_cell[m->leaves[l]] = sqrt(fmax(cell_err2[l], 0.0));
     for (int q = 0; q < nz; q++) {
       double g = cell_geo ? cell_geo[(size_t)nz * l + q] : 0.0;
-      out->estimate[q] += cell_eps[(size_t)nz * l + q] + g;
+      out->estimate[q] +=
+          (out->local_applied && replaced[l] ? 0.0 : cell_eps[(size_t)nz * l + q]) + g;
       if (out->geometry) out->geometry[q] += g;
     }
   }
@@ -476,7 +517,7 @@ static int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale,
 
 done:
   free(z), free(samples), free(star), free(cell_eps), free(cell_err2), free(cell_norm2);
-  free(cell_geo), free(mu);
+  free(cell_geo), free(mu), free(replaced), free(cell_loc), free(free_mask);
   return rc;
 }
 
@@ -498,8 +539,13 @@ int nh_dwr_estimate(nh_system *sys, const nh_rows *rows, double scale, const nh_
   const int nz = 3 * n_points;
   double *j = nh_calloc(3 * (size_t)m->n_nodes * (size_t)(nz ? nz : 1), sizeof(double));
   if (!j) return NH_ERROR(NH_ERR_MEMORY, "out of memory: %d goal functionals", nz);
-  int rc = nh_dwr_point_functionals(m, n_points, points, radius, where, j);
-  if (!rc) rc = nh_dwr_functionals(sys, rows, scale, m, t, h, u, nz, 3, j, out);
+  double *w = nh_calloc((size_t)nz * (size_t)(nz ? nz : 1), sizeof(double));
+  int rc = w ? nh_dwr_point_functionals(m, n_points, points, radius, where, j)
+             : NH_ERROR(NH_ERR_MEMORY, "out of memory: %d goal functionals", nz);
+  for (int q = 0; q < nz && !rc; q++) w[(size_t)nz * q + q] = 1.0; /* functional q is J_q */
+  nh_dwr_goals goals = {n_points, points, radius, w};
+  if (!rc) rc = nh_dwr_functionals(sys, rows, scale, m, t, h, u, nz, 3, j, &goals, out);
+  free(w);
   for (int p = 0; p < n_points && !rc; p++) {
     const double *e = out->estimate + 3 * p;
     out->norm[p] = sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]);
@@ -522,7 +568,8 @@ int nh_dwr_estimate_combined(nh_system *sys, const nh_rows *rows, double scale, 
       rc = nh_goal_functional(m, points + 3 * p, radius, k, where ? where[p] : NULL, jk);
       for (size_t i = 0; i < n3 && !rc; i++) jc[i] += w * jk[i];
     }
-  if (!rc) rc = nh_dwr_functionals(sys, rows, scale, m, t, h, u, 1, 1, jc, out);
+  nh_dwr_goals goals = {n_points, points, radius, weights};
+  if (!rc) rc = nh_dwr_functionals(sys, rows, scale, m, t, h, u, 1, 1, jc, &goals, out);
   if (!rc && out->norm) out->norm[0] = fabs(out->estimate[0]);
   free(jk), free(jc);
   return rc;

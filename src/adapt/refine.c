@@ -188,7 +188,8 @@ int nh_adapt_estimate_goal(nh_adapt *a, nh_system *sys, const nh_rows *rows, dou
                      .loads = a->loads,
                      .geometry = a->goal_geo,
                      .data = a->data,
-                     .constraint = a->goal_cons};
+                     .constraint = a->goal_cons,
+                     .local = 1};
   if (!combined) {
     NH_TRY(nh_dwr_estimate(sys, rows, scale, m, tissue, hanging, u, a->n_goals, a->goal_points,
                            a->radius, NULL, &r));

@@ -64,6 +64,7 @@ typedef struct {
   int n, cap;
   int *node;
   double *w;
+  double X[3], nrm[3], ref[3], rho; /* the disc's rule (nh_disc_points); rho 0: the point */
 } nh_disc;
 
 /* A tool group: an outer tool and the tools nested in it, one hole in the

@@ -101,40 +101,18 @@ static int nh_disc_sample(nh_disc *d, const nh_mesh *m, const double X[3], doubl
 int nh_disc_build(nh_disc *d, const nh_mesh *m, const nh_cpoint *p, const double nrm[3],
                   const double ref[3], double rho) {
   d->n = 0;
-  const double h = nh_mesh_cell_size(m, p->cell);
-  const int rings = rho > 0.0 ? (int)fmin(8.0, fmax(1.0, ceil(2.0 * rho / h))) : 0;
-  /* e1, e2: unit vectors across nrm, e1 along ref's part across nrm (the
-   * tool's frame: continuous in the tool's state), without ref the axis
-   * least aligned with nrm (exact for a normal along an axis) */
-  double e1[3] = {0, 0, 0}, e2[3], nn[3] = {nrm[0], nrm[1], nrm[2]}, total = 0.0;
-  nh_vec3_normalize(nn);
-  if (ref) {
-    memcpy(e1, ref, sizeof e1);
-  } else {
-    int low = 0;
-    for (int i = 1; i < 3; i++)
-      if (fabs(nrm[i]) < fabs(nrm[low])) low = i;
-    e1[low] = 1.0;
-  }
-  const double c = nh_vec3_dot(e1, nn);
-  for (int i = 0; i < 3; i++) e1[i] -= c * nn[i];
-  nh_vec3_normalize(e1);
-  nh_vec3_cross(nn, e1, e2);
-  /* rings at radii ρ(k − ½)/n of width ρ/n, 6k points each: the midpoint rule
-   * in r, equal angles; weight 2 r dr / ρ² per ring */
-  for (int k = 1; k <= rings; k++) {
-    const double r = rho * (k - 0.5) / rings, w = 2.0 * (k - 0.5) / ((double)rings * rings * 6 * k);
-    for (int j = 0; j < 6 * k; j++) {
-      const double a = 2.0 * NH_PI * j / (6.0 * k), ca = cos(a), sa = sin(a);
-      double X[3];
-      int in;
-      for (int i = 0; i < 3; i++) X[i] = p->X[i] + r * (ca * e1[i] + sa * e2[i]);
-      NH_TRY(nh_disc_sample(d, m, X, w, &in));
-      total += in ? w : 0.0;
-    }
+  memcpy(d->X, p->X, sizeof d->X);
+  for (int i = 0; i < 3; i++) d->nrm[i] = nrm[i], d->ref[i] = ref ? ref[i] : 0.0;
+  d->rho = rho > 0.0 ? rho : 0.0;
+  double X[3 * NH_DISC_MAX_POINTS], w[NH_DISC_MAX_POINTS], total = 0.0;
+  const int n = nh_disc_points(p->X, nrm, ref, rho, nh_mesh_cell_size(m, p->cell), X, w);
+  for (int q = 0; q < n; q++) {
+    int in;
+    NH_TRY(nh_disc_sample(d, m, X + 3 * q, w[q], &in));
+    total += in ? w[q] : 0.0;
   }
   if (total <= 0.0) { /* no disc, or all of it outside: the point itself */
-    d->n = 0, total = 1.0;
+    d->n = 0, total = 1.0, d->rho = 0.0;
     double N[8];
     nh_hex_shape(p->xi, N);
     for (int a = 0; a < 8; a++) NH_TRY(nh_disc_add(d, m->cells[8 * p->cell + a], N[a]));
@@ -159,6 +137,11 @@ int nh_disc_row(nh_rows *rows, int r, const nh_disc *d) {
   NH_TRY(nh_rows_widen(rows, d->n));
   for (int k = 0; k < d->n; k++)
     rows->node[rows->start[r] + k] = d->node[k], rows->N[rows->start[r] + k] = d->w[k];
+  double *rec = rows->disc + 10 * r;
+  memcpy(rec, d->X, 3 * sizeof(double));
+  memcpy(rec + 3, d->nrm, 3 * sizeof(double));
+  memcpy(rec + 6, d->ref, 3 * sizeof(double));
+  rec[9] = d->rho;
   return NH_OK;
 }
 

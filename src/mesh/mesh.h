@@ -399,6 +399,20 @@ int nh_mesh_refine(nh_mesh *mesh, const nh_template *tmpl, const int *cells, int
                    nh_refine_info *info);
 void nh_refine_info_free(nh_refine_info *info);
 
+/* ---- a tool's cross-section as material points (mesh/disc.c) ----
+ * The disc of radius rho about X across nrm (docs/interaction.md "Tip
+ * disc"): n rings at radii rho (k − ½)/n, k = 1..n, of 6k equally spaced
+ * points, weight 2(k − ½)/(6k n²) each (the midpoint rule in r, exact in
+ * θ), n = ⌈2 rho / h⌉ clamped to [1, NH_DISC_MAX_RINGS] (samples at most
+ * h/2 apart); each ring starts on ref's part across nrm (ref NULL or 0: the
+ * axis least aligned with nrm). Writes the points X[3 each] and weights w
+ * (Σ w = 1); returns their count, at most NH_DISC_MAX_POINTS (0 if
+ * rho <= 0). */
+#define NH_DISC_MAX_RINGS  8
+#define NH_DISC_MAX_POINTS (3 * NH_DISC_MAX_RINGS * (NH_DISC_MAX_RINGS + 1))
+int nh_disc_points(const double X[3], const double nrm[3], const double ref[3], double rho,
+                   double h, double *points, double *w);
+
 /* Smallest edge length of cell c's rest shape. */
 /* Node -> the leaves having it as a corner, in CSR form: the leaves of node
  * v are leaf[start[v] .. start[v + 1]), ascending, each once. Both arrays

@@ -21,7 +21,8 @@ void nh_rows_clear(nh_rows *r) {
 
 void nh_rows_free(nh_rows *r) {
   free(r->start), free(r->node), free(r->N), free(r->dir), free(r->tool), free(r->elem), free(r->J);
-  free(r->tool2), free(r->elem2), free(r->J2), free(r->gap), free(r->law), free(r->lambda);
+  free(r->tool2), free(r->elem2), free(r->J2), free(r->gap), free(r->disc), free(r->law),
+      free(r->lambda);
   memset(r, 0, sizeof *r);
 }
 
@@ -54,6 +55,7 @@ int nh_rows_add(nh_rows *r) {
     NH_GROW(r->elem2, cap);
     NH_GROW(r->J2, 36 * cap);
     NH_GROW(r->gap, cap);
+    NH_GROW(r->disc, 10 * cap);
     NH_GROW(r->law, cap);
     NH_GROW(r->lambda, cap);
     r->cap = cap;
@@ -69,6 +71,7 @@ int nh_rows_add(nh_rows *r) {
   r->tool2[i] = -1, r->elem2[i] = 0;
   memset(r->J2 + 36 * i, 0, 36 * sizeof(double));
   r->gap[i] = 0.0, r->lambda[i] = 0.0;
+  memset(r->disc + 10 * i, 0, 10 * sizeof(double));
   r->law[i] = (nh_row_law){NH_ROW_BILATERAL, -1, -1, 0.0, 0.0, -1, 0.0, 0, 0};
   return i;
 }

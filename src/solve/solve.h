@@ -367,7 +367,12 @@ typedef struct {
    * host: contact/nest.c). Element and Jacobian as tool's. */
   int *tool2, *elem2;
   double *J2;
-  double *gap;     /* g */
+  double *gap; /* g */
+  /* 10 per row: a disc row's rule (nh_disc_points: rest centre X, normal,
+   * ring reference, radius ρ; written by the contact module with the
+   * weights), ρ = 0 for a point row: what a finer discretisation samples
+   * again (the goal estimate's local dual, adapt/dwr_local.c) */
+  double *disc;
   nh_row_law *law; /* law; normal indices refer to rows of this set */
   double *lambda;  /* in: warm start; out: the forces of the step */
 } nh_rows;
