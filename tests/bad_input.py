@@ -89,6 +89,10 @@ CASES = [
     ("set_base.yaml", ["adapt.hanging=both"], "--set:1", "adapt.hanging"),
     # adapt.resolve_tip with the spr estimator (the default), and not a boolean.
     ("set_base.yaml", ["adapt.resolve_tip=false"], "--set:1", "adapt.resolve_tip"),
+    # adapt.local_dual with the spr estimator, and not a boolean.
+    ("set_base.yaml", ["adapt.local_dual=true"], "--set:1", "adapt.local_dual"),
+    ("set_base.yaml", ["adapt.estimator=goal", "adapt.local_dual=1"], "--set:2",
+     "adapt.local_dual"),
     ("set_base.yaml", ["adapt.estimator=goal", "adapt.resolve_tip=2"], "--set:2",
      "adapt.resolve_tip"),
     ("set_base.yaml", ["tissue.material.formulation=[bbar]"], "--set:1",

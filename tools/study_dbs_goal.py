@@ -84,6 +84,14 @@ DBS_GOAL = {
         ("estimate-10mm", "goal estimate on uniform 10 mm, no refinement",
          ["adapt.estimator=goal", "tissue.grid=[14,17,13]", "adapt.max_level=1",
           "adapt.max_dofs=7248"], "estimate"),
+        # the local enriched dual where the STN's leaf holds the cannula's tip rows
+        # (adapt.local_dual, off by default; docs/dbs.md "The hold with a local enriched dual")
+        ("goal-l1-local", "goal from 14 mm, 1 level, local dual",
+         ["adapt.estimator=goal", "tissue.grid=[10,12,9]", "adapt.max_level=1",
+          "adapt.local_dual=true"], "goal"),
+        ("estimate-14mm-local", "goal estimate on uniform 14 mm, local dual",
+         ["adapt.estimator=goal", "tissue.grid=[10,12,9]", "adapt.max_level=1",
+          "adapt.max_dofs=3039", "adapt.local_dual=true"], "estimate"),
     ],
     "target": "STN",
     "cannula": "cannula",

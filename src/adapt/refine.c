@@ -75,6 +75,7 @@ struct nh_adapt {
   /* several goals in one dual (dwr.c): every separate_every-th estimate
    * solves each goal's duals and sets the weights, the others one dual */
   int separate_every, since_separate, have_weights;
+  int local_dual;  /* adapt.local_dual: the local enriched dual at held rows (dwr_local.c) */
   double *weight;  /* 3 per goal: ω_pk = E_pk / |E_p| of the last separate estimate */
   double *sep_est; /* 3 per goal: E_pk of the last separate estimate */
   double sep_sum;  /* Σ_p |E_p| of the last separate estimate (= Σ ω E there) */
@@ -105,6 +106,7 @@ int nh_adapt_create(const nh_adapt_spec *spec, int max_cells, nh_adapt **out) {
   a->tolerance = spec->tolerance;
   a->coarsen = spec->coarsen;
   a->separate_every = spec->separate_every > 0 ? spec->separate_every : 1;
+  a->local_dual = spec->local_dual;
   *out = a;
   return NH_OK;
 }
@@ -189,7 +191,7 @@ int nh_adapt_estimate_goal(nh_adapt *a, nh_system *sys, const nh_rows *rows, dou
                      .geometry = a->goal_geo,
                      .data = a->data,
                      .constraint = a->goal_cons,
-                     .local = 1};
+                     .local = a->local_dual};
   if (!combined) {
     NH_TRY(nh_dwr_estimate(sys, rows, scale, m, tissue, hanging, u, a->n_goals, a->goal_points,
                            a->radius, NULL, &r));

@@ -207,6 +207,8 @@ typedef struct {
   int resolve;            /* adapt.resolve: re-solves of a step on its refined mesh (>= 0) */
   int resolve_tip;        /* adapt.resolve_tip: goal only, re-solve while the refinement splits
                              a leaf holding a tool's tip (default 1) */
+  int local_dual;         /* adapt.local_dual: goal only, the local enriched dual where a goal's
+                             leaf holds a tool's rows (dwr_local.c; default 0) */
   int separate_every; /* adapt.separate_every: every N-th goal estimate solves each goal's duals,
                          the others one combined dual (>= 1, default 1) */
   double coarsen;     /* adapt.coarsen.fraction (0: no coarsening; in (0, 1)) */
