@@ -80,7 +80,13 @@ struct nh_system {
   const double *jac_v;
   double jac_cG, jac_cD;
   int lazy_updates; /* leaves whose tangent the last assembly updated */
-  int threads;      /* OpenMP threads of the last assembly (0: all), W's build uses them too */
+  /* The last assembly's u, v, f_int and K̃ v (assemble.c): one repeated at
+   * the same u and v (a step's first, after the previous step's residual
+   * assembly) hands them back. kept: 0 none, 1 f_int, 2 f_int and K̃ v. */
+  double *last_u, *last_v, *last_f, *last_kv; /* 3 per node each */
+  int last_kept;
+  double last_tolerance;
+  int threads; /* OpenMP threads of the last assembly (0: all), W's build uses them too */
 
   /* Constraint rows J (m x n_free, stored as Jᵀ: n_free x m) solved through
    * the compliance W = J A⁻¹ Jᵀ (Algorithm 1); W and its Cholesky factor are
