@@ -92,7 +92,8 @@ int nh_system_factor_or_reuse(nh_system *s, const nh_integrator *in, nh_factor_r
     /* an inherited factor (inherit.c) builds W₀ by one application per
      * constraint row: with many rows a factorisation is cheaper */
     if (!need && !s->L &&
-        (double)s->rows_hint * s->flops_iteration * NH_SOLVE_FLOP_COST > s->flops_factor)
+        (double)s->rows_hint * s->flops_iteration * nh_solve_flop_cost(s->flops_factor) >
+            s->flops_factor)
       need = 1;
     if (!need && !s->L) {
       NH_TRY(nh_inherit_ready(s)); /* the new unknowns' block, once */
@@ -157,6 +158,17 @@ int nh_system_pcg(nh_system *s, const double *b, double *x, int guess, double to
                   sqrt(rz / ref2), tolerance, *iterations);
 }
 
+double nh_solve_flop_cost(double flops_factor) {
+  static const double F[3] = {6e6, 1.15e8, 5.3e9}, rho[3] = {1.0, 3.1, 8.0};
+  if (!(flops_factor > F[0])) return rho[0];
+  for (int k = 1; k < 3; k++)
+    if (flops_factor < F[k]) {
+      const double a = log(flops_factor / F[k - 1]) / log(F[k] / F[k - 1]);
+      return rho[k - 1] + a * (rho[k] - rho[k - 1]);
+    }
+  return rho[2];
+}
+
 /* The renewal rule of a sequence of solves with slowly degrading
  * preconditioner: with F the cost of the factorisation that opened the
  * cycle and e_j the extra cost of the j-th step's solves with the reused
@@ -180,7 +192,7 @@ int nh_system_pcg(nh_system *s, const double *b, double *x, int guess, double to
  * and with it every result, is the same on a loaded and an idle machine:
  * F is CHOLMOD's flop count of the factorisation; streamed operations
  * (triangular solves, products with A, the constraint solver's sweeps) are
- * weighted by NH_SOLVE_FLOP_COST, the time of such a flop relative to a
+ * weighted by ρ = nh_solve_flop_cost(F), the time of such a flop relative to a
  * factorisation's (triangular solves stream L from memory, the supernodal
  * factorisation runs in dense BLAS-3 blocks: docs/performance.md); the
  * constraint solver's dense factorisations (LAPACK) count as factorisation
@@ -191,7 +203,8 @@ void nh_system_account(nh_system *s, const nh_step_stats *st) {
                           later * (s->flops_iteration + s->flops_solve) + st->correction_flops;
   /* an inherited factor's W₀: one application of the preconditioner per row */
   const double rows_w = !s->L && s->inh ? (double)s->rows_hint * s->flops_iteration : 0.0;
-  const double extra = (streamed + rows_w) * NH_SOLVE_FLOP_COST + st->correction_flops_dense;
+  const double extra =
+      (streamed + rows_w) * nh_solve_flop_cost(s->flops_factor) + st->correction_flops_dense;
   if (s->factor_age == 0) {
     s->cycle_cost = s->flops_factor;
     s->cycle_steps = 1;
