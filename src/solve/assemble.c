@@ -40,10 +40,10 @@
  * assembly left, so no tangent is updated, A is kept, and the force and
  * K̃ v are the last ones, which the system keeps. That is a dynamic step's
  * first assembly, at the state where the previous step's residual assembled
- * (measured: a quarter of the dbs-skull goal run's assembly time,
- * docs/performance.md). The tissue's element data do not change while a
- * system lives (a mesh change builds a new one), as the kept tangents
- * already assume.
+ * (on the dbs-skull goal run that pass was a fifth of the assembly's
+ * samples: docs/performance.md, "The dbs-skull goal run"). The tissue's
+ * element data do not change while a system lives (a mesh change builds a
+ * new one), as the kept tangents already assume.
  *
  * Two passes, each by colour (system.c): 1. every leaf's force, frame,
  * update decision and K̃ v; 2. A. Within a colour no two leaves share a
