@@ -248,9 +248,10 @@ int nh_system_solve_reuse(nh_system *s, const double *b, double *x, double toler
 
 /* The reuse state of a checkpoint: whether a factor exists, the u and
  * coefficients of the A it factorises, its age and the renewal rule's
- * counters. The factor itself (megabytes, CHOLMOD's layout) is not saved: it
- * is made again from the same A, which the same assembly and the same
- * CHOLMOD make bit for bit the same. */
+ * counters, the last assembly, and the W₀ the factor's corrections keep
+ * (coupled.c: m² doubles and its rows' key). The factor itself (megabytes,
+ * CHOLMOD's layout) is not saved: it is made again from the same A, which
+ * the same assembly and the same CHOLMOD make bit for bit the same. */
 void nh_system_reuse_save(const nh_system *s, nh_bytes *b) {
   int32_t head[4] = {s->L != NULL, s->n_nodes, s->factor_age, s->refactor_due};
   nh_bytes_put(b, head, sizeof head);
@@ -264,9 +265,39 @@ void nh_system_reuse_save(const nh_system *s, nh_bytes *b) {
   /* the last assembly (its frames decide which tangents the next one keeps) */
   int32_t assembled = s->a_valid;
   nh_bytes_put(b, &assembled, sizeof assembled);
-  if (!assembled) return;
-  nh_bytes_put(b, s->c_assembled, sizeof s->c_assembled);
-  nh_bytes_put(b, s->u_assembled, sizeof(double) * 3 * (size_t)s->n_nodes);
+  if (assembled) {
+    nh_bytes_put(b, s->c_assembled, sizeof s->c_assembled);
+    nh_bytes_put(b, s->u_assembled, sizeof(double) * 3 * (size_t)s->n_nodes);
+  }
+  /* the W₀ the factor's corrections keep (coupled.c), with its rows' key:
+   * a continued run takes it where the uninterrupted one does */
+  int32_t w0[2] = {s->L && s->w0 && s->w0_serial == s->factor_serial ? s->w0_m : -1, s->w0_slots};
+  nh_bytes_put(b, w0, sizeof w0);
+  if (w0[0] < 0) return;
+  nh_bytes_put(b, s->w0_key, sizeof(int) * (size_t)s->w0_slots);
+  nh_bytes_put(b, s->w0, sizeof(double) * (size_t)s->w0_m * (size_t)s->w0_m);
+}
+
+/* The kept W₀ of a saved state (nothing in states written before it was
+ * kept: the reader is then at the end). */
+static int nh_reuse_load_w0(nh_system *s, nh_byte_reader *r) {
+  s->w0_serial = 0;
+  if (r->p == r->end) return NH_OK;
+  int32_t w0[2];
+  nh_bytes_get(r, w0, sizeof w0);
+  NH_CHECK(!r->short_read && w0[0] < 100000 && w0[1] >= 0, NH_ERR_INPUT,
+           "the checkpoint's solver state is malformed");
+  if (w0[0] < 0) return NH_OK;
+  const size_t mm = (size_t)w0[0] * (size_t)w0[0];
+  free(s->w0), free(s->w0_key);
+  s->w0 = nh_calloc(mm ? mm : 1, sizeof(double));
+  s->w0_key = nh_calloc(w0[1] ? (size_t)w0[1] : 1, sizeof(int));
+  if (!s->w0 || !s->w0_key) return NH_ERROR(NH_ERR_MEMORY, "out of memory restoring W0");
+  nh_bytes_get(r, s->w0_key, sizeof(int) * (size_t)w0[1]);
+  nh_bytes_get(r, s->w0, sizeof(double) * mm);
+  NH_CHECK(!r->short_read && s->L, NH_ERR_INPUT, "the checkpoint's solver state is malformed");
+  s->w0_m = w0[0], s->w0_slots = w0[1], s->w0_serial = s->factor_serial;
+  return NH_OK;
 }
 
 /* Assemble A at a saved u (f_int to scratch): NH_ERR_INPUT if u is not finite. */
@@ -308,6 +339,7 @@ int nh_system_reuse_load(nh_system *s, const unsigned char *data, size_t size, i
     NH_TRY(nh_reuse_assemble(s, &r, threads));
   else
     s->factor_current = 0;
+  NH_TRY(nh_reuse_load_w0(s, &r));
   NH_CHECK(r.p == r.end, NH_ERR_INPUT, "the checkpoint's solver state is malformed");
   s->factor_age = head[2];
   s->refactor_due = head[3];

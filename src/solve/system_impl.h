@@ -86,6 +86,14 @@ struct nh_system {
   double *last_u, *last_v, *last_f, *last_kv; /* 3 per node each */
   int last_kept;
   double last_tolerance;
+  /* The tissue part of W₀ = J A₀⁻¹ Jᵀ last built (coupled.c), with the
+   * factorisation it came from (factor_serial, counted by nh_system_factor)
+   * and its rows' tissue nodes and tool elements: a reused factor's outer
+   * corrections take it again while those are the same. */
+  int factor_serial;
+  double *w0;
+  int w0_m, w0_slots, w0_serial; /* w0_serial 0: none kept */
+  int *w0_key;                   /* m + 1 starts, the nodes, 4 per row (tool, elem, tool2, elem2) */
   int threads; /* OpenMP threads of the last assembly (0: all), W's build uses them too */
 
   /* Constraint rows J (m x n_free, stored as Jᵀ: n_free x m) solved through
