@@ -55,6 +55,18 @@
  *    the slip); the lateral rates stay 0 throughout. At the prediction the
  *    step sticks at v*(1 − 1e-7) and slides at v*(1 + 1e-7).
  *
+ * 4. A reused factor's kept W₀ (solve/coupled.c, nh_tissue_compliance).
+ *    The tissue held at 9 material points by rows without a tool part,
+ *    stepped with reuse (solver.refactor: auto) and, from the same states,
+ *    with a factorisation at every step (the exact path of part 1). The
+ *    step after the first reuses the factor and takes the first step's W₀
+ *    (same factor, same rows' nodes): its end-of-step velocities and λ must
+ *    equal the exact path's to 1e-7 relative (the corrections' fixed point
+ *    does not depend on W₀; tolerance 1e-10 per solve). The kept W₀ must
+ *    not be taken, the results again equal, when a row moves to another
+ *    cell, and when the factor is not the one it was built with (a
+ *    factorisation in between, then a state that changes A).
+ *
  * NH_VERBOSE=1 prints the measured agreements. */
 #include "beam/beam.h"
 #include "check.h"
@@ -890,6 +902,90 @@ static void test_bad_row(void) {
   tissue_close(&tf);
 }
 
+/* ---- 4. a reused factor's kept W₀ ---- */
+
+/* Rows tying the tissue's points X (9, the last moved by `shift` along x)
+ * to their rest positions along three directions each, the gaps the
+ * current violation plus a small offset. */
+static void tie_rows(nh_rows *rows, const tissue_fix *tf, const double *u, double shift) {
+  nh_rows_clear(rows);
+  const double X[3][3] = {{0.006, 0.005, 0.012}, {0.017, 0.013, 0.006}, {0.026, 0.007, 0.015}};
+  const double dirs[3][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  for (int p = 0; p < 3; p++)
+    for (int q = 0; q < 3; q++) {
+      double x[3] = {X[p][0] + (p == 2 ? shift : 0.0), X[p][1], X[p][2]};
+      add_row(rows, tf, u, NULL, 0.0, x, dirs[q], 1e-6 * (q + 1));
+    }
+}
+
+/* One step of both paths from the same state (u, v); the reuse path's
+ * stats in *st. Checks their agreement. */
+static void kept_step(tissue_fix *tf, nh_system *exact, const double *f, double *u, double *v,
+                      double shift, nh_coupled_stats *st, const char *what) {
+  const int n3 = 3 * tf->nn;
+  nh_integrator auto_in = {
+      .dt = 1e-3, .alpha = 0.5, .beta = 1e-3, .threads = 1, .tolerance = 1e-10, .reuse = 1};
+  nh_integrator every = auto_in;
+  every.reuse = 0;
+  double *ue = dalloc(n3), *ve = dalloc(n3);
+  memcpy(ue, u, sizeof(double) * n3), memcpy(ve, v, sizeof(double) * n3);
+  nh_rows ra = {0}, re = {0};
+  tie_rows(&ra, tf, u, shift);
+  tie_rows(&re, tf, u, shift);
+  CHECK_OK(nh_step_coupled(tf->sys, &auto_in, f, u, v, 0, NULL, &ra, 1e-13, 1e-13, 200, st));
+  CHECK_OK(nh_step_coupled(exact, &every, f, ue, ve, 0, NULL, &re, 1e-13, 1e-13, 200, NULL));
+  double e_v = rel_diff(v, ve, n3), e_l = rel_diff(ra.lambda, re.lambda, ra.m);
+  CHECK(e_v <= 1e-7 && e_l <= 1e-7,
+        "kept W0, %s: reuse against exact path: v %.3g, lambda %.3g (> 1e-7)", what, e_v, e_l);
+  if (verbose)
+    printf("  kept W0, %s: W0 kept %d, factorised %d, corrections %d; v %.3g, lambda %.3g\n", what,
+           st->w_kept, st->step.factorised, st->step.corrections, e_v, e_l);
+  memcpy(u, ue, sizeof(double) * n3), memcpy(v, ve, sizeof(double) * n3); /* the exact state */
+  nh_rows_free(&ra), nh_rows_free(&re);
+  free(ue), free(ve);
+}
+
+/* Two steps from a fresh system and state: the first factorises (and keeps
+ * its W₀), the second reuses the factor with the last row moved by `shift`. */
+static void kept_sequence(double shift, int more) {
+  tissue_fix tf;
+  tissue_open(1e5, 0.4, &tf);
+  nh_system *exact;
+  CHECK_OK(nh_system_create(tf.tissue, tf.fixed, NULL, &exact));
+  const int n3 = 3 * tf.nn;
+  double *u = dalloc(n3), *v = dalloc(n3), *f = dalloc(n3);
+  for (int i = 0; i < n3; i++) {
+    if (tf.fixed[i / 3]) continue;
+    u[i] = 1e-4 * nh_rand(), v[i] = 5e-2 * nh_rand(), f[i] = 1e-1 * nh_rand();
+  }
+  nh_coupled_stats st;
+  kept_step(&tf, exact, f, u, v, 0.0, &st, "first step");
+  CHECK(st.step.factorised == 1 && !st.w_kept,
+        "kept W0: the first step must factorise (%d), keep nothing (%d)", st.step.factorised,
+        st.w_kept);
+  kept_step(&tf, exact, f, u, v, shift, &st, shift == 0.0 ? "same rows" : "a row moved");
+  CHECK(st.step.factorised == 0 && st.w_kept == (shift == 0.0),
+        "kept W0, row shift %g: the second step reused the factor %d (want 1), W0 %d (want %d)",
+        shift, !st.step.factorised, st.w_kept, shift == 0.0);
+  if (more) { /* another factor of another A: W0 belongs to the previous one */
+    CHECK_OK(nh_system_factor(tf.sys));
+    for (int i = 0; i < n3; i++)
+      if (!tf.fixed[i / 3]) u[i] += 1e-5 * nh_rand();
+    kept_step(&tf, exact, f, u, v, shift, &st, "another factor");
+    CHECK(st.step.factorised == 0 && st.w_kept == 0,
+          "kept W0: after another factorisation: factorised %d, kept %d (want 0, 0)",
+          st.step.factorised, st.w_kept);
+  }
+  free(u), free(v), free(f);
+  nh_system_destroy(&exact);
+  tissue_close(&tf);
+}
+
+static void test_kept_w0(void) {
+  kept_sequence(0.0, 1);  /* kept, then not after another factorisation */
+  kept_sequence(0.01, 0); /* the last point in the next cell along x (cells are 10 mm) */
+}
+
 int main(void) {
   verbose = getenv("NH_VERBOSE") != NULL;
   kkt_case(1e5, 0.3, 1, 0.0, 0);
@@ -898,5 +994,6 @@ int main(void) {
   kkt_case(1e6, 0.35, 0, 0.0, 0);
   test_stick_slide();
   test_bad_row();
+  test_kept_w0();
   TEST_END();
 }

@@ -23,7 +23,12 @@
  *     (Δ and ε scaled alike) gives 10× within 20 %;
  *  3. a repeated assembly at a state within τ rebuilds no tangent (A kept);
  *  4. 1 and 2 threads give bitwise the same force, K̃ v and A along the same
- *     history (the in-place path runs in parallel: 144 cells per colour). */
+ *     history (the in-place path runs in parallel: 144 cells per colour);
+ *  5. an assembly repeated at the same u and v hands back the last force and
+ *     K̃ v (assemble.c): it must equal a fresh system's at every change of
+ *     its inputs, u and v changed in place (same buffers), cM, K̃ v asked for
+ *     after an assembly without it, and τ lowered to 0 at the same state
+ *     (the lagging tangents must then be rebuilt). */
 #include "check.h"
 #include "fem/fem.h"
 #include "mesh/mesh.h"
@@ -95,6 +100,59 @@ static void error_and_bound(setup *S, double tau, double *error, double *bound) 
   }
   *error = fabs(pEp);
   *bound = b;
+}
+
+/* sys's force, K̃ v and A p (from the last assembly) against a fresh
+ * system's assembled once at (u, v, c_M): bitwise (τ = 0 has no history). */
+static void against_fresh(setup *S, nh_system *sys, const double *u, const double *v, double cm,
+                          const char *what, const char *name) {
+  nh_system *fresh;
+  const size_t bn = sizeof(double) * (size_t)S->n, bf = sizeof(double) * (size_t)S->nf;
+  CHECK_OK(nh_system_create(S->t, S->fixed, NULL, &fresh));
+  nh_system_assemble(fresh, u, v, cm, cK, S->f[1], S->kv[1], 1);
+  nh_system_apply(fresh, S->p, S->y[1]);
+  nh_system_apply(sys, S->p, S->y[0]);
+  CHECK(!memcmp(S->f[0], S->f[1], bn), "%s: %s: f_int differs from a fresh assembly", name, what);
+  CHECK(!memcmp(S->kv[0], S->kv[1], bn), "%s: %s: K v differs from a fresh assembly", name, what);
+  CHECK(!memcmp(S->y[0], S->y[1], bf), "%s: %s: A differs from a fresh assembly", name, what);
+  nh_system_destroy(&fresh);
+}
+
+/* Part 5 on sys (assembled at u1 with tolerance tau, lagging tangents). */
+static void repeated(setup *S, double tau, nh_system *sys, const char *name) {
+  const size_t bn = sizeof(double) * (size_t)S->n;
+  double *u = malloc(bn), *v = malloc(bn);
+  memcpy(u, S->u1, bn), memcpy(v, S->v, bn);
+  /* τ lowered to 0 at the same state: the tangents kept within τ are rebuilt */
+  nh_system_set_lazy(sys, 0.0);
+  nh_system_lazy_reset(sys);
+  nh_system_assemble(sys, u, v, cM, cK, S->f[0], S->kv[0], 1);
+  CHECK(nh_system_lazy_updates(sys) > 0, "%s: tau %g -> 0: no tangent rebuilt", name, tau);
+  against_fresh(S, sys, u, v, cM, "tau lowered to 0", name);
+  /* the same state again: nothing rebuilt, the same results */
+  nh_system_lazy_reset(sys);
+  memset(S->f[0], 0, bn), memset(S->kv[0], 0, bn);
+  nh_system_assemble(sys, u, v, cM, cK, S->f[0], S->kv[0], 1);
+  CHECK(nh_system_lazy_updates(sys) == 0, "%s: repeated: %d tangents rebuilt", name,
+        nh_system_lazy_updates(sys));
+  against_fresh(S, sys, u, v, cM, "repeated", name);
+  /* u changed in place */
+  for (int i = 0; i < S->n; i++) u[i] += 1e-3 * tau * H * nh_rand();
+  nh_system_assemble(sys, u, v, cM, cK, S->f[0], S->kv[0], 1);
+  against_fresh(S, sys, u, v, cM, "u changed", name);
+  /* v changed in place */
+  for (int i = 0; i < S->n; i++) v[i] = nh_rand();
+  nh_system_assemble(sys, u, v, cM, cK, S->f[0], S->kv[0], 1);
+  against_fresh(S, sys, u, v, cM, "v changed", name);
+  /* another c_M (A afresh) */
+  nh_system_assemble(sys, u, v, 2.0 * cM, cK, S->f[0], S->kv[0], 1);
+  against_fresh(S, sys, u, v, 2.0 * cM, "c_M changed", name);
+  /* without K̃ v at a new state, then with it at the same state */
+  for (int i = 0; i < S->n; i++) u[i] -= 1e-3 * tau * H * nh_rand();
+  nh_system_assemble(sys, u, NULL, 2.0 * cM, cK, S->f[0], NULL, 1);
+  nh_system_assemble(sys, u, v, 2.0 * cM, cK, S->f[0], S->kv[0], 1);
+  against_fresh(S, sys, u, v, 2.0 * cM, "K v asked for after an assembly without", name);
+  free(u), free(v);
 }
 
 /* All checks for one formulation (bbar = 0: full integration). */
@@ -222,6 +280,9 @@ static void run(int bbar) {
     CHECK(!memcmp(S.kv[0], S.kv[1], bn), "%s: tau %g: K v differs between 1 and 2 threads", name,
           tau);
     CHECK(!memcmp(S.y[0], S.y[1], bf), "%s: tau %g: A differs between 1 and 2 threads", name, tau);
+
+    /* 5. The repeated assembly's kept results, against fresh systems. */
+    repeated(&S, tau, lazy2, name);
     nh_system_destroy(&exact);
     nh_system_destroy(&zero);
     nh_system_destroy(&lazy1);

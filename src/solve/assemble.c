@@ -35,6 +35,16 @@
  * round-off (about eps ‖K₀‖ each) that a fresh assembly (a mesh change, a
  * change of cM or cK, more than half the leaves) clears.
  *
+ * An assembly repeated at the same u and v with the same cM, cK and τ
+ * (bitwise; A valid) computes nothing: every frame equals the one the last
+ * assembly left, so no tangent is updated, A is kept, and the force and
+ * K̃ v are the last ones, which the system keeps. That is a dynamic step's
+ * first assembly, at the state where the previous step's residual assembled
+ * (on the dbs-skull goal run that pass was a fifth of the assembly's
+ * samples: docs/performance.md, "The dbs-skull goal run"). The tissue's
+ * element data do not change while a system lives (a mesh change builds a
+ * new one), as the kept tangents already assume.
+ *
  * Two passes, each by colour (system.c): 1. every leaf's force, frame,
  * update decision and K̃ v; 2. A. Within a colour no two leaves share a
  * node, so every entry receives its contributions in colour order whatever
@@ -71,30 +81,45 @@ void nh_system_lazy_reset(nh_system *s) {
   s->lazy_updates = 0;
 }
 
-/* Ã = Tᵀ Aₑ T of a leaf with a hanging corner, scattered through its map. */
+/* Ã = Tᵀ Aₑ T of a leaf with a hanging corner, scattered through its map.
+ * T (8 x k) is sparse: a corner is one effective node (weight 1) or a hanging
+ * node's 2 or 4 masters, so both products run over T's nonzeros only. Each
+ * entry still sums its nonzero terms in ascending corner order, as the dense
+ * product did, and the skipped terms were exact zeros: the same bits. */
 static void nh_scatter_expanded(const nh_system *s, int l, const double *Ae, double *Ax) {
   int k = s->eff_start[l + 1] - s->eff_start[l], nd = 3 * k;
   const double *T = s->eff_T + 8 * s->eff_start[l];
   const int *map = s->emap + s->emap_start[l];
-  double *B = nh_calloc(24 * (size_t)nd, sizeof(double)); /* B = Aₑ T */
-  if (!B) return; /* cannot happen in practice; the factorisation then fails loudly */
-  for (int r = 0; r < 24; r++)
+  int nz_start[9];
+  /* B = Aₑ T, then Ã; T's nonzeros of corner b: nz_w, nz_node [nz_start[b], nz_start[b + 1]) */
+  double *B = nh_calloc((24 + (size_t)nd) * (size_t)nd + 8 * (size_t)k, sizeof(double));
+  int *nz_node = nh_calloc(8 * (size_t)k, sizeof(int));
+  if (!B || !nz_node) { /* cannot happen in practice; the factorisation then fails loudly */
+    free(B), free(nz_node);
+    return;
+  }
+  double *At = B + 24 * (size_t)nd, *nz_w = At + (size_t)nd * nd;
+  nz_start[0] = 0;
+  for (int b = 0; b < 8; b++) {
+    nz_start[b + 1] = nz_start[b];
     for (int q = 0; q < k; q++)
-      for (int j = 0; j < 3; j++) {
-        double sum = 0.0;
-        for (int b = 0; b < 8; b++) sum += Ae[24 * r + 3 * b + j] * T[b * k + q];
-        B[nd * r + 3 * q + j] = sum;
+      if (T[b * k + q] != 0.0) nz_node[nz_start[b + 1]] = q, nz_w[nz_start[b + 1]++] = T[b * k + q];
+  }
+  for (int r = 0; r < 24; r++)
+    for (int b = 0; b < 8; b++)
+      for (int z = nz_start[b]; z < nz_start[b + 1]; z++)
+        for (int j = 0; j < 3; j++)
+          B[nd * r + 3 * nz_node[z] + j] += Ae[24 * r + 3 * b + j] * nz_w[z];
+  for (int a = 0; a < 8; a++)
+    for (int z = nz_start[a]; z < nz_start[a + 1]; z++)
+      for (int i = 0; i < 3; i++) {
+        double *row = At + (size_t)nd * (3 * nz_node[z] + i);
+        const double *Brow = B + (size_t)nd * (3 * a + i);
+        for (int c = 0; c < nd; c++) row[c] += nz_w[z] * Brow[c];
       }
-  for (int p = 0; p < k; p++)
-    for (int i = 0; i < 3; i++)
-      for (int c = 0; c < nd; c++) {
-        int pos = map[nd * (3 * p + i) + c];
-        if (pos < 0) continue;
-        double sum = 0.0;
-        for (int a = 0; a < 8; a++) sum += T[a * k + p] * B[nd * (3 * a + i) + c];
-        Ax[pos] += sum;
-      }
-  free(B);
+  for (int r = 0; r < nd * nd; r++)
+    if (map[r] >= 0) Ax[map[r]] += At[r];
+  free(B), free(nz_node);
 }
 
 static void nh_scatter_leaf(const nh_system *s, int l, const double *Ae, double *Ax) {
@@ -135,6 +160,33 @@ static void nh_split_symmetric(double K[576], double *skew) {
  * split; the last group (leaves with hanging corners) is serial. */
 enum { NH_ASSEMBLE_PARALLEL_MIN = 128 };
 
+/* The last assembly repeated: the same u (and v when K̃ v is asked for), tolerance and
+ * coefficients, A valid (see the header). */
+static int nh_assembly_repeated(const nh_system *s, const double *u, const double *v,
+                                const double *Kv, int fresh) {
+  const size_t bytes = sizeof(double) * 3 * (size_t)s->n_nodes;
+  return !fresh && s->last_kept >= (Kv ? 2 : 1) && s->lazy_tolerance == s->last_tolerance &&
+         !memcmp(u, s->last_u, bytes) && (!Kv || !memcmp(v, s->last_v, bytes));
+}
+
+/* Keep this assembly's inputs and outputs for a repetition (nothing kept
+ * without memory: the next assembly then computes). */
+static void nh_assembly_keep(nh_system *s, const double *u, const double *v, const double *f_int,
+                             const double *Kv) {
+  const size_t n = 3 * (size_t)s->n_nodes, bytes = sizeof(double) * n;
+  s->last_kept = 0;
+  if (!s->last_u) {
+    s->last_u = nh_calloc(n, sizeof(double)), s->last_v = nh_calloc(n, sizeof(double));
+    s->last_f = nh_calloc(n, sizeof(double)), s->last_kv = nh_calloc(n, sizeof(double));
+  }
+  if (!s->last_u || !s->last_v || !s->last_f || !s->last_kv) return;
+  memcpy(s->last_u, u, bytes);
+  memcpy(s->last_f, f_int, bytes);
+  if (Kv) memcpy(s->last_v, v, bytes), memcpy(s->last_kv, Kv, bytes);
+  s->last_tolerance = s->lazy_tolerance;
+  s->last_kept = Kv ? 2 : 1;
+}
+
 void nh_system_assemble(nh_system *s, const double *u, const double *v, double cM, double cK,
                         double *f_int, double *Kv, int threads) {
   const nh_tissue *t = s->tissue;
@@ -142,10 +194,18 @@ void nh_system_assemble(nh_system *s, const double *u, const double *v, double c
   const double tol = s->lazy_tolerance;
   const int jacobian = s->consistent && s->jac_v;
   const int fresh = !s->a_valid || cM != s->a_cM || cK != s->a_cK || jacobian;
+  s->threads = threads; /* the compliance W's build (compliance.c) runs on the same team */
+  if (nh_assembly_repeated(s, u, v, Kv, fresh)) {
+    const size_t bytes = sizeof(double) * 3 * (size_t)m->n_nodes;
+    memcpy(f_int, s->last_f, bytes);
+    if (Kv) memcpy(Kv, s->last_kv, bytes);
+    memset(s->updated, 0, (size_t)m->n_leaves); /* as the computed repetition: none */
+    return;
+  }
+  s->last_kept = 0;
   memset(f_int, 0, sizeof(double) * 3 * (size_t)m->n_nodes);
   if (Kv) memset(Kv, 0, sizeof(double) * 3 * (size_t)m->n_nodes);
   int nt = threads > 0 ? threads : omp_get_max_threads();
-  s->threads = threads; /* the compliance W's build (compliance.c) runs on the same team */
 
   /* 1. Forces, frames, which tangents to update, and K̃ v. */
   for (int colour = 0; colour <= s->n_colours; colour++) {
@@ -180,6 +240,7 @@ void nh_system_assemble(nh_system *s, const double *u, const double *v, double c
     s->factor_current = 0;
     return;
   }
+  nh_assembly_keep(s, u, v, f_int, Kv);
   int todo[66] = {0}, count = 0;
   for (int colour = 0; colour <= s->n_colours; colour++) {
     for (int k = s->colour_start[colour]; k < s->colour_start[colour + 1]; k++)

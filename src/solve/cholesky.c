@@ -36,6 +36,7 @@ int nh_system_factor(nh_system *s) {
     s->flops_iteration = s->flops_solve + 4.0 * (double)cholmod_nnz(s->A, &s->cm);
   }
   s->W_valid = 0; /* the compliance belongs to the previous A */
+  s->factor_serial++;
   s->factor_current = 0;
   int ok = cholmod_factorize(s->A, s->L, &s->cm);
   s->not_posdef = s->cm.status == CHOLMOD_NOT_POSDEF;

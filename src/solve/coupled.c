@@ -184,12 +184,53 @@ static int nh_coupled_free_solve(nh_step_work *w) {
   return NH_OK;
 }
 
-/* The tissue part of W with the current factor, W_t = J_t A⁻¹ J_tᵀ, and the
- * sum W = W_t + W_tools for the constraint solve. */
+/* The rows' key for a kept W₀ (nh_tissue_compliance): m + 1 starts, the
+ * tissue nodes, and each row's tool, element, second tool and element;
+ * *len its length. NULL without memory. */
+static int *nh_rows_key(const nh_rows *rows, int *len) {
+  const int m = rows->m, slots = rows->start[m];
+  *len = m + 1 + slots + 4 * m;
+  int *key = nh_calloc((size_t)*len, sizeof(int));
+  if (!key) return NULL;
+  memcpy(key, rows->start, sizeof(int) * (size_t)(m + 1));
+  memcpy(key + m + 1, rows->node, sizeof(int) * (size_t)slots);
+  for (int i = 0; i < m; i++) {
+    int *k = key + m + 1 + slots + 4 * i;
+    k[0] = rows->tool[i], k[1] = rows->elem[i];
+    k[2] = rows->tool2 ? rows->tool2[i] : -1, k[3] = rows->elem2 ? rows->elem2[i] : -1;
+  }
+  return key;
+}
+
+/* The tissue part of W, W_t = J_t A⁻¹ J_tᵀ with the factor (current or
+ * reused), and the sum W = W_t + W_tools for the constraint solve. With a
+ * reused factor W_t only linearises the outer corrections, whose fixed point
+ * does not depend on it (nh_corrected_step): a W_t built with the same
+ * factor for rows on the same tissue nodes and tool elements (their
+ * directions and weights moved by a step) serves, and is taken again. */
 static int nh_tissue_compliance(nh_step_work *w) {
-  const size_t mm = (size_t)w->m * w->m;
-  memset(w->Wt, 0, sizeof(double) * mm);
-  NH_TRY(nh_system_compliance_add(w->s, w->Jt, w->Wt));
+  nh_system *s = w->s;
+  const int m = w->m;
+  const size_t mm = (size_t)m * m;
+  int len = 0, *key = s->L ? nh_rows_key(w->rows, &len) : NULL;
+  const int same = key && !s->factor_current && s->w0_serial == s->factor_serial && s->w0_m == m &&
+                   s->w0_slots == len && !memcmp(key, s->w0_key, sizeof(int) * len);
+  w->st.w_kept = same;
+  if (same) {
+    memcpy(w->Wt, s->w0, sizeof(double) * mm);
+    free(key);
+  } else {
+    memset(w->Wt, 0, sizeof(double) * mm);
+    int rc = nh_system_compliance_add(s, w->Jt, w->Wt);
+    s->w0_serial = 0;
+    free(s->w0), s->w0 = NULL;
+    free(s->w0_key), s->w0_key = key;
+    if (rc) return rc;
+    if (key && (s->w0 = nh_calloc(mm ? mm : 1, sizeof(double)))) {
+      memcpy(s->w0, w->Wt, sizeof(double) * mm);
+      s->w0_m = m, s->w0_slots = len, s->w0_serial = s->factor_serial;
+    }
+  }
   for (size_t k = 0; k < mm; k++) w->W[k] = w->Wt[k] + w->Wtools[k];
   return NH_OK;
 }

@@ -92,7 +92,8 @@ int nh_system_factor_or_reuse(nh_system *s, const nh_integrator *in, nh_factor_r
     /* an inherited factor (inherit.c) builds W₀ by one application per
      * constraint row: with many rows a factorisation is cheaper */
     if (!need && !s->L &&
-        (double)s->rows_hint * s->flops_iteration * NH_SOLVE_FLOP_COST > s->flops_factor)
+        (double)s->rows_hint * s->flops_iteration * nh_solve_flop_cost(s->flops_factor) >
+            s->flops_factor)
       need = 1;
     if (!need && !s->L) {
       NH_TRY(nh_inherit_ready(s)); /* the new unknowns' block, once */
@@ -157,6 +158,17 @@ int nh_system_pcg(nh_system *s, const double *b, double *x, int guess, double to
                   sqrt(rz / ref2), tolerance, *iterations);
 }
 
+double nh_solve_flop_cost(double flops_factor) {
+  static const double F[3] = {6e6, 1.15e8, 5.3e9}, rho[3] = {1.0, 3.1, 8.0};
+  if (!(flops_factor > F[0])) return rho[0];
+  for (int k = 1; k < 3; k++)
+    if (flops_factor < F[k]) {
+      const double a = log(flops_factor / F[k - 1]) / log(F[k] / F[k - 1]);
+      return rho[k - 1] + a * (rho[k] - rho[k - 1]);
+    }
+  return rho[2];
+}
+
 /* The renewal rule of a sequence of solves with slowly degrading
  * preconditioner: with F the cost of the factorisation that opened the
  * cycle and e_j the extra cost of the j-th step's solves with the reused
@@ -180,7 +192,7 @@ int nh_system_pcg(nh_system *s, const double *b, double *x, int guess, double to
  * and with it every result, is the same on a loaded and an idle machine:
  * F is CHOLMOD's flop count of the factorisation; streamed operations
  * (triangular solves, products with A, the constraint solver's sweeps) are
- * weighted by NH_SOLVE_FLOP_COST, the time of such a flop relative to a
+ * weighted by ρ = nh_solve_flop_cost(F), the time of such a flop relative to a
  * factorisation's (triangular solves stream L from memory, the supernodal
  * factorisation runs in dense BLAS-3 blocks: docs/performance.md); the
  * constraint solver's dense factorisations (LAPACK) count as factorisation
@@ -191,7 +203,8 @@ void nh_system_account(nh_system *s, const nh_step_stats *st) {
                           later * (s->flops_iteration + s->flops_solve) + st->correction_flops;
   /* an inherited factor's W₀: one application of the preconditioner per row */
   const double rows_w = !s->L && s->inh ? (double)s->rows_hint * s->flops_iteration : 0.0;
-  const double extra = (streamed + rows_w) * NH_SOLVE_FLOP_COST + st->correction_flops_dense;
+  const double extra =
+      (streamed + rows_w) * nh_solve_flop_cost(s->flops_factor) + st->correction_flops_dense;
   if (s->factor_age == 0) {
     s->cycle_cost = s->flops_factor;
     s->cycle_steps = 1;
@@ -235,9 +248,10 @@ int nh_system_solve_reuse(nh_system *s, const double *b, double *x, double toler
 
 /* The reuse state of a checkpoint: whether a factor exists, the u and
  * coefficients of the A it factorises, its age and the renewal rule's
- * counters. The factor itself (megabytes, CHOLMOD's layout) is not saved: it
- * is made again from the same A, which the same assembly and the same
- * CHOLMOD make bit for bit the same. */
+ * counters, the last assembly, and the W₀ the factor's corrections keep
+ * (coupled.c: m² doubles and its rows' key). The factor itself (megabytes,
+ * CHOLMOD's layout) is not saved: it is made again from the same A, which
+ * the same assembly and the same CHOLMOD make bit for bit the same. */
 void nh_system_reuse_save(const nh_system *s, nh_bytes *b) {
   int32_t head[4] = {s->L != NULL, s->n_nodes, s->factor_age, s->refactor_due};
   nh_bytes_put(b, head, sizeof head);
@@ -251,9 +265,39 @@ void nh_system_reuse_save(const nh_system *s, nh_bytes *b) {
   /* the last assembly (its frames decide which tangents the next one keeps) */
   int32_t assembled = s->a_valid;
   nh_bytes_put(b, &assembled, sizeof assembled);
-  if (!assembled) return;
-  nh_bytes_put(b, s->c_assembled, sizeof s->c_assembled);
-  nh_bytes_put(b, s->u_assembled, sizeof(double) * 3 * (size_t)s->n_nodes);
+  if (assembled) {
+    nh_bytes_put(b, s->c_assembled, sizeof s->c_assembled);
+    nh_bytes_put(b, s->u_assembled, sizeof(double) * 3 * (size_t)s->n_nodes);
+  }
+  /* the W₀ the factor's corrections keep (coupled.c), with its rows' key:
+   * a continued run takes it where the uninterrupted one does */
+  int32_t w0[2] = {s->L && s->w0 && s->w0_serial == s->factor_serial ? s->w0_m : -1, s->w0_slots};
+  nh_bytes_put(b, w0, sizeof w0);
+  if (w0[0] < 0) return;
+  nh_bytes_put(b, s->w0_key, sizeof(int) * (size_t)s->w0_slots);
+  nh_bytes_put(b, s->w0, sizeof(double) * (size_t)s->w0_m * (size_t)s->w0_m);
+}
+
+/* The kept W₀ of a saved state (nothing in states written before it was
+ * kept: the reader is then at the end). */
+static int nh_reuse_load_w0(nh_system *s, nh_byte_reader *r) {
+  s->w0_serial = 0;
+  if (r->p == r->end) return NH_OK;
+  int32_t w0[2];
+  nh_bytes_get(r, w0, sizeof w0);
+  NH_CHECK(!r->short_read && w0[0] < 100000 && w0[1] >= 0, NH_ERR_INPUT,
+           "the checkpoint's solver state is malformed");
+  if (w0[0] < 0) return NH_OK;
+  const size_t mm = (size_t)w0[0] * (size_t)w0[0];
+  free(s->w0), free(s->w0_key);
+  s->w0 = nh_calloc(mm ? mm : 1, sizeof(double));
+  s->w0_key = nh_calloc(w0[1] ? (size_t)w0[1] : 1, sizeof(int));
+  if (!s->w0 || !s->w0_key) return NH_ERROR(NH_ERR_MEMORY, "out of memory restoring W0");
+  nh_bytes_get(r, s->w0_key, sizeof(int) * (size_t)w0[1]);
+  nh_bytes_get(r, s->w0, sizeof(double) * mm);
+  NH_CHECK(!r->short_read && s->L, NH_ERR_INPUT, "the checkpoint's solver state is malformed");
+  s->w0_m = w0[0], s->w0_slots = w0[1], s->w0_serial = s->factor_serial;
+  return NH_OK;
 }
 
 /* Assemble A at a saved u (f_int to scratch): NH_ERR_INPUT if u is not finite. */
@@ -295,6 +339,7 @@ int nh_system_reuse_load(nh_system *s, const unsigned char *data, size_t size, i
     NH_TRY(nh_reuse_assemble(s, &r, threads));
   else
     s->factor_current = 0;
+  NH_TRY(nh_reuse_load_w0(s, &r));
   NH_CHECK(r.p == r.end, NH_ERR_INPUT, "the checkpoint's solver state is malformed");
   s->factor_age = head[2];
   s->refactor_due = head[3];

@@ -426,6 +426,7 @@ typedef struct {
   double t_compliance; /* s: W = J A⁻¹ Jᵀ, tissue (Algorithm 3) and tools */
   double t_mcp;        /* s: the mixed complementarity solve */
   nh_mcp_stats mcp;    /* sweeps, residual, stick/slide/open counts */
+  int w_kept; /* 1: a reused factor's corrections took the W₀ kept from an earlier step */
 } nh_coupled_stats;
 
 /* One backward-Euler step of the tissue (nh_step_dynamic's form) and the

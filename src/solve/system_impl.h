@@ -80,7 +80,21 @@ struct nh_system {
   const double *jac_v;
   double jac_cG, jac_cD;
   int lazy_updates; /* leaves whose tangent the last assembly updated */
-  int threads;      /* OpenMP threads of the last assembly (0: all), W's build uses them too */
+  /* The last assembly's u, v, f_int and K̃ v (assemble.c): one repeated at
+   * the same u and v (a step's first, after the previous step's residual
+   * assembly) hands them back. kept: 0 none, 1 f_int, 2 f_int and K̃ v. */
+  double *last_u, *last_v, *last_f, *last_kv; /* 3 per node each */
+  int last_kept;
+  double last_tolerance;
+  /* The tissue part of W₀ = J A₀⁻¹ Jᵀ last built (coupled.c), with the
+   * factorisation it came from (factor_serial, counted by nh_system_factor)
+   * and its rows' tissue nodes and tool elements: a reused factor's outer
+   * corrections take it again while those are the same. */
+  int factor_serial;
+  double *w0;
+  int w0_m, w0_slots, w0_serial; /* w0_serial 0: none kept */
+  int *w0_key;                   /* m + 1 starts, the nodes, 4 per row (tool, elem, tool2, elem2) */
+  int threads; /* OpenMP threads of the last assembly (0: all), W's build uses them too */
 
   /* Constraint rows J (m x n_free, stored as Jᵀ: n_free x m) solved through
    * the compliance W = J A⁻¹ Jᵀ (Algorithm 1); W and its Cholesky factor are
@@ -148,12 +162,16 @@ int nh_inherit_compliance_add(nh_system *s, cholmod_sparse *Jt, double *W);
  * any case. */
 enum { NH_PCG_MAX = 40, NH_OUTER_MAX = 10, NH_REFACTOR_MAX_AGE = 200 };
 
-/* The time of one flop of a triangular solve or sparse product relative to
- * one flop of CHOLMOD's supernodal factorisation: measured 7.4 on the needle
- * phantom at 28611 DOFs and 7.5 on the skull case at 18786 (one BLAS
- * thread; docs/performance.md, "When to factorise", where 20 and 5 are
- * compared); the mean cost of a cycle is flat near its optimum. */
-#define NH_SOLVE_FLOP_COST 8.0
+/* ρ, the time of one flop of a triangular solve or sparse product relative
+ * to one flop of CHOLMOD's supernodal factorisation, for a factorisation of
+ * F flops (reuse.c): the factorisation's dense blocks grow with the system
+ * and run faster per flop, the streamed solves do not. Measured (one BLAS
+ * thread; docs/performance.md, "When to factorise"): about 1 at F ≈ 6e6
+ * (the phantom's 650–855 unknowns), 2.9–3.5 at F ≈ 1.15e8 (dbs-skull's
+ * goal mesh, 2100–2500 unknowns), 7.4–7.5 at 5.3e9 and 1.2e10 (18786 and
+ * 28611 unknowns; 8 is used there, as before); linear in log F between
+ * those points, constant beyond them. */
+double nh_solve_flop_cost(double flops_factor);
 
 /* After a step with reuse on: the renewal rule, by operation counts, from
  * the step's PCG iterations with the reused factor, its outer corrections
