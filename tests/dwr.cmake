@@ -8,3 +8,5 @@ nh_add_c_test(test_resolve_tip verify)
 nh_add_c_test(test_dwr_rows verify)
 # The constraint-data term against the skull points one lattice finer, run both ways (tests/test_dwr_skull.c).
 nh_add_c_test(test_dwr_skull verify)
+# adapt.marking.goals: the marked set of the goals' summed indicators and the union of each goal's own marking (tests/test_goal_marking.c).
+nh_add_c_test(test_goal_marking verify)
