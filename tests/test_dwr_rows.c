@@ -31,15 +31,6 @@
  *     (nh_dwr_estimate_combined) equals Σ ω_pk E_pk of the separate
  *     estimates (nh_dwr_estimate) to 1e-10 relative: the recovery and the
  *     integrals are linear in the dual, and so is the constrained solve.
- *  3. The duals on a reused factor (solve.h, nh_system_solve_rows): K
- *     factorised through the renewal path with reuse on, then A = (1 + ε) K
- *     assembled (ε = 0.25) and not factorised. The duals then take the
- *     factor of K as it stands: the saddle point of K, whose solution is
- *     z' = (1 + ε) z, μ' = μ exactly, z, μ those of A from a fresh
- *     factorisation of A (an independent CHOLMOD factor), asserted to 1e-10
- *     relative; with reuse off (refactor: every) A is factorised first and
- *     the duals equal z, μ to 1e-10. A dual mixing the two matrices (the
- *     rows' W of one, the solve of the other) misses both by O(ε).
  * NH_VERBOSE=1 prints the numbers. */
 #include "check.h"
 #include "adapt/adapt.h"
@@ -52,7 +43,6 @@
 
 #include "dwr_support.h"
 #include "hanging_mesh.h"
-#include "solve/system_impl.h"
 
 #define RADIUS 5e-4
 #define NROWS  6
@@ -303,45 +293,6 @@ static void test_data_change(problem *p) {
   free(uf), free(uf2), free(z);
 }
 
-/* Part 3: the duals of A = (1 + ε) K on the factor of K (reuse) and on A's own. */
-static void test_reused_factor(problem *p) {
-  const int n = 3 * p->m->n_nodes, m = p->rows.m;
-  const double eps = 0.25;
-  double *zero = calloc(n, sizeof(double)), *z = malloc(sizeof(double) * 3 * n);
-  double *zr = malloc(sizeof(double) * 3 * n), *mu = malloc(sizeof(double) * 3 * m);
-  double *mur = malloc(sizeof(double) * 3 * m);
-  /* z, μ of A: a fresh factorisation of A itself */
-  nh_system_assemble(p->s, zero, NULL, 0.0, 1.0 + eps, zero, NULL, 0);
-  CHECK_OK(nh_system_factor(p->s));
-  CHECK_OK(nh_dwr_duals(p->s, &p->rows, 1.0, p->m->n_nodes, 3, p->j, z, mu, NULL));
-  for (int reuse = 1; reuse >= 0; reuse--) {
-    nh_integrator in = {.dt = 1.0, .reuse = reuse};
-    nh_step_stats st = {0};
-    nh_system_assemble(p->s, zero, NULL, 0.0, 1.0, zero, NULL, 0); /* K */
-    CHECK_OK(nh_system_factor(p->s));
-    CHECK_OK(nh_system_factor_or_reuse(p->s, &in, NH_FACTOR_STEP, &st)); /* keeps K's factor */
-    nh_system_assemble(p->s, zero, NULL, 0.0, 1.0 + eps, zero, NULL, 0); /* A, not factorised */
-    CHECK_OK(nh_dwr_duals(p->s, &p->rows, 1.0, p->m->n_nodes, 3, p->j, zr, mur, NULL));
-    const int later = nh_system_take_later_factorisations(p->s);
-    CHECK(later == !reuse, "reuse %d: %d factorisations for the duals, expected %d", reuse, later,
-          !reuse);
-    const double c = reuse ? 1.0 + eps : 1.0;
-    double zmax = 0.0, mmax = 0.0, dz = 0.0, dm = 0.0;
-    for (int i = 0; i < 3 * n; i++)
-      zmax = fmax(zmax, fabs(z[i])), dz = fmax(dz, fabs(zr[i] - c * z[i]));
-    for (int i = 0; i < 3 * m; i++)
-      mmax = fmax(mmax, fabs(mu[i])), dm = fmax(dm, fabs(mur[i] - mu[i]));
-    CHECK(dz <= 1e-10 * c * zmax, "reuse %d: the duals differ from %g z by %.3g (max |z| %.3g)",
-          reuse, c, dz, zmax);
-    CHECK(dm <= 1e-10 * mmax, "reuse %d: the multipliers differ from mu by %.3g (max |mu| %.3g)",
-          reuse, dm, mmax);
-    if (getenv("NH_VERBOSE"))
-      printf("reused factor (reuse %d): |z' - %g z| = %.2e of %.2e, |mu' - mu| = %.2e of %.2e\n",
-             reuse, c, dz, zmax, dm, mmax);
-  }
-  free(zero), free(z), free(zr), free(mu), free(mur);
-}
-
 int main(void) {
   problem p = {0};
   CHECK_OK(nh_mesh_create_box(lo, hi, grid, &p.m));
@@ -398,7 +349,6 @@ int main(void) {
              k, lhs, rhs, fabs(lhs - rhs) / fabs(lhs), rhs0, fabs(lhs - rhs0) / fabs(lhs));
   }
   test_data_change(&p);
-  test_reused_factor(&p);
   nh_refine_info_free(&info);
   nh_template_destroy(&t2);
   free(all), free(uh), free(Puh), free(uf), free(zf), free(z0);

@@ -545,8 +545,7 @@ int nh_system_solve_rows(nh_system *s, const nh_rows *rows, const unsigned char 
   const int n = s->n_free;
   if (n_used) *n_used = 0;
   if (mu_out && rows) memset(mu_out, 0, sizeof(double) * (size_t)rows->m * (size_t)ncol);
-  /* reusing: a factor of this mesh's A as it stands (solve.h); else A's own */
-  if (ncol > 0 && !s->factor_current && !(s->reusing && s->L)) NH_TRY(nh_system_factor_later(s));
+  if (ncol > 0 && !s->factor_current) NH_TRY(nh_system_factor_later(s));
   NH_TRY(nh_system_solve_many(s, ncol, b, x));
   int m = 0;
   for (int i = 0; rows && i < rows->m; i++) m += !active || active[i];

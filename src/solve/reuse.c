@@ -84,7 +84,6 @@ int nh_system_factor_or_reuse(nh_system *s, const nh_integrator *in, nh_factor_r
                               nh_step_stats *st) {
   double t0 = nh_time_now();
   int need;
-  s->reusing = in->reuse;
   if (rule == NH_FACTOR_NEWTON) {
     need = !s->factor_current; /* lazy tangents may have left A as it was */
   } else {

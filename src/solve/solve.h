@@ -393,19 +393,14 @@ int nh_rows_widen(nh_rows *rows, int count);
  * pivots below 1e-12 (dependent rows: J_tᵀ μ is still unique, μ is not:
  * the truncated rows get 0). A is the matrix as the step left it, assembled
  * at the step's solution (its closing residual): the tangent at the state
- * the goal estimate integrates at. When the factor is not A's: if the last
- * step reused factors (solver.refactor: auto) and a factor of this mesh
- * exists (a reused one, or the step's own of the A at its start), the duals
- * are those of the matrix A' it factorises, x = A'⁻¹ b − A'⁻¹J_tᵀμ with W'
- * of A' (a consistent saddle point; A' is within the renewal rule's reach
- * of A, and on the phantom's goal run the estimates moved by 1.4e-5
- * relative at the median, 2.4e-3 at most, against A's own factor:
- * docs/performance.md "Goal-oriented runs"); otherwise (refactor: every,
- * or only an inherited factor after a mesh change) A is factorised here
- * first, which starts a new cycle of the renewal rule. (PCG on the reused
- * factor was measured 1.7–3.5 × dearer than that factorisation.) b, x: column-major n_free x ncol.
- * mu (may be NULL): the multipliers, rows->m per column (0 on the inactive rows). *n_used (may be
- * NULL): the active rows. NH_ERR_MEMORY, NH_ERR_NUMERIC. */
+ * the goal estimate integrates at. When the factor is not A's (a reused or
+ * inherited one, or the step's own of the A at its start), A is factorised
+ * here first, which starts a new cycle of the renewal rule: the next step,
+ * assembling at the same state, takes it as A's own factor (PCG on the
+ * reused factor was measured 1.7–3.5 × dearer, docs/performance.md
+ * "Goal-oriented runs"). b, x: column-major n_free x ncol. mu (may be
+ * NULL): the multipliers, rows->m per column (0 on the inactive rows).
+ * *n_used (may be NULL): the active rows. NH_ERR_MEMORY, NH_ERR_NUMERIC. */
 int nh_system_solve_rows(nh_system *sys, const nh_rows *rows, const unsigned char *active, int ncol,
                          const double *b, double *x, double *mu, int *n_used);
 /* The factorisations nh_system_solve_rows made since the last call, and

@@ -45,9 +45,6 @@ struct nh_system {
   /* factorisations after the step (nh_system_solve_rows: the goal
    * estimate's duals), until nh_system_take_later_factorisations */
   int later_factorised;
-  /* the last step reused factors (solver.refactor: auto, nh_system_factor_or_reuse):
-   * the duals then take the factor as it stands */
-  int reusing;
   /* Across a mesh change (inherit.c): the old mesh's factor extended to the
    * new unknowns, the preconditioner while L is NULL; rows_hint: the
    * constraint rows of the coming step (coupled.c), whose W₀ it would cost */
