@@ -10,3 +10,5 @@ nh_add_c_test(test_dwr_rows verify)
 nh_add_c_test(test_dwr_skull verify)
 # The local enriched dual where a held tool row and the goal share a cell, against nested fine solves (tests/test_dwr_local.c).
 nh_add_c_test(test_dwr_local verify)
+# adapt.marking.goals: the marked set of the goals' summed indicators and the union of each goal's own marking (tests/test_goal_marking.c).
+nh_add_c_test(test_goal_marking verify)

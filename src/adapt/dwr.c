@@ -48,7 +48,10 @@
  * Fuenmayor 2014 do this with an equilibrated SPR):
  *     E_pk = Σ_K ε_K,   ε_K = φ_K ∫_K (σ*_u − σ_h(u))ᵀ D⁻¹ (σ*_z − σ_h(z)) dΩ,
  * (2x2x2 Gauss points; σ_h(z) the tangent stress of z at the state u,
- * nh_hex_rotated_stress of Rᵀz; each cell with its own material (per
+ * that of nh_hex_rotated_stress of Rᵀz, formed as λ tr H I + μ (H + Hᵀ),
+ * H = Σₐ zₐ ⊗ R gₐ, with the rotated gradients computed once per cell: the
+ * rotations R(·)Rᵀ of the 36 duals' stresses at every Gauss point were
+ * 40 % of the integrals' time; each cell with its own material (per
  * label) and its formulation: under B-bar the volumetric part is the
  * element's mean, κ θ̄ I, with θ̄(z) = Σₐ bₐ·zₐ the linearised mean volume
  * change, so that the products are those of the assembled tangent; D⁻¹
@@ -162,13 +165,27 @@
 
 #define NH_DWR_PARALLEL_MIN 256
 
-/* d = Rᵀ w over cell c's corners (w a nodal field, 3 per node). */
-static void nh_dwr_corotate(const nh_mesh *m, const double *w, int c, const double R[9],
-                            double d[24]) {
-  for (int a = 0; a < 8; a++) {
-    const double *v = w + 3 * m->cells[8 * c + a];
-    for (int i = 0; i < 3; i++) d[3 * a + i] = R[i] * v[0] + R[3 + i] * v[1] + R[6 + i] * v[2];
-  }
+/* The rotated gradients of one point: (Rg)ₐ = R gₐ, a = 0..7. */
+static void nh_dwr_rotate_gradients(const double R[9], const double g[24], double Rg[24]) {
+  for (int a = 0; a < 8; a++) nh_mat3_vec(R, g + 3 * a, Rg + 3 * a);
+}
+
+/* The tangent stress of an increment w (a dual; we its values at the cell's
+ * 8 corners) at a point with rotated gradients Rg: the corotational
+ * R (λ tr ε I + 2μ ε(Rᵀw)) Rᵀ of nh_hex_rotated_stress, formed without the
+ * rotations, R (Rᵀwₐ ⊗ gₐ) Rᵀ = wₐ ⊗ R gₐ and C isotropic: σ = λ tr H I +
+ * μ (H + Hᵀ), H = Σₐ wₐ ⊗ (R gₐ). B-bar (tz not NULL): κ θ̄ I + 2μ dev ε,
+ * θ̄ = *tz. */
+static void nh_dwr_dual_stress(const double we[24], const double Rg[24], double lambda, double mu,
+                               const double *tz, double s[6]) {
+  double H[9] = {0};
+  for (int a = 0; a < 8; a++)
+    for (int i = 0; i < 3; i++)
+      for (int j = 0; j < 3; j++) H[3 * i + j] += we[3 * a + i] * Rg[3 * a + j];
+  double tr = H[0] + H[4] + H[8];
+  double vol = tz ? (lambda + 2.0 * mu / 3.0) * *tz - 2.0 * mu / 3.0 * tr : lambda * tr;
+  s[0] = 2.0 * mu * H[0] + vol, s[1] = 2.0 * mu * H[4] + vol, s[2] = 2.0 * mu * H[8] + vol;
+  s[3] = mu * (H[5] + H[7]), s[4] = mu * (H[2] + H[6]), s[5] = mu * (H[1] + H[3]);
 }
 
 /* The element's material and, for B-bar, the derivative b of its mean volume
@@ -194,13 +211,10 @@ static double nh_dwr_divergence_rest(const double d[24], const double g[24],
   return s;
 }
 
-/* θ̄ of an increment w (a dual) of cell c: Σₐ bₐ·wₐ. */
-static double nh_dwr_dilatation(const nh_mesh *m, const double *w, int c, const double b[24]) {
+/* θ̄ of an increment w (a dual; we its values at the cell's corners): Σₐ bₐ·wₐ. */
+static double nh_dwr_dilatation(const double we[24], const double b[24]) {
   double s = 0.0;
-  for (int a = 0; a < 8; a++) {
-    const double *v = w + 3 * m->cells[8 * c + a];
-    s += b[3 * a] * v[0] + b[3 * a + 1] * v[1] + b[3 * a + 2] * v[2];
-  }
+  for (int i = 0; i < 24; i++) s += b[i] * we[i];
   return s;
 }
 
@@ -339,10 +353,13 @@ static int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale,
     nh_hex_corotated(Xe, ue, G0, R, d);
     nh_dwr_cell_material(t, c, ue, &lambda, &mu, &gbar, b, &theta);
     nh_hex_rotated_stress(R, d, G0, lambda, mu, gbar ? &theta : NULL, s);
+    double RG0[24];
+    nh_dwr_rotate_gradients(R, G0, RG0);
     for (int q = 0; q < nz; q++) {
-      nh_dwr_corotate(m, z + n3 * q, c, R, d);
-      double tz = gbar ? nh_dwr_dilatation(m, z + n3 * q, c, b) : 0.0;
-      nh_hex_rotated_stress(R, d, G0, lambda, mu, gbar ? &tz : NULL, s + 6 * (1 + q));
+      double ze[24];
+      nh_mesh_cell_coords(m, z + n3 * q, c, ze);
+      double tz = gbar ? nh_dwr_dilatation(ze, b) : 0.0;
+      nh_dwr_dual_stress(ze, RG0, lambda, mu, gbar ? &tz : NULL, s + 6 * (1 + q));
     }
   }
   if ((rc = nh_spr_recover_fields(m, t, h, nfld, samples, star))) goto done;
@@ -366,7 +383,7 @@ static int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale,
     int c = m->leaves[l];
     const int *corner = m->cells + 8 * c;
     const double *G0 = t->G0 + 24 * t->cell_shape[c];
-    double Xe[24], ue[24], R[9], d[24], g[8][24], detJ[8], eu[48], ceu[48];
+    double Xe[24], ue[24], R[9], d[24], g[8][24], Rg[8][24], Rdiv[8][24], detJ[8], eu[48], ceu[48];
     double lambda, mu, b[24], theta;
     const double *gbar;
     nh_mesh_cell_coords(m, m->X, c, Xe);
@@ -377,7 +394,13 @@ static int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale,
     for (int gp = 0; gp < 8; gp++) {
       memcpy(g[gp], G0, sizeof g[gp]);
       detJ[gp] = nh_hex_gradients(Xe, xi + 3 * gp, g[gp]);
-      if (gbar) dev_u[gp] = nh_dwr_divergence_rest(d, g[gp], gbar);
+      nh_dwr_rotate_gradients(R, g[gp], Rg[gp]);
+      if (gbar) {
+        dev_u[gp] = nh_dwr_divergence_rest(d, g[gp], gbar);
+        double gd[24]; /* (I − Π) div w = Σₐ wₐ·R(gₐ − ḡₐ) for a dual w (Rᵀw corotated) */
+        for (int i = 0; i < 24; i++) gd[i] = g[gp][i] - gbar[i];
+        nh_dwr_rotate_gradients(R, gd, Rdiv[gp]);
+      }
       if (!(detJ[gp] > 0.0)) {
 #pragma omp atomic write
         bad_cell = c;
@@ -415,12 +438,12 @@ static int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale,
       double zn2 = 0.0, gn2 = 0.0;
       for (int k = 0; k < group; k++) {
         int q = group * p + k;
-        double dz[24], eps = 0.0, ezz = 0.0;
-        nh_dwr_corotate(m, z + n3 * q, c, R, dz);
-        double tz = gbar ? nh_dwr_dilatation(m, z + n3 * q, c, b) : 0.0;
+        double ze[24], eps = 0.0, ezz = 0.0;
+        nh_mesh_cell_coords(m, z + n3 * q, c, ze);
+        double tz = gbar ? nh_dwr_dilatation(ze, b) : 0.0;
         for (int gp = 0; gp < 8; gp++) {
           double sz[6], ez[6], cez[6], a1 = 0.0, a2 = 0.0;
-          nh_hex_rotated_stress(R, dz, g[gp], lambda, mu, gbar ? &tz : NULL, sz);
+          nh_dwr_dual_stress(ze, Rg[gp], lambda, mu, gbar ? &tz : NULL, sz);
           for (int i = 0; i < 6; i++) {
             double s = 0.0;
             for (int a = 0; a < 8; a++)
@@ -432,7 +455,9 @@ static int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale,
           if (gbar) { /* the mixed (mean-dilatation) method's terms, header "B-bar" */
             double pu = (eu[6 * gp] + eu[6 * gp + 1] + eu[6 * gp + 2]) / 3.0;
             double pz = (ez[0] + ez[1] + ez[2]) / 3.0;
-            a1 -= pu * nh_dwr_divergence_rest(dz, g[gp], gbar) + pz * dev_u[gp];
+            double div_z = 0.0;
+            for (int i = 0; i < 24; i++) div_z += ze[i] * Rdiv[gp][i];
+            a1 -= pu * div_z + pz * dev_u[gp];
           }
           eps += detJ[gp] * a1;
           ezz += detJ[gp] * a2;

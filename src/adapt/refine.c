@@ -17,7 +17,9 @@
  *     at the node's reference coordinates in the parent.
  * Under adapt.estimator goal (nh_adapt_estimate_goal, adapt/dwr.c) the
  * indicators are the goal indicators summed over the goals above
- * adapt.tolerance (between separate estimates: the combined dual's); with
+ * adapt.tolerance (between separate estimates: the combined dual's; with
+ * adapt.marking.goals each, the largest of each goal's indicator over its
+ * own maximum); with
  * a tolerance, marking looks only at cells that can still be refined (so
  * the goal error is chased below it; without one, that would refine every
  * cell near the goals to max_level: docs/adaptivity.md), and the marked
@@ -75,10 +77,12 @@ struct nh_adapt {
   /* several goals in one dual (dwr.c): every separate_every-th estimate
    * solves each goal's duals and sets the weights, the others one dual */
   int separate_every, since_separate, have_weights;
-  int local_dual;  /* adapt.local_dual: the local enriched dual at held rows (dwr_local.c) */
-  double *weight;  /* 3 per goal: ω_pk = E_pk / |E_p| of the last separate estimate */
-  double *sep_est; /* 3 per goal: E_pk of the last separate estimate */
-  double sep_sum;  /* Σ_p |E_p| of the last separate estimate (= Σ ω E there) */
+  int local_dual;   /* adapt.local_dual: the local enriched dual at held rows (dwr_local.c) */
+  int each_goal;    /* adapt.marking.goals: each (every goal's indicator over its own maximum) */
+  double *weight;   /* 3 per goal: ω_pk = E_pk / |E_p| of the last separate estimate */
+  double *sep_est;  /* 3 per goal: E_pk of the last separate estimate */
+  double *goal_top; /* per goal: its largest indicator over the leaves (marking.goals each) */
+  double sep_sum;   /* Σ_p |E_p| of the last separate estimate (= Σ ω E there) */
 };
 
 int nh_adapt_create(const nh_adapt_spec *spec, int max_cells, nh_adapt **out) {
@@ -107,6 +111,7 @@ int nh_adapt_create(const nh_adapt_spec *spec, int max_cells, nh_adapt **out) {
   a->coarsen = spec->coarsen;
   a->separate_every = spec->separate_every > 0 ? spec->separate_every : 1;
   a->local_dual = spec->local_dual;
+  a->each_goal = spec->goal_marking == NH_GOAL_MARKING_EACH;
   *out = a;
   return NH_OK;
 }
@@ -125,7 +130,7 @@ void nh_adapt_destroy(nh_adapt **adapt) {
   free((*adapt)->eta_all);
   nh_node_transfer_free(&(*adapt)->transfer);
   free((*adapt)->weight);
-  free((*adapt)->sep_est);
+  free((*adapt)->sep_est), free((*adapt)->goal_top);
   free(*adapt);
   *adapt = NULL;
 }
@@ -144,6 +149,7 @@ int nh_adapt_estimate(nh_adapt *a, const nh_mesh *m, const nh_tissue *tissue, co
 
 int nh_adapt_set_goals(nh_adapt *a, const nh_mesh *m, int n, const double *points) {
   free(a->goal_points), free(a->goal_error), free(a->goal_est), free(a->weight), free(a->sep_est);
+  free(a->goal_top);
   free(a->goal_geo), free(a->goal_cons);
   a->goal_points = nh_calloc(3 * (size_t)(n ? n : 1), sizeof(double));
   a->goal_error = nh_calloc((size_t)(n ? n : 1), sizeof(double));
@@ -152,8 +158,9 @@ int nh_adapt_set_goals(nh_adapt *a, const nh_mesh *m, int n, const double *point
   a->goal_cons = nh_calloc(3 * (size_t)(n ? n : 1), sizeof(double));
   a->weight = nh_calloc(3 * (size_t)(n ? n : 1), sizeof(double));
   a->sep_est = nh_calloc(3 * (size_t)(n ? n : 1), sizeof(double));
+  a->goal_top = nh_calloc((size_t)(n ? n : 1), sizeof(double));
   if (!a->goal_points || !a->goal_error || !a->goal_est || !a->goal_geo || !a->goal_cons ||
-      !a->weight || !a->sep_est)
+      !a->weight || !a->sep_est || !a->goal_top)
     return NH_ERROR(NH_ERR_MEMORY, "out of memory: goals");
   a->have_weights = 0;
   memcpy(a->goal_points, points, sizeof(double) * 3 * (size_t)n);
@@ -224,17 +231,32 @@ int nh_adapt_estimate_goal(nh_adapt *a, nh_system *sys, const nh_rows *rows, dou
     }
     a->since_separate++;
   }
-  /* The marking indicator: the sum over the goals still above tolerance
-   * (combined: the one dual's, over every goal). */
+  /* The marking indicator over the goals still above tolerance: their sum
+   * (combined: the one dual's, over every goal), or with marking.goals each
+   * the largest of their indicators each divided by its own maximum over
+   * the leaves, so that marking by θ of the maximum (1) marks the union of
+   * every goal's own θ-marking: a goal with a small estimate is not crowded
+   * out by the others (docs/phantom.md, "The goal runs' far probes"). */
   a->n_active = 0;
   for (int p = 0; p < a->n_goals; p++) a->n_active += !(a->goal_error[p] <= a->tolerance);
+  const int each = a->each_goal && !combined;
+  for (int p = 0; p < (each ? a->n_goals : 0); p++) {
+    const double *gi = a->goal_ind + (size_t)m->n_cells * p;
+    double top = 0.0;
+    for (int l = 0; l < m->n_leaves; l++) top = fmax(top, gi[m->leaves[l]]);
+    a->goal_top[p] = top;
+  }
   for (int l = 0; l < m->n_leaves; l++) {
     int c = m->leaves[l];
     double sum = 0.0, all = 0.0;
     for (int p = 0; p < (combined ? 1 : a->n_goals); p++) {
       double v = a->goal_ind[(size_t)m->n_cells * p + c];
       all += v;
-      if (combined || !(a->goal_error[p] <= a->tolerance)) sum += v;
+      if (!combined && a->goal_error[p] <= a->tolerance) continue;
+      if (!each)
+        sum += v;
+      else if (a->goal_top[p] > 0.0)
+        sum = fmax(sum, v / a->goal_top[p]);
     }
     a->eta_cell[c] = sum;
     a->eta_all[c] = all;

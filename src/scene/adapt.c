@@ -81,6 +81,12 @@ static int check_marking(const nh_ctx *c, const nh_key_site *k, void *base) {
                         nh_yaml_get(marking, "strategy", NULL) ? "" : ", the default");
   if (at_theta && !(a->theta > 0 && a->theta < 1))
     return nh_read_fail(c, at_theta, "adapt.marking.theta", "must lie in (0, 1), got %g", a->theta);
+  const nh_yaml_node *at_goals = nh_yaml_get(marking, "goals", NULL);
+  if (at_goals && a->estimator != NH_ESTIMATOR_GOAL)
+    return nh_read_fail(c, at_goals, "adapt.marking.goals", "applies to estimator goal only");
+  if (at_goals && a->goal_marking == NH_GOAL_MARKING_EACH && a->strategy != NH_MARK_MAX)
+    return nh_read_fail(c, at_goals, "adapt.marking.goals",
+                        "each applies to strategy max only (each goal's own theta-marking)");
   if (at_fraction && !(a->fraction > 0 && a->fraction <= 1))
     return nh_read_fail(c, at_fraction, "adapt.marking.fraction", "must lie in (0, 1], got %g",
                         a->fraction);
@@ -137,8 +143,13 @@ static int check_local_dual(const nh_ctx *c, const nh_key_site *k, void *base) {
 }
 
 static int check_separate_every(const nh_ctx *c, const nh_key_site *k, void *base) {
-  if (!goal(base))
+  const nh_scene *s = base;
+  if (!goal(s))
     return nh_read_fail(c, k->at, "adapt.separate_every", "applies to estimator goal only");
+  if (s->adapt.separate_every > 1 && s->adapt.goal_marking == NH_GOAL_MARKING_EACH)
+    return nh_read_fail(c, k->at, "adapt.separate_every",
+                        "must be 1 with adapt.marking.goals: each (each goal marks by its own "
+                        "indicator, which the combined dual does not give)");
   return NH_OK;
 }
 
@@ -147,18 +158,24 @@ static int check_coarsen(const nh_ctx *c, const nh_key_site *k, void *base) {
   if (!(s->adapt.coarsen > 0 && s->adapt.coarsen < 1))
     return nh_read_fail(c, k->at, "adapt.coarsen.fraction", "must lie in (0, 1), got %g",
                         s->adapt.coarsen);
+  if (s->adapt.goal_marking == NH_GOAL_MARKING_EACH)
+    return nh_read_fail(c, k->at, "adapt.coarsen",
+                        "not with adapt.marking.goals: each (its marking threshold is relative to "
+                        "each goal's maximum, coarsening's is the goals' summed indicator)");
   return NH_OK;
 }
 
 static const char *const estimators[] = {"spr", "goal", NULL};
 static const char *const strategies[] = {"max", "dorfler", NULL};
 static const char *const hangings[] = {"eliminate", "lagrange", NULL};
+static const char *const goal_markings[] = {"sum", "each", NULL};
 
 #define A(member) offsetof(nh_scene, adapt.member)
 static const nh_key marking_rows[] = {
     {NH_CHOICE("strategy", A(strategy), NH_MARK_MAX, strategies)},
     {NH_NUMBER("theta", A(theta), 0.3, NH_ANY, 0)}, /* ranges: check_marking */
     {NH_NUMBER("fraction", A(fraction), 0.5, NH_ANY, 0)},
+    {NH_CHOICE("goals", A(goal_marking), NH_GOAL_MARKING_SUM, goal_markings)},
     {0},
 };
 

@@ -226,7 +226,10 @@ static void print_adapt(FILE *f, const nh_scene *s) {
   if (a->strategy == NH_MARK_DORFLER)
     fprintf(f, "dorfler, fraction %g of the total squared error\n", a->fraction);
   else
-    fprintf(f, "max, theta %g of the largest error\n", a->theta);
+    fprintf(f, "max, theta %g of the largest error%s\n", a->theta,
+            a->estimator != NH_ESTIMATOR_GOAL         ? ""
+            : a->goal_marking == NH_GOAL_MARKING_EACH ? " of each goal"
+                                                      : " of the goals' sum");
   fprintf(f, "          template %s\n", a->template_path);
   fprintf(f, "          max_level %d, min_size ", a->max_level);
   if (a->min_size > 0)

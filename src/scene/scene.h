@@ -183,6 +183,7 @@ typedef enum { NH_MARK_MAX = 0, NH_MARK_DORFLER = 1 } nh_mark_strategy;
 typedef enum { NH_HANGING_ELIMINATE = 0, NH_HANGING_LAGRANGE = 1 } nh_hanging_method;
 typedef enum { NH_REFACTOR_AUTO = 0, NH_REFACTOR_EVERY = 1 } nh_refactor_mode;
 typedef enum { NH_ESTIMATOR_SPR = 0, NH_ESTIMATOR_GOAL = 1 } nh_estimator;
+typedef enum { NH_GOAL_MARKING_SUM = 0, NH_GOAL_MARKING_EACH = 1 } nh_goal_marking;
 
 /* Most goal quantities adapt.goal may name. */
 #define NH_MAX_GOALS 64
@@ -193,6 +194,7 @@ typedef struct {
   nh_mark_strategy strategy;       /* adapt.marking.strategy: max (default) | dorfler */
   double theta;                    /* adapt.marking.theta (max): in (0, 1), default 0.3 */
   double fraction;                 /* adapt.marking.fraction (dorfler): in (0, 1], default 0.5 */
+  nh_goal_marking goal_marking;    /* adapt.marking.goals (goal, max): sum (default) | each */
   char template_path[NH_PATH_MAX]; /* adapt.template resolved to a file (default hex2) */
   int max_level;                   /* adapt.max_level: >= 0, default 2 */
   double min_size;                 /* adapt.min_size: m, >= 0, default 0 (no limit) */
