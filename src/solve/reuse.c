@@ -289,6 +289,9 @@ static int nh_reuse_load_w0(nh_system *s, nh_byte_reader *r) {
            "the checkpoint's solver state is malformed");
   if (w0[0] < 0) return NH_OK;
   const size_t mm = (size_t)w0[0] * (size_t)w0[0];
+  /* the sizes against the bytes left, before any allocation */
+  NH_CHECK((size_t)(r->end - r->p) >= sizeof(int) * (size_t)w0[1] + sizeof(double) * mm,
+           NH_ERR_INPUT, "the checkpoint's solver state is malformed");
   free(s->w0), free(s->w0_key);
   s->w0 = nh_calloc(mm ? mm : 1, sizeof(double));
   s->w0_key = nh_calloc(w0[1] ? (size_t)w0[1] : 1, sizeof(int));
