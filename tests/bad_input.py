@@ -103,6 +103,8 @@ CASES = [
                        "adapt.separate_every=2"], "--set:3", "adapt.separate_every"),
     ("set_base.yaml", ["adapt.estimator=goal", "adapt.marking.goals=all"], "--set:2",
      "adapt.marking.goals"),
+    # adapt.marking.goal_leaves: with spr.
+    ("set_base.yaml", ["adapt.marking.goal_leaves=true"], "--set:1", "adapt.marking.goal_leaves"),
     ("set_base.yaml", ["adapt.estimator=goal", "adapt.marking.goals=each",
                        "adapt.coarsen={fraction: 0.1}"], "--set:3", "adapt.coarsen"),
     ("set_base.yaml", ["tissue.material.formulation=[bbar]"], "--set:1",

@@ -14,9 +14,15 @@
  *  1. goals: sum — {K : Σ_p η_K^p ≥ θ max_K' Σ_p η_K'^p};
  *  2. goals: each — ∪_p {K : η_K^p ≥ θ max_K' η_K'^p}, the union of each
  *     goal's own θ-marking.
- * Both asserted equal as sets. The case must exercise the difference: the
- * sum's set misses at least one cell of p₂'s own marking (p₂ crowded out),
- * asserted, so that a driver that summed in both modes fails 2.
+ *  3. goals: sum with goal_leaves — the set of 1 and every leaf below
+ *     max_level whose box overlaps a goal's averaging box p + [−r, r]³:
+ *     here the leaves (edge h = 5 mm) with |c − p|_k < h/2 + r in every
+ *     component k (c their centre), 8 around p₁ (on a grid corner) and 2
+ *     around p₂ (on a grid face).
+ * Each asserted equal as sets. The case must exercise the differences: the
+ * sum's set misses at least one cell of p₂'s own marking (p₂ crowded out)
+ * and at least one leaf of 3's goal boxes, asserted, so that a driver that
+ * summed in both modes fails 2 and one that ignored goal_leaves fails 3.
  * NH_VERBOSE=1 prints the sets' sizes. */
 #include "check.h"
 #include "adapt/adapt.h"
@@ -74,12 +80,31 @@ int main(void) {
     top_sum = fmax(top_sum, ind[c] + ind[(size_t)nc + c]);
   }
   unsigned char *want_sum = calloc(nc, 1), *want_each = calloc(nc, 1), *own2 = calloc(nc, 1);
+  unsigned char *want_leaves = calloc(nc, 1);
+  const double edge = (hi[0] - lo[0]) / grid[0];
+  int n_boxed = 0, boxed_missed = 0;
   for (int l = 0; l < m->n_leaves; l++) {
     int c = m->leaves[l];
     want_sum[c] = ind[c] + ind[(size_t)nc + c] >= THETA * top_sum;
     for (int p = 0; p < 2; p++) want_each[c] |= ind[(size_t)nc * p + c] >= THETA * top[p];
     own2[c] = ind[(size_t)nc + c] >= THETA * top[1];
+    double Xe[24], centre[3] = {0, 0, 0};
+    nh_mesh_cell_coords(m, m->X, c, Xe);
+    for (int q = 0; q < 8; q++)
+      for (int k = 0; k < 3; k++) centre[k] += Xe[3 * q + k] / 8;
+    int boxed = 0;
+    for (int p = 0; p < 2; p++) {
+      int in = 1;
+      for (int k = 0; k < 3; k++) in &= fabs(centre[k] - goals[3 * p + k]) < 0.5 * edge + radius;
+      boxed |= in;
+    }
+    want_leaves[c] = want_sum[c] || boxed;
+    n_boxed += boxed;
+    boxed_missed += boxed && !want_sum[c];
   }
+  CHECK(n_boxed == 10, "%d leaves overlap the goals' boxes, expected 8 + 2", n_boxed);
+  CHECK(boxed_missed > 0, "the sum's marking holds every leaf of the goals' boxes: the case does "
+                          "not exercise goal_leaves");
   int missed = 0;
   for (int c = 0; c < nc; c++) missed += own2[c] && !want_sum[c];
   CHECK(missed > 0,
@@ -98,8 +123,10 @@ int main(void) {
            src ? src : ".");
   int *planned = malloc(sizeof(int) * m->n_leaves);
   unsigned char *got = malloc(nc);
-  for (int mode = 0; mode < 2; mode++) {
-    spec.goal_marking = mode ? NH_GOAL_MARKING_EACH : NH_GOAL_MARKING_SUM;
+  static const char *const modes[] = {"sum", "each", "sum, goal_leaves"};
+  for (int mode = 0; mode < 3; mode++) {
+    spec.goal_marking = mode == 1 ? NH_GOAL_MARKING_EACH : NH_GOAL_MARKING_SUM;
+    spec.goal_leaves = mode == 2;
     nh_adapt *a = NULL;
     CHECK_OK(nh_adapt_create(&spec, 0, &a));
     CHECK_OK(nh_adapt_set_goals(a, m, 2, goals));
@@ -107,7 +134,7 @@ int main(void) {
     int n = 0;
     CHECK_OK(nh_adapt_planned(a, m, planned, &n));
     mask_of(planned, n, nc, got);
-    const unsigned char *want = mode ? want_each : want_sum;
+    const unsigned char *want = mode == 2 ? want_leaves : mode ? want_each : want_sum;
     int extra = 0, lacking = 0, size = 0;
     for (int c = 0; c < nc; c++) {
       extra += got[c] && !want[c];
@@ -116,14 +143,15 @@ int main(void) {
     }
     CHECK(extra == 0 && lacking == 0,
           "goals: %s: the planned set (%d cells) has %d cells beyond the expected %d and lacks %d",
-          mode ? "each" : "sum", n, extra, size, lacking);
+          modes[mode], n, extra, size, lacking);
     if (getenv("NH_VERBOSE"))
       printf("goals: %s: %d cells planned, %d expected (goal 2's own marking: %d cells the sum "
              "misses; estimates %.3g, %.3g m)\n",
-             mode ? "each" : "sum", n, size, missed, norm[0], norm[1]);
+             modes[mode], n, size, missed, norm[0], norm[1]);
     nh_adapt_destroy(&a);
   }
   free(planned), free(got), free(want_sum), free(want_each), free(own2), free(ind);
+  free(want_leaves);
   free(f), free(u), free(b), free(x), free(fixed);
   nh_system_destroy(&s);
   nh_hanging_destroy(&h);

@@ -98,6 +98,20 @@ PHANTOM = {
         # each step re-solved once on the mesh its estimate asked for (no one-step lag)
         ("goal-hex2-l2-resolve", "goal hex2, 2 levels, resolve 1", goal(extra=["adapt.resolve=1"]),
          "goal"),
+        # docs/phantom.md, "Why 1A–1E do not converge": each goal marked by its own maximum, and
+        # the leaves meeting a goal's averaging box refined to max_level
+        ("goal-hex2-l2-each", "goal hex2, 2 levels, each goal", goal(extra=["adapt.marking.goals=each"]),
+         "goal"),
+        ("goal-hex2-l2-leaves", "goal hex2, 2 levels, goal leaves",
+         goal(extra=["adapt.marking.goal_leaves=true"]), "goal"),
+        ("goal-hex2-l2-each-leaves", "goal hex2, 2 levels, each goal, goal leaves",
+         goal(extra=["adapt.marking.goals=each", "adapt.marking.goal_leaves=true"]), "goal"),
+        ("goal-hex2-l2-each-leaves-every2", "goal hex2, 2 levels, each goal, goal leaves, every 2",
+         goal(extra=["adapt.marking.goals=each", "adapt.marking.goal_leaves=true", "adapt.every=2"]),
+         "goal"),
+        ("goal-hex2-l2-each-leaves-every4", "goal hex2, 2 levels, each goal, goal leaves, every 4",
+         goal(extra=["adapt.marking.goals=each", "adapt.marking.goal_leaves=true", "adapt.every=4"]),
+         "goal"),
         # a third level (locally 64×32×32) where the goal estimate asks for it: probes 1–4 lie
         # 2 mm from the shaft's constraint points, which 2 levels (h = 1.25 mm) do not resolve
         ("goal-hex2-l3", "goal hex2, 3 levels", goal(levels=3), "goal"),

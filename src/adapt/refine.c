@@ -19,7 +19,9 @@
  * indicators are the goal indicators summed over the goals above
  * adapt.tolerance (between separate estimates: the combined dual's; with
  * adapt.marking.goals each, the largest of each goal's indicator over its
- * own maximum); with
+ * own maximum; with adapt.marking.goal_leaves, the leaves meeting a
+ * goal's averaging box below max_level raised to the largest indicator,
+ * nh_adapt_mark_goal_leaves); with
  * a tolerance, marking looks only at cells that can still be refined (so
  * the goal error is chased below it; without one, that would refine every
  * cell near the goals to max_level: docs/adaptivity.md), and the marked
@@ -79,6 +81,7 @@ struct nh_adapt {
   int separate_every, since_separate, have_weights;
   int local_dual;   /* adapt.local_dual: the local enriched dual at held rows (dwr_local.c) */
   int each_goal;    /* adapt.marking.goals: each (every goal's indicator over its own maximum) */
+  int goal_leaves;  /* adapt.marking.goal_leaves: the leaves meeting a goal's box are marked */
   double *weight;   /* 3 per goal: ω_pk = E_pk / |E_p| of the last separate estimate */
   double *sep_est;  /* 3 per goal: E_pk of the last separate estimate */
   double *goal_top; /* per goal: its largest indicator over the leaves (marking.goals each) */
@@ -112,6 +115,7 @@ int nh_adapt_create(const nh_adapt_spec *spec, int max_cells, nh_adapt **out) {
   a->separate_every = spec->separate_every > 0 ? spec->separate_every : 1;
   a->local_dual = spec->local_dual;
   a->each_goal = spec->goal_marking == NH_GOAL_MARKING_EACH;
+  a->goal_leaves = spec->goal_leaves;
   *out = a;
   return NH_OK;
 }
@@ -176,6 +180,42 @@ void nh_adapt_set_geometry_loads(nh_adapt *a, const nh_geometry_loads *loads) {
 
 void nh_adapt_set_constraint_data(nh_adapt *a, const nh_constraint_data *data) {
   a->data = data;
+}
+
+/* adapt.marking.goal_leaves: every leaf below max_level whose rest box
+ * overlaps the box B = p + [−r, r]³ of a goal still above tolerance gets
+ * the largest indicator, so that the marking (max: any θ; dorfler: first)
+ * refines it. J_p is the mean over B, whose half-width r is half the finest
+ * cell's edge: in a coarser leaf the discrete J_p is the mean of that
+ * leaf's trilinear interpolant, and the interpolation error at p is not
+ * what the estimate weights (the dual's load lies inside one leaf, and its
+ * recovered error there is as smooth as the leaf). Measured on the phantom
+ * (docs/phantom.md, "Why 1A–1E do not converge"): the probes' own leaves
+ * stayed at level 0–1 in the puncture steps. */
+static void nh_adapt_mark_goal_leaves(nh_adapt *a, const nh_mesh *m) {
+  double top = 0.0;
+  for (int l = 0; l < m->n_leaves; l++) top = fmax(top, a->eta_cell[m->leaves[l]]);
+  if (!(top > 0.0)) return; /* nothing loads the tissue yet: nothing to refine for */
+  for (int l = 0; l < m->n_leaves; l++) {
+    const int c = m->leaves[l];
+    if (m->level[c] >= a->mark.max_level) continue;
+    double Xe[24], lo[3], hi[3];
+    nh_mesh_cell_coords(m, m->X, c, Xe);
+    for (int k = 0; k < 3; k++) lo[k] = hi[k] = Xe[k];
+    for (int q = 1; q < 8; q++)
+      for (int k = 0; k < 3; k++)
+        lo[k] = fmin(lo[k], Xe[3 * q + k]), hi[k] = fmax(hi[k], Xe[3 * q + k]);
+    for (int p = 0; p < a->n_goals; p++) {
+      if (a->goal_error[p] <= a->tolerance) continue;
+      const double *x = a->goal_points + 3 * p;
+      int meets = 1;
+      for (int k = 0; k < 3; k++) meets &= lo[k] < x[k] + a->radius && hi[k] > x[k] - a->radius;
+      if (meets) {
+        a->eta_cell[c] = top;
+        break;
+      }
+    }
+  }
 }
 
 int nh_adapt_estimate_goal(nh_adapt *a, nh_system *sys, const nh_rows *rows, double scale,
@@ -261,6 +301,7 @@ int nh_adapt_estimate_goal(nh_adapt *a, nh_system *sys, const nh_rows *rows, dou
     a->eta_cell[c] = sum;
     a->eta_all[c] = all;
   }
+  if (a->goal_leaves) nh_adapt_mark_goal_leaves(a, m);
   if (eta) *eta = r.eta;
   if (eta_rel) *eta_rel = r.eta_rel;
   a->have_eta = 1;

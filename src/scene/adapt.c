@@ -87,6 +87,10 @@ static int check_marking(const nh_ctx *c, const nh_key_site *k, void *base) {
   if (at_goals && a->goal_marking == NH_GOAL_MARKING_EACH && a->strategy != NH_MARK_MAX)
     return nh_read_fail(c, at_goals, "adapt.marking.goals",
                         "each applies to strategy max only (each goal's own theta-marking)");
+  const nh_yaml_node *at_leaves = nh_yaml_get(marking, "goal_leaves", NULL);
+  if (at_leaves && a->estimator != NH_ESTIMATOR_GOAL)
+    return nh_read_fail(c, at_leaves, "adapt.marking.goal_leaves",
+                        "applies to estimator goal only");
   if (at_fraction && !(a->fraction > 0 && a->fraction <= 1))
     return nh_read_fail(c, at_fraction, "adapt.marking.fraction", "must lie in (0, 1], got %g",
                         a->fraction);
@@ -176,6 +180,7 @@ static const nh_key marking_rows[] = {
     {NH_NUMBER("theta", A(theta), 0.3, NH_ANY, 0)}, /* ranges: check_marking */
     {NH_NUMBER("fraction", A(fraction), 0.5, NH_ANY, 0)},
     {NH_CHOICE("goals", A(goal_marking), NH_GOAL_MARKING_SUM, goal_markings)},
+    {NH_BOOL("goal_leaves", A(goal_leaves), 0)},
     {0},
 };
 

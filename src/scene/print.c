@@ -230,6 +230,8 @@ static void print_adapt(FILE *f, const nh_scene *s) {
             a->estimator != NH_ESTIMATOR_GOAL         ? ""
             : a->goal_marking == NH_GOAL_MARKING_EACH ? " of each goal"
                                                       : " of the goals' sum");
+  if (a->estimator == NH_ESTIMATOR_GOAL && a->goal_leaves)
+    fprintf(f, "          and every leaf meeting a goal's box, up to max_level\n");
   fprintf(f, "          template %s\n", a->template_path);
   fprintf(f, "          max_level %d, min_size ", a->max_level);
   if (a->min_size > 0)

@@ -190,11 +190,13 @@ typedef enum { NH_GOAL_MARKING_SUM = 0, NH_GOAL_MARKING_EACH = 1 } nh_goal_marki
 
 /* The adapt section: estimation, marking, template, limits (adapt/refine.c). */
 typedef struct {
-  int enabled;                     /* the scene has an `adapt` section */
-  nh_mark_strategy strategy;       /* adapt.marking.strategy: max (default) | dorfler */
-  double theta;                    /* adapt.marking.theta (max): in (0, 1), default 0.3 */
-  double fraction;                 /* adapt.marking.fraction (dorfler): in (0, 1], default 0.5 */
-  nh_goal_marking goal_marking;    /* adapt.marking.goals (goal, max): sum (default) | each */
+  int enabled;                  /* the scene has an `adapt` section */
+  nh_mark_strategy strategy;    /* adapt.marking.strategy: max (default) | dorfler */
+  double theta;                 /* adapt.marking.theta (max): in (0, 1), default 0.3 */
+  double fraction;              /* adapt.marking.fraction (dorfler): in (0, 1], default 0.5 */
+  nh_goal_marking goal_marking; /* adapt.marking.goals (goal, max): sum (default) | each */
+  int goal_leaves; /* adapt.marking.goal_leaves (goal): the leaves meeting a goal's box are
+                      marked below max_level (default 0) */
   char template_path[NH_PATH_MAX]; /* adapt.template resolved to a file (default hex2) */
   int max_level;                   /* adapt.max_level: >= 0, default 2 */
   double min_size;                 /* adapt.min_size: m, >= 0, default 0 (no limit) */
