@@ -151,6 +151,11 @@
  * replaces the patch leaves' recovered terms (the marking indicators are
  * not changed).
  *
+ * The functionals j_pk are nodal loads of the rest geometry (the box mean
+ * over the tissue, cut cells integrated): with out->functionals they are
+ * kept between estimates (nh_goal_cache, keyed by key.c) and made again
+ * only on a new mesh, points or radius; the same numbers either way.
+ *
  * Workspace: the duals (3 per point, 3 per node each), the centre samples
  * and recovered nodal stresses of the 1 + 3 n_points fields (6 per cell or
  * node each), one value per leaf and field for the ordered sums. The cell
