@@ -63,6 +63,16 @@
  *     relative: the two are assembled on different paths (Gauss-point
  *     stresses and the compliance against the element matrix). Without the
  *     B-bar term the product differs by O(1) at ν = 0.49.
+ *  5. The goals' functionals kept between estimates (nh_goal_cache): on the
+ *     8x4x4 grid, with cell A (one of the 8 the probe's box touches)
+ *     refined, with A coarsened and its neighbour B (another of the 8)
+ *     refined (nodes, cells and leaves as many as with A refined, the new
+ *     nodes in the box elsewhere, so the functionals the cache holds are
+ *     another mesh's), and B coarsened back to the grid: estimates, norms
+ *     and indicators with the cache bitwise equal to those made afresh
+ *     (nh_dwr_estimate without it), the functionals made again exactly at
+ *     each mesh change and at a new radius, not at a second estimate on
+ *     the same mesh; the combined estimate likewise.
  * NH_VERBOSE=1 prints the sequence. */
 #include "check.h"
 #include "adapt/adapt.h"
@@ -415,8 +425,77 @@ static void test_tangent_product(void) {
   }
 }
 
+/* Part 5: one mesh's estimates with and without the cache, bitwise, twice;
+ * builds: the cache's count expected after them. */
+static void check_functionals_cache(problem *p, nh_goal_cache *k, double radius, int builds,
+                                    const char *what) {
+  setup(p);
+  solve(p);
+  const int nc = p->m->n_cells;
+  const double w[3] = {0.3, -0.5, 0.81};
+  double est[2][3], norm[2], ec[2],
+      *ind[2] = {calloc(nc, sizeof(double)), calloc(nc, sizeof(double))};
+  for (int pass = 0; pass < 2; pass++) {
+    nh_dwr_result r = {.estimate = est[0], .norm = norm, .indicator = ind[0]};
+    CHECK_OK(nh_dwr_estimate(p->s, NULL, 1.0, p->m, p->t, p->h, p->u, 1, probe, radius, NULL, &r));
+    r = (nh_dwr_result){
+        .estimate = est[1], .norm = norm + 1, .indicator = ind[1], .functionals = k};
+    CHECK_OK(nh_dwr_estimate(p->s, NULL, 1.0, p->m, p->t, p->h, p->u, 1, probe, radius, NULL, &r));
+    CHECK(!memcmp(est[0], est[1], sizeof est[0]) && norm[0] == norm[1] &&
+              !memcmp(ind[0], ind[1], sizeof(double) * nc),
+          "%s, pass %d: cached estimate (%.17g %.17g %.17g) differs from the fresh one (%.17g "
+          "%.17g %.17g)",
+          what, pass, est[1][0], est[1][1], est[1][2], est[0][0], est[0][1], est[0][2]);
+    for (int c = 0; c < 2; c++) {
+      r = (nh_dwr_result){.estimate = ec + c, .functionals = c ? k : NULL};
+      CHECK_OK(nh_dwr_estimate_combined(p->s, NULL, 1.0, p->m, p->t, p->h, p->u, 1, probe, radius,
+                                        NULL, w, &r));
+    }
+    CHECK(ec[0] == ec[1], "%s, pass %d: cached combined estimate %.17g, fresh %.17g", what, pass,
+          ec[1], ec[0]);
+    CHECK(nh_goal_cache_builds(k) == builds, "%s: the functionals were made %d times, expected %d",
+          what, nh_goal_cache_builds(k), builds);
+  }
+  if (getenv("NH_VERBOSE"))
+    printf("functionals' cache, %s: %d leaves, estimate %.6e, equal to the fresh one\n", what,
+           p->m->n_leaves, norm[1]);
+  free(ind[0]), free(ind[1]);
+}
+
+static void test_functionals_cache(void) {
+  problem p = {0};
+  CHECK_OK(nh_mesh_create_box(lo, hi, grid, &p.m));
+  nh_template *t2 = regular_template(2);
+  nh_goal_cache *k;
+  CHECK_OK(nh_goal_cache_create(&k));
+  check_functionals_cache(&p, k, RADIUS, 1, "the grid");
+  check_functionals_cache(&p, k, 0.8 * RADIUS, 2, "the grid, another radius");
+  /* cells (4,1,2) and (5,1,2): x 20-25 and 25-30 mm, y 5-10, z 10-15 mm,
+   * both touching the box (25, 10, 15) mm +- 0.5 mm */
+  int A = 4 + 8 * (1 + 4 * 2), B = A + 1;
+  CHECK_OK(nh_mesh_refine(p.m, t2, &A, 1, NULL));
+  check_functionals_cache(&p, k, RADIUS, 3, "A refined");
+  const int counts[3] = {p.m->n_nodes, p.m->n_cells, p.m->n_leaves};
+  int *map = malloc(sizeof(int) * p.m->n_nodes);
+  CHECK_OK(nh_mesh_coarsen(p.m, &A, 1, map));
+  CHECK_OK(nh_mesh_refine(p.m, t2, &B, 1, NULL));
+  CHECK(p.m->n_nodes == counts[0] && p.m->n_cells == counts[1] && p.m->n_leaves == counts[2],
+        "B refined: %d nodes, %d cells, %d leaves; A refined had %d, %d, %d (the test needs "
+        "equal counts)",
+        p.m->n_nodes, p.m->n_cells, p.m->n_leaves, counts[0], counts[1], counts[2]);
+  check_functionals_cache(&p, k, RADIUS, 4, "A coarsened, B refined");
+  CHECK_OK(nh_mesh_coarsen(p.m, &B, 1, map));
+  check_functionals_cache(&p, k, RADIUS, 5, "B coarsened: the grid again");
+  nh_goal_cache_destroy(&k);
+  CHECK(k == NULL, "nh_goal_cache_destroy leaves the pointer set");
+  free(map);
+  nh_template_destroy(&t2);
+  destroy(&p);
+}
+
 int main(void) {
   setvbuf(stdout, NULL, _IOLBF, 0);
+  test_functionals_cache();
   test_tangent_product();
   test_identity();
   test_effectivity();

@@ -271,6 +271,19 @@ const double *nh_adapt_goal_constraint(const nh_adapt *adapt);
 int nh_goal_functional(const nh_mesh *mesh, const double point[3], double radius, int k,
                        const char *where, double *j);
 
+/* The goals' point functionals (nh_goal_functional, 3 per point), which
+ * depend on the rest geometry only, kept between estimates: checked at
+ * every use against the mesh (key.c: leaves, corners, rest positions and
+ * each leaf's fill φ, exactly) and the points and radius (bitwise), and
+ * made again when any of them changed. */
+typedef struct nh_goal_cache nh_goal_cache;
+/* An empty cache. Fails with NH_ERR_MEMORY. */
+int nh_goal_cache_create(nh_goal_cache **out);
+/* Free and set *cache = NULL (accepts NULL). */
+void nh_goal_cache_destroy(nh_goal_cache **cache);
+/* How many times the functionals were made (0 for NULL): the tests' window. */
+int nh_goal_cache_builds(const nh_goal_cache *cache);
+
 /* The tip–target distance d(v) = |x_tip − x_T(v)|, x_T(v) = X_T + J_T(v)
  * (J_T the box mean of nh_goal_functional), linearised about the current
  * state with the tip held (dwr.c, "Distance"): its tissue part is
@@ -329,6 +342,9 @@ typedef struct {
   int local;
   double *local_term;
   int local_applied;
+  /* in (may be NULL: made afresh): the goals' functionals kept between
+   * estimates (nh_goal_cache); the same numbers either way */
+  nh_goal_cache *functionals;
 } nh_dwr_result;
 
 /* Goal-oriented estimate of the displacement at n_points points[3 each]

@@ -10,6 +10,26 @@ typedef struct {
   int cell;
 } nh_mark_entry;
 
+/* A mesh's identity for the module's caches (key.c): counts, leaves, their
+ * corners, rest positions, one number per leaf (the cache's choice) and the
+ * hanging nodes, compared exactly. Zero-initialised: matches nothing. */
+typedef struct {
+  int valid;
+  int n_nodes, n_leaves, n_hanging;
+  int *leaves, *corners, *hanging; /* n_leaves, 8 n_leaves, n_hanging */
+  double *X, *weight;              /* 3 n_nodes, n_leaves */
+} nh_mesh_key;
+
+/* Whether k was set for this mesh with weight[c] per cell and the hanging
+ * table h (may be NULL: none). */
+int nh_mesh_key_matches(const nh_mesh_key *k, const nh_mesh *mesh, const double *weight,
+                        const nh_hanging *h);
+/* Make k the key of this mesh, weight and h (as nh_mesh_key_matches).
+ * Fails with NH_ERR_MEMORY (k then matches nothing). */
+int nh_mesh_key_set(nh_mesh_key *k, const nh_mesh *mesh, const double *weight, const nh_hanging *h);
+/* Free k's arrays and zero it. */
+void nh_mesh_key_free(nh_mesh_key *k);
+
 /* qsort order of nh_mark_entry: decreasing η, then increasing cell id. */
 int nh_mark_entry_compare(const void *a, const void *b);
 

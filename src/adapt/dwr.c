@@ -151,6 +151,11 @@
  * replaces the patch leaves' recovered terms (the marking indicators are
  * not changed).
  *
+ * The functionals j_pk are nodal loads of the rest geometry (the box mean
+ * over the tissue, cut cells integrated): with out->functionals they are
+ * kept between estimates (nh_goal_cache, keyed by key.c) and made again
+ * only on a new mesh, points or radius; the same numbers either way.
+ *
  * Workspace: the duals (3 per point, 3 per node each), the centre samples
  * and recovered nodal stresses of the 1 + 3 n_points fields (6 per cell or
  * node each), one value per leaf and field for the ordered sums. The cell
@@ -546,7 +551,35 @@ done:
   return rc;
 }
 
-/* The point functionals j_pk (3 per point) of the goals. */
+/* The cached functionals (adapt.h): j_pk at j + 3 n_nodes (3p + k), for the
+ * mesh of key (fill per leaf, no hanging table: the functionals are nodal
+ * loads of the corners) and these points and radius. */
+struct nh_goal_cache {
+  int builds;
+  nh_mesh_key key;
+  int n_points;
+  double radius;
+  double *points, *j; /* 3 n_points; 9 n_points n_nodes */
+};
+
+int nh_goal_cache_create(nh_goal_cache **out) {
+  *out = nh_calloc(1, sizeof **out);
+  return *out ? NH_OK : NH_ERROR(NH_ERR_MEMORY, "out of memory: goal functionals' cache");
+}
+
+void nh_goal_cache_destroy(nh_goal_cache **cache) {
+  if (!cache || !*cache) return;
+  nh_mesh_key_free(&(*cache)->key);
+  free((*cache)->points), free((*cache)->j);
+  free(*cache);
+  *cache = NULL;
+}
+
+int nh_goal_cache_builds(const nh_goal_cache *cache) {
+  return cache ? cache->builds : 0;
+}
+
+/* The point functionals j_pk (3 per point) of the goals into j. */
 static int nh_dwr_point_functionals(const nh_mesh *m, int n_points, const double *points,
                                     double radius, char (*where)[NH_WHERE_MAX], double *j) {
   const size_t n3 = 3 * (size_t)m->n_nodes;
@@ -557,16 +590,48 @@ static int nh_dwr_point_functionals(const nh_mesh *m, int n_points, const double
   return NH_OK;
 }
 
+/* *j = the goals' functionals: the cache's (made first if they are not
+ * this mesh's, points' and radius'), or, cache NULL, made into *fresh
+ * (allocated here; the caller frees it). */
+static int nh_dwr_functionals_of(nh_goal_cache *cache, const nh_mesh *m, int n_points,
+                                 const double *points, double radius, char (*where)[NH_WHERE_MAX],
+                                 double **fresh, const double **j) {
+  const size_t n = 9 * (size_t)n_points * (size_t)m->n_nodes;
+  *fresh = NULL, *j = NULL;
+  if (!cache) {
+    if (!(*fresh = nh_calloc(n ? n : 1, sizeof(double))))
+      return NH_ERROR(NH_ERR_MEMORY, "out of memory: %d goal functionals", 3 * n_points);
+    NH_TRY(nh_dwr_point_functionals(m, n_points, points, radius, where, *fresh));
+    *j = *fresh;
+    return NH_OK;
+  }
+  if (!(nh_mesh_key_matches(&cache->key, m, m->fill, NULL) && cache->n_points == n_points &&
+        !memcmp(&cache->radius, &radius, sizeof radius) &&
+        !memcmp(cache->points, points, 3 * sizeof(double) * (size_t)n_points))) {
+    cache->key.valid = 0;
+    NH_TRY(nh_realloc((void **)&cache->j, n + 1, sizeof(double)));
+    NH_TRY(nh_realloc((void **)&cache->points, 3 * (size_t)n_points + 1, sizeof(double)));
+    NH_TRY(nh_dwr_point_functionals(m, n_points, points, radius, where, cache->j));
+    memcpy(cache->points, points, 3 * sizeof(double) * (size_t)n_points);
+    cache->n_points = n_points, cache->radius = radius;
+    NH_TRY(nh_mesh_key_set(&cache->key, m, m->fill, NULL));
+    cache->builds++;
+  }
+  *j = cache->j;
+  return NH_OK;
+}
+
 int nh_dwr_estimate(nh_system *sys, const nh_rows *rows, double scale, const nh_mesh *m,
                     const nh_tissue *t, const nh_hanging *h, const double *u, int n_points,
                     const double *points, double radius, char (*where)[NH_WHERE_MAX],
                     nh_dwr_result *out) {
   const int nz = 3 * n_points;
-  double *j = nh_calloc(3 * (size_t)m->n_nodes * (size_t)(nz ? nz : 1), sizeof(double));
-  if (!j) return NH_ERROR(NH_ERR_MEMORY, "out of memory: %d goal functionals", nz);
+  double *fresh = NULL;
+  const double *j = NULL;
   double *w = nh_calloc((size_t)nz * (size_t)(nz ? nz : 1), sizeof(double));
-  int rc = w ? nh_dwr_point_functionals(m, n_points, points, radius, where, j)
-             : NH_ERROR(NH_ERR_MEMORY, "out of memory: %d goal functionals", nz);
+  int rc =
+      w ? nh_dwr_functionals_of(out->functionals, m, n_points, points, radius, where, &fresh, &j)
+        : NH_ERROR(NH_ERR_MEMORY, "out of memory: %d goal functionals", nz);
   for (int q = 0; q < nz && !rc; q++) w[(size_t)nz * q + q] = 1.0; /* functional q is J_q */
   nh_dwr_goals goals = {n_points, points, radius, w};
   if (!rc) rc = nh_dwr_functionals(sys, rows, scale, m, t, h, u, nz, 3, j, &goals, out);
@@ -575,7 +640,7 @@ int nh_dwr_estimate(nh_system *sys, const nh_rows *rows, double scale, const nh_
     const double *e = out->estimate + 3 * p;
     out->norm[p] = sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]);
   }
-  free(j);
+  free(fresh);
   return rc;
 }
 
@@ -584,18 +649,20 @@ int nh_dwr_estimate_combined(nh_system *sys, const nh_rows *rows, double scale, 
                              const double *points, double radius, char (*where)[NH_WHERE_MAX],
                              const double *weights, nh_dwr_result *out) {
   const size_t n3 = 3 * (size_t)m->n_nodes;
-  double *jk = nh_calloc(n3, sizeof(double)), *jc = nh_calloc(n3, sizeof(double));
-  int rc = jk && jc ? NH_OK : NH_ERROR(NH_ERR_MEMORY, "out of memory: combined goal functional");
+  double *fresh = NULL, *jc = nh_calloc(n3, sizeof(double));
+  const double *j = NULL;
+  int rc =
+      jc ? nh_dwr_functionals_of(out->functionals, m, n_points, points, radius, where, &fresh, &j)
+         : NH_ERROR(NH_ERR_MEMORY, "out of memory: combined goal functional");
   for (int p = 0; p < n_points && !rc; p++)
-    for (int k = 0; k < 3 && !rc; k++) {
-      double w = weights[3 * p + k];
+    for (int k = 0; k < 3; k++) {
+      const double w = weights[3 * p + k], *jk = j + n3 * (size_t)(3 * p + k);
       if (w == 0.0) continue;
-      rc = nh_goal_functional(m, points + 3 * p, radius, k, where ? where[p] : NULL, jk);
-      for (size_t i = 0; i < n3 && !rc; i++) jc[i] += w * jk[i];
+      for (size_t i = 0; i < n3; i++) jc[i] += w * jk[i];
     }
   nh_dwr_goals goals = {n_points, points, radius, weights};
   if (!rc) rc = nh_dwr_functionals(sys, rows, scale, m, t, h, u, 1, 1, jc, &goals, out);
   if (!rc && out->norm) out->norm[0] = fabs(out->estimate[0]);
-  free(jk), free(jc);
+  free(fresh), free(jc);
   return rc;
 }

@@ -53,7 +53,8 @@ struct nh_adapt {
   const nh_fix *keep_fix; /* ... and their refine: the largest edge there (0: none) */
   double *eta_cell;       /* per cell id, valid when have_eta */
   int cap_eta, have_eta;
-  nh_spr_cache *spr; /* SPR's weights of the current mesh (spr.c) */
+  nh_spr_cache *spr;          /* SPR's weights of the current mesh (spr.c) */
+  nh_goal_cache *functionals; /* the goals' functionals of the current mesh (dwr.c) */
   /* goal-oriented estimation (estimator goal) */
   int goal, grade;                /* estimator goal; refinement closed by the 2:1 rule */
   double tolerance;               /* m (0: none) */
@@ -124,6 +125,7 @@ void nh_adapt_destroy(nh_adapt **adapt) {
   if (!adapt || !*adapt) return;
   nh_template_destroy(&(*adapt)->tmpl);
   nh_spr_cache_destroy(&(*adapt)->spr);
+  nh_goal_cache_destroy(&(*adapt)->functionals);
   free((*adapt)->eta_cell);
   free((*adapt)->goal_points);
   free((*adapt)->goal_error);
@@ -229,6 +231,7 @@ int nh_adapt_estimate_goal(nh_adapt *a, nh_system *sys, const nh_rows *rows, dou
     NH_TRY(nh_realloc((void **)&a->eta_all, (size_t)m->n_cells, sizeof(double)));
     a->cap_eta = m->n_cells;
   }
+  if (!a->functionals) NH_TRY(nh_goal_cache_create(&a->functionals));
   a->have_eta = 0; /* until this estimate is complete */
   const int combined = a->have_weights && a->since_separate + 1 < a->separate_every;
   nh_dwr_result r = {.estimate = a->goal_est,
@@ -238,7 +241,8 @@ int nh_adapt_estimate_goal(nh_adapt *a, nh_system *sys, const nh_rows *rows, dou
                      .geometry = a->goal_geo,
                      .data = a->data,
                      .constraint = a->goal_cons,
-                     .local = a->local_dual};
+                     .local = a->local_dual,
+                     .functionals = a->functionals};
   if (!combined) {
     NH_TRY(nh_dwr_estimate(sys, rows, scale, m, tissue, hanging, u, a->n_goals, a->goal_points,
                            a->radius, NULL, &r));

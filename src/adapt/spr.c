@@ -94,7 +94,7 @@
  * parallel region, reported after it), NH_ERR_INTERNAL for inconsistent
  * input (tissue of another mesh, missing element data, a bad hanging-node
  * table), NH_ERR_NUMERIC if η is not finite. */
-#include "adapt/adapt.h"
+#include "adapt/adapt_impl.h"
 
 #include <math.h>
 #include <stdlib.h>
@@ -324,17 +324,13 @@ static int nh_spr_node_weights(const nh_spr_ctx *x, int node, nh_spr_work *w, in
 
 /* The mesh-dependent part of a recovery (nh_spr_cache): every node's
  * weights as nh_spr_node_weights makes them, in node order (CSR), and the
- * key they were made for: the counts, the leaves, their corners, the rest
- * positions, each leaf's φV and the hanging nodes, compared exactly, so any
- * change of the mesh (a refinement and a coarsening that leave the counts as
- * they were included) makes them again. The workspace of nh_spr_estimate
+ * key they were made for (key.c, with each leaf's φV and the hanging
+ * nodes), so any change of the mesh (a refinement and a coarsening that
+ * leave the counts as they were included) makes them again. The workspace of nh_spr_estimate
  * lives here too, so a step allocates nothing. */
 struct nh_spr_cache {
-  int valid, builds;
-  /* the key */
-  int n_nodes, n_leaves, n_hanging;
-  int *leaves, *corners, *hanging; /* n_leaves, 8 n_leaves, n_hanging */
-  double *X, *weight;              /* 3 n_nodes, n_leaves */
+  int builds;
+  nh_mesh_key key; /* key.c, with each leaf's φV */
   /* the weights: node v's samples are cell[start[v] .. start[v + 1]) with coef[];
    * fitted[v]: 1 a fit (nh_spr_fit_combine), 0 the mean (nh_spr_mean), -1 no σ* (0) */
   int *start, *cell;
@@ -357,7 +353,7 @@ int nh_spr_cache_create(nh_spr_cache **out) {
 void nh_spr_cache_destroy(nh_spr_cache **cache) {
   if (!cache || !*cache) return;
   nh_spr_cache *k = *cache;
-  free(k->leaves), free(k->corners), free(k->hanging), free(k->X), free(k->weight);
+  nh_mesh_key_free(&k->key);
   free(k->start), free(k->cell), free(k->fitted), free(k->coef), free(k->grad), free(k->grad_det);
   free(k->sigma_star), free(k->err2), free(k->norm2), free(k->stress), free(k->sh), free(k->detJ);
   free(k);
@@ -368,35 +364,11 @@ int nh_spr_cache_builds(const nh_spr_cache *cache) {
   return cache ? cache->builds : 0;
 }
 
-/* Whether the cache's weights are those of this mesh (weight[c]: φV per cell). */
-static int nh_spr_cache_matches(const nh_spr_cache *k, const nh_mesh *m, const double *weight,
-                                const nh_hanging *h) {
-  const int nh = h ? h->n_hanging : 0;
-  if (!k->valid || k->n_nodes != m->n_nodes || k->n_leaves != m->n_leaves || k->n_hanging != nh)
-    return 0;
-  if (memcmp(k->leaves, m->leaves, sizeof(int) * (size_t)m->n_leaves) ||
-      memcmp(k->X, m->X, 3 * sizeof(double) * (size_t)m->n_nodes) ||
-      (nh && memcmp(k->hanging, h->node, sizeof(int) * (size_t)nh)))
-    return 0;
-  for (int l = 0; l < m->n_leaves; l++) {
-    const int c = m->leaves[l];
-    if (memcmp(k->corners + 8 * l, m->cells + 8 * c, 8 * sizeof(int)) ||
-        memcmp(k->weight + l, weight + c, sizeof(double)))
-      return 0;
-  }
-  return 1;
-}
-
 /* Make every node's weights (serially: this runs once per mesh) and the key. */
 static int nh_spr_cache_build(nh_spr_cache *k, const nh_spr_ctx *x, const nh_hanging *h) {
   const nh_mesh *m = x->m;
-  const int nn = m->n_nodes, nl = m->n_leaves, nh = h ? h->n_hanging : 0;
-  k->valid = 0;
-  NH_TRY(nh_realloc((void **)&k->leaves, (size_t)nl + 1, sizeof(int)));
-  NH_TRY(nh_realloc((void **)&k->corners, 8 * (size_t)nl + 1, sizeof(int)));
-  NH_TRY(nh_realloc((void **)&k->weight, (size_t)nl + 1, sizeof(double)));
-  NH_TRY(nh_realloc((void **)&k->hanging, (size_t)nh + 1, sizeof(int)));
-  NH_TRY(nh_realloc((void **)&k->X, 3 * (size_t)nn + 1, sizeof(double)));
+  const int nn = m->n_nodes, nl = m->n_leaves;
+  k->key.valid = 0;
   NH_TRY(nh_realloc((void **)&k->start, (size_t)nn + 1, sizeof(int)));
   NH_TRY(nh_realloc((void **)&k->fitted, (size_t)nn + 1, 1));
   nh_spr_work w;
@@ -424,14 +396,6 @@ static int nh_spr_cache_build(nh_spr_cache *k, const nh_spr_ctx *x, const nh_han
   nh_spr_work_free(&w);
   if (rc) return rc;
   k->start[nn] = used;
-  k->n_nodes = nn, k->n_leaves = nl, k->n_hanging = nh;
-  memcpy(k->leaves, m->leaves, sizeof(int) * (size_t)nl);
-  for (int l = 0; l < nl; l++) {
-    memcpy(k->corners + 8 * l, m->cells + 8 * m->leaves[l], 8 * sizeof(int));
-    k->weight[l] = x->weight[m->leaves[l]];
-  }
-  if (nh) memcpy(k->hanging, h->node, sizeof(int) * (size_t)nh);
-  memcpy(k->X, m->X, 3 * sizeof(double) * (size_t)nn);
   NH_TRY(nh_realloc((void **)&k->grad, NH_SPR_POINTS * 24 * (size_t)nl + 1, sizeof(double)));
   NH_TRY(nh_realloc((void **)&k->grad_det, NH_SPR_POINTS * (size_t)nl + 1, sizeof(double)));
   const double *xi = nh_spr_points();
@@ -444,7 +408,7 @@ static int nh_spr_cache_build(nh_spr_cache *k, const nh_spr_ctx *x, const nh_han
       k->grad_det[NH_SPR_POINTS * (size_t)l + p] =
           nh_hex_rest_gradients(Xe, G0, xi + 3 * p, k->grad + 24 * (NH_SPR_POINTS * (size_t)l + p));
   }
-  k->valid = 1;
+  NH_TRY(nh_mesh_key_set(&k->key, m, x->weight, h));
   k->builds++;
   return NH_OK;
 }
@@ -525,7 +489,7 @@ static int nh_spr_recover_cached(nh_spr_cache *cache, const nh_mesh *m, const nh
           goto done;
         }
 
-  const int cached = cache && nh_spr_cache_matches(cache, m, weight, h);
+  const int cached = cache && nh_mesh_key_matches(&cache->key, m, weight, h);
   if (!cached) { /* the patches' geometry: centres and the node-to-leaf lists */
     if ((rc = nh_mesh_node_leaves(m, &start, &adj))) goto done;
 #pragma omp parallel for schedule(static) if (nl >= NH_SPR_PARALLEL_MIN)
