@@ -19,10 +19,11 @@ on and a frame every 2 steps, and run three times:
 2. a run started in a temporary folder A with the scene and the output
    folder named by relative paths, stopped once STOP_AFTER steps are in
    steps.csv (frames 0 and 2 written) by SIGINT (by SIGTERM for
-   SIGTERM_CASE). So that a case of 10 ms steps cannot finish before the
-   signal, the process is frozen (SIGSTOP) when the row is seen, sent the
-   signal and let go (SIGCONT): the signal lands wherever the process was,
-   at most a step later. Checked: exit status 1 and one line "stopped by
+   SIGTERM_CASE). So that a case of 1 ms steps cannot finish before the
+   signal, the process runs in slices of about 2 ms and steps.csv is read
+   only while it is frozen (SIGSTOP; restart_tools.wait_rows); when the row
+   is seen it is sent the signal and let go (SIGCONT): the signal lands
+   wherever the process was, at most a slice later. Checked: exit status 1 and one line "stopped by
    signal N"; every frame tissue.pvd and points.pvd list parses (VTK reads
    it, with as many displacements as points) and so does results.h5 with
    every frame it links; DIR/scene.yaml names no file by a relative path
@@ -228,8 +229,7 @@ def check_case(rel, tmp, verbose):
                          + sets, cwd=here, stderr=subprocess.PIPE, text=True)
     stopped = os.path.join(here, "stopped")
     seen = wait_rows(stopped, STOP_AFTER, p)
-    if seen:
-        p.send_signal(signal.SIGSTOP)
+    if seen:  # frozen by wait_rows
         p.send_signal(sig)
         p.send_signal(signal.SIGCONT)
     _, err = p.communicate()

@@ -93,16 +93,31 @@ def compare(what, ref, got, TOL):
 
 
 def wait_rows(out, n, proc):
+    """Run proc in slices of about 2 ms until its steps.csv has more than n
+    lines; True with proc frozen by SIGSTOP (the caller sends its signal,
+    then SIGCONT), False when proc ended first (its returncode set). The
+    file is read only while proc is stopped: polling a running process let
+    a case of 1-4 ms steps (needle-retract) finish its last 7 steps between
+    the row being seen and the signal, on a loaded machine. Slicing starts
+    once steps.csv exists: needlehex re-executes itself at start (main.c,
+    nh_thread_policy), and a SIGSTOP that lands in that execve of a
+    threaded process is lost (measured: the run then finished unstopped)."""
     path = os.path.join(out, "steps.csv")
-    while proc.poll() is None:
-        try:
-            with open(path) as f:
-                if sum(1 for _ in f) > n:
-                    return True
-        except FileNotFoundError:
-            pass
-        time.sleep(0.005)
-    return False
+    while not os.path.exists(path):
+        if proc.poll() is not None:
+            return False
+        time.sleep(0.001)
+    while True:
+        proc.send_signal(signal.SIGSTOP)
+        _, status = os.waitpid(proc.pid, os.WUNTRACED)
+        if not os.WIFSTOPPED(status):
+            proc.returncode = os.waitstatus_to_exitcode(status)
+            return False
+        with open(path) as f:
+            if sum(1 for _ in f) > n:
+                return True
+        proc.send_signal(signal.SIGCONT)
+        time.sleep(0.002)
 
 
 def check_scene(name, scene, sets, stop_after, tol):
@@ -126,6 +141,7 @@ def check_scene(name, scene, sets, stop_after, tol):
             failures.append(f"{name}: the run ended before step {stop_after}")
             return
         p.send_signal(signal.SIGTERM)
+        p.send_signal(signal.SIGCONT)
         _, err = p.communicate()
         printed = err.split("continue with: ")[-1].split()
         if p.returncode != 1 or printed[:2] != ["needlehex", "run"]:
