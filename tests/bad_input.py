@@ -158,6 +158,8 @@ CASES = [
     ("skull_box.yaml", [], 8, "tissue.skull"),
     ("trajectory_base.yaml", ["tissue.skull={gap: -0.001}"], "--set:1", "tissue.skull.gap"),
     ("trajectory_base.yaml", ["tissue.skull={gaps: 0}"], "--set:1", "tissue.skull.gaps"),
+    ("trajectory_base.yaml", ["tissue.skull={gap: 0.001, rows: nodes}"], "--set:1",
+     "tissue.skull.rows"),
     ("trajectory_base.yaml", ["tissue.buoyancy.level=[0, 1]"], "--set:1",
      "tissue.buoyancy.level"),
     # tractions: both a traction and a pressure; a region without boundary

@@ -70,6 +70,7 @@ int nh_contact_create(const nh_scene *sc, const nh_mesh *m, nh_contact **out) {
   }
   if (!rc && sc->tissue.skull) {
     rc = nh_skull_create(&m->domain, sc->tissue.skull_gap, &c->skull);
+    if (!rc) nh_skull_set_rows(c->skull, sc->tissue.skull_rows);
     if (!rc) rc = nh_skull_build(c->skull, m);
   }
   if (rc) {

@@ -174,6 +174,24 @@ void nh_skull_destroy(nh_skull **skull);
  * sets it at creation, a diagnostic: docs/dbs.md); the next nh_skull_build
  * uses it. NH_ERR_INPUT outside 0 ..= NH_CUT_DEPTH_MAX − 1. */
 int nh_skull_set_depth(nh_skull *skull, int depth);
+/* The kind of the skull's rows (default NH_SKULL_ROWS_POINTS): one per
+ * clustered surface point of a cut leaf, or NH_SKULL_ROWS_MORTAR, one
+ * weighted-gap row per tissue node and normal cluster of the surface
+ * samples its shape function sees (docs/theory.md §5c, "Weighted-gap
+ * rows"); the next nh_skull_build uses it. */
+void nh_skull_set_rows(nh_skull *skull, nh_skull_rows_kind kind);
+/* A weighted-gap row at a displacement (nh_skull_weighted_gaps): its gap
+ * g_a = Σ_q w_q N_a(X_q) g(x_q) / D_a, unit inward direction, the weighted
+ * mean rest position Σ_q w_q N_a(X_q) X_q / D_a of its samples, and its area D_a. */
+typedef struct {
+  double g, dir[3], X[3], area;
+} nh_skull_row_info;
+/* Every weighted-gap row at u, in build order (out: nh_skull_points of
+ * them); returns their number (0 for point rows). *dropped (may be NULL):
+ * the area of the samples whose rows were dropped (leaves with less than
+ * NH_FILL_MIN tissue only). For the tests. */
+int nh_skull_weighted_gaps(const nh_skull *skull, const nh_mesh *mesh, const double *u,
+                           nh_skull_row_info *out, double *dropped);
 /* The contact points of the mesh's surface (rest shape), after creation;
  * nh_skull_relocate after refinement keeps the warm starts. */
 int nh_skull_build(nh_skull *skull, const nh_mesh *mesh);

@@ -67,6 +67,19 @@
  * from the point's previous step. The rows' impulses λ / h are the contact
  * forces; λ / (h A) is the contact pressure.
  *
+ * Weighted-gap rows (tissue.skull.rows: mortar, nh_skull_build_mortar;
+ * docs/theory.md §5c, "Weighted-gap rows"): instead of the clustered points,
+ * every leaf's samples are kept (moved onto F = 0), and each node a whose
+ * shape function sees some gives one row per cluster K of their normals,
+ * the mortar-type weighted gap (Puso & Laursen, "A mortar segment-to-segment
+ * contact method for large deformation solid mechanics", 2004) against the
+ * rigid skull: g_a = Σ_K w_q N_a(X_q) g(x_q) / D_a, D_a = Σ_K w_q N_a(X_q),
+ * direction the same mean of the skull's inward normals, tissue part the
+ * widened row Σ_b c_ab u_b with c_ab = Σ_K w_q N_a(X_q) N_b(X_q) / D_a. Their
+ * warm starts, forces, relocation and checkpoint are the points' (one
+ * "point" per row, at the samples' weighted mean); the goal estimate's
+ * data term gives them 0.
+ *
  * The points one lattice finer (nh_skull_data_change): the same leaf's
  * points at depth + 1 (`scaled`: 12³ sub-cells), computed once per leaf,
  * each given to the nearest point of its leaf facing its way; the change of
@@ -92,7 +105,24 @@ typedef struct {
   int crease;   /* it (or its skull point) lies on a crease even after the split: its row
                    keeps the skull's normal at X as its direction */
   int leaf;     /* the leaf whose surface samples made it (cell may be a neighbour: `scaled`) */
+  /* a weighted-gap row (NH_SKULL_ROWS_MORTAR): its samples s->mq[q_first ..< q_first + q_count]
+   * with their weights w_q N_a(X_q) / D_a, and its tissue part s->mt[t_first ..< + t_count] */
+  int q_first, q_count, t_first, t_count;
 } nh_skull_point;
+
+/* A sample of the rest surface kept for the weighted-gap rows: rest point,
+ * its leaf and natural coordinates there, area weight, outward normal, and
+ * whether its leaf holds less than NH_FILL_MIN of tissue. */
+typedef struct {
+  double X[3], xi[3], w, n[3];
+  int cell, small;
+} nh_skull_msample;
+
+/* A weight of a weighted-gap row: a sample (or a node) and its coefficient. */
+typedef struct {
+  int i;
+  double c;
+} nh_skull_weight;
 
 /* At most one point per dominant direction of the outward normal (±x, ±y,
  * ±z) in a leaf. */
@@ -135,6 +165,16 @@ struct nh_skull {
   int n_fine;
   double force[3]; /* last step's total contact force on the tissue, N */
   int active;      /* rows with λ > 0 in the last step */
+  nh_skull_rows_kind kind;
+  /* the weighted-gap rows' data (NH_SKULL_ROWS_MORTAR) */
+  nh_skull_msample *ms; /* every leaf's surface samples */
+  int n_ms, cap_ms;
+  double *ms_g;        /* per sample: gap − φ_skull(x_q) at the last evaluation */
+  double *ms_dir;      /* 3 per sample: −∇U/|∇U| at x_q */
+  nh_skull_weight *mq; /* rows' samples */
+  nh_skull_weight *mt; /* rows' tissue nodes */
+  int n_mq, cap_mq, n_mt, cap_mt;
+  double dropped; /* area of samples whose rows were dropped (only small leaves) */
 };
 
 int nh_skull_create(const nh_domain *domain, double gap, nh_skull **out) {
@@ -168,11 +208,17 @@ int nh_skull_set_depth(nh_skull *s, int depth) {
   return NH_OK;
 }
 
+void nh_skull_set_rows(nh_skull *s, nh_skull_rows_kind kind) {
+  s->kind = kind;
+}
+
 void nh_skull_destroy(nh_skull **skull) {
   if (!skull || !*skull) return;
   free((*skull)->p);
   free((*skull)->cell);
   free((*skull)->fine);
+  free((*skull)->ms), free((*skull)->ms_g), free((*skull)->ms_dir);
+  free((*skull)->mq), free((*skull)->mt);
   free(*skull);
   *skull = NULL;
 }
@@ -396,10 +442,38 @@ static int nh_skull_cell_points(const nh_domain *d, double gap, const nh_skull_s
   return NH_OK;
 }
 
+/* Where a leaf's samples go for the weighted-gap rows: the skull and the
+ * leaf (NULL: nowhere). */
+typedef struct {
+  nh_skull *s;
+  int leaf;
+  const double *Xe;
+} nh_skull_keep;
+
+/* Append a leaf's n samples to k->s's weighted-gap samples: each moved onto
+ * F = 0 along its normal (nh_skull_project; kept where it was if that
+ * fails), with its natural coordinates in the leaf. small: the leaf holds
+ * less than NH_FILL_MIN of tissue. NH_ERR_MEMORY. */
+static int nh_skull_keep_samples(const nh_skull_keep *k, const nh_skull_sample *smp, int n,
+                                 double edge, int small) {
+  nh_skull *s = k->s;
+  for (int q = 0; q < n; q++) {
+    if (s->n_ms >= s->cap_ms && nh_grow((void **)&s->ms, &s->cap_ms, s->n_ms + 1, sizeof *s->ms))
+      return NH_ERROR(NH_ERR_MEMORY, "out of memory: skull samples");
+    nh_skull_msample *m = &s->ms[s->n_ms];
+    if (!nh_skull_project(&s->domain, smp[q].x, edge, m->X)) memcpy(m->X, smp[q].x, sizeof m->X);
+    if (nh_hex_invert(k->Xe, m->X, m->xi) != NH_OK) continue;
+    nh_skull_distance(&s->domain, m->X, m->n);
+    m->w = smp[q].w, m->cell = k->leaf, m->small = small;
+    s->n_ms++;
+  }
+  return NH_OK;
+}
+
 /* The surface points of leaf Xe (n_pt = 0 if the surface misses it) from
  * n³ sub-cell midpoints (n = 6 << fine) and the one-sided smeared delta. */
 static int nh_cell_surface(const nh_domain *d, double gap, const double Xe[24], int fine,
-                           nh_skull_cell *f) {
+                           nh_skull_cell *f, const nh_skull_keep *keep) {
   const int n = 6 << fine;
   double edge = 0.0;
   for (int k = 0; k < 3; k++) edge = fmax(edge, fabs(Xe[18 + k] - Xe[k]));
@@ -431,7 +505,8 @@ static int nh_cell_surface(const nh_domain *d, double gap, const double Xe[24], 
         s->w = w;
         for (int p = 0; p < 3; p++) s->x[p] = x[p] - phi * nrm[p], s->n[p] = nrm[p];
       }
-  int rc = nh_skull_cell_points(d, gap, smp, ns, cls, edge, f);
+  int rc = keep ? nh_skull_keep_samples(keep, smp, ns, edge, 0)
+                : nh_skull_cell_points(d, gap, smp, ns, cls, edge, f);
   free(smp), free(cls);
   return rc;
 }
@@ -441,7 +516,7 @@ static int nh_cell_surface(const nh_domain *d, double gap, const double Xe[24], 
  * F = 0, natural coordinates xi in the leaf, areas; and its tissue
  * fraction. */
 static int nh_cell_cut_surface(const nh_domain *d, double gap, int depth, const double lo[3],
-                               const double hi[3], nh_skull_cell *f) {
+                               const double hi[3], nh_skull_cell *f, const nh_skull_keep *keep) {
   nh_cut_spec spec;
   nh_cut_spec_domain(&spec, d, depth);
   nh_cut_moments mom;
@@ -466,7 +541,10 @@ static int nh_cell_cut_surface(const nh_domain *d, double gap, int depth, const 
   }
   nh_cut_surface_free(&surf);
   f->fraction = mom.volume / ((hi[0] - lo[0]) * (hi[1] - lo[1]) * (hi[2] - lo[2]));
-  if (!rc) rc = nh_skull_cell_points(d, gap, smp, ns, cls, edge, f);
+  if (!rc && keep)
+    rc = nh_skull_keep_samples(keep, smp, ns, edge, f->fraction < NH_FILL_MIN);
+  else if (!rc)
+    rc = nh_skull_cell_points(d, gap, smp, ns, cls, edge, f);
   free(smp), free(cls);
   for (int i = 0; i < f->n_pt && !rc; i++)
     for (int k = 0; k < 3; k++) f->xi[i][k] = (2.0 * f->P[i][k] - lo[k] - hi[k]) / (hi[k] - lo[k]);
@@ -516,18 +594,187 @@ static void nh_skull_merge_small(nh_skull *s) {
 
 /* The points of leaf Xe: from the lattice s->depth + finer (integrated box
  * leaves), else from (6 << finer)³ sub-cells. */
-static int nh_skull_leaf(const nh_skull *s, const double Xe[24], int finer, nh_skull_cell *f) {
+static int nh_skull_leaf(const nh_skull *s, const double Xe[24], int finer, nh_skull_cell *f,
+                         const nh_skull_keep *keep) {
   double lo[3], hi[3];
   memset(f, 0, sizeof *f);
   memcpy(f->Xe, Xe, sizeof f->Xe);
   f->own = nh_domain_integrates_cuts(&s->domain) && nh_hex_is_box(Xe, lo, hi);
-  NH_TRY(f->own ? nh_cell_cut_surface(&s->domain, s->gap, s->depth + finer, lo, hi, f)
-                : nh_cell_surface(&s->domain, s->gap, Xe, finer, f));
+  NH_TRY(f->own ? nh_cell_cut_surface(&s->domain, s->gap, s->depth + finer, lo, hi, f, keep)
+                : nh_cell_surface(&s->domain, s->gap, Xe, finer, f, keep));
   f->done = 1;
   return NH_OK;
 }
 
+/* A node's share of a sample (node, sample, N_a(X_q)), sorted by node. */
+typedef struct {
+  int node, q;
+  double N;
+} nh_skull_share;
+
+static int nh_skull_share_cmp(const void *a, const void *b) {
+  const nh_skull_share *x = a, *y = b;
+  if (x->node != y->node) return x->node < y->node ? -1 : 1;
+  return (x->q > y->q) - (x->q < y->q);
+}
+
+/* Add c to node's coefficient in the row's tissue part s->mt[first ..< s->n_mt]. */
+static int nh_skull_add_node(nh_skull *s, int first, int node, double c) {
+  for (int j = first; j < s->n_mt; j++)
+    if (s->mt[j].i == node) {
+      s->mt[j].c += c;
+      return NH_OK;
+    }
+  if (s->n_mt >= s->cap_mt && nh_grow((void **)&s->mt, &s->cap_mt, s->n_mt + 1, sizeof *s->mt))
+    return NH_ERROR(NH_ERR_MEMORY, "out of memory: skull rows");
+  s->mt[s->n_mt++] = (nh_skull_weight){node, c};
+  return NH_OK;
+}
+
+/* The weighted-gap rows (docs/theory.md §5c, "Weighted-gap rows"): every
+ * leaf's surface samples (w_q, X_q, n_q), and for every node a whose shape
+ * function sees some, per cluster of their normals (nh_skull_cluster with
+ * the weights w_q N_a(X_q): the fissure's two walls or the faces of a
+ * crease apart), one row
+ *   D_a = Σ_q w_q N_a(X_q),   g_a = Σ_q (w_q N_a(X_q) / D_a) g(x_q),
+ *   tissue part Σ_b c_ab u_b,  c_ab = Σ_q (w_q N_a(X_q) / D_a) N_b(X_q)  (Σ_b c_ab = 1),
+ * the gap's average over the node's surface patch and the displacement's
+ * average there (its linearisation with one direction, the weighted
+ * normal). A row whose samples all lie in leaves with less than NH_FILL_MIN
+ * tissue is dropped (its nodes are held by the stabilisation alone; its
+ * area is counted in s->dropped). */
+static int nh_skull_build_mortar(nh_skull *s, const nh_mesh *m) {
+  s->n = s->n_ms = s->n_mq = s->n_mt = 0;
+  s->dropped = 0.0;
+  for (int l = 0; l < m->n_leaves; l++) {
+    const int c = m->leaves[l];
+    double Xe[24];
+    nh_mesh_cell_coords(m, m->X, c, Xe);
+    nh_skull_cell f;
+    const nh_skull_keep keep = {s, c, Xe};
+    NH_TRY(nh_skull_leaf(s, Xe, 0, &f, &keep));
+  }
+  NH_TRY(nh_realloc((void **)&s->ms_g, (size_t)(s->n_ms ? s->n_ms : 1), sizeof *s->ms_g));
+  NH_TRY(nh_realloc((void **)&s->ms_dir, 3 * (size_t)(s->n_ms ? s->n_ms : 1), sizeof *s->ms_dir));
+  const int n_share = 8 * s->n_ms;
+  nh_skull_share *sh = nh_calloc((size_t)(n_share ? n_share : 1), sizeof *sh);
+  nh_skull_sample *smp = nh_calloc((size_t)(n_share ? n_share : 1), sizeof *smp);
+  int *cls = nh_calloc((size_t)(n_share ? n_share : 1), sizeof *cls), n_sh = 0, rc = NH_OK;
+  if (!sh || !smp || !cls) rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: skull rows");
+  for (int q = 0; q < s->n_ms && !rc; q++) {
+    double N[8];
+    nh_hex_shape(s->ms[q].xi, N);
+    for (int a = 0; a < 8; a++)
+      /* N_a < 0 too (a sample projected a little out of its leaf): the
+       * shares of a sample sum to 1, so Σ_a D_a = Σ_q w_q */
+      if (N[a] != 0.0) sh[n_sh++] = (nh_skull_share){m->cells[8 * s->ms[q].cell + a], q, N[a]};
+  }
+  if (!rc) qsort(sh, (size_t)n_sh, sizeof *sh, nh_skull_share_cmp);
+  for (int first = 0, last; first < n_sh && !rc; first = last) {
+    for (last = first; last < n_sh && sh[last].node == sh[first].node; last++) {
+      const nh_skull_msample *ms = &s->ms[sh[last].q];
+      nh_skull_sample *t = &smp[last - first];
+      t->w = ms->w * sh[last].N;
+      memcpy(t->x, ms->X, sizeof t->x), memcpy(t->n, ms->n, sizeof t->n);
+    }
+    const int n = last - first, n_cls = nh_skull_cluster(smp, n, cls);
+    for (int k = 0; k < n_cls && !rc; k++) {
+      double D = 0.0, healthy = 0.0;
+      for (int j = 0; j < n; j++)
+        if (cls[j] == k) D += smp[j].w, healthy += s->ms[sh[first + j].q].small ? 0.0 : smp[j].w;
+      if (!(D > 0.0) || !(healthy > 0.0)) {
+        s->dropped += D;
+        continue;
+      }
+      if (s->n >= s->cap && nh_grow((void **)&s->p, &s->cap, s->n + 1, sizeof *s->p)) {
+        rc = NH_ERR_MEMORY;
+        break;
+      }
+      nh_skull_point *p = &s->p[s->n++];
+      memset(p, 0, sizeof *p);
+      p->row = p->leaf = -1;
+      p->area = D;
+      p->q_first = s->n_mq, p->t_first = s->n_mt;
+      double nrm[3] = {0, 0, 0}, wmax = -1.0;
+      for (int j = 0; j < n && !rc; j++) {
+        if (cls[j] != k) continue;
+        const nh_skull_msample *ms = &s->ms[sh[first + j].q];
+        const double c = smp[j].w / D;
+        for (int d = 0; d < 3; d++) p->X[d] += c * ms->X[d], nrm[d] += c * ms->n[d];
+        if (smp[j].w > wmax)
+          wmax = smp[j].w, p->cell = ms->cell, memcpy(p->xi, ms->xi, sizeof p->xi);
+        double Xe[24], N[8];
+        nh_mesh_cell_coords(m, m->X, ms->cell, Xe);
+        for (int d = 0; d < 3; d++) p->edge = fmax(p->edge, fabs(Xe[18 + d] - Xe[d]));
+        if (s->n_mq >= s->cap_mq &&
+            nh_grow((void **)&s->mq, &s->cap_mq, s->n_mq + 1, sizeof *s->mq)) {
+          rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: skull rows");
+          break;
+        }
+        s->mq[s->n_mq++] = (nh_skull_weight){sh[first + j].q, c};
+        nh_hex_shape(ms->xi, N);
+        for (int b = 0; b < 8 && !rc; b++)
+          rc = nh_skull_add_node(s, p->t_first, m->cells[8 * ms->cell + b], c * N[b]);
+      }
+      nh_skull_normalise(0.0, nrm, p->N);
+      p->q_count = s->n_mq - p->q_first, p->t_count = s->n_mt - p->t_first;
+    }
+  }
+  free(sh), free(smp), free(cls);
+  return rc;
+}
+
+/* The current gap g(x_q) = gap − φ_skull(x_q) and inward direction
+ * −∇U/|∇U| at x_q = X_q + u(X_q) of sample q. */
+static double nh_skull_sample_gap(const nh_skull *s, const nh_mesh *m, const double *u, int q,
+                                  double dir[3]) {
+  const nh_skull_msample *ms = &s->ms[q];
+  double N[8], x[3], nrm[3];
+  nh_hex_shape(ms->xi, N);
+  const int *e = m->cells + 8 * ms->cell;
+  for (int k = 0; k < 3; k++) {
+    x[k] = ms->X[k];
+    for (int a = 0; a < 8; a++) x[k] += N[a] * u[3 * e[a] + k];
+  }
+  const double g = s->gap - nh_skull_wall(&s->domain, x, nrm);
+  for (int k = 0; k < 3; k++) dir[k] = -nrm[k];
+  return g;
+}
+
+/* Weighted-gap row i's gap and unit inward direction at u, from the samples'
+ * gaps and directions g_q, dir_q (NULL: evaluated here). */
+static double nh_skull_row_gap(const nh_skull *s, const nh_mesh *m, const double *u, int i,
+                               const double *g_q, const double *dir_q, double dir[3]) {
+  const nh_skull_point *p = &s->p[i];
+  double g = 0.0, sum[3] = {0, 0, 0};
+  for (int j = p->q_first; j < p->q_first + p->q_count; j++) {
+    const int q = s->mq[j].i;
+    double d[3], gq;
+    if (g_q && dir_q)
+      gq = g_q[q], memcpy(d, dir_q + 3 * q, sizeof d);
+    else
+      gq = nh_skull_sample_gap(s, m, u, q, d);
+    g += s->mq[j].c * gq;
+    for (int k = 0; k < 3; k++) sum[k] += s->mq[j].c * d[k];
+  }
+  nh_skull_normalise(0.0, sum, dir);
+  return g;
+}
+
+int nh_skull_weighted_gaps(const nh_skull *s, const nh_mesh *m, const double *u,
+                           nh_skull_row_info *out, double *dropped) {
+  if (dropped) *dropped = s->kind == NH_SKULL_ROWS_MORTAR ? s->dropped : 0.0;
+  if (s->kind != NH_SKULL_ROWS_MORTAR) return 0;
+  for (int i = 0; i < s->n; i++) {
+    out[i].g = nh_skull_row_gap(s, m, u, i, NULL, NULL, out[i].dir);
+    memcpy(out[i].X, s->p[i].X, sizeof out[i].X);
+    out[i].area = s->p[i].area;
+  }
+  return s->n;
+}
+
 int nh_skull_build(nh_skull *s, const nh_mesh *m) {
+  if (s->kind == NH_SKULL_ROWS_MORTAR) return nh_skull_build_mortar(s, m);
   s->n = 0;
   /* each leaf's points: kept from the last build where its corners are the
    * same (after a refinement, all but the new leaves), else computed */
@@ -541,7 +788,7 @@ int nh_skull_build(nh_skull *s, const nh_mesh *m) {
     if (c < s->n_cell && s->cell[c].done && !memcmp(s->cell[c].Xe, Xe, sizeof Xe)) {
       *f = s->cell[c];
     } else {
-      int rc = nh_skull_leaf(s, Xe, 0, f);
+      int rc = nh_skull_leaf(s, Xe, 0, f, NULL);
       if (rc) {
         free(fresh);
         return rc;
@@ -608,14 +855,54 @@ double nh_skull_penetration(const nh_skull *s, const nh_mesh *m, const double *u
   double worst = 0.0;
   for (int i = 0; i < s->n; i++) {
     double x[3], N[8], nrm[3];
+    if (s->kind == NH_SKULL_ROWS_MORTAR) {
+      worst = fmax(worst, -nh_skull_row_gap(s, m, u, i, NULL, NULL, nrm));
+      continue;
+    }
     nh_skull_position(m, u, &s->p[i], x, N);
     worst = fmax(worst, nh_skull_wall(&s->domain, x, nrm) - s->gap);
   }
   return worst;
 }
 
+/* Row r of point p: unilateral, no tool part, inward direction dir, gap g,
+ * warm-started from p's last impulse. */
+static void nh_skull_row_set(nh_rows *rows, int r, const double dir[3], double g,
+                             nh_skull_point *p) {
+  for (int k = 0; k < 3; k++) rows->dir[3 * r + k] = dir[k];
+  rows->tool[r] = -1, rows->elem[r] = -1;
+  rows->gap[r] = g;
+  rows->law[r] = (nh_row_law){NH_ROW_UNILATERAL, -1, -1, 0.0, 0.0, -1, 0.0, 0, 0};
+  rows->lambda[r] = p->lam;
+  p->row = r;
+}
+
+/* The weighted-gap rows of nh_skull_rows. */
+static int nh_skull_rows_mortar(nh_skull *s, const nh_mesh *m, const double *u, const double *v,
+                                double h, nh_rows *rows) {
+  for (int q = 0; q < s->n_ms; q++) s->ms_g[q] = nh_skull_sample_gap(s, m, u, q, s->ms_dir + 3 * q);
+  for (int i = 0; i < s->n; i++) {
+    nh_skull_point *p = &s->p[i];
+    double dir[3], vn = 0.0;
+    const double g = nh_skull_row_gap(s, m, u, i, s->ms_g, s->ms_dir, dir);
+    for (int j = p->t_first; j < p->t_first + p->t_count; j++)
+      for (int k = 0; k < 3; k++) vn -= s->mt[j].c * v[3 * s->mt[j].i + k] * dir[k];
+    p->row = -1;
+    if (g > 2.0 * h * fmax(vn, 0.0) + 0.01 * p->edge && p->lam == 0.0) continue;
+    int r = nh_rows_add(rows);
+    if (r < 0) return NH_ERROR(NH_ERR_MEMORY, "out of memory: skull rows");
+    NH_TRY(nh_rows_widen(rows, p->t_count));
+    for (int j = 0; j < p->t_count; j++)
+      rows->node[rows->start[r] + j] = s->mt[p->t_first + j].i,
+                                  rows->N[rows->start[r] + j] = s->mt[p->t_first + j].c;
+    nh_skull_row_set(rows, r, dir, g, p);
+  }
+  return NH_OK;
+}
+
 int nh_skull_rows(nh_skull *s, const nh_mesh *m, const double *u, const double *v, double h,
                   nh_rows *rows) {
+  if (s->kind == NH_SKULL_ROWS_MORTAR) return nh_skull_rows_mortar(s, m, u, v, h, rows);
   for (int i = 0; i < s->n; i++) {
     nh_skull_point *p = &s->p[i];
     double x[3], N[8], nrm[3], vn = 0.0;
@@ -635,12 +922,8 @@ int nh_skull_rows(nh_skull *s, const nh_mesh *m, const double *u, const double *
     for (int a = 0; a < 8; a++)
       rows->node[rows->start[r] + a] = m->cells[8 * p->cell + a],
                                   rows->N[rows->start[r] + a] = N[a];
-    for (int k = 0; k < 3; k++) rows->dir[3 * r + k] = -nrm[k];
-    rows->tool[r] = -1, rows->elem[r] = -1;
-    rows->gap[r] = g;
-    rows->law[r] = (nh_row_law){NH_ROW_UNILATERAL, -1, -1, 0.0, 0.0, -1, 0.0, 0, 0};
-    rows->lambda[r] = p->lam;
-    p->row = r;
+    for (int k = 0; k < 3; k++) nrm[k] = -nrm[k];
+    nh_skull_row_set(rows, r, nrm, g, p);
   }
   return NH_OK;
 }
@@ -711,6 +994,10 @@ double nh_skull_missed(const nh_skull *s, const nh_mesh *m, const double *u) {
   for (int i = 0; i < s->n; i++) {
     if (s->p[i].row >= 0) continue;
     double x[3], N[8], nrm[3];
+    if (s->kind == NH_SKULL_ROWS_MORTAR) {
+      worst = fmax(worst, -nh_skull_row_gap(s, m, u, i, NULL, NULL, nrm) / s->p[i].edge);
+      continue;
+    }
     nh_skull_position(m, u, &s->p[i], x, N);
     worst = fmax(worst, (nh_skull_wall(&s->domain, x, nrm) - s->gap) / s->p[i].edge);
   }
@@ -759,11 +1046,16 @@ int nh_skull_data_change(nh_skull *s, const nh_mesh *m, const double *u, int n_f
   for (int i = 0; i < s->n; i++) {
     const nh_skull_point *p = &s->p[i];
     if (p->row < 0) continue;
+    if (s->kind == NH_SKULL_ROWS_MORTAR) { /* not re-sampled: no data term (docs/theory.md §5c) */
+      if (dc) dc[p->row] = 0.0;
+      for (int q = 0; q < n_fields; q++) dw[(size_t)stride * q + p->row] = 0.0;
+      continue;
+    }
     const int c = p->leaf;
     double Xe[24];
     nh_mesh_cell_coords(m, m->X, c, Xe);
     nh_skull_cell *f = &s->fine[c];
-    if (!f->done || memcmp(f->Xe, Xe, sizeof Xe)) NH_TRY(nh_skull_leaf(s, Xe, 1, f));
+    if (!f->done || memcmp(f->Xe, Xe, sizeof Xe)) NH_TRY(nh_skull_leaf(s, Xe, 1, f, NULL));
     int first = i, last = i; /* the leaf's points: consecutive (nh_skull_build) */
     while (first > 0 && s->p[first - 1].leaf == c) first--;
     while (last + 1 < s->n && s->p[last + 1].leaf == c) last++;

@@ -28,6 +28,10 @@ typedef enum { NH_FORMULATION_BBAR = 0, NH_FORMULATION_FULL = 1 } nh_formulation
  * (tissue.cut_cells, docs/theory.md §5c): scaled by their fill fraction φ,
  * or by the finite cell quadrature over their tissue part. */
 typedef enum { NH_CUT_CELLS_SCALED = 0, NH_CUT_CELLS_INTEGRATED = 1 } nh_cut_cells;
+/* The skull's contact rows (tissue.skull.rows, docs/theory.md §5c): one per
+ * surface point of a cut leaf, or one weighted-gap row per tissue node near
+ * the surface (mortar-type averaging of the gap over the surface quadrature). */
+typedef enum { NH_SKULL_ROWS_POINTS = 0, NH_SKULL_ROWS_MORTAR = 1 } nh_skull_rows_kind;
 
 typedef enum {
   NH_REGION_BOX = 0,
@@ -284,6 +288,7 @@ typedef struct nh_scene {
                                       plane normal to gravity); only tissue above it drains */
     int skull;                     /* tissue.skull given (immersed domains, dynamic mode) */
     double skull_gap; /* tissue.skull.gap, m (default 0, >= 0): the CSF gap to the skull */
+    nh_skull_rows_kind skull_rows; /* tissue.skull.rows: points (default) | mortar */
     char where_skull[NH_WHERE_MAX];
     int n_fixed;
     nh_region *fixed; /* tissue.fixed: list of {box | sphere | cylinder, axes?, displacement?,

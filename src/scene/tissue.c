@@ -387,12 +387,14 @@ static int buoyancy_given(const nh_ctx *c, const nh_key_site *k, void *base) {
   return NH_OK;
 }
 
+static const char *const skull_row_kinds[] = {"points", "mortar", NULL};
 static const nh_key skull_rows[] = {
     {NH_NUMBER("gap", M(skull_gap), 0, NH_AT_LEAST, 0)},
+    {NH_CHOICE("rows", M(skull_rows), NH_SKULL_ROWS_POINTS, skull_row_kinds)},
     {0},
 };
 
-/* tissue.skull: {gap: g >= 0 (default 0)}, an immersed domain only; given
+/* tissue.skull: {gap: g >= 0 (default 0), rows: points | mortar}, an immersed domain only; given
  * even when null (`skull:`). */
 static int read_skull(const nh_ctx *c, const nh_key_site *k, void *base) {
   nh_scene *s = base;
