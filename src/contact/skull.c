@@ -111,11 +111,13 @@ typedef struct {
 } nh_skull_point;
 
 /* A sample of the rest surface kept for the weighted-gap rows: rest point,
- * its leaf and natural coordinates there, area weight, outward normal, and
- * whether its leaf holds less than NH_FILL_MIN of tissue. */
+ * its leaf and natural coordinates there, area weight, outward normal,
+ * whether its leaf holds less than NH_FILL_MIN of tissue, and whether it
+ * (or its skull point) lies on a crease (nh_skull_crease: its direction is
+ * then the skull's at the rest point, as a point row's on a crease). */
 typedef struct {
   double X[3], xi[3], w, n[3];
-  int cell, small;
+  int cell, small, crease;
 } nh_skull_msample;
 
 /* A weight of a weighted-gap row: a sample (or a node) and its coefficient. */
@@ -452,8 +454,9 @@ typedef struct {
 
 /* Append a leaf's n samples to k->s's weighted-gap samples: each moved onto
  * F = 0 along its normal (nh_skull_project; kept where it was if that
- * fails), with its natural coordinates in the leaf. small: the leaf holds
- * less than NH_FILL_MIN of tissue. NH_ERR_MEMORY. */
+ * fails), with its natural coordinates in the leaf and whether it lies on a
+ * crease. small: the leaf holds less than NH_FILL_MIN of tissue.
+ * NH_ERR_MEMORY. */
 static int nh_skull_keep_samples(const nh_skull_keep *k, const nh_skull_sample *smp, int n,
                                  double edge, int small) {
   nh_skull *s = k->s;
@@ -464,6 +467,8 @@ static int nh_skull_keep_samples(const nh_skull_keep *k, const nh_skull_sample *
     if (!nh_skull_project(&s->domain, smp[q].x, edge, m->X)) memcpy(m->X, smp[q].x, sizeof m->X);
     if (nh_hex_invert(k->Xe, m->X, m->xi) != NH_OK) continue;
     nh_skull_distance(&s->domain, m->X, m->n);
+    double unused[3];
+    m->crease = nh_skull_crease(&s->domain, s->gap, m->X, edge, unused) < 1.0;
     m->w = smp[q].w, m->cell = k->leaf, m->small = small;
     s->n_ms++;
   }
@@ -725,7 +730,10 @@ static int nh_skull_build_mortar(nh_skull *s, const nh_mesh *m) {
 }
 
 /* The current gap g(x_q) = gap − φ_skull(x_q) and inward direction
- * −∇U/|∇U| at x_q = X_q + u(X_q) of sample q. */
+ * −∇U/|∇U| at x_q = X_q + u(X_q) of sample q; on a crease, at X_q (a
+ * direction from round-off's side of the crease turns a row on a skull
+ * ridge into a negative lateral stiffness: the odd grids' mirror symmetry
+ * lost, 1e4-fold per step; docs/theory.md §5c, "Points on a crease"). */
 static double nh_skull_sample_gap(const nh_skull *s, const nh_mesh *m, const double *u, int q,
                                   double dir[3]) {
   const nh_skull_msample *ms = &s->ms[q];
@@ -737,6 +745,7 @@ static double nh_skull_sample_gap(const nh_skull *s, const nh_mesh *m, const dou
     for (int a = 0; a < 8; a++) x[k] += N[a] * u[3 * e[a] + k];
   }
   const double g = s->gap - nh_skull_wall(&s->domain, x, nrm);
+  if (ms->crease) nh_skull_wall(&s->domain, ms->X, nrm);
   for (int k = 0; k < 3; k++) dir[k] = -nrm[k];
   return g;
 }
