@@ -32,6 +32,9 @@ set_tests_properties(skull_force_mortar PROPERTIES LABELS "verify;slow")
 # The brain shift of dbs-skull.yaml on an odd grid (11 x 13 x 10) stays mirror
 # symmetric to 1e-6 max|u| (no skull point on a crease of F; tests/skull_mirror.py).
 nh_add_py_test(skull_mirror verify skull_mirror.py)
+# The same with the weighted-gap rows (tissue.skull.rows: mortar): mirror-symmetric rows, net
+# skull force without an x part, and shift.
+nh_add_py_test(skull_mirror_mortar verify skull_mirror.py tissue.skull.rows=mortar)
 
 # The per-step reference of tools/study.py dbs-goal (tools/richardson.py; tests/study_reference.py):
 # Richardson through three meshes recovers f∞, the order and the error bar of

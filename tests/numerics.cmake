@@ -21,7 +21,8 @@ nh_add_py_test(run_hdf5 io run_hdf5.py)
 # Restart with tools (tests/restart_tools.py): the needle phantom (also with
 # static friction), and under `slow` the shortened adaptive DBS procedure
 # (nested electrode, release) with solver.refactor auto and every, and a small
-# DBS procedure with skull contact, stopped by SIGTERM (continued by the
+# DBS procedure with skull contact (point rows, and the weighted-gap rows of
+# tissue.skull.rows: mortar), stopped by SIGTERM (continued by the
 # printed command) and by SIGKILL (continued from its checkpoint) equal the
 # uninterrupted run to 1e-12.
 nh_add_py_test(restart_tools io restart_tools.py needle)
@@ -30,6 +31,8 @@ set_tests_properties(restart_tools_dbs PROPERTIES LABELS "io;slow" TIMEOUT 900)
 nh_add_py_test(restart_tools_skull io restart_tools.py skull)
 nh_add_py_test(restart_tools_mri io restart_tools.py mri)
 set_tests_properties(restart_tools_skull PROPERTIES LABELS "io;slow" TIMEOUT 600)
+nh_add_py_test(restart_tools_skull_mortar io restart_tools.py skull-mortar)
+set_tests_properties(restart_tools_skull_mortar PROPERTIES LABELS "io;slow" TIMEOUT 900)
 
 # Restart from anywhere, every shipped case (tests/restart_cases.py; cases
 # found by globbing cases/, study files skipped): each case shortened to 10

@@ -4,7 +4,7 @@ cannula with the electrode nested inside, released at the target, the
 cannula retracted), without and with skull contact, stopped and continued,
 equal the uninterrupted run.
 
-usage: restart_tools.py [needle | dbs | skull | mri]
+usage: restart_tools.py [needle | dbs | skull | skull-mortar | mri]
 
 For each scene: a reference run; a run stopped by SIGTERM mid-way (started
 in a temporary folder, the scene and the output folder given as relative
@@ -216,8 +216,8 @@ def main():
         check_scene("dbs-mri", mri, ["time.end=2.0", "output.checkpoint=10", "output.every=10"],
                     20, 1e-12)
         return report()
-    if which != "skull":
-        print(f"usage: restart_tools.py [needle | dbs | skull | mri] (not {which!r})",
+    if which not in ("skull", "skull-mortar"):
+        print(f"usage: restart_tools.py [needle | dbs | skull | skull-mortar | mri] (not {which!r})",
               file=sys.stderr)
         return 2
     # The DBS procedure with skull contact, small: a 6 x 7 x 6 grid, 20 steps
@@ -229,7 +229,12 @@ def main():
             "output.every=5", "tissue.buoyancy.schedule=[[0, 0], [0.5, 1]]",
             "tools.0.motion=[{until: 0.5, speed: 0}, {until: target, speed: 0.1}, "
             "{until: 1.6, speed: 0}, {until: start, speed: -0.1}]"]
-    check_scene("dbs-skull", os.path.join(SRC, "cases", "dbs", "dbs-skull.yaml"), sets, 12, 1e-12)
+    # skull-mortar: the same with the weighted-gap rows (tissue.skull.rows:
+    # mortar, docs/theory.md §5c), one row per node near the surface.
+    if which == "skull-mortar":
+        sets.append("tissue.skull.rows=mortar")
+    check_scene(which.replace("skull", "dbs-skull"), os.path.join(SRC, "cases", "dbs", "dbs-skull.yaml"),
+                sets, 12, 1e-12)
     return report()
 
 

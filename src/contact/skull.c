@@ -77,7 +77,9 @@
  * direction the same mean of the skull's inward normals, tissue part the
  * widened row Σ_b c_ab u_b with c_ab = Σ_K w_q N_a(X_q) N_b(X_q) / D_a. Their
  * warm starts, forces, relocation and checkpoint are the points' (one
- * "point" per row, at the samples' weighted mean); the goal estimate's
+ * "point" per row, at the samples' weighted mean), except the margin's
+ * floor, 0.1 % of the edge (NH_SKULL_MORTAR_FLOOR), and a screen that
+ * skips the rows far from the skull unevaluated; the goal estimate's
  * data term gives them 0.
  *
  * The points one lattice finer (nh_skull_data_change): the same leaf's
@@ -108,14 +110,18 @@ typedef struct {
   /* a weighted-gap row (NH_SKULL_ROWS_MORTAR): its samples s->mq[q_first ..< q_first + q_count]
    * with their weights w_q N_a(X_q) / D_a, and its tissue part s->mt[t_first ..< + t_count] */
   int q_first, q_count, t_first, t_count;
+  double c_abs; /* Σ |w_q N_a(X_q) / D_a| over its samples (> 1 only with N_a < 0) */
+  double g_ref; /* its gap at the screen's reference displacement (nh_skull_rows_mortar) */
 } nh_skull_point;
 
 /* A sample of the rest surface kept for the weighted-gap rows: rest point,
- * its leaf and natural coordinates there, area weight, outward normal, and
- * whether its leaf holds less than NH_FILL_MIN of tissue. */
+ * its leaf and natural coordinates there, area weight, outward normal,
+ * whether its leaf holds less than NH_FILL_MIN of tissue, and whether it
+ * (or its skull point) lies on a crease (nh_skull_crease: its direction is
+ * then the skull's at the rest point, as a point row's on a crease). */
 typedef struct {
   double X[3], xi[3], w, n[3];
-  int cell, small;
+  int cell, small, crease;
 } nh_skull_msample;
 
 /* A weight of a weighted-gap row: a sample (or a node) and its coefficient. */
@@ -175,6 +181,12 @@ struct nh_skull {
   nh_skull_weight *mt; /* rows' tissue nodes */
   int n_mq, cap_mq, n_mt, cap_mt;
   double dropped; /* area of samples whose rows were dropped (only small leaves) */
+  /* the screen of nh_skull_rows_mortar: the displacement the rows' g_ref were
+   * evaluated at (n_ref nodes; 0: none since the build), and per sample the
+   * call that last evaluated it */
+  double *u_ref;
+  int n_ref, stamp;
+  int *ms_stamp;
 };
 
 int nh_skull_create(const nh_domain *domain, double gap, nh_skull **out) {
@@ -217,7 +229,8 @@ void nh_skull_destroy(nh_skull **skull) {
   free((*skull)->p);
   free((*skull)->cell);
   free((*skull)->fine);
-  free((*skull)->ms), free((*skull)->ms_g), free((*skull)->ms_dir);
+  free((*skull)->ms), free((*skull)->ms_g), free((*skull)->ms_dir), free((*skull)->ms_stamp);
+  free((*skull)->u_ref);
   free((*skull)->mq), free((*skull)->mt);
   free(*skull);
   *skull = NULL;
@@ -452,8 +465,9 @@ typedef struct {
 
 /* Append a leaf's n samples to k->s's weighted-gap samples: each moved onto
  * F = 0 along its normal (nh_skull_project; kept where it was if that
- * fails), with its natural coordinates in the leaf. small: the leaf holds
- * less than NH_FILL_MIN of tissue. NH_ERR_MEMORY. */
+ * fails), with its natural coordinates in the leaf and whether it lies on a
+ * crease. small: the leaf holds less than NH_FILL_MIN of tissue.
+ * NH_ERR_MEMORY. */
 static int nh_skull_keep_samples(const nh_skull_keep *k, const nh_skull_sample *smp, int n,
                                  double edge, int small) {
   nh_skull *s = k->s;
@@ -464,6 +478,8 @@ static int nh_skull_keep_samples(const nh_skull_keep *k, const nh_skull_sample *
     if (!nh_skull_project(&s->domain, smp[q].x, edge, m->X)) memcpy(m->X, smp[q].x, sizeof m->X);
     if (nh_hex_invert(k->Xe, m->X, m->xi) != NH_OK) continue;
     nh_skull_distance(&s->domain, m->X, m->n);
+    double unused[3];
+    m->crease = nh_skull_crease(&s->domain, s->gap, m->X, edge, unused) < 1.0;
     m->w = smp[q].w, m->cell = k->leaf, m->small = small;
     s->n_ms++;
   }
@@ -656,6 +672,9 @@ static int nh_skull_build_mortar(nh_skull *s, const nh_mesh *m) {
   }
   NH_TRY(nh_realloc((void **)&s->ms_g, (size_t)(s->n_ms ? s->n_ms : 1), sizeof *s->ms_g));
   NH_TRY(nh_realloc((void **)&s->ms_dir, 3 * (size_t)(s->n_ms ? s->n_ms : 1), sizeof *s->ms_dir));
+  NH_TRY(nh_realloc((void **)&s->ms_stamp, (size_t)(s->n_ms ? s->n_ms : 1), sizeof *s->ms_stamp));
+  memset(s->ms_stamp, 0, (size_t)(s->n_ms ? s->n_ms : 1) * sizeof *s->ms_stamp);
+  s->n_ref = s->stamp = 0;
   const int n_share = 8 * s->n_ms;
   nh_skull_share *sh = nh_calloc((size_t)(n_share ? n_share : 1), sizeof *sh);
   nh_skull_sample *smp = nh_calloc((size_t)(n_share ? n_share : 1), sizeof *smp);
@@ -712,6 +731,7 @@ static int nh_skull_build_mortar(nh_skull *s, const nh_mesh *m) {
           break;
         }
         s->mq[s->n_mq++] = (nh_skull_weight){sh[first + j].q, c};
+        p->c_abs += fabs(c);
         nh_hex_shape(ms->xi, N);
         for (int b = 0; b < 8 && !rc; b++)
           rc = nh_skull_add_node(s, p->t_first, m->cells[8 * ms->cell + b], c * N[b]);
@@ -725,7 +745,10 @@ static int nh_skull_build_mortar(nh_skull *s, const nh_mesh *m) {
 }
 
 /* The current gap g(x_q) = gap − φ_skull(x_q) and inward direction
- * −∇U/|∇U| at x_q = X_q + u(X_q) of sample q. */
+ * −∇U/|∇U| at x_q = X_q + u(X_q) of sample q; on a crease, at X_q (a
+ * direction from round-off's side of the crease turns a row on a skull
+ * ridge into a negative lateral stiffness: the odd grids' mirror symmetry
+ * lost, 1e4-fold per step; docs/theory.md §5c, "Points on a crease"). */
 static double nh_skull_sample_gap(const nh_skull *s, const nh_mesh *m, const double *u, int q,
                                   double dir[3]) {
   const nh_skull_msample *ms = &s->ms[q];
@@ -737,6 +760,7 @@ static double nh_skull_sample_gap(const nh_skull *s, const nh_mesh *m, const dou
     for (int a = 0; a < 8; a++) x[k] += N[a] * u[3 * e[a] + k];
   }
   const double g = s->gap - nh_skull_wall(&s->domain, x, nrm);
+  if (ms->crease) nh_skull_wall(&s->domain, ms->X, nrm);
   for (int k = 0; k < 3; k++) dir[k] = -nrm[k];
   return g;
 }
@@ -877,18 +901,87 @@ static void nh_skull_row_set(nh_rows *rows, int r, const double dir[3], double g
   p->row = r;
 }
 
+/* The screen of the weighted-gap rows (nh_skull_rows_mortar). Evaluating
+ * every sample's gap each step (seven evaluations of the hull level each,
+ * for ~150 samples a row) was ~38 % of a run's CPU (12 × 14 × 11 of
+ * dbs-skull.yaml, perf), most of it for rows far from the skull that get
+ * no row. A sample's gap g(x_q) = gap − φ_skull(x_q) moves by at most
+ * L |x_q − x_q,ref| from its value at a reference displacement u_ref, and
+ * |x_q − x_q,ref| ≤ Σ_b |N_b(X_q)| d_b with d_b = |u_b − u_ref,b|, Σ |N_b|
+ * ≤ NH_SKULL_SCREEN_N (1 inside the leaf; samples projected a little out of
+ * it exceed it slightly). So row a's gap is at least
+ *   g_a,ref − L NH_SKULL_SCREEN_N c_abs,a max_b d_b  (b over its nodes),
+ * and its closing speed vn at most Σ_b |c_ab| |v_b|; a row whose bounds
+ * already keep it out (and whose last impulse is 0) is skipped without
+ * evaluating its samples: the rows made are exactly those of evaluating
+ * all, so the run is unchanged, bit for bit, and needs no state in the
+ * checkpoint. L = NH_SKULL_SCREEN_L bounds |∇φ_skull| (φ_skull = U/|∇U|
+ * is a distance to first order, |∇φ| ≈ 1 near the surface). It is not a
+ * bound everywhere: deep inside the hull, where |∇U| is small, the fissure
+ * floor's row at the brain's centre (g_ref = 50 mm) moved 16 mm for
+ * 0.05 mm of its nodes (|Δg| / max d ≈ 320); a row so far in stays far, and on
+ * dbs-skull.yaml (10 × 12 × 9 to 16 × 19 × 15) no skipped row would have
+ * been made (every skipped row checked against its evaluated gap). All rows are evaluated again at
+ * the current u (the new u_ref) when a node has moved more than
+ * NH_SKULL_SCREEN_MOVE of the smallest row's edge from u_ref. */
+#define NH_SKULL_SCREEN_L    2.0
+#define NH_SKULL_SCREEN_N    1.5
+#define NH_SKULL_SCREEN_MOVE 0.02
+/* A weighted-gap row is made when its gap is below twice what its closing
+ * speed closes in a step plus NH_SKULL_MORTAR_FLOOR of its edge (or it
+ * pushed in the last step). The point rows' floor, 1 % of the edge, made
+ * 34 508 candidate rows over the 60 steps of 14 × 17 × 13 (dbs-skull.yaml),
+ * 0.1 % 24 344, and the run the same to 1.4e-13 (four grids: ≤ 3e-12,
+ * the contact solve's tolerance; docs/dbs.md): the rows within 1 % of an
+ * edge of the skull that do not close on it average the gap over a patch
+ * in contact and never push. */
+#define NH_SKULL_MORTAR_FLOOR 1e-3
+
 /* The weighted-gap rows of nh_skull_rows. */
 static int nh_skull_rows_mortar(nh_skull *s, const nh_mesh *m, const double *u, const double *v,
                                 double h, nh_rows *rows) {
-  for (int q = 0; q < s->n_ms; q++) s->ms_g[q] = nh_skull_sample_gap(s, m, u, q, s->ms_dir + 3 * q);
+  const int n_nodes = m->n_nodes;
+  double move = 0.0, edge = INFINITY;
+  if (s->n_ref == n_nodes)
+    for (int b = 0; b < n_nodes; b++) {
+      const double *a = u + 3 * b, *r = s->u_ref + 3 * b;
+      move = fmax(move, sqrt((a[0] - r[0]) * (a[0] - r[0]) + (a[1] - r[1]) * (a[1] - r[1]) +
+                             (a[2] - r[2]) * (a[2] - r[2])));
+    }
+  for (int i = 0; i < s->n; i++) edge = fmin(edge, s->p[i].edge);
+  const int refresh = s->n_ref != n_nodes || move > NH_SKULL_SCREEN_MOVE * edge;
+  if (refresh) {
+    NH_TRY(nh_realloc((void **)&s->u_ref, 3 * (size_t)(n_nodes ? n_nodes : 1), sizeof *s->u_ref));
+    memcpy(s->u_ref, u, 3 * (size_t)n_nodes * sizeof *u);
+    s->n_ref = n_nodes;
+  }
+  s->stamp++;
   for (int i = 0; i < s->n; i++) {
     nh_skull_point *p = &s->p[i];
     double dir[3], vn = 0.0;
+    p->row = -1;
+    if (!refresh && p->lam == 0.0) {
+      double d = 0.0, vmax = 0.0;
+      for (int j = p->t_first; j < p->t_first + p->t_count; j++) {
+        const double *a = u + 3 * s->mt[j].i, *r = s->u_ref + 3 * s->mt[j].i,
+                     *w = v + 3 * s->mt[j].i;
+        d = fmax(d, sqrt((a[0] - r[0]) * (a[0] - r[0]) + (a[1] - r[1]) * (a[1] - r[1]) +
+                         (a[2] - r[2]) * (a[2] - r[2])));
+        vmax += fabs(s->mt[j].c) * sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
+      }
+      const double low = p->g_ref - NH_SKULL_SCREEN_L * NH_SKULL_SCREEN_N * p->c_abs * d;
+      if (low > 2.0 * h * vmax + NH_SKULL_MORTAR_FLOOR * p->edge) continue;
+    }
+    for (int j = p->q_first; j < p->q_first + p->q_count; j++) {
+      const int q = s->mq[j].i;
+      if (s->ms_stamp[q] != s->stamp)
+        s->ms_stamp[q] = s->stamp, s->ms_g[q] = nh_skull_sample_gap(s, m, u, q, s->ms_dir + 3 * q);
+    }
     const double g = nh_skull_row_gap(s, m, u, i, s->ms_g, s->ms_dir, dir);
+    if (refresh) p->g_ref = g;
     for (int j = p->t_first; j < p->t_first + p->t_count; j++)
       for (int k = 0; k < 3; k++) vn -= s->mt[j].c * v[3 * s->mt[j].i + k] * dir[k];
-    p->row = -1;
-    if (g > 2.0 * h * fmax(vn, 0.0) + 0.01 * p->edge && p->lam == 0.0) continue;
+    if (g > 2.0 * h * fmax(vn, 0.0) + NH_SKULL_MORTAR_FLOOR * p->edge && p->lam == 0.0) continue;
     int r = nh_rows_add(rows);
     if (r < 0) return NH_ERROR(NH_ERR_MEMORY, "out of memory: skull rows");
     NH_TRY(nh_rows_widen(rows, p->t_count));
