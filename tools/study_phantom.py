@@ -109,6 +109,8 @@ PHANTOM = {
         ("goal-hex2-l2-each-leaves-every2", "goal hex2, 2 levels, each goal, goal leaves, every 2",
          goal(extra=["adapt.marking.goals=each", "adapt.marking.goal_leaves=true", "adapt.every=2"]),
          "goal"),
+        ("goal-hex2-l2-leaves-every4", "goal hex2, 2 levels, goal leaves, every 4",
+         goal(extra=["adapt.marking.goal_leaves=true", "adapt.every=4"]), "goal"),
         ("goal-hex2-l2-each-leaves-every4", "goal hex2, 2 levels, each goal, goal leaves, every 4",
          goal(extra=["adapt.marking.goals=each", "adapt.marking.goal_leaves=true", "adapt.every=4"]),
          "goal"),
