@@ -937,17 +937,20 @@ static void nh_skull_row_set(nh_rows *rows, int r, const double dir[3], double g
  * in contact and never push. */
 #define NH_SKULL_MORTAR_FLOOR 1e-3
 
+/* |u_b − u_ref,b| of node b. */
+static double nh_skull_moved(const double *u, const double *u_ref, int b) {
+  const double d[3] = {u[3 * b] - u_ref[3 * b], u[3 * b + 1] - u_ref[3 * b + 1],
+                       u[3 * b + 2] - u_ref[3 * b + 2]};
+  return nh_vec3_norm(d);
+}
+
 /* The weighted-gap rows of nh_skull_rows. */
 static int nh_skull_rows_mortar(nh_skull *s, const nh_mesh *m, const double *u, const double *v,
                                 double h, nh_rows *rows) {
   const int n_nodes = m->n_nodes;
   double move = 0.0, edge = INFINITY;
   if (s->n_ref == n_nodes)
-    for (int b = 0; b < n_nodes; b++) {
-      const double *a = u + 3 * b, *r = s->u_ref + 3 * b;
-      move = fmax(move, sqrt((a[0] - r[0]) * (a[0] - r[0]) + (a[1] - r[1]) * (a[1] - r[1]) +
-                             (a[2] - r[2]) * (a[2] - r[2])));
-    }
+    for (int b = 0; b < n_nodes; b++) move = fmax(move, nh_skull_moved(u, s->u_ref, b));
   for (int i = 0; i < s->n; i++) edge = fmin(edge, s->p[i].edge);
   const int refresh = s->n_ref != n_nodes || move > NH_SKULL_SCREEN_MOVE * edge;
   if (refresh) {
@@ -963,11 +966,8 @@ static int nh_skull_rows_mortar(nh_skull *s, const nh_mesh *m, const double *u, 
     if (!refresh && p->lam == 0.0) {
       double d = 0.0, vmax = 0.0;
       for (int j = p->t_first; j < p->t_first + p->t_count; j++) {
-        const double *a = u + 3 * s->mt[j].i, *r = s->u_ref + 3 * s->mt[j].i,
-                     *w = v + 3 * s->mt[j].i;
-        d = fmax(d, sqrt((a[0] - r[0]) * (a[0] - r[0]) + (a[1] - r[1]) * (a[1] - r[1]) +
-                         (a[2] - r[2]) * (a[2] - r[2])));
-        vmax += fabs(s->mt[j].c) * sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
+        d = fmax(d, nh_skull_moved(u, s->u_ref, s->mt[j].i));
+        vmax += fabs(s->mt[j].c) * nh_vec3_norm(v + 3 * s->mt[j].i);
       }
       const double low = p->g_ref - NH_SKULL_SCREEN_L * NH_SKULL_SCREEN_N * p->c_abs * d;
       if (low > 2.0 * h * vmax + NH_SKULL_MORTAR_FLOOR * p->edge) continue;
