@@ -26,7 +26,7 @@ nh_add_py_test(skull_force_integrated verify skull_force.py tissue.cut_cells=int
 nh_add_py_test(skull_force_odd verify skull_force.py tissue.grid=[9,11,8] tissue.cut_cells=integrated)
 nh_add_py_test(skull_force_odd_scaled verify skull_force.py tissue.grid=[9,11,8] tissue.cut_cells=scaled)
 # The same with the weighted-gap rows (tissue.skull.rows: mortar, docs/theory.md §5c), an odd grid
-# (slow: 94 s against 2 s, gap 0 gives every node near the surface a row; docs/dbs.md).
+# (slow: 41 s against 2 s, gap 0 gives every node near the surface a row; docs/dbs.md).
 nh_add_py_test(skull_force_mortar verify skull_force.py tissue.grid=[9,11,8] tissue.cut_cells=integrated tissue.skull.rows=mortar)
 set_tests_properties(skull_force_mortar PROPERTIES LABELS "verify;slow")
 # The brain shift of dbs-skull.yaml on an odd grid (11 x 13 x 10) stays mirror
