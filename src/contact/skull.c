@@ -121,6 +121,7 @@ typedef struct {
  * then the skull's at the rest point, as a point row's on a crease). */
 typedef struct {
   double X[3], xi[3], w, n[3];
+  double edge; /* its leaf's largest edge, m */
   int cell, small, crease;
 } nh_skull_msample;
 
@@ -147,16 +148,18 @@ typedef struct {
 /* At most two points per cluster (split once at a crease). */
 #define NH_SKULL_MAX_PT (2 * NH_SKULL_CLUSTERS)
 
-/* A leaf's surface points as last computed: a function of its corners
- * only, so a leaf whose corners are bitwise the same gets them again
- * without the samples (done = 0: not computed). */
+/* A leaf's surface points (or, for the weighted-gap rows, the range of its
+ * samples in s->ms) as last computed: a function of its corners only, so a
+ * leaf whose corners are bitwise the same gets them again without the
+ * samples (done = 0: not computed). */
 typedef struct {
   double Xe[24];
   double P[NH_SKULL_MAX_PT][3], xi[NH_SKULL_MAX_PT][3], area[NH_SKULL_MAX_PT];
   int crease[NH_SKULL_MAX_PT];
   int n_pt, done;
-  double fraction; /* the leaf's tissue volume / its volume (integrated cut cells) */
-  int own;         /* the points belong to this leaf at xi (integrated cut cell) */
+  double fraction;        /* the leaf's tissue volume / its volume (integrated cut cells) */
+  int own;                /* the points belong to this leaf at xi (integrated cut cell) */
+  int ms_first, ms_count; /* its weighted-gap samples in s->ms (NH_SKULL_ROWS_MORTAR) */
 } nh_skull_cell;
 
 struct nh_skull {
@@ -221,6 +224,7 @@ int nh_skull_set_depth(nh_skull *s, int depth) {
 }
 
 void nh_skull_set_rows(nh_skull *s, nh_skull_rows_kind kind) {
+  if (s->kind != kind) s->n_cell = 0; /* the leaves' cache holds the other kind's data */
   s->kind = kind;
 }
 
@@ -480,7 +484,7 @@ static int nh_skull_keep_samples(const nh_skull_keep *k, const nh_skull_sample *
     nh_skull_distance(&s->domain, m->X, m->n);
     double unused[3];
     m->crease = nh_skull_crease(&s->domain, s->gap, m->X, edge, unused) < 1.0;
-    m->w = smp[q].w, m->cell = k->leaf, m->small = small;
+    m->w = smp[q].w, m->cell = k->leaf, m->small = small, m->edge = edge;
     s->n_ms++;
   }
   return NH_OK;
@@ -628,21 +632,16 @@ typedef struct {
   double N;
 } nh_skull_share;
 
-static int nh_skull_share_cmp(const void *a, const void *b) {
-  const nh_skull_share *x = a, *y = b;
-  if (x->node != y->node) return x->node < y->node ? -1 : 1;
-  return (x->q > y->q) - (x->q < y->q);
-}
-
-/* Add c to node's coefficient in the row's tissue part s->mt[first ..< s->n_mt]. */
-static int nh_skull_add_node(nh_skull *s, int first, int node, double c) {
-  for (int j = first; j < s->n_mt; j++)
-    if (s->mt[j].i == node) {
-      s->mt[j].c += c;
-      return NH_OK;
-    }
+/* Add c to node's coefficient in the row's tissue part s->mt[first ..< s->n_mt];
+ * at[node]: its place there, or −1 (reset by the caller when the row is done). */
+static int nh_skull_add_node(nh_skull *s, int *at, int node, double c) {
+  if (at[node] >= 0) {
+    s->mt[at[node]].c += c;
+    return NH_OK;
+  }
   if (s->n_mt >= s->cap_mt && nh_grow((void **)&s->mt, &s->cap_mt, s->n_mt + 1, sizeof *s->mt))
     return NH_ERROR(NH_ERR_MEMORY, "out of memory: skull rows");
+  at[node] = s->n_mt;
   s->mt[s->n_mt++] = (nh_skull_weight){node, c};
   return NH_OK;
 }
@@ -660,16 +659,38 @@ static int nh_skull_add_node(nh_skull *s, int first, int node, double c) {
  * tissue is dropped (its nodes are held by the stabilisation alone; its
  * area is counted in s->dropped). */
 static int nh_skull_build_mortar(nh_skull *s, const nh_mesh *m) {
-  s->n = s->n_ms = s->n_mq = s->n_mt = 0;
+  s->n = s->n_mq = s->n_mt = 0;
   s->dropped = 0.0;
-  for (int l = 0; l < m->n_leaves; l++) {
+  /* each leaf's samples: copied from the last build where its corners are
+   * the same (after a refinement, all but the new leaves), else computed;
+   * in the leaves' order either way, so the rows do not depend on the cache */
+  nh_skull_msample *old = s->ms;
+  s->ms = NULL, s->n_ms = s->cap_ms = 0;
+  nh_skull_cell *fresh = nh_calloc((size_t)(m->n_cells ? m->n_cells : 1), sizeof *fresh);
+  int rc = fresh ? NH_OK : NH_ERROR(NH_ERR_MEMORY, "out of memory: skull samples");
+  for (int l = 0; l < m->n_leaves && !rc; l++) {
     const int c = m->leaves[l];
     double Xe[24];
     nh_mesh_cell_coords(m, m->X, c, Xe);
-    nh_skull_cell f;
-    const nh_skull_keep keep = {s, c, Xe};
-    NH_TRY(nh_skull_leaf(s, Xe, 0, &f, &keep));
+    nh_skull_cell *f = &fresh[c];
+    const int first = s->n_ms;
+    if (c < s->n_cell && s->cell[c].done && !memcmp(s->cell[c].Xe, Xe, sizeof Xe)) {
+      *f = s->cell[c];
+      const int n = f->ms_count;
+      if (n && nh_grow((void **)&s->ms, &s->cap_ms, s->n_ms + n, sizeof *s->ms))
+        rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: skull samples");
+      else if (n)
+        memcpy(s->ms + s->n_ms, old + f->ms_first, (size_t)n * sizeof *s->ms), s->n_ms += n;
+    } else {
+      const nh_skull_keep keep = {s, c, Xe};
+      rc = nh_skull_leaf(s, Xe, 0, f, &keep);
+    }
+    f->ms_first = first, f->ms_count = s->n_ms - first;
   }
+  free(old);
+  free(s->cell);
+  s->cell = fresh, s->n_cell = fresh ? m->n_cells : 0;
+  NH_TRY(rc);
   NH_TRY(nh_realloc((void **)&s->ms_g, (size_t)(s->n_ms ? s->n_ms : 1), sizeof *s->ms_g));
   NH_TRY(nh_realloc((void **)&s->ms_dir, 3 * (size_t)(s->n_ms ? s->n_ms : 1), sizeof *s->ms_dir));
   NH_TRY(nh_realloc((void **)&s->ms_stamp, (size_t)(s->n_ms ? s->n_ms : 1), sizeof *s->ms_stamp));
@@ -677,18 +698,29 @@ static int nh_skull_build_mortar(nh_skull *s, const nh_mesh *m) {
   s->n_ref = s->stamp = 0;
   const int n_share = 8 * s->n_ms;
   nh_skull_share *sh = nh_calloc((size_t)(n_share ? n_share : 1), sizeof *sh);
+  nh_skull_share *by_q = nh_calloc((size_t)(n_share ? n_share : 1), sizeof *by_q);
+  int *at = nh_calloc((size_t)m->n_nodes + 1, sizeof *at);
   nh_skull_sample *smp = nh_calloc((size_t)(n_share ? n_share : 1), sizeof *smp);
-  int *cls = nh_calloc((size_t)(n_share ? n_share : 1), sizeof *cls), n_sh = 0, rc = NH_OK;
-  if (!sh || !smp || !cls) rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: skull rows");
+  int *cls = nh_calloc((size_t)(n_share ? n_share : 1), sizeof *cls), n_sh = 0;
+  if (!sh || !by_q || !at || !smp || !cls)
+    rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: skull rows");
   for (int q = 0; q < s->n_ms && !rc; q++) {
     double N[8];
     nh_hex_shape(s->ms[q].xi, N);
     for (int a = 0; a < 8; a++)
       /* N_a < 0 too (a sample projected a little out of its leaf): the
        * shares of a sample sum to 1, so Σ_a D_a = Σ_q w_q */
-      if (N[a] != 0.0) sh[n_sh++] = (nh_skull_share){m->cells[8 * s->ms[q].cell + a], q, N[a]};
+      if (N[a] != 0.0) {
+        by_q[n_sh++] = (nh_skull_share){m->cells[8 * s->ms[q].cell + a], q, N[a]};
+        at[m->cells[8 * s->ms[q].cell + a] + 1]++;
+      }
   }
-  if (!rc) qsort(sh, (size_t)n_sh, sizeof *sh, nh_skull_share_cmp);
+  /* sorted by node, then sample: a counting sort by node of the shares,
+   * which come in the samples' order (a sample's 8 nodes differ) */
+  for (int b = 0; b < m->n_nodes && !rc; b++) at[b + 1] += at[b];
+  for (int j = 0; j < n_sh && !rc; j++) sh[at[by_q[j].node]++] = by_q[j];
+  for (int b = 0; b <= m->n_nodes && !rc; b++) at[b] = -1; /* now: a node's place in a row */
+  free(by_q);
   for (int first = 0, last; first < n_sh && !rc; first = last) {
     for (last = first; last < n_sh && sh[last].node == sh[first].node; last++) {
       const nh_skull_msample *ms = &s->ms[sh[last].q];
@@ -722,9 +754,8 @@ static int nh_skull_build_mortar(nh_skull *s, const nh_mesh *m) {
         for (int d = 0; d < 3; d++) p->X[d] += c * ms->X[d], nrm[d] += c * ms->n[d];
         if (smp[j].w > wmax)
           wmax = smp[j].w, p->cell = ms->cell, memcpy(p->xi, ms->xi, sizeof p->xi);
-        double Xe[24], N[8];
-        nh_mesh_cell_coords(m, m->X, ms->cell, Xe);
-        for (int d = 0; d < 3; d++) p->edge = fmax(p->edge, fabs(Xe[18 + d] - Xe[d]));
+        double N[8];
+        p->edge = fmax(p->edge, ms->edge);
         if (s->n_mq >= s->cap_mq &&
             nh_grow((void **)&s->mq, &s->cap_mq, s->n_mq + 1, sizeof *s->mq)) {
           rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: skull rows");
@@ -734,13 +765,14 @@ static int nh_skull_build_mortar(nh_skull *s, const nh_mesh *m) {
         p->c_abs += fabs(c);
         nh_hex_shape(ms->xi, N);
         for (int b = 0; b < 8 && !rc; b++)
-          rc = nh_skull_add_node(s, p->t_first, m->cells[8 * ms->cell + b], c * N[b]);
+          rc = nh_skull_add_node(s, at, m->cells[8 * ms->cell + b], c * N[b]);
       }
+      for (int j = p->t_first; j < s->n_mt; j++) at[s->mt[j].i] = -1;
       nh_skull_normalise(0.0, nrm, p->N);
       p->q_count = s->n_mq - p->q_first, p->t_count = s->n_mt - p->t_first;
     }
   }
-  free(sh), free(smp), free(cls);
+  free(sh), free(at), free(smp), free(cls);
   return rc;
 }
 
