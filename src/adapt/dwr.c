@@ -316,10 +316,9 @@ int nh_dwr_duals(nh_system *sys, const nh_rows *rows, double scale, int n_nodes,
  * of `group` consecutive functionals, the marking indicator
  * ‖e*_u‖_K (Σ_{q in group} ‖e*_{z_q}‖²_K)^½ (out->indicator, n_cells per
  * group); out->estimate receives the nz E_q, out->norm is not touched. */
-static int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale, const nh_mesh *m,
-                              const nh_tissue *t, const nh_hanging *h, const double *u, int nz,
-                              int group, const double *j, const nh_dwr_goals *goals,
-                              nh_dwr_result *out) {
+int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale, const nh_mesh *m,
+                       const nh_tissue *t, const nh_hanging *h, const double *u, int nz, int group,
+                       const double *j, const nh_dwr_goals *goals, nh_dwr_result *out) {
   const int nn = m->n_nodes, nl = m->n_leaves, nfld = 1 + nz, ng = nz / group;
   const size_t n3 = 3 * (size_t)nn;
   double *z = nh_calloc(n3 * (size_t)(nz ? nz : 1), sizeof(double));
