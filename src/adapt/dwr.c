@@ -141,7 +141,9 @@
  * (Λ_i the row's force, μ_q the dual's multipliers of nh_dwr_duals): the
  * primal's force on the dual through the moved directions and the dual's
  * pressure on the coarse solution's gaps at the finer points. C_q is added
- * to E_q (not to the marking indicators); the tools' rows have δ = 0.
+ * to E_q (not to the marking indicators). The tools' rows change by their
+ * anchors' error (docs/theory.md §6.6, "Anchoring": contact/anchor.c, with
+ * the front's error estimated by dwr_front.c).
  *
  * Held rows in the goal's cell (docs/theory.md §6.6; dwr_local.c). Where
  * an active tool row and a goal's box share a leaf, z_h is pinned to ≈ 0

@@ -28,7 +28,14 @@
  * constraint-data term alone, −δc_q, the old front's anchoring error
  * carried to the new front; the cutting row (sliding: not in the dual)
  * gets the step's own discretisation error of the disc's axial mean
- * displacement under the cutting force. */
+ * displacement under the cutting force.
+ *
+ * Friction rows. In this dual every friction row but the front's own axial
+ * row counts as sliding (not held): a sticking friction row holds the
+ * step's increment (its gap is the slip, or 0), not the total displacement
+ * whose error e is. Held, as in the goals' dual, a shaft point's axial row
+ * that sticks in a cutting step halved e there on the DBS case (docs/dbs.md,
+ * "The front's anchoring error"). */
 #include "adapt/adapt_impl.h"
 
 #include <stdlib.h>
@@ -52,10 +59,23 @@ int nh_dwr_front_error(nh_system *sys, const nh_rows *rows, double scale, const 
       for (int k = 0; k < 3; k++) j[n3 * q + 3 * (size_t)rows->node[s] + k] += rows->N[s] * n[k];
     }
   }
+  /* the friction rows other than the front's own axial row as sliding: a
+   * sticking friction row holds the step's increment, not the total
+   * displacement whose error e is (the header) */
+  nh_rows held = *rows;
+  held.law = nh_calloc((size_t)rows->m, sizeof *held.law);
+  if (!held.law) {
+    free(j);
+    return NH_ERROR(NH_ERR_MEMORY, "out of memory: the front's rows");
+  }
+  for (int i = 0; i < rows->m; i++) {
+    held.law[i] = rows->law[i];
+    if (held.law[i].kind == NH_ROW_FRICTION && i != row + 2) held.law[i].sliding = 1;
+  }
   nh_dwr_goals goals = {0, NULL, 0.0, NULL};
   nh_dwr_result out = {.estimate = E, .loads = loads, .data = data};
-  int rc = nh_dwr_functionals(sys, rows, scale, m, t, h, u, 3, 3, j, &goals, &out);
-  free(j);
+  int rc = nh_dwr_functionals(sys, &held, scale, m, t, h, u, 3, 3, j, &goals, &out);
+  free(j), free(held.law);
   if (rc) return rc;
   for (int q = 0; q < 3; q++)
     for (int k = 0; k < 3; k++) e[k] += E[q] * rows->dir[3 * (row + q) + k];
