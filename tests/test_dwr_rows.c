@@ -48,6 +48,14 @@
  *     and the μ part must be above 5 % of it (else the test would not test
  *     the term). The tie's force here is 3e-8 N against a change of the
  *     goal of 1e-5 m: the Λ part is 1e-6 of it, so this checks the μ part.
+ *  5. The front's error (nh_dwr_front_error, adapt/dwr_front.c): three
+ *     bilateral rows at one point along x, y, z (a held front) with data
+ *     changes δc_q and no force. The dual of a held row's own tissue part
+ *     is z = 0, μ = c_K e_q (Jᵀμ is the load), so its estimate is the data
+ *     term alone, E_q = −δc_q: e = −(δc_0, δc_1, δc_2) to round-off (the
+ *     old front's anchoring error carried to the new one). With the
+ *     friction row r2 of the header as the third row and sliding, the dual
+ *     is not zero and e_2 differs from −δc_2 by more than 1 %.
  * NH_VERBOSE=1 prints the numbers. */
 #include "check.h"
 #include "adapt/adapt.h"
@@ -349,6 +357,47 @@ static void test_anchor(problem *p) {
   free(uf), free(ue), free(z);
 }
 
+static int no_change(void *ctx, int n, const double *w, double *out) {
+  (void)w;
+  const int m = *(const int *)ctx;
+  memset(out, 0, sizeof(double) * (size_t)m * (size_t)n);
+  return NH_OK;
+}
+
+static void test_front(problem *p) {
+  static const double P[3] = {0.015, 0.007, 0.012}, dc[3] = {2e-6, -3e-6, 5e-6};
+  nh_rows rows = {0};
+  double force[3] = {0, 0, 0}, change[3], e[3];
+  int c, m = 3;
+  double xi[3], N[8];
+  CHECK_OK(nh_mesh_locate(p->m, P, &c, xi));
+  nh_hex_shape(xi, N);
+  for (int q = 0; q < 3; q++) {
+    int r = nh_rows_add(&rows);
+    for (int a = 0; a < 8; a++)
+      rows.node[8 * r + a] = p->m->cells[8 * c + a], rows.N[8 * r + a] = N[a];
+    rows.dir[3 * r + q] = 1.0;
+    rows.tool[r] = -1;
+    rows.law[r].kind = NH_ROW_BILATERAL;
+    change[q] = dc[q];
+  }
+  nh_constraint_data data = {.change = change, .force = force, .linear = no_change, .ctx = &m};
+  double *u = calloc(3 * (size_t)p->m->n_nodes, sizeof(double));
+  dense_solve(p, u, NULL);
+  CHECK_OK(nh_dwr_front_error(p->s, &rows, 1.0, p->m, p->t, p->h, u, 0, NULL, &data, e));
+  for (int k = 0; k < 3; k++) {
+    CHECK_CLOSE(e[k], -dc[k], 1e-9 * fabs(dc[k]), "held front: e = -dc");
+    if (getenv("NH_VERBOSE")) printf("front k=%d: e = %.9e, -dc = %.9e\n", k, e[k], -dc[k]);
+  }
+  rows.law[2] = (nh_row_law){NH_ROW_FRICTION, 0, 1, 0.1, 1e-9, -1, 0.1, 1, 1};
+  CHECK_OK(nh_dwr_front_error(p->s, &rows, 1.0, p->m, p->t, p->h, u, 0, NULL, &data, e));
+  CHECK(fabs(e[2] + dc[2]) > 0.01 * fabs(dc[2]), "cutting row: e_2 = %.3e is the data term alone",
+        e[2]);
+  if (getenv("NH_VERBOSE")) printf("front, sliding axial row: e_2 = %.9e\n", e[2]);
+  nh_rows_free(&rows);
+  free(u);
+}
+
 int main(void) {
   problem p = {0};
   CHECK_OK(nh_mesh_create_box(lo, hi, grid, &p.m));
@@ -406,6 +455,7 @@ int main(void) {
   }
   test_data_change(&p);
   test_anchor(&p);
+  test_front(&p);
   nh_refine_info_free(&info);
   nh_template_destroy(&t2);
   free(all), free(uh), free(Puh), free(uf), free(zf), free(z0);
