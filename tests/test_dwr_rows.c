@@ -31,6 +31,31 @@
  *     (nh_dwr_estimate_combined) equals Σ ω_pk E_pk of the separate
  *     estimates (nh_dwr_estimate) to 1e-10 relative: the recovery and the
  *     integrals are linear in the dual, and so is the constrained solve.
+ *  3. Constraint data (test_data_change): the exact identity for moved
+ *     points and changed gaps with the perturbed dual.
+ *  4. Anchoring (test_anchor; docs/theory.md §6.6, "Anchoring"): the tie r4
+ *     holds its material point P at a fixed place; the exact solution would
+ *     hold P + ε δX. Row r4 then reads n·(x(P + ε δX) − x_0), gap
+ *     g' = n·ε δX, and with the unperturbed dual (z, μ of the rows as they
+ *     are, nh_dwr_duals) and Λ = −λ_f the first-order change is
+ *       J(u_ε) − J(u_f) ≈ Λ₄ δ(J z)₄ − μ₄ δc₄,
+ *       δc₄ = n·(x(P + ε δX; u_f) − x(P; u_f)),  δ(J z)₄ = n·(z(P + ε δX) − z(P)),
+ *     the term contact/anchor.c adds. Checked against dense solves at
+ *     ε = 1, 1/2, 1/4 (δX = (0.1, 0.05, 0.15) mm in 5 mm cells, P on a
+ *     node, P + ε δX in one cell): the remainder must fall with order 2
+ *     (observed order in [1.8, 2.2]; it is the product of two O(ε)
+ *     changes, J' − J and z' − z), be below 10 % of the change at ε = 1,
+ *     and the μ part must be above 5 % of it (else the test would not test
+ *     the term). The tie's force here is 3e-8 N against a change of the
+ *     goal of 1e-5 m: the Λ part is 1e-6 of it, so this checks the μ part.
+ *  5. The front's error (nh_dwr_front_error, adapt/dwr_front.c): three
+ *     bilateral rows at one point along x, y, z (a held front) with data
+ *     changes δc_q and no force. The dual of a held row's own tissue part
+ *     is z = 0, μ = c_K e_q (Jᵀμ is the load), so its estimate is the data
+ *     term alone, E_q = −δc_q: e = −(δc_0, δc_1, δc_2) to round-off (the
+ *     old front's anchoring error carried to the new one). With the
+ *     friction row r2 of the header as the third row and sliding, the dual
+ *     is not zero and e_2 differs from −δc_2 by more than 1 %.
  * NH_VERBOSE=1 prints the numbers. */
 #include "check.h"
 #include "adapt/adapt.h"
@@ -282,6 +307,97 @@ static void test_data_change(problem *p) {
   free(uf), free(uf2), free(z);
 }
 
+static void test_anchor(problem *p) {
+  const double dX[3] = {1e-4, 0.5e-4, 1.5e-4}, *n4 = p->rows.dir + 3 * 4;
+  const int n = 3 * p->m->n_nodes;
+  rows_n3 = n;
+  double *uf = malloc(sizeof(double) * n), *ue = malloc(sizeof(double) * n);
+  double *z = malloc(sizeof(double) * 3 * n), lambda[NROWS], mu[3 * NROWS], rem[3][3], dj[3][3];
+  dense_solve(p, uf, lambda);
+  CHECK_OK(nh_dwr_duals(p->s, &p->rows, 1.0, p->m->n_nodes, 3, p->j, z, mu, NULL));
+  nh_rows old = p->rows;
+  p->rows = (nh_rows){0};
+  for (int e = 0; e < 3; e++) {
+    const double eps = 1.0 / (1 << e);
+    double shift[NROWS][3] = {{0}}, g[NROWS] = {0};
+    for (int k = 0; k < 3; k++) shift[4][k] = eps * dX[k];
+    g[4] = eps * nh_vec3_dot(n4, dX); /* the tie holds the moved point where P was held */
+    make_rows_data(p, shift, g);
+    dense_solve(p, ue, NULL);
+    const double dc = row_value(&p->rows, 4, uf) + g[4] - row_value(&old, 4, uf);
+    for (int k = 0; k < 3; k++) {
+      const double *zk = z + (size_t)n * k;
+      const double lhs =
+          dwr_dot(n, p->j + (size_t)n * k, ue) - dwr_dot(n, p->j + (size_t)n * k, uf);
+      const double dual = -mu[NROWS * k + 4] * dc;
+      const double primal = -lambda[4] * (row_value(&p->rows, 4, zk) - row_value(&old, 4, zk));
+      rem[e][k] = lhs - primal - dual;
+      dj[e][k] = lhs;
+      if (e == 0)
+        CHECK(fabs(dual) > 0.05 * fabs(lhs), "k=%d: the mu part is %.1e of the change: no test", k,
+              dual / lhs);
+      if (getenv("NH_VERBOSE"))
+        printf("anchor eps=%.3f k=%d: dJ = %.6e, Lambda dJz = %.6e, -mu dc = %.6e, remainder "
+               "%.3e (%.1e of dJ)\n",
+               eps, k, lhs, primal, dual, rem[e][k], rem[e][k] / lhs);
+    }
+    nh_rows_free(&p->rows);
+  }
+  for (int k = 0; k < 3; k++) {
+    CHECK(fabs(rem[0][k]) < 0.1 * fabs(dj[0][k]), "k=%d: remainder %.2e of dJ %.2e at eps = 1", k,
+          rem[0][k], dj[0][k]);
+    for (int e = 0; e < 2; e++) {
+      const double order = log2(fabs(rem[e][k] / rem[e + 1][k]));
+      CHECK(order > 1.8 && order < 2.2, "k=%d: remainder order %.3f between eps = %g and %g", k,
+            order, 1.0 / (1 << e), 1.0 / (2 << e));
+      if (getenv("NH_VERBOSE")) printf("anchor k=%d: remainder order %.3f\n", k, order);
+    }
+  }
+  p->rows = old;
+  free(uf), free(ue), free(z);
+}
+
+static int no_change(void *ctx, int n, const double *w, double *out) {
+  (void)w;
+  const int m = *(const int *)ctx;
+  memset(out, 0, sizeof(double) * (size_t)m * (size_t)n);
+  return NH_OK;
+}
+
+static void test_front(problem *p) {
+  static const double P[3] = {0.015, 0.007, 0.012}, dc[3] = {2e-6, -3e-6, 5e-6};
+  nh_rows rows = {0};
+  double force[3] = {0, 0, 0}, change[3], e[3];
+  int c, m = 3;
+  double xi[3], N[8];
+  CHECK_OK(nh_mesh_locate(p->m, P, &c, xi));
+  nh_hex_shape(xi, N);
+  for (int q = 0; q < 3; q++) {
+    int r = nh_rows_add(&rows);
+    for (int a = 0; a < 8; a++)
+      rows.node[8 * r + a] = p->m->cells[8 * c + a], rows.N[8 * r + a] = N[a];
+    rows.dir[3 * r + q] = 1.0;
+    rows.tool[r] = -1;
+    rows.law[r].kind = NH_ROW_BILATERAL;
+    change[q] = dc[q];
+  }
+  nh_constraint_data data = {.change = change, .force = force, .linear = no_change, .ctx = &m};
+  double *u = calloc(3 * (size_t)p->m->n_nodes, sizeof(double));
+  dense_solve(p, u, NULL);
+  CHECK_OK(nh_dwr_front_error(p->s, &rows, 1.0, p->m, p->t, p->h, u, 0, NULL, &data, e));
+  for (int k = 0; k < 3; k++) {
+    CHECK_CLOSE(e[k], -dc[k], 1e-9 * fabs(dc[k]), "held front: e = -dc");
+    if (getenv("NH_VERBOSE")) printf("front k=%d: e = %.9e, -dc = %.9e\n", k, e[k], -dc[k]);
+  }
+  rows.law[2] = (nh_row_law){NH_ROW_FRICTION, 0, 1, 0.1, 1e-9, -1, 0.1, 1, 1};
+  CHECK_OK(nh_dwr_front_error(p->s, &rows, 1.0, p->m, p->t, p->h, u, 0, NULL, &data, e));
+  CHECK(fabs(e[2] + dc[2]) > 0.01 * fabs(dc[2]), "cutting row: e_2 = %.3e is the data term alone",
+        e[2]);
+  if (getenv("NH_VERBOSE")) printf("front, sliding axial row: e_2 = %.9e\n", e[2]);
+  nh_rows_free(&rows);
+  free(u);
+}
+
 int main(void) {
   problem p = {0};
   CHECK_OK(nh_mesh_create_box(lo, hi, grid, &p.m));
@@ -338,6 +454,8 @@ int main(void) {
              k, lhs, rhs, fabs(lhs - rhs) / fabs(lhs), rhs0, fabs(lhs - rhs0) / fabs(lhs));
   }
   test_data_change(&p);
+  test_anchor(&p);
+  test_front(&p);
   nh_refine_info_free(&info);
   nh_template_destroy(&t2);
   free(all), free(uh), free(Puh), free(uf), free(zf), free(z0);

@@ -372,4 +372,17 @@ int nh_dwr_estimate_combined(nh_system *sys, const nh_rows *rows, double scale, 
                              char (*where)[NH_WHERE_MAX], const double *weights,
                              nh_dwr_result *out);
 
+/* The error e (m) of the mean displacement of the tip disc whose three
+ * rows (directions n1, n2, t) start at `row` among the step's rows: the
+ * anchoring error of the front a cutting step sets there (dwr_front.c;
+ * docs/theory.md §6.6, "Anchoring"). e = Σ_q E_q n_q, E_q the goal
+ * estimate of the row's tissue part n_q · Σ w_a v_a (constrained dual,
+ * geometry term with loads (may be NULL), constraint-data term with data
+ * (may be NULL), the latter carrying the old front's anchoring error).
+ * sys, rows, scale, u as nh_dwr_estimate. NH_ERR_INTERNAL (row out of
+ * range), or fails as nh_dwr_estimate. */
+int nh_dwr_front_error(nh_system *sys, const nh_rows *rows, double scale, const nh_mesh *mesh,
+                       const nh_tissue *tissue, const nh_hanging *hanging, const double *u, int row,
+                       const nh_geometry_loads *loads, const nh_constraint_data *data, double e[3]);
+
 #endif

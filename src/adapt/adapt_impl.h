@@ -42,6 +42,15 @@ typedef struct {
   const double *weights;
 } nh_dwr_goals;
 
+/* The estimates E_q of nz functionals j (3 n_nodes each) of the step's
+ * solution u, with the constrained dual of the rows (dwr.c); for each group
+ * of `group` consecutive functionals the marking indicator (out->indicator,
+ * may be NULL). goals: the box goals the local dual needs (out->local).
+ * Fails as nh_dwr_estimate. */
+int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale, const nh_mesh *mesh,
+                       const nh_tissue *tissue, const nh_hanging *hanging, const double *u, int nz,
+                       int group, const double *j, const nh_dwr_goals *goals, nh_dwr_result *out);
+
 /* The local enriched dual where a goal's box and an active tool row share a
  * leaf (dwr_local.c; docs/theory.md §6.6, "Held rows in the goal's cell").
  * In: the step's state (mesh, tissue, hanging (may be NULL), u, rows and

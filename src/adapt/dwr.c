@@ -141,7 +141,9 @@
  * (Λ_i the row's force, μ_q the dual's multipliers of nh_dwr_duals): the
  * primal's force on the dual through the moved directions and the dual's
  * pressure on the coarse solution's gaps at the finer points. C_q is added
- * to E_q (not to the marking indicators); the tools' rows have δ = 0.
+ * to E_q (not to the marking indicators). The tools' rows change by their
+ * anchors' error (docs/theory.md §6.6, "Anchoring": contact/anchor.c, with
+ * the front's error estimated by dwr_front.c).
  *
  * Held rows in the goal's cell (docs/theory.md §6.6; dwr_local.c). Where
  * an active tool row and a goal's box share a leaf, z_h is pinned to ≈ 0
@@ -316,10 +318,9 @@ int nh_dwr_duals(nh_system *sys, const nh_rows *rows, double scale, int n_nodes,
  * of `group` consecutive functionals, the marking indicator
  * ‖e*_u‖_K (Σ_{q in group} ‖e*_{z_q}‖²_K)^½ (out->indicator, n_cells per
  * group); out->estimate receives the nz E_q, out->norm is not touched. */
-static int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale, const nh_mesh *m,
-                              const nh_tissue *t, const nh_hanging *h, const double *u, int nz,
-                              int group, const double *j, const nh_dwr_goals *goals,
-                              nh_dwr_result *out) {
+int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale, const nh_mesh *m,
+                       const nh_tissue *t, const nh_hanging *h, const double *u, int nz, int group,
+                       const double *j, const nh_dwr_goals *goals, nh_dwr_result *out) {
   const int nn = m->n_nodes, nl = m->n_leaves, nfld = 1 + nz, ng = nz / group;
   const size_t n3 = 3 * (size_t)nn;
   double *z = nh_calloc(n3 * (size_t)(nz ? nz : 1), sizeof(double));

@@ -94,6 +94,8 @@ static int nh_channel_lay(nh_group *G, const nh_tool_spec *spec, const nh_mesh *
     nh_cpoint p = {0};
     if (nh_point_set(m, &p, X)) return NH_OK; /* left the tissue */
     p.len = sp, p.tool = -1, p.row = -1;
+    for (int i = 0; i < 3; i++) /* the anchoring error as the position: interpolated (anchor.c) */
+      p.dX[i] = last->dX[i] + (to->dX[i] - last->dX[i]) * sp / dist;
     G->chan[G->n_chan++] = p;
   }
 }

@@ -180,6 +180,7 @@ static int nh_contact_end_step(nh_contact *c, const nh_mesh *m, const double *u,
     NH_TRY(nh_tip_update(c, G, m, u, tau, &ev));
     NH_TRY(nh_group_transition(c, G, m, u, &ev, t_new, h));
     c->cut += ev.cut;
+    G->cut = ev.cut;
   }
   for (int k = 0; k < c->n; k++)
     if (c->tools[k].host >= 0) c->tools[k].state = nh_nested_state(c, k, t_new, h);
@@ -382,7 +383,8 @@ int nh_contact_data_change(nh_contact *c, const nh_mesh *m, const double *u, int
   const int rm = c->rows.m;
   if (dc) memset(dc, 0, sizeof(double) * (size_t)rm);
   if (dw) memset(dw, 0, sizeof(double) * (size_t)rm * (size_t)n_fields);
-  return c->skull ? nh_skull_data_change(c->skull, m, u, dw ? n_fields : 0, w, rm, dc, dw) : NH_OK;
+  if (c->skull) NH_TRY(nh_skull_data_change(c->skull, m, u, dw ? n_fields : 0, w, rm, dc, dw));
+  return nh_anchor_data_change(c, m, u, dw ? n_fields : 0, w, dc, dw);
 }
 
 void nh_contact_stats_get(const nh_contact *c, nh_contact_stats *st) {

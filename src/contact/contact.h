@@ -130,17 +130,31 @@ typedef struct {
   nh_coupled_stats solve;
 } nh_contact_stats;
 void nh_contact_stats_get(const nh_contact *c, nh_contact_stats *stats);
+/* The first tip row of each group whose tip cut in the last step (its
+ * three rows: n1, n2, t), at most cap of them into row; returns how many
+ * (0 for c = NULL). */
+int nh_contact_fronts(const nh_contact *c, int *row, int cap);
+/* Set the anchoring error of the front whose tip rows start at `row` (a
+ * row of nh_contact_fronts) from e (m), the estimated error of its disc's
+ * mean displacement in the last step (adapt/dwr_front.c): its material
+ * point moves by δX with x̄_D(X + δX; u) = x̄_D(X; u) − e (anchor.c; 0 if
+ * that point leaves the tissue). NH_ERR_MEMORY. */
+int nh_contact_set_front_error(nh_contact *c, const nh_mesh *mesh, const double *u, int row,
+                               const double e[3]);
 /* The constraint rows of the last step with their forces (the goal
  * estimate's constrained dual, adapt/dwr.c); NULL for c = NULL. */
 const nh_rows *nh_contact_rows(const nh_contact *c);
 /* The change of the rows' constraints when sampled one lattice finer, at
  * the tissue state u (the goal estimate's constraint-data term,
  * docs/theory.md §6.6, "Constraint data"; nh_skull_data_change for the
- * skull's rows, 0 for the tools' rows, whose data are not re-sampled):
+ * skull's rows; for the tools' rows, those of the anchors with an
+ * anchoring error, anchor.c, the rest 0):
  * dc (may be NULL) the change of each row's gap at u, dw the change of its
  * linearisation applied to the fields w (3 n_nodes each), rows->m per
  * field (rows = nh_contact_rows(c)). NH_ERR_MEMORY, or the cut-cell
- * quadrature's failure. */
+ * quadrature's failure. The tools' rows of an anchor (a front, a channel
+ * point) change as if anchored at the exact solution's material point
+ * (nh_contact_set_front_error; docs/theory.md §6.6, "Anchoring"). */
 int nh_contact_data_change(nh_contact *c, const nh_mesh *mesh, const double *u, int n_fields,
                            const double *w, double *dc, double *dw);
 

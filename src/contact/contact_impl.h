@@ -38,6 +38,7 @@ typedef struct {
   int slid;           /* its friction slid in the last step (static or kinetic bound next) */
   double handover[3]; /* the lateral offset to its tool's axis still allowed after it passed
                          from one tool of the group to another (channel.c: the hand-over) */
+  double dX[3];       /* its anchoring error: the exact solution's anchor − X (anchor.c) */
 } nh_cpoint;
 
 /* One tool: a beam, its motion and the forces of the last step. */
@@ -83,6 +84,7 @@ typedef struct {
   int tip_tool;      /* the tool with the tip rows in the last step (−1) */
   double entry_x[3]; /* current position of the entry point (after the last step) */
   int fine_warned;   /* the warning that an explicit spacing is finer than a cell was given */
+  int cut;           /* its tip cut in the last step (the front moved) */
 } nh_group;
 
 /* What a group's constraints saw in the step just solved: the input of the
@@ -180,6 +182,14 @@ void nh_row_tissue(nh_rows *rows, int r, const nh_mesh *mesh, const nh_cpoint *p
 /* The radius of a tool's cross-section as its tip and puncture rows act on
  * the tissue (docs/interaction.md, "Tip disc"). */
 double nh_tip_radius(const nh_tool_spec *spec);
+
+/* ---- anchor.c ---- */
+/* Add the change of the rows of every anchor with an anchoring error (the
+ * fronts with tip rows, the channel points tied) to dc (rows.m, may be
+ * NULL) and dw (rows.m per field of the n fields w, may be NULL), as
+ * nh_contact_data_change describes. NH_ERR_MEMORY. */
+int nh_anchor_data_change(const nh_contact *c, const nh_mesh *mesh, const double *u, int n,
+                          const double *w, double *dc, double *dw);
 
 /* ---- puncture.c ---- */
 /* The entry point of an outer tool on the rest surface (has_entry = 0: its

@@ -1,0 +1,83 @@
+/* dwr_front.c — the error of a tool's front at the step that anchors it
+ * (docs/theory.md §6.6, "Anchoring"; docs/dbs.md, "What the local dual
+ * does not see").
+ *
+ * When a tool's tip cuts, the contact module moves the channel's front to
+ * the material point X_f whose tip disc has its mean at the tip under the
+ * step's solution: x̄_D(X_f; u_h) = x_tip (contact/channel.c). The exact
+ * solution u of the step puts it at X*: x̄_D(X*; u) = x_tip. With
+ * e = x̄_D(X_f; u) − x̄_D(X_f; u_h) the error of the disc's mean
+ * displacement, x̄_D(X*; u_h) = x_tip − e to first order (the error field
+ * smooth over the disc's motion δX = X* − X_f), i.e. δX = −F⁻¹ e. Every
+ * later row that holds the front (and the channel points laid from it)
+ * then holds the wrong material point: a change of those rows' data that
+ * the step's own estimate cannot see, and which docs/dbs.md measured as
+ * 98 % of the DBS hold's error. The contact module keeps δX per anchor and
+ * turns it into the rows' data change (nh_contact_data_change), which the
+ * goal estimate weights by the dual's multipliers (dwr.c, "Constraint
+ * data").
+ *
+ * This file estimates e at the cutting step: the tip rows' tissue parts
+ * are the functionals J_q(v) = n_q · Σ_a w_a v_a (q = 0, 1, 2: the rows'
+ * directions n1, n2, t, orthonormal, w the disc's node weights), estimated
+ * by the goal machinery (nh_dwr_functionals: the constrained dual of the
+ * step's active rows, recovered-error products, geometry and constraint
+ * data terms), and e = Σ_q E_q n_q. The rows that hold the disc in the
+ * dual (the lateral rows, the axial one when it sticks) make their own
+ * functional's dual z = 0 with μ its unit vector: their E_q is then the
+ * constraint-data term alone, −δc_q, the old front's anchoring error
+ * carried to the new front; the cutting row (sliding: not in the dual)
+ * gets the step's own discretisation error of the disc's axial mean
+ * displacement under the cutting force.
+ *
+ * Friction rows. In this dual every friction row but the front's own axial
+ * row counts as sliding (not held): a sticking friction row holds the
+ * step's increment (its gap is the slip, or 0), not the total displacement
+ * whose error e is. Held, as in the goals' dual, a shaft point's axial row
+ * that sticks in a cutting step halved e there on the DBS case (docs/dbs.md,
+ * "The front's anchoring error"). */
+#include "adapt/adapt_impl.h"
+
+#include <stdlib.h>
+
+int nh_dwr_front_error(nh_system *sys, const nh_rows *rows, double scale, const nh_mesh *m,
+                       const nh_tissue *t, const nh_hanging *h, const double *u, int row,
+                       const nh_geometry_loads *loads, const nh_constraint_data *data,
+                       double e[3]) {
+  e[0] = e[1] = e[2] = 0.0;
+  NH_CHECK(rows && row >= 0 && row + 3 <= rows->m, NH_ERR_INTERNAL,
+           "front error: rows %d..%d are not among the step's %d", row, row + 2,
+           rows ? rows->m : 0);
+  const size_t n3 = 3 * (size_t)m->n_nodes;
+  double *j = nh_calloc(3 * n3, sizeof(double)), E[3] = {0};
+  if (!j) return NH_ERROR(NH_ERR_MEMORY, "out of memory: the front's functionals");
+  for (int q = 0; q < 3; q++) {
+    const int r = row + q;
+    const double *n = rows->dir + 3 * r;
+    for (int s = rows->start[r]; s < rows->start[r + 1]; s++) {
+      if (rows->node[s] < 0) continue;
+      for (int k = 0; k < 3; k++) j[n3 * q + 3 * (size_t)rows->node[s] + k] += rows->N[s] * n[k];
+    }
+  }
+  /* the friction rows other than the front's own axial row as sliding: a
+   * sticking friction row holds the step's increment, not the total
+   * displacement whose error e is (the header) */
+  nh_rows held = *rows;
+  held.law = nh_calloc((size_t)rows->m, sizeof *held.law);
+  if (!held.law) {
+    free(j);
+    return NH_ERROR(NH_ERR_MEMORY, "out of memory: the front's rows");
+  }
+  for (int i = 0; i < rows->m; i++) {
+    held.law[i] = rows->law[i];
+    if (held.law[i].kind == NH_ROW_FRICTION && i != row + 2) held.law[i].sliding = 1;
+  }
+  nh_dwr_goals goals = {0, NULL, 0.0, NULL};
+  nh_dwr_result out = {.estimate = E, .loads = loads, .data = data};
+  int rc = nh_dwr_functionals(sys, &held, scale, m, t, h, u, 3, 3, j, &goals, &out);
+  free(j), free(held.law);
+  if (rc) return rc;
+  for (int q = 0; q < 3; q++)
+    for (int k = 0; k < 3; k++) e[k] += E[q] * rows->dir[3 * (row + q) + k];
+  return NH_OK;
+}
