@@ -9,7 +9,7 @@
    naming the step, a final frame and a checkpoint; the command the message
    prints ("continue with: needlehex run DIR/scene.yaml --restart DIR"),
    run as printed, finishes it with the same result.
-4. A corrupted, a foreign and another scene's checkpoint are refused with
+4. A corrupted, a foreign, an older format's and another scene's checkpoint are refused with
    exit status 2 and one message.
 5. HDF5 (output.hdf5 on in every run of cases 1-3, the reference included,
    since it is part of the scene): after each restart results.h5 has exactly
@@ -286,6 +286,9 @@ def main():
         cases.append(("corrupted", bytes(corrupt), "corrupted"))
         cases.append(("truncated", bytes(data[: len(data) // 3]), "corrupted"))
         cases.append(("foreign", open(os.path.join(ref, "tissue.pvd"), "rb").read(), "not a needlehex checkpoint"))
+        older = bytearray(data)
+        older[8:12] = (5).to_bytes(4, "little")  # format 5: the tools' state before the anchors' errors
+        cases.append(("older", bytes(older), "written by an older needlehex"))
         for what, content, phrase in cases:
             with open(ck, "wb") as f:
                 f.write(content)
