@@ -295,16 +295,23 @@ static void nh_add_dilatation_variation(const nh_hex_volumetric *vol, const doub
 void nh_hex_corot_tangent(const double K0[576], const double G0[24], const nh_hex_volumetric *vol,
                           const double frame[NH_HEX_FRAME], double Kt[576]) {
   const double *R = frame + NH_FRAME_R;
-  for (int a = 0; a < 8; a++)
-    for (int c = 0; c < 8; c++) {
-      double B[9], T[9];
-      for (int i = 0; i < 3; i++)
-        for (int j = 0; j < 3; j++) B[3 * i + j] = K0[24 * (3 * a + i) + 3 * c + j];
-      nh_mat3_mul(R, B, T);
-      nh_mat3_mul_nt(T, R, B);
-      for (int i = 0; i < 3; i++)
-        for (int j = 0; j < 3; j++) Kt[24 * (3 * a + i) + 3 * c + j] = B[3 * i + j];
+  /* Kₐ_c = (R K0ₐ_c) Rᵀ block by block, written out with the operands and
+   * the order of additions of nh_mat3_mul and nh_mat3_mul_nt (the same bits;
+   * the calls and copies were a third of the phantom's assembly) */
+  for (int a = 0; a < 8; a++) {
+    double T[72]; /* R K0ₐ_c for c = 0 … 7: rows 3a … 3a + 2 of K0, rotated */
+    const double *k = K0 + 24 * 3 * a;
+    for (int i = 0; i < 3; i++)
+      for (int j = 0; j < 24; j++)
+        T[24 * i + j] = R[3 * i] * k[j] + R[3 * i + 1] * k[24 + j] + R[3 * i + 2] * k[48 + j];
+    for (int i = 0; i < 3; i++) {
+      double *row = Kt + 24 * (3 * a + i);
+      for (int c = 0; c < 8; c++)
+        for (int j = 0; j < 3; j++)
+          row[3 * c + j] = T[24 * i + 3 * c] * R[3 * j] + T[24 * i + 3 * c + 1] * R[3 * j + 1] +
+                           T[24 * i + 3 * c + 2] * R[3 * j + 2];
     }
+  }
   if (nh_frame_spins(frame)) nh_add_spin(K0, G0, frame, frame + NH_FRAME_D, Kt);
   /* B-bar: κ V (bₐ ⊗ b_b + θ̄ Hₐ_b), Hₐ_b = ∂bₐ/∂u_b = [F̄ (ḡ_b × ḡₐ)]×. */
   if (vol) {
