@@ -68,6 +68,8 @@ void nh_system_destroy(nh_system **sys) {
   free(s->frame_new);
   free(s->skew);
   free(s->updated);
+  free(s->group);
+  free(s->expand);
   free(s->last_u), free(s->last_v), free(s->last_f), free(s->last_kv);
   free(s->w0), free(s->w0_key);
   for (int i = 0; i < 4; i++) free(s->work[i]);

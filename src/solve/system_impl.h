@@ -80,6 +80,12 @@ struct nh_system {
   const double *jac_v;
   double jac_cG, jac_cD;
   int lazy_updates; /* leaves whose tangent the last assembly updated */
+  /* The serial group's work (assemble.c): its leaves' results computed in
+   * parallel into `group` (group_cap doubles), then added in leaf order;
+   * `expand` holds each thread's expansion work (expand_slot doubles). */
+  double *group, *expand;
+  size_t group_cap, expand_slot;
+  int expand_threads;
   /* The last assembly's u, v, f_int and K̃ v (assemble.c): one repeated at
    * the same u and v (a step's first, after the previous step's residual
    * assembly) hands them back. kept: 0 none, 1 f_int, 2 f_int and K̃ v. */
