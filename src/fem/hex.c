@@ -339,18 +339,26 @@ void nh_hex_corot_tangent(const double K0[576], const double G0[24], const nh_he
   /* Kₐ_c = (R K0ₐ_c) Rᵀ block by block, written out with the operands and
    * the order of additions of nh_mat3_mul and nh_mat3_mul_nt (the same bits;
    * the calls and copies were a third of the phantom's assembly) */
+  const double r00 = R[0], r01 = R[1], r02 = R[2], r10 = R[3], r11 = R[4], r12 = R[5], r20 = R[6],
+               r21 = R[7], r22 = R[8];
   for (int a = 0; a < 8; a++) {
     double T[72]; /* R K0ₐ_c for c = 0 … 7: rows 3a … 3a + 2 of K0, rotated */
     const double *k = K0 + 24 * 3 * a;
-    for (int i = 0; i < 3; i++)
-      for (int j = 0; j < 24; j++)
-        T[24 * i + j] = R[3 * i] * k[j] + R[3 * i + 1] * k[24 + j] + R[3 * i + 2] * k[48 + j];
+    for (int j = 0; j < 24; j++) {
+      const double k0 = k[j], k1 = k[24 + j], k2 = k[48 + j];
+      T[j] = r00 * k0 + r01 * k1 + r02 * k2;
+      T[24 + j] = r10 * k0 + r11 * k1 + r12 * k2;
+      T[48 + j] = r20 * k0 + r21 * k1 + r22 * k2;
+    }
     for (int i = 0; i < 3; i++) {
       double *row = Kt + 24 * (3 * a + i);
-      for (int c = 0; c < 8; c++)
-        for (int j = 0; j < 3; j++)
-          row[3 * c + j] = T[24 * i + 3 * c] * R[3 * j] + T[24 * i + 3 * c + 1] * R[3 * j + 1] +
-                           T[24 * i + 3 * c + 2] * R[3 * j + 2];
+      const double *t = T + 24 * i;
+      for (int c = 0; c < 8; c++) {
+        const double t0 = t[3 * c], t1 = t[3 * c + 1], t2 = t[3 * c + 2];
+        row[3 * c] = t0 * r00 + t1 * r01 + t2 * r02;
+        row[3 * c + 1] = t0 * r10 + t1 * r11 + t2 * r12;
+        row[3 * c + 2] = t0 * r20 + t1 * r21 + t2 * r22;
+      }
     }
   }
   if (nh_frame_spins(frame)) nh_add_spin(K0, G0, frame, frame + NH_FRAME_D, Kt);

@@ -145,12 +145,10 @@ static size_t nh_expand_slot(int k) {
 }
 
 /* Leaf l's matrix in A's storage: Ã (expanded leaves, nh_expand) or Aₑ
- * (plain leaves) added through the leaf's map. */
+ * (plain leaves), its stored entries added at their positions (pair). */
 static void nh_add_leaf(const nh_system *s, int l, const double *At, double *Ax) {
-  const int k = s->eff_start[l + 1] - s->eff_start[l], n = k ? 9 * k * k : 576;
-  const int *map = k ? s->emap + s->emap_start[l] : s->scatter + 576 * (size_t)l;
-  for (int r = 0; r < n; r++)
-    if (map[r] >= 0) Ax[map[r]] += At[r];
+  const int *p = s->pair + 2 * s->pair_start[l], *end = s->pair + 2 * s->pair_start[l + 1];
+  for (; p < end; p += 2) Ax[p[1]] += At[p[0]];
 }
 
 /* δ = max(‖R − R̃‖_F, ‖C − C̃‖_F) of two frames. */
