@@ -7,9 +7,9 @@
  * Each thread count assembles its own system: a second assembly at the same
  * state would keep A's values (lazy tangents, solve/assemble.c).
  * Twice: on a uniform grid (every leaf coloured), and on one with every
- * other cell refined (hex2, a checkerboard): its 1728 leaves with a hanging
- * corner form the serial group, computed in parallel and added in leaf
- * order (in chunks: more than one at this size). */
+ * other cell refined (hex2, a checkerboard of 216 of 432 cells): nearly all
+ * of its 1728 fine leaves have a hanging corner and form the last group,
+ * computed in parallel and added in leaf order. */
 #include "check.h"
 #include "fem/fem.h"
 #include "mesh/mesh.h"

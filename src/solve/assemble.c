@@ -48,7 +48,11 @@
  * Two passes, each by colour (system.c): 1. every leaf's force, frame,
  * update decision and K̃ v; 2. A. Within a colour no two leaves share a
  * node, so every entry receives its contributions in colour order whatever
- * the thread count: the result is bitwise that of one thread. */
+ * the thread count: the result is bitwise that of one thread. The leaves
+ * with a hanging corner (the last group, which share masters) have their
+ * results computed in parallel into a buffer and added in leaf order, so
+ * they too are bitwise those of one thread (on the adaptive hex2 phantom
+ * they are three quarters of the leaves). */
 #include "solve/system_impl.h"
 
 #include <math.h>
@@ -176,7 +180,8 @@ static void nh_split_symmetric(double K[576], double *skew) {
 
 /* A parallel region costs tens of µs (far more when cores are shared): only
  * colours with at least this many leaves to do (≈ 1 ms of element work) are
- * split; the last group (leaves with hanging corners) is serial. */
+ * split; the last group (leaves with hanging corners) is computed in
+ * parallel and added serially (nh_assemble_group), by the same threshold. */
 enum { NH_ASSEMBLE_PARALLEL_MIN = 128 };
 
 /* The last assembly repeated: the same u (and v when K̃ v is asked for), tolerance and

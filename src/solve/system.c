@@ -18,7 +18,8 @@
  * two leaves of one colour share a node; colours run one after the other,
  * the leaves of a colour in parallel. Leaves with a hanging corner share
  * masters with many others (every fine leaf on a coarse face couples that
- * face's corners), so they form one last group assembled serially. Every entry then receives its
+ * face's corners), so they form one last group whose results are computed in
+ * parallel and added serially, in leaf order. Every entry then receives its
  * contributions in colour order whatever the thread count, so the serial and
  * the parallel result are bitwise equal. */
 #include "solve/system_impl.h"
@@ -152,7 +153,8 @@ static int nh_node_graph(const nh_system *s, int **ptr_out, int **adj_out) {
 }
 
 /* Greedy colouring of the plain leaves: colour = lowest not used by a leaf
- * sharing a node. Leaves with a hanging corner go to a last, serial group. */
+ * sharing a node. Leaves with a hanging corner go to a last group, added
+ * serially (assemble.c). */
 static int nh_colour_leaves(nh_system *s) {
   const nh_mesh *m = s->tissue->mesh;
   uint64_t *used = nh_calloc((size_t)m->n_nodes, sizeof(uint64_t));
