@@ -1,6 +1,7 @@
 # Numerics: element, solver and time-integration verification.
 nh_add_c_test(test_polar unit)
 nh_add_c_test(test_rotation verify)
+nh_add_c_test(test_hex_kernels unit)
 nh_add_c_test(test_tangent verify)
 nh_add_c_test(test_newton_rate verify)
 nh_add_py_test(newton_dynamic verify newton_dynamic.py)

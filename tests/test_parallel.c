@@ -5,7 +5,11 @@
  * natural cell order (no colouring) must agree to round-off (1e-13 relative):
  * this catches a race or a lost contribution, which would show as O(1).
  * Each thread count assembles its own system: a second assembly at the same
- * state would keep A's values (lazy tangents, solve/assemble.c). */
+ * state would keep A's values (lazy tangents, solve/assemble.c).
+ * Twice: on a uniform grid (every leaf coloured), and on one with every
+ * other cell refined (hex2, a checkerboard of 216 of 432 cells): nearly all
+ * of its 1728 fine leaves have a hanging corner and form the last group,
+ * computed in parallel and added in leaf order. */
 #include "check.h"
 #include "fem/fem.h"
 #include "mesh/mesh.h"
@@ -13,20 +17,19 @@
 
 #include <string.h>
 
-int main(void) {
-  const double lo[3] = {0, 0, 0}, hi[3] = {0.04, 0.02, 0.02};
-  const int grid[3] = {24, 12, 12}; /* 432 cells per colour: above the parallel threshold */
-  nh_mesh *m;
-  CHECK_OK(nh_mesh_create_box(lo, hi, grid, &m));
+#include "hanging_mesh.h"
+
+/* 1 and 2 threads bitwise, and a natural-order serial loop to round-off,
+ * on mesh m with the nodes `fixed` and hanging nodes h (NULL: none);
+ * colours: the plain leaves' colour count expected (0: not checked). */
+static void check_threads(nh_mesh *m, unsigned char *fixed, const nh_hanging *h, int colours) {
   nh_material mat = {1e7, 0.4, 1000, NH_FORMULATION_BBAR};
   nh_tissue *t;
   CHECK_OK(nh_tissue_create(m, &mat, &t));
-  unsigned char *fixed = calloc((size_t)m->n_nodes, 1);
-  for (int i = 0; i < m->n_nodes; i++) fixed[i] = m->X[3 * i] > 0.0399;
   nh_system *s, *s2;
-  CHECK_OK(nh_system_create(t, fixed, NULL, &s));
-  CHECK_OK(nh_system_create(t, fixed, NULL, &s2));
-  CHECK(nh_system_colours(s) == 8, "a structured grid needs 8 colours, got %d",
+  CHECK_OK(nh_system_create(t, fixed, h, &s));
+  CHECK_OK(nh_system_create(t, fixed, h, &s2));
+  CHECK(!colours || nh_system_colours(s) == colours, "%d colours expected, got %d", colours,
         nh_system_colours(s));
   int n = 3 * m->n_nodes, nf = nh_system_free_dofs(s);
   double *x = malloc(sizeof(double) * n), *v = malloc(sizeof(double) * n);
@@ -65,10 +68,41 @@ int main(void) {
     CHECK_CLOSE(k2[i], kr[i], 1e-13 * kscale, "K v vs natural-order serial");
   }
   free(x), free(v), free(f1), free(f2), free(k1), free(k2), free(p), free(y1), free(y2), free(fr),
-      free(kr), free(fixed);
+      free(kr);
   nh_system_destroy(&s);
   nh_system_destroy(&s2);
   nh_tissue_destroy(&t);
+}
+
+int main(void) {
+  const double lo[3] = {0, 0, 0}, hi[3] = {0.04, 0.02, 0.02};
+  const int grid[3] = {24, 12, 12}; /* 432 cells per colour: above the parallel threshold */
+  nh_mesh *m;
+  CHECK_OK(nh_mesh_create_box(lo, hi, grid, &m));
+  unsigned char *fixed = calloc((size_t)m->n_nodes, 1);
+  for (int i = 0; i < m->n_nodes; i++) fixed[i] = m->X[3 * i] > 0.0399;
+  check_threads(m, fixed, NULL, 8); /* a structured grid needs 8 colours */
+  free(fixed);
+  nh_mesh_destroy(&m);
+
+  const int coarse[3] = {12, 6, 6};
+  CHECK_OK(nh_mesh_create_box(lo, hi, coarse, &m));
+  int *cells = malloc(sizeof(int) * m->n_cells), n_refine = 0;
+  for (int k = 0; k < 6; k++)
+    for (int j = 0; j < 6; j++)
+      for (int i = 0; i < 12; i++)
+        if ((i + j + k) % 2 == 0) cells[n_refine++] = i + 12 * (j + 6 * k);
+  nh_template *tmpl = regular_template(2);
+  CHECK_OK(nh_mesh_refine(m, tmpl, cells, n_refine, NULL));
+  fixed = calloc((size_t)m->n_nodes, 1);
+  for (int i = 0; i < m->n_nodes; i++) fixed[i] = m->X[3 * i] > 0.0399;
+  nh_hanging *h;
+  CHECK_OK(nh_hanging_detect(m, fixed, &h));
+  CHECK(h->n_hanging > 0, "the checkerboard has no hanging node");
+  check_threads(m, fixed, h, 0);
+  nh_hanging_destroy(&h);
+  nh_template_destroy(&tmpl);
+  free(cells), free(fixed);
   nh_mesh_destroy(&m);
   TEST_END();
 }

@@ -117,6 +117,7 @@ void nh_beam_destroy(nh_beam **beam) {
   if (!beam || !*beam) return;
   nh_beam *b = *beam;
   free(b->x), free(b->T), free(b->v), free(b->X), free(b->T0);
+  nh_beam_system_destroy(&b->system);
   free(b);
   *beam = NULL;
 }

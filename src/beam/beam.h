@@ -227,6 +227,10 @@ int nh_beam_dynamic_prepare(nh_beam *beam, const nh_beam_dynamic_options *option
                             const double *f_ext, const double base_velocity[6],
                             nh_beam_system *system, double *rhs);
 void nh_beam_system_solve(const nh_beam_system *system, double *y);
+/* The beam's own step system, created at the first call and kept (with its
+ * work arrays) until nh_beam_destroy: a coupled step prepares it every step
+ * without allocating. *out is borrowed. Fails with NH_ERR_MEMORY. */
+int nh_beam_step_system(nh_beam *beam, nh_beam_system **out);
 /* 1 if the last prepare found A = (1 + hα) M + (hβ + h²) K indefinite (the
  * tool compressed beyond a buckling load of the step) and used K's positive
  * part (eigenvalues clipped at 0) instead; A is then positive definite and

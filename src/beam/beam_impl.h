@@ -10,8 +10,9 @@ struct nh_beam {
   double l0;     /* element rest length L / n */
   nh_beam_section section;
   nh_beam_constants c;
-  double *x, *T, *v; /* current state: 3, 9, 6 per node */
-  double *X, *T0;    /* rest state: 3, 9 per node */
+  double *x, *T, *v;      /* current state: 3, 9, 6 per node */
+  double *X, *T0;         /* rest state: 3, 9 per node */
+  nh_beam_system *system; /* nh_beam_step_system's, created on first use */
 };
 
 /* Skew matrix S(a): S(a) b = a × b. */

@@ -212,6 +212,12 @@ struct nh_beam_system {
   int projected;          /* the last prepare clipped negative tangent eigenvalues */
   int lu;                 /* A holds the LU factor of the full (unsymmetric) tangent */
   int banded;             /* B holds the band Cholesky factor of A (A unused) */
+  /* prepare's work, every entry written before it is read: the internal
+   * force (N), the free block and its symmetric part, the full one
+   * (quasi-static), the positive part and a copy (m x m each); the positive
+   * part's eigenvalues (m), eigenvectors (m x m) and their supports (2m) */
+  double *fi, *Kf, *Kfull, *P, *work, *w, *Z;
+  int *support;
 };
 
 int nh_beam_system_create(const nh_beam *b, nh_beam_system **out) {
@@ -219,13 +225,23 @@ int nh_beam_system_create(const nh_beam *b, nh_beam_system **out) {
   nh_beam_system *s = nh_calloc(1, sizeof *s);
   if (!s) return NH_ERR_MEMORY;
   s->N = 6 * (b->n + 1), s->m = s->N - 6;
-  s->K = nh_calloc((size_t)s->N * s->N, sizeof(double));
-  s->A = nh_calloc((size_t)s->m * s->m, sizeof(double));
-  s->B = nh_calloc((size_t)(NH_BEAM_BAND + 1) * s->m, sizeof(double));
-  s->M = nh_calloc((size_t)s->N, sizeof(double));
-  s->Kv = nh_calloc((size_t)s->N, sizeof(double));
-  s->piv = nh_calloc((size_t)s->m, sizeof(int));
-  if (!s->K || !s->A || !s->B || !s->M || !s->Kv || !s->piv) {
+  const size_t N = (size_t)s->N, m = (size_t)s->m;
+  s->K = nh_calloc(N * N, sizeof(double));
+  s->A = nh_calloc(m * m, sizeof(double));
+  s->B = nh_calloc((size_t)(NH_BEAM_BAND + 1) * m, sizeof(double));
+  s->M = nh_calloc(N, sizeof(double));
+  s->Kv = nh_calloc(N, sizeof(double));
+  s->piv = nh_calloc(m, sizeof(int));
+  s->fi = nh_calloc(N, sizeof(double));
+  s->Kf = nh_calloc(m * m, sizeof(double));
+  s->Kfull = nh_calloc(m * m, sizeof(double));
+  s->P = nh_calloc(m * m, sizeof(double));
+  s->work = nh_calloc(m * m, sizeof(double));
+  s->w = nh_calloc(m, sizeof(double));
+  s->Z = nh_calloc(m * m, sizeof(double));
+  s->support = nh_calloc(2 * m, sizeof(int));
+  if (!s->K || !s->A || !s->B || !s->M || !s->Kv || !s->piv || !s->fi || !s->Kf || !s->Kfull ||
+      !s->P || !s->work || !s->w || !s->Z || !s->support) {
     nh_beam_system_destroy(&s);
     return NH_ERR_MEMORY;
   }
@@ -237,8 +253,16 @@ void nh_beam_system_destroy(nh_beam_system **ps) {
   nh_beam_system *s = *ps;
   if (!s) return;
   free(s->K), free(s->A), free(s->B), free(s->M), free(s->Kv), free(s->piv);
+  free(s->fi), free(s->Kf), free(s->Kfull), free(s->P), free(s->work), free(s->w), free(s->Z);
+  free(s->support);
   free(s);
   *ps = NULL;
+}
+
+int nh_beam_step_system(nh_beam *b, nh_beam_system **out) {
+  if (!b->system) NH_TRY(nh_beam_system_create(b, &b->system));
+  *out = b->system;
+  return NH_OK;
 }
 
 /* A = (1 + hα) M + cK K over the free DOFs into s->A; Cholesky in place
@@ -287,19 +311,20 @@ static int nh_beam_form_band_factor(nh_beam_system *s, const double *K, double c
  *   P = Σₖ max(wₖ, floor) vₖvₖᵀ = K + Σ_{wₖ < floor} (floor − wₖ) vₖvₖᵀ,
  * so only the eigenpairs below the floor are computed (dsyevr over the
  * interval (−‖K‖∞ − 1, floor], MRRR), a few for a compressed needle,
- * instead of all of them (dsyevd, then P = C Cᵀ by dsyrk). */
-static int nh_beam_positive_part(const double *K0, double *K, int m, double cM, double *P) {
-  double *w = nh_calloc((size_t)m, sizeof(double)), *Z = nh_calloc((size_t)m * m, sizeof(double));
-  int *support = nh_calloc(2 * (size_t)m, sizeof(int)), found = 0, rc = NH_OK;
-  if (!w || !Z || !support) rc = NH_ERR_MEMORY;
+ * instead of all of them (dsyevd, then P = C Cᵀ by dsyrk). Work: s's w, Z
+ * and support. */
+static int nh_beam_positive_part(nh_beam_system *s, const double *K0, double *K, int m, double cM,
+                                 double *P) {
+  double *w = s->w, *Z = s->Z;
+  int *support = s->support, found = 0, rc = NH_OK;
   double norm = 0.0, floor = 0.0;
-  for (int i = 0; i < m && !rc; i++) {
+  for (int i = 0; i < m; i++) {
     double r = 0.0;
     for (int j = 0; j < m; j++) r += fabs(K0[(size_t)i * m + j]);
     norm = fmax(norm, r);
   }
   memcpy(P, K0, sizeof(double) * (size_t)m * m);
-  if (!rc && cM == 0.0) { /* the largest eigenvalue, for the floor */
+  if (cM == 0.0) { /* the largest eigenvalue, for the floor */
     memcpy(K, K0, sizeof(double) * (size_t)m * m);
     if (LAPACKE_dsyevr(LAPACK_COL_MAJOR, 'N', 'I', 'L', m, K, m, 0.0, 0.0, m, m, 0.0, &found, w, Z,
                        m, support) ||
@@ -314,7 +339,6 @@ static int nh_beam_positive_part(const double *K0, double *K, int m, double cM, 
     rc = NH_ERROR(NH_ERR_NUMERIC, "beam dynamic step: eigen-decomposition of the tangent failed");
   for (int k = 0; k < found && !rc; k++) /* column k of Z (column-major): vₖ */
     cblas_dsyr(CblasRowMajor, CblasLower, m, floor - w[k], Z + (size_t)k * m, 1, P, m);
-  free(w), free(Z), free(support);
   return rc;
 }
 
@@ -325,12 +349,7 @@ int nh_beam_dynamic_prepare(nh_beam *b, const nh_beam_dynamic_options *o, const 
            o->beta);
   const int N = s->N, m = s->m;
   const double h = o->dt, cK = h * o->beta + h * h, cM = o->quasi_static ? 0.0 : 1.0 + h * o->alpha;
-  double *fi = nh_calloc((size_t)N, sizeof(double));
-  double *Kf = nh_calloc((size_t)m * m, sizeof(double));
-  if (!fi || !Kf) {
-    free(fi), free(Kf);
-    return NH_ERR_MEMORY;
-  }
+  double *fi = s->fi, *Kf = s->Kf;
   nh_beam_mass(b, s->M);
   /* the exact tangent on the right-hand side (see the file comment: a
    * spinning base), its symmetric part in A */
@@ -353,11 +372,7 @@ int nh_beam_dynamic_prepare(nh_beam *b, const nh_beam_dynamic_options *o, const 
   s->projected = s->lu = s->banded = 0;
   double *Kfull = NULL; /* quasi-static: the free block of the full tangent */
   if (o->quasi_static) {
-    Kfull = nh_calloc((size_t)m * m, sizeof(double));
-    if (!Kfull) {
-      free(fi), free(Kf);
-      return NH_ERR_MEMORY;
-    }
+    Kfull = s->Kfull;
     memcpy(Kfull, Kf, sizeof(double) * (size_t)m * m);
   }
   for (int i = 0; i < m; i++) /* Kf: the symmetric part (A; the definiteness test) */
@@ -384,16 +399,11 @@ int nh_beam_dynamic_prepare(nh_beam *b, const nh_beam_dynamic_options *o, const 
      * clipped at 0, or without mass at 1e-9 of the largest): the residual
      * stays exact, A stays positive definite (dense: the eigenvectors are
      * not local). */
-    double *P = nh_calloc((size_t)m * m, sizeof(double));
-    double *work = nh_calloc((size_t)m * m, sizeof(double));
-    if (!P || !work) rc = NH_ERR_MEMORY;
-    if (!rc) rc = nh_beam_positive_part(Kf, work, m, cM, P);
-    if (!rc && nh_beam_form_factor(s, P, cM, cK))
+    rc = nh_beam_positive_part(s, Kf, s->work, m, cM, s->P);
+    if (!rc && nh_beam_form_factor(s, s->P, cM, cK))
       rc = NH_ERROR(NH_ERR_NUMERIC, "beam dynamic step: the step matrix is not positive definite");
     s->projected = 1;
-    free(P), free(work);
   }
-  free(fi), free(Kf), free(Kfull);
   return rc;
 }
 
@@ -429,7 +439,7 @@ int nh_beam_dynamic_finish(nh_beam *b, double dt, const double base_velocity[6],
 int nh_beam_step_dynamic(nh_beam *b, const nh_beam_dynamic_options *o, const double *f_ext) {
   const double still[6] = {0, 0, 0, 0, 0, 0};
   nh_beam_system *s = NULL;
-  NH_TRY(nh_beam_system_create(b, &s));
+  NH_TRY(nh_beam_step_system(b, &s));
   double *dv = nh_calloc((size_t)s->m, sizeof(double));
   int rc = dv ? NH_OK : NH_ERR_MEMORY;
   memset(b->v, 0, 6 * sizeof(double)); /* the base is prescribed and at rest */
@@ -437,6 +447,5 @@ int nh_beam_step_dynamic(nh_beam *b, const nh_beam_dynamic_options *o, const dou
   if (!rc) nh_beam_system_solve(s, dv);
   if (!rc) rc = nh_beam_dynamic_finish(b, o->dt, still, dv);
   free(dv);
-  nh_beam_system_destroy(&s);
   return rc;
 }

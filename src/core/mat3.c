@@ -92,8 +92,8 @@ double nh_mat3_det(const double A[9]) {
 }
 
 int nh_mat3_singular(const double A[9], double det) {
-  double scale = 0.0;
-  for (int i = 0; i < 9; i++) scale = fmax(scale, fabs(A[i]));
+  double scale = 0.0; /* the largest |A_i|, NaN entries ignored (as fmax would; not a call) */
+  for (int i = 0; i < 9; i++) scale = fabs(A[i]) > scale ? fabs(A[i]) : scale;
   return !(fabs(det) > 1e-300 && fabs(det) > 1e-14 * scale * scale * scale);
 }
 

@@ -54,6 +54,10 @@ double nh_hex_gradients(const double X[24], const double xi[3], double g[24]);
 /* det J at ξ as nh_hex_gradients returns it (0 where det J > 0 but J is not
  * invertible), without the gradients: for checks of the sign alone. */
 double nh_hex_det(const double X[24], const double xi[3]);
+/* 1 if !(nh_hex_det(x, ξ) > 0) at one of the 8 corners or the 2x2x2 Gauss
+ * points of the hexahedron x (the guard's inversion test, sim/guard.c),
+ * else 0: the same test at a quarter of the work (see hex.c). */
+int nh_hex_inverted(const double x[24]);
 
 /* F = I + Σ uₐ ⊗ G0ₐ, its polar rotation R[9], and the corotated nodal
  * displacements d[24] = Rᵀ uₐ + (Rᵀ − I)(Xₐ − X̄) (= Rᵀxₐ − Xₐ up to a

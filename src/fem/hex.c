@@ -53,6 +53,47 @@ double nh_hex_det(const double X[24], const double xi[3]) {
   return det > 0.0 && nh_mat3_singular(J, det) ? 0.0 : det;
 }
 
+/* !(det J > 0) or J singular (nh_hex_det's test) for J at a point. */
+static int nh_hex_bad_jacobian(const double J[9]) {
+  const double det = nh_mat3_det(J);
+  return !(det > 0.0) || nh_mat3_singular(J, det);
+}
+
+/* The corners: at ξ = ξ_p the derivatives ∂N_a/∂ξ_j are ±½ for a = p and
+ * p's neighbour along j and exact zeros (±0) for the six others, so J's
+ * sums keep only those two terms. A sum that starts at +0 and skips ±0
+ * terms gives the same bits (x + ±0 = x for x ≠ 0, +0 + ±0 = +0, and a sum
+ * from +0 is never −0), so J is nh_hex_jacobian's. The Gauss points take
+ * nh_hex_dshape's derivatives and nh_hex_jacobian's sums, in its order. */
+int nh_hex_inverted(const double x[24]) {
+  static const double g = 0.57735026918962576; /* 1/√3, as sim/guard.c had it */
+  /* p's neighbours along ξ, η, ζ (mesh/mesh.h's corner numbering) */
+  static const int along[8][3] = {{1, 3, 4}, {0, 2, 5}, {3, 1, 6}, {2, 0, 7},
+                                  {5, 7, 0}, {4, 6, 1}, {7, 5, 2}, {6, 4, 3}};
+  for (int p = 0; p < 8; p++) {
+    double J[9];
+    for (int j = 0; j < 3; j++) {
+      const int q = along[p][j], lo = p < q ? p : q, hi = p < q ? q : p;
+      const double dlo = 0.5 * nh_hex_corner[lo][j], dhi = 0.5 * nh_hex_corner[hi][j];
+      for (int i = 0; i < 3; i++) J[3 * i + j] = (0.0 + x[3 * lo + i] * dlo) + x[3 * hi + i] * dhi;
+    }
+    if (nh_hex_bad_jacobian(J)) return 1;
+  }
+  for (int p = 0; p < 8; p++) {
+    const double xi[3] = {(p & 1) ? g : -g, (p & 2) ? g : -g, (p & 4) ? g : -g};
+    double dN[8][3], J[9];
+    nh_hex_dshape(xi, dN);
+    for (int i = 0; i < 3; i++)
+      for (int j = 0; j < 3; j++) {
+        double sum = 0.0;
+        for (int a = 0; a < 8; a++) sum += x[3 * a + i] * dN[a][j];
+        J[3 * i + j] = sum;
+      }
+    if (nh_hex_bad_jacobian(J)) return 1;
+  }
+  return 0;
+}
+
 double nh_hex_gradients(const double X[24], const double xi[3], double g[24]) {
   double dN[8][3], J[9], Jinv[9];
   const double det = nh_hex_jacobian(X, xi, dN, J);
@@ -295,16 +336,31 @@ static void nh_add_dilatation_variation(const nh_hex_volumetric *vol, const doub
 void nh_hex_corot_tangent(const double K0[576], const double G0[24], const nh_hex_volumetric *vol,
                           const double frame[NH_HEX_FRAME], double Kt[576]) {
   const double *R = frame + NH_FRAME_R;
-  for (int a = 0; a < 8; a++)
-    for (int c = 0; c < 8; c++) {
-      double B[9], T[9];
-      for (int i = 0; i < 3; i++)
-        for (int j = 0; j < 3; j++) B[3 * i + j] = K0[24 * (3 * a + i) + 3 * c + j];
-      nh_mat3_mul(R, B, T);
-      nh_mat3_mul_nt(T, R, B);
-      for (int i = 0; i < 3; i++)
-        for (int j = 0; j < 3; j++) Kt[24 * (3 * a + i) + 3 * c + j] = B[3 * i + j];
+  /* Kₐ_c = (R K0ₐ_c) Rᵀ block by block, written out with the operands and
+   * the order of additions of nh_mat3_mul and nh_mat3_mul_nt (the same bits;
+   * the calls and copies were a third of the phantom's assembly) */
+  const double r00 = R[0], r01 = R[1], r02 = R[2], r10 = R[3], r11 = R[4], r12 = R[5], r20 = R[6],
+               r21 = R[7], r22 = R[8];
+  for (int a = 0; a < 8; a++) {
+    double T[72]; /* R K0ₐ_c for c = 0 … 7: rows 3a … 3a + 2 of K0, rotated */
+    const double *k = K0 + 24 * 3 * a;
+    for (int j = 0; j < 24; j++) {
+      const double k0 = k[j], k1 = k[24 + j], k2 = k[48 + j];
+      T[j] = r00 * k0 + r01 * k1 + r02 * k2;
+      T[24 + j] = r10 * k0 + r11 * k1 + r12 * k2;
+      T[48 + j] = r20 * k0 + r21 * k1 + r22 * k2;
     }
+    for (int i = 0; i < 3; i++) {
+      double *row = Kt + 24 * (3 * a + i);
+      const double *t = T + 24 * i;
+      for (int c = 0; c < 8; c++) {
+        const double t0 = t[3 * c], t1 = t[3 * c + 1], t2 = t[3 * c + 2];
+        row[3 * c] = t0 * r00 + t1 * r01 + t2 * r02;
+        row[3 * c + 1] = t0 * r10 + t1 * r11 + t2 * r12;
+        row[3 * c + 2] = t0 * r20 + t1 * r21 + t2 * r22;
+      }
+    }
+  }
   if (nh_frame_spins(frame)) nh_add_spin(K0, G0, frame, frame + NH_FRAME_D, Kt);
   /* B-bar: κ V (bₐ ⊗ b_b + θ̄ Hₐ_b), Hₐ_b = ∂bₐ/∂u_b = [F̄ (ḡ_b × ḡₐ)]×. */
   if (vol) {

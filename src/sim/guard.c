@@ -37,7 +37,6 @@
 
 /* Cell c inverted at the displacements u (see the top of this file). */
 static int nh_cell_inverted(const nh_sim *s, int c) {
-  static const double g = 0.57735026918962576; /* 1/sqrt(3) */
   const nh_mesh *m = s->mesh;
   double X[24], x[24];
   nh_mesh_cell_coords(m, m->X, c, X);
@@ -48,11 +47,7 @@ static int nh_cell_inverted(const nh_sim *s, int c) {
   int n_pts = nh_tissue_tissue_points(s->tissue, c, pts);
   if (n_pts >= 0) /* a cut cell: where its tissue is */
     for (int p = 0; p < n_pts && !bad; p++) bad = !(nh_hex_det(x, pts + 3 * p) > 0.0);
-  for (int p = 0; p < 16 && !bad && n_pts < 0; p++) {
-    double a = p < 8 ? 1.0 : g;
-    double xi[3] = {(p & 1) ? a : -a, (p & 2) ? a : -a, (p & 4) ? a : -a};
-    bad = !(nh_hex_det(x, xi) > 0.0);
-  }
+  if (n_pts < 0) bad = nh_hex_inverted(x);
   return bad;
 }
 

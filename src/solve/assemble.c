@@ -48,7 +48,11 @@
  * Two passes, each by colour (system.c): 1. every leaf's force, frame,
  * update decision and K̃ v; 2. A. Within a colour no two leaves share a
  * node, so every entry receives its contributions in colour order whatever
- * the thread count: the result is bitwise that of one thread. */
+ * the thread count: the result is bitwise that of one thread. The leaves
+ * with a hanging corner (the last group, which share masters) have their
+ * results computed in parallel into a buffer and added in leaf order, so
+ * they too are bitwise those of one thread (on the adaptive hex2 phantom
+ * they are three quarters of the leaves). */
 #include "solve/system_impl.h"
 
 #include <math.h>
@@ -81,55 +85,74 @@ void nh_system_lazy_reset(nh_system *s) {
   s->lazy_updates = 0;
 }
 
-/* Ã = Tᵀ Aₑ T of a leaf with a hanging corner, scattered through its map.
+/* Ã = Tᵀ Aₑ T (nd x nd, nd = 3 k, into At) of a leaf with a hanging corner.
  * T (8 x k) is sparse: a corner is one effective node (weight 1) or a hanging
  * node's 2 or 4 masters, so both products run over T's nonzeros only. Each
  * entry still sums its nonzero terms in ascending corner order, as the dense
- * product did, and the skipped terms were exact zeros: the same bits. */
-static void nh_scatter_expanded(const nh_system *s, int l, const double *Ae, double *Ax) {
+ * product did, and the skipped terms were exact zeros: the same bits. The
+ * products start from their first term, 0 + t (so a −0 term gives +0 as
+ * from zeroed storage), instead of zeroing B and Ã first (the zeroing cost
+ * a third of this function on the phantom). work: nh_expand_slot(k) doubles. */
+static void nh_expand(const nh_system *s, int l, const double *Ae, double *work, double *At) {
   int k = s->eff_start[l + 1] - s->eff_start[l], nd = 3 * k;
   const double *T = s->eff_T + 8 * s->eff_start[l];
-  const int *map = s->emap + s->emap_start[l];
   int nz_start[9];
-  /* B = Aₑ T, then Ã; T's nonzeros of corner b: nz_w, nz_node [nz_start[b], nz_start[b + 1]) */
-  double *B = nh_calloc((24 + (size_t)nd) * (size_t)nd + 8 * (size_t)k, sizeof(double));
-  int *nz_node = nh_calloc(8 * (size_t)k, sizeof(int));
-  if (!B || !nz_node) { /* cannot happen in practice; the factorisation then fails loudly */
-    free(B), free(nz_node);
-    return;
-  }
-  double *At = B + 24 * (size_t)nd, *nz_w = At + (size_t)nd * nd;
+  /* B = Aₑ T, then Ã; T's nonzeros of corner b: nz_w, nz_node [nz_start[b], nz_start[b + 1]);
+   * nz_first: the node's first nonzero (its B columns and Ã rows start there) */
+  double *B = work, *nz_w = B + 24 * (size_t)nd;
+  int *nz_node = (int *)(nz_w + 8 * (size_t)k), *nz_first = nz_node + 8 * k,
+      *seen = nz_first + 8 * k;
+  memset(seen, 0, sizeof(int) * k);
   nz_start[0] = 0;
   for (int b = 0; b < 8; b++) {
     nz_start[b + 1] = nz_start[b];
     for (int q = 0; q < k; q++)
-      if (T[b * k + q] != 0.0) nz_node[nz_start[b + 1]] = q, nz_w[nz_start[b + 1]++] = T[b * k + q];
+      if (T[b * k + q] != 0.0) {
+        int z = nz_start[b + 1]++;
+        nz_node[z] = q, nz_w[z] = T[b * k + q], nz_first[z] = !seen[q], seen[q] = 1;
+      }
   }
+  for (int q = 0; q < k; q++) /* a node without a nonzero (none in practice): zero */
+    if (!seen[q]) {
+      for (int r = 0; r < 24; r++)
+        for (int j = 0; j < 3; j++) B[nd * r + 3 * q + j] = 0.0;
+      for (int i = 0; i < 3; i++) memset(At + (size_t)nd * (3 * q + i), 0, sizeof(double) * nd);
+    }
   for (int r = 0; r < 24; r++)
     for (int b = 0; b < 8; b++)
-      for (int z = nz_start[b]; z < nz_start[b + 1]; z++)
-        for (int j = 0; j < 3; j++)
-          B[nd * r + 3 * nz_node[z] + j] += Ae[24 * r + 3 * b + j] * nz_w[z];
+      for (int z = nz_start[b]; z < nz_start[b + 1]; z++) {
+        double *Bz = B + nd * r + 3 * nz_node[z];
+        const double *Ar = Ae + 24 * r + 3 * b;
+        if (nz_first[z])
+          for (int j = 0; j < 3; j++) Bz[j] = 0.0 + Ar[j] * nz_w[z];
+        else
+          for (int j = 0; j < 3; j++) Bz[j] += Ar[j] * nz_w[z];
+      }
   for (int a = 0; a < 8; a++)
     for (int z = nz_start[a]; z < nz_start[a + 1]; z++)
       for (int i = 0; i < 3; i++) {
         double *row = At + (size_t)nd * (3 * nz_node[z] + i);
         const double *Brow = B + (size_t)nd * (3 * a + i);
-        for (int c = 0; c < nd; c++) row[c] += nz_w[z] * Brow[c];
+        const double w = nz_w[z];
+        if (nz_first[z])
+          for (int c = 0; c < nd; c++) row[c] = 0.0 + w * Brow[c];
+        else
+          for (int c = 0; c < nd; c++) row[c] += w * Brow[c];
       }
-  for (int r = 0; r < nd * nd; r++)
-    if (map[r] >= 0) Ax[map[r]] += At[r];
-  free(B), free(nz_node);
 }
 
-static void nh_scatter_leaf(const nh_system *s, int l, const double *Ae, double *Ax) {
-  if (s->eff_start[l + 1] > s->eff_start[l]) {
-    nh_scatter_expanded(s, l, Ae, Ax);
-    return;
-  }
-  const int *map = s->scatter + 576 * (size_t)l;
-  for (int r = 0; r < 576; r++)
-    if (map[r] >= 0) Ax[map[r]] += Ae[r];
+/* Doubles of nh_expand's work for k effective nodes: B (24 x 3k), the
+ * nonzeros' weights (8k), their nodes and first flags and the nodes'
+ * seen flags (17k ints in 9k doubles). */
+static size_t nh_expand_slot(int k) {
+  return 24 * 3 * (size_t)k + 8 * (size_t)k + 9 * (size_t)k;
+}
+
+/* Leaf l's matrix in A's storage: Ã (expanded leaves, nh_expand) or Aₑ
+ * (plain leaves), its stored entries added at their positions (pair). */
+static void nh_add_leaf(const nh_system *s, int l, const double *At, double *Ax) {
+  const int *p = s->pair + 2 * s->pair_start[l], *end = s->pair + 2 * s->pair_start[l + 1];
+  for (; p < end; p += 2) Ax[p[1]] += At[p[0]];
 }
 
 /* δ = max(‖R − R̃‖_F, ‖C − C̃‖_F) of two frames. */
@@ -157,7 +180,8 @@ static void nh_split_symmetric(double K[576], double *skew) {
 
 /* A parallel region costs tens of µs (far more when cores are shared): only
  * colours with at least this many leaves to do (≈ 1 ms of element work) are
- * split; the last group (leaves with hanging corners) is serial. */
+ * split; the last group (leaves with hanging corners) is computed in
+ * parallel and added serially (nh_assemble_group), by the same threshold. */
 enum { NH_ASSEMBLE_PARALLEL_MIN = 128 };
 
 /* The last assembly repeated: the same u (and v when K̃ v is asked for), tolerance and
@@ -187,6 +211,184 @@ static void nh_assembly_keep(nh_system *s, const double *u, const double *v, con
   s->last_kept = Kv ? 2 : 1;
 }
 
+/* Pass 1 for leaf l: its force f, its frame (frame_new) and whether its
+ * tangent is updated (s->updated), and with v the product y = K̃ₑ vₑ. */
+static void nh_leaf_force(nh_system *s, int l, const double *u, const double *v, int fresh,
+                          double f[24], double y[24]) {
+  const nh_tissue *t = s->tissue;
+  const nh_mesh *m = t->mesh;
+  const double tol = s->lazy_tolerance;
+  int c = m->leaves[l];
+  double *now = s->frame_new + NH_HEX_FRAME * (size_t)l, *old = s->frame + NH_HEX_FRAME * (size_t)l;
+  nh_tissue_element_force(t, c, u, f, now);
+  if (!s->consistent) nh_hex_frame_corotational(now);
+  int update = fresh || (tol > 0.0 ? nh_frame_change(now, old) > tol
+                                   : memcmp(now, old, NH_HEX_FRAME * sizeof(double)) != 0);
+  s->updated[l] = (unsigned char)update;
+  if (v) {
+    double ve[24];
+    nh_mesh_cell_coords(m, v, c, ve);
+    nh_tissue_element_apply(t, c, update ? now : old, ve, y);
+  }
+}
+
+/* f_int (and Kv) += leaf l's f (and y). */
+static void nh_leaf_add_force(const nh_mesh *m, int l, const double f[24], const double *y,
+                              double *f_int, double *Kv) {
+  const int *e = m->cells + 8 * m->leaves[l];
+  for (int a = 0; a < 8; a++)
+    for (int i = 0; i < 3; i++) f_int[3 * e[a] + i] += f[3 * a + i];
+  if (Kv)
+    for (int r = 0; r < 24; r++) Kv[3 * e[r / 3] + r % 3] += y[r];
+}
+
+/* Pass 2 for leaf l: K ← its matrix for A (afresh: cM Mₑ + cK K̃ₑ from its
+ * frame, updated first; in place: cK (K̃_new − K̃_old)), split into its
+ * symmetric part and (skew kept) the skew part N for a consistent tangent. */
+static void nh_leaf_matrix(nh_system *s, int l, int full, int jacobian, double cM, double cK,
+                           double K[576], double N[576]) {
+  const nh_tissue *t = s->tissue;
+  const nh_mesh *m = t->mesh;
+  int c = m->leaves[l];
+  double *frame = s->frame + NH_HEX_FRAME * (size_t)l,
+         *now = s->frame_new + NH_HEX_FRAME * (size_t)l;
+  if (full) {
+    if (s->updated[l]) memcpy(frame, now, NH_HEX_FRAME * sizeof(double));
+    /* Aₑ = cK Kₑ + cM Mₑ, Mₑ the lumped mass ρ φ Vₑ / 8 per corner. */
+    nh_tissue_element_tangent(t, c, frame, K);
+    double me[8];
+    nh_tissue_corner_masses(t, c, NULL, me); /* no plane: cannot fail */
+    if (jacobian) {                          /* nh_system_set_jacobian */
+      double fc[NH_HEX_FRAME], Kc[576], ve[24];
+      memcpy(fc, frame, sizeof fc);
+      nh_hex_frame_corotational(fc);
+      nh_tissue_element_tangent(t, c, fc, Kc);
+      nh_mesh_cell_coords(m, s->jac_v, c, ve);
+      nh_tissue_element_rate_tangent(t, c, frame, ve, N);
+      for (int r = 0; r < 576; r++)
+        K[r] = cK * Kc[r] + s->jac_cG * (K[r] - Kc[r]) + s->jac_cD * N[r];
+    } else {
+      for (int r = 0; r < 576; r++) K[r] *= cK;
+    }
+    for (int r = 0; r < 24; r++) K[25 * r] += cM * me[r / 3];
+  } else {
+    double K_old[576];
+    nh_tissue_element_tangent(t, c, now, K);
+    nh_tissue_element_tangent(t, c, frame, K_old);
+    for (int r = 0; r < 576; r++) K[r] = cK * (K[r] - K_old[r]);
+    memcpy(frame, now, NH_HEX_FRAME * sizeof(double));
+  }
+  if (s->consistent) nh_split_symmetric(K, s->skew ? N : NULL);
+}
+
+/* The serial group's work: at most this many doubles of results at a time. */
+enum { NH_GROUP_DOUBLES = 1 << 20 };
+
+/* Room for `need` doubles of group results and, for `threads` threads, the
+ * expansion work of the largest leaf. Returns 0 on success. */
+static int nh_group_reserve(nh_system *s, size_t need, int threads) {
+  if (need > s->group_cap) {
+    free(s->group);
+    s->group = nh_calloc(need, sizeof(double));
+    s->group_cap = s->group ? need : 0;
+    if (!s->group) return NH_ERR_MEMORY;
+  }
+  if (!s->expand_slot) {
+    const nh_mesh *m = s->tissue->mesh;
+    int kmax = 0;
+    for (int l = 0; l < m->n_leaves; l++)
+      if (s->eff_start[l + 1] - s->eff_start[l] > kmax)
+        kmax = s->eff_start[l + 1] - s->eff_start[l];
+    s->expand_slot = nh_expand_slot(kmax);
+  }
+  if (threads > s->expand_threads) {
+    free(s->expand);
+    s->expand = nh_calloc((size_t)threads * s->expand_slot, sizeof(double));
+    s->expand_threads = s->expand ? threads : 0;
+    if (!s->expand) return NH_ERR_MEMORY;
+  }
+  return NH_OK;
+}
+
+/* Doubles of leaf l's pass-2 result: Ã (or Aₑ), twice with the skew part. */
+static size_t nh_leaf_doubles(const nh_system *s, int l) {
+  const int k = s->eff_start[l + 1] - s->eff_start[l];
+  return (k ? 9 * (size_t)k * k : 576) * (s->consistent && s->skew ? 2 : 1);
+}
+
+/* The serial group (leaves with a hanging corner, colour n_colours), leaves
+ * [lo, hi) of colour_leaf: their nodes overlap, so each pass computes the
+ * leaves' results in parallel into s->group, chunk by chunk, and adds them
+ * in leaf order: every entry receives the terms of the one-thread loop in
+ * its order, the same bits. Pass 1 (matrix 0): forces and K̃ v; pass 2:
+ * A's leaf matrices (only the updated leaves unless full). Returns 0, or
+ * NH_ERR_MEMORY with nothing added. */
+static int nh_assemble_group(nh_system *s, int lo, int hi, int nt, int matrix, const double *u,
+                             const double *v, int fresh, double *f_int, double *Kv, int full,
+                             int jacobian, double cM, double cK) {
+  const nh_mesh *m = s->tissue->mesh;
+  double *Ax = s->A->x;
+  const int skew = s->consistent && s->skew != NULL;
+  for (int k0 = lo; k0 < hi;) {
+    /* the chunk [k0, k1) and its results' offsets */
+    size_t need = 0;
+    int k1 = k0, work = 0;
+    while (k1 < hi) {
+      int l = s->colour_leaf[k1];
+      size_t d = matrix ? (full || s->updated[l] ? nh_leaf_doubles(s, l) : 0) : 48;
+      if (k1 > k0 && need + d > NH_GROUP_DOUBLES) break;
+      need += d, work += d > 0, k1++;
+    }
+    int threads = nt > 1 && work >= NH_ASSEMBLE_PARALLEL_MIN ? nt : 1;
+    NH_TRY(nh_group_reserve(s, need + (size_t)(k1 - k0), threads));
+    /* offsets stored after the results, as doubles (exact for these sizes) */
+    double *off = s->group + need;
+    size_t o = 0;
+    for (int k = k0; k < k1; k++) {
+      int l = s->colour_leaf[k];
+      off[k - k0] = (double)o;
+      o += matrix ? (full || s->updated[l] ? nh_leaf_doubles(s, l) : 0) : 48;
+    }
+#pragma omp parallel for num_threads(threads) schedule(dynamic, 4) if (threads > 1)
+    for (int k = k0; k < k1; k++) {
+      int l = s->colour_leaf[k];
+      double *r = s->group + (size_t)off[k - k0];
+      if (!matrix) {
+        nh_leaf_force(s, l, u, Kv ? v : NULL, fresh, r, r + 24);
+        continue;
+      }
+      if (!full && !s->updated[l]) continue;
+      double K[576], N[576];
+      nh_leaf_matrix(s, l, full, jacobian, cM, cK, K, N);
+      const int n_eff = s->eff_start[l + 1] - s->eff_start[l];
+      if (!n_eff) {
+        memcpy(r, K, sizeof K);
+        if (skew) memcpy(r + 576, N, sizeof N);
+        continue;
+      }
+      double *w = s->expand + s->expand_slot * (size_t)omp_get_thread_num();
+      nh_expand(s, l, K, w, r);
+      if (skew) nh_expand(s, l, N, w, r + 9 * (size_t)n_eff * n_eff);
+    }
+    for (int k = k0; k < k1; k++) {
+      int l = s->colour_leaf[k];
+      const double *r = s->group + (size_t)off[k - k0];
+      if (!matrix) {
+        nh_leaf_add_force(m, l, r, r + 24, f_int, Kv);
+        continue;
+      }
+      if (!full && !s->updated[l]) continue;
+      nh_add_leaf(s, l, r, Ax);
+      if (skew) {
+        const int n_eff = s->eff_start[l + 1] - s->eff_start[l];
+        nh_add_leaf(s, l, r + (n_eff ? 9 * (size_t)n_eff * n_eff : 576), s->skew);
+      }
+    }
+    k0 = k1;
+  }
+  return NH_OK;
+}
+
 void nh_system_assemble(nh_system *s, const double *u, const double *v, double cM, double cK,
                         double *f_int, double *Kv, int threads) {
   const nh_tissue *t = s->tissue;
@@ -206,35 +408,26 @@ void nh_system_assemble(nh_system *s, const double *u, const double *v, double c
   memset(f_int, 0, sizeof(double) * 3 * (size_t)m->n_nodes);
   if (Kv) memset(Kv, 0, sizeof(double) * 3 * (size_t)m->n_nodes);
   int nt = threads > 0 ? threads : omp_get_max_threads();
+  const int g_lo = s->colour_start[s->n_colours], g_hi = s->colour_start[s->n_colours + 1];
 
   /* 1. Forces, frames, which tangents to update, and K̃ v. */
-  for (int colour = 0; colour <= s->n_colours; colour++) {
+  for (int colour = 0; colour < s->n_colours; colour++) {
     /* SIGINT/SIGTERM: the results are left partial; callers ask
      * nh_stop_check after. */
     if (nh_stop_requested()) break;
     int lo = s->colour_start[colour], hi = s->colour_start[colour + 1];
-    int parallel = nt > 1 && hi - lo >= NH_ASSEMBLE_PARALLEL_MIN && colour < s->n_colours;
+    int parallel = nt > 1 && hi - lo >= NH_ASSEMBLE_PARALLEL_MIN;
 #pragma omp parallel for num_threads(nt) schedule(static) if (parallel)
     for (int k = lo; k < hi; k++) {
-      int l = s->colour_leaf[k], c = m->leaves[l];
-      const int *e = m->cells + 8 * c;
-      double f[24], *now = s->frame_new + NH_HEX_FRAME * (size_t)l,
-                    *old = s->frame + NH_HEX_FRAME * (size_t)l;
-      nh_tissue_element_force(t, c, u, f, now);
-      if (!s->consistent) nh_hex_frame_corotational(now);
-      int update = fresh || (tol > 0.0 ? nh_frame_change(now, old) > tol
-                                       : memcmp(now, old, NH_HEX_FRAME * sizeof(double)) != 0);
-      s->updated[l] = (unsigned char)update;
-      for (int a = 0; a < 8; a++)
-        for (int i = 0; i < 3; i++) f_int[3 * e[a] + i] += f[3 * a + i];
-      if (Kv) {
-        double ve[24], y[24];
-        nh_mesh_cell_coords(m, v, c, ve);
-        nh_tissue_element_apply(t, c, update ? now : old, ve, y);
-        for (int r = 0; r < 24; r++) Kv[3 * e[r / 3] + r % 3] += y[r];
-      }
+      int l = s->colour_leaf[k];
+      double f[24], y[24];
+      nh_leaf_force(s, l, u, Kv ? v : NULL, fresh, f, y);
+      nh_leaf_add_force(m, l, f, y, f_int, Kv);
     }
   }
+  if (!nh_stop_requested() &&
+      nh_assemble_group(s, g_lo, g_hi, nt, 0, u, v, fresh, f_int, Kv, 0, 0, cM, cK))
+    goto out_of_memory;
   if (nh_stop_requested()) { /* A and the frames no longer agree: start afresh */
     s->a_valid = 0;
     s->factor_current = 0;
@@ -258,53 +451,38 @@ void nh_system_assemble(nh_system *s, const double *u, const double *v, double c
   double *Ax = s->A->x;
   if (full) memset(Ax, 0, sizeof(double) * ((int *)s->A->p)[s->n_free]);
   if (full && s->skew) memset(s->skew, 0, sizeof(double) * ((int *)s->A->p)[s->n_free]);
-  for (int colour = 0; colour <= s->n_colours; colour++) {
+  for (int colour = 0; colour < s->n_colours; colour++) {
     if (nh_stop_requested()) {
       s->a_valid = 0;
       return;
     }
     int lo = s->colour_start[colour], hi = s->colour_start[colour + 1];
     int work = full ? hi - lo : todo[colour];
-    int parallel = nt > 1 && work >= NH_ASSEMBLE_PARALLEL_MIN && colour < s->n_colours;
+    int parallel = nt > 1 && work >= NH_ASSEMBLE_PARALLEL_MIN;
 #pragma omp parallel for num_threads(nt) schedule(static) if (parallel)
     for (int k = lo; k < hi; k++) {
-      int l = s->colour_leaf[k], c = m->leaves[l];
-      double *frame = s->frame + NH_HEX_FRAME * (size_t)l,
-             *now = s->frame_new + NH_HEX_FRAME * (size_t)l;
+      int l = s->colour_leaf[k];
       if (!full && !s->updated[l]) continue;
       double K[576], N[576];
-      if (full) {
-        if (s->updated[l]) memcpy(frame, now, NH_HEX_FRAME * sizeof(double));
-        /* Aₑ = cK Kₑ + cM Mₑ, Mₑ the lumped mass ρ φ Vₑ / 8 per corner. */
-        nh_tissue_element_tangent(t, c, frame, K);
-        double me[8];
-        nh_tissue_corner_masses(t, c, NULL, me); /* no plane: cannot fail */
-        if (jacobian) {                          /* nh_system_set_jacobian */
-          double fc[NH_HEX_FRAME], Kc[576], ve[24];
-          memcpy(fc, frame, sizeof fc);
-          nh_hex_frame_corotational(fc);
-          nh_tissue_element_tangent(t, c, fc, Kc);
-          nh_mesh_cell_coords(m, s->jac_v, c, ve);
-          nh_tissue_element_rate_tangent(t, c, frame, ve, N);
-          for (int r = 0; r < 576; r++)
-            K[r] = cK * Kc[r] + s->jac_cG * (K[r] - Kc[r]) + s->jac_cD * N[r];
-        } else {
-          for (int r = 0; r < 576; r++) K[r] *= cK;
-        }
-        for (int r = 0; r < 24; r++) K[25 * r] += cM * me[r / 3];
-      } else {
-        double K_old[576];
-        nh_tissue_element_tangent(t, c, now, K);
-        nh_tissue_element_tangent(t, c, frame, K_old);
-        for (int r = 0; r < 576; r++) K[r] = cK * (K[r] - K_old[r]);
-        memcpy(frame, now, NH_HEX_FRAME * sizeof(double));
-      }
-      if (s->consistent) nh_split_symmetric(K, s->skew ? N : NULL);
-      nh_scatter_leaf(s, l, K, Ax);
-      if (s->consistent && s->skew) nh_scatter_leaf(s, l, N, s->skew);
+      nh_leaf_matrix(s, l, full, jacobian, cM, cK, K, N);
+      nh_add_leaf(s, l, K, Ax);
+      if (s->consistent && s->skew) nh_add_leaf(s, l, N, s->skew);
     }
   }
+  if (nh_stop_requested()) {
+    s->a_valid = 0;
+    return;
+  }
+  if (nh_assemble_group(s, g_lo, g_hi, nt, 1, u, v, fresh, f_int, Kv, full, jacobian, cM, cK))
+    goto out_of_memory;
   s->a_valid = 1;
   s->a_cM = cM;
   s->a_cK = cK;
+  return;
+out_of_memory: /* loud: the residual is not finite, the step fails */
+  NH_ERROR(NH_ERR_MEMORY, "out of memory: assembly of the leaves with a hanging corner");
+  for (int i = 0; i < 3 * m->n_nodes; i++) f_int[i] = NAN;
+  s->a_valid = 0;
+  s->factor_current = 0;
+  s->last_kept = 0;
 }

@@ -57,11 +57,11 @@
 
 /* Per-tool work of one step. */
 typedef struct {
-  nh_beam_system *sys;
-  int mfree;  /* free DOFs of the tool */
-  double *dv; /* mfree: the free update, then the corrected one */
-  int *rows;  /* the rows touching this tool */
-  int *side;  /* the side of each (nh_row_tool_coef: 1 for a row's second tool) */
+  nh_beam_system *sys; /* the tool's own (nh_beam_step_system), borrowed */
+  int mfree;           /* free DOFs of the tool */
+  double *dv;          /* mfree: the free update, then the corrected one */
+  int *rows;           /* the rows touching this tool */
+  int *side;           /* the side of each (nh_row_tool_coef: 1 for a row's second tool) */
   int nrows;
   double *X;    /* mfree x nrows, column-major: A_k⁻¹ J_kᵀ */
   double *vnew; /* all DOFs: end-of-step velocity (base prescribed) */
@@ -97,7 +97,6 @@ typedef struct {
 } nh_step_work;
 
 static void nh_tool_work_free(nh_tool_work *w) {
-  nh_beam_system_destroy(&w->sys);
   free(w->dv), free(w->rows), free(w->side), free(w->X), free(w->vnew);
 }
 
@@ -130,7 +129,7 @@ static int nh_step_work_alloc(nh_step_work *w) {
     t->rows = nh_calloc((size_t)(m > 0 ? m : 1), sizeof(int));
     t->side = nh_calloc((size_t)(m > 0 ? m : 1), sizeof(int));
     if (!t->dv || !t->vnew || !t->rows || !t->side) return NH_ERR_MEMORY;
-    NH_TRY(nh_beam_system_create(w->tools[k].beam, &t->sys));
+    NH_TRY(nh_beam_step_system(w->tools[k].beam, &t->sys));
   }
   return NH_OK;
 }

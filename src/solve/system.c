@@ -9,19 +9,22 @@
  * its effective (master) nodes. The lumped mass enters Aₑ as a diagonal, so
  * PᵀMP couples the masters of a hanging node as it must. The pattern is the upper
  * triangle (CHOLMOD stype = +1) of the node graph (two nodes are coupled when
- * they share a leaf). Each leaf stores where each entry of its 24x24 matrix
- * goes (576 ints, -1 for the lower triangle and fixed DOFs), computed once
- * per pattern by binary search, so assembly is a straight scatter.
+ * they share a leaf). Each leaf stores where the entries of its matrix go
+ * that A stores (the upper triangle's, of free DOFs: about half), as pairs
+ * (entry, position) found once per pattern by binary search, so assembly is
+ * a straight scatter without tests.
  *
  * Parallel assembly without races (assemble.c): leaves are coloured greedily so that no
  * two leaves of one colour share a node; colours run one after the other,
  * the leaves of a colour in parallel. Leaves with a hanging corner share
  * masters with many others (every fine leaf on a coarse face couples that
- * face's corners), so they form one last group assembled serially. Every entry then receives its
+ * face's corners), so they form one last group whose results are computed in
+ * parallel and added serially, in leaf order. Every entry then receives its
  * contributions in colour order whatever the thread count, so the serial and
  * the parallel result are bitwise equal. */
 #include "solve/system_impl.h"
 
+#include <limits.h>
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
@@ -59,15 +62,16 @@ void nh_system_destroy(nh_system **sys) {
   free(s->eff_start);
   free(s->eff_node);
   free(s->eff_T);
-  free(s->emap_start);
-  free(s->emap);
-  free(s->scatter);
+  free(s->pair_start);
+  free(s->pair);
   free(s->colour_start);
   free(s->colour_leaf);
   free(s->frame);
   free(s->frame_new);
   free(s->skew);
   free(s->updated);
+  free(s->group);
+  free(s->expand);
   free(s->last_u), free(s->last_v), free(s->last_f), free(s->last_kv);
   free(s->w0), free(s->w0_key);
   for (int i = 0; i < 4; i++) free(s->work[i]);
@@ -149,7 +153,8 @@ static int nh_node_graph(const nh_system *s, int **ptr_out, int **adj_out) {
 }
 
 /* Greedy colouring of the plain leaves: colour = lowest not used by a leaf
- * sharing a node. Leaves with a hanging corner go to a last, serial group. */
+ * sharing a node. Leaves with a hanging corner go to a last group, added
+ * serially (assemble.c). */
 static int nh_colour_leaves(nh_system *s) {
   const nh_mesh *m = s->tissue->mesh;
   uint64_t *used = nh_calloc((size_t)m->n_nodes, sizeof(uint64_t));
@@ -235,31 +240,40 @@ static int nh_system_pattern(nh_system *s) {
   free(ptr);
   free(adj);
 
-  /* Maps: 576 entries per leaf for plain leaves, (3 n_eff)² for the others. */
-  s->scatter = nh_calloc(576 * (size_t)(m->n_leaves ? m->n_leaves : 1), sizeof(int));
-  s->emap_start = nh_calloc(((size_t)m->n_leaves + 1), sizeof(int));
-  if (!s->scatter || !s->emap_start) return NH_ERROR(NH_ERR_MEMORY, "out of memory: scatter maps");
-  size_t n_emap = 0;
-  for (int l = 0; l < m->n_leaves; l++) {
-    int k = s->eff_start[l + 1] - s->eff_start[l];
-    s->emap_start[l] = (int)n_emap;
-    n_emap += (size_t)9 * k * k;
+  /* Maps: of a leaf's 576 entries (plain) or (3 n_eff)² (the others) those
+   * A stores, with their positions. */
+  const size_t nl = (size_t)m->n_leaves;
+  int kmax = 8;
+  for (int l = 0; l < m->n_leaves; l++)
+    if (s->eff_start[l + 1] - s->eff_start[l] > kmax) kmax = s->eff_start[l + 1] - s->eff_start[l];
+  int *map = nh_calloc(9 * (size_t)kmax * kmax, sizeof(int)), cap = 0;
+  s->pair_start = nh_calloc(nl + 1, sizeof(size_t));
+  s->pair = NULL;
+  if (!map || !s->pair_start) {
+    free(map);
+    return NH_ERROR(NH_ERR_MEMORY, "out of memory: scatter maps");
   }
-  s->emap_start[m->n_leaves] = (int)n_emap;
-  s->emap = nh_calloc((n_emap ? n_emap : 1), sizeof(int));
-  if (!s->emap) return NH_ERROR(NH_ERR_MEMORY, "out of memory: scatter maps");
+  size_t used = 0;
   for (int l = 0; l < m->n_leaves; l++) {
     const int *e;
-    int k = nh_leaf_nodes(s, l, &e);
-    int plain = s->eff_start[l + 1] == s->eff_start[l];
-    int *map = plain ? s->scatter + 576 * (size_t)l : s->emap + s->emap_start[l];
-    int nd = 3 * k;
+    int k = nh_leaf_nodes(s, l, &e), nd = 3 * k, n = 0;
     for (int r = 0; r < nd; r++)
       for (int c = 0; c < nd; c++) {
         int fr = s->free_of[3 * e[r / 3] + r % 3], fc = s->free_of[3 * e[c / 3] + c % 3];
         map[nd * r + c] = (fr < 0 || fc < 0 || fr > fc) ? -1 : nh_find_entry(Ap, Ai, fr, fc);
+        n += map[nd * r + c] >= 0;
       }
+    if (used + (size_t)n > (size_t)INT_MAX / 2 ||
+        nh_grow((void **)&s->pair, &cap, 2 * (int)(used + (size_t)n), sizeof(int))) {
+      free(map);
+      return NH_ERROR(NH_ERR_MEMORY, "out of memory: scatter maps");
+    }
+    s->pair_start[l] = used;
+    for (int r = 0; r < nd * nd; r++)
+      if (map[r] >= 0) s->pair[2 * used] = r, s->pair[2 * used + 1] = map[r], used++;
   }
+  s->pair_start[nl] = used;
+  free(map);
   return NH_OK;
 }
 

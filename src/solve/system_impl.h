@@ -21,11 +21,9 @@ struct nh_system {
 
   /* Leaves with a hanging corner assemble Tᵀ Aₑ T over their effective
    * nodes eff_node[eff_start[l] .. eff_start[l+1]) (an empty range for a
-   * plain leaf), with T (8 per effective node, T[a k + p]) and a map of
-   * (3 k)² positions from emap_start[l]. */
+   * plain leaf), with T (8 per effective node, T[a k + p]). */
   int *eff_start, *eff_node;
   double *eff_T;
-  int *emap_start, *emap;
 
   /* A, upper triangle, CSC over free DOFs; values live in A->x. */
   cholmod_common cm;
@@ -58,8 +56,12 @@ struct nh_system {
   double c_assembled[2], c_factored[2];
   double *pcg[4]; /* n_free each: PCG work */
 
-  int *scatter; /* 576 per plain leaf (leaf order): position in A->x of K_e[r][c], -1 if not stored
-                 */
+  /* Where a leaf's matrix goes (Aₑ, 24 x 24, of a plain leaf; Tᵀ Aₑ T,
+   * 3k x 3k, of one with a hanging corner): the stored entries only, as
+   * pairs (r, position in A->x) of the row-major index r, ascending, for
+   * leaf l from pair[2 pair_start[l]] to pair[2 pair_start[l + 1]]. */
+  size_t *pair_start;
+  int *pair;
   int n_colours;
   int *colour_start; /* n_colours + 1 */
   int *colour_leaf;  /* leaf indices grouped by colour */
@@ -80,6 +82,12 @@ struct nh_system {
   const double *jac_v;
   double jac_cG, jac_cD;
   int lazy_updates; /* leaves whose tangent the last assembly updated */
+  /* The serial group's work (assemble.c): its leaves' results computed in
+   * parallel into `group` (group_cap doubles), then added in leaf order;
+   * `expand` holds each thread's expansion work (expand_slot doubles). */
+  double *group, *expand;
+  size_t group_cap, expand_slot;
+  int expand_threads;
   /* The last assembly's u, v, f_int and K̃ v (assemble.c): one repeated at
    * the same u and v (a step's first, after the previous step's residual
    * assembly) hands them back. kept: 0 none, 1 f_int, 2 f_int and K̃ v. */
