@@ -197,6 +197,7 @@ static void nh_dwr_dual_stress(const double we[24], const double Rg[24], double 
  * rotated gradients by point last (RgT[3a + j][gp] = (R g_a(gp))_j) and
  * the stresses too (s[k][gp]): the same sums in the same order, vectorised
  * over the points. */
+NH_ADAPT_VECTOR_CLONES
 static void nh_dwr_dual_stresses(const double we[24], const double RgT[24][8], double lambda,
                                  double mu, const double *tz, double s[6][8]) {
   double H[9][8] = {{0}};
@@ -212,6 +213,23 @@ static void nh_dwr_dual_stresses(const double we[24], const double RgT[24][8], d
     s[3][gp] = mu * (H[5][gp] + H[7][gp]), s[4][gp] = mu * (H[2][gp] + H[6][gp]);
     s[5][gp] = mu * (H[1][gp] + H[3][gp]);
   }
+}
+
+/* A field's 6 nodal values (field + stride × node) at the 8 Gauss points
+ * of the cell with these corners: s[i][gp] = Σₐ N_a(gp) valueₐ,ᵢ, the sum
+ * in a's order, NT[a][gp] = N_a(gp). */
+NH_ADAPT_VECTOR_CLONES
+static void nh_dwr_interpolate(const double *field, size_t stride, const int corner[8],
+                               const double NT[8][8], double s[6][8]) {
+  double acc[6][8] = {{0}}; /* local: no aliasing with field */
+  for (int a = 0; a < 8; a++) {
+    const double *sa = field + stride * (size_t)corner[a];
+    for (int i = 0; i < 6; i++) {
+      const double v = sa[i];
+      for (int gp = 0; gp < 8; gp++) acc[i][gp] += NT[a][gp] * v;
+    }
+  }
+  memcpy(s, acc, sizeof acc);
 }
 
 /* The element's material and, for B-bar, the derivative b of its mean volume
@@ -473,18 +491,14 @@ static int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale,
       double zn2 = 0.0, gn2 = 0.0;
       for (int k = 0; k < group; k++) {
         int q = group * p + k;
-        double ze[24], sz[6][8], sstar[6][8] = {{0}}, eps = 0.0, ezz = 0.0;
+        double ze[24], sz[6][8], sstar[6][8], eps = 0.0, ezz = 0.0;
         nh_mesh_cell_coords(m, z + n3 * q, c, ze);
         double tz = gbar ? nh_dwr_dilatation(ze, b) : 0.0;
         nh_dwr_dual_stresses(ze, RgT, lambda, mu, gbar ? &tz : NULL, sz);
         double div_z[8] = {0}; /* (I − Π) div z at the points (B-bar) */
         for (int i = 0; i < 24 && gbar; i++)
           for (int gp = 0; gp < 8; gp++) div_z[gp] += ze[i] * RdivT[i][gp];
-        for (int a = 0; a < 8; a++) { /* σ*_z at the points: Σₐ Nₐ σ*ₐ, in a's order */
-          const double *sa = star + 6 * ((size_t)nfld * corner[a] + 1 + q);
-          for (int i = 0; i < 6; i++)
-            for (int gp = 0; gp < 8; gp++) sstar[i][gp] += NT[a][gp] * sa[i];
-        }
+        nh_dwr_interpolate(star + 6 * (1 + (size_t)q), 6 * (size_t)nfld, corner, NT, sstar);
         for (int gp = 0; gp < 8; gp++) {
           double ez[6], cez[6], a1 = 0.0, a2 = 0.0;
           for (int i = 0; i < 6; i++) ez[i] = sstar[i][gp] - sz[i][gp];

@@ -181,6 +181,7 @@ static int nh_spr_fit_weights(int n, const double *points, const double x0[3], d
  * are read row by row (a sample's m components are contiguous; the goal
  * estimate recovers 6 (1 + 36) of them at once), each component's sums
  * taken over i in order as a per-component loop would: the same bits. */
+NH_ADAPT_VECTOR_CLONES
 static void nh_spr_fit_combine(int n, const int *cells, const double *c, int m,
                                const double *values, double *out) {
   enum { CHUNK = 64 };
