@@ -195,6 +195,45 @@ static void nh_dwr_dual_stress(const double we[24], const double Rg[24], double 
   s[3] = mu * (H[5] + H[7]), s[4] = mu * (H[2] + H[6]), s[5] = mu * (H[1] + H[3]);
 }
 
+/* nh_dwr_dual_stress at the 8 Gauss points of a cell at once, the
+ * rotated gradients by point last (RgT[3a + j][gp] = (R g_a(gp))_j) and
+ * the stresses too (s[k][gp]): the same sums in the same order, vectorised
+ * over the points. */
+NH_ADAPT_VECTOR_CLONES
+static void nh_dwr_dual_stresses(const double we[24], const double RgT[24][8], double lambda,
+                                 double mu, const double *tz, double s[6][8]) {
+  double H[9][8] = {{0}};
+  for (int a = 0; a < 8; a++)
+    for (int i = 0; i < 3; i++)
+      for (int j = 0; j < 3; j++)
+        for (int gp = 0; gp < 8; gp++) H[3 * i + j][gp] += we[3 * a + i] * RgT[3 * a + j][gp];
+  for (int gp = 0; gp < 8; gp++) {
+    double tr = H[0][gp] + H[4][gp] + H[8][gp];
+    double vol = tz ? (lambda + 2.0 * mu / 3.0) * *tz - 2.0 * mu / 3.0 * tr : lambda * tr;
+    s[0][gp] = 2.0 * mu * H[0][gp] + vol, s[1][gp] = 2.0 * mu * H[4][gp] + vol;
+    s[2][gp] = 2.0 * mu * H[8][gp] + vol;
+    s[3][gp] = mu * (H[5][gp] + H[7][gp]), s[4][gp] = mu * (H[2][gp] + H[6][gp]);
+    s[5][gp] = mu * (H[1][gp] + H[3][gp]);
+  }
+}
+
+/* A field's 6 nodal values (field + stride × node) at the 8 Gauss points
+ * of the cell with these corners: s[i][gp] = Σₐ N_a(gp) valueₐ,ᵢ, the sum
+ * in a's order, NT[a][gp] = N_a(gp). */
+NH_ADAPT_VECTOR_CLONES
+static void nh_dwr_interpolate(const double *field, size_t stride, const int corner[8],
+                               const double NT[8][8], double s[6][8]) {
+  double acc[6][8] = {{0}}; /* local: no aliasing with field */
+  for (int a = 0; a < 8; a++) {
+    const double *sa = field + stride * (size_t)corner[a];
+    for (int i = 0; i < 6; i++) {
+      const double v = sa[i];
+      for (int gp = 0; gp < 8; gp++) acc[i][gp] += NT[a][gp] * v;
+    }
+  }
+  memcpy(s, acc, sizeof acc);
+}
+
 /* The element's material and, for B-bar, the derivative b of its mean volume
  * change at the state (bₐ = cof(F̄) ḡₐ, nh_hex_corot) and the change itself:
  * *gbar NULL for the full formulation. */
@@ -371,11 +410,13 @@ int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale, const 
   if ((rc = nh_spr_recover_fields(m, t, h, nfld, samples, star))) goto done;
 
   static const double gq = 0.57735026918962576451; /* 1/√3 */
-  double xi[24], N[8][8];
+  double xi[24], N[8][8], NT[8][8];
   for (int g = 0; g < 8; g++) {
     for (int k = 0; k < 3; k++) xi[3 * g + k] = gq * nh_hex_corner[g][k];
     nh_hex_shape(xi + 3 * g, N[g]);
   }
+  for (int g = 0; g < 8; g++)
+    for (int a = 0; a < 8; a++) NT[a][g] = N[g][a];
   for (int c = 0; c < m->n_cells && out->indicator; c++)
     for (int p = 0; p < ng; p++) out->indicator[(size_t)m->n_cells * p + c] = 0.0;
   int bad_cell = -1, geo_rc = 0;
@@ -440,30 +481,33 @@ int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale, const 
         for (int k = 0; k < 3; k++) s += z[n3 * q + 3 * (size_t)corner[a] + k] * rg[3 * a + k];
       cell_geo[(size_t)nz * l + q] = 4.0 / 3.0 * s;
     }
+    /* Rg and Rdiv by point last (the 8 points' stresses in one pass), the
+     * recovered pressure errors of u (B-bar) */
+    double RgT[24][8], RdivT[24][8], pu[8];
+    for (int gp = 0; gp < 8; gp++) {
+      for (int i = 0; i < 24; i++) RgT[i][gp] = Rg[gp][i], RdivT[i][gp] = gbar ? Rdiv[gp][i] : 0.0;
+      pu[gp] = (eu[6 * gp] + eu[6 * gp + 1] + eu[6 * gp + 2]) / 3.0;
+    }
     for (int p = 0; p < ng; p++) {
       double zn2 = 0.0, gn2 = 0.0;
       for (int k = 0; k < group; k++) {
         int q = group * p + k;
-        double ze[24], eps = 0.0, ezz = 0.0;
+        double ze[24], sz[6][8], sstar[6][8], eps = 0.0, ezz = 0.0;
         nh_mesh_cell_coords(m, z + n3 * q, c, ze);
         double tz = gbar ? nh_dwr_dilatation(ze, b) : 0.0;
+        nh_dwr_dual_stresses(ze, RgT, lambda, mu, gbar ? &tz : NULL, sz);
+        double div_z[8] = {0}; /* (I − Π) div z at the points (B-bar) */
+        for (int i = 0; i < 24 && gbar; i++)
+          for (int gp = 0; gp < 8; gp++) div_z[gp] += ze[i] * RdivT[i][gp];
+        nh_dwr_interpolate(star + 6 * (1 + (size_t)q), 6 * (size_t)nfld, corner, NT, sstar);
         for (int gp = 0; gp < 8; gp++) {
-          double sz[6], ez[6], cez[6], a1 = 0.0, a2 = 0.0;
-          nh_dwr_dual_stress(ze, Rg[gp], lambda, mu, gbar ? &tz : NULL, sz);
-          for (int i = 0; i < 6; i++) {
-            double s = 0.0;
-            for (int a = 0; a < 8; a++)
-              s += N[gp][a] * star[6 * ((size_t)nfld * corner[a] + 1 + q) + i];
-            ez[i] = s - sz[i];
-          }
+          double ez[6], cez[6], a1 = 0.0, a2 = 0.0;
+          for (int i = 0; i < 6; i++) ez[i] = sstar[i][gp] - sz[i][gp];
           nh_voigt_compliance(lambda, mu, ez, cez);
           for (int i = 0; i < 6; i++) a1 += ez[i] * ceu[6 * gp + i], a2 += ez[i] * cez[i];
           if (gbar) { /* the mixed (mean-dilatation) method's terms, header "B-bar" */
-            double pu = (eu[6 * gp] + eu[6 * gp + 1] + eu[6 * gp + 2]) / 3.0;
             double pz = (ez[0] + ez[1] + ez[2]) / 3.0;
-            double div_z = 0.0;
-            for (int i = 0; i < 24; i++) div_z += ze[i] * Rdiv[gp][i];
-            a1 -= pu * div_z + pz * dev_u[gp];
+            a1 -= pu[gp] * div_z[gp] + pz * dev_u[gp];
           }
           eps += detJ[gp] * a1;
           ezz += detJ[gp] * a2;

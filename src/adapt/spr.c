@@ -177,16 +177,27 @@ static int nh_spr_fit_weights(int n, const double *points, const double x0[3], d
 }
 
 /* out[k] = v̄ + Σ_i c_i (v_i − v̄) for the m components of the samples
- * values[m id_i + k], id_i = cells[i] (or i if cells is NULL). */
+ * values[m id_i + k], id_i = cells[i] (or i if cells is NULL). The samples
+ * are read row by row (a sample's m components are contiguous; the goal
+ * estimate recovers 6 (1 + 36) of them at once), each component's sums
+ * taken over i in order as a per-component loop would: the same bits. */
+NH_ADAPT_VECTOR_CLONES
 static void nh_spr_fit_combine(int n, const int *cells, const double *c, int m,
                                const double *values, double *out) {
-  for (int k = 0; k < m; k++) {
-    double vbar = 0.0, fit = 0.0;
-    for (int i = 0; i < n; i++) vbar += values[(size_t)m * (cells ? cells[i] : i) + k];
-    vbar /= n;
-    for (int i = 0; i < n; i++)
-      fit += c[i] * (values[(size_t)m * (cells ? cells[i] : i) + k] - vbar);
-    out[k] = vbar + fit;
+  enum { CHUNK = 64 };
+  for (int k0 = 0; k0 < m; k0 += CHUNK) {
+    const int mk = m - k0 < CHUNK ? m - k0 : CHUNK;
+    double vbar[CHUNK] = {0}, fit[CHUNK] = {0};
+    for (int i = 0; i < n; i++) {
+      const double *v = values + (size_t)m * (cells ? cells[i] : i) + k0;
+      for (int k = 0; k < mk; k++) vbar[k] += v[k];
+    }
+    for (int k = 0; k < mk; k++) vbar[k] /= n;
+    for (int i = 0; i < n; i++) {
+      const double *v = values + (size_t)m * (cells ? cells[i] : i) + k0;
+      for (int k = 0; k < mk; k++) fit[k] += c[i] * (v[k] - vbar[k]);
+    }
+    for (int k = 0; k < mk; k++) out[k0 + k] = vbar[k] + fit[k];
   }
 }
 
