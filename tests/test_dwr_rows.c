@@ -32,7 +32,9 @@
  *     estimates (nh_dwr_estimate) to 1e-10 relative: the recovery and the
  *     integrals are linear in the dual, and so is the constrained solve.
  *  3. Constraint data (test_data_change): the exact identity for moved
- *     points and changed gaps with the perturbed dual.
+ *     points and changed gaps with the perturbed dual; with rows 0 and 4
+ *     given a tool, the estimate's inherited part (the tools' rows') is
+ *     their terms of that identity, and the whole term unchanged.
  *  4. Anchoring (test_anchor; docs/theory.md §6.6, "Anchoring"): the tie r4
  *     holds its material point P at a fixed place; the exact solution would
  *     hold P + ε δX. Row r4 then reads n·(x(P + ε δX) − x_0), gap
@@ -302,6 +304,27 @@ static void test_data_change(problem *p) {
              k, lhs, primal, dual, C[k], fabs(C[k] - lhs) / fabs(lhs));
   }
   CHECK(primal_max > 0.05, "the lambda part is at most %.1e of the change: no test", primal_max);
+  /* The tools' rows' part, inherited (their anchors' errors, which
+   * tolerance mode does not chase; refine.c): rows 0 and 4 as a tool's
+   * (tool 0; the dual does not read the tool part), the rest ties. It
+   * must be those rows' terms of the sum above, and C unchanged. */
+  double C2[3], inh[3];
+  p->rows.tool[0] = p->rows.tool[4] = 0;
+  nh_dwr_result r2 = {
+      .estimate = E, .norm = &norm, .data = &data, .constraint = C2, .inherited = inh};
+  CHECK_OK(
+      nh_dwr_estimate(p->s, &p->rows, 1.0, p->m, p->t, p->h, uf, 1, points, RADIUS, NULL, &r2));
+  for (int k = 0; k < 3; k++) {
+    const double *zk = z + (size_t)n * k;
+    double tools = 0.0;
+    for (int i = 0; i < NROWS; i += 4)
+      tools += lambda[i] * (row_value(&old, i, zk) - row_value(&p->rows, i, zk)) -
+               mu[NROWS * k + i] * dc[i];
+    CHECK_CLOSE(C2[k], C[k], 1e-12 * fabs(C[k]), "the constraint term, summed in two parts");
+    CHECK_CLOSE(inh[k], tools, 1e-10 * fabs(C[k]), "the tools' rows' (inherited) part");
+    CHECK(fabs(tools) > 0.05 * fabs(C[k]) && fabs(C[k] - tools) > 0.05 * fabs(C[k]),
+          "k=%d: the tools' part %.1e of C: no test", k, tools / C[k]);
+  }
   nh_rows_free(&p->rows);
   p->rows = old;
   free(uf), free(uf2), free(z);

@@ -331,9 +331,12 @@ typedef struct {
   double *geometry;
   /* The constraint-data term (dwr.c, "Constraint data"): in, data (may be
    * NULL: no term); out, constraint (may be NULL) the part of each
-   * estimate that is the term, C_q (included in estimate). */
+   * estimate that is the term, C_q (included in estimate), and inherited
+   * (may be NULL) the part of C_q from the tools' rows: their anchors'
+   * errors, made at the steps that anchored them (docs/theory.md §6.6,
+   * "Anchoring"), which no refinement of this step reduces. */
   const nh_constraint_data *data;
-  double *constraint;
+  double *constraint, *inherited;
   /* The local enriched dual where a goal's cell holds tool rows
    * (dwr_local.c): in, local (0: off); out, local_term (may be NULL) the
    * patch's term L_q (0 where not applied; included in estimate, in place

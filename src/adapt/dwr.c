@@ -309,7 +309,8 @@ void nh_dwr_active_rows(const nh_rows *rows, unsigned char *active) {
  *   C_q = Σ_i (Λ_i δ(J z_q)_i − μ_qi δc_i / c_K),
  * μ the duals' multipliers (rows->m each, 0 on the rows a dual dropped;
  * followed by as much workspace), added to out->estimate and stored in
- * out->constraint (if not NULL). */
+ * out->constraint (if not NULL); the tools' rows' part (their anchors'
+ * errors) also in out->inherited (if not NULL). */
 static int nh_dwr_constraint_term(const nh_rows *rows, const double *z, double *mu,
                                   const nh_constraint_data *data, double scale, int nz,
                                   nh_dwr_result *out) {
@@ -318,11 +319,13 @@ static int nh_dwr_constraint_term(const nh_rows *rows, const double *z, double *
   int rc = data->linear(data->ctx, nz, z, dz);
   if (rc) return NH_ERROR(rc, "goal estimate: the constraints' finer data failed");
   for (int q = 0; q < nz; q++) {
-    double s = 0.0;
+    double s[2] = {0.0, 0.0}; /* the skull's and ties' rows; the tools' (inherited) */
     for (int i = 0; i < m; i++)
-      s += data->force[i] * dz[(size_t)m * q + i] - mu[(size_t)m * q + i] * data->change[i] / scale;
-    out->estimate[q] += s;
-    if (out->constraint) out->constraint[q] = s;
+      s[rows->tool[i] >= 0] +=
+          data->force[i] * dz[(size_t)m * q + i] - mu[(size_t)m * q + i] * data->change[i] / scale;
+    out->estimate[q] += s[0] + s[1];
+    if (out->constraint) out->constraint[q] = s[0] + s[1];
+    if (out->inherited) out->inherited[q] = s[1];
   }
   return NH_OK;
 }
@@ -534,6 +537,7 @@ int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale, const 
     out->estimate[q] = 0.0;
     if (out->geometry) out->geometry[q] = 0.0;
     if (out->constraint) out->constraint[q] = 0.0;
+    if (out->inherited) out->inherited[q] = 0.0;
   }
   if (with_data && (rc = nh_dwr_constraint_term(rows, z, mu, out->data, scale, nz, out))) goto done;
   /* where a goal's cell holds tool rows: the local enriched dual's term in

@@ -68,7 +68,8 @@ struct nh_adapt {
   double *goal_est;               /* per goal: the signed E_pk (3), valid when have_eta */
   double *goal_geo;               /* per goal: its geometry part G_pk (3, in goal_est) */
   double *goal_cons;              /* per goal: its constraint-data part C_pk (3, in goal_est) */
-  double *goal_ind;               /* n_goals x cap_eta */
+  double *goal_inh;   /* per goal: the tools' rows' part of C_pk, inherited (3; NaN: not split) */
+  double *goal_ind;   /* n_goals x cap_eta */
   double *eta_all;    /* per cell: Σ over every goal (coarsening: a goal below tolerance still
                          needs its cells) */
   int n_active;       /* goals above tolerance at the last estimate */
@@ -132,6 +133,7 @@ void nh_adapt_destroy(nh_adapt **adapt) {
   free((*adapt)->goal_est);
   free((*adapt)->goal_geo);
   free((*adapt)->goal_cons);
+  free((*adapt)->goal_inh);
   free((*adapt)->goal_ind);
   free((*adapt)->eta_all);
   nh_node_transfer_free(&(*adapt)->transfer);
@@ -156,17 +158,18 @@ int nh_adapt_estimate(nh_adapt *a, const nh_mesh *m, const nh_tissue *tissue, co
 int nh_adapt_set_goals(nh_adapt *a, const nh_mesh *m, int n, const double *points) {
   free(a->goal_points), free(a->goal_error), free(a->goal_est), free(a->weight), free(a->sep_est);
   free(a->goal_top);
-  free(a->goal_geo), free(a->goal_cons);
+  free(a->goal_geo), free(a->goal_cons), free(a->goal_inh);
   a->goal_points = nh_calloc(3 * (size_t)(n ? n : 1), sizeof(double));
   a->goal_error = nh_calloc((size_t)(n ? n : 1), sizeof(double));
   a->goal_est = nh_calloc(3 * (size_t)(n ? n : 1), sizeof(double));
   a->goal_geo = nh_calloc(3 * (size_t)(n ? n : 1), sizeof(double));
   a->goal_cons = nh_calloc(3 * (size_t)(n ? n : 1), sizeof(double));
+  a->goal_inh = nh_calloc(3 * (size_t)(n ? n : 1), sizeof(double));
   a->weight = nh_calloc(3 * (size_t)(n ? n : 1), sizeof(double));
   a->sep_est = nh_calloc(3 * (size_t)(n ? n : 1), sizeof(double));
   a->goal_top = nh_calloc((size_t)(n ? n : 1), sizeof(double));
   if (!a->goal_points || !a->goal_error || !a->goal_est || !a->goal_geo || !a->goal_cons ||
-      !a->weight || !a->sep_est || !a->goal_top)
+      !a->goal_inh || !a->weight || !a->sep_est || !a->goal_top)
     return NH_ERROR(NH_ERR_MEMORY, "out of memory: goals");
   a->have_weights = 0;
   memcpy(a->goal_points, points, sizeof(double) * 3 * (size_t)n);
@@ -182,6 +185,25 @@ void nh_adapt_set_geometry_loads(nh_adapt *a, const nh_geometry_loads *loads) {
 
 void nh_adapt_set_constraint_data(nh_adapt *a, const nh_constraint_data *data) {
   a->data = data;
+}
+
+/* Whether goal p is above the tolerance by the part of its last estimate
+ * that refining this mesh can reduce: E_p without the tools' rows' part of
+ * its constraint-data term, their anchors' errors, which were made at the
+ * steps that anchored them (docs/theory.md §6.6, "Anchoring"). Counting
+ * them made tolerance mode refine the DBS hold to 2× the dofs, where the
+ * error is the insertion's (docs/dbs.md, "The front's anchoring error").
+ * After a combined estimate (not split: NaN) the whole estimate counts;
+ * without a tolerance, any nonzero estimate. */
+static int nh_adapt_goal_above(const nh_adapt *a, int p) {
+  if (!(a->tolerance > 0.0)) return !(a->goal_error[p] <= 0.0); /* no tolerance: any error */
+  const double *e = a->goal_est + 3 * p, *i = a->goal_inh + 3 * p;
+  double r2 = 0.0;
+  for (int k = 0; k < 3; k++) {
+    double r = isnan(i[k]) ? e[k] : e[k] - i[k];
+    r2 += r * r;
+  }
+  return !(sqrt(r2) <= a->tolerance);
 }
 
 /* adapt.marking.goal_leaves: every leaf below max_level whose rest box
@@ -208,7 +230,7 @@ static void nh_adapt_mark_goal_leaves(nh_adapt *a, const nh_mesh *m) {
       for (int k = 0; k < 3; k++)
         lo[k] = fmin(lo[k], Xe[3 * q + k]), hi[k] = fmax(hi[k], Xe[3 * q + k]);
     for (int p = 0; p < a->n_goals; p++) {
-      if (a->goal_error[p] <= a->tolerance) continue;
+      if (!nh_adapt_goal_above(a, p)) continue;
       const double *x = a->goal_points + 3 * p;
       int meets = 1;
       for (int k = 0; k < 3; k++) meets &= lo[k] < x[k] + a->radius && hi[k] > x[k] - a->radius;
@@ -241,6 +263,7 @@ int nh_adapt_estimate_goal(nh_adapt *a, nh_system *sys, const nh_rows *rows, dou
                      .geometry = a->goal_geo,
                      .data = a->data,
                      .constraint = a->goal_cons,
+                     .inherited = a->goal_inh,
                      .local = a->local_dual,
                      .functionals = a->functionals};
   if (!combined) {
@@ -260,7 +283,7 @@ int nh_adapt_estimate_goal(nh_adapt *a, nh_system *sys, const nh_rows *rows, dou
     a->since_separate = 0;
   } else {
     double Ec = 0.0;
-    r.estimate = &Ec, r.norm = NULL, r.geometry = NULL, r.constraint = NULL;
+    r.estimate = &Ec, r.norm = NULL, r.geometry = NULL, r.constraint = NULL, r.inherited = NULL;
     NH_TRY(nh_dwr_estimate_combined(sys, rows, scale, m, tissue, hanging, u, a->n_goals,
                                     a->goal_points, a->radius, NULL, a->weight, &r));
     /* each goal's estimate carried from the last separate one by the
@@ -270,7 +293,7 @@ int nh_adapt_estimate_goal(nh_adapt *a, nh_system *sys, const nh_rows *rows, dou
       double *e = a->goal_est + 3 * p;
       for (int k = 0; k < 3; k++) e[k] = rho * a->sep_est[3 * p + k];
       for (int k = 0; k < 3; k++) /* not split */
-        a->goal_geo[3 * p + k] = a->goal_cons[3 * p + k] = NAN;
+        a->goal_geo[3 * p + k] = a->goal_cons[3 * p + k] = a->goal_inh[3 * p + k] = NAN;
       a->goal_error[p] = sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]);
     }
     a->since_separate++;
@@ -282,7 +305,7 @@ int nh_adapt_estimate_goal(nh_adapt *a, nh_system *sys, const nh_rows *rows, dou
    * every goal's own θ-marking: a goal with a small estimate is not crowded
    * out by the others (docs/phantom.md, "The goal runs' far probes"). */
   a->n_active = 0;
-  for (int p = 0; p < a->n_goals; p++) a->n_active += !(a->goal_error[p] <= a->tolerance);
+  for (int p = 0; p < a->n_goals; p++) a->n_active += nh_adapt_goal_above(a, p);
   const int each = a->each_goal && !combined;
   for (int p = 0; p < (each ? a->n_goals : 0); p++) {
     const double *gi = a->goal_ind + (size_t)m->n_cells * p;
@@ -296,7 +319,7 @@ int nh_adapt_estimate_goal(nh_adapt *a, nh_system *sys, const nh_rows *rows, dou
     for (int p = 0; p < (combined ? 1 : a->n_goals); p++) {
       double v = a->goal_ind[(size_t)m->n_cells * p + c];
       all += v;
-      if (!combined && a->goal_error[p] <= a->tolerance) continue;
+      if (!combined && !nh_adapt_goal_above(a, p)) continue;
       if (!each)
         sum += v;
       else if (a->goal_top[p] > 0.0)
