@@ -87,15 +87,16 @@ static int nh_channel_lay(nh_group *G, const nh_tool_spec *spec, const nh_mesh *
                   spec->where, sp, cell);
       G->fine_warned = 1;
     }
-    double X[3]; /* before the array grows: `last` points into it */
-    for (int i = 0; i < 3; i++) X[i] = last->X[i] + d[i] * sp / dist;
+    double X[3], dX[3];         /* before the array grows: `last` points into it */
+    for (int i = 0; i < 3; i++) /* the anchoring error as the position: interpolated (anchor.c) */
+      X[i] = last->X[i] + d[i] * sp / dist,
+      dX[i] = last->dX[i] + (to->dX[i] - last->dX[i]) * sp / dist;
     if (nh_grow((void **)&G->chan, &G->cap_chan, G->n_chan + 1, sizeof *G->chan))
       return NH_ERR_MEMORY;
     nh_cpoint p = {0};
     if (nh_point_set(m, &p, X)) return NH_OK; /* left the tissue */
     p.len = sp, p.tool = -1, p.row = -1;
-    for (int i = 0; i < 3; i++) /* the anchoring error as the position: interpolated (anchor.c) */
-      p.dX[i] = last->dX[i] + (to->dX[i] - last->dX[i]) * sp / dist;
+    memcpy(p.dX, dX, sizeof dX);
     G->chan[G->n_chan++] = p;
   }
 }
