@@ -1,11 +1,12 @@
 /* fuzz_checkpoint.c — fuzz target: the checkpoint reader
  * (nh_checkpoint_read, behind `needlehex run --restart`) on any payload.
  * The input is the payload after the scene hash: this target writes the
- * header (magic, format 4, byte order, size) and the hash of its own small
- * scene around it and computes the checksum, so the fuzzer explores what a
- * checksum-valid file of a buggy writer could hold (a random file stops at
- * the checksum). Every input must either read (and be freed) or fail with
- * "--restart: PATH: ..." (fuzz_common.h). See fuzz_scene.c. */
+ * header (magic, the format the reader takes (6), byte order, size) and
+ * the hash of its own small scene around it and computes the checksum, so
+ * the fuzzer explores what a checksum-valid file of a buggy writer could
+ * hold (a random file stops at the checksum). Every input must either
+ * read (and be freed) or fail with "--restart: PATH: ..."
+ * (fuzz_common.h). See fuzz_scene.c. */
 #include "fuzz_common.h"
 #include "scene/scene.h"
 #include "sim/sim_impl.h"
@@ -44,7 +45,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
   uint64_t hash = nh_fuzz_fnv1a(scene->yaml, strlen(scene->yaml), seed);
   uint64_t payload = 8 + (uint64_t)size;
   uint64_t sum = nh_fuzz_fnv1a(data, size, nh_fuzz_fnv1a(&hash, 8, seed));
-  uint32_t version = 4, order = 0x01020304;
+  uint32_t version = 6, order = 0x01020304;
   char path[256];
   snprintf(path, sizeof path, "%s/checkpoint.nhc", dir);
   FILE *f = fopen(path, "wb");
