@@ -53,7 +53,7 @@ double nh_hex_det(const double X[24], const double xi[3]) {
   return det > 0.0 && nh_mat3_singular(J, det) ? 0.0 : det;
 }
 
-/* !(det J > 0) or J singular (nh_hex_det's test) for J at a point. */
+/* !(det J > 0) or J singular (nh_hex_det's test) for a corner's J. */
 static int nh_hex_bad_jacobian(const double J[9]) {
   const double det = nh_mat3_det(J);
   return !(det > 0.0) || nh_mat3_singular(J, det);
@@ -63,8 +63,8 @@ static int nh_hex_bad_jacobian(const double J[9]) {
  * p's neighbour along j and exact zeros (±0) for the six others, so J's
  * sums keep only those two terms. A sum that starts at +0 and skips ±0
  * terms gives the same bits (x + ±0 = x for x ≠ 0, +0 + ±0 = +0, and a sum
- * from +0 is never −0), so J is nh_hex_jacobian's. The Gauss points take
- * nh_hex_dshape's derivatives and nh_hex_jacobian's sums, in its order. */
+ * from +0 is never −0), so J is nh_hex_jacobian's. The Gauss points are
+ * nh_hex_det's. */
 int nh_hex_inverted(const double x[24]) {
   static const double g = 0.57735026918962576; /* 1/√3, as sim/guard.c had it */
   /* p's neighbours along ξ, η, ζ (mesh/mesh.h's corner numbering) */
@@ -81,15 +81,7 @@ int nh_hex_inverted(const double x[24]) {
   }
   for (int p = 0; p < 8; p++) {
     const double xi[3] = {(p & 1) ? g : -g, (p & 2) ? g : -g, (p & 4) ? g : -g};
-    double dN[8][3], J[9];
-    nh_hex_dshape(xi, dN);
-    for (int i = 0; i < 3; i++)
-      for (int j = 0; j < 3; j++) {
-        double sum = 0.0;
-        for (int a = 0; a < 8; a++) sum += x[3 * a + i] * dN[a][j];
-        J[3 * i + j] = sum;
-      }
-    if (nh_hex_bad_jacobian(J)) return 1;
+    if (!(nh_hex_det(x, xi) > 0.0)) return 1;
   }
   return 0;
 }
