@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Install every Debian package needlehex needs: build, tests, plots, pictures
 # (xvfb: a virtual display for tools/render.py; ffmpeg: its MP4; elastix: its
-# transformix applies the exported displacement fields in tests/nifti_field.py).
+# transformix applies the exported displacement fields in tests/nifti_field.py;
+# valgrind: callgrind's instruction counts, docs/performance.md).
 # Idempotent; run as root (or with sudo available).
 set -euo pipefail
 pkgs=(
@@ -11,7 +12,7 @@ pkgs=(
   python3 python3-numpy python3-matplotlib python3-vtk9 python3-meshio python3-h5py python3-nibabel python3-scipy
   python3-distributed python3-yaml
   elastix
-  xvfb ffmpeg git
+  xvfb ffmpeg git valgrind
 )
 sudo=""
 if [ "$(id -u)" -ne 0 ]; then sudo="sudo"; fi
