@@ -670,6 +670,17 @@ static void test_step_operator(void) {
     for (int i = 0; i < m; i++) diff = fmax(diff, fabs(y[i] - z[i])), zmax = fmax(zmax, fabs(z[i]));
     snprintf(what, sizeof what, "case %d: |y_beam - y_dense| / |y| (cond %.2g)", c, 1.0 / rcond);
     CHECK_CLOSE(diff / zmax, 0.0, 100 * 2.2e-16 / rcond, what);
+    /* several right-hand sides at once (the tools' compliance columns):
+     * each column solves the dense A to the same backward error */
+    double *Y = calloc((size_t)3 * m, sizeof(double)), *R = calloc((size_t)3 * m, sizeof(double));
+    for (int k = 0; k < 3 * m; k++) R[k] = Y[k] = nh_rand();
+    nh_beam_system_solve_many(S, 3, Y);
+    for (int col = 0; col < 3; col++) {
+      snprintf(what, sizeof what, "case %d: column %d of the many-column solve's backward error", c,
+               col);
+      CHECK_CLOSE(backward_error(A, m, Y + (size_t)col * m, R + (size_t)col * m), 0.0, 1e-12, what);
+    }
+    free(Y), free(R);
   }
   nh_beam_system_destroy(&S);
   free(f), free(K), free(M), free(A), free(F), free(w), free(r), free(y), free(z), free(fi),

@@ -227,6 +227,9 @@ int nh_beam_dynamic_prepare(nh_beam *beam, const nh_beam_dynamic_options *option
                             const double *f_ext, const double base_velocity[6],
                             nh_beam_system *system, double *rhs);
 void nh_beam_system_solve(const nh_beam_system *system, double *y);
+/* The same for nrhs right-hand sides at once, the columns of Y (m x nrhs,
+ * column-major): one blocked triangular solve instead of nrhs. */
+void nh_beam_system_solve_many(const nh_beam_system *system, int nrhs, double *Y);
 /* The beam's own step system, created at the first call and kept (with its
  * work arrays) until nh_beam_destroy: a coupled step prepares it every step
  * without allocating. *out is borrowed. Fails with NH_ERR_MEMORY. */

@@ -407,14 +407,20 @@ int nh_beam_dynamic_prepare(nh_beam *b, const nh_beam_dynamic_options *o, const 
   return rc;
 }
 
-void nh_beam_system_solve(const nh_beam_system *s, double *y) {
+void nh_beam_system_solve_many(const nh_beam_system *s, int nrhs, double *Y) {
+  if (nrhs <= 0) return;
   if (s->lu)
-    LAPACKE_dgetrs(LAPACK_ROW_MAJOR, 'N', s->m, 1, s->A, s->m, s->piv, y, 1);
+    for (int c = 0; c < nrhs; c++) /* row-major LU: one column at a time */
+      LAPACKE_dgetrs(LAPACK_ROW_MAJOR, 'N', s->m, 1, s->A, s->m, s->piv, Y + (size_t)c * s->m, 1);
   else if (s->banded)
-    LAPACKE_dpbtrs_work(LAPACK_COL_MAJOR, 'L', s->m, NH_BEAM_BAND, 1, s->B, NH_BEAM_BAND + 1, y,
+    LAPACKE_dpbtrs_work(LAPACK_COL_MAJOR, 'L', s->m, NH_BEAM_BAND, nrhs, s->B, NH_BEAM_BAND + 1, Y,
                         s->m);
   else
-    LAPACKE_dpotrs_work(LAPACK_COL_MAJOR, 'U', s->m, 1, s->A, s->m, y, s->m);
+    LAPACKE_dpotrs_work(LAPACK_COL_MAJOR, 'U', s->m, nrhs, s->A, s->m, Y, s->m);
+}
+
+void nh_beam_system_solve(const nh_beam_system *s, double *y) {
+  nh_beam_system_solve_many(s, 1, y);
 }
 
 int nh_beam_system_projected(const nh_beam_system *s) {

@@ -234,18 +234,16 @@ static int nh_tissue_compliance(nh_step_work *w) {
   return NH_OK;
 }
 
-/* One tool's part of W, W_ij += J_i (A_k⁻¹ J_jᵀ), by |rows_k| dense solves
- * (their columns kept in X for the correction). */
+/* One tool's part of W, W_ij += J_i (A_k⁻¹ J_jᵀ), by one dense solve of its
+ * |rows_k| columns (kept in X for the correction). */
 static int nh_tool_compliance(nh_step_work *w, nh_tool_work *t) {
   const nh_rows *rows = w->rows;
   const int m = w->m;
   t->X = nh_calloc((size_t)t->mfree * t->nrows, sizeof(double));
   if (!t->X) return NH_ERR_MEMORY;
-  for (int a = 0; a < t->nrows; a++) {
-    double *x = t->X + (size_t)a * t->mfree;
-    nh_row_tool_column(rows, t->rows[a], t->side[a], x);
-    nh_beam_system_solve(t->sys, x);
-  }
+  for (int a = 0; a < t->nrows; a++)
+    nh_row_tool_column(rows, t->rows[a], t->side[a], t->X + (size_t)a * t->mfree);
+  nh_beam_system_solve_many(t->sys, t->nrows, t->X);
   for (int a = 0; a < t->nrows; a++) {
     const int i = t->rows[a], d0 = 6 * nh_row_elem(rows, i, t->side[a]) - 6;
     double coef[12];
