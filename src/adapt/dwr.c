@@ -181,22 +181,38 @@ static void nh_dwr_rotate_gradients(const double R[9], const double g[24], doubl
           R[3 * i] * g[3 * a] + R[3 * i + 1] * g[3 * a + 1] + R[3 * i + 2] * g[3 * a + 2];
 }
 
-/* The tangent stress of an increment w (a dual; we its values at the cell's
- * 8 corners) at a point with rotated gradients Rg: the corotational
+/* The tangent stresses of nq ≤ 8 increments w_q (duals z + n3 q, at the
+ * cell's corners) at a point with rotated gradients Rg: the corotational
  * R (λ tr ε I + 2μ ε(Rᵀw)) Rᵀ of nh_hex_rotated_stress, formed without the
  * rotations, R (Rᵀwₐ ⊗ gₐ) Rᵀ = wₐ ⊗ R gₐ and C isotropic: σ = λ tr H I +
- * μ (H + Hᵀ), H = Σₐ wₐ ⊗ (R gₐ). B-bar (tz not NULL): κ θ̄ I + 2μ dev ε,
- * θ̄ = *tz. */
-static void nh_dwr_dual_stress(const double we[24], const double Rg[24], double lambda, double mu,
-                               const double *tz, double s[6]) {
-  double H[9] = {0};
+ * μ (H + Hᵀ), H = Σₐ wₐ ⊗ (R gₐ). B-bar (b not NULL): κ θ̄ I + 2μ dev ε,
+ * θ̄(w) = Σₐ bₐ·wₐ. Vectorised over the duals, each sum in the scalar
+ * formula's order; s + 6 stride q receives dual q's 6 components. */
+NH_ADAPT_VECTOR_CLONES
+static void nh_dwr_dual_stresses(const double *z, size_t n3, int nq, const int corner[8],
+                                 const double Rg[24], double lambda, double mu, const double *b,
+                                 double *s, size_t stride) {
+  double w[24][8] = {{0}}, H[9][8] = {{0}}, tz[8] = {0};
+  for (int q = 0; q < nq; q++)
+    for (int a = 0; a < 8; a++)
+      for (int k = 0; k < 3; k++) w[3 * a + k][q] = z[n3 * q + 3 * (size_t)corner[a] + k];
+  for (int i = 0; i < 24 && b; i++)
+    for (int q = 0; q < 8; q++) tz[q] += b[i] * w[i][q];
   for (int a = 0; a < 8; a++)
     for (int i = 0; i < 3; i++)
-      for (int j = 0; j < 3; j++) H[3 * i + j] += we[3 * a + i] * Rg[3 * a + j];
-  double tr = H[0] + H[4] + H[8];
-  double vol = tz ? (lambda + 2.0 * mu / 3.0) * *tz - 2.0 * mu / 3.0 * tr : lambda * tr;
-  s[0] = 2.0 * mu * H[0] + vol, s[1] = 2.0 * mu * H[4] + vol, s[2] = 2.0 * mu * H[8] + vol;
-  s[3] = mu * (H[5] + H[7]), s[4] = mu * (H[2] + H[6]), s[5] = mu * (H[1] + H[3]);
+      for (int j = 0; j < 3; j++)
+        for (int q = 0; q < 8; q++) H[3 * i + j][q] += w[3 * a + i][q] * Rg[3 * a + j];
+  double sq[6][8];
+  for (int q = 0; q < 8; q++) {
+    double tr = H[0][q] + H[4][q] + H[8][q];
+    double vol = b ? (lambda + 2.0 * mu / 3.0) * tz[q] - 2.0 * mu / 3.0 * tr : lambda * tr;
+    sq[0][q] = 2.0 * mu * H[0][q] + vol, sq[1][q] = 2.0 * mu * H[4][q] + vol;
+    sq[2][q] = 2.0 * mu * H[8][q] + vol;
+    sq[3][q] = mu * (H[5][q] + H[7][q]), sq[4][q] = mu * (H[2][q] + H[6][q]);
+    sq[5][q] = mu * (H[1][q] + H[3][q]);
+  }
+  for (int q = 0; q < nq; q++)
+    for (int k = 0; k < 6; k++) s[stride * q + k] = sq[k][q];
 }
 
 /* One dual's terms at the 8 Gauss points of a cell at once (vectorised
@@ -443,12 +459,9 @@ int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale, const 
     nh_hex_rotated_stress(R, d, G0, lambda, mu, gbar ? &theta : NULL, s);
     double RG0[24];
     nh_dwr_rotate_gradients(R, G0, RG0);
-    for (int q = 0; q < nz; q++) {
-      double ze[24];
-      nh_mesh_cell_coords(m, z + n3 * q, c, ze);
-      double tz = gbar ? nh_dwr_dilatation(ze, b) : 0.0;
-      nh_dwr_dual_stress(ze, RG0, lambda, mu, gbar ? &tz : NULL, s + 6 * (1 + q));
-    }
+    for (int q = 0; q < nz; q += 8)
+      nh_dwr_dual_stresses(z + n3 * q, n3, nz - q < 8 ? nz - q : 8, m->cells + 8 * c, RG0, lambda,
+                           mu, gbar ? b : NULL, s + 6 * (1 + (size_t)q), 6);
   }
   if ((rc = nh_spr_recover_fields(m, t, h, nfld, samples, star))) goto done;
 
