@@ -217,8 +217,8 @@ static void nh_dwr_dual_stresses(const double *z, size_t n3, int nq, const int c
 
 /* One dual's terms at the 8 Gauss points of a cell at once (vectorised
  * over the points, the sums in the order of the scalar formulas): its
- * tangent stress σ_h(z) (nh_dwr_dual_stress, the rotated gradients by point
- * last, RgT[3a + j][gp] = (R g_a(gp))_j), its recovered stress σ*_z
+ * tangent stress σ_h(z) (as nh_dwr_dual_stresses, the rotated gradients by
+ * point last, RgT[3a + j][gp] = (R g_a(gp))_j), its recovered stress σ*_z
  * interpolated from the nodal values zstar + stride × corner (NT[a][gp] =
  * N_a(gp)), e_z = σ*_z − σ_h(z), D⁻¹ e_z (nh_voigt_compliance) and the
  * point products a1 = e_zᵀ D⁻¹ e_u (ceuT[k][gp] = (D⁻¹ e_u)_k; B-bar:
