@@ -172,66 +172,122 @@
 
 #define NH_DWR_PARALLEL_MIN 256
 
-/* The rotated gradients of one point: (Rg)ₐ = R gₐ, a = 0..7. */
+/* The rotated gradients of one point: (Rg)ₐ = R gₐ, a = 0..7 (nh_mat3_vec's
+ * sums, inlined: 16 calls per leaf and point otherwise). */
 static void nh_dwr_rotate_gradients(const double R[9], const double g[24], double Rg[24]) {
-  for (int a = 0; a < 8; a++) nh_mat3_vec(R, g + 3 * a, Rg + 3 * a);
-}
-
-/* The tangent stress of an increment w (a dual; we its values at the cell's
- * 8 corners) at a point with rotated gradients Rg: the corotational
- * R (λ tr ε I + 2μ ε(Rᵀw)) Rᵀ of nh_hex_rotated_stress, formed without the
- * rotations, R (Rᵀwₐ ⊗ gₐ) Rᵀ = wₐ ⊗ R gₐ and C isotropic: σ = λ tr H I +
- * μ (H + Hᵀ), H = Σₐ wₐ ⊗ (R gₐ). B-bar (tz not NULL): κ θ̄ I + 2μ dev ε,
- * θ̄ = *tz. */
-static void nh_dwr_dual_stress(const double we[24], const double Rg[24], double lambda, double mu,
-                               const double *tz, double s[6]) {
-  double H[9] = {0};
   for (int a = 0; a < 8; a++)
     for (int i = 0; i < 3; i++)
-      for (int j = 0; j < 3; j++) H[3 * i + j] += we[3 * a + i] * Rg[3 * a + j];
-  double tr = H[0] + H[4] + H[8];
-  double vol = tz ? (lambda + 2.0 * mu / 3.0) * *tz - 2.0 * mu / 3.0 * tr : lambda * tr;
-  s[0] = 2.0 * mu * H[0] + vol, s[1] = 2.0 * mu * H[4] + vol, s[2] = 2.0 * mu * H[8] + vol;
-  s[3] = mu * (H[5] + H[7]), s[4] = mu * (H[2] + H[6]), s[5] = mu * (H[1] + H[3]);
+      Rg[3 * a + i] =
+          R[3 * i] * g[3 * a] + R[3 * i + 1] * g[3 * a + 1] + R[3 * i + 2] * g[3 * a + 2];
 }
 
-/* nh_dwr_dual_stress at the 8 Gauss points of a cell at once, the
- * rotated gradients by point last (RgT[3a + j][gp] = (R g_a(gp))_j) and
- * the stresses too (s[k][gp]): the same sums in the same order, vectorised
- * over the points. */
+/* The tangent stresses of nq ≤ 8 increments w_q (duals z + n3 q, at the
+ * cell's corners) at a point with rotated gradients Rg: the corotational
+ * R (λ tr ε I + 2μ ε(Rᵀw)) Rᵀ of nh_hex_rotated_stress, formed without the
+ * rotations, R (Rᵀwₐ ⊗ gₐ) Rᵀ = wₐ ⊗ R gₐ and C isotropic: σ = λ tr H I +
+ * μ (H + Hᵀ), H = Σₐ wₐ ⊗ (R gₐ). B-bar (b not NULL): κ θ̄ I + 2μ dev ε,
+ * θ̄(w) = Σₐ bₐ·wₐ. Vectorised over the duals, each sum in the scalar
+ * formula's order; s + 6 stride q receives dual q's 6 components. */
 NH_ADAPT_VECTOR_CLONES
-static void nh_dwr_dual_stresses(const double we[24], const double RgT[24][8], double lambda,
-                                 double mu, const double *tz, double s[6][8]) {
-  double H[9][8] = {{0}};
+static void nh_dwr_dual_stresses(const double *z, size_t n3, int nq, const int corner[8],
+                                 const double Rg[24], double lambda, double mu, const double *b,
+                                 double *s, size_t stride) {
+  double w[24][8] = {{0}}, H[9][8] = {{0}}, tz[8] = {0};
+  for (int q = 0; q < nq; q++)
+    for (int a = 0; a < 8; a++)
+      for (int k = 0; k < 3; k++) w[3 * a + k][q] = z[n3 * q + 3 * (size_t)corner[a] + k];
+  for (int i = 0; i < 24 && b; i++)
+    for (int q = 0; q < 8; q++) tz[q] += b[i] * w[i][q];
   for (int a = 0; a < 8; a++)
     for (int i = 0; i < 3; i++)
       for (int j = 0; j < 3; j++)
-        for (int gp = 0; gp < 8; gp++) H[3 * i + j][gp] += we[3 * a + i] * RgT[3 * a + j][gp];
-  for (int gp = 0; gp < 8; gp++) {
-    double tr = H[0][gp] + H[4][gp] + H[8][gp];
-    double vol = tz ? (lambda + 2.0 * mu / 3.0) * *tz - 2.0 * mu / 3.0 * tr : lambda * tr;
-    s[0][gp] = 2.0 * mu * H[0][gp] + vol, s[1][gp] = 2.0 * mu * H[4][gp] + vol;
-    s[2][gp] = 2.0 * mu * H[8][gp] + vol;
-    s[3][gp] = mu * (H[5][gp] + H[7][gp]), s[4][gp] = mu * (H[2][gp] + H[6][gp]);
-    s[5][gp] = mu * (H[1][gp] + H[3][gp]);
+        for (int q = 0; q < 8; q++) H[3 * i + j][q] += w[3 * a + i][q] * Rg[3 * a + j];
+  double sq[6][8];
+  for (int q = 0; q < 8; q++) {
+    double tr = H[0][q] + H[4][q] + H[8][q];
+    double vol = b ? (lambda + 2.0 * mu / 3.0) * tz[q] - 2.0 * mu / 3.0 * tr : lambda * tr;
+    sq[0][q] = 2.0 * mu * H[0][q] + vol, sq[1][q] = 2.0 * mu * H[4][q] + vol;
+    sq[2][q] = 2.0 * mu * H[8][q] + vol;
+    sq[3][q] = mu * (H[5][q] + H[7][q]), sq[4][q] = mu * (H[2][q] + H[6][q]);
+    sq[5][q] = mu * (H[1][q] + H[3][q]);
   }
+  for (int q = 0; q < nq; q++)
+    for (int k = 0; k < 6; k++) s[stride * q + k] = sq[k][q];
 }
 
-/* A field's 6 nodal values (field + stride × node) at the 8 Gauss points
- * of the cell with these corners: s[i][gp] = Σₐ N_a(gp) valueₐ,ᵢ, the sum
- * in a's order, NT[a][gp] = N_a(gp). */
+/* One dual's terms at the 8 Gauss points of a cell at once (vectorised
+ * over the points, the sums in the order of the scalar formulas): its
+ * tangent stress σ_h(z) (as nh_dwr_dual_stresses, the rotated gradients by
+ * point last, RgT[3a + j][gp] = (R g_a(gp))_j), its recovered stress σ*_z
+ * interpolated from the nodal values zstar + stride × corner (NT[a][gp] =
+ * N_a(gp)), e_z = σ*_z − σ_h(z), D⁻¹ e_z (nh_voigt_compliance) and the
+ * point products a1 = e_zᵀ D⁻¹ e_u (ceuT[k][gp] = (D⁻¹ e_u)_k; B-bar:
+ * − e_p,u (I − Π) div z − e_p,z (I − Π) div u, with RdivT, pu, dev_u) and
+ * a2 = e_zᵀ D⁻¹ e_z, summed with the weights detJ in the points' order:
+ * *eps = Σ detJ a1, *ezz = Σ detJ a2. B-bar when bbar, θ̄(z) = tz. */
 NH_ADAPT_VECTOR_CLONES
-static void nh_dwr_interpolate(const double *field, size_t stride, const int corner[8],
-                               const double NT[8][8], double s[6][8]) {
-  double acc[6][8] = {{0}}; /* local: no aliasing with field */
+static void nh_dwr_dual_terms(const double we[24], const double RgT[24][8],
+                              const double RdivT[24][8], const double *zstar, size_t stride,
+                              const int corner[8], const double NT[8][8], double lambda, double mu,
+                              int bbar, double tz, const double ceuT[6][8], const double pu[8],
+                              const double dev_u[8], const double detJ[8], double *eps,
+                              double *ezz) {
+  double H[9][8], ss[6][8] = {{0}}, dz[8] = {0}, a1[8], a2[8];
+  /* H row by row and each sum in a's order (3 × 8 accumulators in registers) */
+  for (int i = 0; i < 3; i++) {
+    double h0[8] = {0}, h1[8] = {0}, h2[8] = {0};
+    for (int a = 0; a < 8; a++) {
+      const double w = we[3 * a + i];
+      for (int gp = 0; gp < 8; gp++) {
+        h0[gp] += w * RgT[3 * a][gp];
+        h1[gp] += w * RgT[3 * a + 1][gp];
+        h2[gp] += w * RgT[3 * a + 2][gp];
+      }
+    }
+    memcpy(H[3 * i], h0, sizeof h0), memcpy(H[3 * i + 1], h1, sizeof h1);
+    memcpy(H[3 * i + 2], h2, sizeof h2);
+  }
+  for (int i = 0; i < 24 && bbar; i++) {
+    const double w = we[i];
+    for (int gp = 0; gp < 8; gp++) dz[gp] += w * RdivT[i][gp];
+  }
   for (int a = 0; a < 8; a++) {
-    const double *sa = field + stride * (size_t)corner[a];
+    const double *sa = zstar + stride * (size_t)corner[a];
     for (int i = 0; i < 6; i++) {
       const double v = sa[i];
-      for (int gp = 0; gp < 8; gp++) acc[i][gp] += NT[a][gp] * v;
+      for (int gp = 0; gp < 8; gp++) ss[i][gp] += NT[a][gp] * v;
     }
   }
-  memcpy(s, acc, sizeof acc);
+  const double c = lambda / (3.0 * lambda + 2.0 * mu); /* nh_voigt_compliance's */
+  double ez[6][8], cez[6][8], vol[8];
+  for (int gp = 0; gp < 8; gp++) {
+    double tr = H[0][gp] + H[4][gp] + H[8][gp];
+    vol[gp] = bbar ? (lambda + 2.0 * mu / 3.0) * tz - 2.0 * mu / 3.0 * tr : lambda * tr;
+  }
+  for (int gp = 0; gp < 8; gp++) {
+    ez[0][gp] = ss[0][gp] - (2.0 * mu * H[0][gp] + vol[gp]);
+    ez[1][gp] = ss[1][gp] - (2.0 * mu * H[4][gp] + vol[gp]);
+    ez[2][gp] = ss[2][gp] - (2.0 * mu * H[8][gp] + vol[gp]);
+    ez[3][gp] = ss[3][gp] - mu * (H[5][gp] + H[7][gp]);
+    ez[4][gp] = ss[4][gp] - mu * (H[2][gp] + H[6][gp]);
+    ez[5][gp] = ss[5][gp] - mu * (H[1][gp] + H[3][gp]);
+  }
+  for (int gp = 0; gp < 8; gp++) {
+    const double k = c * (ez[0][gp] + ez[1][gp] + ez[2][gp]);
+    for (int i = 0; i < 3; i++) cez[i][gp] = (ez[i][gp] - k) / (2.0 * mu);
+    for (int i = 3; i < 6; i++) cez[i][gp] = ez[i][gp] / mu;
+  }
+  for (int gp = 0; gp < 8; gp++) a1[gp] = 0.0, a2[gp] = 0.0;
+  for (int i = 0; i < 6; i++)
+    for (int gp = 0; gp < 8; gp++)
+      a1[gp] += ez[i][gp] * ceuT[i][gp], a2[gp] += ez[i][gp] * cez[i][gp];
+  for (int gp = 0; gp < 8 && bbar; gp++) { /* the mixed method's terms, header "B-bar" */
+    double pz = (ez[0][gp] + ez[1][gp] + ez[2][gp]) / 3.0;
+    a1[gp] -= pu[gp] * dz[gp] + pz * dev_u[gp];
+  }
+  double s1 = 0.0, s2 = 0.0;
+  for (int gp = 0; gp < 8; gp++) s1 += detJ[gp] * a1[gp], s2 += detJ[gp] * a2[gp];
+  *eps = s1, *ezz = s2;
 }
 
 /* The element's material and, for B-bar, the derivative b of its mean volume
@@ -403,12 +459,9 @@ int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale, const 
     nh_hex_rotated_stress(R, d, G0, lambda, mu, gbar ? &theta : NULL, s);
     double RG0[24];
     nh_dwr_rotate_gradients(R, G0, RG0);
-    for (int q = 0; q < nz; q++) {
-      double ze[24];
-      nh_mesh_cell_coords(m, z + n3 * q, c, ze);
-      double tz = gbar ? nh_dwr_dilatation(ze, b) : 0.0;
-      nh_dwr_dual_stress(ze, RG0, lambda, mu, gbar ? &tz : NULL, s + 6 * (1 + q));
-    }
+    for (int q = 0; q < nz; q += 8)
+      nh_dwr_dual_stresses(z + n3 * q, n3, nz - q < 8 ? nz - q : 8, m->cells + 8 * c, RG0, lambda,
+                           mu, gbar ? b : NULL, s + 6 * (1 + (size_t)q), 6);
   }
   if ((rc = nh_spr_recover_fields(m, t, h, nfld, samples, star))) goto done;
 
@@ -484,37 +537,23 @@ int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale, const 
         for (int k = 0; k < 3; k++) s += z[n3 * q + 3 * (size_t)corner[a] + k] * rg[3 * a + k];
       cell_geo[(size_t)nz * l + q] = 4.0 / 3.0 * s;
     }
-    /* Rg and Rdiv by point last (the 8 points' stresses in one pass), the
-     * recovered pressure errors of u (B-bar) */
-    double RgT[24][8], RdivT[24][8], pu[8];
+    /* Rg, Rdiv and D⁻¹ e_u by point last (the 8 points' terms in one
+     * pass), the recovered pressure errors of u (B-bar) */
+    double RgT[24][8], RdivT[24][8], pu[8], ceuT[6][8];
     for (int gp = 0; gp < 8; gp++) {
       for (int i = 0; i < 24; i++) RgT[i][gp] = Rg[gp][i], RdivT[i][gp] = gbar ? Rdiv[gp][i] : 0.0;
+      for (int i = 0; i < 6; i++) ceuT[i][gp] = ceu[6 * gp + i];
       pu[gp] = (eu[6 * gp] + eu[6 * gp + 1] + eu[6 * gp + 2]) / 3.0;
     }
     for (int p = 0; p < ng; p++) {
       double zn2 = 0.0, gn2 = 0.0;
       for (int k = 0; k < group; k++) {
         int q = group * p + k;
-        double ze[24], sz[6][8], sstar[6][8], eps = 0.0, ezz = 0.0;
+        double ze[24], eps, ezz;
         nh_mesh_cell_coords(m, z + n3 * q, c, ze);
         double tz = gbar ? nh_dwr_dilatation(ze, b) : 0.0;
-        nh_dwr_dual_stresses(ze, RgT, lambda, mu, gbar ? &tz : NULL, sz);
-        double div_z[8] = {0}; /* (I − Π) div z at the points (B-bar) */
-        for (int i = 0; i < 24 && gbar; i++)
-          for (int gp = 0; gp < 8; gp++) div_z[gp] += ze[i] * RdivT[i][gp];
-        nh_dwr_interpolate(star + 6 * (1 + (size_t)q), 6 * (size_t)nfld, corner, NT, sstar);
-        for (int gp = 0; gp < 8; gp++) {
-          double ez[6], cez[6], a1 = 0.0, a2 = 0.0;
-          for (int i = 0; i < 6; i++) ez[i] = sstar[i][gp] - sz[i][gp];
-          nh_voigt_compliance(lambda, mu, ez, cez);
-          for (int i = 0; i < 6; i++) a1 += ez[i] * ceu[6 * gp + i], a2 += ez[i] * cez[i];
-          if (gbar) { /* the mixed (mean-dilatation) method's terms, header "B-bar" */
-            double pz = (ez[0] + ez[1] + ez[2]) / 3.0;
-            a1 -= pu[gp] * div_z[gp] + pz * dev_u[gp];
-          }
-          eps += detJ[gp] * a1;
-          ezz += detJ[gp] * a2;
-        }
+        nh_dwr_dual_terms(ze, RgT, RdivT, star + 6 * (1 + (size_t)q), 6 * (size_t)nfld, corner, NT,
+                          lambda, mu, gbar != NULL, tz, ceuT, pu, dev_u, detJ, &eps, &ezz);
         cell_eps[(size_t)nz * l + q] = m->fill[c] * eps;
         zn2 += m->fill[c] * ezz;
         if (cut) gn2 += cell_geo[(size_t)nz * l + q] * cell_geo[(size_t)nz * l + q];
@@ -632,10 +671,17 @@ int nh_goal_cache_builds(const nh_goal_cache *cache) {
 static int nh_dwr_point_functionals(const nh_mesh *m, int n_points, const double *points,
                                     double radius, char (*where)[NH_WHERE_MAX], double *j) {
   const size_t n3 = 3 * (size_t)m->n_nodes;
-  for (int p = 0; p < n_points; p++)
-    for (int k = 0; k < 3; k++)
-      NH_TRY(nh_goal_functional(m, points + 3 * p, radius, k, where ? where[p] : NULL,
-                                j + n3 * (size_t)(3 * p + k)));
+  for (int p = 0; p < n_points; p++) {
+    /* the 3 components' loads are the same box integrals (1 · φ w_a / |B ∩ Ω|
+     * on component k, 0 · … = +0 on the others): integrated once, for k = 0 */
+    double *jx = j + n3 * (size_t)(3 * p);
+    NH_TRY(nh_goal_functional(m, points + 3 * p, radius, 0, where ? where[p] : NULL, jx));
+    for (int k = 1; k < 3; k++) {
+      double *jk = j + n3 * (size_t)(3 * p + k);
+      memset(jk, 0, n3 * sizeof(double));
+      for (size_t v = 0; v < n3; v += 3) jk[v + k] = jx[v];
+    }
+  }
   return NH_OK;
 }
 
