@@ -217,21 +217,22 @@ static void nh_dwr_dual_stresses(const double we[24], const double RgT[24][8], d
   }
 }
 
-/* A field's 6 nodal values (field + stride × node) at the 8 Gauss points
- * of the cell with these corners: s[i][gp] = Σₐ N_a(gp) valueₐ,ᵢ, the sum
- * in a's order, NT[a][gp] = N_a(gp). */
 NH_ADAPT_VECTOR_CLONES
-static void nh_dwr_interpolate(const double *field, size_t stride, const int corner[8],
-                               const double NT[8][8], double s[6][8]) {
-  double acc[6][8] = {{0}}; /* local: no aliasing with field */
-  for (int a = 0; a < 8; a++) {
-    const double *sa = field + stride * (size_t)corner[a];
-    for (int i = 0; i < 6; i++) {
-      const double v = sa[i];
-      for (int gp = 0; gp < 8; gp++) acc[i][gp] += NT[a][gp] * v;
+void nh_dwr_interpolate(const double *field, size_t stride, const int corner[8],
+                        const double NT[8][8], double s[6][8]) {
+  double v[8][6]; /* local: no aliasing with field */
+  for (int a = 0; a < 8; a++) memcpy(v[a], field + stride * (size_t)corner[a], sizeof v[a]);
+  for (int i = 0; i < 6; i++) {
+    /* one sum per lane, over a in order (omp simd vectorises over the
+     * points, without reordering a lane's sum: GCC's own vectoriser left
+     * this loop scalar) */
+#pragma omp simd
+    for (int gp = 0; gp < 8; gp++) {
+      double acc = 0.0;
+      for (int a = 0; a < 8; a++) acc += NT[a][gp] * v[a][i];
+      s[i][gp] = acc;
     }
   }
-  memcpy(s, acc, sizeof acc);
 }
 
 /* The element's material and, for B-bar, the derivative b of its mean volume
