@@ -85,8 +85,11 @@ int nh_system_lazy_updates(const nh_system *sys);
 void nh_system_lazy_reset(nh_system *sys);
 /* The frames (NH_HEX_FRAME doubles per leaf, in leaf order; fem.h) of the
  * last computed assembly if it was of this tissue at this u (bitwise), else
- * NULL: their rotations R are then those nh_hex_corotated gives every leaf
- * at u (its centre gradients nh_tissue_g0). Valid until the next assembly. */
+ * NULL (also for sys NULL): their rotations R are then those
+ * nh_hex_corotated gives every leaf at u (its centre gradients
+ * nh_tissue_g0). sys must be the system of the tissue's current mesh (a
+ * mesh change builds a new one; counts are checked, not the leaves). Valid
+ * until the next assembly. */
 const double *nh_system_frames_at(const nh_system *sys, const nh_tissue *tissue, const double *u);
 
 /* Numeric Cholesky factorisation of the assembled A (symbolic analysis on
