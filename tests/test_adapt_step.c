@@ -49,7 +49,7 @@ static nh_adapt *setup(const nh_adapt_spec *spec, nh_mesh **m, double **u, doubl
   nh_adapt *a;
   CHECK_OK(nh_adapt_create(spec, 0, &a));
   double eta, eta_rel;
-  CHECK_OK(nh_adapt_estimate(a, *m, t, *u, NULL, &eta, &eta_rel));
+  CHECK_OK(nh_adapt_estimate(a, *m, t, *u, NULL, NULL, &eta, &eta_rel));
   CHECK(eta > 0, "eta = %g, expected > 0 for a non-linear field", eta);
   nh_tissue_destroy(&t);
   return a;

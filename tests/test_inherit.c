@@ -203,7 +203,7 @@ int main(void) {
   const int centre = m->cells[8 * c0 + 6]; /* corner 6 of the first child: the parent's centre */
   z[3 * centre + 1] = 1e-5;
   double eta, eta_rel;
-  CHECK_OK(nh_adapt_estimate(a, m, s1.tissue, z, s1.hanging, &eta, &eta_rel));
+  CHECK_OK(nh_adapt_estimate(a, m, s1.tissue, z, s1.hanging, NULL, &eta, &eta_rel));
   int changed = 0, before = m->n_leaves;
   double *f2[2] = {u1, z};
   CHECK_OK(nh_adapt_step(a, m, 2, f2, &changed));

@@ -27,6 +27,7 @@
 #include "adapt/adapt.h"
 #include "fem/fem.h"
 #include "mesh/mesh.h"
+#include "solve/solve.h"
 
 #include <omp.h>
 #include <string.h>
@@ -566,7 +567,13 @@ static void test_marking(void) {
  * holds), and B's coarsening back to the grid. At each mesh, for two displacement
  * fields: ηₑ, η and η_rel equal to the uncached ones to round-off, and the
  * weights made again exactly when the mesh changed (a stale cache gives
- * the previous mesh's patches: differences of the order of ηₑ). */
+ * the previous mesh's patches: differences of the order of ηₑ). The
+ * cached path's stresses (vectorised over the points, the cached
+ * gradients) and the uncached one's (nh_hex_stress_at) are the same
+ * arithmetic, so the estimates are also compared bit for bit; and again
+ * with the rotations taken from an assembly's frames at u
+ * (nh_system_frames_at), which must be there after an assembly at u and
+ * not for another u. Both formulations (full and B-bar). */
 static void check_cached(nh_spr_cache *k, const nh_mesh *m, const nh_tissue *t, int builds,
                          const char *what) {
   nh_hanging *h;
@@ -586,7 +593,27 @@ static void check_cached(nh_spr_cache *k, const nh_mesh *m, const nh_tissue *t, 
         }
     double eta1, eta2, r1, r2, scale = 0.0, diff = 0.0;
     CHECK_OK(nh_spr_estimate(m, t, u, h, e1, &eta1, &r1));
-    CHECK_OK(nh_spr_estimate_cached(k, m, t, u, h, e2, &eta2, &r2));
+    /* the frames of an assembly at u (x = 0 face fixed) */
+    unsigned char *fixed = calloc((size_t)m->n_nodes, 1);
+    for (int i = 0; i < m->n_nodes; i++) fixed[i] = m->X[3 * i] < 1e-9;
+    nh_system *sys;
+    CHECK_OK(nh_system_create(t, fixed, h, &sys));
+    double *f = calloc(3 * (size_t)m->n_nodes, sizeof(double));
+    nh_system_assemble(sys, u, NULL, 1.0, 1.0, f, NULL, 1);
+    const double *frames = nh_system_frames_at(sys, t, u);
+    CHECK(frames != NULL, "%s: no frames after an assembly at u", what);
+    u[0] += 1e-9;
+    CHECK(nh_system_frames_at(sys, t, u) == NULL, "%s: frames of another u handed out", what);
+    u[0] -= 1e-9;
+    CHECK_OK(nh_spr_estimate_cached(k, m, t, u, h, frames, e2, &eta2, &r2));
+    CHECK(memcmp(e1, e2, sizeof(double) * m->n_cells) == 0 && eta1 == eta2 && r1 == r2,
+          "%s: the estimate with the frames' rotations is not bitwise the uncached one", what);
+    nh_system_destroy(&sys);
+    free(fixed), free(f);
+    memset(e2, 0, sizeof(double) * m->n_cells);
+    CHECK_OK(nh_spr_estimate_cached(k, m, t, u, h, NULL, e2, &eta2, &r2));
+    CHECK(memcmp(e1, e2, sizeof(double) * m->n_cells) == 0 && eta1 == eta2 && r1 == r2,
+          "%s: the cached estimate is not bitwise the uncached one", what);
     for (int l = 0; l < m->n_leaves; l++) {
       int c = m->leaves[l];
       scale = fmax(scale, e1[c]);
@@ -607,14 +634,16 @@ static void check_cached(nh_spr_cache *k, const nh_mesh *m, const nh_tissue *t, 
   nh_hanging_destroy(&h);
 }
 
-static void test_cache(void) {
+static void test_cache(nh_formulation formulation) {
   const double lo[3] = {0, 0, 0}, hi[3] = {0.04, 0.03, 0.03};
   const int grid[3] = {4, 3, 3};
   nh_test_rng = 2718;
   nh_mesh *m;
   CHECK_OK(nh_mesh_create_box(lo, hi, grid, &m));
   nh_tissue *t;
-  CHECK_OK(nh_tissue_create(m, &mat, &t));
+  nh_material mt = mat;
+  mt.formulation = formulation;
+  CHECK_OK(nh_tissue_create(m, &mt, &t));
   nh_template *tmpl = regular_template(2);
   nh_spr_cache *k;
   CHECK_OK(nh_spr_cache_create(&k));
@@ -671,7 +700,8 @@ int main(void) {
   test_linear_stress();
   for (int n = 2; n <= 4; n++) test_nonconforming(n);
   test_threads();
-  test_cache();
+  test_cache(NH_FORMULATION_FULL);
+  test_cache(NH_FORMULATION_BBAR);
   test_marking();
   TEST_END();
 }

@@ -103,10 +103,13 @@ void nh_spr_cache_destroy(nh_spr_cache **cache);
 /* How many times the weights were made (0 for NULL): the tests' window. */
 int nh_spr_cache_builds(const nh_spr_cache *cache);
 /* nh_spr_estimate with the weights from cache (made again first if the
- * mesh is not theirs): bitwise the same results. Fails as nh_spr_estimate. */
+ * mesh is not theirs): bitwise the same results. frames (may be NULL): the
+ * frames of an assembly of this tissue at this u (nh_system_frames_at), whose
+ * rotations the stresses then take instead of decomposing F again (the same
+ * bits). Fails as nh_spr_estimate. */
 int nh_spr_estimate_cached(nh_spr_cache *cache, const nh_mesh *mesh, const nh_tissue *tissue,
-                           const double *u, const nh_hanging *hanging, double *eta_cell,
-                           double *eta, double *eta_rel);
+                           const double *u, const nh_hanging *hanging, const double *frames,
+                           double *eta_cell, double *eta, double *eta_rel);
 
 /* Marking parameters (the scene's adapt section). */
 typedef struct {
@@ -145,11 +148,13 @@ int nh_adapt_create(const nh_adapt_spec *spec, int max_cells, nh_adapt **out);
 void nh_adapt_destroy(nh_adapt **adapt);
 
 /* Estimate the error of the solution u (nh_spr_estimate) and keep the
- * element indicators for nh_adapt_indicators and nh_adapt_step.
+ * element indicators for nh_adapt_indicators and nh_adapt_step. frames: as
+ * nh_spr_estimate_cached (may be NULL).
  * Out: *eta, *eta_rel as nh_spr_estimate. Fails as nh_spr_estimate,
  * NH_ERR_MEMORY. */
 int nh_adapt_estimate(nh_adapt *adapt, const nh_mesh *mesh, const nh_tissue *tissue,
-                      const double *u, const nh_hanging *hanging, double *eta, double *eta_rel);
+                      const double *u, const nh_hanging *hanging, const double *frames, double *eta,
+                      double *eta_rel);
 
 /* The indicators ηₑ of the last estimate (per cell id, leaves meaningful),
  * or NULL if there is none for the current mesh (none made yet, or the mesh

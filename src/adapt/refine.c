@@ -144,13 +144,14 @@ void nh_adapt_destroy(nh_adapt **adapt) {
 }
 
 int nh_adapt_estimate(nh_adapt *a, const nh_mesh *m, const nh_tissue *tissue, const double *u,
-                      const nh_hanging *hanging, double *eta, double *eta_rel) {
+                      const nh_hanging *hanging, const double *frames, double *eta,
+                      double *eta_rel) {
   if (m->n_cells > a->cap_eta) {
     NH_TRY(nh_realloc((void **)&a->eta_cell, (size_t)m->n_cells, sizeof(double)));
     a->cap_eta = m->n_cells;
   }
   if (!a->spr) NH_TRY(nh_spr_cache_create(&a->spr));
-  NH_TRY(nh_spr_estimate_cached(a->spr, m, tissue, u, hanging, a->eta_cell, eta, eta_rel));
+  NH_TRY(nh_spr_estimate_cached(a->spr, m, tissue, u, hanging, frames, a->eta_cell, eta, eta_rel));
   a->have_eta = 1;
   return NH_OK;
 }

@@ -78,8 +78,21 @@
  * in the same order as the node-by-node path: the results are bitwise the
  * same (tests/test_spr.c, through refinement and coarsening). The cache
  * also keeps every leaf's rest gradients and det J at the indicator's 9
- * points (nh_hex_rest_gradients), which step 5 recomputed at every step;
- * σₕ then comes from nh_hex_stress_with, the same arithmetic.
+ * points (nh_hex_rest_gradients), which step 5 recomputed at every step.
+ *
+ * A step's arithmetic. With the cache, σₕ at a leaf's 9 points comes from
+ * nh_spr_point_stresses and the integrals of step 5 from
+ * nh_spr_cell_error: the operations of nh_hex_stress_at and of the
+ * point-by-point loop, in their order, one SIMD lane per point, so the
+ * same bits (tests/test_spr.c compares the two paths by memcmp). The
+ * rotation R of a leaf's stresses is the polar decomposition of F at its
+ * centre, which the step's last assembly made too: when the caller hands
+ * the frames of an assembly at this very u (nh_system_frames_at, which
+ * compares u bitwise; on the adaptive phantom every estimate finds them),
+ * R is read from them instead of decomposed again (a cut leaf, whose
+ * frame has its own centre gradients, still decomposes). On the adaptive
+ * hex2 phantom these cut SPR from 416 to 168 M instructions of a 120-step
+ * run (docs/performance.md, "SPR's step").
  *
  * Workspace: per cell a centre, a centre stress and a weight (10 doubles);
  * the node-to-leaf adjacency (CSR, 8 ints per leaf); per thread the patch
@@ -119,9 +132,88 @@ static const double *nh_spr_points(void) {
 static int nh_spr_recover_cached(nh_spr_cache *cache, const nh_mesh *m, const nh_tissue *t,
                                  const nh_hanging *h, int n_fields, const double *stress,
                                  double *sigma_star);
+
+/* σₕ at the indicator's 9 points of a leaf, s[k][p], from its rotation R,
+ * corotated displacements d and rest gradients by point last (gT[3a + j][p]
+ * = ∂N_a/∂X_j at point p); theta_bar: B-bar's θ̄, NULL for the full
+ * formulation. nh_hex_stress_at's arithmetic (fem/stress.c: H = Σₐ dₐ ⊗ gₐ,
+ * S = μ (H + Hᵀ) + vol I, R S Rᵀ as nh_mat3_mul then nh_mat3_mul_nt), its
+ * sums in its order, vectorised over the points: the same bits. S is
+ * symmetric bit for bit (x + y = y + x), so its 6 distinct entries serve
+ * for 9, and of R S Rᵀ only the 6 entries s needs are formed. */
+NH_ADAPT_VECTOR_CLONES
+static void nh_spr_point_stresses(const double R[9], const double d[24],
+                                  const double gT[24][NH_SPR_POINTS], double lambda, double mu,
+                                  const double *theta_bar, double s[6][NH_SPR_POINTS]) {
+  enum { P = NH_SPR_POINTS };
+  double H[9][P], vol[P];
+  /* omp simd: one lane per point, each lane's sums in their order (GCC's
+   * own vectoriser left these loops scalar) */
+  for (int i = 0; i < 3; i++)
+    for (int j = 0; j < 3; j++)
+#pragma omp simd
+      for (int p = 0; p < P; p++) {
+        double h = 0.0;
+        for (int a = 0; a < 8; a++) h += d[3 * a + i] * gT[3 * a + j][p];
+        H[3 * i + j][p] = h;
+      }
+  if (theta_bar) { /* (λ + 2μ/3) θ̄ − 2μ/3 tr H, the constants as stress.c forms them */
+    const double kt = (lambda + 2.0 * mu / 3.0) * *theta_bar, c = 2.0 * mu / 3.0;
+#pragma omp simd
+    for (int p = 0; p < P; p++) vol[p] = kt - c * (H[0][p] + H[4][p] + H[8][p]);
+  } else {
+#pragma omp simd
+    for (int p = 0; p < P; p++) vol[p] = lambda * (H[0][p] + H[4][p] + H[8][p]);
+  }
+#pragma omp simd
+  for (int p = 0; p < P; p++) {
+    /* S (the + 0.0 of the off-diagonal entries as stress.c's: −0 becomes +0) */
+    const double s00 = mu * (H[0][p] + H[0][p]) + vol[p], s11 = mu * (H[4][p] + H[4][p]) + vol[p],
+                 s22 = mu * (H[8][p] + H[8][p]) + vol[p], s01 = mu * (H[1][p] + H[3][p]) + 0.0,
+                 s02 = mu * (H[2][p] + H[6][p]) + 0.0, s12 = mu * (H[5][p] + H[7][p]) + 0.0;
+    const double S[9] = {s00, s01, s02, s01, s11, s12, s02, s12, s22};
+    double T[9]; /* R S */
+    for (int i = 0; i < 3; i++)
+      for (int j = 0; j < 3; j++)
+        T[3 * i + j] = R[3 * i] * S[j] + R[3 * i + 1] * S[3 + j] + R[3 * i + 2] * S[6 + j];
+    /* (T Rᵀ)_ij for (ij) = 00, 11, 22, 12, 02, 01 */
+    static const int row[6] = {0, 1, 2, 1, 0, 0}, col[6] = {0, 1, 2, 2, 2, 1};
+    for (int k = 0; k < 6; k++) {
+      const double *Ti = T + 3 * row[k], *Rj = R + 3 * col[k];
+      s[k][p] = Ti[0] * Rj[0] + Ti[1] * Rj[1] + Ti[2] * Rj[2];
+    }
+  }
+}
+
+/* A leaf's integrands at its 8 Gauss points, summed: *e2 = Σ_g det J_g dᵀD⁻¹d
+ * (d = σ* − σₕ) and *n2 = Σ_g det J_g σₕᵀD⁻¹σₕ, from σ* and σₕ by point last
+ * (star[k][g], sh[k][g]). D⁻¹ as nh_voigt_compliance forms it and each sum
+ * in the order of the point-by-point loop (over k, then g): the same bits,
+ * the points vectorised. */
+NH_ADAPT_VECTOR_CLONES
+static void nh_spr_cell_error(const double star[6][8], const double sh[6][8], const double dJ[8],
+                              double lambda, double mu, double *e2, double *n2) {
+  const double kl = lambda / (3.0 * lambda + 2.0 * mu);
+  double de[8], dn[8];
+#pragma omp simd
+  for (int g = 0; g < 8; g++) {
+    double df[6], sd = 0.0, sn = 0.0;
+    for (int k = 0; k < 6; k++) df[k] = star[k][g] - sh[k][g];
+    const double kd = kl * (df[0] + df[1] + df[2]), kn = kl * (sh[0][g] + sh[1][g] + sh[2][g]);
+    for (int k = 0; k < 3; k++) sd += df[k] * ((df[k] - kd) / (2.0 * mu));
+    for (int k = 3; k < 6; k++) sd += df[k] * (df[k] / mu);
+    for (int k = 0; k < 3; k++) sn += sh[k][g] * ((sh[k][g] - kn) / (2.0 * mu));
+    for (int k = 3; k < 6; k++) sn += sh[k][g] * (sh[k][g] / mu);
+    de[g] = sd, dn[g] = sn;
+  }
+  double se = 0.0, sn = 0.0;
+  for (int g = 0; g < 8; g++) se += dJ[g] * de[g], sn += dJ[g] * dn[g];
+  *e2 = se, *n2 = sn;
+}
 static int nh_spr_estimate_with(nh_spr_cache *ws, nh_spr_cache *weights, const nh_mesh *m,
                                 const nh_tissue *t, const double *u, const nh_hanging *h,
-                                double *eta_cell, double *eta, double *eta_rel);
+                                const double *frames, double *eta_cell, double *eta,
+                                double *eta_rel);
 
 int nh_spr_fit_patch(int n, const double *points, const double *values, const double x0[3],
                      double out[6]) {
@@ -185,6 +277,20 @@ NH_ADAPT_VECTOR_CLONES
 static void nh_spr_fit_combine(int n, const int *cells, const double *c, int m,
                                const double *values, double *out) {
   enum { CHUNK = 64 };
+  if (m == 6 && cells) { /* SPR's own 6 components (every step): the sums below, unrolled */
+    double vbar[6] = {0}, fit[6] = {0};
+    for (int i = 0; i < n; i++) {
+      const double *v = values + 6 * (size_t)cells[i];
+      for (int k = 0; k < 6; k++) vbar[k] += v[k];
+    }
+    for (int k = 0; k < 6; k++) vbar[k] /= n;
+    for (int i = 0; i < n; i++) {
+      const double *v = values + 6 * (size_t)cells[i];
+      for (int k = 0; k < 6; k++) fit[k] += c[i] * (v[k] - vbar[k]);
+    }
+    for (int k = 0; k < 6; k++) out[k] = vbar[k] + fit[k];
+    return;
+  }
   for (int k0 = 0; k0 < m; k0 += CHUNK) {
     const int mk = m - k0 < CHUNK ? m - k0 : CHUNK;
     double vbar[CHUNK] = {0}, fit[CHUNK] = {0};
@@ -349,7 +455,8 @@ struct nh_spr_cache {
   double *coef;
   int cap_coef;
   /* per leaf the rest gradients at the indicator's 9 points (the 8 Gauss
-   * points, then the centre; nh_hex_rest_gradients) and det J there */
+   * points, then the centre; nh_hex_rest_gradients), by point last
+   * (grad[24 9 l + 9 r + p]: entry r of point p), and det J there */
   double *grad, *grad_det;
   /* nh_spr_estimate's workspace, sized by the mesh */
   double *sigma_star, *err2, *norm2, *stress, *sh, *detJ;
@@ -412,12 +519,14 @@ static int nh_spr_cache_build(nh_spr_cache *k, const nh_spr_ctx *x, const nh_han
   const double *xi = nh_spr_points();
   for (int l = 0; l < nl; l++) {
     const int c = m->leaves[l];
-    double Xe[24];
+    double Xe[24], g[24];
     nh_mesh_cell_coords(m, m->X, c, Xe);
     const double *G0 = x->t->G0 + 24 * x->t->cell_shape[c];
-    for (int p = 0; p < NH_SPR_POINTS; p++)
-      k->grad_det[NH_SPR_POINTS * (size_t)l + p] =
-          nh_hex_rest_gradients(Xe, G0, xi + 3 * p, k->grad + 24 * (NH_SPR_POINTS * (size_t)l + p));
+    double *gT = k->grad + 24 * NH_SPR_POINTS * (size_t)l; /* by point last */
+    for (int p = 0; p < NH_SPR_POINTS; p++) {
+      k->grad_det[NH_SPR_POINTS * (size_t)l + p] = nh_hex_rest_gradients(Xe, G0, xi + 3 * p, g);
+      for (int r = 0; r < 24; r++) gT[NH_SPR_POINTS * r + p] = g[r];
+    }
   }
   NH_TRY(nh_mesh_key_set(&k->key, m, x->weight, h));
   k->builds++;
@@ -585,7 +694,7 @@ int nh_spr_estimate(const nh_mesh *m, const nh_tissue *t, const double *u, const
                     double *eta_cell, double *eta, double *eta_rel) {
   nh_spr_cache *ws = NULL; /* the workspace of this call; the weights made node by node */
   int rc = nh_spr_cache_create(&ws);
-  if (!rc) rc = nh_spr_estimate_with(ws, NULL, m, t, u, h, eta_cell, eta, eta_rel);
+  if (!rc) rc = nh_spr_estimate_with(ws, NULL, m, t, u, h, NULL, eta_cell, eta, eta_rel);
   nh_spr_cache_destroy(&ws);
   return rc;
 }
@@ -613,16 +722,19 @@ static int nh_spr_workspace(nh_spr_cache *k, const nh_mesh *m) {
 }
 
 int nh_spr_estimate_cached(nh_spr_cache *cache, const nh_mesh *m, const nh_tissue *t,
-                           const double *u, const nh_hanging *h, double *eta_cell, double *eta,
-                           double *eta_rel) {
-  return nh_spr_estimate_with(cache, cache, m, t, u, h, eta_cell, eta, eta_rel);
+                           const double *u, const nh_hanging *h, const double *frames,
+                           double *eta_cell, double *eta, double *eta_rel) {
+  return nh_spr_estimate_with(cache, cache, m, t, u, h, frames, eta_cell, eta, eta_rel);
 }
 
 /* The estimate with the workspace of ws and the recovery's weights from
- * weights (nh_spr_recover_cached; NULL: node by node). */
+ * weights (nh_spr_recover_cached; NULL: node by node). frames (with
+ * weights only; may be NULL): an assembly's frames at u
+ * (nh_system_frames_at), whose rotations are the ones the stresses need. */
 static int nh_spr_estimate_with(nh_spr_cache *ws, nh_spr_cache *weights, const nh_mesh *m,
                                 const nh_tissue *t, const double *u, const nh_hanging *h,
-                                double *eta_cell, double *eta, double *eta_rel) {
+                                const double *frames, double *eta_cell, double *eta,
+                                double *eta_rel) {
   NH_TRY(nh_spr_check(m, t, h));
   int nl = m->n_leaves;
   if (nh_spr_workspace(ws, m))
@@ -635,35 +747,51 @@ static int nh_spr_estimate_with(nh_spr_cache *ws, nh_spr_cache *weights, const n
 
   /* σₕ at the 8 Gauss points and, where the cell's rotation is the one
    * nh_tissue_cell_stress uses (every cell but a cut one), at the centre in
-   * the same call (the 9th point): one polar decomposition per leaf and
-   * step instead of two, the same numbers */
+   * the same call (the 9th point): one rotation per leaf and step instead of
+   * two, the same numbers. With the cache, the rest gradients are its own
+   * (made for this mesh first) and the rotation R of such a leaf is taken
+   * from the frames when given: the assembly's polar decomposition of the
+   * same F (nh_hex_corotated's, at the same u, X and centre gradients). */
   const double *xi = nh_spr_points();
-  double N[8][8];
-  for (int g = 0; g < 8; g++) nh_hex_shape(xi + 3 * g, N[g]);
-  /* with a cache, its rest gradients at the 9 points (made for this mesh first) */
+  double NT[8][8]; /* NT[a][g] = N_a at Gauss point g */
+  for (int g = 0; g < 8; g++) {
+    double N[8];
+    nh_hex_shape(xi + 3 * g, N);
+    for (int a = 0; a < 8; a++) NT[a][g] = N[a];
+  }
   if (weights) NH_TRY(nh_spr_recover_cached(weights, m, t, h, 0, NULL, NULL));
 #pragma omp parallel for schedule(static) if (nl >= NH_SPR_PARALLEL_MIN)
   for (int l = 0; l < nl; l++) {
     int c = m->leaves[l];
-    double Xe[24], ue[24], s9[54], det9[9];
+    double Xe[24], ue[24], s9[6][NH_SPR_POINTS];
     nh_mesh_cell_coords(m, m->X, c, Xe);
     nh_mesh_cell_coords(m, u, c, ue);
     double lambda, mu;
     nh_tissue_cell_material(t, c, &lambda, &mu, NULL);
-    const double *G0 = t->G0 + 24 * t->cell_shape[c];
+    const double *G0 = t->G0 + 24 * t->cell_shape[c], *Gbar = nh_tissue_gbar(t, c);
     const int centre = nh_tissue_g0(t, c) == G0;
     if (weights) {
-      const size_t at = NH_SPR_POINTS * (size_t)l;
-      nh_hex_stress_with(Xe, ue, G0, nh_tissue_gbar(t, c), lambda, mu, centre ? 9 : 8,
-                         weights->grad + 24 * at, s9);
-      memcpy(det9, weights->grad_det + at, 8 * sizeof(double));
+      double R[9], d[24], theta = Gbar ? nh_hex_mean_dilatation(ue, Gbar, NULL) : 0.0;
+      if (frames && centre) {
+        memcpy(R, frames + NH_HEX_FRAME * (size_t)l + NH_FRAME_R, sizeof R);
+        nh_hex_corotate(Xe, ue, R, d);
+      } else {
+        nh_hex_corotated(Xe, ue, G0, R, d);
+      }
+      nh_spr_point_stresses(
+          R, d, (const double(*)[NH_SPR_POINTS])(weights->grad + 24 * NH_SPR_POINTS * (size_t)l),
+          lambda, mu, Gbar ? &theta : NULL, s9);
     } else {
-      nh_hex_stress_at(Xe, ue, G0, nh_tissue_gbar(t, c), lambda, mu, centre ? 9 : 8, xi, s9, det9);
+      double s[6 * NH_SPR_POINTS], det9[NH_SPR_POINTS];
+      nh_hex_stress_at(Xe, ue, G0, Gbar, lambda, mu, centre ? 9 : 8, xi, s, det9);
+      memcpy(detJ + 8 * (size_t)l, det9, 8 * sizeof(double));
+      for (int p = 0; p < (centre ? 9 : 8); p++)
+        for (int k = 0; k < 6; k++) s9[k][p] = s[6 * p + k];
     }
-    memcpy(sh + 48 * (size_t)l, s9, 48 * sizeof(double));
-    memcpy(detJ + 8 * (size_t)l, det9, 8 * sizeof(double));
+    for (int k = 0; k < 6; k++) /* σₕ by point last (sh[48 l + 8k + g]) */
+      memcpy(sh + 48 * (size_t)l + 8 * k, s9[k], 8 * sizeof(double));
     if (centre)
-      memcpy(stress + 6 * (size_t)c, s9 + 48, 6 * sizeof(double));
+      for (int k = 0; k < 6; k++) stress[6 * (size_t)c + k] = s9[k][8];
     else
       nh_tissue_cell_stress(t, c, u, stress + 6 * (size_t)c);
   }
@@ -674,30 +802,18 @@ static int nh_spr_estimate_with(nh_spr_cache *ws, nh_spr_cache *weights, const n
 #pragma omp parallel for schedule(static) if (nl >= NH_SPR_PARALLEL_MIN)
   for (int l = 0; l < nl; l++) {
     int c = m->leaves[l];
-    const int *corner = m->cells + 8 * c;
-    const double *shl = sh + 48 * (size_t)l, *dJ = detJ + 8 * (size_t)l;
-    double e2 = 0.0, n2 = 0.0, lambda, mu;
+    const double *dJ =
+        weights ? weights->grad_det + NH_SPR_POINTS * (size_t)l : detJ + 8 * (size_t)l;
+    double star[6][8], e2, n2, lambda, mu;
     nh_tissue_cell_material(t, c, &lambda, &mu, NULL);
-    for (int g = 0; g < 8; g++) {
+    for (int g = 0; g < 8; g++)
       if (!(dJ[g] > 0.0)) {
 #pragma omp atomic write
         bad_cell = c;
       }
-      double diff[6], e[6];
-      for (int k = 0; k < 6; k++) {
-        double s = 0.0;
-        for (int a = 0; a < 8; a++) s += N[g][a] * sigma_star[6 * corner[a] + k];
-        diff[k] = s - shl[6 * g + k];
-      }
-      nh_voigt_compliance(lambda, mu, diff, e);
-      double de = 0.0;
-      for (int k = 0; k < 6; k++) de += diff[k] * e[k];
-      nh_voigt_compliance(lambda, mu, shl + 6 * g, e);
-      double dn = 0.0;
-      for (int k = 0; k < 6; k++) dn += shl[6 * g + k] * e[k];
-      e2 += dJ[g] * de;
-      n2 += dJ[g] * dn;
-    }
+    nh_dwr_interpolate(sigma_star, 6, m->cells + 8 * c, (const double(*)[8])NT, star);
+    nh_spr_cell_error((const double(*)[8])star, (const double(*)[8])(sh + 48 * (size_t)l), dJ,
+                      lambda, mu, &e2, &n2);
     err2[l] = m->fill[c] * e2;
     norm2[l] = m->fill[c] * n2;
   }

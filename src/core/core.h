@@ -169,8 +169,20 @@ void nh_mat3_mul(const double A[9], const double B[9], double C[9]);    /* C = A
 void nh_mat3_mul_tn(const double A[9], const double B[9], double C[9]); /* C = Aᵀ B  */
 void nh_mat3_mul_nt(const double A[9], const double B[9], double C[9]); /* C = A Bᵀ  */
 void nh_mat3_transpose(const double A[9], double At[9]);
-void nh_mat3_vec(const double A[9], const double x[3], double y[3]);  /* y = A x  */
-void nh_mat3_tvec(const double A[9], const double x[3], double y[3]); /* y = Aᵀ x */
+/* y = A x and y = Aᵀ x (y may alias x), inline: the element kernels call
+ * them per corner (a call cost more than the product; the same bits). */
+static inline void nh_mat3_vec(const double A[9], const double x[3], double y[3]) {
+  const double t0 = A[0] * x[0] + A[1] * x[1] + A[2] * x[2],
+               t1 = A[3] * x[0] + A[4] * x[1] + A[5] * x[2],
+               t2 = A[6] * x[0] + A[7] * x[1] + A[8] * x[2];
+  y[0] = t0, y[1] = t1, y[2] = t2;
+}
+static inline void nh_mat3_tvec(const double A[9], const double x[3], double y[3]) {
+  const double t0 = A[0] * x[0] + A[3] * x[1] + A[6] * x[2],
+               t1 = A[1] * x[0] + A[4] * x[1] + A[7] * x[2],
+               t2 = A[2] * x[0] + A[5] * x[1] + A[8] * x[2];
+  y[0] = t0, y[1] = t1, y[2] = t2;
+}
 double nh_mat3_det(const double A[9]);
 /* Inverse; returns NH_ERR_NUMERIC if |det| <= tiny (no message recorded). */
 int nh_mat3_inverse(const double A[9], double Ainv[9]);

@@ -74,18 +74,6 @@ void nh_mat3_transpose(const double A[9], double At[9]) {
   memcpy(At, T, sizeof T);
 }
 
-void nh_mat3_vec(const double A[9], const double x[3], double y[3]) {
-  double t[3];
-  for (int i = 0; i < 3; i++) t[i] = A[3 * i] * x[0] + A[3 * i + 1] * x[1] + A[3 * i + 2] * x[2];
-  memcpy(y, t, sizeof t);
-}
-
-void nh_mat3_tvec(const double A[9], const double x[3], double y[3]) {
-  double t[3];
-  for (int i = 0; i < 3; i++) t[i] = A[i] * x[0] + A[3 + i] * x[1] + A[6 + i] * x[2];
-  memcpy(y, t, sizeof t);
-}
-
 double nh_mat3_det(const double A[9]) {
   return A[0] * (A[4] * A[8] - A[5] * A[7]) - A[1] * (A[3] * A[8] - A[5] * A[6]) +
          A[2] * (A[3] * A[7] - A[4] * A[6]);

@@ -64,6 +64,10 @@ int nh_hex_inverted(const double x[24]);
  * translation, which K0 annihilates). */
 void nh_hex_corotated(const double X[24], const double u[24], const double G0[24], double R[9],
                       double d[24]);
+/* The corotated displacements d[24] of nh_hex_corotated for a given
+ * rotation R[9] (the polar rotation an assembly's frame holds): the same
+ * arithmetic, so the same bits for the same R. */
+void nh_hex_corotate(const double X[24], const double u[24], const double R[9], double d[24]);
 
 /* B-bar's volumetric part of one element: mean gradients, κ = λ + ⅔μ, V. */
 typedef struct {
@@ -161,12 +165,6 @@ void nh_hex_stress_at(const double X[24], const double u[24], const double G0[24
  * g[24] = ∇N_a(ξ) (G0 where det J <= 0); returns det J there. */
 double nh_hex_rest_gradients(const double X[24], const double G0[24], const double xi[3],
                              double g[24]);
-/* nh_hex_stress_at with the rest gradients of its n points given (g[24 n],
- * nh_hex_rest_gradients: they depend on the rest shape only, so a caller
- * that keeps them skips their computation); bitwise the same s. */
-void nh_hex_stress_with(const double X[24], const double u[24], const double G0[24],
-                        const double *Gbar, double lambda, double mu, int n, const double *g,
-                        double *s);
 
 /* σ = R (λ tr ε I + 2 μ ε) Rᵀ, ε = sym(Σₐ dₐ ⊗ gₐ), for element rotation
  * R[9], corotated nodal values d[24] and shape-function gradients g[24] at a

@@ -134,15 +134,10 @@ int nh_hex_stiffness(const double X[24], double lambda, double mu, int bbar, dou
   return NH_OK;
 }
 
-/* F = I + Σ uₐ ⊗ gₐ, its polar rotation R, and the corotated displacement
- * d = Rᵀ uₐ + (Rᵀ − I)(Xₐ − X̄) of every node. */
-static void nh_hex_corotated_F(const double X[24], const double u[24], const double G0[24],
-                               double F[9], double R[9], double d[24]) {
-  nh_mat3_identity(F);
-  for (int a = 0; a < 8; a++)
-    for (int i = 0; i < 3; i++)
-      for (int j = 0; j < 3; j++) F[3 * i + j] += u[3 * a + i] * G0[3 * a + j];
-  nh_polar_rotation(F, R);
+/* The corotated displacements d = Rᵀ uₐ + (Rᵀ − I)(Xₐ − X̄) for the rotation R
+ * (inline in the element force's path, as before nh_hex_corotate shared it). */
+static inline void nh_hex_corotate_d(const double X[24], const double u[24], const double R[9],
+                                     double d[24]) {
   double c[3] = {0, 0, 0};
   for (int a = 0; a < 8; a++)
     for (int i = 0; i < 3; i++) c[i] += 0.125 * X[3 * a + i];
@@ -152,6 +147,22 @@ static void nh_hex_corotated_F(const double X[24], const double u[24], const dou
     nh_mat3_tvec(R, rel, rr);
     for (int i = 0; i < 3; i++) d[3 * a + i] += rr[i] - rel[i];
   }
+}
+
+/* F = I + Σ uₐ ⊗ gₐ, its polar rotation R, and the corotated displacement
+ * d of every node. */
+static void nh_hex_corotated_F(const double X[24], const double u[24], const double G0[24],
+                               double F[9], double R[9], double d[24]) {
+  nh_mat3_identity(F);
+  for (int a = 0; a < 8; a++)
+    for (int i = 0; i < 3; i++)
+      for (int j = 0; j < 3; j++) F[3 * i + j] += u[3 * a + i] * G0[3 * a + j];
+  nh_polar_rotation(F, R);
+  nh_hex_corotate_d(X, u, R, d);
+}
+
+void nh_hex_corotate(const double X[24], const double u[24], const double R[9], double d[24]) {
+  nh_hex_corotate_d(X, u, R, d);
 }
 
 void nh_hex_corotated(const double X[24], const double u[24], const double G0[24], double R[9],

@@ -63,6 +63,19 @@ void nh_hex_rotated_stress(const double R[9], const double d[24], const double g
   nh_point_stress(R, d, g, lambda, mu, theta_bar, s);
 }
 
+/* nh_hex_stress_at with the rest gradients of its n points given (g[24 n]). */
+static void nh_hex_stress_with(const double X[24], const double u[24], const double G0[24],
+                               const double *Gbar, double lambda, double mu, int n, const double *g,
+                               double *s) {
+  /* The rotation and corotated displacements of the element, as hex.c. */
+  double R[9], d[24];
+  nh_hex_corotated(X, u, G0, R, d);
+  /* B-bar: the mean volume change θ̄ = det F̄ − 1, one per element. */
+  double mean_dilatation = Gbar ? nh_hex_mean_dilatation(u, Gbar, NULL) : 0.0;
+  for (int p = 0; p < n; p++)
+    nh_point_stress(R, d, g + 24 * p, lambda, mu, Gbar ? &mean_dilatation : NULL, s + 6 * p);
+}
+
 void nh_hex_stress_at(const double X[24], const double u[24], const double G0[24],
                       const double *Gbar, double lambda, double mu, int n, const double *xi,
                       double *s, double *detJ) {
@@ -81,18 +94,6 @@ double nh_hex_rest_gradients(const double X[24], const double G0[24], const doub
                              double g[24]) {
   memcpy(g, G0, 24 * sizeof(double));
   return nh_hex_gradients(X, xi, g);
-}
-
-void nh_hex_stress_with(const double X[24], const double u[24], const double G0[24],
-                        const double *Gbar, double lambda, double mu, int n, const double *g,
-                        double *s) {
-  /* The rotation and corotated displacements of the element, as hex.c. */
-  double R[9], d[24];
-  nh_hex_corotated(X, u, G0, R, d);
-  /* B-bar: the mean volume change θ̄ = det F̄ − 1, one per element. */
-  double mean_dilatation = Gbar ? nh_hex_mean_dilatation(u, Gbar, NULL) : 0.0;
-  for (int p = 0; p < n; p++)
-    nh_point_stress(R, d, g + 24 * p, lambda, mu, Gbar ? &mean_dilatation : NULL, s + 6 * p);
 }
 
 void nh_voigt_compliance(double lambda, double mu, const double s[6], double e[6]) {

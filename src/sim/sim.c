@@ -643,8 +643,10 @@ static int nh_sim_front_errors(nh_sim *s, const nh_rows *rows, double scale,
  * step's factor (the coefficient of K in A: 1 static, hβ + h² dynamic). */
 static int nh_sim_estimate(nh_sim *s) {
   const nh_scene *sc = s->scene;
-  if (sc->adapt.estimator != NH_ESTIMATOR_GOAL)
-    return nh_adapt_estimate(s->adapt, s->mesh, s->tissue, s->u, s->hanging, &s->eta, &s->eta_rel);
+  if (sc->adapt.estimator !=
+      NH_ESTIMATOR_GOAL) /* the frames of the step's last assembly, if at u */
+    return nh_adapt_estimate(s->adapt, s->mesh, s->tissue, s->u, s->hanging,
+                             nh_system_frames_at(s->system, s->tissue, s->u), &s->eta, &s->eta_rel);
   const double h = sc->time.step;
   double scale = sc->time.mode == NH_MODE_STATIC ? 1.0 : h * sc->tissue.damping_stiffness + h * h;
   /* the geometry term's loads at this step (docs/theory.md §6.6, "Geometry") */

@@ -83,6 +83,14 @@ void nh_system_set_lazy(nh_system *sys, double tolerance);
 /* Leaves whose tangent the assemblies since nh_system_lazy_reset rebuilt. */
 int nh_system_lazy_updates(const nh_system *sys);
 void nh_system_lazy_reset(nh_system *sys);
+/* The frames (NH_HEX_FRAME doubles per leaf, in leaf order; fem.h) of the
+ * last computed assembly if it was of this tissue at this u (bitwise), else
+ * NULL (also for sys NULL): their rotations R are then those
+ * nh_hex_corotated gives every leaf at u (its centre gradients
+ * nh_tissue_g0). sys must be the system of the tissue's current mesh (a
+ * mesh change builds a new one; counts are checked, not the leaves). Valid
+ * until the next assembly. */
+const double *nh_system_frames_at(const nh_system *sys, const nh_tissue *tissue, const double *u);
 
 /* Numeric Cholesky factorisation of the assembled A (symbolic analysis on
  * first use). Fails with NH_ERR_NUMERIC if A is not positive definite
