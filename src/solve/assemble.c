@@ -87,65 +87,59 @@ void nh_system_lazy_reset(nh_system *s) {
 
 /* Ã = Tᵀ Aₑ T (nd x nd, nd = 3 k, into At) of a leaf with a hanging corner.
  * T (8 x k) is sparse: a corner is one effective node (weight 1) or a hanging
- * node's 2 or 4 masters, so both products run over T's nonzeros only. Each
- * entry still sums its nonzero terms in ascending corner order, as the dense
- * product did, and the skipped terms were exact zeros: the same bits. The
- * products start from their first term, 0 + t (so a −0 term gives +0 as
- * from zeroed storage), instead of zeroing B and Ã first (the zeroing cost
- * a third of this function on the phantom). work: nh_expand_slot(k) doubles. */
-static void nh_expand(const nh_system *s, int l, const double *Ae, double *work, double *At) {
-  int k = s->eff_start[l + 1] - s->eff_start[l], nd = 3 * k;
-  const double *T = s->eff_T + 8 * s->eff_start[l];
-  int nz_start[9];
-  /* B = Aₑ T, then Ã; T's nonzeros of corner b: nz_w, nz_node [nz_start[b], nz_start[b + 1]);
-   * nz_first: the node's first nonzero (its B columns and Ã rows start there) */
-  double *B = work, *nz_w = B + 24 * (size_t)nd;
-  int *nz_node = (int *)(nz_w + 8 * (size_t)k), *nz_first = nz_node + 8 * k,
-      *seen = nz_first + 8 * k;
-  memset(seen, 0, sizeof(int) * k);
-  nz_start[0] = 0;
-  for (int b = 0; b < 8; b++) {
-    nz_start[b + 1] = nz_start[b];
-    for (int q = 0; q < k; q++)
-      if (T[b * k + q] != 0.0) {
-        int z = nz_start[b + 1]++;
-        nz_node[z] = q, nz_w[z] = T[b * k + q], nz_first[z] = !seen[q], seen[q] = 1;
-      }
+ * node's 2 or 4 masters, so both products run over T's nonzeros only, listed
+ * once per system in corner order (nz_*, system.c). Each entry still sums its
+ * nonzero terms in ascending corner order, as the dense product did, and the
+ * skipped terms were exact zeros: the same bits. The products start from
+ * their first term, 0 + t (so a −0 term gives +0 as from zeroed storage),
+ * instead of zeroing B and Ã first (the zeroing cost a third of this
+ * function on the phantom). B: nh_expand_slot(k) doubles of work. */
+static void nh_expand(const nh_system *s, int l, const double *Ae, double *B, double *At) {
+  const int k = s->eff_start[l + 1] - s->eff_start[l], nd = 3 * k;
+  const int lo = s->nz_start[l], hi = s->nz_start[l + 1];
+  const int *corner = s->nz_corner, *node = s->nz_node, *first = s->nz_first;
+  const double *w = s->nz_w;
+  int n_first = 0;
+  for (int z = lo; z < hi; z++) n_first += first[z];
+  for (int q = 0; q < k && n_first < k;
+       q++) { /* a node without a nonzero (none in practice): zero */
+    int seen = 0;
+    for (int z = lo; z < hi; z++) seen |= node[z] == q;
+    if (seen) continue;
+    for (int r = 0; r < 24; r++)
+      for (int j = 0; j < 3; j++) B[nd * r + 3 * q + j] = 0.0;
+    for (int i = 0; i < 3; i++) memset(At + (size_t)nd * (3 * q + i), 0, sizeof(double) * nd);
   }
-  for (int q = 0; q < k; q++) /* a node without a nonzero (none in practice): zero */
-    if (!seen[q]) {
+  /* B = Aₑ T (24 x nd), nonzero by nonzero (each entry's terms in the
+   * nonzeros' order: the row-by-row loop's sums) */
+  for (int z = lo; z < hi; z++) {
+    double *Bz = B + 3 * node[z];
+    const double *Az = Ae + 3 * corner[z], wz = w[z];
+    if (first[z])
       for (int r = 0; r < 24; r++)
-        for (int j = 0; j < 3; j++) B[nd * r + 3 * q + j] = 0.0;
-      for (int i = 0; i < 3; i++) memset(At + (size_t)nd * (3 * q + i), 0, sizeof(double) * nd);
+        for (int j = 0; j < 3; j++) Bz[nd * r + j] = 0.0 + Az[24 * r + j] * wz;
+    else
+      for (int r = 0; r < 24; r++)
+        for (int j = 0; j < 3; j++) Bz[nd * r + j] += Az[24 * r + j] * wz;
+  }
+  /* Ã = Tᵀ B, its upper triangle: the effective nodes ascend as their free
+   * DOFs do (system.c), so the entries A stores (nh_add_leaf) have c >= row */
+  for (int z = lo; z < hi; z++)
+    for (int i = 0; i < 3; i++) {
+      const int d = 3 * node[z] + i;
+      double *row = At + (size_t)nd * d;
+      const double *Brow = B + (size_t)nd * (3 * corner[z] + i);
+      const double wz = w[z];
+      if (first[z])
+        for (int c = d; c < nd; c++) row[c] = 0.0 + wz * Brow[c];
+      else
+        for (int c = d; c < nd; c++) row[c] += wz * Brow[c];
     }
-  for (int r = 0; r < 24; r++)
-    for (int b = 0; b < 8; b++)
-      for (int z = nz_start[b]; z < nz_start[b + 1]; z++) {
-        double *Bz = B + nd * r + 3 * nz_node[z];
-        const double *Ar = Ae + 24 * r + 3 * b;
-        if (nz_first[z])
-          for (int j = 0; j < 3; j++) Bz[j] = 0.0 + Ar[j] * nz_w[z];
-        else
-          for (int j = 0; j < 3; j++) Bz[j] += Ar[j] * nz_w[z];
-      }
-  for (int a = 0; a < 8; a++)
-    for (int z = nz_start[a]; z < nz_start[a + 1]; z++)
-      for (int i = 0; i < 3; i++) {
-        double *row = At + (size_t)nd * (3 * nz_node[z] + i);
-        const double *Brow = B + (size_t)nd * (3 * a + i);
-        const double w = nz_w[z];
-        if (nz_first[z])
-          for (int c = 0; c < nd; c++) row[c] = 0.0 + w * Brow[c];
-        else
-          for (int c = 0; c < nd; c++) row[c] += w * Brow[c];
-      }
 }
 
-/* Doubles of nh_expand's work for k effective nodes: B (24 x 3k), the
- * nonzeros' weights (8k), their nodes and first flags and the nodes'
- * seen flags (17k ints in 9k doubles). */
+/* Doubles of nh_expand's work for k effective nodes: B (24 x 3k). */
 static size_t nh_expand_slot(int k) {
-  return 24 * 3 * (size_t)k + 8 * (size_t)k + 9 * (size_t)k;
+  return 24 * 3 * (size_t)k;
 }
 
 /* Leaf l's matrix in A's storage: Ã (expanded leaves, nh_expand) or Aₑ

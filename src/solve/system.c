@@ -61,7 +61,7 @@ void nh_system_destroy(nh_system **sys) {
   free(s->exp_w);
   free(s->eff_start);
   free(s->eff_node);
-  free(s->eff_T);
+  free(s->nz_start), free(s->nz_corner), free(s->nz_node), free(s->nz_first), free(s->nz_w);
   free(s->pair_start);
   free(s->pair);
   free(s->colour_start);
@@ -79,11 +79,6 @@ void nh_system_destroy(nh_system **sys) {
   free(s->u_assembled), free(s->u_factored);
   free(s);
   *sys = NULL;
-}
-
-static int nh_int_cmp(const void *a, const void *b) {
-  int x = *(const int *)a, y = *(const int *)b;
-  return (x > y) - (x < y);
 }
 
 /* The nodes leaf l couples: its effective nodes if it has a hanging corner
@@ -136,14 +131,21 @@ static int nh_node_graph(const nh_system *s, int **ptr_out, int **adj_out) {
     for (int a = 0; a < k; a++)
       for (int b = 0; b < k; b++) adj[fill[e[a]]++] = e[b];
   }
-  /* Sort and deduplicate each list in place, then compact. */
+  /* Deduplicate each list (fill now marks the nodes listed for node i),
+   * compact it in place and sort it: a few dozen nodes, by insertion. */
+  for (int i = 0; i < n; i++) fill[i] = -1;
   int out = 0;
   for (int i = 0; i < n; i++) {
-    int lo = count[i], hi = count[i + 1];
-    qsort(adj + lo, (size_t)(hi - lo), sizeof(int), nh_int_cmp);
+    int lo = count[i], hi = count[i + 1], first = out;
     count[i] = out;
-    for (int k = lo; k < hi; k++)
-      if (k == lo || adj[k] != adj[k - 1]) adj[out++] = adj[k];
+    for (int k = lo; k < hi; k++) {
+      int v = adj[k];
+      if (fill[v] == i) continue;
+      fill[v] = i;
+      int p = out++;
+      for (; p > first && adj[p - 1] > v; p--) adj[p] = adj[p - 1];
+      adj[p] = v;
+    }
   }
   count[n] = out;
   free(fill);
@@ -257,12 +259,22 @@ static int nh_system_pattern(nh_system *s) {
   for (int l = 0; l < m->n_leaves; l++) {
     const int *e;
     int k = nh_leaf_nodes(s, l, &e), nd = 3 * k, n = 0;
-    for (int r = 0; r < nd; r++)
-      for (int c = 0; c < nd; c++) {
-        int fr = s->free_of[3 * e[r / 3] + r % 3], fc = s->free_of[3 * e[c / 3] + c % 3];
-        map[nd * r + c] = (fr < 0 || fc < 0 || fr > fc) ? -1 : nh_find_entry(Ap, Ai, fr, fc);
-        n += map[nd * r + c] >= 0;
+    /* A node's free DOFs are consecutive numbers and a column holds all of
+     * them that do not exceed it, consecutively: one search per node and
+     * column, the node's first free DOF, places the others. */
+    for (int c = 0; c < nd; c++) {
+      const int fc = s->free_of[3 * e[c / 3] + c % 3];
+      for (int a = 0; a < k; a++) {
+        const int *fa = s->free_of + 3 * e[a];
+        int f0 = fa[0] >= 0 ? fa[0] : fa[1] >= 0 ? fa[1] : fa[2];
+        int p0 = fc >= 0 && f0 >= 0 && f0 <= fc ? nh_find_entry(Ap, Ai, f0, fc) : -1;
+        for (int i = 0; i < 3; i++) {
+          int fr = fa[i], r = 3 * a + i;
+          map[nd * r + c] = (p0 < 0 || fr < 0 || fr > fc) ? -1 : p0 + (fr - f0);
+          n += map[nd * r + c] >= 0;
+        }
       }
+    }
     if (used + (size_t)n > (size_t)INT_MAX / 2 ||
         nh_grow((void **)&s->pair, &cap, 2 * (int)(used + (size_t)n), sizeof(int))) {
       free(map);
@@ -313,36 +325,61 @@ static int nh_system_prolongation(nh_system *s, const unsigned char *fixed, cons
   s->exp_start[n] = p;
   (void)fixed;
   /* Effective nodes of leaves with a hanging corner: union of the corners'
-   * expansions, in first-seen order. */
-  int cap = 0, used = 0;
+   * expansions, in ascending order (as their free DOFs: A's upper triangle
+   * is then Ã's, which is all assemble.c computes); then T's nonzeros
+   * (nz_*), corner by corner, node by node. */
+  int cap = 0, used = 0, cap_nz = 0, n_nz = 0;
   s->eff_node = NULL;
-  s->eff_T = NULL;
-  int capT = 0;
-  for (int l = 0; l < m->n_leaves; l++) {
+  s->nz_start = nh_calloc((size_t)m->n_leaves + 1, sizeof(int));
+  if (!s->nz_start) return NH_ERROR(NH_ERR_MEMORY, "out of memory: hanging-node elimination");
+  double *T = NULL; /* T[a k + p] of one leaf */
+  int *seen = NULL, capT = 0, cap_seen = 0, rc = NH_OK;
+  for (int l = 0; l < m->n_leaves && !rc; l++) {
     const int *e = m->cells + 8 * m->leaves[l];
     s->eff_start[l] = used;
+    s->nz_start[l] = n_nz;
     int any = 0;
     for (int a = 0; a < 8; a++) any |= h && h->n_hanging && h->index[e[a]] >= 0;
     if (!any) continue;
     int start = used;
-    for (int a = 0; a < 8; a++)
-      for (int q = s->exp_start[e[a]]; q < s->exp_start[e[a] + 1]; q++) {
+    for (int a = 0; a < 8 && !rc; a++)
+      for (int q = s->exp_start[e[a]]; q < s->exp_start[e[a] + 1] && !rc; q++) {
         int v = s->exp_node[q], found = 0;
         for (int r = start; r < used && !found; r++) found = s->eff_node[r] == v;
         if (found) continue;
-        NH_TRY(nh_grow((void **)&s->eff_node, &cap, used + 1, sizeof(int)));
-        s->eff_node[used++] = v;
+        if ((rc = nh_grow((void **)&s->eff_node, &cap, used + 1, sizeof(int)))) break;
+        int r = used++; /* insertion in ascending order */
+        for (; r > start && s->eff_node[r - 1] > v; r--) s->eff_node[r] = s->eff_node[r - 1];
+        s->eff_node[r] = v;
       }
-    NH_TRY(nh_grow((void **)&s->eff_T, &capT, 8 * used, sizeof(double)));
     int k = used - start;
-    double *T = s->eff_T + 8 * start; /* T[a * k + p] */
+    if (rc || (rc = nh_grow((void **)&T, &capT, 8 * k, sizeof(double))) ||
+        (rc = nh_grow((void **)&seen, &cap_seen, k, sizeof(int))))
+      break;
     for (int i = 0; i < 8 * k; i++) T[i] = 0.0;
     for (int a = 0; a < 8; a++)
       for (int q = s->exp_start[e[a]]; q < s->exp_start[e[a] + 1]; q++)
         for (int r = 0; r < k; r++)
           if (s->eff_node[start + r] == s->exp_node[q]) T[a * k + r] += s->exp_w[q];
+    for (int r = 0; r < k; r++) seen[r] = 0;
+    for (int a = 0; a < 8 && !rc; a++)
+      for (int r = 0; r < k; r++) {
+        if (T[a * k + r] == 0.0) continue;
+        int had = cap_nz;
+        if ((rc = nh_grow((void **)&s->nz_corner, &cap_nz, n_nz + 1, sizeof(int))) ||
+            (cap_nz > had &&
+             ((rc = nh_realloc((void **)&s->nz_node, (size_t)cap_nz, sizeof(int))) ||
+              (rc = nh_realloc((void **)&s->nz_first, (size_t)cap_nz, sizeof(int))) ||
+              (rc = nh_realloc((void **)&s->nz_w, (size_t)cap_nz, sizeof(double))))))
+          break;
+        s->nz_corner[n_nz] = a, s->nz_node[n_nz] = r, s->nz_w[n_nz] = T[a * k + r];
+        s->nz_first[n_nz++] = !seen[r], seen[r] = 1;
+      }
   }
+  free(T), free(seen);
+  if (rc) return rc;
   s->eff_start[m->n_leaves] = used;
+  s->nz_start[m->n_leaves] = n_nz;
   return NH_OK;
 }
 
@@ -416,12 +453,24 @@ void nh_system_apply(const nh_system *s, const double *x, double *y) {
   const int *Ap = s->A->p, *Ai = s->A->i;
   const double *Ax = s->A->x;
   memset(y, 0, sizeof(double) * (size_t)s->n_free);
-  for (int j = 0; j < s->n_free; j++)
-    for (int p = Ap[j]; p < Ap[j + 1]; p++) {
+  /* Column j holds rows i <= j, sorted, the diagonal last: y[j] receives
+   * column j's off-diagonal terms, then its diagonal, and only later columns'
+   * terms after that. So the off-diagonal sum runs in a register, in the same
+   * order as through memory (the same bits, without a load and a store of
+   * y[j] per entry, which the compiler cannot drop: y[i] may be y[j]). */
+  for (int j = 0; j < s->n_free; j++) {
+    const double xj = x[j];
+    double yj = y[j];
+    int p = Ap[j], end = Ap[j + 1];
+    if (p < end && Ai[end - 1] == j) end--; /* the diagonal, added below */
+    for (; p < end; p++) {
       int i = Ai[p];
-      y[i] += Ax[p] * x[j];
-      if (i != j) y[j] += Ax[p] * x[i];
+      y[i] += Ax[p] * xj;
+      yj += Ax[p] * x[i];
     }
+    y[j] = yj;
+    if (end < Ap[j + 1]) y[j] += Ax[end] * xj;
+  }
 }
 
 void nh_system_gather(const nh_system *s, const double *full, double *part) {

@@ -23,7 +23,13 @@ struct nh_system {
    * nodes eff_node[eff_start[l] .. eff_start[l+1]) (an empty range for a
    * plain leaf), with T (8 per effective node, T[a k + p]). */
   int *eff_start, *eff_node;
-  double *eff_T;
+  /* T's nonzeros, leaf by leaf [nz_start[l], nz_start[l+1]) in corner
+   * order (T is fixed while the system lives, so assemble.c's Tᵀ Aₑ T does
+   * not search T at every assembly): corner nz_corner of effective node
+   * nz_node (its index in the leaf's list) with weight nz_w; nz_first marks
+   * the node's first nonzero. */
+  int *nz_start, *nz_corner, *nz_node, *nz_first;
+  double *nz_w;
 
   /* A, upper triangle, CSC over free DOFs; values live in A->x. */
   cholmod_common cm;
