@@ -643,8 +643,8 @@ static int nh_sim_front_errors(nh_sim *s, const nh_rows *rows, double scale,
  * step's factor (the coefficient of K in A: 1 static, hβ + h² dynamic). */
 static int nh_sim_estimate(nh_sim *s) {
   const nh_scene *sc = s->scene;
-  if (sc->adapt.estimator !=
-      NH_ESTIMATOR_GOAL) /* the frames of the step's last assembly, if at u */
+  /* SPR: with the frames of the step's last assembly, if it was at u */
+  if (sc->adapt.estimator != NH_ESTIMATOR_GOAL)
     return nh_adapt_estimate(s->adapt, s->mesh, s->tissue, s->u, s->hanging,
                              nh_system_frames_at(s->system, s->tissue, s->u), &s->eta, &s->eta_rel);
   const double h = sc->time.step;

@@ -101,8 +101,8 @@ static void nh_expand(const nh_system *s, int l, const double *Ae, double *B, do
   const double *w = s->nz_w;
   int n_first = 0;
   for (int z = lo; z < hi; z++) n_first += first[z];
-  for (int q = 0; q < k && n_first < k;
-       q++) { /* a node without a nonzero (none in practice): zero */
+  /* a node without a nonzero (none in practice): zero */
+  for (int q = 0; q < k && n_first < k; q++) {
     int seen = 0;
     for (int z = lo; z < hi; z++) seen |= node[z] == q;
     if (seen) continue;
