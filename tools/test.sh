@@ -3,7 +3,7 @@
 #   tools/test.sh              Release build in build/, all tests (what CI runs)
 #   tools/test.sh --sanitize   Debug build with -fsanitize=address,undefined in build-asan/
 #   tools/test.sh --quick      the tests without the label `slow` (ctest -LE slow):
-#                              under a minute in Release on 2 cores
+#                              about 4 minutes in Release (README.md)
 # The options combine (--sanitize --quick).
 set -euo pipefail
 cd "$(dirname "$0")/.."
