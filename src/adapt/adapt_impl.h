@@ -21,14 +21,6 @@ typedef struct {
 #define NH_ADAPT_VECTOR_CLONES
 #endif
 
-/* A field's 6 nodal values (field + stride × node) at the 8 Gauss points
- * of the cell with these corners: s[i][gp] = Σₐ N_a(gp) valueₐ,ᵢ, the sum
- * in a's order from 0 (as a point-by-point loop forms it), NT[a][gp] =
- * N_a(gp) (dwr.c; SPR's σ*; the goal estimate's nh_dwr_dual_terms forms
- * the same sums inside its kernel). */
-void nh_dwr_interpolate(const double *field, size_t stride, const int corner[8],
-                        const double NT[8][8], double s[6][8]);
-
 /* A mesh's identity for the module's caches (key.c): counts, leaves, their
  * corners, rest positions, one number per leaf (the cache's choice) and the
  * hanging nodes, compared exactly. Zero-initialised: matches nothing. */

@@ -290,25 +290,6 @@ static void nh_dwr_dual_terms(const double we[24], const double RgT[24][8],
   *eps = s1, *ezz = s2;
 }
 
-/* adapt_impl.h: a nodal field at a cell's 8 Gauss points (SPR's σ*). */
-NH_ADAPT_VECTOR_CLONES
-void nh_dwr_interpolate(const double *field, size_t stride, const int corner[8],
-                        const double NT[8][8], double s[6][8]) {
-  double v[8][6]; /* local: no aliasing with field */
-  for (int a = 0; a < 8; a++) memcpy(v[a], field + stride * (size_t)corner[a], sizeof v[a]);
-  for (int i = 0; i < 6; i++) {
-    /* one sum per lane, over a in order (omp simd vectorises over the
-     * points, without reordering a lane's sum: GCC's own vectoriser left
-     * this loop scalar) */
-#pragma omp simd
-    for (int gp = 0; gp < 8; gp++) {
-      double acc = 0.0;
-      for (int a = 0; a < 8; a++) acc += NT[a][gp] * v[a][i];
-      s[i][gp] = acc;
-    }
-  }
-}
-
 /* The element's material and, for B-bar, the derivative b of its mean volume
  * change at the state (bₐ = cof(F̄) ḡₐ, nh_hex_corot) and the change itself:
  * *gbar NULL for the full formulation. */

@@ -185,6 +185,24 @@ static void nh_spr_point_stresses(const double R[9], const double d[24],
   }
 }
 
+/* σ* (6 values per node) at a cell's 8 Gauss points, s[i][g] = Σₐ N_a(g)
+ * σ*_a,i (NT[a][g] = N_a(g)), each sum over a in order from 0 as the
+ * point-by-point loop formed it, one SIMD lane per point (GCC's own
+ * vectoriser left the loop scalar): the same bits. */
+NH_ADAPT_VECTOR_CLONES
+static void nh_spr_interpolate(const double *sigma_star, const int corner[8], const double NT[8][8],
+                               double s[6][8]) {
+  double v[8][6]; /* local: no aliasing with sigma_star */
+  for (int a = 0; a < 8; a++) memcpy(v[a], sigma_star + 6 * (size_t)corner[a], sizeof v[a]);
+  for (int i = 0; i < 6; i++)
+#pragma omp simd
+    for (int g = 0; g < 8; g++) {
+      double acc = 0.0;
+      for (int a = 0; a < 8; a++) acc += NT[a][g] * v[a][i];
+      s[i][g] = acc;
+    }
+}
+
 /* A leaf's integrands at its 8 Gauss points, summed: *e2 = Σ_g det J_g dᵀD⁻¹d
  * (d = σ* − σₕ) and *n2 = Σ_g det J_g σₕᵀD⁻¹σₕ, from σ* and σₕ by point last
  * (star[k][g], sh[k][g]). D⁻¹ as nh_voigt_compliance forms it and each sum
@@ -811,7 +829,7 @@ static int nh_spr_estimate_with(nh_spr_cache *ws, nh_spr_cache *weights, const n
 #pragma omp atomic write
         bad_cell = c;
       }
-    nh_dwr_interpolate(sigma_star, 6, m->cells + 8 * c, (const double(*)[8])NT, star);
+    nh_spr_interpolate(sigma_star, m->cells + 8 * c, (const double(*)[8])NT, star);
     nh_spr_cell_error((const double(*)[8])star, (const double(*)[8])(sh + 48 * (size_t)l), dJ,
                       lambda, mu, &e2, &n2);
     err2[l] = m->fill[c] * e2;

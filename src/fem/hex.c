@@ -134,8 +134,9 @@ int nh_hex_stiffness(const double X[24], double lambda, double mu, int bbar, dou
   return NH_OK;
 }
 
-/* The corotated displacements d = Rᵀ uₐ + (Rᵀ − I)(Xₐ − X̄) for the rotation R
- * (inline in the element force's path, as before nh_hex_corotate shared it). */
+/* The corotated displacements d = Rᵀ uₐ + (Rᵀ − I)(Xₐ − X̄) for the rotation R.
+ * Static inline so that the element force keeps it inlined (an out-of-line
+ * call made 16×8×8's assembly 2–3 % slower); nh_hex_corotate exports it. */
 static inline void nh_hex_corotate_d(const double X[24], const double u[24], const double R[9],
                                      double d[24]) {
   double c[3] = {0, 0, 0};

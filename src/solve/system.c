@@ -328,7 +328,7 @@ static int nh_system_prolongation(nh_system *s, const unsigned char *fixed, cons
    * expansions, in ascending order (as their free DOFs: A's upper triangle
    * is then Ã's, which is all assemble.c computes); then T's nonzeros
    * (nz_*), corner by corner, node by node. */
-  int cap = 0, used = 0, cap_nz = 0, n_nz = 0;
+  int cap = 0, used = 0, n_nz = 0, cap_corner = 0, cap_node = 0, cap_first = 0, cap_w = 0;
   s->eff_node = NULL;
   s->nz_start = nh_calloc((size_t)m->n_leaves + 1, sizeof(int));
   if (!s->nz_start) return NH_ERROR(NH_ERR_MEMORY, "out of memory: hanging-node elimination");
@@ -361,17 +361,17 @@ static int nh_system_prolongation(nh_system *s, const unsigned char *fixed, cons
       for (int q = s->exp_start[e[a]]; q < s->exp_start[e[a] + 1]; q++)
         for (int r = 0; r < k; r++)
           if (s->eff_node[start + r] == s->exp_node[q]) T[a * k + r] += s->exp_w[q];
+    /* at most 8 k nonzeros */
+    const int need = n_nz + 8 * k;
+    if ((rc = nh_grow((void **)&s->nz_corner, &cap_corner, need, sizeof(int))) ||
+        (rc = nh_grow((void **)&s->nz_node, &cap_node, need, sizeof(int))) ||
+        (rc = nh_grow((void **)&s->nz_first, &cap_first, need, sizeof(int))) ||
+        (rc = nh_grow((void **)&s->nz_w, &cap_w, need, sizeof(double))))
+      break;
     for (int r = 0; r < k; r++) seen[r] = 0;
-    for (int a = 0; a < 8 && !rc; a++)
+    for (int a = 0; a < 8; a++)
       for (int r = 0; r < k; r++) {
         if (T[a * k + r] == 0.0) continue;
-        int had = cap_nz;
-        if ((rc = nh_grow((void **)&s->nz_corner, &cap_nz, n_nz + 1, sizeof(int))) ||
-            (cap_nz > had &&
-             ((rc = nh_realloc((void **)&s->nz_node, (size_t)cap_nz, sizeof(int))) ||
-              (rc = nh_realloc((void **)&s->nz_first, (size_t)cap_nz, sizeof(int))) ||
-              (rc = nh_realloc((void **)&s->nz_w, (size_t)cap_nz, sizeof(double))))))
-          break;
         s->nz_corner[n_nz] = a, s->nz_node[n_nz] = r, s->nz_w[n_nz] = T[a * k + r];
         s->nz_first[n_nz++] = !seen[r], seen[r] = 1;
       }

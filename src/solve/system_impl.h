@@ -21,7 +21,7 @@ struct nh_system {
 
   /* Leaves with a hanging corner assemble Tᵀ Aₑ T over their effective
    * nodes eff_node[eff_start[l] .. eff_start[l+1]) (an empty range for a
-   * plain leaf), with T (8 per effective node, T[a k + p]). */
+   * plain leaf), ascending, T (8 x k) kept as its nonzeros below. */
   int *eff_start, *eff_node;
   /* T's nonzeros, leaf by leaf [nz_start[l], nz_start[l+1]) in corner
    * order (T is fixed while the system lives, so assemble.c's Tᵀ Aₑ T does
