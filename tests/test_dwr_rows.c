@@ -58,6 +58,11 @@
  *     old front's anchoring error carried to the new one). With the
  *     friction row r2 of the header as the third row and sliding, the dual
  *     is not zero and e_2 differs from −δc_2 by more than 1 %.
+ *  6. The constrained solve itself (test_solve_rows): x and μ of
+ *     nh_system_solve_rows against the dense KKT solve for 2, 4 and 7
+ *     right-hand sides on the fine problem's 4 active rows, so both of its
+ *     routes (m >= ncol: the compliance path and a second ncol-column
+ *     solve; m < ncol: G = A⁻¹ J_tᵀ, x −= G μ) are checked.
  * NH_VERBOSE=1 prints the numbers. */
 #include "check.h"
 #include "adapt/adapt.h"
@@ -144,17 +149,18 @@ static int active_row(int i) {
   return i != 3 && i != 5;
 }
 
-/* The constrained solution by a dense LU solve of [K Jᵀ; J 0] [u; λ] =
- * [f; 0] over the unfixed DOFs (K from the element matrices at rest). */
-static void dense_solve(const problem *p, double *u, double *lambda) {
+/* The dense matrix [K Jᵀ; J 0] over the unfixed DOFs and the active rows
+ * (K from the element matrices at rest, J from the rows' shape values),
+ * column-major N x N, N = *nf + active rows; dof[3 n_nodes]: the unfixed
+ * DOFs' positions, −1 at fixed ones. */
+static double *dense_kkt(const problem *p, int *dof, int *nf_out, int *N_out) {
   const nh_mesh *m = p->m;
-  int n = 3 * m->n_nodes, *dof = malloc(sizeof(int) * n), nf = 0;
+  int n = 3 * m->n_nodes, nf = 0;
   for (int i = 0; i < n; i++) dof[i] = p->fixed[i / 3] ? -1 : nf++;
   int na = 0;
   for (int i = 0; i < NROWS; i++) na += active_row(i);
   int N = nf + na;
-  double *A = calloc((size_t)N * N, sizeof(double)), *b = calloc(N, sizeof(double));
-  double *zero = calloc(n, sizeof(double));
+  double *A = calloc((size_t)N * N, sizeof(double)), *zero = calloc(n, sizeof(double));
   for (int l = 0; l < m->n_leaves; l++) {
     int c = m->leaves[l];
     double fe[24], K[576];
@@ -166,8 +172,6 @@ static void dense_solve(const problem *p, double *u, double *lambda) {
         if (dr >= 0 && dq >= 0) A[(size_t)dq * N + dr] += K[24 * r + q];
       }
   }
-  for (int i = 0; i < n; i++)
-    if (dof[i] >= 0) b[dof[i]] = p->f[i];
   for (int i = 0, row = nf; i < NROWS; i++) {
     if (!active_row(i)) continue;
     for (int a = 0; a < 8; a++)
@@ -178,14 +182,27 @@ static void dense_solve(const problem *p, double *u, double *lambda) {
         A[(size_t)d * N + row] += v;
         A[(size_t)row * N + d] += v;
       }
-    b[row] = -p->rows.gap[i]; /* the row's gap c(u) = J u + g, held at 0 */
     row++;
   }
+  free(zero);
+  *nf_out = nf, *N_out = N;
+  return A;
+}
+
+/* The constrained solution by a dense LU solve of [K Jᵀ; J 0] [u; λ] =
+ * [f; −g] (dense_kkt). */
+static void dense_solve(const problem *p, double *u, double *lambda) {
+  int n = 3 * p->m->n_nodes, *dof = malloc(sizeof(int) * n), nf, N;
+  double *A = dense_kkt(p, dof, &nf, &N), *b = calloc(N, sizeof(double));
+  for (int i = 0; i < n; i++)
+    if (dof[i] >= 0) b[dof[i]] = p->f[i];
+  for (int i = 0, row = nf; i < NROWS; i++)
+    if (active_row(i)) b[row++] = -p->rows.gap[i]; /* the row's gap c(u) = J u + g, held at 0 */
   int *piv = malloc(sizeof(int) * N);
   CHECK(LAPACKE_dgesv(LAPACK_COL_MAJOR, N, 1, A, N, piv, b, N) == 0, "dense KKT solve");
   for (int i = 0; i < n; i++) u[i] = dof[i] >= 0 ? b[dof[i]] : 0.0;
   for (int i = 0, row = nf; i < NROWS && lambda; i++) lambda[i] = active_row(i) ? b[row++] : 0.0;
-  free(dof), free(A), free(b), free(zero), free(piv);
+  free(dof), free(A), free(b), free(piv);
 }
 
 /* n_i · w(P_i) of row i for a nodal field w. */
@@ -421,6 +438,76 @@ static void test_front(problem *p) {
   free(u);
 }
 
+/* Part 6: nh_system_solve_rows itself against the dense KKT solve, for
+ * NCOL_MAX right-hand sides b_q (smooth, made up, nonzero on every free
+ * DOF): A x_q + J_tᵀ μ_q = b_q, J_t x_q = 0 on the four active rows, by
+ * LU of [K Jᵀ; J 0] (dense_kkt). ncol = 2 and 4 take the compliance path
+ * (m = 4 >= ncol: W by nh_system_compliance_add, a second solve of ncol
+ * columns), ncol = 7 the other (m < ncol: G = A⁻¹ J_tᵀ, W = J_t G,
+ * x −= G μ). x and μ must match to 1e-10 of their largest entries (the
+ * round-off of the two factorisations on this problem: measured 6e-15 to
+ * 1.1e-14, NH_VERBOSE=1), and the two routes' common columns to 1e-12
+ * (measured 3e-15). */
+#define NCOL_MAX 7
+
+static void test_solve_rows(problem *p) {
+  static const unsigned char active[NROWS] = {1, 1, 1, 0, 1, 0};
+  const int n = 3 * p->m->n_nodes, nf = nh_system_free_dofs(p->s), ncols[3] = {2, 4, NCOL_MAX};
+  int *dof = malloc(sizeof(int) * n), nk, N;
+  double *A = dense_kkt(p, dof, &nk, &N);
+  double *bfull = malloc(sizeof(double) * n), *bd = calloc((size_t)N * NCOL_MAX, sizeof(double));
+  double *b = malloc(sizeof(double) * nf * NCOL_MAX), *x = malloc(sizeof(double) * nf * NCOL_MAX);
+  double *x7 = malloc(sizeof(double) * nf * NCOL_MAX), mu[NROWS * NCOL_MAX], mu7[NROWS * NCOL_MAX];
+  double *xq = malloc(sizeof(double) * n);
+  int *piv = malloc(sizeof(int) * N);
+  CHECK(nk == nf, "dense KKT: %d unfixed DOFs, the system has %d", nk, nf);
+  for (int q = 0; q < NCOL_MAX; q++) {
+    for (int i = 0; i < n; i++) bfull[i] = 1e-6 * sin(0.37 * i + 1.1 * q) * (1.0 + 0.1 * q);
+    nh_system_gather(p->s, bfull, b + (size_t)nf * q);
+    for (int i = 0; i < n; i++)
+      if (dof[i] >= 0) bd[(size_t)N * q + dof[i]] = bfull[i];
+  }
+  CHECK(LAPACKE_dgesv(LAPACK_COL_MAJOR, N, NCOL_MAX, A, N, piv, bd, N) == 0, "dense KKT solve");
+  for (int c = 2; c >= 0; c--) { /* ncol = 7 first: the other routes are compared with it */
+    const int ncol = ncols[c];
+    int used = -1;
+    CHECK_OK(nh_system_solve_rows(p->s, &p->rows, active, ncol, b, x, mu, &used));
+    CHECK(used == 4, "ncol=%d: %d active rows, expected 4", ncol, used);
+    double xmax = 0.0, xerr = 0.0, mumax = 0.0, muerr = 0.0, xdiff = 0.0, mudiff = 0.0;
+    for (int q = 0; q < ncol; q++) {
+      nh_system_scatter(p->s, x + (size_t)nf * q, xq);
+      for (int i = 0; i < n; i++) {
+        const double e = dof[i] >= 0 ? bd[(size_t)N * q + dof[i]] : 0.0;
+        xmax = fmax(xmax, fabs(e)), xerr = fmax(xerr, fabs(xq[i] - e));
+      }
+      for (int i = 0, row = nk; i < NROWS; i++) {
+        const double e = active[i] ? bd[(size_t)N * q + row++] : 0.0, v = mu[NROWS * q + i];
+        mumax = fmax(mumax, fabs(e)), muerr = fmax(muerr, fabs(v - e));
+        if (ncol < NCOL_MAX) mudiff = fmax(mudiff, fabs(v - mu7[NROWS * q + i]));
+      }
+      for (int i = 0; i < nf && ncol < NCOL_MAX; i++)
+        xdiff = fmax(xdiff, fabs(x[(size_t)nf * q + i] - x7[(size_t)nf * q + i]));
+    }
+    CHECK(xmax > 0.0 && mumax > 0.0, "ncol=%d: the dense solution vanishes", ncol);
+    CHECK(xerr <= 1e-10 * xmax, "ncol=%d: max |x - x_dense| = %.3e, 1e-10 of max |x| = %.3e", ncol,
+          xerr, 1e-10 * xmax);
+    CHECK(muerr <= 1e-10 * mumax, "ncol=%d: max |mu - mu_dense| = %.3e, 1e-10 of max |mu| = %.3e",
+          ncol, muerr, 1e-10 * mumax);
+    if (ncol < NCOL_MAX) {
+      CHECK(xdiff <= 1e-12 * xmax, "ncol=%d: x differs from ncol=%d's by %.3e (max |x| %.3e)", ncol,
+            NCOL_MAX, xdiff, xmax);
+      CHECK(mudiff <= 1e-12 * mumax, "ncol=%d: mu differs from ncol=%d's by %.3e (max |mu| %.3e)",
+            ncol, NCOL_MAX, mudiff, mumax);
+    } else
+      memcpy(x7, x, sizeof(double) * nf * NCOL_MAX), memcpy(mu7, mu, sizeof mu);
+    if (getenv("NH_VERBOSE"))
+      printf("solve_rows ncol=%d: |x - dense| %.1e of max |x|, |mu - dense| %.1e of max |mu|; "
+             "against ncol=%d: x %.1e, mu %.1e\n",
+             ncol, xerr / xmax, muerr / mumax, NCOL_MAX, xdiff / xmax, mudiff / mumax);
+  }
+  free(dof), free(A), free(bfull), free(bd), free(b), free(x), free(x7), free(xq), free(piv);
+}
+
 int main(void) {
   problem p = {0};
   CHECK_OK(nh_mesh_create_box(lo, hi, grid, &p.m));
@@ -479,6 +566,7 @@ int main(void) {
   test_data_change(&p);
   test_anchor(&p);
   test_front(&p);
+  test_solve_rows(&p);
   nh_refine_info_free(&info);
   nh_template_destroy(&t2);
   free(all), free(uh), free(Puh), free(uf), free(zf), free(z0);

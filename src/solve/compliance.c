@@ -539,7 +539,20 @@ void nh_system_add_reactions(const nh_system *s, double *b) {
 /* The dual of a constrained step (solve.h): the active rows' tissue parts
  * compacted into a row set of their own, W of it, and the pivoted Cholesky
  * factor of D W D (D = diag(W)^−½) for the multipliers; A factorised first
- * when the factor is not A's. */
+ * when the factor is not A's.
+ *
+ * The correction A⁻¹ J_tᵀ μ takes one of two routes, by the number m of
+ * active rows against the ncol right-hand sides:
+ *   m >= ncol: W by nh_system_compliance_add (restricted forward solves),
+ *     then A⁻¹ (J_tᵀ μ), a second solve of ncol columns;
+ *   m <  ncol: G = A⁻¹ J_tᵀ by one solve of m columns, W = J_t G and the
+ *     correction G μ (a dense n x m by m x ncol product).
+ * The second costs an m-column solve where the first costs an ncol-column
+ * one (the phantom's goal estimate: 36 duals, 3 to ~45 active rows); W =
+ * J_t G is then nearly free (m² sparse dot products), far below the
+ * compliance path. J_t G is symmetric only to round-off: its lower triangle
+ * is formed and mirrored (dpstrf reads the lower one; the scaling reads
+ * both). The two routes agree to round-off (tests/test_dwr_rows.c). */
 int nh_system_solve_rows(nh_system *s, const nh_rows *rows, const unsigned char *active, int ncol,
                          const double *b, double *x, double *mu_out, int *n_used) {
   const int n = s->n_free;
@@ -563,6 +576,9 @@ int nh_system_solve_rows(nh_system *s, const nh_rows *rows, const unsigned char 
   double *d = nh_calloc((size_t)m, sizeof(double));
   double *mu = nh_calloc((size_t)m * (size_t)ncol, sizeof(double));
   double *c = nh_calloc((size_t)m * (size_t)ncol, sizeof(double));
+  /* the second solve's right-hand sides and solutions: J_tᵀ μ and A⁻¹ J_tᵀ μ
+   * (ncol columns), or with m < ncol J_tᵀ and G = A⁻¹ J_tᵀ (m columns) */
+  const int direct = m < ncol;
   double *f = nh_calloc((size_t)n * (size_t)ncol, sizeof(double));
   double *y = nh_calloc((size_t)n * (size_t)ncol, sizeof(double));
   cholmod_sparse *Jt = NULL;
@@ -583,7 +599,20 @@ int nh_system_solve_rows(nh_system *s, const nh_rows *rows, const unsigned char 
     Jt = nh_rows_tissue_jt(s, &sub, mark);
     if (!Jt) rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: constrained dual (%d rows)", m);
   }
-  if (!rc) rc = nh_system_compliance_add(s, Jt, W);
+  if (!rc && direct) {
+    const int *Jp = Jt->p, *Ji = Jt->i;
+    const double *Jx = Jt->x;
+    for (int j = 0; j < m; j++) /* J_tᵀ dense (f was zeroed by calloc) */
+      for (int p = Jp[j]; p < Jp[j + 1]; p++) f[(size_t)n * j + Ji[p]] = Jx[p];
+    rc = nh_system_solve_many(s, m, f, y);
+    for (int j = 0; j < m && !rc; j++) /* W = J_t G, lower triangle, mirrored */
+      for (int i = j; i < m; i++) {
+        double v = 0.0;
+        for (int p = Jp[i]; p < Jp[i + 1]; p++) v += Jx[p] * y[(size_t)n * j + Ji[p]];
+        W[(size_t)j * m + i] = W[(size_t)i * m + j] = v;
+      }
+  } else if (!rc)
+    rc = nh_system_compliance_add(s, Jt, W);
   if (!rc) {
     const int *Jp = Jt->p, *Ji = Jt->i;
     const double *Jx = Jt->x;
@@ -611,12 +640,17 @@ int nh_system_solve_rows(nh_system *s, const nh_rows *rows, const unsigned char 
         double *mq = mu + (size_t)m * q;
         memset(mq, 0, sizeof(double) * (size_t)m);
         for (int i = 0; i < rank; i++) mq[piv[i] - 1] = d[piv[i] - 1] * c[(size_t)rank * q + i];
-        nh_rows_tissue_force(Jt, mq, f + (size_t)n * q, n);
+        if (!direct) nh_rows_tissue_force(Jt, mq, f + (size_t)n * q, n);
         for (int i = 0, k = 0; mu_out && i < rows->m; i++)
           if (!active || active[i]) mu_out[(size_t)rows->m * q + i] = mq[k++];
       }
-      rc = nh_system_solve_many(s, ncol, f, y);
-      for (size_t i = 0; !rc && i < (size_t)n * (size_t)ncol; i++) x[i] -= y[i];
+      if (direct) /* x −= G μ */
+        cblas_dgemm(CblasColMajor, CblasNoTrans, CblasNoTrans, n, ncol, m, -1.0, y, n, mu, m, 1.0,
+                    x, n);
+      else {
+        rc = nh_system_solve_many(s, ncol, f, y);
+        for (size_t i = 0; !rc && i < (size_t)n * (size_t)ncol; i++) x[i] -= y[i];
+      }
     }
   }
   if (!rc && n_used) *n_used = m;

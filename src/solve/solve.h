@@ -401,7 +401,9 @@ int nh_rows_widen(nh_rows *rows, int count);
  * with A the step's matrix and J_t the tissue part of the rows with
  * active[i] != 0 (active NULL: every row); the tools' parts are held (a
  * rigid tool). x = A⁻¹ b − A⁻¹ J_tᵀ μ with W μ = J_t A⁻¹ b,
- * W = J_t A⁻¹ J_tᵀ (nh_system_compliance_add), solved by a pivoted
+ * W = J_t A⁻¹ J_tᵀ (nh_system_compliance_add; with fewer active rows m
+ * than columns, J_t G and the correction G μ from G = A⁻¹ J_tᵀ, one solve
+ * of m columns instead of a second one of ncol), solved by a pivoted
  * Cholesky factorisation of the diagonally scaled W truncated at relative
  * pivots below 1e-12 (dependent rows: J_tᵀ μ is still unique, μ is not:
  * the truncated rows get 0). A is the matrix as the step left it, assembled
