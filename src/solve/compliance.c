@@ -548,11 +548,13 @@ void nh_system_add_reactions(const nh_system *s, double *b) {
  *   m <  ncol: G = A⁻¹ J_tᵀ by one solve of m columns, W = J_t G and the
  *     correction G μ (a dense n x m by m x ncol product).
  * The second costs an m-column solve where the first costs an ncol-column
- * one (the phantom's goal estimate: 36 duals, 3 to ~45 active rows); W =
- * J_t G is then nearly free (m² sparse dot products), far below the
- * compliance path. J_t G is symmetric only to round-off: its lower triangle
- * is formed and mirrored (dpstrf reads the lower one; the scaling reads
- * both). The two routes agree to round-off (tests/test_dwr_rows.c). */
+ * one (the phantom's goal estimate: 36 duals, 3 to ~50 active rows); W =
+ * J_t G is then nearly free, m² sparse dot products (the phantom's goal run:
+ * under 10e6 instructions where the compliance path took 110e6 on the same
+ * 29 calls, docs/performance.md). J_t G is symmetric only to round-off:
+ * its lower triangle is formed and mirrored (dpstrf reads the lower one;
+ * the scaling reads both). The two routes agree to round-off
+ * (tests/test_dwr_rows.c). */
 int nh_system_solve_rows(nh_system *s, const nh_rows *rows, const unsigned char *active, int ncol,
                          const double *b, double *x, double *mu_out, int *n_used) {
   const int n = s->n_free;
