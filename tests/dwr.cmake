@@ -12,3 +12,5 @@ nh_add_c_test(test_dwr_skull verify)
 nh_add_c_test(test_dwr_local verify)
 # adapt.marking.goals: the marked set of the goals' summed indicators and the union of each goal's own marking (tests/test_goal_marking.c).
 nh_add_c_test(test_goal_marking verify)
+# The fronts' errors in the goal estimate's pass: bitwise those of each front alone, the goals' unchanged (tests/test_dwr_fronts.c).
+nh_add_c_test(test_dwr_fronts verify)

@@ -253,6 +253,20 @@ typedef struct {
 /* The constraint data the next goal estimates' constraint-data term uses
  * (dwr.c, "Constraint data"); kept by pointer, NULL: no term. */
 void nh_adapt_set_constraint_data(nh_adapt *adapt, const nh_constraint_data *data);
+/* The fronts a goal estimate also estimates (dwr_front.c; docs/theory.md
+ * §6.6, "Anchoring"): in, n fronts and row[n], each front's first tip row
+ * among the step's rows (its disc's rows n1, n2, t); out, error[3 n], each
+ * front's e (m, nh_dwr_front_error). */
+typedef struct {
+  int n;
+  const int *row;
+  double *error;
+} nh_dwr_fronts;
+
+/* The fronts whose errors the next goal estimates also estimate, in the
+ * same pass (nh_dwr_result.fronts; their errors written to fronts->error);
+ * kept by pointer, NULL: none. */
+void nh_adapt_set_fronts(nh_adapt *adapt, nh_dwr_fronts *fronts);
 /* |E_p| per goal of the last goal estimate (m), or NULL (none for this mesh). */
 const double *nh_adapt_goal_errors(const nh_adapt *adapt);
 /* The signed E_pk (3 per goal, m) of the last goal estimate, or NULL. */
@@ -353,6 +367,10 @@ typedef struct {
   /* in (may be NULL: made afresh): the goals' functionals kept between
    * estimates (nh_goal_cache); the same numbers either way */
   nh_goal_cache *functionals;
+  /* in/out (may be NULL: none): the fronts whose errors the same pass
+   * estimates (dwr_front.c), each with the dual of its own rows; no
+   * marking indicator, no local dual */
+  nh_dwr_fronts *fronts;
 } nh_dwr_result;
 
 /* Goal-oriented estimate of the displacement at n_points points[3 each]
@@ -387,8 +405,9 @@ int nh_dwr_estimate_combined(nh_system *sys, const nh_rows *rows, double scale, 
  * estimate of the row's tissue part n_q · Σ w_a v_a (constrained dual,
  * geometry term with loads (may be NULL), constraint-data term with data
  * (may be NULL), the latter carrying the old front's anchoring error).
- * sys, rows, scale, u as nh_dwr_estimate. NH_ERR_INTERNAL (row out of
- * range), or fails as nh_dwr_estimate. */
+ * sys, rows, scale, u as nh_dwr_estimate. The front alone: a goal
+ * estimate gives the same e for its nh_dwr_result.fronts in its own pass.
+ * NH_ERR_INTERNAL (row out of range), or fails as nh_dwr_estimate. */
 int nh_dwr_front_error(nh_system *sys, const nh_rows *rows, double scale, const nh_mesh *mesh,
                        const nh_tissue *tissue, const nh_hanging *hanging, const double *u, int row,
                        const nh_geometry_loads *loads, const nh_constraint_data *data, double e[3]);

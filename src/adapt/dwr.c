@@ -158,9 +158,23 @@
  * kept between estimates (nh_goal_cache, keyed by key.c) and made again
  * only on a new mesh, points or radius; the same numbers either way.
  *
- * Workspace: the duals (3 per point, 3 per node each), the centre samples
- * and recovered nodal stresses of the 1 + 3 n_points fields (6 per cell or
- * node each), one value per leaf and field for the ordered sums. The cell
+ * Fronts (dwr_front.c; docs/theory.md §6.6, "Anchoring"). At a step
+ * whose tools' tips cut, each front's error comes from 3 functionals (its
+ * tip rows' tissue parts) whose duals hold rows of their own
+ * (nh_dwr_front_duals). With out->fronts they are estimated in the same
+ * pass as the goals: their duals follow the goals' through the centre
+ * samples, the recovery and the integrals, so the primal's share (its
+ * corotation, recovered stress, e_u and D⁻¹ e_u at the Gauss points, the
+ * geometry residual) is computed once per step. They have no marking
+ * indicator and no local dual. Every dual's terms involve that dual and
+ * the primal only (the recovery combines each field's values alone), so
+ * the goals' estimates are the same numbers with or without fronts, and
+ * each front's those of a pass of its own (nh_dwr_front_error).
+ *
+ * Workspace: the duals (3 per point and per front, 3 per node each), the
+ * centre samples and recovered nodal stresses of the primal and the duals
+ * (6 per cell or node and field), one value per leaf and dual for the
+ * ordered sums. The cell
  * loop runs in parallel (OpenMP); sums are taken in leaf order afterwards,
  * so results do not depend on the thread count. */
 #include "adapt/adapt_impl.h"
@@ -361,27 +375,27 @@ void nh_dwr_active_rows(const nh_rows *rows, unsigned char *active) {
   }
 }
 
-/* The constraint-data term of the nz duals z (header "Constraint data"),
+/* The constraint-data term of the nd duals z (header "Constraint data"),
  *   C_q = Σ_i (Λ_i δ(J z_q)_i − μ_qi δc_i / c_K),
  * μ the duals' multipliers (rows->m each, 0 on the rows a dual dropped;
- * followed by as much workspace), added to out->estimate and stored in
- * out->constraint (if not NULL); the tools' rows' part (their anchors'
- * errors) also in out->inherited (if not NULL). */
+ * followed by as much workspace), added to E[q] and, for the first nz,
+ * stored in out->constraint (if not NULL), the tools' rows' part (their
+ * anchors' errors) also in out->inherited (if not NULL). */
 static int nh_dwr_constraint_term(const nh_rows *rows, const double *z, double *mu,
-                                  const nh_constraint_data *data, double scale, int nz,
-                                  nh_dwr_result *out) {
+                                  const nh_constraint_data *data, double scale, int nd, int nz,
+                                  double *E, nh_dwr_result *out) {
   const int m = rows->m;
-  double *dz = mu + (size_t)m * nz;
-  int rc = data->linear(data->ctx, nz, z, dz);
+  double *dz = mu + (size_t)m * nd;
+  int rc = data->linear(data->ctx, nd, z, dz);
   if (rc) return NH_ERROR(rc, "goal estimate: the constraints' finer data failed");
-  for (int q = 0; q < nz; q++) {
+  for (int q = 0; q < nd; q++) {
     double s[2] = {0.0, 0.0}; /* the skull's and ties' rows; the tools' (inherited) */
     for (int i = 0; i < m; i++)
       s[rows->tool[i] >= 0] +=
           data->force[i] * dz[(size_t)m * q + i] - mu[(size_t)m * q + i] * data->change[i] / scale;
-    out->estimate[q] += s[0] + s[1];
-    if (out->constraint) out->constraint[q] = s[0] + s[1];
-    if (out->inherited) out->inherited[q] = s[1];
+    E[q] += s[0] + s[1];
+    if (q < nz && out->constraint) out->constraint[q] = s[0] + s[1];
+    if (q < nz && out->inherited) out->inherited[q] = s[1];
   }
   return NH_OK;
 }
@@ -415,37 +429,48 @@ int nh_dwr_duals(nh_system *sys, const nh_rows *rows, double scale, int n_nodes,
 /* The estimates E_q of nz functionals j (3 n_nodes each) and, for each group
  * of `group` consecutive functionals, the marking indicator
  * ‖e*_u‖_K (Σ_{q in group} ‖e*_{z_q}‖²_K)^½ (out->indicator, n_cells per
- * group); out->estimate receives the nz E_q, out->norm is not touched. */
+ * group); out->estimate receives the nz E_q, out->norm is not touched; with
+ * out->fronts, the fronts' errors in the same pass (header "Fronts"). */
 int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale, const nh_mesh *m,
                        const nh_tissue *t, const nh_hanging *h, const double *u, int nz, int group,
                        const double *j, const nh_dwr_goals *goals, nh_dwr_result *out) {
-  const int nn = m->n_nodes, nl = m->n_leaves, nfld = 1 + nz, ng = nz / group;
+  const int n_fronts = out->fronts ? out->fronts->n : 0;
+  const int nd = nz + 3 * n_fronts; /* the duals: the nz functionals', then 3 per front */
+  const int nn = m->n_nodes, nl = m->n_leaves, nfld = 1 + nd, ng = nz / group;
   const size_t n3 = 3 * (size_t)nn;
-  double *z = nh_calloc(n3 * (size_t)(nz ? nz : 1), sizeof(double));
+  double *z = nh_calloc(n3 * (size_t)(nd ? nd : 1), sizeof(double));
   double *samples =
       nh_calloc(6 * (size_t)nfld * (size_t)(m->n_cells ? m->n_cells : 1), sizeof(double));
   double *star = nh_calloc(6 * (size_t)nfld * (size_t)(nn ? nn : 1), sizeof(double));
-  double *cell_eps = nh_calloc((size_t)(nz ? nz : 1) * (size_t)(nl ? nl : 1), sizeof(double));
+  double *cell_eps = nh_calloc((size_t)(nd ? nd : 1) * (size_t)(nl ? nl : 1), sizeof(double));
   double *cell_err2 = nh_calloc((size_t)(nl ? nl : 1), sizeof(double));
   double *cell_norm2 = nh_calloc((size_t)(nl ? nl : 1), sizeof(double));
-  double *cell_geo = NULL;        /* nz per leaf: the geometry term (header "Geometry") */
+  double *cell_geo = NULL;        /* nd per leaf: the geometry term (header "Geometry") */
   double *mu = NULL;              /* the duals' multipliers (header "Constraint data") */
   unsigned char *replaced = NULL; /* per leaf: its term replaced by the local dual's */
   double *cell_loc = nh_calloc((size_t)(nz ? nz : 1), sizeof(double)), *free_mask = NULL;
+  double *E = nh_calloc((size_t)(nd ? nd : 1), sizeof(double)); /* every dual's estimate */
   int rc = NH_OK;
-  if (!z || !samples || !star || !cell_eps || !cell_err2 || !cell_norm2 || !cell_loc) {
-    rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: goal-oriented estimate (%d duals, %d nodes)", nz,
+  if (!z || !samples || !star || !cell_eps || !cell_err2 || !cell_norm2 || !cell_loc || !E) {
+    rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: goal-oriented estimate (%d duals, %d nodes)", nd,
                   nn);
     goto done;
   }
   const int with_data = out->data && rows && rows->m > 0;
-  if (with_data && !(mu = nh_calloc(2 * (size_t)rows->m * (size_t)nz, sizeof(double)))) {
+  if (with_data && !(mu = nh_calloc(2 * (size_t)rows->m * (size_t)nd, sizeof(double)))) {
     rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: the duals' multipliers (%d rows)", rows->m);
     goto done;
   }
-  if ((rc = nh_dwr_duals(sys, rows, scale, nn, nz, j, z, mu, &out->n_rows))) goto done;
+  out->n_rows = 0;
+  if (nz > 0 && (rc = nh_dwr_duals(sys, rows, scale, nn, nz, j, z, mu, &out->n_rows))) goto done;
+  for (int f = 0; f < n_fronts; f++) { /* each front's duals hold its own rows (dwr_front.c) */
+    const int q = nz + 3 * f;
+    if ((rc = nh_dwr_front_duals(sys, rows, scale, nn, out->fronts->row[f], z + n3 * q,
+                                 mu ? mu + (size_t)rows->m * q : NULL)))
+      goto done;
+  }
 
-    /* Centre samples: the primal's corotational stress, each dual's tangent stress. */
+  /* Centre samples: the primal's corotational stress, each dual's tangent stress. */
 #pragma omp parallel for schedule(static) if (nl >= NH_DWR_PARALLEL_MIN)
   for (int l = 0; l < nl; l++) {
     int c = m->leaves[l];
@@ -459,8 +484,8 @@ int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale, const 
     nh_hex_rotated_stress(R, d, G0, lambda, mu, gbar ? &theta : NULL, s);
     double RG0[24];
     nh_dwr_rotate_gradients(R, G0, RG0);
-    for (int q = 0; q < nz; q += 8)
-      nh_dwr_dual_stresses(z + n3 * q, n3, nz - q < 8 ? nz - q : 8, m->cells + 8 * c, RG0, lambda,
+    for (int q = 0; q < nd; q += 8)
+      nh_dwr_dual_stresses(z + n3 * q, n3, nd - q < 8 ? nd - q : 8, m->cells + 8 * c, RG0, lambda,
                            mu, gbar ? b : NULL, s + 6 * (1 + (size_t)q), 6);
   }
   if ((rc = nh_spr_recover_fields(m, t, h, nfld, samples, star))) goto done;
@@ -476,7 +501,7 @@ int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale, const 
   for (int c = 0; c < m->n_cells && out->indicator; c++)
     for (int p = 0; p < ng; p++) out->indicator[(size_t)m->n_cells * p + c] = 0.0;
   int bad_cell = -1, geo_rc = 0;
-  cell_geo = t->n_cut ? nh_calloc((size_t)nz * (size_t)(nl ? nl : 1), sizeof(double)) : NULL;
+  cell_geo = t->n_cut ? nh_calloc((size_t)nd * (size_t)(nl ? nl : 1), sizeof(double)) : NULL;
   if (t->n_cut && !cell_geo) {
     rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: the goal estimate's geometry term");
     goto done;
@@ -531,11 +556,11 @@ int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale, const 
       geo_rc = -cut;
       cut = 0;
     }
-    for (int q = 0; q < nz && cut; q++) {
+    for (int q = 0; q < nd && cut; q++) {
       double s = 0.0;
       for (int a = 0; a < 8; a++)
         for (int k = 0; k < 3; k++) s += z[n3 * q + 3 * (size_t)corner[a] + k] * rg[3 * a + k];
-      cell_geo[(size_t)nz * l + q] = 4.0 / 3.0 * s;
+      cell_geo[(size_t)nd * l + q] = 4.0 / 3.0 * s;
     }
     /* Rg, Rdiv and D⁻¹ e_u by point last (the 8 points' terms in one
      * pass), the recovered pressure errors of u (B-bar) */
@@ -545,22 +570,22 @@ int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale, const 
       for (int i = 0; i < 6; i++) ceuT[i][gp] = ceu[6 * gp + i];
       pu[gp] = (eu[6 * gp] + eu[6 * gp + 1] + eu[6 * gp + 2]) / 3.0;
     }
-    for (int p = 0; p < ng; p++) {
-      double zn2 = 0.0, gn2 = 0.0;
-      for (int k = 0; k < group; k++) {
-        int q = group * p + k;
-        double ze[24], eps, ezz;
-        nh_mesh_cell_coords(m, z + n3 * q, c, ze);
-        double tz = gbar ? nh_dwr_dilatation(ze, b) : 0.0;
-        nh_dwr_dual_terms(ze, RgT, RdivT, star + 6 * (1 + (size_t)q), 6 * (size_t)nfld, corner, NT,
-                          lambda, mu, gbar != NULL, tz, ceuT, pu, dev_u, detJ, &eps, &ezz);
-        cell_eps[(size_t)nz * l + q] = m->fill[c] * eps;
-        zn2 += m->fill[c] * ezz;
-        if (cut) gn2 += cell_geo[(size_t)nz * l + q] * cell_geo[(size_t)nz * l + q];
-      }
+    double zn2 = 0.0, gn2 = 0.0; /* the group's sums for its marking indicator */
+    for (int q = 0; q < nd; q++) {
+      double ze[24], eps, ezz;
+      nh_mesh_cell_coords(m, z + n3 * q, c, ze);
+      double tz = gbar ? nh_dwr_dilatation(ze, b) : 0.0;
+      nh_dwr_dual_terms(ze, RgT, RdivT, star + 6 * (1 + (size_t)q), 6 * (size_t)nfld, corner, NT,
+                        lambda, mu, gbar != NULL, tz, ceuT, pu, dev_u, detJ, &eps, &ezz);
+      cell_eps[(size_t)nd * l + q] = m->fill[c] * eps;
+      if (q >= nz) continue; /* the fronts' duals do not mark */
+      zn2 += m->fill[c] * ezz;
+      if (cut) gn2 += cell_geo[(size_t)nd * l + q] * cell_geo[(size_t)nd * l + q];
+      if ((q + 1) % group) continue;
       if (out->indicator)
-        out->indicator[(size_t)m->n_cells * p + c] =
+        out->indicator[(size_t)m->n_cells * (q / group) + c] =
             sqrt(fmax(cell_err2[l], 0.0) * fmax(zn2, 0.0)) + sqrt(gn2);
+      zn2 = gn2 = 0.0;
     }
   }
   if (geo_rc) {
@@ -573,12 +598,12 @@ int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale, const 
   }
   double sum_err = 0.0, sum_norm = 0.0;
   for (int q = 0; q < nz; q++) {
-    out->estimate[q] = 0.0;
     if (out->geometry) out->geometry[q] = 0.0;
     if (out->constraint) out->constraint[q] = 0.0;
     if (out->inherited) out->inherited[q] = 0.0;
   }
-  if (with_data && (rc = nh_dwr_constraint_term(rows, z, mu, out->data, scale, nz, out))) goto done;
+  if (with_data && (rc = nh_dwr_constraint_term(rows, z, mu, out->data, scale, nd, nz, E, out)))
+    goto done;
   /* where a goal's cell holds tool rows: the local enriched dual's term in
    * place of the patch's recovered terms (dwr_local.c) */
   out->local_applied = 0;
@@ -603,27 +628,31 @@ int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale, const 
                               z, goals->n_points, goals->points, goals->radius, goals->weights,
                               out->loads, cell_loc, replaced, &out->local_applied)))
     goto done;
-  for (int q = 0; q < nz; q++) {
-    double loc = out->local_applied ? cell_loc[q] : 0.0;
-    out->estimate[q] += loc;
-    if (out->local_term) out->local_term[q] = loc;
+  for (int q = 0; q < nd; q++) { /* the fronts' duals have no local term: 0 */
+    double loc = q < nz && out->local_applied ? cell_loc[q] : 0.0;
+    E[q] += loc;
+    if (q < nz && out->local_term) out->local_term[q] = loc;
   }
   for (int l = 0; l < nl; l++) {
     sum_err += cell_err2[l];
     sum_norm += cell_norm2[l];
     if (out->eta_cell) out->eta_cell[m->leaves[l]] = sqrt(fmax(cell_err2[l], 0.0));
-    for (int q = 0; q < nz; q++) {
-      double g = cell_geo ? cell_geo[(size_t)nz * l + q] : 0.0;
-      out->estimate[q] +=
-          (out->local_applied && replaced[l] ? 0.0 : cell_eps[(size_t)nz * l + q]) + g;
-      if (out->geometry) out->geometry[q] += g;
+    const int local = out->local_applied && replaced[l];
+    for (int q = 0; q < nd; q++) {
+      double g = cell_geo ? cell_geo[(size_t)nd * l + q] : 0.0;
+      E[q] += (q < nz && local ? 0.0 : cell_eps[(size_t)nd * l + q]) + g;
+      if (q < nz && out->geometry) out->geometry[q] += g;
     }
   }
-  for (int q = 0; q < nz; q++)
-    if (!isfinite(out->estimate[q])) {
-      rc = NH_ERROR(NH_ERR_NUMERIC, "goal estimate of functional %d is not finite", q);
+  for (int q = 0; q < nd; q++)
+    if (!isfinite(E[q])) {
+      rc = NH_ERROR(NH_ERR_NUMERIC, "goal estimate of %s %d is not finite",
+                    q < nz ? "functional" : "front functional", q < nz ? q : q - nz);
       goto done;
     }
+  if (nz > 0) memcpy(out->estimate, E, sizeof(double) * (size_t)nz);
+  for (int f = 0; f < n_fronts; f++)
+    nh_dwr_front_vector(rows, out->fronts->row[f], E + nz + 3 * f, out->fronts->error + 3 * f);
   if (!isfinite(sum_err) || !isfinite(sum_norm)) {
     rc =
         NH_ERROR(NH_ERR_NUMERIC, "SPR: the error estimate is not finite (eta^2 = %g, |u|_E^2 = %g)",
@@ -635,7 +664,7 @@ int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale, const 
 
 done:
   free(z), free(samples), free(star), free(cell_eps), free(cell_err2), free(cell_norm2);
-  free(cell_geo), free(mu), free(replaced), free(cell_loc), free(free_mask);
+  free(cell_geo), free(mu), free(replaced), free(cell_loc), free(free_mask), free(E);
   return rc;
 }
 

@@ -21,8 +21,13 @@
  * are the functionals J_q(v) = n_q · Σ_a w_a v_a (q = 0, 1, 2: the rows'
  * directions n1, n2, t, orthonormal, w the disc's node weights), estimated
  * by the goal machinery (nh_dwr_functionals: the constrained dual of the
- * step's active rows, recovered-error products, geometry and constraint
- * data terms), and e = Σ_q E_q n_q. The rows that hold the disc in the
+ * rows below, recovered-error products, geometry and constraint data
+ * terms), and e = Σ_q E_q n_q. The goal estimate of the step carries the
+ * fronts' duals alongside the goals' (nh_dwr_result.fronts), so that the
+ * primal's share (its corotation, recovered stress and Gauss-point errors)
+ * is computed once per step; each dual's terms are those of its own
+ * estimate, the same numbers as an estimate of the front alone
+ * (nh_dwr_front_error). The rows that hold the disc in the
  * dual (the lateral rows, the axial one when it sticks) make their own
  * functional's dual z = 0 with μ its unit vector: their E_q is then the
  * constraint-data term alone, −δc_q, the old front's anchoring error
@@ -40,16 +45,13 @@
 
 #include <stdlib.h>
 
-int nh_dwr_front_error(nh_system *sys, const nh_rows *rows, double scale, const nh_mesh *m,
-                       const nh_tissue *t, const nh_hanging *h, const double *u, int row,
-                       const nh_geometry_loads *loads, const nh_constraint_data *data,
-                       double e[3]) {
-  e[0] = e[1] = e[2] = 0.0;
+int nh_dwr_front_duals(nh_system *sys, const nh_rows *rows, double scale, int n_nodes, int row,
+                       double *z, double *mu) {
   NH_CHECK(rows && row >= 0 && row + 3 <= rows->m, NH_ERR_INTERNAL,
            "front error: rows %d..%d are not among the step's %d", row, row + 2,
            rows ? rows->m : 0);
-  const size_t n3 = 3 * (size_t)m->n_nodes;
-  double *j = nh_calloc(3 * n3, sizeof(double)), E[3] = {0};
+  const size_t n3 = 3 * (size_t)n_nodes;
+  double *j = nh_calloc(3 * n3, sizeof(double));
   if (!j) return NH_ERROR(NH_ERR_MEMORY, "out of memory: the front's functionals");
   for (int q = 0; q < 3; q++) {
     const int r = row + q;
@@ -72,12 +74,24 @@ int nh_dwr_front_error(nh_system *sys, const nh_rows *rows, double scale, const 
     held.law[i] = rows->law[i];
     if (held.law[i].kind == NH_ROW_FRICTION && i != row + 2) held.law[i].sliding = 1;
   }
-  nh_dwr_goals goals = {0, NULL, 0.0, NULL};
-  nh_dwr_result out = {.estimate = E, .loads = loads, .data = data};
-  int rc = nh_dwr_functionals(sys, &held, scale, m, t, h, u, 3, 3, j, &goals, &out);
+  int rc = nh_dwr_duals(sys, &held, scale, n_nodes, 3, j, z, mu, NULL);
   free(j), free(held.law);
-  if (rc) return rc;
+  return rc;
+}
+
+void nh_dwr_front_vector(const nh_rows *rows, int row, const double E[3], double e[3]) {
+  e[0] = e[1] = e[2] = 0.0;
   for (int q = 0; q < 3; q++)
     for (int k = 0; k < 3; k++) e[k] += E[q] * rows->dir[3 * (row + q) + k];
-  return NH_OK;
+}
+
+int nh_dwr_front_error(nh_system *sys, const nh_rows *rows, double scale, const nh_mesh *m,
+                       const nh_tissue *t, const nh_hanging *h, const double *u, int row,
+                       const nh_geometry_loads *loads, const nh_constraint_data *data,
+                       double e[3]) {
+  e[0] = e[1] = e[2] = 0.0;
+  nh_dwr_fronts front = {1, &row, e};
+  nh_dwr_goals goals = {0, NULL, 0.0, NULL};
+  nh_dwr_result out = {.loads = loads, .data = data, .fronts = &front};
+  return nh_dwr_functionals(sys, rows, scale, m, t, h, u, 0, 1, NULL, &goals, &out);
 }

@@ -60,6 +60,7 @@ struct nh_adapt {
   double tolerance;               /* m (0: none) */
   const nh_geometry_loads *loads; /* the geometry term's loads (may be NULL) */
   const nh_constraint_data *data; /* the constraint-data term's data (may be NULL) */
+  nh_dwr_fronts *fronts;          /* the fronts estimated with the goals (may be NULL) */
   double coarsen;                 /* fraction of the marking threshold (0: none) */
   int n_goals;                    /* goal points */
   double *goal_points;            /* 3 per goal */
@@ -188,6 +189,10 @@ void nh_adapt_set_constraint_data(nh_adapt *a, const nh_constraint_data *data) {
   a->data = data;
 }
 
+void nh_adapt_set_fronts(nh_adapt *a, nh_dwr_fronts *fronts) {
+  a->fronts = fronts;
+}
+
 /* Whether goal p is above the tolerance by the part of its last estimate
  * that refining this mesh can reduce: E_p without the tools' rows' part of
  * its constraint-data term, their anchors' errors, which were made at the
@@ -266,7 +271,8 @@ int nh_adapt_estimate_goal(nh_adapt *a, nh_system *sys, const nh_rows *rows, dou
                      .constraint = a->goal_cons,
                      .inherited = a->goal_inh,
                      .local = a->local_dual,
-                     .functionals = a->functionals};
+                     .functionals = a->functionals,
+                     .fronts = a->fronts};
   if (!combined) {
     NH_TRY(nh_dwr_estimate(sys, rows, scale, m, tissue, hanging, u, a->n_goals, a->goal_points,
                            a->radius, NULL, &r));

@@ -623,22 +623,6 @@ static int nh_sim_rows_linear(void *ctx, int n, const double *w, double *out) {
   return nh_contact_data_change(s->contact, s->mesh, s->u, n, w, NULL, out);
 }
 
-/* The anchoring error of the fronts whose tip cut in this step (docs/theory.md
- * §6.6, "Anchoring"): the goal estimate of their tip discs' mean
- * displacement (adapt/dwr_front.c), kept by the contact module (anchor.c)
- * for the constraint-data term of the later steps. */
-static int nh_sim_front_errors(nh_sim *s, const nh_rows *rows, double scale,
-                               const nh_geometry_loads *loads, const nh_constraint_data *data) {
-  int row[8], n = nh_contact_fronts(s->contact, row, 8);
-  for (int i = 0; i < n; i++) {
-    double e[3];
-    NH_TRY(nh_dwr_front_error(s->system, rows, scale, s->mesh, s->tissue, s->hanging, s->u, row[i],
-                              loads, data, e));
-    NH_TRY(nh_contact_set_front_error(s->contact, s->mesh, s->u, row[i], e));
-  }
-  return NH_OK;
-}
-
 /* The error estimate of this step's solution: SPR, or goal-oriented with the
  * step's factor (the coefficient of K in A: 1 static, hβ + h² dynamic). */
 static int nh_sim_estimate(nh_sim *s) {
@@ -678,12 +662,23 @@ static int nh_sim_estimate(nh_sim *s) {
     rc = nh_contact_data_change(s->contact, s->mesh, s->u, 0, NULL, dc, NULL);
   }
   nh_adapt_set_constraint_data(s->adapt, dc ? &data : NULL);
+  /* the anchoring error of the fronts whose tip cut in this step (§6.6,
+   * "Anchoring"): the goal estimate of their tip discs' mean displacement,
+   * in the same pass (adapt/dwr_front.c), kept by the contact module
+   * (anchor.c) for the constraint-data term of the later steps; every
+   * front's estimate sees the anchors' errors as the step found them */
+  int front_row[8];
+  double front_error[8][3];
+  nh_dwr_fronts fronts = {nh_contact_fronts(s->contact, front_row, 8), front_row, front_error[0]};
+  nh_adapt_set_fronts(s->adapt, fronts.n ? &fronts : NULL);
   if (!rc)
     rc = nh_adapt_estimate_goal(s->adapt, s->system, rows, scale, s->mesh, s->tissue, s->u,
                                 s->hanging, &s->eta, &s->eta_rel);
-  if (!rc && s->contact) rc = nh_sim_front_errors(s, rows, scale, &loads, dc ? &data : NULL);
+  for (int i = 0; i < fronts.n && !rc; i++)
+    rc = nh_contact_set_front_error(s->contact, s->mesh, s->u, front_row[i], front_error[i]);
   nh_adapt_set_geometry_loads(s->adapt, NULL);
   nh_adapt_set_constraint_data(s->adapt, NULL);
+  nh_adapt_set_fronts(s->adapt, NULL);
   free(buf), free(dc);
   return rc;
 }

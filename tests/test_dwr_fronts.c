@@ -1,0 +1,197 @@
+/* test_dwr_fronts.c — the fronts' errors estimated in the goal estimate's
+ * pass (adapt/dwr_front.c, nh_dwr_result.fronts) against each front
+ * estimated alone (nh_dwr_front_error) and the goals estimated without
+ * fronts.
+ *
+ * The block of test_dwr_rows (4 × 2 × 2 cells of 1 cm, clamped at x = 4 cm,
+ * B-bar) at a smooth state u, with eight rows: front A (rows 0–2 at one
+ * point along x, y, z: bilateral, bilateral, sticking friction), a
+ * sticking friction row (3), front B (rows 4–6 along an oblique
+ * orthonormal frame: pressing unilateral, bilateral, sliding friction) and
+ * a unilateral row that does not press (7); data changes, forces and a
+ * linearised change (δ(J w)_i = 0.01 n_i · w(P_i)) on every row, so the
+ * constraint-data term is not zero. Every dual's terms are its own (the
+ * duals meet only in sums over each dual's own terms), so:
+ *  1. a goal estimate of 2 points with the two fronts gives the goals'
+ *     estimates, indicators, η and η_rel of the estimate without fronts,
+ *     and each front's e of nh_dwr_front_error, bitwise (memcmp): 6 goal
+ *     duals and 6 fronts' duals, so front B's straddle the 8-dual blocks of
+ *     the centre stresses;
+ *  2. the same for the combined functional of the goals (one dual);
+ *  3. a front's dual treats every friction row but its own axial row as
+ *     sliding (the header of dwr_front.c): front B's e is bitwise the same
+ *     when row 3 slides, while the goals' estimates change (row 3 is in
+ *     their dual);
+ *  4. front A's rows all hold its dual: z = 0, μ = c_K e_q, so e = −(δc_0,
+ *     δc_1, δc_2) to round-off (test_dwr_rows, part 5); front B's e is not
+ *     zero and differs from −Σ_q δc_{4+q} n_q by more than 1 % (its
+ *     sliding axial row leaves a dual that is not zero).
+ * NH_VERBOSE=1 prints the numbers. */
+#include "check.h"
+#include "adapt/adapt.h"
+#include "fem/fem.h"
+#include "mesh/mesh.h"
+#include "solve/solve.h"
+
+#include <string.h>
+
+#include "dwr_support.h"
+
+#define RADIUS 5e-4
+#define NROWS  8
+
+static const double lo[3] = {0, 0, 0}, hi[3] = {0.04, 0.02, 0.02};
+static const int grid[3] = {4, 2, 2};
+static const double points[6] = {0.025, 0.010, 0.015, 0.015, 0.015, 0.005};
+static const double weights[6] = {0.7, -1.3, 0.2, -0.4, 1.1, 2.5};
+
+typedef struct {
+  const nh_mesh *m;
+  const nh_rows *rows;
+} linear_ctx;
+
+/* δ(J w)_i = 0.01 n_i · w(P_i) for each of the n fields w. */
+static int row_change(void *ctx, int n, const double *w, double *out) {
+  const linear_ctx *x = ctx;
+  const size_t n3 = 3 * (size_t)x->m->n_nodes;
+  for (int q = 0; q < n; q++)
+    for (int i = 0; i < x->rows->m; i++) {
+      double s = 0.0;
+      for (int a = 0; a < 8; a++)
+        for (int k = 0; k < 3; k++)
+          s += x->rows->N[8 * i + a] * x->rows->dir[3 * i + k] *
+               w[n3 * q + 3 * (size_t)x->rows->node[8 * i + a] + k];
+      out[(size_t)x->rows->m * q + i] = 0.01 * s;
+    }
+  return NH_OK;
+}
+
+static void make_rows(const nh_mesh *m, nh_rows *rows) {
+  static const double X[NROWS][3] = {
+      {0.015, 0.007, 0.012}, {0.015, 0.007, 0.012}, {0.015, 0.007, 0.012}, {0.011, 0.009, 0.004},
+      {0.027, 0.012, 0.009}, {0.027, 0.012, 0.009}, {0.027, 0.012, 0.009}, {0.006, 0.014, 0.017}};
+  static const double dir[NROWS][3] = {{1, 0, 0},     {0, 1, 0}, {0, 0, 1},      {0, 0, 1},
+                                       {0.6, 0, 0.8}, {0, 1, 0}, {-0.8, 0, 0.6}, {0, 1, 0}};
+  static const nh_row_kind kind[NROWS] = {NH_ROW_BILATERAL, NH_ROW_BILATERAL,  NH_ROW_FRICTION,
+                                          NH_ROW_FRICTION,  NH_ROW_UNILATERAL, NH_ROW_BILATERAL,
+                                          NH_ROW_FRICTION,  NH_ROW_UNILATERAL};
+  static const int sliding[NROWS] = {0, 0, 0, 0, 0, 0, 1, 0};
+  static const double lambda[NROWS] = {2e-8, -1e-8, 3e-8, 1e-8, 4e-8, 2e-8, 1e-8, 0.0};
+  for (int i = 0; i < NROWS; i++) {
+    int r = nh_rows_add(rows), c;
+    double xi[3], N[8];
+    CHECK(r == i, "row %d added as %d", i, r);
+    CHECK_OK(nh_mesh_locate(m, X[i], &c, xi));
+    nh_hex_shape(xi, N);
+    for (int a = 0; a < 8; a++)
+      rows->node[8 * r + a] = m->cells[8 * c + a], rows->N[8 * r + a] = N[a];
+    memcpy(rows->dir + 3 * r, dir[i], sizeof dir[i]);
+    rows->tool[r] = -1;
+    rows->law[r].kind = kind[i];
+    rows->law[r].sliding = sliding[i];
+    rows->lambda[r] = lambda[i];
+  }
+}
+
+/* A goal estimate (separate, or combined with `weights`) with the fronts
+ * (may be NULL) into E (6 or 1), ind (2 or 1 per cell), *r. */
+static void estimate(nh_system *s, const nh_rows *rows, const nh_mesh *m, const nh_tissue *t,
+                     const nh_hanging *h, const double *u, const nh_constraint_data *data,
+                     int combined, nh_dwr_fronts *fronts, double *E, double *ind,
+                     nh_dwr_result *r) {
+  double norm[2];
+  *r = (nh_dwr_result){
+      .estimate = E, .norm = norm, .indicator = ind, .data = data, .fronts = fronts};
+  if (combined)
+    CHECK_OK(
+        nh_dwr_estimate_combined(s, rows, 1.0, m, t, h, u, 2, points, RADIUS, NULL, weights, r));
+  else
+    CHECK_OK(nh_dwr_estimate(s, rows, 1.0, m, t, h, u, 2, points, RADIUS, NULL, r));
+}
+
+int main(void) {
+  nh_mesh *m = NULL;
+  nh_tissue *t = NULL;
+  unsigned char *fixed = NULL;
+  nh_hanging *h = NULL;
+  nh_system *s = NULL;
+  nh_rows rows = {0};
+  CHECK_OK(nh_mesh_create_box(lo, hi, grid, &m));
+  nh_material mat = {1.0e4, 0.3, 1000, NH_FORMULATION_BBAR};
+  CHECK_OK(dwr_block_system(m, &mat, &t, &fixed, &h, &s));
+  make_rows(m, &rows);
+  const int nn = m->n_nodes, nc = m->n_cells;
+  double *u = calloc(3 * (size_t)nn, sizeof(double));
+  for (int i = 0; i < nn; i++) { /* smooth, 0 on the clamp at x = 4 cm */
+    if (fixed[i]) continue;
+    const double *X = m->X + 3 * i, d = 0.04 - X[0];
+    u[3 * i] = 2e-4 * d * X[1] / 0.04, u[3 * i + 1] = -3e-4 * d * X[2] / 0.02;
+    u[3 * i + 2] = 1e-4 * d * (X[0] + X[1]) / 0.04;
+  }
+  double change[NROWS], force[NROWS];
+  for (int i = 0; i < NROWS; i++)
+    change[i] = 1e-6 * (i + 1) * (i % 2 ? -1 : 1), force[i] = 1e-3 * (i - 3);
+  linear_ctx lx = {m, &rows};
+  nh_constraint_data data = {.change = change, .force = force, .linear = row_change, .ctx = &lx};
+
+  double eA[3], eB[3];
+  CHECK_OK(nh_dwr_front_error(s, &rows, 1.0, m, t, h, u, 0, NULL, &data, eA));
+  CHECK_OK(nh_dwr_front_error(s, &rows, 1.0, m, t, h, u, 4, NULL, &data, eB));
+  double eB_data[3] = {0, 0, 0}, off = 0.0; /* front B's data term alone */
+  for (int q = 0; q < 3; q++)
+    for (int k = 0; k < 3; k++) eB_data[k] -= change[4 + q] * rows.dir[3 * (4 + q) + k];
+  for (int k = 0; k < 3; k++) {
+    CHECK_CLOSE(eA[k], -change[k], 1e-9 * fabs(change[k]), "held front A: e = -dc");
+    off = fmax(off, fabs(eB[k] - eB_data[k]));
+  }
+  CHECK(off > 0.01 * sqrt(dwr_dot(3, eB_data, eB_data)),
+        "front B: e = (%g, %g, %g) is its data term alone", eB[0], eB[1], eB[2]);
+  if (getenv("NH_VERBOSE"))
+    printf("e_A = (%.6e, %.6e, %.6e), e_B = (%.6e, %.6e, %.6e)\n", eA[0], eA[1], eA[2], eB[0],
+           eB[1], eB[2]);
+
+  for (int combined = 0; combined < 2; combined++) { /* parts 1 and 2 */
+    const int ne = combined ? 1 : 6, ni = combined ? 1 : 2;
+    double E0[6], E1[6], *ind0 = calloc((size_t)(2 * nc), sizeof(double));
+    double *ind1 = calloc((size_t)(2 * nc), sizeof(double)), err[6];
+    int row[2] = {0, 4};
+    nh_dwr_fronts fronts = {2, row, err};
+    nh_dwr_result r0, r1;
+    estimate(s, &rows, m, t, h, u, &data, combined, NULL, E0, ind0, &r0);
+    estimate(s, &rows, m, t, h, u, &data, combined, &fronts, E1, ind1, &r1);
+    const char *what = combined ? "combined" : "separate";
+    CHECK(!memcmp(E0, E1, sizeof(double) * ne), "%s: the goals' estimates changed with fronts",
+          what);
+    CHECK(!memcmp(ind0, ind1, sizeof(double) * (size_t)(ni * nc)),
+          "%s: the goals' indicators changed with fronts", what);
+    CHECK(!memcmp(&r0.eta, &r1.eta, sizeof r0.eta) &&
+              !memcmp(&r0.eta_rel, &r1.eta_rel, sizeof r0.eta_rel),
+          "%s: eta %.17g / %.17g, eta_rel %.17g / %.17g", what, r0.eta, r1.eta, r0.eta_rel,
+          r1.eta_rel);
+    CHECK(r0.n_rows == r1.n_rows && r0.n_rows == 6, "%s: %d and %d rows in the goals' duals, not 6",
+          what, r0.n_rows, r1.n_rows);
+    CHECK(!memcmp(err, eA, sizeof eA), "%s: front A's e (%.17g, %.17g, %.17g) is not its own", what,
+          err[0], err[1], err[2]);
+    CHECK(!memcmp(err + 3, eB, sizeof eB), "%s: front B's e (%.17g, %.17g, %.17g) is not its own",
+          what, err[3], err[4], err[5]);
+    free(ind0), free(ind1);
+  }
+
+  /* part 3: row 3 sliding leaves front B's dual as it was, not the goals' */
+  double E0[6], E1[6], eB1[3];
+  nh_dwr_result r;
+  estimate(s, &rows, m, t, h, u, &data, 0, NULL, E0, NULL, &r);
+  rows.law[3].sliding = 1;
+  estimate(s, &rows, m, t, h, u, &data, 0, NULL, E1, NULL, &r);
+  CHECK_OK(nh_dwr_front_error(s, &rows, 1.0, m, t, h, u, 4, NULL, &data, eB1));
+  CHECK(!memcmp(eB, eB1, sizeof eB), "front B's e depends on friction row 3's state");
+  CHECK(memcmp(E0, E1, sizeof E0), "the goals' estimates do not see friction row 3");
+
+  nh_rows_free(&rows);
+  nh_system_destroy(&s);
+  nh_hanging_destroy(&h);
+  nh_tissue_destroy(&t);
+  nh_mesh_destroy(&m);
+  free(fixed), free(u);
+  return nh_test_failures ? 1 : 0;
+}
