@@ -27,8 +27,8 @@
  * primal's share (its corotation, recovered stress and Gauss-point errors)
  * is computed once per step; each dual's terms are those of its own
  * estimate, the same numbers as an estimate of the front alone
- * (nh_dwr_front_error). The rows that hold the disc in the
- * dual (the lateral rows, the axial one when it sticks) make their own
+ * (nh_dwr_front_error). The rows that hold the disc in the dual (the
+ * lateral rows, the axial one when it sticks) make their own
  * functional's dual z = 0 with μ its unit vector: their E_q is then the
  * constraint-data term alone, −δc_q, the old front's anchoring error
  * carried to the new front; the cutting row (sliding: not in the dual)
