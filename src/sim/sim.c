@@ -1132,6 +1132,8 @@ int nh_sim_step(nh_sim *s) {
   r.resolve = r.adapt_now && (sc->adapt.resolve > 0 || nh_sim_resolves_tip(s));
   r.inside = nh_sim_tools_inside(s);
   NH_TRY(nh_sim_predict(s, &r));
+  /* the goal estimate factorises A at the step's solution (its duals) */
+  nh_system_expect_factor_later(s->system, r.adapt_now && sc->adapt.estimator == NH_ESTIMATOR_GOAL);
   int rc = nh_sim_solve(s, r.t_new, &r.st);
   const double t_solved = nh_time_now();
   /* what the solver's phases leave of the step so far: the tools' part */

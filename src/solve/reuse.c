@@ -29,9 +29,14 @@
  *     a two-level preconditioner), which serves under the same rules while
  *     it pays; with constraint rows, it serves while W₀ = J B Jᵀ (one
  *     application per row) costs less than a factorisation;
- *   - the renewal rule of nh_system_account asks for it;
- *   - the factor is NH_REFACTOR_MAX_AGE steps old (a schedule that bounds
- *     drift on long quiet runs);
+ *   - the renewal rule of nh_system_account asks for it, or the factor is
+ *     NH_REFACTOR_MAX_AGE steps old (a schedule that bounds drift on long
+ *     quiet runs), unless the step's solution is to be factorised after it
+ *     (nh_system_expect_factor_later: the goal estimate's duals) and the
+ *     factor is this mesh's own: that factorisation renews the cycle, so
+ *     one at the start would be a second in the step; one more step with the
+ *     factor costs about the last step's few PCG iterations instead (and
+ *     factorises after all if PCG fails);
  *   - hanging-node rows are enforced by multipliers (compliance.c builds
  *     their W from the factor, exactly).
  * An iteration of the static Newton (nh_solve_static, NH_FACTOR_NEWTON)
@@ -87,8 +92,12 @@ int nh_system_factor_or_reuse(nh_system *s, const nh_integrator *in, nh_factor_r
   if (rule == NH_FACTOR_NEWTON) {
     need = !s->factor_current; /* lazy tangents may have left A as it was */
   } else {
-    need = !in->reuse || (!s->L && !s->inh) || s->n_rows > 0 || s->refactor_due ||
-           s->factor_age >= NH_REFACTOR_MAX_AGE;
+    /* a factorisation at the step's solution renews the cycle anyway: with
+     * this mesh's own factor, the step does not factorise at its start too
+     * (an inherited one, weaker, still does) */
+    const int renew =
+        (s->refactor_due || s->factor_age >= NH_REFACTOR_MAX_AGE) && !(s->factor_follows && s->L);
+    need = !in->reuse || (!s->L && !s->inh) || s->n_rows > 0 || renew;
     /* an inherited factor (inherit.c) builds W₀ by one application per
      * constraint row: with many rows a factorisation is cheaper */
     if (!need && !s->L &&
@@ -222,6 +231,10 @@ int nh_system_factor_later(nh_system *s) {
   s->cycle_steps = 1;
   s->refactor_due = 0;
   return NH_OK;
+}
+
+void nh_system_expect_factor_later(nh_system *s, int yes) {
+  s->factor_follows = yes;
 }
 
 int nh_system_take_later_factorisations(nh_system *s) {

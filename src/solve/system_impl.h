@@ -49,6 +49,10 @@ struct nh_system {
   /* factorisations after the step (nh_system_solve_rows: the goal
    * estimate's duals), until nh_system_take_later_factorisations */
   int later_factorised;
+  /* nh_system_expect_factor_later: this step's solution will be factorised
+   * (the goal estimate's duals), which renews the cycle; a renewal due at
+   * the step's start is left to it */
+  int factor_follows;
   /* Across a mesh change (inherit.c): the old mesh's factor extended to the
    * new unknowns, the preconditioner while L is NULL; rows_hint: the
    * constraint rows of the coming step (coupled.c), whose W₀ it would cost */
