@@ -847,6 +847,8 @@ static int nh_sim_resolve(nh_sim *s, double t_new, nh_step_stats *st, int *resol
     if ((rc = nh_sim_solve(s, t_new, &again)) || (rc = nh_sim_estimate(s))) break;
     st->t_assemble += again.t_assemble, st->t_factor += again.t_factor;
     st->t_solve += again.t_solve, st->t_constraints += again.t_constraints;
+    /* the re-solve's factorisations and its estimate's (the next step's count otherwise) */
+    st->factorised += again.factorised + nh_system_take_later_factorisations(s->system);
     st->iterations = again.iterations, st->residual = again.residual;
     st->residual_floor = again.residual_floor;
     (*resolves)++;
