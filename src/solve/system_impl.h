@@ -58,6 +58,11 @@ struct nh_system {
    * constraint rows of the coming step (coupled.c), whose W₀ it would cost */
   struct nh_inherited *inh;
   int rows_hint;
+  /* the PCG iterations of the last step that solved with an inherited
+   * factor (0: none yet), carried from system to system across mesh
+   * changes: the gate's estimate of what the next one costs (reuse.c);
+   * inh_step: this step solves with it (nh_system_account records it) */
+  int inherit_its, inh_step;
   cholmod_factor *L_aside; /* benchmarks: the factor timed aside (NH_TIME_FACTOR) */
   /* What A was assembled from (u, and cM, cK), at the last assembly and at
    * the one the factor L factorises: a continued run assembles and factorises
