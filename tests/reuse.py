@@ -27,7 +27,9 @@ That factorisation renews the factor's cycle, so a step estimated with the
 goal estimator solves with its mesh's own factor even when the renewal rule
 asks for a factorisation at its start (reuse.c): each estimated step that
 was not re-solved makes at most one factorisation (main's rule made two at
-steps 32 and 36 of this case, the renewal's and the duals').
+steps 32 and 36 of this case, the renewal's and the duals'; an estimated
+step that starts on an inherited factor may still make two, which this
+case's do not: its mesh changes follow estimates, 4 steps apart).
 
     reuse.py [CASE ...]   the named cases only (default: all)
 """

@@ -33,11 +33,11 @@
  *   - the renewal rule of nh_system_account asks for it, or the factor is
  *     NH_REFACTOR_MAX_AGE steps old (a schedule that bounds drift on long
  *     quiet runs), unless the step's solution is to be factorised after it
- *     (nh_system_expect_factor_later: the goal estimate's duals) and the
- *     factor is this mesh's own: that factorisation renews the cycle, so
- *     one at the start would be a second in the step; one more step with the
- *     factor costs about the last step's few PCG iterations instead (and
- *     factorises after all if PCG fails);
+ *     (nh_system_expect_factor_later: the goal estimate's duals), the step
+ *     is dynamic and the factor is this mesh's own: that factorisation
+ *     renews the cycle, so one at the start would be a second in the step;
+ *     one more step with the factor costs about the last step's few PCG
+ *     iterations instead (and factorises after all if PCG fails);
  *   - hanging-node rows are enforced by multipliers (compliance.c builds
  *     their W from the factor, exactly).
  * An iteration of the static Newton (nh_solve_static, NH_FACTOR_NEWTON)
@@ -94,10 +94,11 @@ int nh_system_factor_or_reuse(nh_system *s, const nh_integrator *in, nh_factor_r
     need = !s->factor_current; /* lazy tangents may have left A as it was */
   } else {
     /* a factorisation at the step's solution renews the cycle anyway: with
-     * this mesh's own factor, the step does not factorise at its start too
-     * (an inherited one, weaker, still does) */
-    const int renew =
-        (s->refactor_due || s->factor_age >= NH_REFACTOR_MAX_AGE) && !(s->factor_follows && s->L);
+     * this mesh's own factor, a dynamic step does not factorise at its start
+     * too (an inherited one, weaker, still does; a quasi-static step's
+     * Newton iterations each come here, and would defer it many times) */
+    const int later = s->factor_follows && s->L && !in->quasi_static;
+    const int renew = (s->refactor_due || s->factor_age >= NH_REFACTOR_MAX_AGE) && !later;
     need = !in->reuse || (!s->L && !s->inh) || s->n_rows > 0 || renew;
     /* an inherited factor (inherit.c) costs one application per constraint
      * row (W₀) and its PCG iterations, as many as the last step that solved
