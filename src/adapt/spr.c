@@ -289,8 +289,15 @@ static int nh_spr_fit_weights(int n, const double *points, const double x0[3], d
 /* out[k] = v̄ + Σ_i c_i (v_i − v̄) for the m components of the samples
  * values[m id_i + k], id_i = cells[i] (or i if cells is NULL). The samples
  * are read row by row (a sample's m components are contiguous; the goal
- * estimate recovers 6 (1 + 36) of them at once), each component's sums
- * taken over i in order as a per-component loop would: the same bits. */
+ * estimate recovers 6 (1 + 36) of them at once). SPR's own 6 components
+ * (m = 6 with cells, every step of an SPR run) take v̄ first, then the fit,
+ * in two passes. Any other m takes one pass with per-sample weights:
+ *   v̄ + Σ_i c_i (v_i − v̄) = Σ_i w_i v_i,  w_i = c_i + (1 − Σ_j c_j) / n
+ * (Σ c_j = 0 in exact arithmetic, as Σ y_i = 0; kept so that the identity
+ * holds for the c as computed): half the reads of the samples. The two
+ * forms differ at round-off, about eps (1 + Σ |c_i|) relative to the
+ * largest |v_i|, where Σ c_i² = y0ᵀ C⁻¹ y0 = leverage − 1/n, so
+ * Σ |c_i| <= √(n NH_SPR_MAX_LEVERAGE). */
 NH_ADAPT_VECTOR_CLONES
 static void nh_spr_fit_combine(int n, const int *cells, const double *c, int m,
                                const double *values, double *out) {
@@ -309,19 +316,17 @@ static void nh_spr_fit_combine(int n, const int *cells, const double *c, int m,
     for (int k = 0; k < 6; k++) out[k] = vbar[k] + fit[k];
     return;
   }
+  double csum = 0.0;
+  for (int i = 0; i < n; i++) csum += c[i];
+  const double a = (1.0 - csum) / n;
   for (int k0 = 0; k0 < m; k0 += CHUNK) {
     const int mk = m - k0 < CHUNK ? m - k0 : CHUNK;
-    double vbar[CHUNK] = {0}, fit[CHUNK] = {0};
+    double fit[CHUNK] = {0};
     for (int i = 0; i < n; i++) {
-      const double *v = values + (size_t)m * (cells ? cells[i] : i) + k0;
-      for (int k = 0; k < mk; k++) vbar[k] += v[k];
+      const double *v = values + (size_t)m * (cells ? cells[i] : i) + k0, w = c[i] + a;
+      for (int k = 0; k < mk; k++) fit[k] += w * v[k];
     }
-    for (int k = 0; k < mk; k++) vbar[k] /= n;
-    for (int i = 0; i < n; i++) {
-      const double *v = values + (size_t)m * (cells ? cells[i] : i) + k0;
-      for (int k = 0; k < mk; k++) fit[k] += c[i] * (v[k] - vbar[k]);
-    }
-    for (int k = 0; k < mk; k++) out[k0 + k] = vbar[k] + fit[k];
+    for (int k = 0; k < mk; k++) out[k0 + k] = fit[k];
   }
 }
 

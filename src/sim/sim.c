@@ -842,6 +842,8 @@ static int nh_sim_resolve(nh_sim *s, double t_new, nh_step_stats *st, int *resol
     if ((rc = nh_sim_solve(s, t_new, &again)) || (rc = nh_sim_estimate(s))) break;
     st->t_assemble += again.t_assemble, st->t_factor += again.t_factor;
     st->t_solve += again.t_solve, st->t_constraints += again.t_constraints;
+    /* the re-solve's factorisations and its estimate's (the next step's count otherwise) */
+    st->factorised += again.factorised + nh_system_take_later_factorisations(s->system);
     st->iterations = again.iterations, st->residual = again.residual;
     st->residual_floor = again.residual_floor;
     (*resolves)++;
@@ -1127,6 +1129,8 @@ int nh_sim_step(nh_sim *s) {
   r.resolve = r.adapt_now && (sc->adapt.resolve > 0 || nh_sim_resolves_tip(s));
   r.inside = nh_sim_tools_inside(s);
   NH_TRY(nh_sim_predict(s, &r));
+  /* the goal estimate factorises A at the step's solution (its duals) */
+  nh_system_expect_factor_later(s->system, r.adapt_now && sc->adapt.estimator == NH_ESTIMATOR_GOAL);
   int rc = nh_sim_solve(s, r.t_new, &r.st);
   const double t_solved = nh_time_now();
   /* what the solver's phases leave of the step so far: the tools' part */

@@ -145,6 +145,7 @@ static int nh_inherit_block(nh_system *s, nh_inherited *h) {
 }
 
 int nh_system_inherit(nh_system *s, nh_system *old, const nh_node_transfer *t) {
+  if (old) s->inherit_its = old->inherit_its; /* what the next mesh change expects */
   if (!old || !old->L || old->inh || old->n_rows > 0 || s->n_rows > 0 || !t ||
       t->n_old != old->n_nodes || t->n_new != s->n_nodes)
     return NH_OK; /* nothing to inherit: the first step factorises */

@@ -27,11 +27,17 @@
  *     unless it inherited the factor of the mesh before a refinement or
  *     coarsening (inherit.c: the old factor extended to the new unknowns,
  *     a two-level preconditioner), which serves under the same rules while
- *     it pays; with constraint rows, it serves while W₀ = J B Jᵀ (one
- *     application per row) costs less than a factorisation;
- *   - the renewal rule of nh_system_account asks for it;
- *   - the factor is NH_REFACTOR_MAX_AGE steps old (a schedule that bounds
- *     drift on long quiet runs);
+ *     it pays, and while W₀ = J B Jᵀ (one application per constraint row)
+ *     and as many PCG iterations as the last step with an inherited factor
+ *     made (carried across mesh changes) cost less than a factorisation;
+ *   - the renewal rule of nh_system_account asks for it, or the factor is
+ *     NH_REFACTOR_MAX_AGE steps old (a schedule that bounds drift on long
+ *     quiet runs), unless the step's solution is to be factorised after it
+ *     (nh_system_expect_factor_later: the goal estimate's duals), the step
+ *     is dynamic and the factor is this mesh's own: that factorisation
+ *     renews the cycle, so one at the start would be a second in the step;
+ *     one more step with the factor costs about the last step's few PCG
+ *     iterations instead (and factorises after all if PCG fails);
  *   - hanging-node rows are enforced by multipliers (compliance.c builds
  *     their W from the factor, exactly).
  * An iteration of the static Newton (nh_solve_static, NH_FACTOR_NEWTON)
@@ -87,17 +93,26 @@ int nh_system_factor_or_reuse(nh_system *s, const nh_integrator *in, nh_factor_r
   if (rule == NH_FACTOR_NEWTON) {
     need = !s->factor_current; /* lazy tangents may have left A as it was */
   } else {
-    need = !in->reuse || (!s->L && !s->inh) || s->n_rows > 0 || s->refactor_due ||
-           s->factor_age >= NH_REFACTOR_MAX_AGE;
-    /* an inherited factor (inherit.c) builds W₀ by one application per
-     * constraint row: with many rows a factorisation is cheaper */
+    /* a factorisation at the step's solution renews the cycle anyway: with
+     * this mesh's own factor, a dynamic step does not factorise at its start
+     * too (an inherited one, weaker, still does; a quasi-static step's
+     * Newton iterations each come here, and would defer it many times) */
+    const int later = s->factor_follows && s->L && !in->quasi_static;
+    const int renew = (s->refactor_due || s->factor_age >= NH_REFACTOR_MAX_AGE) && !later;
+    need = !in->reuse || (!s->L && !s->inh) || s->n_rows > 0 || renew;
+    /* an inherited factor (inherit.c) costs one application per constraint
+     * row (W₀) and its PCG iterations, as many as the last step that solved
+     * with one made (inherit_its): when those cost more than a
+     * factorisation, factorise */
     if (!need && !s->L &&
-        (double)s->rows_hint * s->flops_iteration * nh_solve_flop_cost(s->flops_factor) >
+        (double)(s->rows_hint + s->inherit_its) * s->flops_iteration *
+                nh_solve_flop_cost(s->flops_factor) >
             s->flops_factor)
       need = 1;
     if (!need && !s->L) {
       NH_TRY(nh_inherit_ready(s)); /* the new unknowns' block, once */
       need = !s->inh;
+      s->inh_step = !need;
     }
     /* already the factor of this A (lazy tangents may keep A): reuse takes it;
      * `every` factorises at every step, as asked */
@@ -205,6 +220,8 @@ void nh_system_account(nh_system *s, const nh_step_stats *st) {
   const double rows_w = !s->L && s->inh ? (double)s->rows_hint * s->flops_iteration : 0.0;
   const double extra =
       (streamed + rows_w) * nh_solve_flop_cost(s->flops_factor) + st->correction_flops_dense;
+  if (s->inh_step) /* what the inherited preconditioner took (inherit_its) */
+    s->inherit_its = st->pcg_iterations, s->inh_step = 0;
   if (s->factor_age == 0) {
     s->cycle_cost = s->flops_factor;
     s->cycle_steps = 1;
@@ -222,6 +239,10 @@ int nh_system_factor_later(nh_system *s) {
   s->cycle_steps = 1;
   s->refactor_due = 0;
   return NH_OK;
+}
+
+void nh_system_expect_factor_later(nh_system *s, int yes) {
+  s->factor_follows = yes;
 }
 
 int nh_system_take_later_factorisations(nh_system *s) {
@@ -273,9 +294,13 @@ void nh_system_reuse_save(const nh_system *s, nh_bytes *b) {
    * a continued run takes it where the uninterrupted one does */
   int32_t w0[2] = {s->L && s->w0 && s->w0_serial == s->factor_serial ? s->w0_m : -1, s->w0_slots};
   nh_bytes_put(b, w0, sizeof w0);
-  if (w0[0] < 0) return;
-  nh_bytes_put(b, s->w0_key, sizeof(int) * (size_t)s->w0_slots);
-  nh_bytes_put(b, s->w0, sizeof(double) * (size_t)s->w0_m * (size_t)s->w0_m);
+  if (w0[0] >= 0) {
+    nh_bytes_put(b, s->w0_key, sizeof(int) * (size_t)s->w0_slots);
+    nh_bytes_put(b, s->w0, sizeof(double) * (size_t)s->w0_m * (size_t)s->w0_m);
+  }
+  /* the inherited factor's last iterations: the next mesh change decides by them */
+  int32_t its = s->inherit_its;
+  nh_bytes_put(b, &its, sizeof its);
 }
 
 /* The kept W₀ of a saved state (nothing in states written before it was
@@ -343,7 +368,11 @@ int nh_system_reuse_load(nh_system *s, const unsigned char *data, size_t size, i
   else
     s->factor_current = 0;
   NH_TRY(nh_reuse_load_w0(s, &r));
-  NH_CHECK(r.p == r.end, NH_ERR_INPUT, "the checkpoint's solver state is malformed");
+  int32_t its = 0; /* not in states written before it was kept */
+  if (r.p != r.end) nh_bytes_get(&r, &its, sizeof its);
+  NH_CHECK(r.p == r.end && !r.short_read && its >= 0, NH_ERR_INPUT,
+           "the checkpoint's solver state is malformed");
+  s->inherit_its = its;
   s->factor_age = head[2];
   s->refactor_due = head[3];
   s->cycle_steps = steps;

@@ -421,6 +421,13 @@ int nh_system_solve_rows(nh_system *sys, const nh_rows *rows, const unsigned cha
 /* The factorisations nh_system_solve_rows made since the last call, and
  * reset the count. */
 int nh_system_take_later_factorisations(nh_system *sys);
+/* Whether the coming step's solution will be factorised after the step
+ * (yes: the goal estimate's duals, nh_system_solve_rows, follow it). That
+ * factorisation renews the cycle of the renewal rule, so a step told so
+ * solves with its own mesh's factor, by PCG, when the rule (or the factor's
+ * age) asks for a renewal at its start, instead of factorising twice
+ * (reuse.c). Holds until called again. */
+void nh_system_expect_factor_later(nh_system *sys, int yes);
 
 /* A tool in the coupled step: its beam and the prescribed base velocity at
  * the end of the step (linear, angular). */

@@ -49,11 +49,20 @@ struct nh_system {
   /* factorisations after the step (nh_system_solve_rows: the goal
    * estimate's duals), until nh_system_take_later_factorisations */
   int later_factorised;
+  /* nh_system_expect_factor_later: this step's solution will be factorised
+   * (the goal estimate's duals), which renews the cycle; a renewal due at
+   * the step's start is left to it */
+  int factor_follows;
   /* Across a mesh change (inherit.c): the old mesh's factor extended to the
    * new unknowns, the preconditioner while L is NULL; rows_hint: the
    * constraint rows of the coming step (coupled.c), whose W₀ it would cost */
   struct nh_inherited *inh;
   int rows_hint;
+  /* the PCG iterations of the last step that solved with an inherited
+   * factor (0: none yet), carried from system to system across mesh
+   * changes: the gate's estimate of what the next one costs (reuse.c);
+   * inh_step: this step solves with it (nh_system_account records it) */
+  int inherit_its, inh_step;
   cholmod_factor *L_aside; /* benchmarks: the factor timed aside (NH_TIME_FACTOR) */
   /* What A was assembled from (u, and cM, cK), at the last assembly and at
    * the one the factor L factorises: a continued run assembles and factorises
