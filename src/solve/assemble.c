@@ -101,7 +101,9 @@ static void nh_expand(const nh_system *s, int l, const double *Ae, double *B, do
   const double *w = s->nz_w;
   int n_first = 0;
   for (int z = lo; z < hi; z++) n_first += first[z];
-  /* a node without a nonzero (none in practice): zero */
+  /* a node without a nonzero: zero. It happens: an aggregated node's
+   * extrapolated weights (mesh/hanging.c) can vanish or cancel, as at a cut
+   * leaf of dbs-skull.yaml at step 4 */
   for (int q = 0; q < k && n_first < k; q++) {
     int seen = 0;
     for (int z = lo; z < hi; z++) seen |= node[z] == q;
