@@ -31,7 +31,9 @@
  * small factorisation (the adaptive phantom's 700-1300 unknowns) went to
  * those wake-ups. OMP_THREAD_LIMIT caps every team, CHOLMOD's too, at the
  * threads asked for (OMP_NUM_THREADS, else the cores); the loops it splits
- * write disjoint entries, so the factor is bitwise the same.
+ * write disjoint entries, so the factor is bitwise the same. Within that
+ * cap a default run's team of two still woke for every loop, so the
+ * factorisation runs them on one thread (nh_cholmod_factorize).
  * Kernels: OpenBLAS chooses its kernels by the CPU's model name; on a
  * model it does not know (a virtual machine's CPUID naming a generic
  * "Intel Xeon Processor", as on the machine of docs/performance.md,

@@ -8,6 +8,11 @@ nh_add_py_test(newton_dynamic verify newton_dynamic.py)
 nh_add_c_test(test_patch verify)
 nh_add_c_test(test_locking verify)
 nh_add_c_test(test_parallel unit)
+# CHOLMOD's own OpenMP teams inside a factorisation run on one thread
+# (solve/cholesky.c); the test counts the process's threads, so it needs
+# teams of 2 allowed.
+nh_add_c_test(test_cholmod_teams unit)
+set_property(TEST test_cholmod_teams APPEND PROPERTY ENVIRONMENT "OMP_NUM_THREADS=2;OMP_THREAD_LIMIT=2")
 nh_add_c_test(test_lazy verify)
 nh_add_c_test(test_cantilever verify)
 nh_add_c_test(test_dynamic verify)

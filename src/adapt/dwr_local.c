@@ -503,7 +503,7 @@ int nh_dwr_local_term(const nh_mesh *m, const nh_tissue *t, const nh_hanging *h,
 
   /* z0 = K⁻¹ (j_f − K_fb z_b); with rows, Y = K⁻¹ C_fᵀ, W μ = C z0 + C_b z_b */
   F = cholmod_analyze(K, &cm);
-  if (F) cholmod_factorize(K, F, &cm);
+  if (F) nh_cholmod_factorize(K, F, &cm);
   if (!F || cm.status != CHOLMOD_OK || F->minor < (size_t)nf) {
     rc = NH_ERROR(NH_ERR_NUMERIC, "local dual: the lattice's matrix is not positive definite");
     goto done;

@@ -9,6 +9,7 @@
  * workspace kept in the system, so a step allocates nothing. */
 #include "solve/system_impl.h"
 
+#include <omp.h>
 #include <string.h>
 
 /* A CHOLMOD failure in `what`, by its status: out of memory and too large
@@ -25,6 +26,15 @@ static int nh_cholmod_failed(const nh_system *s, const char *what) {
   return NH_ERROR(NH_ERR_NUMERIC, "CHOLMOD %s failed (status %d)", what, s->cm.status);
 }
 
+int nh_cholmod_factorize(cholmod_sparse *A, cholmod_factor *L, cholmod_common *cm) {
+  if (omp_in_parallel()) return cholmod_factorize(A, L, cm);
+  const int levels = omp_get_max_active_levels();
+  omp_set_max_active_levels(0); /* every team opened meanwhile has one thread */
+  int ok = cholmod_factorize(A, L, cm);
+  omp_set_max_active_levels(levels);
+  return ok;
+}
+
 int nh_system_factor(nh_system *s) {
   if (!s->L) {
     s->L = cholmod_analyze(s->A, &s->cm);
@@ -38,7 +48,7 @@ int nh_system_factor(nh_system *s) {
   s->W_valid = 0; /* the compliance belongs to the previous A */
   s->factor_serial++;
   s->factor_current = 0;
-  int ok = cholmod_factorize(s->A, s->L, &s->cm);
+  int ok = nh_cholmod_factorize(s->A, s->L, &s->cm);
   s->not_posdef = s->cm.status == CHOLMOD_NOT_POSDEF;
   if (s->not_posdef) { /* the column in A's order, its node, cells and the likely cause */
     const int k = (int)s->L->minor, *perm = s->L->Perm;

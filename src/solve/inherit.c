@@ -232,7 +232,7 @@ static int nh_inherit_prepare(nh_system *s) {
     return NH_ERROR(NH_ERR_NUMERIC,
                     "CHOLMOD analysis of the new unknowns' block failed (status %d)", s->cm.status);
   const double lnz = s->cm.lnz;
-  int ok = cholmod_factorize(h->ANN, h->LNN, &s->cm);
+  int ok = nh_cholmod_factorize(h->ANN, h->LNN, &s->cm);
   if (!ok || s->cm.status != CHOLMOD_OK) /* not positive definite: factorise A instead */
     return NH_ERROR(NH_ERR_NUMERIC, "the new unknowns' block is not positive definite");
   /* its solves: two per application */

@@ -77,7 +77,7 @@ static int nh_time_aside(nh_system *s, nh_step_stats *st) {
       !(s->L_aside = s->L ? cholmod_copy_factor(s->L, &s->cm) : cholmod_analyze(s->A, &s->cm)))
     return NH_ERROR(NH_ERR_MEMORY, "out of memory: a factor copy to time");
   double t1 = nh_time_now();
-  int ok = cholmod_factorize(s->A, s->L_aside, &s->cm);
+  int ok = nh_cholmod_factorize(s->A, s->L_aside, &s->cm);
   double t2 = nh_time_now();
   if (!ok || s->cm.status < CHOLMOD_OK)
     return NH_ERROR(NH_ERR_NUMERIC, "timing a factorisation failed (status %d)", s->cm.status);

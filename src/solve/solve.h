@@ -92,6 +92,16 @@ void nh_system_lazy_reset(nh_system *sys);
  * until the next assembly. */
 const double *nh_system_frames_at(const nh_system *sys, const nh_tissue *tissue, const double *u);
 
+/* cholmod_factorize(A, L, cm) with the OpenMP teams CHOLMOD opens inside it
+ * (its per-supernode loops) on one thread: with the BLAS on one thread
+ * those loops only copy and clear, and waking a sleeping team for each cost
+ * up to 3x the factorisation (docs/performance.md, "Threads"). Returns
+ * cholmod_factorize's result; inside a parallel region it only calls it. */
+struct cholmod_sparse_struct;
+struct cholmod_factor_struct;
+struct cholmod_common_struct;
+int nh_cholmod_factorize(struct cholmod_sparse_struct *A, struct cholmod_factor_struct *L,
+                         struct cholmod_common_struct *cm);
 /* Numeric Cholesky factorisation of the assembled A (symbolic analysis on
  * first use). Fails with NH_ERR_NUMERIC if A is not positive definite
  * (CHOLMOD's common->status is checked) — message names the column. */
