@@ -12,11 +12,12 @@ typedef struct {
 
 /* The estimators' inner loops over many fields (SPR's fits of the goal
  * estimate's 1 + 36 fields, the duals' stresses at the 8 Gauss points),
- * compiled twice on x86-64 with GCC: for AVX2 (4 doubles per instruction)
- * and the baseline SSE2 (2), chosen at load time by the CPU. Without FMA
- * and with the sums in the source's order both compute the same bits. */
+ * compiled three times on x86-64 with GCC: for AVX-512 (8 doubles per
+ * instruction: the 8 Gauss points in one), AVX2 (4) and the baseline SSE2
+ * (2), chosen at load time by the CPU. Without FMA and with the sums in the
+ * source's order all compute the same bits. */
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__ELF__)
-#define NH_ADAPT_VECTOR_CLONES __attribute__((target_clones("avx2", "default")))
+#define NH_ADAPT_VECTOR_CLONES __attribute__((target_clones("avx512f", "avx2", "default")))
 #else
 #define NH_ADAPT_VECTOR_CLONES
 #endif
