@@ -102,6 +102,7 @@ struct cholmod_factor_struct;
 struct cholmod_common_struct;
 int nh_cholmod_factorize(struct cholmod_sparse_struct *A, struct cholmod_factor_struct *L,
                          struct cholmod_common_struct *cm);
+
 /* Numeric Cholesky factorisation of the assembled A (symbolic analysis on
  * first use). Fails with NH_ERR_NUMERIC if A is not positive definite
  * (CHOLMOD's common->status is checked) — message names the column. */
