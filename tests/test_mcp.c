@@ -20,6 +20,8 @@
  *     fixed-point solve); the disc pair likewise;
  *  8. known solutions of constructed problems (test_known), and of
  *     problems with an unsymmetric W (test_unsymmetric);
+ *  9. an ill-conditioned problem on which the sweeps and Newton stall
+ *     within the budget, finished by the proximal fallback (test_proximal);
  *  plus bad laws rejected and non-convergence reported. Silent on success. */
 #include "solve/solve.h"
 
@@ -821,6 +823,64 @@ static void test_unsymmetric(void) {
   free(W), free(r), free(ls), free(ws), free(lam), free(laws);
 }
 
+/* The proximal fallback (src/solve/mcp.c, header "Algorithm"): an
+ * ill-conditioned unilateral problem, W the Gaussian kernel exp(−|x_i −
+ * x_j|²/ℓ²) + δ I of M = 400 random points x_i on the unit sphere (ℓ = 0.7,
+ * δ = 1e-10: a smooth compliance, its eigenvalues decaying as a surface
+ * Green's function's do), with a known solution: λ* = 0.5 + 0.5 z on the
+ * rows with z > 0 (w* = 0), λ* = 0 and w* = 0.1 − z on the others, r = w* −
+ * W λ*. Within a budget of 30 iterations the sweeps stall and Newton from
+ * their iterate does not finish (main before the fallback: residual above
+ * 1e-10, NH_ERR_NUMERIC); the fallback's regularised problems must solve it
+ * to the tolerance within its own 30: λ ≥ 0, w ≥ 0 to the tolerance, and
+ * the complementarity min(λ, w) = 0 to it. (w itself is w*'s only to the
+ * conditioning: W's smallest eigenvalues are near δ.) */
+static void test_proximal(void) {
+  enum { M = 400 };
+  static double X[3 * M], W[M * M], r[M], ls[M], ws[M], lam[M], w[M];
+  nh_row_law laws[M];
+  const double ell = 0.7, delta = 1e-10, tol = 1e-10;
+  nh_test_rng = 88172645463325252ull; /* the points whatever ran before */
+  for (int i = 0; i < M; i++) {
+    double s = 0.0;
+    for (int k = 0; k < 3; k++) X[3 * i + k] = nh_rand(), s += X[3 * i + k] * X[3 * i + k];
+    for (int k = 0; k < 3; k++) X[3 * i + k] /= sqrt(s);
+  }
+  for (int j = 0; j < M; j++)
+    for (int i = 0; i < M; i++) {
+      double d2 = 0.0;
+      for (int k = 0; k < 3; k++)
+        d2 += (X[3 * i + k] - X[3 * j + k]) * (X[3 * i + k] - X[3 * j + k]);
+      W[(size_t)j * M + i] = exp(-d2 / (ell * ell)) + (i == j ? delta : 0.0);
+    }
+  for (int i = 0; i < M; i++) {
+    const double z = X[3 * i + 2];
+    ls[i] = z > 0.0 ? 0.5 + 0.5 * z : 0.0;
+    ws[i] = z > 0.0 ? 0.0 : 0.1 - z;
+    laws[i] = law(NH_ROW_UNILATERAL), lam[i] = 0.0;
+  }
+  apply(M, W, ls, ws, r); /* W λ* + w* */
+  for (int i = 0; i < M; i++) r[i] = ws[i] - (r[i] - ws[i]);
+  nh_mcp_stats st;
+  int rc = nh_mcp_solve(M, W, r, laws, tol, 30, lam, &st);
+  CHECK(rc == NH_OK && st.residual <= tol && st.method == NH_MCP_FALLBACK,
+        "proximal fallback: rc %d (%s), %d Newton steps, %d sweeps, method %d, residual %.3g", rc,
+        rc ? nh_error_message() : "", st.newton_steps, st.sweeps, (int)st.method, st.residual);
+  apply(M, W, lam, r, w);
+  double scale = 0.0, lmin = 0.0, wmin = 0.0, comp = 0.0, werr = 0.0;
+  for (int i = 0; i < M; i++) {
+    scale = fmax(scale, fabs(r[i]));
+    lmin = fmin(lmin, lam[i]), wmin = fmin(wmin, w[i]);
+    comp = fmax(comp, fabs(fmin(lam[i], w[i])));
+    werr = fmax(werr, fabs(w[i] - ws[i]));
+  }
+  CHECK(lmin >= 0.0 && wmin >= -1e2 * tol * scale && comp <= 1e2 * tol * scale &&
+            werr <= 1e-3 * scale,
+        "proximal fallback: min lambda %.3g, min w %.3g, |min(lambda, w)| %.3g, |w - w*| %.3g "
+        "(scale %.3g)",
+        lmin, wmin, comp, werr, scale);
+}
+
 int main(void) {
   test_bilateral();
   test_unilateral();
@@ -833,5 +893,6 @@ int main(void) {
   test_failures();
   test_known();
   test_unsymmetric();
+  test_proximal();
   TEST_END();
 }

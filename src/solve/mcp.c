@@ -61,6 +61,14 @@
  * (so a warm start at the solution costs 0 sweeps) and after every sweep. The best
  * iterate is kept and returned if max_iterations is reached.
  *
+ * Proximal fallback (nh_mcp_proximal; docs/interaction.md): where the
+ * sweeps and Newton both stop short of the tolerance (nearly dependent
+ * rows: the weighted-gap skull rows of a fine mesh), the regularised
+ * problems W + ρ diag(W), r − ρ diag(W) λ_k, strictly monotone, by Newton,
+ * for ρ = 1e-3 ÷ 10 each down to 1e-9, each from the last, until λ_k solves
+ * the original problem (Rockafellar, "Monotone operators and the proximal
+ * point algorithm"); kept only if it converges.
+ *
  * Unsymmetric W (nh_mcp_solve_unsymmetric; the quasi-static step's beam
  * blocks with their full tangent): the blocks by LU with partial pivoting,
  * W̃'s rows read as rows (Newton's Jacobian, a disc pair's block); the
@@ -98,6 +106,10 @@
  * the multiple of it the Tresca fixed point may spend. */
 #define NH_MCP_NEWTON_MAX   100
 #define NH_MCP_TRESCA_STEPS 10
+/* The proximal fallback's regularisations ρ (relative to W's diagonal):
+ * from the first down to the last, ÷10 each. */
+#define NH_MCP_PROX_FIRST 1e-3
+#define NH_MCP_PROX_LAST  1e-9
 
 static void nh_mcp_work_free(nh_mcp_work *ws) {
   free(ws->Wt), free(ws->d), free(ws->rt), free(ws->lt), free(ws->wt), free(ws->best);
@@ -487,16 +499,18 @@ static double nh_mcp_run(nh_mcp_work *ws, const double *W, const nh_row_law *law
  * "Method and fallback"): up to NH_MCP_EXACT_ROWS rows the semismooth Newton
  * method first (mcp_newton.c), its converged λ̃ projected onto the sets
  * (kept if still within tolerance), and the sweeps from its best iterate if
- * it stopped short; above, the sweeps first and Newton from theirs. λ̃ is
+ * it stopped short; above (unless newton_first), the sweeps first and
+ * Newton from theirs. λ̃ is
  * left at the best iterate (also in ws->best), its residual in *res;
  * st->newton_steps, st->sweeps and the methods used (bits 1: exact, 2:
  * sweeps, in *used) accumulate. */
 static int nh_mcp_attempt(nh_mcp_work *ws, const double *W, const nh_row_law *lw, double tolerance,
-                          int max_iterations, nh_mcp_stats *st, int *used, double *res) {
+                          int max_iterations, int newton_first, nh_mcp_stats *st, int *used,
+                          double *res) {
   const int m = ws->m;
   const int newton_max = max_iterations < NH_MCP_NEWTON_MAX ? max_iterations : NH_MCP_NEWTON_MAX;
   double r = HUGE_VAL;
-  if (m <= NH_MCP_EXACT_ROWS) {
+  if (m <= NH_MCP_EXACT_ROWS || newton_first) {
     NH_TRY(nh_mcp_newton(ws, W, lw, tolerance, newton_max, &st->newton_steps, &r));
     *used |= 1;
     if (r <= tolerance) { /* feasible forces (the natural map allows a round-off outside) */
@@ -532,9 +546,11 @@ static int nh_mcp_attempt(nh_mcp_work *ws, const double *W, const nh_row_law *lw
   return NH_OK;
 }
 
-static int nh_mcp_solve_any(int m, const double *W, int unsym, const double *r, nh_row_law *laws,
-                            double tolerance, int max_iterations, double *lambda,
-                            nh_mcp_stats *stats) {
+/* One solve of the problem (the header's method); newton_first: the exact
+ * method first whatever m (the proximal fallback's regularised problems). */
+static int nh_mcp_solve_once(int m, const double *W, int unsym, const double *r, nh_row_law *laws,
+                             double tolerance, int max_iterations, int newton_first, double *lambda,
+                             nh_mcp_stats *stats) {
   nh_mcp_stats dummy;
   if (!stats) stats = &dummy;
   memset(stats, 0, sizeof *stats);
@@ -616,7 +632,7 @@ static int nh_mcp_solve_any(int m, const double *W, int unsym, const double *r, 
   }
   int used = 0, rc = NH_OK;
   double best_res = HUGE_VAL;
-  rc = nh_mcp_attempt(&ws, W, lw, tolerance, max_iterations, stats, &used, &best_res);
+  rc = nh_mcp_attempt(&ws, W, lw, tolerance, max_iterations, newton_first, stats, &used, &best_res);
   /* Break-away: a row on its static bound slides, at the kinetic bound;
    * solve again from here until no row breaks away (at most once per row). */
   for (int broke = 1; !rc && broke && best_res <= tolerance && !nh_stop_requested();) {
@@ -630,7 +646,9 @@ static int nh_mcp_solve_any(int m, const double *W, int unsym, const double *r, 
       if (l->group == i) lw[i + 1].mu = laws[i + 1].mu;
       broke = 1;
     }
-    if (broke) rc = nh_mcp_attempt(&ws, W, lw, tolerance, max_iterations, stats, &used, &best_res);
+    if (broke)
+      rc = nh_mcp_attempt(&ws, W, lw, tolerance, max_iterations, newton_first, stats, &used,
+                          &best_res);
   }
   memcpy(ws.lt, ws.best, sizeof(double) * (size_t)m);
   for (int i = 0; i < m; i++) lambda[i] = ws.d[i] * ws.lt[i];
@@ -659,6 +677,97 @@ static int nh_mcp_solve_any(int m, const double *W, int unsym, const double *r, 
                     NH_MCP_BILATERAL_BLOCK && nb > 0 && !block_ok ? ", dependent: solved row by row"
                                                                   : "");
   return NH_OK;
+}
+
+/* The proximal fallback (header, "Proximal fallback"): the stalled solve's best λ
+ * in lambda, its statistics in *stats; laws: as given to it, out: its laws.
+ * Solves w = (W + ρD) λ + r − ρD λ_k for ρ = NH_MCP_PROX_FIRST, ÷10 each,
+ * down to NH_MCP_PROX_LAST, each from the last, until λ solves the original
+ * problem within tolerance, then the original problem from there (which
+ * sets the laws' outputs); Newton steps and sweeps all within the caller's
+ * max_iterations. Only a converged result is kept: *converged = 1 with λ,
+ * out and *stats replaced; else nothing changes. NH_ERR_MEMORY. */
+static int nh_mcp_proximal(int m, const double *W, int unsym, const double *r,
+                           const nh_row_law *laws, nh_row_law *out, double tolerance,
+                           int max_iterations, double *lambda, nh_mcp_stats *stats,
+                           int *converged) {
+  *converged = 0;
+  double *Wr = nh_calloc((size_t)m * m, sizeof(double)), *rr = nh_calloc((size_t)m, sizeof(double));
+  double *lam = nh_calloc((size_t)m, sizeof(double)), *probe = nh_calloc((size_t)m, sizeof(double));
+  nh_row_law *lw = nh_calloc((size_t)m, sizeof *lw);
+  if (!Wr || !rr || !lam || !probe || !lw) {
+    free(Wr), free(rr), free(lam), free(probe), free(lw);
+    return NH_ERROR(NH_ERR_MEMORY, "out of memory: constraint solve's proximal fallback (%d rows)",
+                    m);
+  }
+  memcpy(Wr, W, sizeof(double) * (size_t)m * m);
+  memcpy(lam, lambda, sizeof(double) * (size_t)m);
+  int newton = 0, sweeps = 0, left = max_iterations, rc = NH_OK;
+  double flops = 0.0, flops_dense = 0.0;
+  for (double rho = NH_MCP_PROX_FIRST; rho >= NH_MCP_PROX_LAST * 0.5 && left > 0; rho *= 0.1) {
+    for (int i = 0; i < m; i++) {
+      const double d = W[(size_t)i * m + i];
+      Wr[(size_t)i * m + i] = d * (1.0 + rho);
+      rr[i] = r[i] - rho * d * lam[i];
+    }
+    nh_mcp_stats st;
+    memcpy(lw, laws, sizeof *lw * (size_t)m);
+    rc = nh_mcp_solve_once(m, Wr, unsym, rr, lw, tolerance, left, 1, lam, &st);
+    newton += st.newton_steps, sweeps += st.sweeps, left -= st.newton_steps + st.sweeps;
+    flops += st.flops, flops_dense += st.flops_dense;
+    if (rc == NH_ERR_NUMERIC) nh_error_clear(), rc = NH_OK; /* the next ρ goes on from its best */
+    if (rc || nh_stop_requested()) break;
+    memcpy(probe, lam, sizeof(double) * (size_t)m); /* the original residual at λ */
+    memcpy(lw, laws, sizeof *lw * (size_t)m);
+    rc = nh_mcp_solve_once(m, W, unsym, r, lw, tolerance, 0, 0, probe, &st);
+    if (rc == NH_ERR_NUMERIC) nh_error_clear(), rc = NH_OK;
+    flops += st.flops;
+    if (rc || st.residual <= tolerance) break;
+  }
+  if (!rc && !nh_stop_requested()) {
+    nh_mcp_stats fin;
+    memcpy(lw, laws, sizeof *lw * (size_t)m);
+    rc = nh_mcp_solve_once(m, W, unsym, r, lw, tolerance, left > 0 ? left : 0, 1, lam, &fin);
+    if (rc == NH_OK) {
+      *converged = 1;
+      memcpy(lambda, lam, sizeof(double) * (size_t)m);
+      memcpy(out, lw, sizeof *lw * (size_t)m);
+      fin.newton_steps += stats->newton_steps + newton, fin.sweeps += stats->sweeps + sweeps;
+      fin.iterations = fin.newton_steps + fin.sweeps;
+      fin.flops += stats->flops + flops, fin.flops_dense += stats->flops_dense + flops_dense;
+      fin.method = NH_MCP_FALLBACK;
+      *stats = fin;
+    } else if (rc == NH_ERR_NUMERIC) {
+      nh_error_clear(), rc = NH_OK;
+    }
+  }
+  free(Wr), free(rr), free(lam), free(probe), free(lw);
+  return rc;
+}
+
+/* nh_mcp_solve_once, and where it stalls short of tolerance the proximal
+ * fallback, whose result is kept if it converges. */
+static int nh_mcp_solve_any(int m, const double *W, int unsym, const double *r, nh_row_law *laws,
+                            double tolerance, int max_iterations, double *lambda,
+                            nh_mcp_stats *stats) {
+  nh_mcp_stats dummy;
+  if (!stats) stats = &dummy;
+  nh_row_law *given = m > 0 && laws ? nh_calloc((size_t)m, sizeof *given) : NULL;
+  if (given) memcpy(given, laws, sizeof *given * (size_t)m); /* (without memory: no fallback) */
+  int rc = nh_mcp_solve_once(m, W, unsym, r, laws, tolerance, max_iterations, 0, lambda, stats);
+  if (!given || rc != NH_ERR_NUMERIC || !(stats->residual > tolerance) ||
+      !isfinite(stats->residual) || nh_stop_requested()) {
+    free(given);
+    return rc;
+  }
+  char stalled[1024];
+  snprintf(stalled, sizeof stalled, "%s", nh_error_message());
+  nh_error_clear();
+  int converged = 0, prc = nh_mcp_proximal(m, W, unsym, r, given, laws, tolerance, max_iterations,
+                                           lambda, stats, &converged);
+  free(given);
+  if (prc) return prc;
+  return converged ? NH_OK : NH_ERROR(NH_ERR_NUMERIC, "%s", stalled);
 }
 
 int nh_mcp_solve(int m, const double *W, const double *r, nh_row_law *laws, double tolerance,
