@@ -47,7 +47,9 @@
  *      is kept while F does not change (hundreds of skull rows: F settles
  *      long before the residual does).
  * w̃ is updated after each change (a column of W̃ per row) and recomputed
- * from scratch before each residual, so round-off does not accumulate. The
+ * from scratch every NH_MCP_RECOMPUTE sweeps and before a residual is
+ * accepted, so round-off does not accumulate (with 1000 skull rows the
+ * recomputation every sweep was 44 % of the solve's time). The
  * exact bilateral block (versus treating bilateral rows as unbounded GS
  * rows) was chosen by measurement, docs/interaction.md: with coupled
  * bilateral rows plain GS needs tens to hundreds of sweeps where the block
@@ -62,12 +64,15 @@
  * iterate is kept and returned if max_iterations is reached.
  *
  * Proximal fallback (nh_mcp_proximal; docs/interaction.md): where the
- * sweeps and Newton both stop short of the tolerance (nearly dependent
- * rows: the weighted-gap skull rows of a fine mesh), the regularised
- * problems W + ρ diag(W), r − ρ diag(W) λ_k, strictly monotone, by Newton,
- * for ρ = 1e-3 ÷ 10 each down to 1e-9, each from the last, until λ_k solves
- * the original problem (Rockafellar, "Monotone operators and the proximal
- * point algorithm"); kept only if it converges.
+ * sweeps and Newton both stop short of the tolerance within NH_MCP_PROX_AFTER
+ * sweeps (nearly dependent rows: the weighted-gap skull rows of a fine
+ * mesh), the regularised problems W + ρ diag(W), r − ρ diag(W) λ_k,
+ * strictly monotone, by Newton, each from the last solution λ_k, ρ from
+ * 1e-3 down to 1e-9, ÷10 after a regularised problem is solved and ×10
+ * (the same centre) after one is not, until λ_k solves the original
+ * problem (Rockafellar, "Monotone operators and the proximal point
+ * algorithm"); kept only if it converges, and if it does not, the plain
+ * solve goes on from its best iterate with the rest of its budget.
  *
  * Unsymmetric W (nh_mcp_solve_unsymmetric; the quasi-static step's beam
  * blocks with their full tangent): the blocks by LU with partial pivoting,
@@ -97,19 +102,34 @@
 #define NH_MCP_SUBSPACE 1
 #endif
 /* Rows up to which the exact method (semismooth Newton) goes first; above,
- * the sweeps go first and Newton is their fallback (the crossover measured
- * in docs/interaction.md, "Method and fallback"). 0: sweeps first always. */
+ * the sweeps go first, with Newton probes between their rounds (the
+ * crossover measured in docs/interaction.md, "Method and fallback"). 0:
+ * sweeps first always. */
 #ifndef NH_MCP_EXACT_ROWS
 #define NH_MCP_EXACT_ROWS 200
 #endif
 /* Newton steps per attempt (with max_iterations, the lower of the two), and
  * the multiple of it the Tresca fixed point may spend. */
-#define NH_MCP_NEWTON_MAX   100
+#define NH_MCP_NEWTON_MAX 100
+/* Sweeps-first solves: the first round of sweeps before a Newton probe
+ * (the rounds double), and the probe's Newton steps. */
+#define NH_MCP_PROBE_SWEEPS 100
+#define NH_MCP_PROBE_STEPS  10
+/* Sweeps between two recomputations of w̃ = W̃ λ̃ + r̃ from scratch (the
+ * sweeps update it row by row; the recomputation bounds the round-off). */
+#ifndef NH_MCP_RECOMPUTE
+#define NH_MCP_RECOMPUTE 8
+#endif
 #define NH_MCP_TRESCA_STEPS 10
 /* The proximal fallback's regularisations ρ (relative to W's diagonal):
  * from the first down to the last, ÷10 each. */
 #define NH_MCP_PROX_FIRST 1e-3
 #define NH_MCP_PROX_LAST  1e-9
+/* The budget of one regularised problem (Newton steps, then sweeps). */
+#define NH_MCP_PROX_STEPS 30
+/* Sweeps (or Newton steps) of the plain solve before the proximal fallback
+ * is tried; the rest of the budget follows if it fails. */
+#define NH_MCP_PROX_AFTER 100
 
 static void nh_mcp_work_free(nh_mcp_work *ws) {
   free(ws->Wt), free(ws->d), free(ws->rt), free(ws->lt), free(ws->wt), free(ws->best);
@@ -313,12 +333,12 @@ static int nh_mcp_factor(nh_mcp_work *ws, int nb, const int *idx, double *L, int
     for (int i = 0; i < nb; i++) L[(size_t)j * nb + i] = ws->Wt[(size_t)idx[j] * m + idx[i]];
   if (ws->unsym) {
     ws->flops_dense += (double)nb * nb * nb / 3.0; /* LU: 2 nb³/3 */
-    if (LAPACKE_dgetrf(LAPACK_COL_MAJOR, nb, nb, L, nb, piv) != 0) return 0;
+    if (LAPACKE_dgetrf_work(LAPACK_COL_MAJOR, nb, nb, L, nb, piv) != 0) return 0;
     for (int j = 0; j < nb; j++)
       if (!(fabs(L[(size_t)j * nb + j]) > 1e-12)) return 0;
     return 1;
   }
-  if (LAPACKE_dpotrf(LAPACK_COL_MAJOR, 'L', nb, L, nb) != 0) return 0;
+  if (LAPACKE_dpotrf_work(LAPACK_COL_MAJOR, 'L', nb, L, nb) != 0) return 0;
   /* W̃ has unit diagonal: a pivot below 1e-12 (L_jj below 1e-6) means dependent rows. */
   for (int j = 0; j < nb; j++)
     if (!(L[(size_t)j * nb + j] > 1e-6)) return 0;
@@ -333,9 +353,9 @@ static void nh_mcp_solve_block(nh_mcp_work *ws, int nb, const int *idx, const do
   for (int j = 0; j < nb; j++) z[j] = ws->wt[idx[j]];
   ws->flops += 2.0 * nb * nb;
   if (ws->unsym)
-    LAPACKE_dgetrs(LAPACK_COL_MAJOR, 'N', nb, 1, L, nb, piv, z, nb); /* P L U δ = w̃_B */
+    LAPACKE_dgetrs_work(LAPACK_COL_MAJOR, 'N', nb, 1, L, nb, piv, z, nb); /* P L U δ = w̃_B */
   else
-    LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', nb, 1, L, nb, z, nb); /* L Lᵀ δ = w̃_B */
+    LAPACKE_dpotrs_work(LAPACK_COL_MAJOR, 'L', nb, 1, L, nb, z, nb); /* L Lᵀ δ = w̃_B */
   for (int j = 0; j < nb; j++) nh_mcp_move(ws, idx[j], -z[j]);
 }
 
@@ -478,8 +498,14 @@ static double nh_mcp_run(nh_mcp_work *ws, const double *W, const nh_row_law *law
     double prev = res;
     nh_mcp_sweep(ws, W, laws);
     n++;
-    nh_mcp_recompute_w(ws);
+    /* w̃ as the sweep updated it, made again from scratch every
+     * NH_MCP_RECOMPUTE sweeps and before a residual is accepted */
+    if (n % NH_MCP_RECOMPUTE == 0) nh_mcp_recompute_w(ws);
     res = nh_mcp_residual(ws, W, laws);
+    if (res <= tolerance && n % NH_MCP_RECOMPUTE) {
+      nh_mcp_recompute_w(ws);
+      res = nh_mcp_residual(ws, W, laws);
+    }
     /* The subspace step costs O(|F|³): only when the sweeps contract slowly. */
     if (NH_MCP_SUBSPACE && !(res <= tolerance) && !(res < 0.5 * prev))
       res = nh_mcp_subspace(ws, W, laws, res);
@@ -499,8 +525,10 @@ static double nh_mcp_run(nh_mcp_work *ws, const double *W, const nh_row_law *law
  * "Method and fallback"): up to NH_MCP_EXACT_ROWS rows the semismooth Newton
  * method first (mcp_newton.c), its converged λ̃ projected onto the sets
  * (kept if still within tolerance), and the sweeps from its best iterate if
- * it stopped short; above (unless newton_first), the sweeps first and
- * Newton from theirs. λ̃ is
+ * it stopped short; above (unless newton_first > 0), the sweeps in doubling
+ * rounds, each followed by a Newton probe from their iterate, the last
+ * one with Newton's whole budget (newton_first 0) or a probe too
+ * (newton_first < 0: the proximal fallback follows). λ̃ is
  * left at the best iterate (also in ws->best), its residual in *res;
  * st->newton_steps, st->sweeps and the methods used (bits 1: exact, 2:
  * sweeps, in *used) accumulate. */
@@ -510,7 +538,7 @@ static int nh_mcp_attempt(nh_mcp_work *ws, const double *W, const nh_row_law *lw
   const int m = ws->m;
   const int newton_max = max_iterations < NH_MCP_NEWTON_MAX ? max_iterations : NH_MCP_NEWTON_MAX;
   double r = HUGE_VAL;
-  if (m <= NH_MCP_EXACT_ROWS || newton_first) {
+  if (m <= NH_MCP_EXACT_ROWS || newton_first > 0) {
     NH_TRY(nh_mcp_newton(ws, W, lw, tolerance, newton_max, &st->newton_steps, &r));
     *used |= 1;
     if (r <= tolerance) { /* feasible forces (the natural map allows a round-off outside) */
@@ -535,19 +563,38 @@ static int nh_mcp_attempt(nh_mcp_work *ws, const double *W, const nh_row_law *lw
       }
     }
   } else {
-    r = nh_mcp_run(ws, W, lw, tolerance, max_iterations, &st->sweeps);
-    *used |= 2;
-    if (!(r <= tolerance)) {
-      NH_TRY(nh_mcp_newton(ws, W, lw, tolerance, newton_max, &st->newton_steps, &r));
+    /* Sweeps in rounds of NH_MCP_PROBE_SWEEPS, doubling, each followed by
+     * a short Newton probe from the sweeps' best iterate: once the sweeps
+     * have found the active set, Newton ends the solve in a few steps
+     * where the sweeps' linear rate would take thousands (nearly dependent
+     * skull rows, docs/interaction.md "Method and fallback"). A probe that
+     * does not converge leaves its best iterate, no worse than the
+     * sweeps'; after the last round, Newton with its whole budget. */
+    int swept = 0, round = NH_MCP_PROBE_SWEEPS;
+    for (;;) {
+      const int before = st->sweeps;
+      const int n = max_iterations - swept < round ? max_iterations - swept : round;
+      r = nh_mcp_run(ws, W, lw, tolerance, n, &st->sweeps);
+      *used |= 2;
+      swept += n;
+      if (r <= tolerance || !isfinite(r) || nh_stop_requested()) break;
+      const int last = swept >= max_iterations || st->sweeps - before < n;
+      const int steps = (last && newton_first == 0) || newton_max < NH_MCP_PROBE_STEPS
+                            ? newton_max
+                            : NH_MCP_PROBE_STEPS;
+      NH_TRY(nh_mcp_newton(ws, W, lw, tolerance, steps, &st->newton_steps, &r));
       *used |= 1;
+      if (r <= tolerance || last) break;
+      round *= 2;
     }
   }
   *res = r;
   return NH_OK;
 }
 
-/* One solve of the problem (the header's method); newton_first: the exact
- * method first whatever m (the proximal fallback's regularised problems). */
+/* One solve of the problem (the header's method); newton_first > 0: the
+ * exact method first whatever m (the proximal fallback's regularised
+ * problems); < 0: no long Newton after the sweeps (nh_mcp_attempt). */
 static int nh_mcp_solve_once(int m, const double *W, int unsym, const double *r, nh_row_law *laws,
                              double tolerance, int max_iterations, int newton_first, double *lambda,
                              nh_mcp_stats *stats) {
@@ -681,10 +728,13 @@ static int nh_mcp_solve_once(int m, const double *W, int unsym, const double *r,
 
 /* The proximal fallback (header, "Proximal fallback"): the stalled solve's best λ
  * in lambda, its statistics in *stats; laws: as given to it, out: its laws.
- * Solves w = (W + ρD) λ + r − ρD λ_k for ρ = NH_MCP_PROX_FIRST, ÷10 each,
- * down to NH_MCP_PROX_LAST, each from the last, until λ solves the original
- * problem within tolerance, then the original problem from there (which
- * sets the laws' outputs); Newton steps and sweeps all within the caller's
+ * Solves w = (W + ρD) λ + r − ρD λ_k (at most NH_MCP_PROX_STEPS Newton
+ * steps and sweeps each) from ρ = NH_MCP_PROX_FIRST: a solved one is the
+ * next centre λ_k+1 and ρ ÷ 10, down to NH_MCP_PROX_LAST; an unsolved one
+ * keeps the centre and ρ × 10 (none above NH_MCP_PROX_FIRST: the
+ * fallback stops). Until λ_k solves the original problem within
+ * tolerance, then the original problem from there (which sets the laws'
+ * outputs); Newton steps and sweeps all within the caller's
  * max_iterations. Only a converged result is kept: *converged = 1 with λ,
  * out and *stats replaced; else nothing changes. NH_ERR_MEMORY. */
 static int nh_mcp_proximal(int m, const double *W, int unsym, const double *r,
@@ -703,8 +753,9 @@ static int nh_mcp_proximal(int m, const double *W, int unsym, const double *r,
   memcpy(Wr, W, sizeof(double) * (size_t)m * m);
   memcpy(lam, lambda, sizeof(double) * (size_t)m);
   int newton = 0, sweeps = 0, left = max_iterations, rc = NH_OK;
-  double flops = 0.0, flops_dense = 0.0;
-  for (double rho = NH_MCP_PROX_FIRST; rho >= NH_MCP_PROX_LAST * 0.5 && left > 0; rho *= 0.1) {
+  double flops = 0.0, flops_dense = 0.0, rho = NH_MCP_PROX_FIRST;
+  int reached = 0;
+  while (rho >= NH_MCP_PROX_LAST * 0.5 && left > 0) {
     for (int i = 0; i < m; i++) {
       const double d = W[(size_t)i * m + i];
       Wr[(size_t)i * m + i] = d * (1.0 + rho);
@@ -712,22 +763,34 @@ static int nh_mcp_proximal(int m, const double *W, int unsym, const double *r,
     }
     nh_mcp_stats st;
     memcpy(lw, laws, sizeof *lw * (size_t)m);
-    rc = nh_mcp_solve_once(m, Wr, unsym, rr, lw, tolerance, left, 1, lam, &st);
+    memcpy(probe, lam, sizeof(double) * (size_t)m);
+    const int budget = left < NH_MCP_PROX_STEPS ? left : NH_MCP_PROX_STEPS;
+    rc = nh_mcp_solve_once(m, Wr, unsym, rr, lw, tolerance, budget, 1, probe, &st);
     newton += st.newton_steps, sweeps += st.sweeps, left -= st.newton_steps + st.sweeps;
     flops += st.flops, flops_dense += st.flops_dense;
-    if (rc == NH_ERR_NUMERIC) nh_error_clear(), rc = NH_OK; /* the next ρ goes on from its best */
+    if (rc == NH_ERR_NUMERIC) nh_error_clear(), rc = NH_OK;
     if (rc || nh_stop_requested()) break;
-    memcpy(probe, lam, sizeof(double) * (size_t)m); /* the original residual at λ */
+    if (!(st.residual <= tolerance)) { /* not solved: a larger ρ, the same centre */
+      if (rho >= NH_MCP_PROX_FIRST) break;
+      rho *= 10.0;
+      continue;
+    }
+    memcpy(lam, probe, sizeof(double) * (size_t)m); /* the original residual at λ */
     memcpy(lw, laws, sizeof *lw * (size_t)m);
     rc = nh_mcp_solve_once(m, W, unsym, r, lw, tolerance, 0, 0, probe, &st);
     if (rc == NH_ERR_NUMERIC) nh_error_clear(), rc = NH_OK;
     flops += st.flops;
-    if (rc || st.residual <= tolerance) break;
+    if (rc || (reached = st.residual <= tolerance)) break;
+    rho *= 0.1;
   }
   if (!rc && !nh_stop_requested()) {
+    /* reached: the laws' outputs and the break-away loop at λ; else a
+     * short Newton from the last centre (the caller's plain solve has the
+     * rest of the budget) */
     nh_mcp_stats fin;
+    const int budget = reached || left < NH_MCP_PROX_STEPS ? left : NH_MCP_PROX_STEPS;
     memcpy(lw, laws, sizeof *lw * (size_t)m);
-    rc = nh_mcp_solve_once(m, W, unsym, r, lw, tolerance, left > 0 ? left : 0, 1, lam, &fin);
+    rc = nh_mcp_solve_once(m, W, unsym, r, lw, tolerance, budget > 0 ? budget : 0, 1, lam, &fin);
     if (rc == NH_OK) {
       *converged = 1;
       memcpy(lambda, lam, sizeof(double) * (size_t)m);
@@ -745,8 +808,10 @@ static int nh_mcp_proximal(int m, const double *W, int unsym, const double *r,
   return rc;
 }
 
-/* nh_mcp_solve_once, and where it stalls short of tolerance the proximal
- * fallback, whose result is kept if it converges. */
+/* nh_mcp_solve_once with at most NH_MCP_PROX_AFTER of max_iterations and,
+ * where it stalls short of tolerance, the proximal fallback, whose result
+ * is kept if it converges; if it does not, the plain solve again from its
+ * best iterate with the rest of max_iterations. */
 static int nh_mcp_solve_any(int m, const double *W, int unsym, const double *r, nh_row_law *laws,
                             double tolerance, int max_iterations, double *lambda,
                             nh_mcp_stats *stats) {
@@ -754,7 +819,10 @@ static int nh_mcp_solve_any(int m, const double *W, int unsym, const double *r, 
   if (!stats) stats = &dummy;
   nh_row_law *given = m > 0 && laws ? nh_calloc((size_t)m, sizeof *given) : NULL;
   if (given) memcpy(given, laws, sizeof *given * (size_t)m); /* (without memory: no fallback) */
-  int rc = nh_mcp_solve_once(m, W, unsym, r, laws, tolerance, max_iterations, 0, lambda, stats);
+  const int first =
+      given && max_iterations > NH_MCP_PROX_AFTER ? NH_MCP_PROX_AFTER : max_iterations;
+  int rc = nh_mcp_solve_once(m, W, unsym, r, laws, tolerance, first,
+                             first < max_iterations ? -1 : 0, lambda, stats);
   if (!given || rc != NH_ERR_NUMERIC || !(stats->residual > tolerance) ||
       !isfinite(stats->residual) || nh_stop_requested()) {
     free(given);
@@ -765,6 +833,22 @@ static int nh_mcp_solve_any(int m, const double *W, int unsym, const double *r, 
   nh_error_clear();
   int converged = 0, prc = nh_mcp_proximal(m, W, unsym, r, given, laws, tolerance, max_iterations,
                                            lambda, stats, &converged);
+  if (!prc && !converged && first < max_iterations && !nh_stop_requested()) {
+    /* the rest of the budget to the plain solve, from its best iterate */
+    nh_mcp_stats more;
+    memcpy(laws, given, sizeof *given * (size_t)m);
+    rc = nh_mcp_solve_once(m, W, unsym, r, laws, tolerance, max_iterations - first, 0, lambda,
+                           &more);
+    more.newton_steps += stats->newton_steps, more.sweeps += stats->sweeps;
+    more.iterations = more.newton_steps + more.sweeps;
+    more.flops += stats->flops, more.flops_dense += stats->flops_dense;
+    *stats = more;
+    free(given);
+    if (rc != NH_ERR_NUMERIC) return rc;
+    snprintf(stalled, sizeof stalled, "%s", nh_error_message());
+    nh_error_clear();
+    return NH_ERROR(NH_ERR_NUMERIC, "%s", stalled);
+  }
   free(given);
   if (prc) return prc;
   return converged ? NH_OK : NH_ERROR(NH_ERR_NUMERIC, "%s", stalled);

@@ -255,11 +255,11 @@ static int nh_newton_direction(nh_mcp_work *ws, nh_newton_work *nw) {
     double anorm = LAPACKE_dlange(LAPACK_COL_MAJOR, '1', nr, nr, nw->HR, nr), rcond = 0.0;
     ws->flops += 6.0 * (double)nr * nr;
     ws->flops_dense += 2.0 * (double)nr * nr * nr / 3.0;
-    int info = LAPACKE_dgetrf(LAPACK_COL_MAJOR, nr, nr, nw->HR, nr, nw->ipiv);
+    int info = LAPACKE_dgetrf_work(LAPACK_COL_MAJOR, nr, nr, nw->HR, nr, nw->ipiv);
     if (info == 0) LAPACKE_dgecon(LAPACK_COL_MAJOR, '1', nr, nw->HR, nr, anorm, &rcond);
     if (info != 0 || !(rcond >= NH_NEWTON_RCOND)) continue;
     memcpy(nw->z, nw->rhs, sizeof(double) * (size_t)nr);
-    LAPACKE_dgetrs(LAPACK_COL_MAJOR, 'N', nr, 1, nw->HR, nr, nw->ipiv, nw->z, nr);
+    LAPACKE_dgetrs_work(LAPACK_COL_MAJOR, 'N', nr, 1, nw->HR, nr, nw->ipiv, nw->z, nr);
     int finite = 1;
     for (int a = 0; a < nr; a++) finite &= isfinite(nw->z[a]);
     if (!finite) continue;
