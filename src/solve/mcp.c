@@ -69,7 +69,7 @@
  * mesh), the regularised problems W + ρ diag(W), r − ρ diag(W) λ_k,
  * strictly monotone, by Newton, each from the last solution λ_k, ρ from
  * 1e-3 down to 1e-9, ÷10 after a regularised problem is solved and ×10
- * (the same centre) after one is not, until λ_k solves the original
+ * (the same centre, up to 1e-1) after one is not, until λ_k solves the original
  * problem (Rockafellar, "Monotone operators and the proximal point
  * algorithm"); kept only if it converges, and if it does not, the plain
  * solve goes on from its best iterate with the rest of its budget.
@@ -125,6 +125,9 @@
  * from the first down to the last, ÷10 each. */
 #define NH_MCP_PROX_FIRST 1e-3
 #define NH_MCP_PROX_LAST  1e-9
+/* The largest ρ the fallback goes back up to where a regularised problem
+ * is not solved within its budget. */
+#define NH_MCP_PROX_MAX 1e-1
 /* The budget of one regularised problem (Newton steps, then sweeps). */
 #define NH_MCP_PROX_STEPS 30
 /* Sweeps (or Newton steps) of the plain solve before the proximal fallback
@@ -731,7 +734,7 @@ static int nh_mcp_solve_once(int m, const double *W, int unsym, const double *r,
  * Solves w = (W + ρD) λ + r − ρD λ_k (at most NH_MCP_PROX_STEPS Newton
  * steps and sweeps each) from ρ = NH_MCP_PROX_FIRST: a solved one is the
  * next centre λ_k+1 and ρ ÷ 10, down to NH_MCP_PROX_LAST; an unsolved one
- * keeps the centre and ρ × 10 (none above NH_MCP_PROX_FIRST: the
+ * keeps the centre and ρ × 10 (none above NH_MCP_PROX_MAX: the
  * fallback stops). Until λ_k solves the original problem within
  * tolerance, then the original problem from there (which sets the laws'
  * outputs); Newton steps and sweeps all within the caller's
@@ -771,7 +774,7 @@ static int nh_mcp_proximal(int m, const double *W, int unsym, const double *r,
     if (rc == NH_ERR_NUMERIC) nh_error_clear(), rc = NH_OK;
     if (rc || nh_stop_requested()) break;
     if (!(st.residual <= tolerance)) { /* not solved: a larger ρ, the same centre */
-      if (rho >= NH_MCP_PROX_FIRST) break;
+      if (rho >= NH_MCP_PROX_MAX) break;
       rho *= 10.0;
       continue;
     }
