@@ -729,6 +729,15 @@ static int nh_mcp_solve_once(int m, const double *W, int unsym, const double *r,
   return NH_OK;
 }
 
+/* The counts of a solve that followed `earlier` made its own: Newton
+ * steps, sweeps, their sum and the operations added (method, residual and
+ * the rows' states stay the later solve's). */
+static void nh_mcp_stats_after(nh_mcp_stats *later, const nh_mcp_stats *earlier) {
+  later->newton_steps += earlier->newton_steps, later->sweeps += earlier->sweeps;
+  later->iterations = later->newton_steps + later->sweeps;
+  later->flops += earlier->flops, later->flops_dense += earlier->flops_dense;
+}
+
 /* The proximal fallback (header, "Proximal fallback"): the stalled solve's best λ
  * in lambda, its statistics in *stats; laws: as given to it, out: its laws.
  * Solves w = (W + ρD) λ + r − ρD λ_k (at most NH_MCP_PROX_STEPS Newton
@@ -778,8 +787,8 @@ static int nh_mcp_proximal(int m, const double *W, int unsym, const double *r,
       rho *= 10.0;
       continue;
     }
-    memcpy(lam, probe, sizeof(double) * (size_t)m); /* the original residual at λ */
-    memcpy(lw, laws, sizeof *lw * (size_t)m);
+    memcpy(lam, probe, sizeof(double) * (size_t)m); /* the next centre */
+    memcpy(lw, laws, sizeof *lw * (size_t)m);       /* the original residual at it */
     rc = nh_mcp_solve_once(m, W, unsym, r, lw, tolerance, 0, 0, probe, &st);
     if (rc == NH_ERR_NUMERIC) nh_error_clear(), rc = NH_OK;
     flops += st.flops;
@@ -798,9 +807,9 @@ static int nh_mcp_proximal(int m, const double *W, int unsym, const double *r,
       *converged = 1;
       memcpy(lambda, lam, sizeof(double) * (size_t)m);
       memcpy(out, lw, sizeof *lw * (size_t)m);
-      fin.newton_steps += stats->newton_steps + newton, fin.sweeps += stats->sweeps + sweeps;
-      fin.iterations = fin.newton_steps + fin.sweeps;
-      fin.flops += stats->flops + flops, fin.flops_dense += stats->flops_dense + flops_dense;
+      fin.newton_steps += newton, fin.sweeps += sweeps;
+      fin.flops += flops, fin.flops_dense += flops_dense;
+      nh_mcp_stats_after(&fin, stats);
       fin.method = NH_MCP_FALLBACK;
       *stats = fin;
     } else if (rc == NH_ERR_NUMERIC) {
@@ -837,20 +846,16 @@ static int nh_mcp_solve_any(int m, const double *W, int unsym, const double *r, 
   int converged = 0, prc = nh_mcp_proximal(m, W, unsym, r, given, laws, tolerance, max_iterations,
                                            lambda, stats, &converged);
   if (!prc && !converged && first < max_iterations && !nh_stop_requested()) {
-    /* the rest of the budget to the plain solve, from its best iterate */
+    /* the rest of the budget to the plain solve, from its best iterate
+     * (its error, if it stalls too, is the one reported) */
     nh_mcp_stats more;
     memcpy(laws, given, sizeof *given * (size_t)m);
     rc = nh_mcp_solve_once(m, W, unsym, r, laws, tolerance, max_iterations - first, 0, lambda,
                            &more);
-    more.newton_steps += stats->newton_steps, more.sweeps += stats->sweeps;
-    more.iterations = more.newton_steps + more.sweeps;
-    more.flops += stats->flops, more.flops_dense += stats->flops_dense;
+    nh_mcp_stats_after(&more, stats);
     *stats = more;
     free(given);
-    if (rc != NH_ERR_NUMERIC) return rc;
-    snprintf(stalled, sizeof stalled, "%s", nh_error_message());
-    nh_error_clear();
-    return NH_ERROR(NH_ERR_NUMERIC, "%s", stalled);
+    return rc;
   }
   free(given);
   if (prc) return prc;
