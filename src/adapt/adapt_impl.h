@@ -60,19 +60,18 @@ typedef struct {
  * may be NULL). goals: the box goals the local dual needs (out->local).
  * With out->fronts, the fronts' errors too, from the same primal terms
  * (nz may then be 0: the fronts alone). Fails as nh_dwr_estimate and
- * nh_dwr_front_duals. */
+ * nh_dwr_front_setup. */
 int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale, const nh_mesh *mesh,
                        const nh_tissue *tissue, const nh_hanging *hanging, const double *u, int nz,
                        int group, const double *j, const nh_dwr_goals *goals, nh_dwr_result *out);
 
-/* The 3 duals of the front whose tip rows start at `row` among the step's
- * rows (dwr_front.c): the functionals n_q · Σ w_a v_a of its rows, the
- * constrained dual of the rows with every friction row but the front's
- * axial one sliding (nh_dwr_duals: z 3 × 3 n_nodes, mu (may be NULL)
- * rows->m per dual). NH_ERR_INTERNAL (rows out of range), NH_ERR_MEMORY,
- * or fails as nh_dwr_duals. */
-int nh_dwr_front_duals(nh_system *sys, const nh_rows *rows, double scale, int n_nodes, int row,
-                       double *z, double *mu);
+/* The 3 dual problems of the front whose tip rows start at `row` among the
+ * step's rows (dwr_front.c): j (3 × 3 n_nodes) the functionals
+ * n_q · Σ w_a v_a of its rows, active (rows->m) the rows its duals hold:
+ * the active rows (nh_dwr_active_rows) with every friction row but the
+ * front's axial one sliding. Solved with the goals' duals in one pass
+ * (nh_dwr_functionals). NH_ERR_INTERNAL (rows out of range). */
+int nh_dwr_front_setup(const nh_rows *rows, int n_nodes, int row, double *j, unsigned char *active);
 /* The front's error e = Σ_q E_q n_q from its duals' estimates E[3]. */
 void nh_dwr_front_vector(const nh_rows *rows, int row, const double E[3], double e[3]);
 

@@ -161,15 +161,18 @@
  * Fronts (dwr_front.c; docs/theory.md §6.6, "Anchoring"). At a step
  * whose tools' tips cut, each front's error comes from 3 functionals (its
  * tip rows' tissue parts) whose duals hold rows of their own
- * (nh_dwr_front_duals). With out->fronts they are estimated in the same
- * pass as the goals: their duals follow the goals' through the centre
- * samples, the recovery and the integrals, so the primal's share (its
- * corotation, recovered stress, e_u and D⁻¹ e_u at the Gauss points, the
- * geometry residual) is computed once per step. They have no marking
- * indicator and no local dual. Every dual's terms involve that dual and
+ * (nh_dwr_front_setup), solved with the goals' in one pass
+ * (nh_system_solve_rows_sets: one solve of all columns, each set's
+ * multipliers from its rows' block of W). With out->fronts they are
+ * estimated in the same pass as the goals: their duals follow the goals'
+ * through the centre samples, the recovery and the integrals, so the
+ * primal's share (its corotation, recovered stress, e_u and D⁻¹ e_u at the
+ * Gauss points, the geometry residual) is computed once per step. They
+ * have no marking indicator and no local dual. Every dual's terms involve that dual and
  * the primal only (the recovery combines each field's values alone), so
  * the goals' estimates are the same numbers with or without fronts, and
- * each front's those of a pass of its own (nh_dwr_front_error).
+ * each front's those of a pass of its own (nh_dwr_front_error), up to the
+ * round-off of their shared solve.
  *
  * Workspace: the duals (3 per point and per front, 3 per node each), the
  * centre samples and recovered nodal stresses of the primal and the duals
@@ -400,29 +403,77 @@ static int nh_dwr_constraint_term(const nh_rows *rows, const double *z, double *
   return NH_OK;
 }
 
-int nh_dwr_duals(nh_system *sys, const nh_rows *rows, double scale, int n_nodes, int n,
-                 const double *j, double *z, double *mu, int *n_rows) {
+/* The duals of n_sets sets of functionals, set k its next ncol[k] of j
+ * with the rows active[k] (NULL: the tissue alone), in one solve
+ * (nh_system_solve_rows_sets); otherwise as nh_dwr_duals. */
+static int nh_dwr_duals_sets(nh_system *sys, const nh_rows *rows, double scale, int n_nodes,
+                             int n_sets, const int *ncol, const unsigned char *const *active,
+                             const double *j, double *z, double *mu, int *n_rows) {
   const int nf = nh_system_free_dofs(sys);
+  int n = 0;
+  for (int k = 0; k < n_sets; k++) n += ncol[k];
   if (n_rows) *n_rows = 0;
   NH_CHECK(nh_system_constraint_rows(sys) == 0, NH_ERR_INPUT,
            "the goal-oriented estimate needs hanging nodes eliminated (adapt.hanging: eliminate)");
   double *b = nh_calloc((size_t)nf * (size_t)(n ? n : 1), sizeof(double));
   double *x = nh_calloc((size_t)nf * (size_t)(n ? n : 1), sizeof(double));
-  unsigned char *active = rows && rows->m > 0 ? nh_calloc((size_t)rows->m, 1) : NULL;
-  int rc = b && x && (active || !rows || rows->m == 0)
-               ? NH_OK
-               : NH_ERROR(NH_ERR_MEMORY, "out of memory: %d dual problems", n);
+  int rc = b && x ? NH_OK : NH_ERROR(NH_ERR_MEMORY, "out of memory: %d dual problems", n);
   for (int q = 0; q < n && !rc; q++) {
     nh_system_gather(sys, j + 3 * (size_t)n_nodes * q, b + (size_t)nf * q);
     for (int i = 0; i < nf; i++) b[(size_t)nf * q + i] *= scale;
   }
-  if (!rc && active) nh_dwr_active_rows(rows, active);
-  if (!rc) rc = nh_system_solve_rows(sys, active ? rows : NULL, active, n, b, x, mu, n_rows);
+  if (!rc) {
+    const int with_rows = rows && rows->m > 0;
+    rc = nh_system_solve_rows_sets(sys, with_rows ? rows : NULL, n_sets, ncol, active, b, x, mu,
+                                   n_rows);
+  }
   for (int q = 0; q < n && !rc; q++)
     nh_system_scatter(sys, x + (size_t)nf * q, z + 3 * (size_t)n_nodes * q);
   free(b);
   free(x);
+  return rc;
+}
+
+int nh_dwr_duals(nh_system *sys, const nh_rows *rows, double scale, int n_nodes, int n,
+                 const double *j, double *z, double *mu, int *n_rows) {
+  unsigned char *active = rows && rows->m > 0 ? nh_calloc((size_t)rows->m, 1) : NULL;
+  if (rows && rows->m > 0 && !active)
+    return NH_ERROR(NH_ERR_MEMORY, "out of memory: %d dual problems", n);
+  if (active) nh_dwr_active_rows(rows, active);
+  const unsigned char *sets[1] = {active};
+  int rc = nh_dwr_duals_sets(sys, rows, scale, n_nodes, 1, &n, sets, j, z, mu, n_rows);
   free(active);
+  return rc;
+}
+
+/* The goals' nz duals and the fronts' (3 each, their own rows:
+ * nh_dwr_front_setup) in one pass: z and mu for nz + 3 n_fronts duals. */
+static int nh_dwr_all_duals(nh_system *sys, const nh_rows *rows, double scale, int n_nodes, int nz,
+                            const double *j, const nh_dwr_fronts *fronts, double *z, double *mu,
+                            int *n_rows) {
+  const int nfr = fronts ? fronts->n : 0, nd = nz + 3 * nfr, mr = rows ? rows->m : 0;
+  const size_t n3 = 3 * (size_t)n_nodes;
+  double *jall = nh_calloc(n3 * (size_t)(nd ? nd : 1), sizeof(double));
+  unsigned char *act = nh_calloc((size_t)(1 + nfr) * (size_t)(mr ? mr : 1), 1);
+  const unsigned char **sets = nh_calloc((size_t)(1 + nfr), sizeof *sets);
+  int *ncol = nh_calloc((size_t)(1 + nfr), sizeof(int));
+  int rc = jall && act && sets && ncol
+               ? NH_OK
+               : NH_ERROR(NH_ERR_MEMORY, "out of memory: %d dual problems", nd);
+  if (!rc) {
+    if (nz) memcpy(jall, j, n3 * (size_t)nz * sizeof(double));
+    ncol[0] = nz;
+    if (mr) nh_dwr_active_rows(rows, act), sets[0] = act;
+  }
+  for (int f = 0; f < nfr && !rc; f++) {
+    ncol[1 + f] = 3;
+    sets[1 + f] = mr ? act + (size_t)mr * (1 + f) : NULL;
+    rc = nh_dwr_front_setup(rows, n_nodes, fronts->row[f], jall + n3 * (nz + 3 * (size_t)f),
+                            act + (size_t)mr * (1 + f));
+  }
+  if (!rc)
+    rc = nh_dwr_duals_sets(sys, rows, scale, n_nodes, 1 + nfr, ncol, sets, jall, z, mu, n_rows);
+  free(jall), free(act), free(sets), free(ncol);
   return rc;
 }
 
@@ -462,15 +513,12 @@ int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale, const 
     goto done;
   }
   out->n_rows = 0;
-  if (nz > 0 && (rc = nh_dwr_duals(sys, rows, scale, nn, nz, j, z, mu, &out->n_rows))) goto done;
-  for (int f = 0; f < n_fronts; f++) { /* each front's duals hold its own rows (dwr_front.c) */
-    const int q = nz + 3 * f;
-    if ((rc = nh_dwr_front_duals(sys, rows, scale, nn, out->fronts->row[f], z + n3 * q,
-                                 mu ? mu + (size_t)rows->m * q : NULL)))
-      goto done;
-  }
+  /* the goals' duals, and each front's holding its own rows (dwr_front.c) */
+  if (nd > 0 &&
+      (rc = nh_dwr_all_duals(sys, rows, scale, nn, nz, j, out->fronts, z, mu, &out->n_rows)))
+    goto done;
 
-  /* Centre samples: the primal's corotational stress, each dual's tangent stress. */
+    /* Centre samples: the primal's corotational stress, each dual's tangent stress. */
 #pragma omp parallel for schedule(static) if (nl >= NH_DWR_PARALLEL_MIN)
   for (int l = 0; l < nl; l++) {
     int c = m->leaves[l];

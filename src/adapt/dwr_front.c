@@ -43,16 +43,15 @@
  * "The front's anchoring error"). */
 #include "adapt/adapt_impl.h"
 
-#include <stdlib.h>
+#include <string.h>
 
-int nh_dwr_front_duals(nh_system *sys, const nh_rows *rows, double scale, int n_nodes, int row,
-                       double *z, double *mu) {
+int nh_dwr_front_setup(const nh_rows *rows, int n_nodes, int row, double *j,
+                       unsigned char *active) {
   NH_CHECK(rows && row >= 0 && row + 3 <= rows->m, NH_ERR_INTERNAL,
            "front error: rows %d..%d are not among the step's %d", row, row + 2,
            rows ? rows->m : 0);
   const size_t n3 = 3 * (size_t)n_nodes;
-  double *j = nh_calloc(3 * n3, sizeof(double));
-  if (!j) return NH_ERROR(NH_ERR_MEMORY, "out of memory: the front's functionals");
+  memset(j, 0, 3 * n3 * sizeof(double));
   for (int q = 0; q < 3; q++) {
     const int r = row + q;
     const double *n = rows->dir + 3 * r;
@@ -64,19 +63,10 @@ int nh_dwr_front_duals(nh_system *sys, const nh_rows *rows, double scale, int n_
   /* the friction rows other than the front's own axial row as sliding: a
    * sticking friction row holds the step's increment, not the total
    * displacement whose error e is (the header) */
-  nh_rows held = *rows;
-  held.law = nh_calloc((size_t)rows->m, sizeof *held.law);
-  if (!held.law) {
-    free(j);
-    return NH_ERROR(NH_ERR_MEMORY, "out of memory: the front's rows");
-  }
-  for (int i = 0; i < rows->m; i++) {
-    held.law[i] = rows->law[i];
-    if (held.law[i].kind == NH_ROW_FRICTION && i != row + 2) held.law[i].sliding = 1;
-  }
-  int rc = nh_dwr_duals(sys, &held, scale, n_nodes, 3, j, z, mu, NULL);
-  free(j), free(held.law);
-  return rc;
+  nh_dwr_active_rows(rows, active);
+  for (int i = 0; i < rows->m; i++)
+    if (rows->law[i].kind == NH_ROW_FRICTION && i != row + 2) active[i] = 0;
+  return NH_OK;
 }
 
 void nh_dwr_front_vector(const nh_rows *rows, int row, const double E[3], double e[3]) {

@@ -84,20 +84,90 @@ int nh_system_solve(nh_system *s, const double *b, double *x) {
   return NH_OK;
 }
 
-int nh_system_solve_many(nh_system *s, int ncol, const double *b, double *x) {
+/* OpenBLAS's, when the BLAS linked is OpenBLAS (a weak reference: NULL otherwise). */
+#pragma weak openblas_get_num_threads
+int openblas_get_num_threads(void);
+
+int nh_system_blas_team(const nh_system *s) {
+  /* a BLAS with threads of its own (OPENBLAS_NUM_THREADS > 1) gets the cores instead */
+  if (openblas_get_num_threads && openblas_get_num_threads() > 1) return 1;
+  return s->threads > 0 ? s->threads : omp_get_max_threads();
+}
+
+/* One chunk of columns [c0, c1) of the two blocks (b1, x1: ncol1 columns;
+ * b2, x2: the rest), solved with the common cm. */
+static int nh_solve_chunk(nh_system *s, cholmod_common *cm, int c0, int c1, int ncol1,
+                          const double *b1, double *x1, const double *b2, double *x2) {
+  const size_t n = (size_t)s->n_free;
+  cholmod_dense *B = cholmod_allocate_dense(n, (size_t)(c1 - c0), n, CHOLMOD_REAL, cm);
+  if (!B) return CHOLMOD_OUT_OF_MEMORY;
+  double *Bx = B->x;
+  for (int c = c0; c < c1; c++)
+    memcpy(Bx + n * (size_t)(c - c0), c < ncol1 ? b1 + n * c : b2 + n * (size_t)(c - ncol1),
+           sizeof(double) * n);
+  cholmod_dense *X = cholmod_solve(CHOLMOD_A, s->L, B, cm);
+  cholmod_free_dense(&B, cm);
+  if (!X) return cm->status < CHOLMOD_OK ? cm->status : CHOLMOD_INVALID;
+  const double *Xx = X->x;
+  for (int c = c0; c < c1; c++)
+    memcpy(c < ncol1 ? x1 + n * c : x2 + n * (size_t)(c - ncol1), Xx + n * (size_t)(c - c0),
+           sizeof(double) * n);
+  cholmod_free_dense(&X, cm);
+  return CHOLMOD_OK;
+}
+
+/* The number of chunks the columns of a many-column solve are cut into: a
+ * power of two, by the number of columns alone (never by the threads), so
+ * that every column is solved by the same calls on any number of threads
+ * and x is bitwise the same; each chunk at least NH_SOLVE_CHUNK_COLUMNS
+ * columns, at most NH_SOLVE_CHUNKS chunks. */
+enum { NH_SOLVE_CHUNK_COLUMNS = 16, NH_SOLVE_CHUNKS = 4 };
+static int nh_solve_chunks(int ncol) {
+  int k = 1;
+  while (2 * k <= NH_SOLVE_CHUNKS && ncol >= 2 * k * NH_SOLVE_CHUNK_COLUMNS) k *= 2;
+  return k;
+}
+
+int nh_system_solve_two(nh_system *s, int ncol1, const double *b1, double *x1, int ncol2,
+                        const double *b2, double *x2) {
+  const int ncol = ncol1 + ncol2;
   if (ncol <= 0) return NH_OK;
   const size_t n = (size_t)s->n_free;
   if (!s->L && s->inh) {
-    for (int c = 0; c < ncol; c++) NH_TRY(nh_inherit_apply(s, b + n * c, x + n * c));
+    for (int c = 0; c < ncol; c++)
+      NH_TRY(nh_inherit_apply(s, c < ncol1 ? b1 + n * c : b2 + n * (size_t)(c - ncol1),
+                              c < ncol1 ? x1 + n * c : x2 + n * (size_t)(c - ncol1)));
     return NH_OK;
   }
-  cholmod_dense *B = cholmod_allocate_dense(n, (size_t)ncol, n, CHOLMOD_REAL, &s->cm);
-  if (!B) return NH_ERROR(NH_ERR_MEMORY, "out of memory: %d right-hand sides", ncol);
-  memcpy(B->x, b, sizeof(double) * n * (size_t)ncol);
-  cholmod_dense *X = cholmod_solve(CHOLMOD_A, s->L, B, &s->cm);
-  cholmod_free_dense(&B, &s->cm);
-  if (!X) return nh_cholmod_failed(s, "solve");
-  memcpy(x, X->x, sizeof(double) * n * (size_t)ncol);
-  cholmod_free_dense(&X, &s->cm);
-  return NH_OK;
+  const int nch = nh_solve_chunks(ncol);
+  const int threads = omp_in_parallel() ? 1 : nh_system_blas_team(s);
+  const int nt = threads < nch ? threads : nch;
+  int status = CHOLMOD_OK;
+#pragma omp parallel num_threads(nt) if (nt > 1)
+  {
+    /* thread 0 solves with the system's common, the others with their own */
+    cholmod_common own, *cm = &s->cm;
+    if (omp_get_thread_num() > 0) {
+      cholmod_start(&own);
+      own.print = 0, own.error_handler = NULL;
+      cm = &own;
+    }
+#pragma omp for schedule(static)
+    for (int k = 0; k < nch; k++) {
+      int st = nh_solve_chunk(s, cm, k * ncol / nch, (k + 1) * ncol / nch, ncol1, b1, x1, b2, x2);
+      if (st != CHOLMOD_OK) {
+#pragma omp atomic write
+        status = st;
+      }
+    }
+    if (cm == &own) cholmod_finish(&own);
+  }
+  if (status == CHOLMOD_OK) return NH_OK;
+  if (status == CHOLMOD_OUT_OF_MEMORY)
+    return NH_ERROR(NH_ERR_MEMORY, "out of memory: %d right-hand sides", ncol);
+  return NH_ERROR(NH_ERR_NUMERIC, "CHOLMOD solve failed (status %d)", status);
+}
+
+int nh_system_solve_many(nh_system *s, int ncol, const double *b, double *x) {
+  return nh_system_solve_two(s, ncol, b, x, 0, NULL, NULL);
 }

@@ -192,10 +192,6 @@ int nh_system_compliance_add_spsolve(nh_system *s, cholmod_sparse *Jt, double *W
  * 1.16 s (C = 16) and 0.56 s (C = 32). */
 #define NH_SUPER_COLUMNS 16
 
-/* OpenBLAS's, when the BLAS linked is OpenBLAS (a weak reference: NULL otherwise). */
-#pragma weak openblas_get_num_threads
-int openblas_get_num_threads(void);
-
 typedef struct {
   int nsuper;
   const int *super, *pi, *px, *ls; /* CHOLMOD's supernodal layout */
@@ -394,9 +390,7 @@ static int nh_compliance_add_supernodal(nh_system *s, cholmod_sparse *Jt, double
   nh_super_block *blk = nh_calloc((size_t)(nb ? nb : 1), sizeof *blk);
   nh_column_key *key = nh_calloc((size_t)(m ? m : 1), sizeof *key);
   int *count = NULL, *start = NULL, *list = NULL;
-  /* a BLAS with threads of its own (OPENBLAS_NUM_THREADS > 1) gets the cores instead */
-  const int blas_threaded = openblas_get_num_threads && openblas_get_num_threads() > 1;
-  const int nt = blas_threaded ? 1 : s->threads > 0 ? s->threads : omp_get_max_threads();
+  const int nt = nh_system_blas_team(s);
   nh_super_scratch *ws = nh_calloc((size_t)nt, sizeof *ws);
   double *Z = NULL, *G = NULL, *U = NULL;
   int rc = blk && key && ws ? nh_super_tree_build(s->L, &t) : NH_ERR_MEMORY;
@@ -545,8 +539,9 @@ void nh_system_add_reactions(const nh_system *s, double *b) {
  * active rows against the ncol right-hand sides:
  *   m >= ncol: W by nh_system_compliance_add (restricted forward solves),
  *     then A⁻¹ (J_tᵀ μ), a second solve of ncol columns;
- *   m <  ncol: G = A⁻¹ J_tᵀ by one solve of m columns, W = J_t G and the
- *     correction G μ (a dense n x m by m x ncol product).
+ *   m <  ncol: G = A⁻¹ J_tᵀ, its m columns solved with the ncol of A⁻¹ b
+ *     in one pass (nh_system_solve_two), W = J_t G and the correction G μ
+ *     (a dense n x m by m x ncol product).
  * The second costs an m-column solve where the first costs an ncol-column
  * one (the phantom's goal estimate: 36 duals, 3 to ~50 active rows); W =
  * J_t G is then nearly free, m² sparse dot products (the phantom's goal run:
@@ -555,47 +550,62 @@ void nh_system_add_reactions(const nh_system *s, double *b) {
  * its lower triangle is formed and mirrored (dpstrf reads the lower one;
  * the scaling reads both). The two routes agree to round-off
  * (tests/test_dwr_rows.c). */
-int nh_system_solve_rows(nh_system *s, const nh_rows *rows, const unsigned char *active, int ncol,
-                         const double *b, double *x, double *mu_out, int *n_used) {
-  const int n = s->n_free;
+int nh_system_solve_rows_sets(nh_system *s, const nh_rows *rows, int n_sets, const int *set_ncol,
+                              const unsigned char *const *set_active, const double *b, double *x,
+                              double *mu_out, int *n_used) {
+  const int n = s->n_free, mr = rows ? rows->m : 0;
+  int ncol = 0;
+  for (int k = 0; k < n_sets; k++) ncol += set_ncol[k];
   if (n_used) *n_used = 0;
-  if (mu_out && rows) memset(mu_out, 0, sizeof(double) * (size_t)rows->m * (size_t)ncol);
+  if (mu_out && rows) memset(mu_out, 0, sizeof(double) * (size_t)mr * (size_t)ncol);
   if (ncol > 0 && !s->factor_current) NH_TRY(nh_system_factor_later(s));
-  NH_TRY(nh_system_solve_many(s, ncol, b, x));
-  int m = 0;
-  for (int i = 0; rows && i < rows->m; i++) m += !active || active[i];
-  if (m == 0 || ncol <= 0) return NH_OK;
+  /* the union of the sets' active rows: row i at place pos[i] (−1: in none) */
+  int *pos = nh_calloc((size_t)(mr ? mr : 1), sizeof(int)), m = 0;
+  if (!pos) return NH_ERROR(NH_ERR_MEMORY, "out of memory: constrained dual (%d rows)", mr);
+  for (int i = 0; i < mr; i++) {
+    int in = 0;
+    for (int k = 0; k < n_sets && !in; k++)
+      in = set_ncol[k] > 0 && (!set_active[k] || set_active[k][i]);
+    pos[i] = in ? m++ : -1;
+  }
+  if (m == 0 || ncol <= 0) {
+    free(pos);
+    return nh_system_solve_many(s, ncol, b, x);
+  }
   int slots = 0;
-  for (int i = 0; i < rows->m; i++)
-    if (!active || active[i]) slots += rows->start[i + 1] - rows->start[i];
+  for (int i = 0; i < mr; i++)
+    if (pos[i] >= 0) slots += rows->start[i + 1] - rows->start[i];
   nh_rows sub = {.m = m, .cap = m, .n_slots = slots};
   sub.start = nh_calloc((size_t)m + 1, sizeof(int));
   sub.node = nh_calloc((size_t)slots + 1, sizeof(int));
   sub.N = nh_calloc((size_t)slots + 1, sizeof(double));
   sub.dir = nh_calloc(3 * (size_t)m, sizeof(double));
   int *mark = nh_calloc((size_t)(n ? n : 1), sizeof(int)), *piv = nh_calloc((size_t)m, sizeof(int));
-  double *W = nh_calloc((size_t)m * (size_t)m, sizeof(double));
+  int *place = nh_calloc((size_t)m, sizeof(int)), *row = nh_calloc((size_t)m, sizeof(int));
+  double *W = nh_calloc((size_t)m * (size_t)m, sizeof(double));  /* the union's, unscaled */
+  double *Ws = nh_calloc((size_t)m * (size_t)m, sizeof(double)); /* a set's block, scaled */
   double *d = nh_calloc((size_t)m, sizeof(double));
-  double *mu = nh_calloc((size_t)m * (size_t)ncol, sizeof(double));
-  double *c = nh_calloc((size_t)m * (size_t)ncol, sizeof(double));
+  double *mu = nh_calloc((size_t)m * (size_t)ncol, sizeof(double)); /* at the union's places */
+  double *c = nh_calloc(2 * (size_t)m * (size_t)ncol, sizeof(double)), *cp = c + (size_t)m * ncol;
   /* the second solve's right-hand sides and solutions: J_tᵀ μ and A⁻¹ J_tᵀ μ
    * (ncol columns), or with m < ncol J_tᵀ and G = A⁻¹ J_tᵀ (m columns) */
   const int direct = m < ncol;
   double *f = nh_calloc((size_t)n * (size_t)ncol, sizeof(double));
   double *y = nh_calloc((size_t)n * (size_t)ncol, sizeof(double));
   cholmod_sparse *Jt = NULL;
-  int rc = sub.start && sub.node && sub.N && sub.dir && mark && piv && W && d && mu && c && f && y
+  int rc = sub.start && sub.node && sub.N && sub.dir && mark && piv && place && row && W && Ws &&
+                   d && mu && c && f && y
                ? NH_OK
                : NH_ERROR(NH_ERR_MEMORY, "out of memory: constrained dual (%d rows)", m);
   if (!rc) {
-    for (int i = 0, k = 0; i < rows->m; i++) {
-      if (active && !active[i]) continue;
+    for (int i = 0, k = 0; i < mr; i++) {
+      if (pos[i] < 0) continue;
       const int a = rows->start[i], len = rows->start[i + 1] - a;
       sub.start[k + 1] = sub.start[k] + len;
       memcpy(sub.node + sub.start[k], rows->node + a, (size_t)len * sizeof(int));
       memcpy(sub.N + sub.start[k], rows->N + a, (size_t)len * sizeof(double));
       memcpy(sub.dir + 3 * k, rows->dir + 3 * i, 3 * sizeof(double));
-      k++;
+      row[k++] = i;
     }
     for (int i = 0; i < n; i++) mark[i] = -1;
     Jt = nh_rows_tissue_jt(s, &sub, mark);
@@ -606,59 +616,73 @@ int nh_system_solve_rows(nh_system *s, const nh_rows *rows, const unsigned char 
     const double *Jx = Jt->x;
     for (int j = 0; j < m; j++) /* J_tᵀ dense (f was zeroed by calloc) */
       for (int p = Jp[j]; p < Jp[j + 1]; p++) f[(size_t)n * j + Ji[p]] = Jx[p];
-    rc = nh_system_solve_many(s, m, f, y);
-    for (int j = 0; j < m && !rc; j++) /* W = J_t G, lower triangle, mirrored */
+    rc = nh_system_solve_two(s, ncol, b, x, m, f, y); /* A⁻¹ b and G in one pass */
+    for (int j = 0; j < m && !rc; j++)                /* W = J_t G, lower triangle, mirrored */
       for (int i = j; i < m; i++) {
         double v = 0.0;
         for (int p = Jp[i]; p < Jp[i + 1]; p++) v += Jx[p] * y[(size_t)n * j + Ji[p]];
         W[(size_t)j * m + i] = W[(size_t)i * m + j] = v;
       }
-  } else if (!rc)
+  } else if (!rc && !(rc = nh_system_solve_many(s, ncol, b, x)))
     rc = nh_system_compliance_add(s, Jt, W);
-  if (!rc) {
-    const int *Jp = Jt->p, *Ji = Jt->i;
+  /* Each set's multipliers from its rows' block of W: with D = diag(W)^−½,
+   * Pᵀ (D W D) P = L Lᵀ up to rank r, L₁₁ L₁₁ᵀ y₁ = (Pᵀ D J A⁻¹ b)₁, y₂ = 0,
+   * μ = D P y. */
+  for (int k = 0, c0 = 0; k < n_sets && !rc; c0 += set_ncol[k++]) {
+    const int *Jp = Jt->p, *Ji = Jt->i, nk = set_ncol[k];
     const double *Jx = Jt->x;
-    for (int j = 0; j < m; j++) {
-      double w = W[(size_t)j * m + j];
-      d[j] = w > 0.0 ? 1.0 / sqrt(w) : 0.0; /* a row without free DOFs: dropped */
+    int ms = 0;
+    for (int i = 0; i < mr; i++)
+      if (pos[i] >= 0 && (!set_active[k] || set_active[k][i])) place[ms++] = pos[i];
+    if (ms == 0 || nk == 0) continue;
+    if (k == 0 && n_used) *n_used = ms;
+    for (int a = 0; a < ms; a++) {
+      double w = W[(size_t)place[a] * m + place[a]];
+      d[a] = w > 0.0 ? 1.0 / sqrt(w) : 0.0; /* a row without free DOFs: dropped */
     }
-    for (int j = 0; j < m; j++)
-      for (int i = 0; i < m; i++) W[(size_t)j * m + i] *= d[i] * d[j];
-    for (int q = 0; q < ncol; q++) /* D J A⁻¹ b */
-      for (int j = 0; j < m; j++) {
+    for (int a = 0; a < ms; a++)
+      for (int e = 0; e < ms; e++)
+        Ws[(size_t)a * ms + e] = W[(size_t)place[a] * m + place[e]] * d[a] * d[e];
+    for (int q = 0; q < nk; q++) /* D J A⁻¹ b */
+      for (int a = 0; a < ms; a++) {
+        const int j = place[a];
         double v = 0.0;
-        for (int p = Jp[j]; p < Jp[j + 1]; p++) v += Jx[p] * x[(size_t)n * q + Ji[p]];
-        mu[(size_t)m * q + j] = d[j] * v;
+        for (int p = Jp[j]; p < Jp[j + 1]; p++) v += Jx[p] * x[(size_t)n * (c0 + q) + Ji[p]];
+        c[(size_t)ms * q + a] = d[a] * v;
       }
-    /* Pᵀ W̃ P = L Lᵀ up to rank r; L₁₁ L₁₁ᵀ y₁ = (Pᵀ c)₁, y₂ = 0, μ = D P y. */
     int rank = 0;
-    int info = (int)LAPACKE_dpstrf(LAPACK_COL_MAJOR, 'L', m, W, m, piv, &rank, 1e-12);
+    int info = (int)LAPACKE_dpstrf(LAPACK_COL_MAJOR, 'L', ms, Ws, ms, piv, &rank, 1e-12);
     if (info < 0) rc = NH_ERROR(NH_ERR_NUMERIC, "constrained dual: dpstrf failed (%d)", info);
-    if (!rc && rank > 0) {
-      for (int q = 0; q < ncol; q++)
-        for (int i = 0; i < rank; i++) c[(size_t)rank * q + i] = mu[(size_t)m * q + piv[i] - 1];
-      LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', rank, ncol, W, m, c, rank);
-      for (int q = 0; q < ncol; q++) {
-        double *mq = mu + (size_t)m * q;
-        memset(mq, 0, sizeof(double) * (size_t)m);
-        for (int i = 0; i < rank; i++) mq[piv[i] - 1] = d[piv[i] - 1] * c[(size_t)rank * q + i];
-        if (!direct) nh_rows_tissue_force(Jt, mq, f + (size_t)n * q, n);
-        for (int i = 0, k = 0; mu_out && i < rows->m; i++)
-          if (!active || active[i]) mu_out[(size_t)rows->m * q + i] = mq[k++];
+    if (rc || rank == 0) continue;
+    for (int q = 0; q < nk; q++)
+      for (int i = 0; i < rank; i++) cp[(size_t)rank * q + i] = c[(size_t)ms * q + piv[i] - 1];
+    LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', rank, nk, Ws, ms, cp, rank);
+    for (int q = 0; q < nk; q++)
+      for (int i = 0; i < rank; i++) {
+        const int a = piv[i] - 1, j = place[a];
+        const double v = d[a] * cp[(size_t)rank * q + i];
+        mu[(size_t)m * (c0 + q) + j] = v;
+        if (mu_out) mu_out[(size_t)mr * (c0 + q) + row[j]] = v;
       }
-      if (direct) /* x −= G μ */
-        cblas_dgemm(CblasColMajor, CblasNoTrans, CblasNoTrans, n, ncol, m, -1.0, y, n, mu, m, 1.0,
-                    x, n);
-      else {
-        rc = nh_system_solve_many(s, ncol, f, y);
-        for (size_t i = 0; !rc && i < (size_t)n * (size_t)ncol; i++) x[i] -= y[i];
-      }
-    }
   }
-  if (!rc && n_used) *n_used = m;
+  if (!rc && direct) /* x −= G μ */
+    cblas_dgemm(CblasColMajor, CblasNoTrans, CblasNoTrans, n, ncol, m, -1.0, y, n, mu, m, 1.0, x,
+                n);
+  else if (!rc) {
+    for (int q = 0; q < ncol; q++)
+      nh_rows_tissue_force(Jt, mu + (size_t)m * q, f + (size_t)n * q, n);
+    rc = nh_system_solve_many(s, ncol, f, y);
+    for (size_t i = 0; !rc && i < (size_t)n * (size_t)ncol; i++) x[i] -= y[i];
+  }
   if (Jt) cholmod_free_sparse(&Jt, &s->cm);
+  free(pos), free(place), free(row), free(Ws);
   free(sub.start), free(sub.node), free(sub.N), free(sub.dir), free(mark), free(piv), free(W),
       free(d), free(mu);
   free(c), free(f), free(y);
   return rc;
+}
+
+int nh_system_solve_rows(nh_system *s, const nh_rows *rows, const unsigned char *active, int ncol,
+                         const double *b, double *x, double *mu_out, int *n_used) {
+  return nh_system_solve_rows_sets(s, rows, 1, &ncol, &active, b, x, mu_out, n_used);
 }

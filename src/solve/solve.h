@@ -413,8 +413,9 @@ int nh_rows_widen(nh_rows *rows, int count);
  * active[i] != 0 (active NULL: every row); the tools' parts are held (a
  * rigid tool). x = A⁻¹ b − A⁻¹ J_tᵀ μ with W μ = J_t A⁻¹ b,
  * W = J_t A⁻¹ J_tᵀ (nh_system_compliance_add; with fewer active rows m
- * than columns, J_t G and the correction G μ from G = A⁻¹ J_tᵀ, one solve
- * of m columns instead of a second one of ncol), solved by a pivoted
+ * than columns, J_t G and the correction G μ from G = A⁻¹ J_tᵀ, its m
+ * columns solved with A⁻¹ b's ncol in one pass, instead of a second solve
+ * of ncol), solved by a pivoted
  * Cholesky factorisation of the diagonally scaled W truncated at relative
  * pivots below 1e-12 (dependent rows: J_tᵀ μ is still unique, μ is not:
  * the truncated rows get 0). A is the matrix as the step left it, assembled
@@ -429,6 +430,14 @@ int nh_rows_widen(nh_rows *rows, int count);
  * *n_used (may be NULL): the active rows. NH_ERR_MEMORY, NH_ERR_NUMERIC. */
 int nh_system_solve_rows(nh_system *sys, const nh_rows *rows, const unsigned char *active, int ncol,
                          const double *b, double *x, double *mu, int *n_used);
+/* nh_system_solve_rows of n_sets sets of columns at once, set k its next
+ * set_ncol[k] columns of b and x with the rows set_active[k] (NULL: every
+ * row): one solve for all of them, and W and G over the union of their
+ * rows, each set's multipliers from its own rows' block of W (the goals'
+ * duals and the fronts' in one pass, adapt/dwr.c). *n_used: set 0's rows. */
+int nh_system_solve_rows_sets(nh_system *sys, const nh_rows *rows, int n_sets, const int *set_ncol,
+                              const unsigned char *const *set_active, const double *b, double *x,
+                              double *mu, int *n_used);
 /* The factorisations nh_system_solve_rows made since the last call, and
  * reset the count. */
 int nh_system_take_later_factorisations(nh_system *sys);
