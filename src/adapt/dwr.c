@@ -403,12 +403,13 @@ static int nh_dwr_constraint_term(const nh_rows *rows, const double *z, double *
   return NH_OK;
 }
 
-/* The duals of n_sets sets of functionals, set k its next ncol[k] of j
- * with the rows active[k] (NULL: the tissue alone), in one solve
- * (nh_system_solve_rows_sets); otherwise as nh_dwr_duals. */
+/* The duals of n_sets sets of functionals, set k ncol[k] of them at j[k]
+ * (3 n_nodes each) with the rows active[k] (NULL: every row), in one solve
+ * (nh_system_solve_rows_sets): z and mu of all of them, set after set;
+ * otherwise as nh_dwr_duals. */
 static int nh_dwr_duals_sets(nh_system *sys, const nh_rows *rows, double scale, int n_nodes,
                              int n_sets, const int *ncol, const unsigned char *const *active,
-                             const double *j, double *z, double *mu, int *n_rows) {
+                             const double *const *j, double *z, double *mu, int *n_rows) {
   const int nf = nh_system_free_dofs(sys);
   int n = 0;
   for (int k = 0; k < n_sets; k++) n += ncol[k];
@@ -418,10 +419,12 @@ static int nh_dwr_duals_sets(nh_system *sys, const nh_rows *rows, double scale, 
   double *b = nh_calloc((size_t)nf * (size_t)(n ? n : 1), sizeof(double));
   double *x = nh_calloc((size_t)nf * (size_t)(n ? n : 1), sizeof(double));
   int rc = b && x ? NH_OK : NH_ERROR(NH_ERR_MEMORY, "out of memory: %d dual problems", n);
-  for (int q = 0; q < n && !rc; q++) {
-    nh_system_gather(sys, j + 3 * (size_t)n_nodes * q, b + (size_t)nf * q);
-    for (int i = 0; i < nf; i++) b[(size_t)nf * q + i] *= scale;
-  }
+  for (int k = 0, q = 0; k < n_sets && !rc; k++)
+    for (int i = 0; i < ncol[k]; i++, q++) {
+      double *bq = b + (size_t)nf * q;
+      nh_system_gather(sys, j[k] + 3 * (size_t)n_nodes * i, bq);
+      for (int r = 0; r < nf; r++) bq[r] *= scale;
+    }
   if (!rc) {
     const int with_rows = rows && rows->m > 0;
     rc = nh_system_solve_rows_sets(sys, with_rows ? rows : NULL, n_sets, ncol, active, b, x, mu,
@@ -441,39 +444,39 @@ int nh_dwr_duals(nh_system *sys, const nh_rows *rows, double scale, int n_nodes,
     return NH_ERROR(NH_ERR_MEMORY, "out of memory: %d dual problems", n);
   if (active) nh_dwr_active_rows(rows, active);
   const unsigned char *sets[1] = {active};
-  int rc = nh_dwr_duals_sets(sys, rows, scale, n_nodes, 1, &n, sets, j, z, mu, n_rows);
+  const double *js[1] = {j};
+  int rc = nh_dwr_duals_sets(sys, rows, scale, n_nodes, 1, &n, sets, js, z, mu, n_rows);
   free(active);
   return rc;
 }
 
 /* The goals' nz duals and the fronts' (3 each, their own rows:
- * nh_dwr_front_setup) in one pass: z and mu for nz + 3 n_fronts duals. */
+ * nh_dwr_front_setup) in one solve: z and mu for nz + 3 n_fronts duals. */
 static int nh_dwr_all_duals(nh_system *sys, const nh_rows *rows, double scale, int n_nodes, int nz,
                             const double *j, const nh_dwr_fronts *fronts, double *z, double *mu,
                             int *n_rows) {
-  const int nfr = fronts ? fronts->n : 0, nd = nz + 3 * nfr, mr = rows ? rows->m : 0;
+  const int nfr = fronts ? fronts->n : 0, mr = rows ? rows->m : 0, ns = 1 + nfr;
   const size_t n3 = 3 * (size_t)n_nodes;
-  double *jall = nh_calloc(n3 * (size_t)(nd ? nd : 1), sizeof(double));
-  unsigned char *act = nh_calloc((size_t)(1 + nfr) * (size_t)(mr ? mr : 1), 1);
-  const unsigned char **sets = nh_calloc((size_t)(1 + nfr), sizeof *sets);
-  int *ncol = nh_calloc((size_t)(1 + nfr), sizeof(int));
-  int rc = jall && act && sets && ncol
+  double *jf = nh_calloc(3 * n3 * (size_t)(nfr ? nfr : 1), sizeof(double)); /* the fronts' */
+  unsigned char *act = nh_calloc((size_t)ns * (size_t)(mr ? mr : 1), 1);
+  const unsigned char **sets = nh_calloc((size_t)ns, sizeof *sets);
+  const double **js = nh_calloc((size_t)ns, sizeof *js);
+  int *ncol = nh_calloc((size_t)ns, sizeof(int));
+  int rc = jf && act && sets && js && ncol
                ? NH_OK
-               : NH_ERROR(NH_ERR_MEMORY, "out of memory: %d dual problems", nd);
+               : NH_ERROR(NH_ERR_MEMORY, "out of memory: %d dual problems", nz + 3 * nfr);
   if (!rc) {
-    if (nz) memcpy(jall, j, n3 * (size_t)nz * sizeof(double));
-    ncol[0] = nz;
+    ncol[0] = nz, js[0] = j;
     if (mr) nh_dwr_active_rows(rows, act), sets[0] = act;
   }
   for (int f = 0; f < nfr && !rc; f++) {
-    ncol[1 + f] = 3;
+    ncol[1 + f] = 3, js[1 + f] = jf + 3 * n3 * (size_t)f;
     sets[1 + f] = mr ? act + (size_t)mr * (1 + f) : NULL;
-    rc = nh_dwr_front_setup(rows, n_nodes, fronts->row[f], jall + n3 * (nz + 3 * (size_t)f),
+    rc = nh_dwr_front_setup(rows, n_nodes, fronts->row[f], jf + 3 * n3 * (size_t)f,
                             act + (size_t)mr * (1 + f));
   }
-  if (!rc)
-    rc = nh_dwr_duals_sets(sys, rows, scale, n_nodes, 1 + nfr, ncol, sets, jall, z, mu, n_rows);
-  free(jall), free(act), free(sets), free(ncol);
+  if (!rc) rc = nh_dwr_duals_sets(sys, rows, scale, n_nodes, ns, ncol, sets, js, z, mu, n_rows);
+  free(jf), free(act), free(sets), free(js), free(ncol);
   return rc;
 }
 
@@ -514,11 +517,12 @@ int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale, const 
   }
   out->n_rows = 0;
   /* the goals' duals, and each front's holding its own rows (dwr_front.c) */
-  if (nd > 0 &&
-      (rc = nh_dwr_all_duals(sys, rows, scale, nn, nz, j, out->fronts, z, mu, &out->n_rows)))
-    goto done;
+  if (nd > 0) {
+    rc = nh_dwr_all_duals(sys, rows, scale, nn, nz, j, out->fronts, z, mu, &out->n_rows);
+    if (rc) goto done;
+  }
 
-    /* Centre samples: the primal's corotational stress, each dual's tangent stress. */
+  /* Centre samples: the primal's corotational stress, each dual's tangent stress. */
 #pragma omp parallel for schedule(static) if (nl >= NH_DWR_PARALLEL_MIN)
   for (int l = 0; l < nl; l++) {
     int c = m->leaves[l];

@@ -540,7 +540,7 @@ void nh_system_add_reactions(const nh_system *s, double *b) {
  *   m >= ncol: W by nh_system_compliance_add (restricted forward solves),
  *     then A⁻¹ (J_tᵀ μ), a second solve of ncol columns;
  *   m <  ncol: G = A⁻¹ J_tᵀ, its m columns solved with the ncol of A⁻¹ b
- *     in one pass (nh_system_solve_two), W = J_t G and the correction G μ
+ *     in one call (nh_system_solve_two), W = J_t G and the correction G μ
  *     (a dense n x m by m x ncol product).
  * The second costs an m-column solve where the first costs an ncol-column
  * one (the phantom's goal estimate: 36 duals, 3 to ~50 active rows); W =
@@ -616,7 +616,7 @@ int nh_system_solve_rows_sets(nh_system *s, const nh_rows *rows, int n_sets, con
     const double *Jx = Jt->x;
     for (int j = 0; j < m; j++) /* J_tᵀ dense (f was zeroed by calloc) */
       for (int p = Jp[j]; p < Jp[j + 1]; p++) f[(size_t)n * j + Ji[p]] = Jx[p];
-    rc = nh_system_solve_two(s, ncol, b, x, m, f, y); /* A⁻¹ b and G in one pass */
+    rc = nh_system_solve_two(s, ncol, b, x, m, f, y); /* A⁻¹ b and G in one call */
     for (int j = 0; j < m && !rc; j++)                /* W = J_t G, lower triangle, mirrored */
       for (int i = j; i < m; i++) {
         double v = 0.0;

@@ -122,8 +122,11 @@ int nh_system_reuse_load(nh_system *sys, const unsigned char *data, size_t size,
 /* Solve A x = b for free-DOF vectors (length nh_system_free_dofs). */
 int nh_system_solve(nh_system *sys, const double *b, double *x);
 /* Solve A X = B for ncol free-DOF vectors at once (column-major, n_free x
- * ncol each): one pass of the triangular solves over all columns, with the
- * factor of the last nh_system_factor. NH_ERR_MEMORY, NH_ERR_NUMERIC. */
+ * ncol each) with the factor of the last nh_system_factor: the columns in
+ * chunks of at least 16 (up to 4, fixed by ncol alone: the same bits on any
+ * number of threads), each chunk one pass of the triangular solves, the
+ * chunks on the solver's threads (cholesky.c). NH_ERR_MEMORY,
+ * NH_ERR_NUMERIC. */
 int nh_system_solve_many(nh_system *sys, int ncol, const double *b, double *x);
 
 /* Constraint rows tying each hanging node to its masters, u_h = Σ w u_m,

@@ -232,17 +232,17 @@ int nh_system_solve_reuse(nh_system *s, const double *b, double *x, double toler
 int nh_system_pcg(nh_system *s, const double *b, double *x, int guess, double tolerance,
                   int max_iterations, int *iterations);
 
-/* W += J A⁻¹ Jᵀ (Algorithm 3) for rows given as Jᵀ (n_free x m, CSC, sorted);
- * W dense column-major m x m. A must be factorised. Fails with
- * NH_ERR_MEMORY, NH_ERR_NUMERIC (CHOLMOD) or a stop request. */
 /* The threads of a team whose tasks call BLAS on one thread each (the
  * compliance W's build, many-column solves): solver.threads, else every
  * core; 1 when the BLAS has threads of its own (OPENBLAS_NUM_THREADS > 1). */
 int nh_system_blas_team(const nh_system *s);
-/* nh_system_solve_many of two blocks at once, ncol1 columns b1 -> x1 and
- * ncol2 columns b2 -> x2 (one pass over the factor for both). */
+/* nh_system_solve_many of two blocks as one of ncol1 + ncol2 columns
+ * (b1 -> x1, then b2 -> x2), in the chunks of their total. */
 int nh_system_solve_two(nh_system *s, int ncol1, const double *b1, double *x1, int ncol2,
                         const double *b2, double *x2);
+/* W += J A⁻¹ Jᵀ (Algorithm 3) for rows given as Jᵀ (n_free x m, CSC, sorted);
+ * W dense column-major m x m. A must be factorised. Fails with
+ * NH_ERR_MEMORY, NH_ERR_NUMERIC (CHOLMOD) or a stop request. */
 int nh_system_compliance_add(nh_system *s, cholmod_sparse *Jt, double *W);
 /* The same through CHOLMOD's sparse solves (cholmod_spsolve), for any
  * factor: the path of a simplicial factor, and an independent one for the
