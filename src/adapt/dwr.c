@@ -437,21 +437,9 @@ static int nh_dwr_duals_sets(nh_system *sys, const nh_rows *rows, double scale, 
   return rc;
 }
 
-int nh_dwr_duals(nh_system *sys, const nh_rows *rows, double scale, int n_nodes, int n,
-                 const double *j, double *z, double *mu, int *n_rows) {
-  unsigned char *active = rows && rows->m > 0 ? nh_calloc((size_t)rows->m, 1) : NULL;
-  if (rows && rows->m > 0 && !active)
-    return NH_ERROR(NH_ERR_MEMORY, "out of memory: %d dual problems", n);
-  if (active) nh_dwr_active_rows(rows, active);
-  const unsigned char *sets[1] = {active};
-  const double *js[1] = {j};
-  int rc = nh_dwr_duals_sets(sys, rows, scale, n_nodes, 1, &n, sets, js, z, mu, n_rows);
-  free(active);
-  return rc;
-}
-
-/* The goals' nz duals and the fronts' (3 each, their own rows:
- * nh_dwr_front_setup) in one solve: z and mu for nz + 3 n_fronts duals. */
+/* The goals' nz duals with the active rows (nh_dwr_active_rows) and the
+ * fronts' (3 each, their own rows: nh_dwr_front_setup; fronts may be NULL)
+ * in one solve: z and mu for nz + 3 n_fronts duals. */
 static int nh_dwr_all_duals(nh_system *sys, const nh_rows *rows, double scale, int n_nodes, int nz,
                             const double *j, const nh_dwr_fronts *fronts, double *z, double *mu,
                             int *n_rows) {
@@ -478,6 +466,11 @@ static int nh_dwr_all_duals(nh_system *sys, const nh_rows *rows, double scale, i
   if (!rc) rc = nh_dwr_duals_sets(sys, rows, scale, n_nodes, ns, ncol, sets, js, z, mu, n_rows);
   free(jf), free(act), free(sets), free(js), free(ncol);
   return rc;
+}
+
+int nh_dwr_duals(nh_system *sys, const nh_rows *rows, double scale, int n_nodes, int n,
+                 const double *j, double *z, double *mu, int *n_rows) {
+  return nh_dwr_all_duals(sys, rows, scale, n_nodes, n, j, NULL, z, mu, n_rows);
 }
 
 /* The estimates E_q of nz functionals j (3 n_nodes each) and, for each group

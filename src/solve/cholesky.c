@@ -163,9 +163,8 @@ int nh_system_solve_two(nh_system *s, int ncol1, const double *b1, double *x1, i
     if (cm == &own) cholmod_finish(&own);
   }
   if (status == CHOLMOD_OK) return NH_OK;
-  if (status == CHOLMOD_OUT_OF_MEMORY)
-    return NH_ERROR(NH_ERR_MEMORY, "out of memory: %d right-hand sides", ncol);
-  return NH_ERROR(NH_ERR_NUMERIC, "CHOLMOD solve failed (status %d)", status);
+  s->cm.status = status; /* a chunk's, reported as the system's own solves are */
+  return nh_cholmod_failed(s, "solve");
 }
 
 int nh_system_solve_many(nh_system *s, int ncol, const double *b, double *x) {

@@ -550,6 +550,11 @@ void nh_system_add_reactions(const nh_system *s, double *b) {
  * its lower triangle is formed and mirrored (dpstrf reads the lower one;
  * the scaling reads both). The two routes agree to round-off
  * (tests/test_dwr_rows.c). */
+/* Row i is in set k: the set has columns and holds the row (active NULL: every row). */
+static int nh_set_holds(const int *set_ncol, const unsigned char *const *set_active, int k, int i) {
+  return set_ncol[k] > 0 && (!set_active[k] || set_active[k][i]);
+}
+
 int nh_system_solve_rows_sets(nh_system *s, const nh_rows *rows, int n_sets, const int *set_ncol,
                               const unsigned char *const *set_active, const double *b, double *x,
                               double *mu_out, int *n_used) {
@@ -564,8 +569,7 @@ int nh_system_solve_rows_sets(nh_system *s, const nh_rows *rows, int n_sets, con
   if (!pos) return NH_ERROR(NH_ERR_MEMORY, "out of memory: constrained dual (%d rows)", mr);
   for (int i = 0; i < mr; i++) {
     int in = 0;
-    for (int k = 0; k < n_sets && !in; k++)
-      in = set_ncol[k] > 0 && (!set_active[k] || set_active[k][i]);
+    for (int k = 0; k < n_sets && !in; k++) in = nh_set_holds(set_ncol, set_active, k, i);
     pos[i] = in ? m++ : -1;
   }
   if (m == 0 || ncol <= 0) {
@@ -589,9 +593,9 @@ int nh_system_solve_rows_sets(nh_system *s, const nh_rows *rows, int n_sets, con
   double *c = nh_calloc(2 * (size_t)m * (size_t)ncol, sizeof(double)), *cp = c + (size_t)m * ncol;
   /* the second solve's right-hand sides and solutions: J_tᵀ μ and A⁻¹ J_tᵀ μ
    * (ncol columns), or with m < ncol J_tᵀ and G = A⁻¹ J_tᵀ (m columns) */
-  const int direct = m < ncol;
-  double *f = nh_calloc((size_t)n * (size_t)ncol, sizeof(double));
-  double *y = nh_calloc((size_t)n * (size_t)ncol, sizeof(double));
+  const int direct = m < ncol, ncol2 = direct ? m : ncol;
+  double *f = nh_calloc((size_t)n * (size_t)ncol2, sizeof(double));
+  double *y = nh_calloc((size_t)n * (size_t)ncol2, sizeof(double));
   cholmod_sparse *Jt = NULL;
   int rc = sub.start && sub.node && sub.N && sub.dir && mark && piv && place && row && W && Ws &&
                    d && mu && c && f && y
@@ -633,8 +637,8 @@ int nh_system_solve_rows_sets(nh_system *s, const nh_rows *rows, int n_sets, con
     const double *Jx = Jt->x;
     int ms = 0;
     for (int i = 0; i < mr; i++)
-      if (pos[i] >= 0 && (!set_active[k] || set_active[k][i])) place[ms++] = pos[i];
-    if (ms == 0 || nk == 0) continue;
+      if (pos[i] >= 0 && nh_set_holds(set_ncol, set_active, k, i)) place[ms++] = pos[i];
+    if (ms == 0) continue;
     if (k == 0 && n_used) *n_used = ms;
     for (int a = 0; a < ms; a++) {
       double w = W[(size_t)place[a] * m + place[a]];
