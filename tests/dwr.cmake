@@ -14,3 +14,5 @@ nh_add_c_test(test_dwr_local verify)
 nh_add_c_test(test_goal_marking verify)
 # The fronts' errors in the goal estimate's pass: bitwise those of each front alone, the goals' unchanged (tests/test_dwr_fronts.c).
 nh_add_c_test(test_dwr_fronts verify)
+# The estimate's Gauss-point kernel against its terms formed point by point from their definitions (tests/test_dwr_kernel.c).
+nh_add_c_test(test_dwr_kernel unit)

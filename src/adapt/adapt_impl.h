@@ -68,6 +68,16 @@ typedef struct {
   const double *weights;
 } nh_dwr_goals;
 
+/* One dual's terms at a cell's 8 Gauss points (dwr.c, where the arguments
+ * are described): *eps = Σ det J (e_zᵀ D⁻¹ e_u, with B-bar's
+ * − e_p,u (I − Π) div z − e_p,z (I − Π) div u), *ezz = Σ det J e_zᵀ D⁻¹ e_z.
+ * Outside dwr.c for tests/test_dwr_kernel.c only. */
+void nh_dwr_dual_terms(const double we[24], const double RgT[24][8], const double RdivT[24][8],
+                       const double *zstar, size_t stride, const int corner[8],
+                       const double NT[8][8], double lambda, double mu, int bbar, double tz,
+                       const double ceuT[6][8], const double pu[8], const double dev_u[8],
+                       const double detJ[8], double *eps, double *ezz);
+
 /* The estimates E_q of nz functionals j (3 n_nodes each) of the step's
  * solution u, with the constrained dual of the rows (dwr.c); for each group
  * of `group` consecutive functionals the marking indicator (out->indicator,

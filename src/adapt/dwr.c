@@ -246,12 +246,11 @@ static void nh_dwr_dual_stresses(const double *z, size_t n3, int nq, const int c
  * point's operations are the scalar formulas' in their order (no FMA), so
  * every clone computes the same bits. */
 NH_ADAPT_V4_CLONES
-static void nh_dwr_dual_terms(const double we[24], const double RgT[24][8],
-                              const double RdivT[24][8], const double *zstar, size_t stride,
-                              const int corner[8], const double NT[8][8], double lambda, double mu,
-                              int bbar, double tz, const double ceuT[6][8], const double pu[8],
-                              const double dev_u[8], const double detJ[8], double *eps,
-                              double *ezz) {
+void nh_dwr_dual_terms(const double we[24], const double RgT[24][8], const double RdivT[24][8],
+                       const double *zstar, size_t stride, const int corner[8],
+                       const double NT[8][8], double lambda, double mu, int bbar, double tz,
+                       const double ceuT[6][8], const double pu[8], const double dev_u[8],
+                       const double detJ[8], double *eps, double *ezz) {
   const nh_v4 zero = {0.0, 0.0, 0.0, 0.0};
   const double c = lambda / (3.0 * lambda + 2.0 * mu); /* nh_voigt_compliance's */
   const double m2 = 2.0 * mu, m23 = 2.0 * mu / 3.0;
