@@ -10,29 +10,30 @@ typedef struct {
   int cell;
 } nh_mark_entry;
 
-/* The estimators' inner loops over many fields (SPR's fits of the goal
- * estimate's 1 + 36 fields, the duals' stresses at the 8 Gauss points),
- * compiled three times on x86-64 with GCC: for AVX-512 (8 doubles per
- * instruction: the 8 Gauss points in one), AVX2 (4) and the baseline SSE2
- * (2), chosen at load time by the CPU. Without FMA and with the sums in the
- * source's order all compute the same bits. */
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__ELF__)
-#define NH_ADAPT_VECTOR_CLONES __attribute__((target_clones("avx512f", "avx2", "default")))
-#else
-#define NH_ADAPT_VECTOR_CLONES
-#endif
-
-/* Four doubles in one vector (GCC's and Clang's vector extension: the
- * arithmetic elementwise, a scalar operand applied to every element), for
- * kernels written on the vectors themselves. NH_V4_LOAD(v, p): v = p[0..3]
- * (any alignment). Their clones: AVX2 (one instruction per operation; on
- * AVX-512 machines too, where the 4-wide form ran faster than the AVX-512
- * clone of the same source) and the baseline (pairs of SSE2 halves). */
+/* The estimators' inner loops, compiled more than once on x86-64 with GCC
+ * and chosen at load time by the CPU; without FMA and with the sums in the
+ * source's order every copy computes the same bits.
+ *
+ * NH_ADAPT_VECTOR_CLONES: loops left to the compiler's vectoriser (SPR's
+ * stresses, interpolation and error at the points, spr.c; the duals' centre
+ * stresses, dwr.c), for AVX-512, AVX2 and the baseline SSE2.
+ *
+ * nh_v4, NH_V4_LOAD, NH_ADAPT_V4_CLONES: kernels written on 4-double
+ * vectors themselves (GCC's and Clang's vector extension: the arithmetic
+ * elementwise, a scalar operand applied to every element; NH_V4_LOAD(v, p):
+ * v = p[0..3], any alignment) where the vectoriser shuffled more than it
+ * computed (the Gauss-point kernel, dwr.c; SPR's combination of many
+ * fields, spr.c: docs/performance.md, "The Gauss-point kernel on explicit
+ * vectors"). Their copies: AVX2 (on AVX-512 machines too, where the 4-wide
+ * form ran faster than an AVX-512 copy of the same source) and the
+ * baseline (pairs of SSE2 halves). */
 typedef double nh_v4 __attribute__((vector_size(32)));
 #define NH_V4_LOAD(v, p) memcpy(&(v), (p), sizeof(v))
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__ELF__)
-#define NH_ADAPT_V4_CLONES __attribute__((target_clones("avx2", "default")))
+#define NH_ADAPT_VECTOR_CLONES __attribute__((target_clones("avx512f", "avx2", "default")))
+#define NH_ADAPT_V4_CLONES     __attribute__((target_clones("avx2", "default")))
 #else
+#define NH_ADAPT_VECTOR_CLONES
 #define NH_ADAPT_V4_CLONES
 #endif
 

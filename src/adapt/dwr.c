@@ -234,7 +234,7 @@ static void nh_dwr_dual_stresses(const double *z, size_t n3, int nq, const int c
 
 /* One dual's terms at the 8 Gauss points of a cell (four at a time, on
  * GCC's 4-double vectors: the compiler's own vectorisation of the 8-point
- * loops shuffled more than it computed, 2.6× the time): its tangent stress
+ * loops shuffled more than it computed, 2.2× the time): its tangent stress
  * σ_h(z) (as nh_dwr_dual_stresses, the rotated gradients by point last,
  * RgT[3a + j][gp] = (R g_a(gp))_j), its recovered stress σ*_z interpolated
  * from the nodal values zstar + stride × corner (NT[a][gp] = N_a(gp)),
