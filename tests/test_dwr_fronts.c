@@ -27,7 +27,15 @@
  *  4. front A's rows all hold its dual: z = 0, μ = c_K e_q, so e = −(δc_0,
  *     δc_1, δc_2) to round-off (test_dwr_rows, part 5); front B's e is not
  *     zero and differs from −Σ_q δc_{4+q} n_q by more than 1 % (its
- *     sliding axial row leaves a dual that is not zero).
+ *     sliding axial row leaves a dual that is not zero);
+ *  5. a shaft point's dual (dwr_front.c, "Shaft points") is its axial
+ *     functional with every friction row free: with both fronts' axial
+ *     rows sliding, points at their rows have t · e of those fronts, to
+ *     round-off, in one pass with the goals and the fronts, whose numbers
+ *     do not change;
+ *  6. with front A's axial row sticking (held in the goals' duals), a point
+ *     at its rows changes the goals' estimates exactly as −e_p added to
+ *     that row's data change does.
  * NH_VERBOSE=1 prints the numbers. */
 #include "check.h"
 #include "adapt/adapt.h"
@@ -167,7 +175,7 @@ int main(void) {
     double E0[6], E1[6], *ind0 = calloc((size_t)(2 * nc), sizeof(double));
     double *ind1 = calloc((size_t)(2 * nc), sizeof(double)), err[6];
     int row[2] = {0, 4};
-    nh_dwr_fronts fronts = {2, row, err};
+    nh_dwr_fronts fronts = {2, row, err, 0, NULL, NULL};
     nh_dwr_result r0, r1;
     estimate(s, &rows, m, t, h, u, &data, combined, NULL, E0, ind0, &r0);
     estimate(s, &rows, m, t, h, u, &data, combined, &fronts, E1, ind1, &r1);
@@ -201,6 +209,53 @@ int main(void) {
   CHECK_OK(nh_dwr_front_error(s, &rows, 1.0, m, t, h, u, 4, NULL, &data, eB1));
   CHECK(!memcmp(eB, eB1, sizeof eB), "front B's e depends on friction row 3's state");
   CHECK(memcmp(E0, E1, sizeof E0), "the goals' estimates do not see friction row 3");
+
+  /* part 5: shaft points, one dual each with every friction row free: with
+   * front A's axial row 2 sliding too, a point at front B's rows and one at
+   * front A's have the errors of those fronts along their axial rows,
+   * t · e, to round-off, estimated in the pass of the goals and the
+   * fronts, and the goals' estimates and the fronts' e do not change */
+  rows.law[2].sliding = 1;
+  double eA2[3], E2[6], E3[6], ferr[6], perr[2];
+  CHECK_OK(nh_dwr_front_error(s, &rows, 1.0, m, t, h, u, 0, NULL, &data, eA2));
+  estimate(s, &rows, m, t, h, u, &data, 0, NULL, E2, NULL, &r);
+  int frow[2] = {0, 4}, prow[2] = {4, 0};
+  nh_dwr_fronts fp = {2, frow, ferr, 2, prow, perr};
+  estimate(s, &rows, m, t, h, u, &data, 0, &fp, E3, NULL, &r);
+  const double tB = dwr_dot(3, eB1, rows.dir + 3 * 6), tA = dwr_dot(3, eA2, rows.dir + 3 * 2);
+  if (getenv("NH_VERBOSE"))
+    printf("points: %.17g against t.e_B %.17g, %.17g against t.e_A %.17g\n", perr[0], tB, perr[1],
+           tA);
+  CHECK(max_rel_diff(6, E2, E3) <= ROUNDOFF, "the goals' estimates changed with shaft points");
+  CHECK(max_rel_diff(3, eA2, ferr) <= ROUNDOFF && max_rel_diff(3, eB1, ferr + 3) <= ROUNDOFF,
+        "the fronts' e changed with shaft points");
+  CHECK(fabs(perr[0] - tB) <= ROUNDOFF * sqrt(dwr_dot(3, eB1, eB1)),
+        "the point at front B's rows: %.17g, not t . e_B = %.17g", perr[0], tB);
+  CHECK(fabs(perr[1] - tA) <= ROUNDOFF * sqrt(dwr_dot(3, eA2, eA2)),
+        "the point at front A's rows: %.17g, not t . e_A = %.17g", perr[1], tA);
+  CHECK(fabs(tA + change[2]) > 0.01 * fabs(change[2]),
+        "front A's axial error %.3g is its data term alone with its axial row sliding", tA);
+
+  /* part 6: a sticking point's error is its axial row's data from the step
+   * that estimates it: the goals' estimates with the point equal those
+   * without it and with δc_2 − e_p as row 2's data, to round-off */
+  rows.law[2].sliding = 0;
+  int p0 = 0;
+  double E4[6], E5[6], e0;
+  nh_dwr_fronts fq = {0, NULL, NULL, 1, &p0, &e0};
+  estimate(s, &rows, m, t, h, u, &data, 0, &fq, E4, NULL, &r);
+  const double c2 = change[2];
+  change[2] = c2 - e0;
+  estimate(s, &rows, m, t, h, u, &data, 0, NULL, E5, NULL, &r);
+  change[2] = c2;
+  estimate(s, &rows, m, t, h, u, &data, 0, NULL, E2, NULL, &r);
+  if (getenv("NH_VERBOSE"))
+    printf("sticking point: e_p %.6e; goals' estimates with it / with its data / without: %.6e "
+           "%.6e %.6e\n",
+           e0, E4[0], E5[0], E2[0]);
+  CHECK(max_rel_diff(6, E5, E4) <= ROUNDOFF,
+        "the sticking point's same-step term is not its data term (%.3g)", max_rel_diff(6, E5, E4));
+  CHECK(max_rel_diff(6, E2, E4) > 1e-6, "the sticking point's error changes no goal estimate");
 
   nh_rows_free(&rows);
   nh_system_destroy(&s);

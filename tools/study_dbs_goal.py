@@ -198,7 +198,7 @@ def run(a, binary):
     def eff(est, err, bar, off, sl=slice(1, None)):
         """Effectivity est / err over the steps in sl (default: ≥ 1) with an estimate whose
         true error the reference resolves (err > st["resolved"] × its bar) on the reference's
-        branch (not off): (median, min, max, steps, of)."""
+        branch (not off): (median, min, max, steps, of, the steps outside [0.5, 2])."""
         ok = np.zeros(n, dtype=bool)
         ok[sl] = True
         ok &= np.isfinite(est)
@@ -206,7 +206,8 @@ def run(a, binary):
         if not use.any():
             return None
         v = est[use] / err[use]
-        return float(np.median(v)), float(v.min()), float(v.max()), int(use.sum()), int(ok.sum())
+        return (float(np.median(v)), float(v.min()), float(v.max()), int(use.sum()), int(ok.sum()),
+                [int(i) for i in np.nonzero(use)[0][(v < 0.5) | (v > 2.0)]])
 
     lines = []
     p = lines.append
@@ -264,14 +265,16 @@ def run(a, binary):
     lines += engine.table_head(
         "run", "max dofs", "max rows", "median ms/step", "/ 7 mm", "total s",
         "max \\|d − d_ref\\| mm (t s)", "RMS mm", "final d mm",
-        "effectivity of error_estimate: median (range; steps)", "of distance_error_estimate")
+        "effectivity of error_estimate: median (range; judged steps), the judged steps outside "
+        "[0.5, 2]", "of distance_error_estimate")
     for r in runs:
         s = r["speed"]
         cells = []
         for est, err, bar in ((r["est"], r["xerr"], x_bar), (r["dest"], r["err"], d_bar)):
             e = eff(est, err, bar, r["off"])
             r.setdefault("eff", []).append(e)
-            cells.append("%.2f (%.2f–%.2f; %d of %d)" % e if e else "–")
+            cells.append("%.2f (%.2f–%.2f; %d of %d), outside [0.5, 2]: %s" % (
+                *e[:5], ", ".join(map(str, e[5])) or "none") if e else "–")
         p("| %s | %d | %d | %.1f | %.3f | %.1f | %.4f (%.2f) | %.4f | %.4f | %s | %s |" % (
             r["label"], s["max_dofs"], r["rows"], s["median"], r["ratio"], s["total"],
             1e3 * r["max"], r["times"][r["at"]], 1e3 * r["rms"], 1e3 * r["d"][-1], *cells))

@@ -256,11 +256,18 @@ void nh_adapt_set_constraint_data(nh_adapt *adapt, const nh_constraint_data *dat
 /* The fronts a goal estimate also estimates (dwr_front.c; docs/theory.md
  * §6.6, "Anchoring"): in, n fronts and row[n], each front's first tip row
  * among the step's rows (its disc's rows n1, n2, t); out, error[3 n], each
- * front's e (m, nh_dwr_front_error). */
+ * front's e (m, nh_dwr_front_error). And shaft points: in, n_points and
+ * point_row[n_points], each point's first row (n1, n2, t); out,
+ * point_error[n_points], the estimated error of its axial row's tissue
+ * part, t · (u − u_h), with that row free in its dual (m; dwr_front.c,
+ * "Shaft points"). */
 typedef struct {
   int n;
   const int *row;
   double *error;
+  int n_points;
+  const int *point_row;
+  double *point_error;
 } nh_dwr_fronts;
 
 /* The fronts whose errors the next goal estimates also estimate, in the

@@ -97,6 +97,13 @@ int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale, const 
  * front's axial one sliding. Solved with the goals' duals in one pass
  * (nh_dwr_functionals). NH_ERR_INTERNAL (rows out of range). */
 int nh_dwr_front_setup(const nh_rows *rows, int n_nodes, int row, double *j, unsigned char *active);
+/* The n dual problems of the shaft points whose rows start at row[p]
+ * (dwr_front.c, "Shaft points"): j (n × 3 n_nodes) the functionals
+ * t · Σ N_a v_a of their axial rows' tissue parts, active (rows->m) the
+ * rows their duals hold: the active rows with every friction row sliding.
+ * NH_ERR_INTERNAL (rows out of range). */
+int nh_dwr_points_setup(const nh_rows *rows, int n_nodes, int n, const int *row, double *j,
+                        unsigned char *active);
 /* The front's error e = Σ_q E_q n_q from its duals' estimates E[3]. */
 void nh_dwr_front_vector(const nh_rows *rows, int row, const double E[3], double e[3]);
 

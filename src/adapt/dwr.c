@@ -434,22 +434,25 @@ static int nh_dwr_duals_sets(nh_system *sys, const nh_rows *rows, double scale, 
   return rc;
 }
 
-/* The goals' nz duals with the active rows (nh_dwr_active_rows) and the
- * fronts' (3 each, their own rows: nh_dwr_front_setup; fronts may be NULL)
- * in one solve: z and mu for nz + 3 n_fronts duals. */
+/* The goals' nz duals with the active rows (nh_dwr_active_rows), the
+ * fronts' (3 each, their own rows: nh_dwr_front_setup) and the shaft
+ * points' (1 each, one set: nh_dwr_points_setup; fronts may be NULL) in
+ * one solve: z and mu for nz + 3 n_fronts + n_points duals. */
 static int nh_dwr_all_duals(nh_system *sys, const nh_rows *rows, double scale, int n_nodes, int nz,
                             const double *j, const nh_dwr_fronts *fronts, double *z, double *mu,
                             int *n_rows) {
-  const int nfr = fronts ? fronts->n : 0, mr = rows ? rows->m : 0, ns = 1 + nfr;
+  const int nfr = fronts ? fronts->n : 0, npt = fronts ? fronts->n_points : 0;
+  const int mr = rows ? rows->m : 0, ns = 1 + nfr + (npt > 0);
   const size_t n3 = 3 * (size_t)n_nodes;
-  double *jf = nh_calloc(3 * n3 * (size_t)(nfr ? nfr : 1), sizeof(double)); /* the fronts' */
+  /* the fronts' functionals, then the points' */
+  double *jf = nh_calloc(n3 * (size_t)(3 * nfr + npt + 1), sizeof(double));
   unsigned char *act = nh_calloc((size_t)ns * (size_t)(mr ? mr : 1), 1);
   const unsigned char **sets = nh_calloc((size_t)ns, sizeof *sets);
   const double **js = nh_calloc((size_t)ns, sizeof *js);
   int *ncol = nh_calloc((size_t)ns, sizeof(int));
   int rc = jf && act && sets && js && ncol
                ? NH_OK
-               : NH_ERROR(NH_ERR_MEMORY, "out of memory: %d dual problems", nz + 3 * nfr);
+               : NH_ERROR(NH_ERR_MEMORY, "out of memory: %d dual problems", nz + 3 * nfr + npt);
   if (!rc) {
     ncol[0] = nz, js[0] = j;
     if (mr) nh_dwr_active_rows(rows, act), sets[0] = act;
@@ -459,6 +462,13 @@ static int nh_dwr_all_duals(nh_system *sys, const nh_rows *rows, double scale, i
     sets[1 + f] = mr ? act + (size_t)mr * (1 + f) : NULL;
     rc = nh_dwr_front_setup(rows, n_nodes, fronts->row[f], jf + 3 * n3 * (size_t)f,
                             act + (size_t)mr * (1 + f));
+  }
+  if (npt > 0 && !rc) {
+    const int s = 1 + nfr;
+    ncol[s] = npt, js[s] = jf + 3 * n3 * (size_t)nfr;
+    sets[s] = mr ? act + (size_t)mr * s : NULL;
+    rc = nh_dwr_points_setup(rows, n_nodes, npt, fronts->point_row, jf + 3 * n3 * (size_t)nfr,
+                             act + (size_t)mr * s);
   }
   if (!rc) rc = nh_dwr_duals_sets(sys, rows, scale, n_nodes, ns, ncol, sets, js, z, mu, n_rows);
   free(jf), free(act), free(sets), free(js), free(ncol);
@@ -479,7 +489,9 @@ int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale, const 
                        const nh_tissue *t, const nh_hanging *h, const double *u, int nz, int group,
                        const double *j, const nh_dwr_goals *goals, nh_dwr_result *out) {
   const int n_fronts = out->fronts ? out->fronts->n : 0;
-  const int nd = nz + 3 * n_fronts; /* the duals: the nz functionals', then 3 per front */
+  const int n_points = out->fronts ? out->fronts->n_points : 0;
+  /* the duals: the nz functionals', 3 per front, 1 per shaft point */
+  const int nd = nz + 3 * n_fronts + n_points;
   const int nn = m->n_nodes, nl = m->n_leaves, nfld = 1 + nd, ng = nz / group;
   const size_t n3 = 3 * (size_t)nn;
   double *z = nh_calloc(n3 * (size_t)(nd ? nd : 1), sizeof(double));
@@ -689,12 +701,27 @@ int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale, const 
   for (int q = 0; q < nd; q++)
     if (!isfinite(E[q])) {
       rc = NH_ERROR(NH_ERR_NUMERIC, "goal estimate of %s %d is not finite",
-                    q < nz ? "functional" : "front functional", q < nz ? q : q - nz);
+                    q < nz ? "functional" : "front or shaft point functional", q < nz ? q : q - nz);
       goto done;
     }
+  /* the shaft points' axial errors are their rows' data from this step on
+   * (dwr_front.c, "Shaft points"): δc = −E_p on the axial row, which the
+   * goals' duals hold, its data 0 until now (the points' own duals leave it
+   * free, so their E_p do not depend on it) */
+  for (int p = 0; with_data && p < n_points; p++) {
+    const int r = out->fronts->point_row[p] + 2, mr = rows->m;
+    const double dc = -E[nz + 3 * n_fronts + p];
+    for (int q = 0; q < nz; q++) {
+      const double c = -mu[(size_t)mr * q + r] * dc / scale;
+      E[q] += c;
+      if (out->constraint) out->constraint[q] += c;
+      if (out->inherited) out->inherited[q] += c;
+    }
+  }
   if (nz > 0) memcpy(out->estimate, E, sizeof(double) * (size_t)nz);
   for (int f = 0; f < n_fronts; f++)
     nh_dwr_front_vector(rows, out->fronts->row[f], E + nz + 3 * f, out->fronts->error + 3 * f);
+  for (int p = 0; p < n_points; p++) out->fronts->point_error[p] = E[nz + 3 * n_fronts + p];
   if (!isfinite(sum_err) || !isfinite(sum_norm)) {
     rc =
         NH_ERROR(NH_ERR_NUMERIC, "SPR: the error estimate is not finite (eta^2 = %g, |u|_E^2 = %g)",

@@ -40,7 +40,24 @@
  * step's increment (its gap is the slip, or 0), not the total displacement
  * whose error e is. Held, as in the goals' dual, a shaft point's axial row
  * that sticks in a cutting step halved e there on the DBS case (docs/dbs.md,
- * "The front's anchoring error"). */
+ * "The front's anchoring error").
+ *
+ * Shaft points. A channel point's axial row is a friction row on the slip
+ * rate: while it sticks, the tissue at the point follows the tool over each
+ * step, so the error of the tissue's total axial displacement there stays
+ * what it was when the point stuck. With the row free in the dual (its
+ * force taken as data, as a sliding row's friction bound is), the step's
+ * estimate of J_p(v) = t · Σ N_a v_a, the axial displacement of the row's
+ * tissue part, is that error, e_p: estimated at the first estimate that
+ * finds the point sticking, kept by the contact module (nh_cpoint.dc_axial
+ * = −e_p) as the axial row's data change until the point slides again
+ * (contact/anchor.c), and weighted by the goals' duals, which hold that
+ * row, as the front's (μ δc / c_K). Estimated once per sticking, not at
+ * every sliding step: on the phantom's goal run the sliding points' columns
+ * made the goal estimate's steps 5 % slower. The points' duals share one
+ * set of held rows (every friction row free, as in the fronts' duals: a
+ * sticking row holds the step's increment, not the total displacement), one
+ * column each. */
 #include "adapt/adapt_impl.h"
 
 #include <string.h>
@@ -69,6 +86,27 @@ int nh_dwr_front_setup(const nh_rows *rows, int n_nodes, int row, double *j,
   return NH_OK;
 }
 
+int nh_dwr_points_setup(const nh_rows *rows, int n_nodes, int n, const int *row, double *j,
+                        unsigned char *active) {
+  const size_t n3 = 3 * (size_t)n_nodes;
+  memset(j, 0, (size_t)n * n3 * sizeof(double));
+  for (int p = 0; p < n; p++) {
+    NH_CHECK(rows && row[p] >= 0 && row[p] + 3 <= rows->m, NH_ERR_INTERNAL,
+             "shaft point error: rows %d..%d are not among the step's %d", row[p], row[p] + 2,
+             rows ? rows->m : 0);
+    const int r = row[p] + 2;
+    const double *t = rows->dir + 3 * r;
+    for (int s = rows->start[r]; s < rows->start[r + 1]; s++) {
+      if (rows->node[s] < 0) continue;
+      for (int k = 0; k < 3; k++) j[n3 * p + 3 * (size_t)rows->node[s] + k] += rows->N[s] * t[k];
+    }
+  }
+  nh_dwr_active_rows(rows, active);
+  for (int i = 0; i < rows->m; i++)
+    if (rows->law[i].kind == NH_ROW_FRICTION) active[i] = 0;
+  return NH_OK;
+}
+
 void nh_dwr_front_vector(const nh_rows *rows, int row, const double E[3], double e[3]) {
   e[0] = e[1] = e[2] = 0.0;
   for (int q = 0; q < 3; q++)
@@ -80,7 +118,7 @@ int nh_dwr_front_error(nh_system *sys, const nh_rows *rows, double scale, const 
                        const nh_geometry_loads *loads, const nh_constraint_data *data,
                        double e[3]) {
   e[0] = e[1] = e[2] = 0.0;
-  nh_dwr_fronts front = {1, &row, e};
+  nh_dwr_fronts front = {1, &row, e, 0, NULL, NULL};
   nh_dwr_goals goals = {0, NULL, 0.0, NULL};
   nh_dwr_result out = {.loads = loads, .data = data, .fronts = &front};
   return nh_dwr_functionals(sys, rows, scale, m, t, h, u, 0, 1, NULL, &goals, &out);

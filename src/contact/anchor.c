@@ -22,7 +22,10 @@
  *     δ(J w)_i = n_i · (w̄(X + δX) − w̄(X))
  * (the means over the same rule, rebuilt at X + δX; a shaft point's axial
  * row is a friction row on the slip rate whose gap is not the point's
- * position (channel.c, nh_tie_rows): δc = 0 there, δ(J w) as the others'),
+ * position (channel.c, nh_tie_rows): its δc is not that of δX but the
+ * error of the tissue's axial displacement there when the point stuck,
+ * δc = −e_p (nh_cpoint.dc_axial; adapt/dwr_front.c, "Shaft points"), which
+ * the row keeps until the point slides; δ(J w) as the others'),
  * and the goal estimate
  * adds C_q = Σ_i (Λ_i δ(J z_q)_i − μ_qi δc_i / c_K). Sign convention: δX
  * is the exact anchor minus the discrete one, so δc is the exact data
@@ -71,9 +74,10 @@ static void nh_anchor_moved_mean(const nh_disc *d, const nh_mesh *m, const nh_cp
 static int nh_anchor_rows_change(const nh_rows *rows, const nh_mesh *m, const double *u,
                                  const nh_cpoint *p, int tip, int n, const double *w, double *dc,
                                  double *dw) {
-  if (!(p->dX[0] != 0.0 || p->dX[1] != 0.0 || p->dX[2] != 0.0) || p->row < 0) return NH_OK;
+  if (p->row < 0 || p->row + 3 > rows->m) return NH_OK;
   const int r0 = p->row, rm = rows->m;
-  if (r0 + 3 > rm) return NH_OK;
+  if (!tip && dc) dc[r0 + 2] += p->dc_axial;
+  if (!(p->dX[0] != 0.0 || p->dX[1] != 0.0 || p->dX[2] != 0.0)) return NH_OK;
   const double *rule = rows->disc + 10 * r0;
   nh_cpoint q = *p;
   /* the rows' anchor: a disc row's rule keeps its centre (a front that cut
@@ -130,6 +134,30 @@ int nh_contact_fronts(const nh_contact *c, int *row, int cap) {
       row[n++] = G->front.row;
   }
   return n;
+}
+
+int nh_contact_stuck_points(const nh_contact *c, int *row, int cap) {
+  int n = 0;
+  for (int g = 0; c && g < c->n_groups; g++) {
+    const nh_group *G = &c->groups[g];
+    for (int i = 1; i < G->n_chan; i++) {
+      const int r = G->chan[i].row;
+      if (r < 0 || r + 3 > c->rows.m || c->rows.law[r + 2].kind != NH_ROW_FRICTION ||
+          c->rows.law[r + 2].sliding || G->chan[i].dc_axial_set)
+        continue;
+      if (row && n < cap) row[n] = r;
+      n++;
+    }
+  }
+  return n;
+}
+
+void nh_contact_set_point_error(nh_contact *c, int row, double e) {
+  for (int g = 0; g < c->n_groups; g++) {
+    nh_group *G = &c->groups[g];
+    for (int i = 1; i < G->n_chan; i++)
+      if (G->chan[i].row == row) G->chan[i].dc_axial = -e, G->chan[i].dc_axial_set = 1;
+  }
 }
 
 int nh_contact_set_front_error(nh_contact *c, const nh_mesh *m, const double *u, int row,

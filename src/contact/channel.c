@@ -408,6 +408,7 @@ void nh_shaft_update(nh_contact *c, nh_group *G, double h, nh_group_events *ev) 
       nh_tool_add_force(&c->tools[p->tool], &c->rows, p->row + q, h, p->s);
     }
     p->slid = c->rows.law[p->row + 2].sliding;
+    if (p->slid) p->dc_axial = 0.0, p->dc_axial_set = 0; /* estimated again when it sticks */
     double o = sqrt(nh_vec3_dot(p->handover, p->handover)), close = NH_HANDOVER_RATE * p->len;
     for (int q = 0; q < 3; q++) p->handover[q] *= o > close ? 1.0 - close / o : 0.0;
     /* the torsion row follows the three: a moment, kept as the next warm start */

@@ -141,6 +141,17 @@ int nh_contact_fronts(const nh_contact *c, int *row, int cap);
  * that point leaves the tissue). NH_ERR_MEMORY. */
 int nh_contact_set_front_error(nh_contact *c, const nh_mesh *mesh, const double *u, int row,
                                const double e[3]);
+/* How many shaft points' axial friction rows stuck in the last step with
+ * no axial data error estimated since they last slid (0 for c = NULL); the
+ * first cap of them into row (may be NULL) as their first rows (n1, n2,
+ * t). */
+int nh_contact_stuck_points(const nh_contact *c, int *row, int cap);
+/* Set the axial data error of the shaft point whose rows start at `row`
+ * (a row of nh_contact_stuck_points) from e (m), the estimated error
+ * t · (u − u_h) of its axial row's tissue part in the last step with that
+ * row free (adapt/dwr_front.c, "Shaft points"): δc = −e on that row until
+ * it slides (anchor.c). */
+void nh_contact_set_point_error(nh_contact *c, int row, double e);
 /* The constraint rows of the last step with their forces (the goal
  * estimate's constrained dual, adapt/dwr.c); NULL for c = NULL. */
 const nh_rows *nh_contact_rows(const nh_contact *c);

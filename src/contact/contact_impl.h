@@ -39,6 +39,8 @@ typedef struct {
   double handover[3]; /* the lateral offset to its tool's axis still allowed after it passed
                          from one tool of the group to another (channel.c: the hand-over) */
   double dX[3];       /* its anchoring error: the exact solution's anchor − X (anchor.c) */
+  double dc_axial;    /* a shaft point's axial data error, −t · e (anchor.c), while it sticks */
+  int dc_axial_set;   /* dc_axial estimated since the point last slid */
 } nh_cpoint;
 
 /* One tool: a beam, its motion and the forces of the last step. */

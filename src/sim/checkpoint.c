@@ -5,10 +5,11 @@
  * Format (little-endian, native doubles; a file from a machine of another
  * byte order is refused, not converted):
  *   "NHCKPT\0\1"   8-byte magic
- *   u32 version    6 (1: no tools, still read; 2 to 5: an older tools' state
+ *   u32 version    7 (1: no tools, still read; 2 to 6: an older tools' state
  *                  without the channel points' hand-over offsets (2, 3),
- *                  the quasi-static prediction (4) or the anchors' errors
- *                  (5, contact/anchor.c), refused)
+ *                  the quasi-static prediction (4), the anchors' errors
+ *                  (5, contact/anchor.c) or the shaft points' axial data
+ *                  errors (6), refused)
  *   u32 0x01020304 byte-order marker
  *   u64 size       bytes of payload
  *   u64 checksum   FNV-1a 64 of the payload
@@ -231,7 +232,7 @@ int nh_checkpoint_write(const nh_sim *s) {
   }
   char path[NH_PATH_MAX + 32];
   nh_checkpoint_path(s->scene->output.dir, path, sizeof path);
-  uint32_t version = 6, order = 0x01020304;
+  uint32_t version = 7, order = 0x01020304;
   uint64_t size = b.len, sum = nh_fnv1a(b.data, b.len, NH_FNV_SEED);
   nh_atomic_file af;
   int rc = nh_atomic_open(path, "checkpoint", 1, &af);
@@ -393,13 +394,13 @@ int nh_checkpoint_read(const char *dir, const nh_scene *scene, nh_checkpoint *ck
     fclose(f);
     return NH_ERROR(NH_ERR_INPUT, "--restart: %s: not a needlehex checkpoint", path);
   }
-  if ((version != 1 && version != 6) || order != 0x01020304) {
+  if ((version != 1 && version != 7) || order != 0x01020304) {
     fclose(f);
     return NH_ERROR(NH_ERR_INPUT,
                     "--restart: %s: checkpoint format %u (byte order %#x) is not the one this "
-                    "needlehex reads (1 or 6, %#x)%s",
+                    "needlehex reads (1 or 7, %#x)%s",
                     path, version, order, 0x01020304u,
-                    version >= 2 && version <= 5
+                    version >= 2 && version <= 6
                         ? ": written by an older needlehex, whose tools' state this one does "
                           "not read; run the scene again from the start"
                         : "");

@@ -669,17 +669,32 @@ static int nh_sim_estimate(nh_sim *s) {
    * front's estimate sees the anchors' errors as the step found them */
   int front_row[8];
   double front_error[8][3];
-  nh_dwr_fronts fronts = {nh_contact_fronts(s->contact, front_row, 8), front_row, front_error[0]};
-  nh_adapt_set_fronts(s->adapt, fronts.n ? &fronts : NULL);
+  /* and the axial error of the shaft points that stick with none estimated
+   * since they last slid (dwr_front.c, "Shaft points"), kept as their axial
+   * rows' data change until they slide */
+  const int n_points = nh_contact_stuck_points(s->contact, NULL, 0);
+  int *point_row = nh_calloc((size_t)n_points + 1, sizeof(int));
+  double *point_error = nh_calloc((size_t)n_points + 1, sizeof(double));
+  if (!rc && (!point_row || !point_error))
+    rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: %d shaft points", n_points);
+  nh_dwr_fronts fronts = {nh_contact_fronts(s->contact, front_row, 8),
+                          front_row,
+                          front_error[0],
+                          rc ? 0 : nh_contact_stuck_points(s->contact, point_row, n_points),
+                          point_row,
+                          point_error};
+  nh_adapt_set_fronts(s->adapt, fronts.n || fronts.n_points ? &fronts : NULL);
   if (!rc)
     rc = nh_adapt_estimate_goal(s->adapt, s->system, rows, scale, s->mesh, s->tissue, s->u,
                                 s->hanging, &s->eta, &s->eta_rel);
   for (int i = 0; i < fronts.n && !rc; i++)
     rc = nh_contact_set_front_error(s->contact, s->mesh, s->u, front_row[i], front_error[i]);
+  for (int i = 0; i < fronts.n_points && !rc; i++)
+    nh_contact_set_point_error(s->contact, point_row[i], point_error[i]);
   nh_adapt_set_geometry_loads(s->adapt, NULL);
   nh_adapt_set_constraint_data(s->adapt, NULL);
   nh_adapt_set_fronts(s->adapt, NULL);
-  free(buf), free(dc);
+  free(buf), free(dc), free(point_row), free(point_error);
   return rc;
 }
 

@@ -45,7 +45,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
   uint64_t hash = nh_fuzz_fnv1a(scene->yaml, strlen(scene->yaml), seed);
   uint64_t payload = 8 + (uint64_t)size;
   uint64_t sum = nh_fuzz_fnv1a(data, size, nh_fuzz_fnv1a(&hash, 8, seed));
-  uint32_t version = 6, order = 0x01020304;
+  uint32_t version = 7, order = 0x01020304;
   char path[256];
   snprintf(path, sizeof path, "%s/checkpoint.nhc", dir);
   FILE *f = fopen(path, "wb");
