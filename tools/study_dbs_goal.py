@@ -106,6 +106,18 @@ DBS_GOAL = {
 }
 
 
+def step_ranges(steps):
+    """Sorted steps as ranges: [1, 4, 5, 6, 9] -> "1, 4–6, 9" ("none" if empty)."""
+    out, i = [], 0
+    while i < len(steps):
+        j = i
+        while j + 1 < len(steps) and steps[j + 1] == steps[j] + 1:
+            j += 1
+        out.append("%d" % steps[i] if j == i else "%d–%d" % (steps[i], steps[j]))
+        i = j + 1
+    return ", ".join(out) or "none"
+
+
 def phase_slices(r, n):
     """The non-empty phases of a run r (its tools.csv's i_shift, i_top, i_back; n steps) as
     (name, slice of step indices), step 0 left out: shift, insertion, hold, retraction."""
@@ -274,7 +286,7 @@ def run(a, binary):
             e = eff(est, err, bar, r["off"])
             r.setdefault("eff", []).append(e)
             cells.append("%.2f (%.2f–%.2f; %d of %d), outside [0.5, 2]: %s" % (
-                *e[:5], ", ".join(map(str, e[5])) or "none") if e else "–")
+                *e[:5], step_ranges(e[5])) if e else "–")
         p("| %s | %d | %d | %.1f | %.3f | %.1f | %.4f (%.2f) | %.4f | %.4f | %s | %s |" % (
             r["label"], s["max_dofs"], r["rows"], s["median"], r["ratio"], s["total"],
             1e3 * r["max"], r["times"][r["at"]], 1e3 * r["rms"], 1e3 * r["d"][-1], *cells))
