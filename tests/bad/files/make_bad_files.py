@@ -789,10 +789,10 @@ def make_checkpoints(binary, work):
     for n in (1, 1000):
         ck(f"extra_{n}", ["trailing bytes"], base + b"\0" * n)
     ck("magic", ["not a needlehex checkpoint"], b"NHCKPX" + base[6:])
-    for v in (0, 7, 2 ** 32 - 1):
+    for v in (0, 8, 2 ** 32 - 1):
         ck(f"version_{v}", [f"format {v}"], base[:8] + struct.pack("<I", v) + base[12:])
-    for v in (2, 3, 4, 5):  # an older needlehex's tools' state (no hand-over offsets; 4: no
-        # quasi-static prediction; 5: no anchoring errors)
+    for v in (2, 3, 4, 5, 6):  # an older needlehex's tools' state (no hand-over offsets; 4: no
+        # quasi-static prediction; 5: no anchoring errors; 6: no shaft points' axial errors)
         ck(f"version_{v}", [f"format {v}", "older needlehex"],
            base[:8] + struct.pack("<I", v) + base[12:])
     ck("byte_order", ["byte order"], base[:12] + struct.pack(">I", 0x01020304) + base[16:])
