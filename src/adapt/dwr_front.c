@@ -62,6 +62,26 @@
 
 #include <string.h>
 
+/* Add row r's tissue part along its direction, n_r · Σ_a N_a v_a, to the
+ * functional j (3 per node). */
+static void nh_dwr_row_functional(const nh_rows *rows, int r, double *j) {
+  const double *n = rows->dir + 3 * r;
+  for (int s = rows->start[r]; s < rows->start[r + 1]; s++) {
+    if (rows->node[s] < 0) continue;
+    for (int k = 0; k < 3; k++) j[3 * (size_t)rows->node[s] + k] += rows->N[s] * n[k];
+  }
+}
+
+/* The rows a front's or shaft point's dual holds: the active rows with
+ * every friction row free but `keep` (−1: none). A sticking friction row
+ * holds the step's increment, not the total displacement whose error these
+ * duals estimate (the header). */
+static void nh_dwr_hold_but_friction(const nh_rows *rows, int keep, unsigned char *active) {
+  nh_dwr_active_rows(rows, active);
+  for (int i = 0; i < rows->m; i++)
+    if (rows->law[i].kind == NH_ROW_FRICTION && i != keep) active[i] = 0;
+}
+
 int nh_dwr_front_setup(const nh_rows *rows, int n_nodes, int row, double *j,
                        unsigned char *active) {
   NH_CHECK(rows && row >= 0 && row + 3 <= rows->m, NH_ERR_INTERNAL,
@@ -69,20 +89,8 @@ int nh_dwr_front_setup(const nh_rows *rows, int n_nodes, int row, double *j,
            rows ? rows->m : 0);
   const size_t n3 = 3 * (size_t)n_nodes;
   memset(j, 0, 3 * n3 * sizeof(double));
-  for (int q = 0; q < 3; q++) {
-    const int r = row + q;
-    const double *n = rows->dir + 3 * r;
-    for (int s = rows->start[r]; s < rows->start[r + 1]; s++) {
-      if (rows->node[s] < 0) continue;
-      for (int k = 0; k < 3; k++) j[n3 * q + 3 * (size_t)rows->node[s] + k] += rows->N[s] * n[k];
-    }
-  }
-  /* the friction rows other than the front's own axial row as sliding: a
-   * sticking friction row holds the step's increment, not the total
-   * displacement whose error e is (the header) */
-  nh_dwr_active_rows(rows, active);
-  for (int i = 0; i < rows->m; i++)
-    if (rows->law[i].kind == NH_ROW_FRICTION && i != row + 2) active[i] = 0;
+  for (int q = 0; q < 3; q++) nh_dwr_row_functional(rows, row + q, j + n3 * q);
+  nh_dwr_hold_but_friction(rows, row + 2, active); /* the front's own axial row held */
   return NH_OK;
 }
 
@@ -94,16 +102,9 @@ int nh_dwr_points_setup(const nh_rows *rows, int n_nodes, int n, const int *row,
     NH_CHECK(rows && row[p] >= 0 && row[p] + 3 <= rows->m, NH_ERR_INTERNAL,
              "shaft point error: rows %d..%d are not among the step's %d", row[p], row[p] + 2,
              rows ? rows->m : 0);
-    const int r = row[p] + 2;
-    const double *t = rows->dir + 3 * r;
-    for (int s = rows->start[r]; s < rows->start[r + 1]; s++) {
-      if (rows->node[s] < 0) continue;
-      for (int k = 0; k < 3; k++) j[n3 * p + 3 * (size_t)rows->node[s] + k] += rows->N[s] * t[k];
-    }
+    nh_dwr_row_functional(rows, row[p] + 2, j + n3 * p);
   }
-  nh_dwr_active_rows(rows, active);
-  for (int i = 0; i < rows->m; i++)
-    if (rows->law[i].kind == NH_ROW_FRICTION) active[i] = 0;
+  nh_dwr_hold_but_friction(rows, -1, active);
   return NH_OK;
 }
 
