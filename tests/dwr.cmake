@@ -16,3 +16,5 @@ nh_add_c_test(test_goal_marking verify)
 nh_add_c_test(test_dwr_fronts verify)
 # The estimate's Gauss-point kernel against its terms formed point by point from their definitions (tests/test_dwr_kernel.c).
 nh_add_c_test(test_dwr_kernel unit)
+# The memory term's links: their sum against the static dual, an exact identity with and without held rows (tests/test_dwr_memory.c).
+nh_add_c_test(test_dwr_memory verify)

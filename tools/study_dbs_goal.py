@@ -89,6 +89,17 @@ DBS_GOAL = {
         ("goal-l1-local", "goal from 14 mm, 1 level, local dual",
          ["adapt.estimator=goal", "tissue.grid=[10,12,9]", "adapt.max_level=1",
           "adapt.local_dual=true"], "goal"),
+        # the dynamic steps' memory term (adapt.memory, off by default; docs/dbs.md "The
+        # dynamic steps' memory")
+        ("goal-l1-memory", "goal from 14 mm, 1 level, memory",
+         ["adapt.estimator=goal", "tissue.grid=[10,12,9]", "adapt.max_level=1",
+          "adapt.memory=true"], "goal"),
+        ("estimate-14mm-memory", "goal estimate on uniform 14 mm, memory",
+         ["adapt.estimator=goal", "tissue.grid=[10,12,9]", "adapt.max_level=1",
+          "adapt.max_dofs=3039", "adapt.memory=true"], "estimate"),
+        ("estimate-10mm-memory", "goal estimate on uniform 10 mm, memory",
+         ["adapt.estimator=goal", "tissue.grid=[14,17,13]", "adapt.max_level=1",
+          "adapt.max_dofs=7248", "adapt.memory=true"], "estimate"),
         ("estimate-14mm-local", "goal estimate on uniform 14 mm, local dual",
          ["adapt.estimator=goal", "tissue.grid=[10,12,9]", "adapt.max_level=1",
           "adapt.max_dofs=3039", "adapt.local_dual=true"], "estimate"),

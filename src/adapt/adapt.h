@@ -270,6 +270,21 @@ typedef struct {
   double *point_error;
 } nh_dwr_fronts;
 
+/* A dynamic step's data for the goal estimate's memory term
+ * (dwr_memory.c; docs/theory.md §6.6, "Memory"): the step h (s), the mass
+ * and stiffness damping α (1/s) and β (s), the lumped nodal mass, and at
+ * most max_links links. */
+typedef struct {
+  double h, alpha, beta;
+  const double *mass;
+  int max_links;
+} nh_dwr_memory;
+
+/* The dynamic step's data of the next goal estimates' memory term
+ * (dwr_memory.c; NULL: a quasi-static step, no memory), copied, and the
+ * step they estimate (a second estimate at the same step, after a
+ * re-solve, starts from the same earlier steps). */
+void nh_adapt_set_memory(nh_adapt *adapt, const nh_dwr_memory *memory, int step);
 /* The fronts whose errors the next goal estimates also estimate, in the
  * same pass (nh_dwr_result.fronts; their errors written to fronts->error);
  * kept by pointer, NULL: none. */
@@ -378,6 +393,14 @@ typedef struct {
    * estimates (dwr_front.c), each with the dual of its own rows; no
    * marking indicator, no local dual */
   nh_dwr_fronts *fronts;
+  /* in (may be NULL: none, a quasi-static step): the dynamic step's data for
+   * the memory term's links (dwr_memory.c); out, memory_own (may be NULL
+   * without memory) each link's own estimate, link m of functional q at
+   * [nz m + q] for m = 0 … memory_links (m = 0: the estimate itself), room
+   * for max_links + 1 links, and memory_links, the links computed */
+  const nh_dwr_memory *memory;
+  double *memory_own;
+  int memory_links;
 } nh_dwr_result;
 
 /* Goal-oriented estimate of the displacement at n_points points[3 each]

@@ -97,6 +97,15 @@ int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale, const 
  * front's axial one sliding. Solved with the goals' duals in one pass
  * (nh_dwr_functionals). NH_ERR_INTERNAL (rows out of range). */
 int nh_dwr_front_setup(const nh_rows *rows, int n_nodes, int row, double *j, unsigned char *active);
+/* The memory term's links (dwr_memory.c) of the nz goal functionals j
+ * (3 n_nodes each): *n_links links, at most mem->max_links, their duals
+ * (*z_links, 3 n_nodes for link m ≥ 1 of functional q at nz (m − 1) + q,
+ * allocated here) and multipliers (*mu_links, rows->m each, the same
+ * order; NULL without rows), each held by the goals' active rows.
+ * NH_ERR_MEMORY, or fails as nh_system_solve_rows. */
+int nh_dwr_memory_duals(nh_system *sys, const nh_rows *rows, double scale, int n_nodes, int nz,
+                        const double *j, const nh_dwr_memory *mem, int *n_links, double **z_links,
+                        double **mu_links);
 /* The n dual problems of the shaft points whose rows start at row[p]
  * (dwr_front.c, "Shaft points"): j (n × 3 n_nodes) the functionals
  * t · Σ N_a v_a of their axial rows' tissue parts, active (rows->m) the

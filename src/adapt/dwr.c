@@ -490,10 +490,20 @@ int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale, const 
                        const double *j, const nh_dwr_goals *goals, nh_dwr_result *out) {
   const int n_fronts = out->fronts ? out->fronts->n : 0;
   const int n_points = out->fronts ? out->fronts->n_points : 0;
-  /* the duals: the nz functionals', 3 per front, 1 per shaft point */
-  const int nd = nz + 3 * n_fronts + n_points;
-  const int nn = m->n_nodes, nl = m->n_leaves, nfld = 1 + nd, ng = nz / group;
+  const int nn = m->n_nodes, nl = m->n_leaves, ng = nz / group, mr = rows ? rows->m : 0;
   const size_t n3 = 3 * (size_t)nn;
+  /* the memory term's links (dwr_memory.c): their duals first */
+  int n_links = 0;
+  double *z_links = NULL, *mu_links = NULL;
+  out->memory_links = 0;
+  if (out->memory && nz > 0) {
+    int rc = nh_dwr_memory_duals(sys, rows, scale, nn, nz, j, out->memory, &n_links, &z_links,
+                                 &mu_links);
+    if (rc) return rc;
+  }
+  /* the duals: the nz functionals', 3 per front, 1 per shaft point, then
+   * nz per link of the memory term */
+  const int nd0 = nz + 3 * n_fronts + n_points, nd = nd0 + nz * n_links, nfld = 1 + nd;
   double *z = nh_calloc(n3 * (size_t)(nd ? nd : 1), sizeof(double));
   double *samples =
       nh_calloc(6 * (size_t)nfld * (size_t)(m->n_cells ? m->n_cells : 1), sizeof(double));
@@ -512,8 +522,8 @@ int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale, const 
                   nn);
     goto done;
   }
-  const int with_data = out->data && rows && rows->m > 0;
-  if (with_data && !(mu = nh_calloc(2 * (size_t)rows->m * (size_t)nd, sizeof(double)))) {
+  const int with_data = out->data && mr > 0;
+  if (with_data && !(mu = nh_calloc(2 * (size_t)mr * (size_t)nd, sizeof(double)))) {
     rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: the duals' multipliers (%d rows)", rows->m);
     goto done;
   }
@@ -522,6 +532,10 @@ int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale, const 
   if (nd > 0) {
     rc = nh_dwr_all_duals(sys, rows, scale, nn, nz, j, out->fronts, z, mu, &out->n_rows);
     if (rc) goto done;
+  }
+  if (n_links > 0) {
+    memcpy(z + n3 * nd0, z_links, sizeof(double) * n3 * (size_t)nz * n_links);
+    if (mu) memcpy(mu + (size_t)mr * nd0, mu_links, sizeof(double) * mr * (size_t)nz * n_links);
   }
 
   /* Centre samples: the primal's corotational stress, each dual's tangent stress. */
@@ -701,7 +715,12 @@ int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale, const 
   for (int q = 0; q < nd; q++)
     if (!isfinite(E[q])) {
       rc = NH_ERROR(NH_ERR_NUMERIC, "goal estimate of %s %d is not finite",
-                    q < nz ? "functional" : "front or shaft point functional", q < nz ? q : q - nz);
+                    q < nz    ? "functional"
+                    : q < nd0 ? "front or shaft point functional"
+                              : "memory link functional",
+                    q < nz    ? q
+                    : q < nd0 ? q - nz
+                              : q - nd0);
       goto done;
     }
   /* the shaft points' axial errors are their rows' data from this step on
@@ -709,16 +728,23 @@ int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale, const 
    * goals' duals hold, its data 0 until now (the points' own duals leave it
    * free, so their E_p do not depend on it) */
   for (int p = 0; with_data && p < n_points; p++) {
-    const int r = out->fronts->point_row[p] + 2, mr = rows->m;
+    const int r = out->fronts->point_row[p] + 2;
     const double dc = -E[nz + 3 * n_fronts + p];
-    for (int q = 0; q < nz; q++) {
+    for (int i = 0; i < nz * (1 + n_links); i++) { /* the goals and the links */
+      const int q = i < nz ? i : nd0 + i - nz;
       const double c = -mu[(size_t)mr * q + r] * dc / scale;
       E[q] += c;
+      if (q >= nz) continue;
       if (out->constraint) out->constraint[q] += c;
       if (out->inherited) out->inherited[q] += c;
     }
   }
   if (nz > 0) memcpy(out->estimate, E, sizeof(double) * (size_t)nz);
+  if (out->memory_own && nz > 0) { /* link 0, the goals; then links 1 … n_links */
+    memcpy(out->memory_own, E, sizeof(double) * (size_t)nz);
+    memcpy(out->memory_own + nz, E + nd0, sizeof(double) * (size_t)nz * n_links);
+    out->memory_links = n_links;
+  }
   for (int f = 0; f < n_fronts; f++)
     nh_dwr_front_vector(rows, out->fronts->row[f], E + nz + 3 * f, out->fronts->error + 3 * f);
   for (int p = 0; p < n_points; p++) out->fronts->point_error[p] = E[nz + 3 * n_fronts + p];
@@ -734,6 +760,7 @@ int nh_dwr_functionals(nh_system *sys, const nh_rows *rows, double scale, const 
 done:
   free(z), free(samples), free(star), free(cell_eps), free(cell_err2), free(cell_norm2);
   free(cell_geo), free(mu), free(replaced), free(cell_loc), free(free_mask), free(E);
+  free(z_links), free(mu_links);
   return rc;
 }
 

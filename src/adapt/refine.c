@@ -38,6 +38,7 @@
 #include "adapt/adapt_impl.h"
 
 #include <math.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -89,6 +90,17 @@ struct nh_adapt {
   double *sep_est;  /* 3 per goal: E_pk of the last separate estimate */
   double *goal_top; /* per goal: its largest indicator over the leaves (marking.goals each) */
   double sep_sum;   /* Σ_p |E_p| of the last separate estimate (= Σ ω E there) */
+  /* the memory term (dwr_memory.c): the dynamic step's data of the next
+   * estimate (have_memory), its step; the links' values S_m (m = 0 …
+   * max_links, 3 n_goals each) after the last separate estimate (mem_cur,
+   * at step cur_step) and after the last one at an earlier step (mem_base,
+   * at base_step: a re-solve estimates its step again from it); own, the
+   * links' own estimates of an estimate */
+  nh_dwr_memory memory;
+  int have_memory, memory_step, cur_step, base_step, cap_links;
+  int sep_memory;               /* the last separate estimate had the memory term */
+  uint64_t cur_rows, base_rows; /* the duals' held rows at cur_step, base_step (a hash) */
+  double *mem_cur, *mem_base, *mem_own;
 };
 
 int nh_adapt_create(const nh_adapt_spec *spec, int max_cells, nh_adapt **out) {
@@ -140,6 +152,7 @@ void nh_adapt_destroy(nh_adapt **adapt) {
   nh_node_transfer_free(&(*adapt)->transfer);
   free((*adapt)->weight);
   free((*adapt)->sep_est), free((*adapt)->goal_top);
+  free((*adapt)->mem_cur), free((*adapt)->mem_base), free((*adapt)->mem_own);
   free(*adapt);
   *adapt = NULL;
 }
@@ -191,6 +204,79 @@ void nh_adapt_set_constraint_data(nh_adapt *a, const nh_constraint_data *data) {
 
 void nh_adapt_set_fronts(nh_adapt *a, nh_dwr_fronts *fronts) {
   a->fronts = fronts;
+}
+
+void nh_adapt_set_memory(nh_adapt *a, const nh_dwr_memory *memory, int step) {
+  a->have_memory = memory != NULL;
+  if (memory) a->memory = *memory;
+  a->memory_step = step;
+}
+
+/* The memory term after a separate estimate at step a->memory_step whose
+ * links' own estimates are a->mem_own (links 0 … n_links): from the links'
+ * values k steps before (the last estimate at an earlier step), S_m =
+ * Σ_{i<k} own_{m+i} + S_{m+k}(base) (dwr_memory.c; the k − 1 steps between
+ * two estimates taken with this step's own errors), and the goals'
+ * estimates E_q = S_0, the memory part S_0 − own_0 also in the inherited
+ * part (no refinement of this step reduces it). Without memory (a quasi-
+ * static step) every S_m = 0 from here on. */
+/* Which rows the goals' duals hold (nh_dwr_active_rows): an FNV-1a hash of
+ * each active row's kind, tools and tissue nodes, so that two steps whose
+ * duals hold the same rows hash the same (the rows' weights and directions
+ * may move: a channel point's weights as the tool slides). */
+static uint64_t nh_adapt_held_rows(const nh_rows *rows) {
+  uint64_t hash = 1469598103934665603u;
+  const int m = rows ? rows->m : 0;
+  unsigned char *active = m ? nh_calloc((size_t)m, 1) : NULL;
+  if (!active) return m ? 0 : hash; /* out of memory: matches nothing but another failure */
+  nh_dwr_active_rows(rows, active);
+  for (int i = 0; i < m; i++) {
+    if (!active[i]) continue;
+    int key[3] = {rows->law[i].kind, rows->tool[i], rows->tool2 ? rows->tool2[i] : -1};
+    for (int k = 0; k < 3 + rows->start[i + 1] - rows->start[i]; k++) {
+      uint32_t v = (uint32_t)(k < 3 ? key[k] : rows->node[rows->start[i] + k - 3]);
+      for (int b = 0; b < 4; b++) hash = (hash ^ ((v >> (8 * b)) & 0xffu)) * 1099511628211u;
+    }
+  }
+  free(active);
+  return hash;
+}
+
+static int nh_adapt_memory_update(nh_adapt *a, int n_links, uint64_t held) {
+  const int nz = 3 * a->n_goals, cap = a->have_memory ? a->memory.max_links + 1 : 1;
+  if (cap > a->cap_links) {
+    NH_TRY(nh_realloc((void **)&a->mem_cur, (size_t)cap * nz, sizeof(double)));
+    NH_TRY(nh_realloc((void **)&a->mem_base, (size_t)cap * nz, sizeof(double)));
+    for (size_t i = (size_t)a->cap_links * nz; i < (size_t)cap * nz; i++)
+      a->mem_cur[i] = a->mem_base[i] = 0.0;
+    a->cap_links = cap;
+  }
+  if (a->memory_step != a->cur_step) { /* the first estimate at this step */
+    memcpy(a->mem_base, a->mem_cur, sizeof(double) * (size_t)a->cap_links * nz);
+    a->base_step = a->cur_step, a->base_rows = a->cur_rows;
+    a->cur_step = a->memory_step;
+  }
+  a->cur_rows = held;
+  if (!a->have_memory) {
+    memset(a->mem_cur, 0, sizeof(double) * (size_t)a->cap_links * nz);
+    return NH_OK;
+  }
+  const int k = a->cur_step - a->base_step > 0 ? a->cur_step - a->base_step : 1;
+  /* the links are the same functionals only while the duals hold the same
+   * rows: the earlier steps' values of other links are dropped */
+  const int same = a->base_rows == held;
+  for (int m = 0; m < a->cap_links; m++)
+    for (int q = 0; q < nz; q++) {
+      double S = same && m + k < a->cap_links ? a->mem_base[(size_t)nz * (m + k) + q] : 0.0;
+      for (int i = 0; i < k && m + i <= n_links; i++) S += a->mem_own[(size_t)nz * (m + i) + q];
+      a->mem_cur[(size_t)nz * m + q] = S;
+    }
+  for (int q = 0; q < nz; q++) {
+    const double memory = a->mem_cur[q] - a->goal_est[q];
+    a->goal_est[q] += memory;
+    a->goal_inh[q] += memory;
+  }
+  return NH_OK;
 }
 
 /* Whether goal p is above the tolerance by the part of its last estimate
@@ -274,8 +360,14 @@ int nh_adapt_estimate_goal(nh_adapt *a, nh_system *sys, const nh_rows *rows, dou
                      .functionals = a->functionals,
                      .fronts = a->fronts};
   if (!combined) {
+    if (a->have_memory) {
+      size_t n = (size_t)(a->memory.max_links + 1) * 3 * (size_t)a->n_goals;
+      NH_TRY(nh_realloc((void **)&a->mem_own, n, sizeof(double)));
+      r.memory = &a->memory, r.memory_own = a->mem_own;
+    }
     NH_TRY(nh_dwr_estimate(sys, rows, scale, m, tissue, hanging, u, a->n_goals, a->goal_points,
                            a->radius, NULL, &r));
+    a->sep_memory = 0;
     /* the weights of the combined functional: each goal's error direction */
     a->sep_sum = 0.0;
     for (int p = 0; p < a->n_goals; p++) {
@@ -288,6 +380,14 @@ int nh_adapt_estimate_goal(nh_adapt *a, nh_system *sys, const nh_rows *rows, dou
     }
     a->have_weights = a->sep_sum > 0.0 && isfinite(a->sep_sum);
     a->since_separate = 0;
+    /* the memory term on top of the step's own estimates (the weights and
+     * the combined estimates' ratio are the own estimates') */
+    NH_TRY(nh_adapt_memory_update(a, r.memory_links, nh_adapt_held_rows(rows)));
+    a->sep_memory = a->have_memory;
+    for (int p = 0; p < a->n_goals; p++) {
+      const double *e = a->goal_est + 3 * p;
+      a->goal_error[p] = sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]);
+    }
   } else {
     double Ec = 0.0;
     r.estimate = &Ec, r.norm = NULL, r.geometry = NULL, r.constraint = NULL, r.inherited = NULL;
@@ -298,7 +398,10 @@ int nh_adapt_estimate_goal(nh_adapt *a, nh_system *sys, const nh_rows *rows, dou
     const double rho = Ec / a->sep_sum;
     for (int p = 0; p < a->n_goals; p++) {
       double *e = a->goal_est + 3 * p;
-      for (int k = 0; k < 3; k++) e[k] = rho * a->sep_est[3 * p + k];
+      for (int k = 0; k < 3; k++) { /* and the last separate estimate's memory part */
+        const int q = 3 * p + k;
+        e[k] = rho * a->sep_est[q] + (a->sep_memory ? a->mem_cur[q] - a->mem_own[q] : 0.0);
+      }
       for (int k = 0; k < 3; k++) /* not split */
         a->goal_geo[3 * p + k] = a->goal_cons[3 * p + k] = a->goal_inh[3 * p + k] = NAN;
       a->goal_error[p] = sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]);

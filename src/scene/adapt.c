@@ -140,6 +140,11 @@ static int check_resolve_tip(const nh_ctx *c, const nh_key_site *k, void *base) 
   return NH_OK;
 }
 
+static int check_memory(const nh_ctx *c, const nh_key_site *k, void *base) {
+  if (!goal(base)) return nh_read_fail(c, k->at, "adapt.memory", "applies to estimator goal only");
+  return NH_OK;
+}
+
 static int check_local_dual(const nh_ctx *c, const nh_key_site *k, void *base) {
   if (!goal(base))
     return nh_read_fail(c, k->at, "adapt.local_dual", "applies to estimator goal only");
@@ -205,6 +210,7 @@ static const nh_key adapt_rows[] = {
     {NH_INT("resolve", A(resolve), 0, NH_AT_LEAST, 0), .check = check_resolve},
     {NH_BOOL("resolve_tip", A(resolve_tip), 1), .check = check_resolve_tip},
     {NH_BOOL("local_dual", A(local_dual), 0), .check = check_local_dual},
+    {NH_BOOL("memory", A(memory), 0), .check = check_memory},
     {NH_INT("separate_every", A(separate_every), 1, NH_AT_LEAST, 1), .check = check_separate_every},
     {NH_MAP("coarsen", coarsen_rows)},
     {0},

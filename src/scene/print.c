@@ -254,9 +254,10 @@ static void print_adapt(FILE *f, const nh_scene *s) {
       fprintf(f, "%g m", a->tolerance);
     else
       fprintf(f, "none");
-    fprintf(f, ", resolve %d%s, separate duals every %d estimates%s, graded (2:1)\n", a->resolve,
+    fprintf(f, ", resolve %d%s, separate duals every %d estimates%s%s, graded (2:1)\n", a->resolve,
             a->resolve_tip ? " (and at the tools' tips)" : "", a->separate_every,
-            a->local_dual ? ", local dual at held rows" : "");
+            a->local_dual ? ", local dual at held rows" : "",
+            a->memory ? ", memory of the dynamic steps" : "");
   }
   if (a->coarsen > 0)
     fprintf(f, "          coarsen below %g of the marking threshold\n", a->coarsen);

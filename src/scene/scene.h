@@ -217,6 +217,8 @@ typedef struct {
                              a leaf holding a tool's tip (default 1) */
   int local_dual;         /* adapt.local_dual: goal only, the local enriched dual where a goal's
                              leaf holds a tool's rows (dwr_local.c; default 0) */
+  int memory;             /* adapt.memory: goal only, the dynamic steps' memory term
+                             (dwr_memory.c; default 0) */
   int separate_every; /* adapt.separate_every: every N-th goal estimate solves each goal's duals,
                          the others one combined dual (>= 1, default 1) */
   double coarsen;     /* adapt.coarsen.fraction (0: no coarsening; in (0, 1)) */

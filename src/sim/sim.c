@@ -623,6 +623,10 @@ static int nh_sim_rows_linear(void *ctx, int n, const double *w, double *out) {
   return nh_contact_data_change(s->contact, s->mesh, s->u, n, w, NULL, out);
 }
 
+/* The memory term's links at most (adapt/dwr_memory.c): 0.78^64 < 1e-6,
+ * the DBS brain's slowest decay per step */
+#define NH_MEMORY_MAX_LINKS 64
+
 /* The error estimate of this step's solution: SPR, or goal-oriented with the
  * step's factor (the coefficient of K in A: 1 static, hβ + h² dynamic). */
 static int nh_sim_estimate(nh_sim *s) {
@@ -684,6 +688,14 @@ static int nh_sim_estimate(nh_sim *s) {
                           point_row,
                           point_error};
   nh_adapt_set_fronts(s->adapt, fronts.n || fronts.n_points ? &fronts : NULL);
+  /* the dynamic step's memory of the earlier steps' errors (adapt/dwr_memory.c) */
+  const nh_dwr_memory memory = {.h = h,
+                                .alpha = sc->tissue.damping_mass,
+                                .beta = sc->tissue.damping_stiffness,
+                                .mass = s->tissue->mass,
+                                .max_links = NH_MEMORY_MAX_LINKS};
+  const int dynamic = sc->time.mode != NH_MODE_STATIC;
+  nh_adapt_set_memory(s->adapt, sc->adapt.memory && dynamic ? &memory : NULL, s->step + 1);
   if (!rc)
     rc = nh_adapt_estimate_goal(s->adapt, s->system, rows, scale, s->mesh, s->tissue, s->u,
                                 s->hanging, &s->eta, &s->eta_rel);
