@@ -15,7 +15,10 @@
  *  1. no rows: the first identity on every free DOF, to round-off relative
  *     to h² |j|, and P_L within 2 % of K⁻¹ j in energy (the links stop at
  *     1 % of the goal dual's energy norm, two in a row);
- *  2. three bilateral rows at a point: the energy identity to round-off.
+ *  2. three bilateral rows at a point: the energy identity to round-off;
+ *     and the links' solver (nh_rows_solver: W formed once) against
+ *     nh_system_solve_rows for one right-hand side, solution and
+ *     multipliers to round-off.
  * A deliberate defect (the factor 1 + hα taken as 1 in dwr_memory.c) fails
  * part 1 by orders of magnitude. NH_VERBOSE=1 prints the numbers. */
 #include "check.h"
@@ -155,6 +158,25 @@ int main(void) {
   CHECK(fabs(lhs - rhs) <= 1e-10 * scale, "held rows: %.17g against %.17g", lhs, rhs);
   CHECK(lhs > 1e-6 * scale, "held rows: the links' sum equals the static dual (%.3g)", lhs);
   free(z);
+  { /* the prepared solver against nh_system_solve_rows */
+    const int nf = nh_system_free_dofs(sd);
+    double *b = calloc((size_t)nf, sizeof(double)), *x1 = calloc((size_t)nf, sizeof(double));
+    double *x2 = calloc((size_t)nf, sizeof(double)), mu1[3], mu2[3];
+    nh_system_gather(sd, j, b);
+    nh_rows_solver *rs = NULL;
+    CHECK_OK(nh_rows_solver_create(sd, &rows, NULL, &rs));
+    CHECK_OK(nh_rows_solver_solve(sd, rs, 1, b, x1, mu1));
+    CHECK_OK(nh_system_solve_rows(sd, &rows, NULL, 1, b, x2, mu2, NULL));
+    double dx = 0.0, xm = 0.0, dm = 0.0, mm = 0.0;
+    for (int i = 0; i < nf; i++) dx = fmax(dx, fabs(x1[i] - x2[i])), xm = fmax(xm, fabs(x2[i]));
+    for (int i = 0; i < 3; i++) dm = fmax(dm, fabs(mu1[i] - mu2[i])), mm = fmax(mm, fabs(mu2[i]));
+    if (getenv("NH_VERBOSE"))
+      printf("rows solver: |dx| %.3e of %.3e, |dmu| %.3e of %.3e\n", dx, xm, dm, mm);
+    CHECK(dx <= 1e-12 * xm && dm <= 1e-12 * mm && mm > 0.0, "rows solver: dx %.3g, dmu %.3g", dx,
+          dm);
+    nh_rows_solver_destroy(sd, &rs);
+    free(b), free(x1), free(x2);
+  }
 
   nh_rows_free(&rows);
   free(zero), free(fint), free(j), free(jx), free(P), free(KP), free(Z), free(D), free(KD), free(w);

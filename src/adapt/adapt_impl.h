@@ -102,7 +102,7 @@ int nh_dwr_front_setup(const nh_rows *rows, int n_nodes, int row, double *j, uns
  * (*z_links, 3 n_nodes for link m ≥ 1 of functional q at nz (m − 1) + q,
  * allocated here) and multipliers (*mu_links, rows->m each, the same
  * order; NULL without rows), each held by the goals' active rows.
- * NH_ERR_MEMORY, or fails as nh_system_solve_rows. */
+ * NH_ERR_MEMORY, or fails as nh_rows_solver_create and _solve. */
 int nh_dwr_memory_duals(nh_system *sys, const nh_rows *rows, double scale, int n_nodes, int nz,
                         const double *j, const nh_dwr_memory *mem, int *n_links, double **z_links,
                         double **mu_links);

@@ -11,14 +11,14 @@
  * error through M and K: with r the step's own residual,
  *     A e_v⁺ = r + M e_v − h K e_u,  e_u⁺ = e_u + h e_v⁺.
  * A functional S(e) = aᵀ e_u + bᵀ e_v of the step's error is then, with
- * A z = h a + b (the rows the goal's dual holds, held: dwr.c,
- * "Constraints"; their forces drop out where the rows held the error at
- * both steps),
- *     S(e⁺) = zᵀ r + aᵀ e_u − h (K z)ᵀ e_u + (M z)ᵀ e_v,
+ * the dual A z + Jᵀμ = h a + b, J z = 0 (the rows the goal's dual holds:
+ * dwr.c, "Constraints"; a row active at the step holds its position, so
+ * J e_u⁺ = 0 and J e_v⁺ = −J e_u / h),
+ *     S(e⁺) = zᵀ r + aᵀ e_u − h (K z)ᵀ e_u − μᵀ J e_u / h + (M z)ᵀ e_v,
  * the step's own error, which the goal machinery estimates for the
  * functional a + b/h (its dual is z), plus a functional S' of the previous
  * step's error with
- *     a' = a − h K z,  b' = M z.
+ *     a' = a − h K z − Jᵀμ / h,  b' = M z.
  * Starting from the goal (a, b) = (j, 0), the links S_0 = J, S_1, S_2, …
  * give J(e_u at step n) = Σ_m own_m(step n − m): each link's own error
  * at the step m steps back. The links' duals are computed here, by
@@ -34,8 +34,11 @@
  *
  * Scaling. The code's duals solve A z = c_K Pᵀ j (c_K = hβ + h², dwr.c);
  * with α_m = c_K a_m and β_m = c_K b_m / h (free-DOF vectors) link m's
- * right-hand side is α_m + β_m and
- *     α_{m+1} = α_m − h (A z_m − (1 + hα) M z_m) / (β + h),  β_{m+1} = M z_m.
+ * right-hand side r_m = α_m + β_m, A z_m + Jᵀμ_m = r_m, and
+ *     α_{m+1} = α_m − h (A z_m − (1 + hα) M z_m) / (β + h) − Jᵀμ_m,
+ *     β_{m+1} = M z_m,
+ * with Jᵀμ_m = r_m − A z_m (for β = 0: α_{m+1} = (1 + hα) M z_m − β_m).
+ * The held rows' compliance is formed once for all links (nh_rows_solver).
  *
  * The links stop when two in a row have a dual energy (z_mᵀ A z_m)^½ below
  * NH_MEMORY_TOLERANCE of the goal's own, for every goal, or at
@@ -79,6 +82,8 @@ int nh_dwr_memory_duals(nh_system *sys, const nh_rows *rows, double scale, int n
           ? NH_OK
           : NH_ERROR(NH_ERR_MEMORY, "out of memory: the memory term's duals (%d nodes)", n_nodes);
   if (mr && !rc) nh_dwr_active_rows(rows, active);
+  nh_rows_solver *rs = NULL; /* the held rows' compliance, once for every link */
+  if (!rc) rc = nh_rows_solver_create(sys, mr ? rows : NULL, active, &rs);
   for (int q = 0; q < nz && !rc; q++) { /* link 0: the goals, α_0 = c_K Pᵀ j, β_0 = 0 */
     nh_system_gather(sys, j + n3 * q, a + (size_t)nf * q);
     for (int i = 0; i < nf; i++) a[(size_t)nf * q + i] *= scale;
@@ -86,7 +91,7 @@ int nh_dwr_memory_duals(nh_system *sys, const nh_rows *rows, double scale, int n
   if (!rc) memcpy(r, a, nfz * sizeof(double));
   int small = 0;
   for (int m = 0; m <= mem->max_links && !rc; m++) {
-    rc = nh_system_solve_rows(sys, mr ? rows : NULL, active, nz, r, z, mu, NULL);
+    rc = nh_rows_solver_solve(sys, rs, nz, r, z, mu);
     if (rc) break;
     int all_small = 1;
     for (int q = 0; q < nz; q++) { /* the dual's energy, then the next link's α, β */
@@ -117,6 +122,7 @@ int nh_dwr_memory_duals(nh_system *sys, const nh_rows *rows, double scale, int n
     if (mr) memcpy(*mu_links + (size_t)mr * nz * (m - 1), mu, sizeof(double) * mr * nz);
     *n_links = m;
   }
+  nh_rows_solver_destroy(sys, &rs);
   free(a), free(r), free(z), free(Az), free(Mz), free(full), free(e0), free(mu), free(active);
   if (rc) {
     free(*z_links), free(*mu_links);

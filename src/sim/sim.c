@@ -623,9 +623,12 @@ static int nh_sim_rows_linear(void *ctx, int n, const double *w, double *out) {
   return nh_contact_data_change(s->contact, s->mesh, s->u, n, w, NULL, out);
 }
 
-/* The memory term's links at most (adapt/dwr_memory.c): 0.78^64 < 1e-6,
- * the DBS brain's slowest decay per step */
-#define NH_MEMORY_MAX_LINKS 64
+/* The memory term's links at most (adapt/dwr_memory.c): on dbs.yaml's
+ * shift 16 links give the estimates of 32 and 64 to 1 % (docs/dbs.md, "The
+ * dynamic steps' memory"), although the links' dual energy has not fallen
+ * to 1 % of the goal's by then: the later links are smooth, and their own
+ * errors small */
+#define NH_MEMORY_MAX_LINKS 16
 
 /* The error estimate of this step's solution: SPR, or goal-oriented with the
  * step's factor (the coefficient of K in A: 1 static, hβ + h² dynamic). */

@@ -550,6 +550,50 @@ void nh_system_add_reactions(const nh_system *s, double *b) {
  * its lower triangle is formed and mirrored (dpstrf reads the lower one;
  * the scaling reads both). The two routes agree to round-off
  * (tests/test_dwr_rows.c). */
+/* The multipliers' factor of the ms rows at place[0..ms) of the m x m
+ * compliance W: D = diag(W)^−½ over them (d; a row without free DOFs, 0:
+ * dropped) and the pivoted Cholesky factor of D W D (Ws, ms x ms; piv,
+ * *rank: pivots below 1e-12 relative truncated). */
+static int nh_dual_factor(const double *W, int m, const int *place, int ms, double *d, double *Ws,
+                          int *piv, int *rank) {
+  for (int a = 0; a < ms; a++) {
+    double w = W[(size_t)place[a] * m + place[a]];
+    d[a] = w > 0.0 ? 1.0 / sqrt(w) : 0.0;
+  }
+  for (int a = 0; a < ms; a++)
+    for (int e = 0; e < ms; e++)
+      Ws[(size_t)a * ms + e] = W[(size_t)place[a] * m + place[e]] * d[a] * d[e];
+  *rank = 0;
+  int info = (int)LAPACKE_dpstrf(LAPACK_COL_MAJOR, 'L', ms, Ws, ms, piv, rank, 1e-12);
+  return info < 0 ? NH_ERROR(NH_ERR_NUMERIC, "constrained dual: dpstrf failed (%d)", info) : NH_OK;
+}
+
+/* The multipliers μ of nk columns x (n each) for the rows at place[0..ms)
+ * of Jt (a factor of nh_dual_factor): L₁₁ L₁₁ᵀ y₁ = (Pᵀ D J x)₁, y₂ = 0,
+ * μ = D P y, written at mu[m q + place[a]]; c (ms nk) and cp (rank nk)
+ * workspace. */
+static void nh_dual_multipliers(const cholmod_sparse *Jt, const int *place, int ms, const double *d,
+                                const double *Ws, const int *piv, int rank, int n, int nk,
+                                const double *x, double *c, double *cp, double *mu, int m) {
+  const int *Jp = Jt->p, *Ji = Jt->i;
+  const double *Jx = Jt->x;
+  for (int q = 0; q < nk; q++) /* D J x */
+    for (int a = 0; a < ms; a++) {
+      const int j = place[a];
+      double v = 0.0;
+      for (int p = Jp[j]; p < Jp[j + 1]; p++) v += Jx[p] * x[(size_t)n * q + Ji[p]];
+      c[(size_t)ms * q + a] = d[a] * v;
+    }
+  for (int q = 0; q < nk; q++)
+    for (int i = 0; i < rank; i++) cp[(size_t)rank * q + i] = c[(size_t)ms * q + piv[i] - 1];
+  LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', rank, nk, Ws, ms, cp, rank);
+  for (int q = 0; q < nk; q++)
+    for (int i = 0; i < rank; i++) {
+      const int a = piv[i] - 1;
+      mu[(size_t)m * q + place[a]] = d[a] * cp[(size_t)rank * q + i];
+    }
+}
+
 /* Row i is in set k: the set has columns and holds the row (active NULL: every row). */
 static int nh_set_holds(const int *set_ncol, const unsigned char *const *set_active, int k, int i) {
   return set_ncol[k] > 0 && (!set_active[k] || set_active[k][i]);
@@ -633,41 +677,19 @@ int nh_system_solve_rows_sets(nh_system *s, const nh_rows *rows, int n_sets, con
    * Pᵀ (D W D) P = L Lᵀ up to rank r, L₁₁ L₁₁ᵀ y₁ = (Pᵀ D J A⁻¹ b)₁, y₂ = 0,
    * μ = D P y. */
   for (int k = 0, c0 = 0; k < n_sets && !rc; c0 += set_ncol[k++]) {
-    const int *Jp = Jt->p, *Ji = Jt->i, nk = set_ncol[k];
-    const double *Jx = Jt->x;
-    int ms = 0;
+    const int nk = set_ncol[k];
+    int ms = 0, rank = 0;
     for (int i = 0; i < mr; i++)
       if (pos[i] >= 0 && nh_set_holds(set_ncol, set_active, k, i)) place[ms++] = pos[i];
     if (ms == 0) continue;
     if (k == 0 && n_used) *n_used = ms;
-    for (int a = 0; a < ms; a++) {
-      double w = W[(size_t)place[a] * m + place[a]];
-      d[a] = w > 0.0 ? 1.0 / sqrt(w) : 0.0; /* a row without free DOFs: dropped */
-    }
-    for (int a = 0; a < ms; a++)
-      for (int e = 0; e < ms; e++)
-        Ws[(size_t)a * ms + e] = W[(size_t)place[a] * m + place[e]] * d[a] * d[e];
-    for (int q = 0; q < nk; q++) /* D J A⁻¹ b */
-      for (int a = 0; a < ms; a++) {
-        const int j = place[a];
-        double v = 0.0;
-        for (int p = Jp[j]; p < Jp[j + 1]; p++) v += Jx[p] * x[(size_t)n * (c0 + q) + Ji[p]];
-        c[(size_t)ms * q + a] = d[a] * v;
-      }
-    int rank = 0;
-    int info = (int)LAPACKE_dpstrf(LAPACK_COL_MAJOR, 'L', ms, Ws, ms, piv, &rank, 1e-12);
-    if (info < 0) rc = NH_ERROR(NH_ERR_NUMERIC, "constrained dual: dpstrf failed (%d)", info);
+    rc = nh_dual_factor(W, m, place, ms, d, Ws, piv, &rank);
     if (rc || rank == 0) continue;
-    for (int q = 0; q < nk; q++)
-      for (int i = 0; i < rank; i++) cp[(size_t)rank * q + i] = c[(size_t)ms * q + piv[i] - 1];
-    LAPACKE_dpotrs(LAPACK_COL_MAJOR, 'L', rank, nk, Ws, ms, cp, rank);
-    for (int q = 0; q < nk; q++)
-      for (int i = 0; i < rank; i++) {
-        const int a = piv[i] - 1, j = place[a];
-        const double v = d[a] * cp[(size_t)rank * q + i];
-        mu[(size_t)m * (c0 + q) + j] = v;
-        if (mu_out) mu_out[(size_t)mr * (c0 + q) + row[j]] = v;
-      }
+    nh_dual_multipliers(Jt, place, ms, d, Ws, piv, rank, n, nk, x + (size_t)n * c0, c, cp,
+                        mu + (size_t)m * c0, m);
+    for (int q = 0; q < nk && mu_out; q++)
+      for (int j = 0; j < m; j++)
+        mu_out[(size_t)mr * (c0 + q) + row[j]] = mu[(size_t)m * (c0 + q) + j];
   }
   if (!rc && direct) /* x −= G μ */
     cblas_dgemm(CblasColMajor, CblasNoTrans, CblasNoTrans, n, ncol, m, -1.0, y, n, mu, m, 1.0, x,
@@ -689,4 +711,101 @@ int nh_system_solve_rows_sets(nh_system *s, const nh_rows *rows, int n_sets, con
 int nh_system_solve_rows(nh_system *s, const nh_rows *rows, const unsigned char *active, int ncol,
                          const double *b, double *x, double *mu_out, int *n_used) {
   return nh_system_solve_rows_sets(s, rows, 1, &ncol, &active, b, x, mu_out, n_used);
+}
+
+/* The constrained dual of one row set for a sequence of right-hand sides
+ * (solve.h): the active rows' tissue parts compacted, their compliance W by
+ * nh_system_compliance_add (restricted forward solves, once), and the
+ * pivoted factor of D W D; each solve is A⁻¹ b, the multipliers, and
+ * A⁻¹ J_tᵀ μ: two solves of its own columns, where nh_system_solve_rows
+ * forms W (or G = A⁻¹ J_tᵀ) again at every call. */
+struct nh_rows_solver {
+  int m, mr, rank; /* active rows, all rows, the factor's rank */
+  int *row, *place, *piv;
+  double *d, *Ws;
+  cholmod_sparse *Jt;
+};
+
+void nh_rows_solver_destroy(nh_system *s, nh_rows_solver **rs) {
+  if (!rs || !*rs) return;
+  if ((*rs)->Jt) cholmod_free_sparse(&(*rs)->Jt, &s->cm);
+  free((*rs)->row), free((*rs)->place), free((*rs)->piv), free((*rs)->d), free((*rs)->Ws);
+  free(*rs);
+  *rs = NULL;
+}
+
+int nh_rows_solver_create(nh_system *s, const nh_rows *rows, const unsigned char *active,
+                          nh_rows_solver **out) {
+  *out = NULL;
+  if (!s->factor_current) NH_TRY(nh_system_factor_later(s));
+  nh_rows_solver *rs = nh_calloc(1, sizeof *rs);
+  if (!rs) return NH_ERROR(NH_ERR_MEMORY, "out of memory: constrained dual");
+  const int mr = rows ? rows->m : 0, n = s->n_free;
+  int m = 0, slots = 0;
+  for (int i = 0; i < mr; i++)
+    if (!active || active[i]) m++, slots += rows->start[i + 1] - rows->start[i];
+  rs->m = m, rs->mr = mr;
+  if (m == 0) {
+    *out = rs;
+    return NH_OK;
+  }
+  nh_rows sub = {.m = m, .cap = m, .n_slots = slots};
+  sub.start = nh_calloc((size_t)m + 1, sizeof(int));
+  sub.node = nh_calloc((size_t)slots + 1, sizeof(int));
+  sub.N = nh_calloc((size_t)slots + 1, sizeof(double));
+  sub.dir = nh_calloc(3 * (size_t)m, sizeof(double));
+  int *mark = nh_calloc((size_t)(n ? n : 1), sizeof(int));
+  double *W = nh_calloc((size_t)m * (size_t)m, sizeof(double));
+  rs->row = nh_calloc((size_t)m, sizeof(int)), rs->place = nh_calloc((size_t)m, sizeof(int));
+  rs->piv = nh_calloc((size_t)m, sizeof(int)), rs->d = nh_calloc((size_t)m, sizeof(double));
+  rs->Ws = nh_calloc((size_t)m * (size_t)m, sizeof(double));
+  int rc = sub.start && sub.node && sub.N && sub.dir && mark && W && rs->row && rs->place &&
+                   rs->piv && rs->d && rs->Ws
+               ? NH_OK
+               : NH_ERROR(NH_ERR_MEMORY, "out of memory: constrained dual (%d rows)", m);
+  for (int i = 0, k = 0; i < mr && !rc; i++) {
+    if (active && !active[i]) continue;
+    const int a = rows->start[i], len = rows->start[i + 1] - a;
+    sub.start[k + 1] = sub.start[k] + len;
+    memcpy(sub.node + sub.start[k], rows->node + a, (size_t)len * sizeof(int));
+    memcpy(sub.N + sub.start[k], rows->N + a, (size_t)len * sizeof(double));
+    memcpy(sub.dir + 3 * k, rows->dir + 3 * i, 3 * sizeof(double));
+    rs->place[k] = k, rs->row[k++] = i;
+  }
+  if (!rc) {
+    for (int i = 0; i < n; i++) mark[i] = -1;
+    if (!(rs->Jt = nh_rows_tissue_jt(s, &sub, mark)))
+      rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: constrained dual (%d rows)", m);
+  }
+  if (!rc) rc = nh_system_compliance_add(s, rs->Jt, W);
+  if (!rc) rc = nh_dual_factor(W, m, rs->place, m, rs->d, rs->Ws, rs->piv, &rs->rank);
+  free(sub.start), free(sub.node), free(sub.N), free(sub.dir), free(mark), free(W);
+  if (rc) nh_rows_solver_destroy(s, &rs);
+  *out = rs;
+  return rc;
+}
+
+int nh_rows_solver_solve(nh_system *s, const nh_rows_solver *rs, int ncol, const double *b,
+                         double *x, double *mu_out) {
+  const int n = s->n_free, m = rs->m, k = rs->rank;
+  if (mu_out) memset(mu_out, 0, sizeof(double) * (size_t)rs->mr * (size_t)ncol);
+  NH_TRY(nh_system_solve_many(s, ncol, b, x));
+  if (m == 0 || k == 0) return NH_OK;
+  double *mu = nh_calloc((size_t)m * (size_t)ncol, sizeof(double));
+  double *c = nh_calloc((size_t)(m + k) * (size_t)ncol, sizeof(double));
+  double *f = nh_calloc((size_t)n * (size_t)ncol, sizeof(double));
+  double *y = nh_calloc((size_t)n * (size_t)ncol, sizeof(double));
+  int rc = mu && c && f && y ? NH_OK : NH_ERROR(NH_ERR_MEMORY, "out of memory: constrained dual");
+  if (!rc) {
+    nh_dual_multipliers(rs->Jt, rs->place, m, rs->d, rs->Ws, rs->piv, k, n, ncol, x, c,
+                        c + (size_t)m * ncol, mu, m);
+    for (int q = 0; q < ncol; q++)
+      nh_rows_tissue_force(rs->Jt, mu + (size_t)m * q, f + (size_t)n * q, n);
+    rc = nh_system_solve_many(s, ncol, f, y);
+  }
+  for (size_t i = 0; !rc && i < (size_t)n * (size_t)ncol; i++) x[i] -= y[i];
+  for (int q = 0; !rc && mu_out && q < ncol; q++)
+    for (int j = 0; j < m; j++) mu_out[(size_t)rs->mr * q + rs->row[j]] = mu[(size_t)m * q + j];
+  free(mu), free(c), free(f), free(y);
+  return rc;
 }

@@ -441,6 +441,19 @@ int nh_system_solve_rows(nh_system *sys, const nh_rows *rows, const unsigned cha
 int nh_system_solve_rows_sets(nh_system *sys, const nh_rows *rows, int n_sets, const int *set_ncol,
                               const unsigned char *const *set_active, const double *b, double *x,
                               double *mu, int *n_used);
+/* nh_system_solve_rows of one row set for a sequence of right-hand sides
+ * that depend on each other (the goal estimate's memory links,
+ * adapt/dwr_memory.c): create forms the active rows' compliance W once (A
+ * factorised first when the factor is not A's); each solve is then two
+ * solves of its ncol columns and the multipliers (rows->m per column in
+ * mu, may be NULL), the same solution as nh_system_solve_rows to
+ * round-off. destroy accepts NULL. NH_ERR_MEMORY, NH_ERR_NUMERIC. */
+typedef struct nh_rows_solver nh_rows_solver;
+int nh_rows_solver_create(nh_system *sys, const nh_rows *rows, const unsigned char *active,
+                          nh_rows_solver **out);
+int nh_rows_solver_solve(nh_system *sys, const nh_rows_solver *rs, int ncol, const double *b,
+                         double *x, double *mu);
+void nh_rows_solver_destroy(nh_system *sys, nh_rows_solver **rs);
 /* The factorisations nh_system_solve_rows made since the last call, and
  * reset the count. */
 int nh_system_take_later_factorisations(nh_system *sys);
