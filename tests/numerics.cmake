@@ -33,6 +33,8 @@ nh_add_py_test(run_hdf5 io run_hdf5.py)
 # uninterrupted run to 1e-12.
 nh_add_py_test(restart_tools io restart_tools.py needle)
 nh_add_py_test(restart_tools_dbs io restart_tools.py dbs)
+# The goal estimate's carried state (adapt.memory's links, adapt.separate_every's weights) across a restart.
+nh_add_py_test(restart_tools_goal io restart_tools.py goal)
 set_tests_properties(restart_tools_dbs PROPERTIES LABELS "io;slow" TIMEOUT 900)
 nh_add_py_test(restart_tools_skull io restart_tools.py skull)
 nh_add_py_test(restart_tools_mri io restart_tools.py mri)

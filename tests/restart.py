@@ -287,7 +287,7 @@ def main():
         cases.append(("truncated", bytes(data[: len(data) // 3]), "corrupted"))
         cases.append(("foreign", open(os.path.join(ref, "tissue.pvd"), "rb").read(), "not a needlehex checkpoint"))
         older = bytearray(data)
-        older[8:12] = (6).to_bytes(4, "little")  # format 6: the tools' state before the shaft points' axial errors
+        older[8:12] = (7).to_bytes(4, "little")  # format 7: before the goal estimate's state
         cases.append(("older", bytes(older), "written by an older needlehex"))
         for what, content, phrase in cases:
             with open(ck, "wb") as f:

@@ -4,7 +4,7 @@ cannula with the electrode nested inside, released at the target, the
 cannula retracted), without and with skull contact, stopped and continued,
 equal the uninterrupted run.
 
-usage: restart_tools.py [needle | dbs | skull | skull-mortar | mri]
+usage: restart_tools.py [needle | dbs | goal | skull | skull-mortar | mri]
 
 For each scene: a reference run; a run stopped by SIGTERM mid-way (started
 in a temporary folder, the scene and the output folder given as relative
@@ -209,6 +209,19 @@ def main():
         check_scene("dbs (refactor auto)", dbs, sets, 25, 1e-12)
         check_scene("dbs (refactor every)", dbs, sets + ["solver.refactor=every"], 25, 1e-12)
         return report()
+    if which == "goal":
+        # The same procedure with the goal-oriented estimate, its memory term
+        # (adapt.memory) and a combined dual every other estimate
+        # (adapt.separate_every): the links' values and the combined dual's
+        # weights are carried from estimate to estimate, so the checkpoint
+        # must hold them (format 8) for the continued run's error_estimate
+        # columns, and the refinement they drive, to be the uninterrupted
+        # run's.
+        dbs = os.path.join(SRC, "cases", "dbs", "dbs.yaml")
+        check_scene("dbs (goal, memory, separate every 2)", dbs,
+                    sets + ["adapt.estimator=goal", "adapt.max_level=1", "adapt.memory=true",
+                            "adapt.separate_every=2"], 25, 1e-12)
+        return report()
     if which == "mri":
         # The DBS procedure on the MRI-derived ventricles: the scene names its
         # label image by a relative path (ventricles.nii.gz, beside the scene).
@@ -217,7 +230,8 @@ def main():
                     20, 1e-12)
         return report()
     if which not in ("skull", "skull-mortar"):
-        print(f"usage: restart_tools.py [needle | dbs | skull | skull-mortar | mri] (not {which!r})",
+        print(f"usage: restart_tools.py [needle | dbs | goal | skull | skull-mortar | mri] "
+              f"(not {which!r})",
               file=sys.stderr)
         return 2
     # The DBS procedure with skull contact, small: a 6 x 7 x 6 grid, 20 steps

@@ -289,6 +289,14 @@ void nh_adapt_set_memory(nh_adapt *adapt, const nh_dwr_memory *memory, int step)
  * same pass (nh_dwr_result.fronts; their errors written to fronts->error);
  * kept by pointer, NULL: none. */
 void nh_adapt_set_fronts(nh_adapt *adapt, nh_dwr_fronts *fronts);
+/* The goal estimate's state that later estimates carry (the combined
+ * dual's weights and the last separate estimates, the memory term's links'
+ * values): appended to b, and read back from data (what save wrote, for a
+ * scene with the same goals) so that a restarted run estimates as the
+ * uninterrupted one. load: NH_ERR_INPUT (message) for a state of other
+ * goals or a malformed one, NH_ERR_MEMORY. */
+void nh_adapt_state_save(const nh_adapt *adapt, nh_bytes *b);
+int nh_adapt_state_load(nh_adapt *adapt, const unsigned char *data, size_t size);
 /* |E_p| per goal of the last goal estimate (m), or NULL (none for this mesh). */
 const double *nh_adapt_goal_errors(const nh_adapt *adapt);
 /* The signed E_pk (3 per goal, m) of the last goal estimate, or NULL. */

@@ -445,6 +445,69 @@ int nh_adapt_estimate_goal(nh_adapt *a, nh_system *sys, const nh_rows *rows, dou
   return NH_OK;
 }
 
+/* The carried state (adapt.h): i32 n_goals (0: none, nothing follows),
+ * i32 have_weights, since_separate, f64 sep_sum, f64 weight[3 n],
+ * sep_est[3 n]; the memory term: i32 cur_step, base_step, cap_links,
+ * sep_memory, u64 cur_rows, base_rows, f64 mem_cur[cap 3 n],
+ * mem_base[cap 3 n], own_0[3 n]. */
+void nh_adapt_state_save(const nh_adapt *a, nh_bytes *b) {
+  const int n = a && a->goal ? a->n_goals : 0, nz = 3 * n;
+  int32_t head[3] = {n, a ? a->have_weights : 0, a ? a->since_separate : 0};
+  nh_bytes_put(b, head, sizeof head);
+  if (n == 0) return;
+  nh_bytes_put(b, &a->sep_sum, sizeof(double));
+  nh_bytes_put(b, a->weight, sizeof(double) * nz);
+  nh_bytes_put(b, a->sep_est, sizeof(double) * nz);
+  int32_t mem[4] = {a->cur_step, a->base_step, a->cap_links, a->sep_memory};
+  uint64_t rows[2] = {a->cur_rows, a->base_rows};
+  nh_bytes_put(b, mem, sizeof mem);
+  nh_bytes_put(b, rows, sizeof rows);
+  nh_bytes_put(b, a->mem_cur, sizeof(double) * (size_t)a->cap_links * nz);
+  nh_bytes_put(b, a->mem_base, sizeof(double) * (size_t)a->cap_links * nz);
+  for (int q = 0; q < nz; q++) {
+    double own = a->mem_own && a->sep_memory ? a->mem_own[q] : 0.0;
+    nh_bytes_put(b, &own, sizeof own);
+  }
+}
+
+int nh_adapt_state_load(nh_adapt *a, const unsigned char *data, size_t size) {
+  nh_byte_reader r = {data, data + size, 0};
+  int32_t head[3] = {0, 0, 0}, mem[4] = {0, 0, 0, 0};
+  nh_bytes_get(&r, head, sizeof head);
+  const int n = a && a->goal ? a->n_goals : 0, nz = 3 * n;
+  if (r.short_read || head[0] != n)
+    return NH_ERROR(NH_ERR_INPUT, "the goal estimate's state has %d goals, the scene %d",
+                    (int)head[0], n);
+  if (n == 0)
+    return r.p == r.end ? NH_OK : NH_ERROR(NH_ERR_INPUT, "the goal estimate's state goes on");
+  nh_bytes_get(&r, &a->sep_sum, sizeof(double));
+  nh_bytes_get(&r, a->weight, sizeof(double) * nz);
+  nh_bytes_get(&r, a->sep_est, sizeof(double) * nz);
+  uint64_t rows[2] = {0, 0};
+  nh_bytes_get(&r, mem, sizeof mem);
+  nh_bytes_get(&r, rows, sizeof rows);
+  const int cap = mem[2];
+  if (r.short_read || cap < 0 || cap > 1 + (int)((r.end - r.p) / (sizeof(double) * (nz ? nz : 1))))
+    return NH_ERROR(NH_ERR_INPUT, "the goal estimate's state is malformed (%d links)", cap);
+  if (cap > 0) {
+    NH_TRY(nh_realloc((void **)&a->mem_cur, (size_t)cap * nz, sizeof(double)));
+    NH_TRY(nh_realloc((void **)&a->mem_base, (size_t)cap * nz, sizeof(double)));
+    NH_TRY(nh_realloc((void **)&a->mem_own, (size_t)cap * nz, sizeof(double)));
+    memset(a->mem_own, 0, sizeof(double) * (size_t)cap * nz);
+  }
+  nh_bytes_get(&r, a->mem_cur, sizeof(double) * (size_t)cap * nz);
+  nh_bytes_get(&r, a->mem_base, sizeof(double) * (size_t)cap * nz);
+  for (int q = 0; q < nz; q++)
+    nh_bytes_get(&r, cap > 0 ? a->mem_own + q : &(double){0}, sizeof(double));
+  if (r.short_read || r.p != r.end)
+    return NH_ERROR(NH_ERR_INPUT, "the goal estimate's state %s",
+                    r.short_read ? "ends early" : "goes on");
+  a->have_weights = head[1], a->since_separate = head[2];
+  a->cur_step = mem[0], a->base_step = mem[1], a->cap_links = cap, a->sep_memory = mem[3];
+  a->cur_rows = rows[0], a->base_rows = rows[1];
+  return NH_OK;
+}
+
 const double *nh_adapt_goal_errors(const nh_adapt *a) {
   return a && a->goal && a->have_eta ? a->goal_error : NULL;
 }

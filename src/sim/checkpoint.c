@@ -5,11 +5,12 @@
  * Format (little-endian, native doubles; a file from a machine of another
  * byte order is refused, not converted):
  *   "NHCKPT\0\1"   8-byte magic
- *   u32 version    7 (1: no tools, still read; 2 to 6: an older tools' state
+ *   u32 version    8 (1: no tools, still read; 2 to 7: an older tools' state
  *                  without the channel points' hand-over offsets (2, 3),
  *                  the quasi-static prediction (4), the anchors' errors
  *                  (5, contact/anchor.c) or the shaft points' axial data
- *                  errors (6), refused)
+ *                  errors (6), or without the goal estimate's state (7),
+ *                  refused)
  *   u32 0x01020304 byte-order marker
  *   u64 size       bytes of payload
  *   u64 checksum   FNV-1a 64 of the payload
@@ -23,7 +24,10 @@
  *                  (2) u64 length, the tools' state (contact/state.c),
  *                  (3) u64 length, the factor reuse (solve/reuse.c: whether
  *                    a factor exists, its age and the renewal rule's
- *                    counters, the u and coefficients of the A it factorises).
+ *                    counters, the u and coefficients of the A it factorises),
+ *                  (8) u64 length, the goal estimate's carried state
+ *                    (adapt/refine.c: the combined dual's weights, the
+ *                    memory term's links).
  * Everything else (element data, hanging nodes, the linear system and the
  * reused factor, load vectors, probe cells, the lattice-to-cell map
  * mesh->root, the domain, which the scene gives) is rebuilt from the mesh
@@ -226,13 +230,22 @@ int nh_checkpoint_write(const nh_sim *s) {
     solver_len = b.len - at - 8;
     memcpy(b.data + at, &solver_len, 8);
   }
+  /* the goal estimate's carried state (adapt/refine.c), likewise */
+  at = b.len;
+  uint64_t adapt_len = 0;
+  nh_bytes_put(&b, &adapt_len, 8);
+  nh_adapt_state_save(s->adapt, &b);
+  if (!b.failed) {
+    adapt_len = b.len - at - 8;
+    memcpy(b.data + at, &adapt_len, 8);
+  }
   if (b.failed) {
     free(b.data);
     return NH_ERROR(NH_ERR_MEMORY, "out of memory writing a checkpoint");
   }
   char path[NH_PATH_MAX + 32];
   nh_checkpoint_path(s->scene->output.dir, path, sizeof path);
-  uint32_t version = 7, order = 0x01020304;
+  uint32_t version = 8, order = 0x01020304;
   uint64_t size = b.len, sum = nh_fnv1a(b.data, b.len, NH_FNV_SEED);
   nh_atomic_file af;
   int rc = nh_atomic_open(path, "checkpoint", 1, &af);
@@ -394,15 +407,15 @@ int nh_checkpoint_read(const char *dir, const nh_scene *scene, nh_checkpoint *ck
     fclose(f);
     return NH_ERROR(NH_ERR_INPUT, "--restart: %s: not a needlehex checkpoint", path);
   }
-  if ((version != 1 && version != 7) || order != 0x01020304) {
+  if ((version != 1 && version != 8) || order != 0x01020304) {
     fclose(f);
     return NH_ERROR(NH_ERR_INPUT,
                     "--restart: %s: checkpoint format %u (byte order %#x) is not the one this "
-                    "needlehex reads (1 or 7, %#x)%s",
+                    "needlehex reads (1 or 8, %#x)%s",
                     path, version, order, 0x01020304u,
-                    version >= 2 && version <= 6
-                        ? ": written by an older needlehex, whose tools' state this one does "
-                          "not read; run the scene again from the start"
+                    version >= 2 && version <= 7
+                        ? ": written by an older needlehex, whose state this one does not "
+                          "read; run the scene again from the start"
                         : "");
   }
   unsigned char *data;
@@ -479,7 +492,8 @@ int nh_checkpoint_read(const char *dir, const nh_scene *scene, nh_checkpoint *ck
   nh_bytes_get(&c, ck->v, sizeof(double) * 3 * (size_t)m->n_nodes);
   /* the tools' state (contact/state.c), the factor reuse (solve/reuse.c) */
   if ((version >= 2 && nh_get_block(&c, &ck->tools, &ck->tools_size)) ||
-      (version >= 3 && nh_get_block(&c, &ck->solver, &ck->solver_size)))
+      (version >= 3 && nh_get_block(&c, &ck->solver, &ck->solver_size)) ||
+      (version >= 8 && nh_get_block(&c, &ck->adapt, &ck->adapt_size)))
     goto oom;
   if (c.short_read || c.p != c.end)
     snprintf(why, sizeof why, "the payload %s", c.short_read ? "ends early" : "goes on");
@@ -502,9 +516,9 @@ done:
   free(data);
   if (rc) {
     nh_mesh_destroy(&m);
-    free(ck->u), free(ck->v), free(ck->tools), free(ck->solver);
+    free(ck->u), free(ck->v), free(ck->tools), free(ck->solver), free(ck->adapt);
     ck->u = ck->v = NULL;
-    ck->tools = ck->solver = NULL;
+    ck->tools = ck->solver = ck->adapt = NULL;
     return rc;
   }
   ck->mesh = m;

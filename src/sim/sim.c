@@ -112,6 +112,7 @@ void nh_sim_destroy(nh_sim **sim) {
   free(s->v_start);
   free(s->restore_tools);
   free(s->restore_solver);
+  free(s->restore_adapt);
   free(s->tools_start);
   free(s->solver_start.data);
   free(s->f_ext);
@@ -494,6 +495,8 @@ static int nh_sim_build(nh_sim *s) {
     s->restore_tools_size = ck.tools_size;
     s->restore_solver = ck.solver;
     s->restore_solver_size = ck.solver_size;
+    s->restore_adapt = ck.adapt;
+    s->restore_adapt_size = ck.adapt_size;
   } else {
     nh_domain domain;
     NH_TRY(nh_domain_from_scene(sc, &domain));
@@ -527,6 +530,14 @@ static int nh_sim_build(nh_sim *s) {
       s->goal_of_point[i] = g;
     }
     NH_TRY(nh_adapt_set_goals(s->adapt, s->mesh, sc->adapt.n_goals, points));
+  }
+  if (s->restore_adapt) { /* --restart: the goal estimate's carried state */
+    int rc = nh_adapt_state_load(s->adapt, s->restore_adapt, s->restore_adapt_size);
+    free(s->restore_adapt);
+    s->restore_adapt = NULL;
+    if (rc == NH_ERR_INPUT)
+      return NH_ERROR(rc, "--restart: %s: %s", s->options.restart_dir, nh_error_message());
+    NH_TRY(rc);
   }
   s->max_goal_error = NAN;
   s->max_goal_point = -1;

@@ -88,6 +88,8 @@ struct nh_sim {
   size_t restore_tools_size;
   unsigned char *restore_solver; /* --restart: the checkpoint's factor reuse until applied */
   size_t restore_solver_size;
+  unsigned char *restore_adapt; /* --restart: the goal estimate's carried state until applied */
+  size_t restore_adapt_size;
   unsigned char *tools_start; /* the tools' state at the start of the step (a step */
   size_t tools_start_size;    /* interrupted inside goes back to it) */
   nh_bytes solver_start;      /* the factor reuse at the start of the step (solver.refactor auto) */
@@ -107,6 +109,8 @@ typedef struct {
   size_t tools_size;
   unsigned char *solver; /* the factor reuse (owned; NULL before format 3) */
   size_t solver_size;
+  unsigned char *adapt; /* the goal estimate's carried state (owned; NULL before format 8) */
+  size_t adapt_size;
 } nh_checkpoint;
 
 /* The scene as run (sc->yaml) with every file it names (tissue mask,

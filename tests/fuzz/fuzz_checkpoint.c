@@ -1,7 +1,7 @@
 /* fuzz_checkpoint.c — fuzz target: the checkpoint reader
  * (nh_checkpoint_read, behind `needlehex run --restart`) on any payload.
  * The input is the payload after the scene hash: this target writes the
- * header (magic, the format the reader takes (6), byte order, size) and
+ * header (magic, the format the reader takes (8), byte order, size) and
  * the hash of its own small scene around it and computes the checksum, so
  * the fuzzer explores what a checksum-valid file of a buggy writer could
  * hold (a random file stops at the checksum). Every input must either
@@ -45,7 +45,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
   uint64_t hash = nh_fuzz_fnv1a(scene->yaml, strlen(scene->yaml), seed);
   uint64_t payload = 8 + (uint64_t)size;
   uint64_t sum = nh_fuzz_fnv1a(data, size, nh_fuzz_fnv1a(&hash, 8, seed));
-  uint32_t version = 7, order = 0x01020304;
+  uint32_t version = 8, order = 0x01020304;
   char path[256];
   snprintf(path, sizeof path, "%s/checkpoint.nhc", dir);
   FILE *f = fopen(path, "wb");
@@ -63,7 +63,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
   nh_fuzz_check_prefix(rc, prefix, 0);
   if (!rc) {
     nh_mesh_destroy(&ck.mesh);
-    free(ck.u), free(ck.v), free(ck.tools), free(ck.solver);
+    free(ck.u), free(ck.v), free(ck.tools), free(ck.solver), free(ck.adapt);
   }
   nh_error_clear();
   return 0;

@@ -730,6 +730,8 @@ def parse_payload(p):
     o["tools"] = o["v"] + 24 * nn
     tl = struct.unpack_from("<Q", p, o["tools"])[0]
     o["solver"] = o["tools"] + 8 + tl
+    sl = struct.unpack_from("<Q", p, o["solver"])[0]
+    o["adapt"] = o["solver"] + 8 + sl
     return o, nn, nc
 
 
@@ -789,10 +791,11 @@ def make_checkpoints(binary, work):
     for n in (1, 1000):
         ck(f"extra_{n}", ["trailing bytes"], base + b"\0" * n)
     ck("magic", ["not a needlehex checkpoint"], b"NHCKPX" + base[6:])
-    for v in (0, 8, 2 ** 32 - 1):
+    for v in (0, 9, 2 ** 32 - 1):
         ck(f"version_{v}", [f"format {v}"], base[:8] + struct.pack("<I", v) + base[12:])
-    for v in (2, 3, 4, 5, 6):  # an older needlehex's tools' state (no hand-over offsets; 4: no
-        # quasi-static prediction; 5: no anchoring errors; 6: no shaft points' axial errors)
+    for v in (2, 3, 4, 5, 6, 7):  # an older needlehex's state (no hand-over offsets; 4: no
+        # quasi-static prediction; 5: no anchoring errors; 6: no shaft points' axial errors;
+        # 7: no goal estimate's state)
         ck(f"version_{v}", [f"format {v}", "older needlehex"],
            base[:8] + struct.pack("<I", v) + base[12:])
     ck("byte_order", ["byte order"], base[:12] + struct.pack(">I", 0x01020304) + base[16:])
