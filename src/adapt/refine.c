@@ -212,14 +212,6 @@ void nh_adapt_set_memory(nh_adapt *a, const nh_dwr_memory *memory, int step) {
   a->memory_step = step;
 }
 
-/* The memory term after a separate estimate at step a->memory_step whose
- * links' own estimates are a->mem_own (links 0 … n_links): from the links'
- * values k steps before (the last estimate at an earlier step), S_m =
- * Σ_{i<k} own_{m+i} + S_{m+k}(base) (dwr_memory.c; the k − 1 steps between
- * two estimates taken with this step's own errors), and the goals'
- * estimates E_q = S_0, the memory part S_0 − own_0 also in the inherited
- * part (no refinement of this step reduces it). Without memory (a quasi-
- * static step) every S_m = 0 from here on. */
 /* Which rows the goals' duals hold (nh_dwr_active_rows): an FNV-1a hash of
  * each active row's kind, tools and tissue nodes, so that two steps whose
  * duals hold the same rows hash the same (the rows' weights and directions
@@ -242,6 +234,14 @@ static uint64_t nh_adapt_held_rows(const nh_rows *rows) {
   return hash;
 }
 
+/* The memory term after a separate estimate at step a->memory_step whose
+ * links' own estimates are a->mem_own (links 0 … n_links): from the links'
+ * values k steps before (the last estimate at an earlier step), S_m =
+ * Σ_{i<k} own_{m+i} + S_{m+k}(base) (dwr_memory.c; the k − 1 steps between
+ * two estimates taken with this step's own errors), and the goals'
+ * estimates E_q = S_0, the memory part S_0 − own_0 also in the inherited
+ * part (no refinement of this step reduces it). Without memory (a quasi-
+ * static step) every S_m = 0 from here on. */
 static int nh_adapt_memory_update(nh_adapt *a, int n_links, uint64_t held) {
   const int nz = 3 * a->n_goals, cap = a->have_memory ? a->memory.max_links + 1 : 1;
   if (cap > a->cap_links) {
@@ -382,7 +382,8 @@ int nh_adapt_estimate_goal(nh_adapt *a, nh_system *sys, const nh_rows *rows, dou
     a->since_separate = 0;
     /* the memory term on top of the step's own estimates (the weights and
      * the combined estimates' ratio are the own estimates') */
-    NH_TRY(nh_adapt_memory_update(a, r.memory_links, nh_adapt_held_rows(rows)));
+    NH_TRY(
+        nh_adapt_memory_update(a, r.memory_links, a->have_memory ? nh_adapt_held_rows(rows) : 0));
     a->sep_memory = a->have_memory;
     for (int p = 0; p < a->n_goals; p++) {
       const double *e = a->goal_est + 3 * p;
