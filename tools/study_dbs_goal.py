@@ -89,32 +89,6 @@ DBS_GOAL = {
         ("goal-l1-local", "goal from 14 mm, 1 level, local dual",
          ["adapt.estimator=goal", "tissue.grid=[10,12,9]", "adapt.max_level=1",
           "adapt.local_dual=true"], "goal"),
-        # the dynamic steps' memory term (adapt.memory, off by default; docs/dbs.md "The
-        # dynamic steps' memory")
-        ("goal-l1-memory", "goal from 14 mm, 1 level, memory",
-         ["adapt.estimator=goal", "tissue.grid=[10,12,9]", "adapt.max_level=1",
-          "adapt.memory=true"], "goal"),
-        ("goal-l1-every4-memory", "goal from 14 mm, 1 level, every 4, memory",
-         ["adapt.estimator=goal", "tissue.grid=[10,12,9]", "adapt.max_level=1", "adapt.every=4",
-          "adapt.memory=true"], "goal"),
-        ("goal-l1-tol-memory", "goal from 14 mm, 1 level, tolerance 2 µm, ≤ 8000 dofs, memory",
-         ["adapt.estimator=goal", "tissue.grid=[10,12,9]", "adapt.max_level=1",
-          "adapt.tolerance=2e-6", "adapt.max_dofs=8000", "adapt.memory=true"], "goal"),
-        ("goal-l2-memory", "goal from 14 mm, 2 levels, memory",
-         ["adapt.estimator=goal", "tissue.grid=[10,12,9]", "adapt.max_level=2",
-          "adapt.memory=true"], "goal"),
-        ("goal-tol50-memory", "goal from 14 mm, 2 levels, tolerance 50 µm, ≤ 20000 dofs, memory",
-         ["adapt.estimator=goal", "tissue.grid=[10,12,9]", "adapt.max_level=2",
-          "adapt.tolerance=5e-5", "adapt.max_dofs=20000", "adapt.memory=true"], "goal"),
-        ("goal-l1-theta0.3-memory", "goal from 14 mm, 1 level, θ = 0.3, memory",
-         ["adapt.estimator=goal", "tissue.grid=[10,12,9]", "adapt.max_level=1",
-          "adapt.marking={strategy: max, theta: 0.3}", "adapt.memory=true"], "goal"),
-        ("estimate-14mm-memory", "goal estimate on uniform 14 mm, memory",
-         ["adapt.estimator=goal", "tissue.grid=[10,12,9]", "adapt.max_level=1",
-          "adapt.max_dofs=3039", "adapt.memory=true"], "estimate"),
-        ("estimate-10mm-memory", "goal estimate on uniform 10 mm, memory",
-         ["adapt.estimator=goal", "tissue.grid=[14,17,13]", "adapt.max_level=1",
-          "adapt.max_dofs=7248", "adapt.memory=true"], "estimate"),
         ("estimate-14mm-local", "goal estimate on uniform 14 mm, local dual",
          ["adapt.estimator=goal", "tissue.grid=[10,12,9]", "adapt.max_level=1",
           "adapt.max_dofs=3039", "adapt.local_dual=true"], "estimate"),
@@ -150,6 +124,14 @@ def phase_slices(r, n):
     cuts = (("shift", 1, r["i_shift"] + 1), ("insertion", r["i_shift"] + 1, r["i_top"]),
             ("hold", r["i_top"], r["i_back"] + 1), ("retraction", r["i_back"] + 1, n))
     return [(w, slice(lo, hi)) for w, lo, hi in cuts if hi > lo]
+
+
+# each goal-estimated run again with the dynamic steps' memory term (adapt.memory, off by
+# default; docs/dbs.md "The dynamic steps' memory"): name-memory
+DBS_GOAL["adaptive"] += [
+    (name + "-memory", label + ", memory", sets + ["adapt.memory=true"], kind)
+    for name, label, sets, kind in list(DBS_GOAL["adaptive"])
+    if kind in ("goal", "estimate") and "adapt.local_dual=true" not in sets]
 
 
 def run(a, binary):

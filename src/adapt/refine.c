@@ -240,10 +240,10 @@ static uint64_t nh_adapt_held_rows(const nh_rows *rows) {
  * Σ_{i<k} own_{m+i} + S_{m+k}(base) (dwr_memory.c; the k − 1 steps between
  * two estimates taken with this step's own errors), and the goals'
  * estimates E_q = S_0, the memory part S_0 − own_0 also in the inherited
- * part (no refinement of this step reduces it). Without memory (a quasi-
- * static step) every S_m = 0 from here on. */
+ * part (no refinement of this step reduces it). Only with memory (a
+ * dynamic step, adapt.memory: the same at every step of a run). */
 static int nh_adapt_memory_update(nh_adapt *a, int n_links, uint64_t held) {
-  const int nz = 3 * a->n_goals, cap = a->have_memory ? a->memory.max_links + 1 : 1;
+  const int nz = 3 * a->n_goals, cap = a->memory.max_links + 1;
   if (cap > a->cap_links) {
     NH_TRY(nh_realloc((void **)&a->mem_cur, (size_t)cap * nz, sizeof(double)));
     NH_TRY(nh_realloc((void **)&a->mem_base, (size_t)cap * nz, sizeof(double)));
@@ -257,10 +257,6 @@ static int nh_adapt_memory_update(nh_adapt *a, int n_links, uint64_t held) {
     a->cur_step = a->memory_step;
   }
   a->cur_rows = held;
-  if (!a->have_memory) {
-    memset(a->mem_cur, 0, sizeof(double) * (size_t)a->cap_links * nz);
-    return NH_OK;
-  }
   const int k = a->cur_step - a->base_step > 0 ? a->cur_step - a->base_step : 1;
   /* the links are the same functionals only while the duals hold the same
    * rows: the earlier steps' values of other links are dropped */
@@ -382,8 +378,7 @@ int nh_adapt_estimate_goal(nh_adapt *a, nh_system *sys, const nh_rows *rows, dou
     a->since_separate = 0;
     /* the memory term on top of the step's own estimates (the weights and
      * the combined estimates' ratio are the own estimates') */
-    NH_TRY(
-        nh_adapt_memory_update(a, r.memory_links, a->have_memory ? nh_adapt_held_rows(rows) : 0));
+    if (a->have_memory) NH_TRY(nh_adapt_memory_update(a, r.memory_links, nh_adapt_held_rows(rows)));
     a->sep_memory = a->have_memory;
     for (int p = 0; p < a->n_goals; p++) {
       const double *e = a->goal_est + 3 * p;

@@ -594,6 +594,38 @@ static void nh_dual_multipliers(const cholmod_sparse *Jt, const int *place, int 
     }
 }
 
+/* J_tᵀ (n_free x m) of the m rows with pos[i] >= 0, in row order (their
+ * tissue parts compacted into a row set of their own), row[k] the k-th
+ * one's index in rows. NULL: out of memory. */
+static cholmod_sparse *nh_rows_held_jt(nh_system *s, const nh_rows *rows, const int *pos, int m,
+                                       int *row) {
+  int slots = 0;
+  for (int i = 0; i < rows->m; i++)
+    if (pos[i] >= 0) slots += rows->start[i + 1] - rows->start[i];
+  nh_rows sub = {.m = m, .cap = m, .n_slots = slots};
+  sub.start = nh_calloc((size_t)m + 1, sizeof(int));
+  sub.node = nh_calloc((size_t)slots + 1, sizeof(int));
+  sub.N = nh_calloc((size_t)slots + 1, sizeof(double));
+  sub.dir = nh_calloc(3 * (size_t)m, sizeof(double));
+  int *mark = nh_calloc((size_t)(s->n_free ? s->n_free : 1), sizeof(int));
+  cholmod_sparse *Jt = NULL;
+  if (sub.start && sub.node && sub.N && sub.dir && mark) {
+    for (int i = 0, k = 0; i < rows->m; i++) {
+      if (pos[i] < 0) continue;
+      const int a = rows->start[i], len = rows->start[i + 1] - a;
+      sub.start[k + 1] = sub.start[k] + len;
+      memcpy(sub.node + sub.start[k], rows->node + a, (size_t)len * sizeof(int));
+      memcpy(sub.N + sub.start[k], rows->N + a, (size_t)len * sizeof(double));
+      memcpy(sub.dir + 3 * k, rows->dir + 3 * i, 3 * sizeof(double));
+      row[k++] = i;
+    }
+    for (int i = 0; i < s->n_free; i++) mark[i] = -1;
+    Jt = nh_rows_tissue_jt(s, &sub, mark);
+  }
+  free(sub.start), free(sub.node), free(sub.N), free(sub.dir), free(mark);
+  return Jt;
+}
+
 /* Row i is in set k: the set has columns and holds the row (active NULL: every row). */
 static int nh_set_holds(const int *set_ncol, const unsigned char *const *set_active, int k, int i) {
   return set_ncol[k] > 0 && (!set_active[k] || set_active[k][i]);
@@ -620,15 +652,7 @@ int nh_system_solve_rows_sets(nh_system *s, const nh_rows *rows, int n_sets, con
     free(pos);
     return nh_system_solve_many(s, ncol, b, x);
   }
-  int slots = 0;
-  for (int i = 0; i < mr; i++)
-    if (pos[i] >= 0) slots += rows->start[i + 1] - rows->start[i];
-  nh_rows sub = {.m = m, .cap = m, .n_slots = slots};
-  sub.start = nh_calloc((size_t)m + 1, sizeof(int));
-  sub.node = nh_calloc((size_t)slots + 1, sizeof(int));
-  sub.N = nh_calloc((size_t)slots + 1, sizeof(double));
-  sub.dir = nh_calloc(3 * (size_t)m, sizeof(double));
-  int *mark = nh_calloc((size_t)(n ? n : 1), sizeof(int)), *piv = nh_calloc((size_t)m, sizeof(int));
+  int *piv = nh_calloc((size_t)m, sizeof(int));
   int *place = nh_calloc((size_t)m, sizeof(int)), *row = nh_calloc((size_t)m, sizeof(int));
   double *W = nh_calloc((size_t)m * (size_t)m, sizeof(double));  /* the union's, unscaled */
   double *Ws = nh_calloc((size_t)m * (size_t)m, sizeof(double)); /* a set's block, scaled */
@@ -641,24 +665,11 @@ int nh_system_solve_rows_sets(nh_system *s, const nh_rows *rows, int n_sets, con
   double *f = nh_calloc((size_t)n * (size_t)ncol2, sizeof(double));
   double *y = nh_calloc((size_t)n * (size_t)ncol2, sizeof(double));
   cholmod_sparse *Jt = NULL;
-  int rc = sub.start && sub.node && sub.N && sub.dir && mark && piv && place && row && W && Ws &&
-                   d && mu && c && f && y
+  int rc = piv && place && row && W && Ws && d && mu && c && f && y
                ? NH_OK
                : NH_ERROR(NH_ERR_MEMORY, "out of memory: constrained dual (%d rows)", m);
-  if (!rc) {
-    for (int i = 0, k = 0; i < mr; i++) {
-      if (pos[i] < 0) continue;
-      const int a = rows->start[i], len = rows->start[i + 1] - a;
-      sub.start[k + 1] = sub.start[k] + len;
-      memcpy(sub.node + sub.start[k], rows->node + a, (size_t)len * sizeof(int));
-      memcpy(sub.N + sub.start[k], rows->N + a, (size_t)len * sizeof(double));
-      memcpy(sub.dir + 3 * k, rows->dir + 3 * i, 3 * sizeof(double));
-      row[k++] = i;
-    }
-    for (int i = 0; i < n; i++) mark[i] = -1;
-    Jt = nh_rows_tissue_jt(s, &sub, mark);
-    if (!Jt) rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: constrained dual (%d rows)", m);
-  }
+  if (!rc && !(Jt = nh_rows_held_jt(s, rows, pos, m, row)))
+    rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: constrained dual (%d rows)", m);
   if (!rc && direct) {
     const int *Jp = Jt->p, *Ji = Jt->i;
     const double *Jx = Jt->x;
@@ -701,9 +712,7 @@ int nh_system_solve_rows_sets(nh_system *s, const nh_rows *rows, int n_sets, con
     for (size_t i = 0; !rc && i < (size_t)n * (size_t)ncol; i++) x[i] -= y[i];
   }
   if (Jt) cholmod_free_sparse(&Jt, &s->cm);
-  free(pos), free(place), free(row), free(Ws);
-  free(sub.start), free(sub.node), free(sub.N), free(sub.dir), free(mark), free(piv), free(W),
-      free(d), free(mu);
+  free(pos), free(place), free(row), free(Ws), free(piv), free(W), free(d), free(mu);
   free(c), free(f), free(y);
   return rc;
 }
@@ -740,46 +749,25 @@ int nh_rows_solver_create(nh_system *s, const nh_rows *rows, const unsigned char
   if (!s->factor_current) NH_TRY(nh_system_factor_later(s));
   nh_rows_solver *rs = nh_calloc(1, sizeof *rs);
   if (!rs) return NH_ERROR(NH_ERR_MEMORY, "out of memory: constrained dual");
-  const int mr = rows ? rows->m : 0, n = s->n_free;
-  int m = 0, slots = 0;
-  for (int i = 0; i < mr; i++)
-    if (!active || active[i]) m++, slots += rows->start[i + 1] - rows->start[i];
+  const int mr = rows ? rows->m : 0;
+  int *pos = nh_calloc((size_t)(mr ? mr : 1), sizeof(int)), m = 0;
+  for (int i = 0; pos && i < mr; i++) pos[i] = !active || active[i] ? m++ : -1;
   rs->m = m, rs->mr = mr;
-  if (m == 0) {
-    *out = rs;
-    return NH_OK;
-  }
-  nh_rows sub = {.m = m, .cap = m, .n_slots = slots};
-  sub.start = nh_calloc((size_t)m + 1, sizeof(int));
-  sub.node = nh_calloc((size_t)slots + 1, sizeof(int));
-  sub.N = nh_calloc((size_t)slots + 1, sizeof(double));
-  sub.dir = nh_calloc(3 * (size_t)m, sizeof(double));
-  int *mark = nh_calloc((size_t)(n ? n : 1), sizeof(int));
-  double *W = nh_calloc((size_t)m * (size_t)m, sizeof(double));
-  rs->row = nh_calloc((size_t)m, sizeof(int)), rs->place = nh_calloc((size_t)m, sizeof(int));
-  rs->piv = nh_calloc((size_t)m, sizeof(int)), rs->d = nh_calloc((size_t)m, sizeof(double));
-  rs->Ws = nh_calloc((size_t)m * (size_t)m, sizeof(double));
-  int rc = sub.start && sub.node && sub.N && sub.dir && mark && W && rs->row && rs->place &&
-                   rs->piv && rs->d && rs->Ws
+  double *W = nh_calloc((size_t)(m ? m : 1) * (size_t)(m ? m : 1), sizeof(double));
+  rs->row = nh_calloc((size_t)(m ? m : 1), sizeof(int));
+  rs->place = nh_calloc((size_t)(m ? m : 1), sizeof(int));
+  rs->piv = nh_calloc((size_t)(m ? m : 1), sizeof(int));
+  rs->d = nh_calloc((size_t)(m ? m : 1), sizeof(double));
+  rs->Ws = nh_calloc((size_t)(m ? m : 1) * (size_t)(m ? m : 1), sizeof(double));
+  int rc = pos && W && rs->row && rs->place && rs->piv && rs->d && rs->Ws
                ? NH_OK
                : NH_ERROR(NH_ERR_MEMORY, "out of memory: constrained dual (%d rows)", m);
-  for (int i = 0, k = 0; i < mr && !rc; i++) {
-    if (active && !active[i]) continue;
-    const int a = rows->start[i], len = rows->start[i + 1] - a;
-    sub.start[k + 1] = sub.start[k] + len;
-    memcpy(sub.node + sub.start[k], rows->node + a, (size_t)len * sizeof(int));
-    memcpy(sub.N + sub.start[k], rows->N + a, (size_t)len * sizeof(double));
-    memcpy(sub.dir + 3 * k, rows->dir + 3 * i, 3 * sizeof(double));
-    rs->place[k] = k, rs->row[k++] = i;
-  }
-  if (!rc) {
-    for (int i = 0; i < n; i++) mark[i] = -1;
-    if (!(rs->Jt = nh_rows_tissue_jt(s, &sub, mark)))
-      rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: constrained dual (%d rows)", m);
-  }
-  if (!rc) rc = nh_system_compliance_add(s, rs->Jt, W);
-  if (!rc) rc = nh_dual_factor(W, m, rs->place, m, rs->d, rs->Ws, rs->piv, &rs->rank);
-  free(sub.start), free(sub.node), free(sub.N), free(sub.dir), free(mark), free(W);
+  for (int k = 0; k < m && !rc; k++) rs->place[k] = k; /* every held row in the one set */
+  if (!rc && m > 0 && !(rs->Jt = nh_rows_held_jt(s, rows, pos, m, rs->row)))
+    rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: constrained dual (%d rows)", m);
+  if (!rc && m > 0) rc = nh_system_compliance_add(s, rs->Jt, W);
+  if (!rc && m > 0) rc = nh_dual_factor(W, m, rs->place, m, rs->d, rs->Ws, rs->piv, &rs->rank);
+  free(pos), free(W);
   if (rc) nh_rows_solver_destroy(s, &rs);
   *out = rs;
   return rc;
