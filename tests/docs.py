@@ -93,6 +93,10 @@ def make_tree():
         f.write('#!/bin/sh\nif [ "$1" = run ]; then shift; exec "%s" run --overwrite "$@"; fi\n'
                 'exec "%s" "$@"\n' % (BIN, BIN))
     os.chmod(wrapper, 0o755)
+    # the test programs the pages drive (build/tests/refine_cells_tool)
+    tests = os.path.join(os.path.dirname(BIN), "tests")
+    if os.path.isdir(tests):
+        os.symlink(tests, os.path.join(TREE, "build", "tests"))
 
 
 def run(where, cmd, **kw):
