@@ -55,8 +55,7 @@ static int level0_leaf(const nh_mesh *m, const double x[3]) {
 }
 
 int main(int argc, char **argv) {
-  if (argc == 2 && (!strcmp(argv[1], "--help") || !strcmp(argv[1], "-h")))
-    return usage(stdout, 0);
+  if (argc == 2 && (!strcmp(argv[1], "--help") || !strcmp(argv[1], "-h"))) return usage(stdout, 0);
   if (argc < 4) return usage(stderr, 2);
   char *end2, *end3;
   const long step = strtol(argv[2], &end2, 10), steps = strtol(argv[3], &end3, 10);
@@ -64,9 +63,8 @@ int main(int argc, char **argv) {
   double points[NH_TOOL_MAX_POINTS][3];
   int n_points = 0, a = 4;
   for (; a < argc && strcmp(argv[a], "--"); a++) {
-    if (n_points == NH_TOOL_MAX_POINTS ||
-        sscanf(argv[a], "%lf,%lf,%lf", &points[n_points][0], &points[n_points][1],
-               &points[n_points][2]) != 3)
+    if (n_points == NH_TOOL_MAX_POINTS || sscanf(argv[a], "%lf,%lf,%lf", &points[n_points][0],
+                                                 &points[n_points][1], &points[n_points][2]) != 3)
       return usage(stderr, 2);
     n_points++;
   }
