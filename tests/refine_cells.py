@@ -9,7 +9,8 @@ trilinear space of every mesh, with hanging nodes too (their interpolation
 is exact for it): refining cells before either step must leave the probes'
 displacements at the exact values to round-off (1e-9 relative to σL/E, the
 full formulation), and the dofs must grow at the step after the refinement.
-A point outside the grid is refused with exit 2.
+A point outside the mesh, or a refinement after the last step, is refused
+with exit 2.
 """
 import os
 import subprocess
@@ -44,9 +45,14 @@ for step in (0, 1):
 
 bad = subprocess.run([TOOL, SCENE, "0", "1", "0.5,0.01,0.005"] + SETS, capture_output=True,
                      text=True)
-if bad.returncode != 2 or "outside the grid" not in bad.stderr:
-    failures.append("a point outside the grid: exit %d, %r (expected 2, 'outside the grid')"
+if bad.returncode != 2 or "outside the mesh" not in bad.stderr:
+    failures.append("a point outside the mesh: exit %d, %r (expected 2, 'outside the mesh')"
                     % (bad.returncode, bad.stderr.strip()))
+
+late = subprocess.run([TOOL, SCENE, "2", "2", "0.005,0.003,0.002"] + SETS, capture_output=True,
+                      text=True)
+if late.returncode != 2:  # a refinement after the last step would never happen
+    failures.append("refine before step 3 of 2: exit %d (expected 2)" % late.returncode)
 
 for f in failures:
     print("FAIL:", f)

@@ -6,8 +6,8 @@
  *       loads SCENE with the overrides after "--" (as `needlehex run
  *       --set`), runs STEPS steps without writing files and, before step
  *       STEP + 1 (0: before the first step), refines once, by the scene's
- *       adapt.template, the leaves of the initial grid that hold the points
- *       X,Y,Z (metres; each must lie in a kept, unrefined level-0 cell),
+ *       adapt.template, the leaves that hold the points X,Y,Z (metres;
+ *       nh_mesh_locate: each must lie in the mesh),
  *       with the state carried to the new nodes as an adaptive run carries
  *       it (nh_sim_refine_cells). Prints one line per step: the step, the
  *       time (s), the dofs and the first target's current position (mm),
@@ -27,31 +27,20 @@
 
 static int usage(FILE *to, int status) {
   fprintf(to, "usage: refine_cells_tool SCENE STEP STEPS [X,Y,Z ...] [-- KEY=VALUE ...]\n"
-              "  refines once, before step STEP + 1, the level-0 leaves holding the points\n"
+              "  refines once, before step STEP + 1, the leaves holding the points\n"
               "  X,Y,Z (m), runs STEPS steps of SCENE (KEY=VALUE: as needlehex run --set)\n"
               "  and prints per step: step, time (s), dofs, the first target's position\n"
               "  (or the first probe's displacement), mm\n");
   return status;
 }
 
-/* The level-0 leaf holding x, or -1 with a message. */
-static int level0_leaf(const nh_mesh *m, const double x[3]) {
-  int I[3];
-  for (int k = 0; k < 3; k++) {
-    I[k] = (int)floor((x[k] - m->origin[k]) / m->spacing[k]);
-    if (I[k] < 0 || I[k] >= m->grid[k]) {
-      fprintf(stderr, "refine_cells_tool: point %g,%g,%g lies outside the grid\n", x[0], x[1],
-              x[2]);
-      return -1;
-    }
-  }
-  const int c = m->root[I[0] + m->grid[0] * (I[1] + m->grid[1] * I[2])];
-  if (c < 0 || m->first_child[c] >= 0) {
-    fprintf(stderr, "refine_cells_tool: point %g,%g,%g: no unrefined level-0 leaf there\n", x[0],
-            x[1], x[2]);
-    return -1;
-  }
-  return c;
+/* The leaf holding x (nh_mesh_locate), or -1 with a message. */
+static int leaf_at(const nh_mesh *m, const double x[3]) {
+  int c;
+  double xi[3];
+  if (nh_mesh_locate(m, x, &c, xi) == NH_OK) return c;
+  fprintf(stderr, "refine_cells_tool: point %g,%g,%g lies outside the mesh\n", x[0], x[1], x[2]);
+  return -1;
 }
 
 int main(int argc, char **argv) {
@@ -68,6 +57,7 @@ int main(int argc, char **argv) {
       return usage(stderr, 2);
     n_points++;
   }
+  if (n_points && step >= steps) return usage(stderr, 2); /* the refinement would never happen */
   const int n_sets = a < argc ? argc - a - 1 : 0;
   nh_scene *scene = NULL;
   nh_sim *sim = NULL;
@@ -88,7 +78,7 @@ int main(int argc, char **argv) {
       const nh_mesh *m = nh_sim_mesh(sim);
       int cells[NH_TOOL_MAX_POINTS], n_cells = 0;
       for (int p = 0; p < n_points && !rc; p++) {
-        const int c = level0_leaf(m, points[p]);
+        const int c = leaf_at(m, points[p]);
         int seen = 0;
         for (int i = 0; i < n_cells; i++) seen |= cells[i] == c;
         if (c < 0)
