@@ -47,3 +47,8 @@ nh_add_py_test(study_reference unit study_reference.py)
 # observed order of every triple of consecutive grids (ratios not constant) and their
 # spread; a run stopped by inverted cells is a row, left out of the triples.
 nh_add_py_test(study_convergence unit study_convergence.py)
+
+# tools/study.py --set (tests/study_set.py): the override reaches every run of a sweep and
+# of the engine's variants, after their own sets (the cantilever's tip deflection scales as
+# 1/E); the default folder carries its values; another study's option exits 2.
+nh_add_py_test(study_set "unit;io" study_set.py)

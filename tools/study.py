@@ -9,6 +9,7 @@ steps.csv / probes.csv / targets.csv and writes plots and a Markdown report.
     tools/study.py cube    [the same options]
     tools/study.py dbs-shift [the same options]
     tools/study.py dbs-goal  [the same options]
+    (every study: --set KEY=VAL ..., a scene override for each of its runs)
     tools/study.py sweep SPEC.yaml [--out DIR] [--fresh] [--workers N | --scheduler ...]
     tools/study.py plan SPEC.yaml  [the same]: one `needlehex plan` per variant
     tools/study.py convergence SCENE --grids NXxNYxNZ,... [--set KEY=VAL ...] [--out DIR]
@@ -87,12 +88,20 @@ def main():
     ap.add_argument("--reuse", action="store_true",
                     help="report on the runs already in OUT instead of running them again")
     ap.add_argument("--fresh", action="store_true", help="sweep: run complete variants again")
+    ap.add_argument("--set", action="append", default=[], dest="sets", metavar="KEY=VAL",
+                    help="a scene override for every run of the study, after the study's own "
+                    "(repeatable; without --out the folder's name gets the values)")
     engine.add_arguments(ap, default_workers=None)
     for mod in dict.fromkeys(mods.values()):
         if hasattr(mod, "add_arguments"):
             mod.add_arguments(ap)
     a = ap.parse_args()
     mod = mods[a.study]
+    # a study's own options (OPTIONS: option -> attribute, default None) given to another
+    foreign = [o for m in dict.fromkeys(mods.values()) if m is not mod
+               for o, attr in getattr(m, "OPTIONS", {}).items() if getattr(a, attr) is not None]
+    if foreign:
+        ap.error("%s: not an option of the %s study" % (", ".join(sorted(set(foreign))), a.study))
     if a.workers is None:
         a.workers = getattr(mod, "WORKERS", 1)
     binary = engine.find_binary(a.binary)

@@ -43,6 +43,7 @@ cluster's workers); needs Debian's python3-distributed for Dask; use
 import ctypes
 import json
 import os
+import re
 import resource
 import shutil
 import signal
@@ -223,8 +224,13 @@ def find_binary(given):
 
 
 def out_dir(a, study):
-    """The study's folder: --out, else out/study/STUDY of the source tree."""
-    return a.out or os.path.join(ROOT, "out", "study", study)
+    """The study's folder: --out, else out/study/STUDY of the source tree, with the values of
+    the --set overrides appended (out/study/dbs-goal-mortar), so that runs with and without
+    them do not share a folder."""
+    if a.out:
+        return a.out
+    tag = "-".join([study] + [s.split("=", 1)[-1] for s in a.sets])
+    return os.path.join(ROOT, "out", "study", re.sub(r"[^A-Za-z0-9_.-]", "_", tag))
 
 
 def plot_dir(a, out):
@@ -236,14 +242,15 @@ def plot_dir(a, out):
 
 def run_variants(a, binary, scene, out, variants):
     """Runs the variants [(name, sets)] of a study into OUT/NAME through the engine
-    (--workers, --scheduler, --threads; --steps: time.steps for every variant); with --reuse
+    (--workers, --scheduler, --threads; --set: overrides after each variant's own; --steps:
+    time.steps for every variant); with --reuse
     a variant already complete in OUT is reported on, not run again (--restart: only if its
     command is the same). Returns {name: run.json record} of the complete ones; failed ones
     are reported."""
     jobs = []
     for name, sets in variants:
         cmd = [binary, "run", scene, "--quiet"]
-        for s in sets + (["time.steps=%d" % a.steps] if a.steps else []):
+        for s in sets + a.sets + (["time.steps=%d" % a.steps] if a.steps else []):
             cmd += ["--set", s]
         jobs.append(Job(name, os.path.join(out, name), cmd))
     done, failed = run_jobs(jobs, workers=a.workers, scheduler=a.scheduler,

@@ -141,7 +141,8 @@ def yaml_value(v):
     return yaml.safe_dump(v, default_flow_style=True).strip()
 
 
-def jobs_of(spec, binary):
+def jobs_of(spec, binary, sets=()):
+    """One job per variant: the spec's `set`, the variant's values, then `sets` (--set)."""
     jobs = []
     plan = spec["command"] == "plan"
     for i, v in enumerate(spec["variants"]):
@@ -150,7 +151,8 @@ def jobs_of(spec, binary):
             cmd += ["--tolerance", repr(float(spec["plan"]["tolerance"]))]
         if plan and "max_runs" in spec["plan"]:
             cmd += ["--max-runs", str(int(spec["plan"]["max_runs"]))]
-        for s in list(spec.get("set", [])) + ["%s=%s" % (k, yaml_value(x)) for k, x in v.items()]:
+        for s in (list(spec.get("set", [])) + ["%s=%s" % (k, yaml_value(x)) for k, x in v.items()]
+                  + list(sets)):
             cmd += ["--set", s]
         # a plan that did not converge exits 1 with its plan.yaml: a result
         jobs.append(engine.Job("v%03d" % i, os.path.join(spec["out"], "v%03d" % i), cmd,
@@ -275,7 +277,7 @@ def run(a, binary):
     if a.out:
         spec["out"] = os.path.abspath(a.out)
     os.makedirs(spec["out"], exist_ok=True)
-    jobs = jobs_of(spec, binary)
+    jobs = jobs_of(spec, binary, a.sets)
     done, failed = engine.run_jobs(jobs, workers=a.workers, scheduler=a.scheduler,
                                    skip_complete=not a.fresh, threads=a.threads)
     rows = table(spec, jobs, done, failed)
