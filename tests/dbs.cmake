@@ -52,3 +52,7 @@ nh_add_py_test(study_convergence unit study_convergence.py)
 # of the engine's variants, after their own sets (the cantilever's tip deflection scales as
 # 1/E); the default folder carries its values; another study's option exits 2.
 nh_add_py_test(study_set "unit;io" study_set.py)
+
+# The DBS procedure's phases as the studies cut them (tests/study_phases.py): a whole
+# procedure's tools.csv and a run that ends in the shift (--steps), phases by construction.
+nh_add_py_test(study_phases unit study_phases.py)

@@ -45,11 +45,15 @@ def scene_grid(scene):
 def phases(out, cannula):
     """The procedure's phases from tools.csv (row indices, step 0 = index 0): the last step
     before the cannula touches the brain (the shift is over), the first at the target depth
-    (the depth in the tissue stops growing there; to 1 µm), the last before the retraction."""
+    (the depth in the tissue stops growing there; to 1 µm), the last before the retraction.
+    A run that ends before the cannula touches the brain (tools/study.py --steps: the shift
+    alone) is all shift: the three are its last row."""
     tools = read_tools(out, cannula)
     n = len(tools["state"])
     touched = [i for i, s in enumerate(tools["state"]) if s != "outside"]
-    i_shift = max(touched[0] - 1, 0) if touched else n - 1
+    if not touched:
+        return n - 1, n - 1, n - 1
+    i_shift = max(touched[0] - 1, 0)
     depth = np.asarray(tools["depth"])
     i_top = int(np.nonzero(depth >= depth.max() - 1e-6)[0][0])
     back = [i for i, s in enumerate(tools["state"]) if s == "retracting"]

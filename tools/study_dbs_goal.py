@@ -120,9 +120,11 @@ def step_ranges(steps):
 
 def phase_slices(r, n):
     """The non-empty phases of a run r (its tools.csv's i_shift, i_top, i_back; n steps) as
-    (name, slice of step indices), step 0 left out: shift, insertion, hold, retraction."""
+    (name, slice of step indices), step 0 left out: shift, insertion, hold, retraction (a run
+    that ends before the cannula touches the brain: the shift alone)."""
     cuts = (("shift", 1, r["i_shift"] + 1), ("insertion", r["i_shift"] + 1, r["i_top"]),
-            ("hold", r["i_top"], r["i_back"] + 1), ("retraction", r["i_back"] + 1, n))
+            ("hold", r["i_top"] if r["i_top"] > r["i_shift"] else n, r["i_back"] + 1),
+            ("retraction", r["i_back"] + 1, n))
     return [(w, slice(lo, hi)) for w, lo, hi in cuts if hi > lo]
 
 
@@ -231,6 +233,11 @@ def run(a, binary):
 
     lines = []
     p = lines.append
+    if not any(r["i_top"] > r["i_shift"] for r in U):
+        p("The runs end before the cannula touches the brain (%d steps, t ≤ %.2f s: the shift "
+          "alone, --steps): the distance's figures \"after the target\" below are those of the "
+          "last step, and the phases are the shift." % (n - 1, U[0]["times"][-1]))
+        p("")
     for R, what in ((ref, "the reference"), (prev, "the next coarser triple")):
         if R is None:
             continue
