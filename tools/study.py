@@ -8,7 +8,7 @@ steps.csv / probes.csv / targets.csv and writes plots and a Markdown report.
     tools/study.py dbs     [the same options]
     tools/study.py cube    [the same options]
     tools/study.py dbs-shift [the same options]
-    tools/study.py dbs-goal  [the same options]
+    tools/study.py dbs-goal  [the same options] [--base NXxNYxNZ]
     (every study: --set KEY=VAL ..., a scene override for each of its runs)
     tools/study.py sweep SPEC.yaml [--out DIR] [--fresh] [--workers N | --scheduler ...]
     tools/study.py plan SPEC.yaml  [the same]: one `needlehex plan` per variant

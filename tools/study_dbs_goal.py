@@ -13,8 +13,13 @@ estimate on the uniform 14 and 10 mm meshes (not refined), and per phase
 (targets.csv geometry_estimate) and its constraint-data part C
 (constraint_estimate) against the true error;
 dbs_goal_error.png, dbs_goal_cost.png, dbs_goal_effectivity.png.
+--base NXxNYxNZ starts the SPR and goal runs from another grid (named
+NAME-from-NXxNYxNZ; the uniform and estimate runs are unchanged, so --restart
+into the same folder reuses them); --steps N ends every run early (the shift
+alone for N ≤ 64: the report then cuts one phase).
 """
 import os
+import re
 
 import numpy as np
 
@@ -106,6 +111,37 @@ DBS_GOAL = {
 }
 
 
+# the options only this study takes (tools/study.py refuses them for the others)
+OPTIONS = {"--base": "base"}
+BASE = "tissue.grid=[10,12,9]"  # the grid the refining runs start from (the 14 mm mesh)
+
+
+def add_arguments(ap):
+    g = ap.add_argument_group("dbs-goal")
+    g.add_argument("--base", default=None, metavar="NXxNYxNZ",
+                   help="dbs-goal: the grid the SPR and goal runs start from (default 10x12x9, "
+                   "the 14 mm mesh; the uniform and estimate runs keep theirs)")
+
+
+def adaptive_variants(base):
+    """st["adaptive"], the SPR and goal runs starting from the grid BASE (NXxNYxNZ; None: the
+    14 mm mesh), named NAME-from-BASE and labelled after it."""
+    if base is None:
+        return DBS_GOAL["adaptive"]
+    m = re.fullmatch(r"(\d+)x(\d+)x(\d+)", base)
+    if not m or min(int(v) for v in m.groups()) < 1:
+        raise SystemExit("--base: '%s' is not NXxNYxNZ" % base)
+    grid = "tissue.grid=[%s]" % ",".join(m.groups())
+    out = []
+    for name, label, sets, kind in DBS_GOAL["adaptive"]:
+        if kind in ("spr", "goal"):
+            name = "%s-from-%s" % (name, base)
+            label = label.replace("from 14 mm", "from %s" % base.replace("x", "×"))
+            sets = [grid if x == BASE else x for x in sets]
+        out.append((name, label, sets, kind))
+    return out
+
+
 def step_ranges(steps):
     """Sorted steps as ranges: [1, 4, 5, 6, 9] -> "1, 4–6, 9" ("none" if empty)."""
     out, i = [], 0
@@ -142,7 +178,7 @@ def run(a, binary):
     position at every step on goal-driven, SPR-driven and uniform meshes against the per-step
     Richardson reference of the finest three uniform meshes; effectivity of the goal
     estimates; cost per step against the 7 mm mesh's."""
-    st = DBS_GOAL
+    st = dict(DBS_GOAL, adaptive=adaptive_variants(a.base))
     out = engine.out_dir(a, "dbs-goal")
     img = engine.plot_dir(a, out)
     sel = [(n, sets + st["common"]) for n, _, sets, *_ in st["uniform"] + st["adaptive"]
