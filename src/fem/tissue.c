@@ -479,7 +479,8 @@ int nh_tissue_set_ties(nh_tissue *t, int n_regions, const nh_region *regions, co
   for (int l = 0; l < m->n_leaves; l++) {
     int c = m->leaves[l], entry = -1;
     for (int r = 0; r < n_regions; r++) {
-      double v = nh_mesh_region_tie(m, c, &regions[r], T);
+      double v;
+      NH_TRY(nh_mesh_region_tie(m, c, &regions[r], T, &v));
       if (v == 0.0) continue;
       if (volume) volume[r] += v;
       if (entry < 0) {

@@ -262,9 +262,12 @@ double nh_mesh_cell_fraction_above(const nh_mesh *mesh, int c, const double poin
                                    const double up[3]);
 
 /* The tie of leaf c to a region: T[8x8] = ∫ χ Nₐ N_b dV over the cell ∩
- * region ∩ tissue (χ as for loads), by 6³ sub-cell midpoints; returns that
- * volume (0: the cell does not meet the region, T all zero). */
-double nh_mesh_region_tie(const nh_mesh *mesh, int c, const nh_region *region, double T[64]);
+ * region ∩ tissue (χ as for loads), by the finite cell quadrature of the
+ * region's and the domain's level sets on integrated box cells, else by 6³
+ * sub-cell midpoints; *volume is that volume (0: the cell does not meet the
+ * region, T all zero). Fails (out of memory) only in the quadrature. */
+int nh_mesh_region_tie(const nh_mesh *mesh, int c, const nh_region *region, double T[64],
+                       double *volume);
 
 /* ---- cut cells: the finite cell quadrature (mesh/cutcell.c) ----
  * The tissue part of a box cell [lo, hi] (natural coordinates ξ ∈ [-1, 1]³,

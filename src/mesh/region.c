@@ -320,22 +320,24 @@ int nh_mesh_cell_coarser_at(const nh_mesh *m, int c, const nh_region *r, double 
   return edge > h && nh_region_distance(r, mid) <= sqrt(half2);
 }
 
-double nh_mesh_region_tie(const nh_mesh *m, int c, const nh_region *r, double T[64]) {
+int nh_mesh_region_tie(const nh_mesh *m, int c, const nh_region *r, double T[64], double *volume) {
   const int n = 6, immersed = m->domain.kind != NH_DOMAIN_BOX;
   double Xe[24], x[3], N[8], dv, vol = 0.0;
   for (int i = 0; i < 64; i++) T[i] = 0.0;
+  *volume = 0.0;
   nh_mesh_cell_coords(m, m->X, c, Xe);
   /* Skip cells far from the region: the bounding boxes do not overlap. */
   double lo[3], hi[3];
-  if (!nh_cell_box_overlaps(Xe, r, lo, hi)) return 0.0;
+  if (!nh_cell_box_overlaps(Xe, r, lo, hi)) return NH_OK;
   if (nh_domain_integrates_cuts(&m->domain) && r->kind != NH_REGION_LABEL &&
       nh_hex_is_box(Xe, lo, hi)) {
     nh_cut_moments mom;
     double wq[27], N[8];
-    if (nh_cut_domain_cell(&m->domain, lo, hi, r, NULL, &mom, wq) || !(mom.volume > 0.0))
-      return 0.0;
+    NH_TRY(nh_cut_domain_cell(&m->domain, lo, hi, r, NULL, &mom, wq));
+    if (!(mom.volume > 0.0)) return NH_OK;
     nh_cut_shape_integrals(wq, N, T);
-    return mom.volume;
+    *volume = mom.volume;
+    return NH_OK;
   }
   for (int i = 0; i < n; i++)
     for (int j = 0; j < n; j++)
@@ -347,5 +349,6 @@ double nh_mesh_region_tie(const nh_mesh *m, int c, const nh_region *r, double T[
           for (int b = 0; b < 8; b++) T[8 * a + b] += N[a] * N[b] * dv;
         vol += dv;
       }
-  return vol;
+  *volume = vol;
+  return NH_OK;
 }
