@@ -15,7 +15,12 @@ nh_add_c_test(test_cutcell "unit;verify" ${CMAKE_CURRENT_BINARY_DIR}/cutcell_scr
 nh_add_c_test(test_cut_components "unit;verify")
 # Cut cells in the tissue (tests/test_fcm.c): immersed patch test to round-off,
 # O(α) consistency, closed pressure, a tie smaller than a cell holds a ball.
-nh_add_c_test(test_fcm "unit;verify")
+nh_add_c_test(test_fcm "unit;verify" ${CMAKE_CURRENT_BINARY_DIR})
+# The same on an ellipsoid as an STL surface (tilted) and as a NIfTI mask, written by the
+# test (libnifti2): patch test, closed pressure, the quadrature's volume of order 2.
+add_test(NAME test_fcm_anatomy COMMAND test_fcm ${CMAKE_CURRENT_BINARY_DIR} anatomy)
+set_tests_properties(test_fcm_anatomy PROPERTIES LABELS "verify;slow"
+  ENVIRONMENT "NH_SOURCE_DIR=${PROJECT_SOURCE_DIR};NH_BINARY=$<TARGET_FILE:needlehex>")
 # Aggregated nodes of integrated cut cells (tests/test_aggregate.c): linear
 # precision of every aggregated node, the immersed patch test solved with them
 # on 5 grids, bounded motion as a cut sliver shrinks from 1e-2 to 1e-6.

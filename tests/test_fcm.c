@@ -1,18 +1,30 @@
 /* test_fcm — cut cells integrated by the finite cell quadrature in the
  * tissue (src/fem/tissue.c, docs/theory.md §5c).
- *  1. Immersed patch test: on an immersed ball (analytic and as an STL-free
- *     label-free shape: the analytic brain, no symmetry) on a sequence of
- *     grids (odd and even: the ball's centre at a cell centre and at a node),
- *     the linear field u = −p (X − c) / (3K) (K = λ + ⅔μ) is in equilibrium
- *     with the consistent load of the uniform pressure p on the immersed
- *     surface: the residual f_int(u) − f_p, relative to |f_p|, is round-off
- *     (<= 1e-9) with α = 0. Expected value: the divergence theorem on the
+ *  1. Immersed patch test, on every domain kind on a sequence of grids
+ *     (the STL and the mask with the argument "anatomy": test_fcm_anatomy)
+ *     (odd, even and unequal counts, so that the shape's centre falls at a
+ *     node, a cell centre or neither): a ball (analytic), the analytic
+ *     brain (no symmetry), an ellipsoid tilted by 30° as an STL surface and
+ *     an ellipsoid as a NIfTI label mask (both written here, centres off
+ *     the origin). The linear field u = −p (X − c) / (3K) (K = λ + ⅔μ) is
+ *     in equilibrium with the consistent load of the uniform pressure p on
+ *     the immersed surface; expected value: the divergence theorem on the
  *     reconstructed polyhedron (stiffness exact for Q2, load exact for
- *     cubics on its faces).
+ *     cubics on its faces). The residual f_int(u) − f_p relative to |f_p|,
+ *     at α = 0: at p = 1e-10 (strain 3e-15) ≤ 1e-11, the linear
+ *     consistency error (round-off: 3e-14 … 3e-13 measured; a broken
+ *     quadrature leaves an O(1) residual at any p); at p = 1e-6 ≤ 1e-9,
+ *     which is the corotational and det F̄ nonlinearity's O(strain), 1e-10
+ *     (it scales with p: 1e-8, 1e-10, 1e-12 at p = 1e-4, 1e-6, 1e-8).
+ *     The quadrature's volume converges to the shape's with order ≥ 1.5
+ *     (the reconstruction's O(s²), s = h/4), printed per grid with its
+ *     observed order: the ball against 4πR³/3, the STL against its
+ *     polyhedron's volume by the divergence theorem, summed here.
  *  2. The consistency error of the stabilisation is O(α): the residual at
  *     α = 1e-4 and 1e-6 divided by α is the same to 10 % (and nonzero).
  *  3. The pressure of the closed surface has zero net force and torque
- *     (Σ f_a, Σ X_a × f_a, relative to p A and p A R) to 1e-12.
+ *     (Σ f_a, Σ X_a × f_a, relative to p A and p A R) to 1e-12, on every
+ *     domain of 1.
  *  4. A sphere region of radius 0.25 of a cell (smaller than a cell on every
  *     grid) ties a ball under gravity: the tangent with the tie is positive
  *     definite (dense Cholesky) and the tie's reaction Σ_a T_ab u_b equals
@@ -30,6 +42,8 @@
 #include "fem/fem.h"
 #include "mesh/mesh.h"
 
+#include <nifti2_io.h>
+#include <stdio.h>
 #include <string.h>
 
 static int verbose;
@@ -53,45 +67,162 @@ static double max_abs(const double *v, int n) {
   return r;
 }
 
-/* Residual of the patch test at stabilisation alpha, relative to |f_p|. */
-static double patch(const nh_domain *d, int g, double alpha, double *force, double *torque) {
+/* The tissue volume of the quadrature: Σ over the leaves of the cut part's
+ * volume, or the whole box of an uncut leaf. */
+static double quadrature_volume(const nh_tissue *t) {
+  const nh_mesh *m = t->mesh;
+  double V = 0.0;
+  for (int l = 0; l < m->n_leaves; l++) {
+    int c = m->leaves[l];
+    const nh_tissue_cut *cut = nh_tissue_cell_cut(t, c);
+    if (cut) {
+      V += cut->volume;
+      continue;
+    }
+    double Xe[24], lo[3] = {INFINITY, INFINITY, INFINITY},
+                   hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    nh_mesh_cell_coords(m, m->X, c, Xe);
+    for (int a = 0; a < 8; a++)
+      for (int k = 0; k < 3; k++)
+        lo[k] = fmin(lo[k], Xe[3 * a + k]), hi[k] = fmax(hi[k], Xe[3 * a + k]);
+    V += (hi[0] - lo[0]) * (hi[1] - lo[1]) * (hi[2] - lo[2]);
+  }
+  return V;
+}
+
+/* The patch test of d on grid g, one mesh and tissue for n cases (the
+ * stabilisation alpha[i] and the pressure p[i]): res[i] the residual
+ * relative to |f_p|; the largest net force and torque of the pressure
+ * relative to p A and p A R; the quadrature's tissue volume. */
+static void patch(const nh_domain *d, const int g[3], int n_cases, const double *alpha,
+                  const double *p, double *res, double *force, double *torque, double *volume) {
   nh_mesh *m = NULL;
   nh_tissue *t = NULL;
-  const int grid[3] = {g, g, g};
-  CHECK_OK(nh_mesh_create(d, grid, &m));
+  CHECK_OK(nh_mesh_create(d, g, &m));
   nh_material mat = {3000.0, 0.45, 1000.0, NH_FORMULATION_BBAR};
   CHECK_OK(nh_tissue_create(m, &mat, &t));
-  CHECK_OK(nh_tissue_set_stabilisation(t, alpha));
   const int n = 3 * m->n_nodes;
   double *u = calloc((size_t)n, sizeof(double)), *fi = calloc((size_t)n, sizeof(double)),
          *fp = calloc((size_t)n, sizeof(double));
-  const double p = 1e-6; /* strain 1e-10: the corotational and det F̄ nonlinearity below round-off */
-  nh_traction tr;
-  memset(&tr, 0, sizeof tr);
-  tr.region.kind = NH_REGION_BOX;
-  for (int k = 0; k < 3; k++) tr.region.min[k] = -1.0, tr.region.max[k] = 1.0;
-  tr.is_pressure = 1, tr.pressure = p;
-  double area = 0.0;
-  CHECK_OK(nh_traction_load(m, &tr, fp, &area));
-  const double K = t->lambda + 2.0 * t->mu / 3.0;
-  for (int i = 0; i < m->n_nodes; i++)
-    for (int k = 0; k < 3; k++) u[3 * i + k] = -p * (m->X[3 * i + k] - d->center[k]) / (3.0 * K);
-  internal_force(t, u, fi);
-  double F[3] = {0, 0, 0}, T[3] = {0, 0, 0}, R = d->half[0];
-  for (int i = 0; i < m->n_nodes; i++) {
-    const double *x = m->X + 3 * i, *f = fp + 3 * i;
-    double r[3] = {x[0] - d->center[0], x[1] - d->center[1], x[2] - d->center[2]};
-    for (int k = 0; k < 3; k++) F[k] += f[k];
-    T[0] += r[1] * f[2] - r[2] * f[1], T[1] += r[2] * f[0] - r[0] * f[2],
-        T[2] += r[0] * f[1] - r[1] * f[0];
+  *force = *torque = 0.0;
+  for (int q = 0; q < n_cases; q++) {
+    CHECK_OK(nh_tissue_set_stabilisation(t, alpha[q]));
+    nh_traction tr;
+    memset(&tr, 0, sizeof tr);
+    tr.region.kind = NH_REGION_BOX;
+    for (int k = 0; k < 3; k++) tr.region.min[k] = -1.0, tr.region.max[k] = 1.0;
+    tr.is_pressure = 1, tr.pressure = p[q];
+    double area = 0.0;
+    memset(fp, 0, sizeof(double) * (size_t)n);
+    CHECK_OK(nh_traction_load(m, &tr, fp, &area));
+    const double K = t->lambda + 2.0 * t->mu / 3.0;
+    for (int i = 0; i < m->n_nodes; i++)
+      for (int k = 0; k < 3; k++)
+        u[3 * i + k] = -p[q] * (m->X[3 * i + k] - d->center[k]) / (3.0 * K);
+    internal_force(t, u, fi);
+    double F[3] = {0, 0, 0}, T[3] = {0, 0, 0}, R = d->half[0];
+    for (int i = 0; i < m->n_nodes; i++) {
+      const double *x = m->X + 3 * i, *f = fp + 3 * i;
+      double r[3] = {x[0] - d->center[0], x[1] - d->center[1], x[2] - d->center[2]};
+      for (int k = 0; k < 3; k++) F[k] += f[k];
+      T[0] += r[1] * f[2] - r[2] * f[1], T[1] += r[2] * f[0] - r[0] * f[2],
+          T[2] += r[0] * f[1] - r[1] * f[0];
+    }
+    *force = fmax(*force, max_abs(F, 3) / (p[q] * area));
+    *torque = fmax(*torque, max_abs(T, 3) / (p[q] * area * R));
+    for (int i = 0; i < n; i++) fi[i] -= fp[i];
+    res[q] = max_abs(fi, n) / max_abs(fp, n);
   }
-  *force = max_abs(F, 3) / (p * area), *torque = max_abs(T, 3) / (p * area * R);
-  for (int i = 0; i < n; i++) fi[i] -= fp[i];
-  double res = max_abs(fi, n) / max_abs(fp, n);
+  *volume = quadrature_volume(t);
   free(u), free(fi), free(fp);
   nh_tissue_destroy(&t);
   nh_mesh_destroy(&m);
-  return res;
+}
+
+/* The ellipsoid of the STL and the mask: semi-axes (m), centre off the
+ * origin; the STL's is turned by 30° about z. */
+static const double ell_axes[3] = {0.030, 0.022, 0.016}, ell_center[3] = {0.0031, -0.0047, 0.0023};
+
+/* Point (i, j) of the tilted ellipsoid's nlat × nlon latitude-longitude
+ * lattice: latitude π i / nlat, longitude 2π j / nlon (j modulo nlon and the
+ * poles exact, so that neighbouring facets share their vertices bit for bit). */
+static void ellipsoid_point(int i, int j, int nlat, int nlon, double x[3]) {
+  const double th = M_PI * i / nlat, ph = 2 * M_PI * (j % nlon) / nlon;
+  const double st = i == 0 || i == nlat ? 0.0 : sin(th), ct = i == 0      ? 1.0
+                                                              : i == nlat ? -1.0
+                                                                          : cos(th);
+  const double e[3] = {ell_axes[0] * st * cos(ph), ell_axes[1] * st * sin(ph), ell_axes[2] * ct};
+  const double c = cos(M_PI / 6), s = sin(M_PI / 6);
+  x[0] = ell_center[0] + c * e[0] - s * e[1];
+  x[1] = ell_center[1] + s * e[0] + c * e[1];
+  x[2] = ell_center[2] + e[2];
+}
+
+/* The tilted ellipsoid as an ASCII STL in mm (nlat × nlon latitude-longitude
+ * facets, the poles' fans as triangles); returns the polyhedron's volume by
+ * the divergence theorem, Σ x₀ · (x₁ × x₂) / 6 over its outward triangles. */
+static double write_ellipsoid_stl(const char *path, int nlat, int nlon) {
+  FILE *f = fopen(path, "w");
+  CHECK(f != NULL, "cannot write %s", path);
+  if (!f) return 0.0;
+  fprintf(f, "solid tilted\n");
+  double V = 0.0;
+  for (int i = 0; i < nlat; i++)
+    for (int j = 0; j < nlon; j++) {
+      double q[4][3];
+      ellipsoid_point(i, j, nlat, nlon, q[0]);
+      ellipsoid_point(i + 1, j, nlat, nlon, q[1]);
+      ellipsoid_point(i + 1, j + 1, nlat, nlon, q[2]);
+      ellipsoid_point(i, j + 1, nlat, nlon, q[3]);
+      const int tri[2][3] = {{0, 1, 2}, {0, 2, 3}};
+      for (int t = 0; t < 2; t++) {
+        /* at the poles q0 = q3 (north) and q1 = q2 (south): one triangle */
+        if ((i == 0 && t == 1) || (i == nlat - 1 && t == 0)) continue;
+        const double *a = q[tri[t][0]], *b = q[tri[t][1]], *c = q[tri[t][2]];
+        fprintf(f, " facet normal 0 0 0\n  outer loop\n");
+        const double *v[3] = {a, b, c};
+        for (int k = 0; k < 3; k++)
+          fprintf(f, "   vertex %.17g %.17g %.17g\n", 1e3 * v[k][0], 1e3 * v[k][1], 1e3 * v[k][2]);
+        fprintf(f, "  endloop\n endfacet\n");
+        V += (a[0] * (b[1] * c[2] - b[2] * c[1]) + a[1] * (b[2] * c[0] - b[0] * c[2]) +
+              a[2] * (b[0] * c[1] - b[1] * c[0])) /
+             6.0;
+      }
+    }
+  fprintf(f, "endsolid tilted\n");
+  fclose(f);
+  return V;
+}
+
+/* The axis-aligned ellipsoid as a NIfTI uint8 label image (libnifti2): 1 mm
+ * voxels, label 1 where the voxel's centre is inside, 0 elsewhere, sform
+ * code 1 placing voxel (0, 0, 0) so that the ellipsoid's centre is c. */
+static void write_ellipsoid_mask(const char *path) {
+  const int64_t dims[8] = {3, 70, 54, 42, 1, 1, 1, 1};
+  nifti_image *nim = nifti_make_new_nim(dims, DT_UINT8, 1);
+  CHECK(nim != NULL, "libnifti2: no image");
+  if (!nim) return;
+  double o[3];
+  for (int k = 0; k < 3; k++) o[k] = 1e3 * ell_center[k] - 0.5 * (dims[k + 1] - 1);
+  nim->dx = nim->dy = nim->dz = 1.0;
+  nim->pixdim[1] = nim->pixdim[2] = nim->pixdim[3] = 1.0;
+  nim->xyz_units = NIFTI_UNITS_MM;
+  nim->qform_code = 0, nim->sform_code = NIFTI_XFORM_SCANNER_ANAT;
+  for (int r = 0; r < 4; r++)
+    for (int c = 0; c < 4; c++)
+      nim->sto_xyz.m[r][c] = r == c ? 1.0 : (c == 3 && r < 3 ? o[r] : 0.0);
+  unsigned char *v = nim->data;
+  for (int k = 0; k < dims[3]; k++)
+    for (int j = 0; j < dims[2]; j++)
+      for (int i = 0; i < dims[1]; i++) {
+        const double x[3] = {o[0] + i, o[1] + j, o[2] + k};
+        double q = 0.0;
+        for (int a = 0; a < 3; a++) q += pow((x[a] - 1e3 * ell_center[a]) / (1e3 * ell_axes[a]), 2);
+        v[((size_t)k * dims[2] + j) * dims[1] + i] = q < 1.0;
+      }
+  CHECK(nifti_set_filenames(nim, path, 0, 1) == 0, "libnifti2: file name %s", path);
+  nifti_image_write(nim);
+  nifti_image_free(nim);
 }
 
 /* Dense Cholesky in place (lower); 0 if positive definite. */
@@ -208,37 +339,101 @@ static void tie_test(int g, double radius) {
   nh_mesh_destroy(&m);
 }
 
-int main(void) {
+/* The surface and mask domains of the ellipsoid, written into dir. */
+static void ellipsoid_domains(const char *dir, nh_domain *stl, nh_domain *mask,
+                              double *stl_volume) {
+  char path[1024];
+  snprintf(path, sizeof path, "%s/fcm_ellipsoid.stl", dir);
+  *stl_volume = write_ellipsoid_stl(path, 48, 96);
+  memset(stl, 0, sizeof *stl);
+  stl->kind = NH_DOMAIN_SURFACE;
+  CHECK_OK(nh_surface_read(path, 1e-3, 0, NULL, &stl->surface));
+  for (int k = 0; k < 3; k++) {
+    stl->min[k] = stl->surface->min[k], stl->max[k] = stl->surface->max[k];
+    stl->center[k] = 0.5 * (stl->min[k] + stl->max[k]),
+    stl->half[k] = 0.5 * (stl->max[k] - stl->min[k]);
+  }
+  stl->cap = 0.25 * fmax(stl->half[0], fmax(stl->half[1], stl->half[2])); /* as the scene's */
+  snprintf(path, sizeof path, "%s/fcm_ellipsoid.nii", dir);
+  write_ellipsoid_mask(path);
+  memset(mask, 0, sizeof *mask);
+  mask->kind = NH_DOMAIN_MASK;
+  CHECK_OK(nh_image_read(path, 1, NULL, &mask->image));
+  const int one = 1;
+  CHECK_OK(nh_image_select(mask->image, &one, 1));
+  for (int k = 0; k < 3; k++) {
+    mask->min[k] = mask->image->box_min[k], mask->max[k] = mask->image->box_max[k];
+    mask->center[k] = 0.5 * (mask->min[k] + mask->max[k]);
+    mask->half[k] = 0.5 * (mask->max[k] - mask->min[k]);
+  }
+}
+
+int main(int argc, char **argv) {
   verbose = getenv("NH_VERBOSE") != NULL;
   const double c0[3] = {0.0013, -0.0021, 0.0007};
-  nh_domain ball, brain;
+  nh_domain ball, brain, stl, mask;
   nh_domain_sphere(c0, 0.03, &ball);
   const double bc[3] = {0, 0, 0}, bs[3] = {0.14, 0.17, 0.12};
   nh_domain_brain(bc, bs, &brain);
-  ball.cut_cells = brain.cut_cells = NH_CUT_CELLS_INTEGRATED;
-  const nh_domain *doms[2] = {&ball, &brain};
-  const char *names[2] = {"ball", "brain"};
-  const int grids[4] = {5, 6, 8, 11};
-  for (int di = 0; di < 2; di++)
-    for (int gi = 0; gi < 4; gi++) {
-      double F, T, F2, T2;
-      double r0 = patch(doms[di], grids[gi], 0.0, &F, &T);
-      CHECK(r0 <= 1e-9, "%s %d³: patch test residual %g at α = 0", names[di], grids[gi], r0);
-      CHECK(di == 1 || (F <= 1e-12 && T <= 1e-12), "%s %d³: net force %g torque %g", names[di],
-            grids[gi], F, T);
-      double r4 = patch(doms[di], grids[gi], 1e-4, &F2, &T2),
-             r6 = patch(doms[di], grids[gi], 1e-6, &F2, &T2);
-      CHECK(r6 > 0.0 && fabs(r4 / 1e-4 / (r6 / 1e-6) - 1.0) < 0.1,
-            "%s %d³: consistency error O(α): r(1e-4) = %g, r(1e-6) = %g", names[di], grids[gi], r4,
-            r6);
+  /* argv: DIR (where the ellipsoid's files go) and "anatomy" for the STL and
+   * mask domains (the slow part), else the ball, the brain and the ties */
+  const int anatomy = argc > 2 && strcmp(argv[2], "anatomy") == 0;
+  double stl_volume = 0.0;
+  memset(&stl, 0, sizeof stl), memset(&mask, 0, sizeof mask);
+  if (anatomy) ellipsoid_domains(argc > 1 ? argv[1] : ".", &stl, &mask, &stl_volume);
+  const nh_domain *doms[4] = {&ball, &brain, &stl, &mask};
+  const char *names[4] = {"ball", "brain", "STL ellipsoid", "mask ellipsoid"};
+  /* the volumes the quadrature converges to (0: none in closed form) */
+  const double exact[4] = {4.0 / 3.0 * M_PI * 0.03 * 0.03 * 0.03, 0.0, stl_volume, 0.0};
+  const int grids[6][3] = {{5, 5, 5}, {6, 6, 6}, {7, 6, 5}, {8, 8, 8}, {11, 10, 12}, {14, 14, 14}};
+  for (int di = anatomy ? 2 : 0; di < (anatomy ? 4 : 2); di++) {
+    ((nh_domain *)doms[di])->cut_cells = NH_CUT_CELLS_INTEGRATED;
+    double err[6], hs[6];
+    for (int gi = 0; gi < 6; gi++) {
+      const int *g = grids[gi];
+      /* α = 0 at p = 1e-10 and 1e-6; on the first three grids α = 1e-4, 1e-6 */
+      const double alpha[4] = {0.0, 0.0, 1e-4, 1e-6}, p[4] = {1e-10, 1e-6, 1e-6, 1e-6};
+      double r[4] = {0, 0, 0, 0}, F, T, V;
+      patch(doms[di], g, gi < 3 ? 4 : 2, alpha, p, r, &F, &T, &V);
+      CHECK(r[0] <= 1e-11, "%s %dx%dx%d: patch test residual %g at α = 0, p = 1e-10", names[di],
+            g[0], g[1], g[2], r[0]);
+      CHECK(r[1] <= 1e-9, "%s %dx%dx%d: patch test residual %g at α = 0, p = 1e-6", names[di], g[0],
+            g[1], g[2], r[1]);
+      CHECK(F <= 1e-12 && T <= 1e-12, "%s %dx%dx%d: net force %g torque %g", names[di], g[0], g[1],
+            g[2], F, T);
+      CHECK(gi >= 3 || (r[3] > 0.0 && fabs(r[2] / 1e-4 / (r[3] / 1e-6) - 1.0) < 0.1),
+            "%s %dx%dx%d: consistency error O(α): r(1e-4) = %g, r(1e-6) = %g", names[di], g[0],
+            g[1], g[2], r[2], r[3]);
+      hs[gi] = 2.0 * doms[di]->half[0] / g[0];
+      err[gi] = exact[di] > 0.0 ? fabs(V / exact[di] - 1.0) : NAN;
       if (verbose)
-        printf("%s %2d³: residual α=0 %.2e, α=1e-6 %.2e, α=1e-4 %.2e; net force %.1e torque %.1e\n",
-               names[di], grids[gi], r0, r6, r4, F, T);
+        printf("%s %2dx%2dx%2d: residual α=0 %.2e (p 1e-10), %.2e (p 1e-6); α=1e-6 %.2e, α=1e-4 "
+               "%.2e; net force %.1e torque %.1e; volume %.6e%s%.2e%s",
+               names[di], g[0], g[1], g[2], r[0], r[1], r[3], r[2], F, T, V,
+               exact[di] > 0.0 ? ", error " : " (", exact[di] > 0.0 ? err[gi] : 0.0,
+               exact[di] > 0.0 ? "" : ")");
+      if (verbose && exact[di] > 0.0 && gi > 0)
+        printf(", order %.2f", log(err[gi - 1] / err[gi]) / log(hs[gi - 1] / hs[gi]));
+      if (verbose) printf("\n");
     }
-  const int tg[4] = {4, 5, 7, 9};
-  for (int i = 0; i < 4; i++) tie_test(tg[i], 0.0);
-  for (int i = 0; i < 4; i++) tie_test(tg[i], 0.008); /* h = 15 … 6.7 mm, a cap of 8 mm */
+    if (exact[di] > 0.0) { /* the least-squares slope of log err against log h */
+      double sx = 0, sy = 0, sxx = 0, sxy = 0;
+      for (int gi = 0; gi < 6; gi++) {
+        double x = log(hs[gi]), y = log(err[gi]);
+        sx += x, sy += y, sxx += x * x, sxy += x * y;
+      }
+      double order = (6 * sxy - sx * sy) / (6 * sxx - sx * sx);
+      CHECK(order >= 1.5, "%s: the quadrature's volume converges with order %.2f < 1.5", names[di],
+            order);
+      if (verbose) printf("%s: volume order %.2f over the six grids\n", names[di], order);
+    }
+  }
+  const int tg[4] = {4, 5, 7, 9}, n_tg = anatomy ? 0 : 4;
+  for (int i = 0; i < n_tg; i++) tie_test(tg[i], 0.0);
+  for (int i = 0; i < n_tg; i++) tie_test(tg[i], 0.008); /* h = 15 … 6.7 mm, a cap of 8 mm */
   nh_domain_release(&ball);
   nh_domain_release(&brain);
+  nh_domain_release(&stl);
+  nh_domain_release(&mask);
   return nh_test_failures ? 1 : 0;
 }
