@@ -79,12 +79,9 @@ static double quadrature_volume(const nh_tissue *t) {
       V += cut->volume;
       continue;
     }
-    double Xe[24], lo[3] = {INFINITY, INFINITY, INFINITY},
-                   hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    double Xe[24], lo[3], hi[3];
     nh_mesh_cell_coords(m, m->X, c, Xe);
-    for (int a = 0; a < 8; a++)
-      for (int k = 0; k < 3; k++)
-        lo[k] = fmin(lo[k], Xe[3 * a + k]), hi[k] = fmax(hi[k], Xe[3 * a + k]);
+    CHECK(nh_hex_is_box(Xe, lo, hi), "leaf %d of a uniform grid is not a box", c);
     V += (hi[0] - lo[0]) * (hi[1] - lo[1]) * (hi[2] - lo[2]);
   }
   return V;
