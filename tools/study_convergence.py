@@ -257,7 +257,8 @@ def run(a, binary):
         c, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
         cortex = [c[0] + 0.45 * half[0], c[1] + half[1] - 0.003, c[2] + 0.3 * half[2]]
     probe = "convergence-cortex"
-    common = ["time.end=%g" % (3.0 if a.end is None else a.end), "output.every=0", "adapt.every=1000000",
+    end = 3.0 if a.end is None else a.end
+    common = ["time.end=%g" % end, "output.every=0", "adapt.every=1000000",
               "probes=[{name: %s, point: [%.6g, %.6g, %.6g]}]" % ((probe,) + tuple(cortex))]
     grids = sorted(parse_grids(a.grids), key=lambda g: -grid_h(lo, hi, g))
     jobs = []
