@@ -15,8 +15,9 @@ estimate on the uniform 14 and 10 mm meshes (not refined), and per phase
 dbs_goal_error.png, dbs_goal_cost.png, dbs_goal_effectivity.png.
 --base NXxNYxNZ starts the SPR and goal runs from another grid (named
 NAME-from-NXxNYxNZ; the uniform and estimate runs are unchanged, so --restart
-into the same folder reuses them); --steps N ends every run early (the shift
-alone for N ≤ 64: the report then cuts one phase).
+into the same folder reuses them; report and plots in OUT/from-NXxNYxNZ);
+--steps N ends every run early (the shift alone for N ≤ 64: the report then
+cuts one phase).
 """
 import os
 import re
@@ -180,7 +181,11 @@ def run(a, binary):
     estimates; cost per step against the 7 mm mesh's."""
     st = dict(DBS_GOAL, adaptive=adaptive_variants(a.base))
     out = engine.out_dir(a, "dbs-goal")
-    img = engine.plot_dir(a, out)
+    # the report and plots of runs from another base grid go beside the base run's, into
+    # OUT/from-BASE, which the same folder's runs then share
+    rep = os.path.join(out, "from-" + a.base) if a.base else out
+    os.makedirs(rep, exist_ok=True)
+    img = engine.plot_dir(a, rep)
     sel = [(n, sets + st["common"]) for n, _, sets, *_ in st["uniform"] + st["adaptive"]
            if not a.only or n in a.only or n in [u[0] for u in st["uniform"]]]
     infos = engine.run_variants(a, binary, st["scene"], out, sel)
@@ -414,7 +419,7 @@ def run(a, binary):
     if loads:
         p("- 1-minute load average at the runs' starts and ends: %.1f–%.1f (2 cores)." % (
             min(loads), max(loads)))
-    engine.write_report(out, lines)
+    engine.write_report(rep, lines)
 
     def band(ax, bar):
         """The reference's error bar (mm) as a grey band from 1 nm up."""
