@@ -41,6 +41,7 @@
 #include "check.h"
 #include "fem/fem.h"
 #include "mesh/mesh.h"
+#include "scene/scene.h"
 
 #include <nifti2_io.h>
 #include <stdio.h>
@@ -315,14 +316,7 @@ static void tie_test(int g, double radius) {
   double umax = max_abs(u, n);
   CHECK(isfinite(umax) && umax > 0.0, "the tie holds the ball (grid %d): max |u| %g", g, umax);
   /* mass = ρ V_h, V_h within the bound of the ball's reconstruction */
-  double V = 0.0, s = h / (1 << NH_CUT_DEPTH);
-  for (int l = 0; l < m->n_leaves; l++) {
-    int c = m->leaves[l];
-    const nh_tissue_cut *cut = nh_tissue_cell_cut(t, c);
-    double Xe[24];
-    nh_mesh_cell_coords(m, m->X, c, Xe);
-    V += cut ? cut->volume : h * h * h;
-  }
+  double V = quadrature_volume(t), s = h / (1 << NH_CUT_DEPTH);
   CHECK_CLOSE(-weight / 9.81, 1000.0 * V, 1e-12 * 1000.0 * V, "mass = ρ V_h");
   double Vx = 4.0 / 3.0 * M_PI * R * R * R,
          bound = 4.0 * M_PI * R * R * 1.5 * s * s / (R - sqrt(3) * s);
@@ -337,32 +331,36 @@ static void tie_test(int g, double radius) {
 }
 
 /* The surface and mask domains of the ellipsoid, written into dir. */
+/* The domain of a scene whose tissue.domain is `domain` (YAML flow), through
+ * the scene reader, as a run builds it. */
+static void scene_domain(const char *dir, const char *name, const char *domain, nh_domain *d) {
+  char path[1024];
+  snprintf(path, sizeof path, "%s/%s.yaml", dir, name);
+  FILE *f = fopen(path, "w");
+  CHECK(f != NULL, "cannot write %s", path);
+  memset(d, 0, sizeof *d);
+  if (!f) return;
+  fprintf(f,
+          "name: %s\ntime: {mode: static, step: 1.0, steps: 1}\ntissue:\n  domain: %s\n"
+          "  grid: [4, 4, 4]\n  material: {young: 3000, poisson: 0.45, density: 1000}\n",
+          name, domain);
+  fclose(f);
+  nh_scene *sc = NULL;
+  CHECK_OK(nh_scene_load(path, 0, NULL, &sc));
+  if (sc) CHECK_OK(nh_domain_from_scene(sc, d));
+  nh_scene_destroy(&sc);
+}
+
+/* The surface and mask domains of the ellipsoid, its files written into dir. */
 static void ellipsoid_domains(const char *dir, nh_domain *stl, nh_domain *mask,
                               double *stl_volume) {
   char path[1024];
   snprintf(path, sizeof path, "%s/fcm_ellipsoid.stl", dir);
   *stl_volume = write_ellipsoid_stl(path, 48, 96);
-  memset(stl, 0, sizeof *stl);
-  stl->kind = NH_DOMAIN_SURFACE;
-  CHECK_OK(nh_surface_read(path, 1e-3, 0, NULL, &stl->surface));
-  for (int k = 0; k < 3; k++) {
-    stl->min[k] = stl->surface->min[k], stl->max[k] = stl->surface->max[k];
-    stl->center[k] = 0.5 * (stl->min[k] + stl->max[k]),
-    stl->half[k] = 0.5 * (stl->max[k] - stl->min[k]);
-  }
-  stl->cap = 0.25 * fmax(stl->half[0], fmax(stl->half[1], stl->half[2])); /* as the scene's */
+  scene_domain(dir, "fcm_stl", "{surface: {file: fcm_ellipsoid.stl}}", stl);
   snprintf(path, sizeof path, "%s/fcm_ellipsoid.nii", dir);
   write_ellipsoid_mask(path);
-  memset(mask, 0, sizeof *mask);
-  mask->kind = NH_DOMAIN_MASK;
-  CHECK_OK(nh_image_read(path, 1, NULL, &mask->image));
-  const int one = 1;
-  CHECK_OK(nh_image_select(mask->image, &one, 1));
-  for (int k = 0; k < 3; k++) {
-    mask->min[k] = mask->image->box_min[k], mask->max[k] = mask->image->box_max[k];
-    mask->center[k] = 0.5 * (mask->min[k] + mask->max[k]);
-    mask->half[k] = 0.5 * (mask->max[k] - mask->min[k]);
-  }
+  scene_domain(dir, "fcm_mask", "{mask: {file: fcm_ellipsoid.nii, labels: [1]}}", mask);
 }
 
 int main(int argc, char **argv) {

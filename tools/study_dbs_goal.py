@@ -160,7 +160,7 @@ def phase_slices(r, n):
     (name, slice of step indices), step 0 left out: shift, insertion, hold, retraction (a run
     that ends before the cannula touches the brain: the shift alone)."""
     cuts = (("shift", 1, r["i_shift"] + 1), ("insertion", r["i_shift"] + 1, r["i_top"]),
-            ("hold", r["i_top"] if r["i_top"] > r["i_shift"] else n, r["i_back"] + 1),
+            ("hold", max(r["i_top"], r["i_shift"] + 1), r["i_back"] + 1),
             ("retraction", r["i_back"] + 1, n))
     return [(w, slice(lo, hi)) for w, lo, hi in cuts if hi > lo]
 
