@@ -1,9 +1,11 @@
 /* dwr_support.h — the pieces of the DWR identity tests computed on paths of
- * their own (test_dwr, test_dwr_rows): the energy product summed element by
- * element, and a nodal field carried to refined nodes. */
+ * their own (test_dwr, test_dwr_rows, test_dwr_skull): the energy product
+ * summed element by element, a nodal field carried to refined nodes, and
+ * the constrained solution by a dense LU solve of the saddle-point system. */
 #ifndef NH_TEST_DWR_SUPPORT_H
 #define NH_TEST_DWR_SUPPORT_H
 
+#include <lapacke.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -80,6 +82,88 @@ __attribute__((unused)) static double *dwr_prolong(const nh_mesh *m, const nh_re
       for (int a = 0; a < 8; a++) v[3 * (info->first_new + k) + i] += N[a] * v[3 * e[a] + i];
   }
   return v;
+}
+
+/* n_i · w(P_i) of row i's tissue part (widened rows too) for a nodal field w. */
+__attribute__((unused)) static double dwr_row_value(const nh_rows *rows, int i, const double *w) {
+  double s = 0.0;
+  for (int a = rows->start[i]; a < rows->start[i + 1]; a++)
+    for (int k = 0; k < 3 && rows->node[a] >= 0; k++)
+      s += rows->N[a] * rows->dir[3 * i + k] * w[3 * rows->node[a] + k];
+  return s;
+}
+
+/* The dense matrix [K Jᵀ; J 0] over the unfixed DOFs and the rows with
+ * active[i] != 0 (K summed from the element matrices at rest, J from the
+ * rows' shape values), column-major N x N, N = *nf + active rows (malloc'd,
+ * NULL when out of memory); dof[3 n_nodes]: the unfixed DOFs' positions,
+ * −1 at fixed ones. The rows' tool parts are ignored; no hanging nodes. */
+__attribute__((unused)) static double *
+dwr_dense_kkt(const nh_mesh *m, const nh_tissue *t, const unsigned char *fixed, const nh_rows *rows,
+              const unsigned char *active, int *dof, int *nf_out, int *N_out) {
+  int n = 3 * m->n_nodes, nf = 0, na = 0;
+  for (int i = 0; i < n; i++) dof[i] = fixed[i / 3] ? -1 : nf++;
+  for (int i = 0; i < rows->m; i++) na += active[i] != 0;
+  int N = nf + na;
+  double *A = calloc((size_t)N * N, sizeof(double)), *zero = calloc(n, sizeof(double));
+  if (!A || !zero) {
+    free(A), free(zero);
+    return NULL;
+  }
+  for (int l = 0; l < m->n_leaves; l++) {
+    int c = m->leaves[l];
+    double fe[24], K[576];
+    nh_tissue_element(t, c, zero, fe, K);
+    for (int r = 0; r < 24; r++)
+      for (int q = 0; q < 24; q++) {
+        int dr = dof[3 * m->cells[8 * c + r / 3] + r % 3],
+            dq = dof[3 * m->cells[8 * c + q / 3] + q % 3];
+        if (dr >= 0 && dq >= 0) A[(size_t)dq * N + dr] += K[24 * r + q];
+      }
+  }
+  for (int i = 0, row = nf; i < rows->m; i++) {
+    if (!active[i]) continue;
+    for (int a = rows->start[i]; a < rows->start[i + 1]; a++)
+      for (int k = 0; k < 3 && rows->node[a] >= 0; k++) {
+        int d = dof[3 * rows->node[a] + k];
+        double v = rows->N[a] * rows->dir[3 * i + k];
+        if (d < 0) continue;
+        A[(size_t)d * N + row] += v;
+        A[(size_t)row * N + d] += v;
+      }
+    row++;
+  }
+  free(zero);
+  *nf_out = nf, *N_out = N;
+  return A;
+}
+
+/* The constrained solution of K u + Jᵀλ = f, J u = −g on the active rows
+ * (g the rows' gaps: each active row's c(u) = J u + g held at 0) by a dense
+ * LU solve of dwr_dense_kkt: u[3 n_nodes] (0 at fixed DOFs), lambda[rows->m]
+ * (may be NULL; 0 on inactive rows; the KKT multiplier, the force on the
+ * tissue being −Jᵀλ). 0, or −1 (out of memory, or a singular matrix). */
+__attribute__((unused)) static int dwr_dense_solve(const nh_mesh *m, const nh_tissue *t,
+                                                   const unsigned char *fixed, const double *f,
+                                                   const nh_rows *rows, const unsigned char *active,
+                                                   double *u, double *lambda) {
+  int n = 3 * m->n_nodes, *dof = malloc(sizeof(int) * n), nf, N, rc = -1;
+  double *A = dof ? dwr_dense_kkt(m, t, fixed, rows, active, dof, &nf, &N) : NULL;
+  double *b = A ? calloc(N, sizeof(double)) : NULL;
+  int *piv = b ? malloc(sizeof(int) * N) : NULL;
+  if (piv) {
+    for (int i = 0; i < n; i++)
+      if (dof[i] >= 0) b[dof[i]] = f[i];
+    for (int i = 0, row = nf; i < rows->m; i++)
+      if (active[i]) b[row++] = -rows->gap[i];
+    if (LAPACKE_dgesv(LAPACK_COL_MAJOR, N, 1, A, N, piv, b, N) == 0) {
+      for (int i = 0; i < n; i++) u[i] = dof[i] >= 0 ? b[dof[i]] : 0.0;
+      for (int i = 0, row = nf; i < rows->m && lambda; i++) lambda[i] = active[i] ? b[row++] : 0.0;
+      rc = 0;
+    }
+  }
+  free(dof), free(A), free(b), free(piv);
+  return rc;
 }
 
 #endif

@@ -145,73 +145,25 @@ static void setup(problem *p) {
   make_rows(p);
 }
 
+static const unsigned char active_rows[NROWS] = {1, 1, 1, 0, 1, 0};
+
 static int active_row(int i) {
-  return i != 3 && i != 5;
+  return active_rows[i];
 }
 
-/* The dense matrix [K Jᵀ; J 0] over the unfixed DOFs and the active rows
- * (K from the element matrices at rest, J from the rows' shape values),
- * column-major N x N, N = *nf + active rows; dof[3 n_nodes]: the unfixed
- * DOFs' positions, −1 at fixed ones. */
+/* [K Jᵀ; J 0] of the problem's active rows (dwr_dense_kkt). */
 static double *dense_kkt(const problem *p, int *dof, int *nf_out, int *N_out) {
-  const nh_mesh *m = p->m;
-  int n = 3 * m->n_nodes, nf = 0;
-  for (int i = 0; i < n; i++) dof[i] = p->fixed[i / 3] ? -1 : nf++;
-  int na = 0;
-  for (int i = 0; i < NROWS; i++) na += active_row(i);
-  int N = nf + na;
-  double *A = calloc((size_t)N * N, sizeof(double)), *zero = calloc(n, sizeof(double));
-  for (int l = 0; l < m->n_leaves; l++) {
-    int c = m->leaves[l];
-    double fe[24], K[576];
-    nh_tissue_element(p->t, c, zero, fe, K);
-    for (int r = 0; r < 24; r++)
-      for (int q = 0; q < 24; q++) {
-        int dr = dof[3 * m->cells[8 * c + r / 3] + r % 3],
-            dq = dof[3 * m->cells[8 * c + q / 3] + q % 3];
-        if (dr >= 0 && dq >= 0) A[(size_t)dq * N + dr] += K[24 * r + q];
-      }
-  }
-  for (int i = 0, row = nf; i < NROWS; i++) {
-    if (!active_row(i)) continue;
-    for (int a = 0; a < 8; a++)
-      for (int k = 0; k < 3; k++) {
-        int d = dof[3 * p->rows.node[8 * i + a] + k];
-        double v = p->rows.N[8 * i + a] * p->rows.dir[3 * i + k];
-        if (d < 0) continue;
-        A[(size_t)d * N + row] += v;
-        A[(size_t)row * N + d] += v;
-      }
-    row++;
-  }
-  free(zero);
-  *nf_out = nf, *N_out = N;
-  return A;
+  return dwr_dense_kkt(p->m, p->t, p->fixed, &p->rows, active_rows, dof, nf_out, N_out);
 }
 
-/* The constrained solution by a dense LU solve of [K Jᵀ; J 0] [u; λ] =
- * [f; −g] (dense_kkt). */
+/* The constrained solution by a dense LU solve (dwr_dense_solve). */
 static void dense_solve(const problem *p, double *u, double *lambda) {
-  int n = 3 * p->m->n_nodes, *dof = malloc(sizeof(int) * n), nf, N;
-  double *A = dense_kkt(p, dof, &nf, &N), *b = calloc(N, sizeof(double));
-  for (int i = 0; i < n; i++)
-    if (dof[i] >= 0) b[dof[i]] = p->f[i];
-  for (int i = 0, row = nf; i < NROWS; i++)
-    if (active_row(i)) b[row++] = -p->rows.gap[i]; /* the row's gap c(u) = J u + g, held at 0 */
-  int *piv = malloc(sizeof(int) * N);
-  CHECK(LAPACKE_dgesv(LAPACK_COL_MAJOR, N, 1, A, N, piv, b, N) == 0, "dense KKT solve");
-  for (int i = 0; i < n; i++) u[i] = dof[i] >= 0 ? b[dof[i]] : 0.0;
-  for (int i = 0, row = nf; i < NROWS && lambda; i++) lambda[i] = active_row(i) ? b[row++] : 0.0;
-  free(dof), free(A), free(b), free(piv);
+  CHECK(dwr_dense_solve(p->m, p->t, p->fixed, p->f, &p->rows, active_rows, u, lambda) == 0,
+        "dense KKT solve");
 }
 
-/* n_i · w(P_i) of row i for a nodal field w. */
 static double row_value(const nh_rows *rows, int i, const double *w) {
-  double s = 0.0;
-  for (int a = 0; a < 8; a++)
-    for (int k = 0; k < 3; k++)
-      s += rows->N[8 * i + a] * rows->dir[3 * i + k] * w[3 * rows->node[8 * i + a] + k];
-  return s;
+  return dwr_row_value(rows, i, w);
 }
 
 static int rows_n3; /* 3 n_nodes of the fields row_change is given */
@@ -451,7 +403,6 @@ static void test_front(problem *p) {
 #define NCOL_MAX 7
 
 static void test_solve_rows(problem *p) {
-  static const unsigned char active[NROWS] = {1, 1, 1, 0, 1, 0};
   const int n = 3 * p->m->n_nodes, nf = nh_system_free_dofs(p->s), ncols[3] = {2, 4, NCOL_MAX};
   int *dof = malloc(sizeof(int) * n), nk, N;
   double *A = dense_kkt(p, dof, &nk, &N);
@@ -471,7 +422,7 @@ static void test_solve_rows(problem *p) {
   for (int c = 2; c >= 0; c--) { /* ncol = 7 first: the other routes are compared with it */
     const int ncol = ncols[c];
     int used = -1;
-    CHECK_OK(nh_system_solve_rows(p->s, &p->rows, active, ncol, b, x, mu, &used));
+    CHECK_OK(nh_system_solve_rows(p->s, &p->rows, active_rows, ncol, b, x, mu, &used));
     CHECK(used == 4, "ncol=%d: %d active rows, expected 4", ncol, used);
     double xmax = 0.0, xerr = 0.0, mumax = 0.0, muerr = 0.0, xdiff = 0.0, mudiff = 0.0;
     for (int q = 0; q < ncol; q++) {
@@ -481,7 +432,7 @@ static void test_solve_rows(problem *p) {
         xmax = fmax(xmax, fabs(e)), xerr = fmax(xerr, fabs(xq[i] - e));
       }
       for (int i = 0, row = nk; i < NROWS; i++) {
-        const double e = active[i] ? bd[(size_t)N * q + row++] : 0.0, v = mu[NROWS * q + i];
+        const double e = active_rows[i] ? bd[(size_t)N * q + row++] : 0.0, v = mu[NROWS * q + i];
         mumax = fmax(mumax, fabs(e)), muerr = fmax(muerr, fabs(v - e));
         if (ncol < NCOL_MAX) mudiff = fmax(mudiff, fabs(v - mu7[NROWS * q + i]));
       }
