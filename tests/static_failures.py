@@ -33,6 +33,18 @@ diagnosed"), instead of 30 iterations in up to 16 load steps.
    it; a load step too large is what load splitting exists for, so the step
    must be solved again in smaller load steps (steps.csv: splits) and
    converge: exit 0, residual <= the tolerance 1e-8, splits >= 1.
+5. The long rule (NH_NEWTON_STALL_LONG, src/solve/solve.h): a Newton with
+   no cause found that makes no new best residual in 10 iterations ends
+   there, not at the 30-iteration limit, and the step is split as at the
+   limit. cases/cantilever.yaml at 0.3 N (its Newton stays near 1 in any
+   number of load steps): exit 1 with "makes no progress", "none of the
+   last 10" at an iteration below 30, and the node named. The same rule in
+   the quasi-static step with skull rows: cases/dbs/dbs-skull-static.yaml
+   on 10 x 12 x 9 at E = 30 Pa (its residual stays near 1: 4.5 s before
+   the rule, 2.9 s with it): exit 1 naming the rule, the node and the
+   constraint rows there.
+The small tie's message names the region that holds the body
+(tissue.fixed[0], one leaf cell).
 Silent on success; exit 1 on failure.
 """
 import csv
@@ -89,6 +101,8 @@ check(m is not None and len(m.group(1).split(",")) == 4 and m.group(2) == "3",
 check(re.search(r"the largest residual, [0-9.e+-]+ N, is at node \d+", err) is not None
       and "cells around it (tissue fraction)" in err and "Likely cause" in err,
       "small tie: the message does not say where and why:\n" + err)
+check("the fixed regions tie tissue.fixed[0]: 1 leaf cell" in err,
+      "small tie: the message does not name the region and its cells:\n" + err)
 
 tables = run(os.path.join(SRC, "cases/cantilever.yaml"), os.path.join(WORK, "cantilever_hard"),
              ["tissue.loads.0.force=[0,0,-0.2]", "solver.on_invalid=warn"], tables=("steps",))
@@ -110,5 +124,30 @@ if p.returncode == 0:
     check(float(row["residual"]) <= 1e-8 and int(float(row["splits"])) >= 1,
           "whole weight: residual %s, splits %s: expected <= 1e-8, >= 1"
           % (row["residual"], row["splits"]))
+
+
+def check_long_rule(name, what, err):
+    m = re.search(what + r" makes no progress: relative residual [0-9.e+-]+ (?:and tool correction"
+                  r" [0-9.e+-]+ )?at iteration (\d+), none of the last 10", err)
+    check(m is not None and int(m.group(1)) < 30,
+          "%s: no '%s makes no progress ... none of the last 10' before iteration 30:\n%s"
+          % (name, what, err))
+    check(re.search(r"is at node \d+, [xyz], rest position", err) is not None,
+          "%s: the message names no node:\n%s" % (name, err))
+
+
+p, cpu, _ = run_failing("cantilever_limit", "cases/cantilever.yaml",
+                        "tissue.loads.0.force=[0,0,-0.3]")
+check(p.returncode == 1, "cantilever 0.3 N: exit %d, expected 1: %s" % (p.returncode, p.stderr))
+check(cpu <= CPU_BOUND, "cantilever 0.3 N: %.2f s of CPU, expected <= %g" % (cpu, CPU_BOUND))
+check_long_rule("cantilever 0.3 N", "static Newton", p.stderr)
+
+p, cpu, _ = run_failing("skull_soft", "cases/dbs/dbs-skull-static.yaml", "tissue.grid=[10,12,9]",
+                        "tissue.material.young=30")
+check(p.returncode == 1, "soft brain on the skull: exit %d, expected 1: %s"
+      % (p.returncode, p.stderr))
+check_long_rule("soft brain on the skull", "quasi-static Newton with constraints", p.stderr)
+check(re.search(r"constraint rows at that node: (none|\d+ of the skull)", p.stderr) is not None,
+      "soft brain on the skull: the rows at the node are not named:\n" + p.stderr)
 
 finish()

@@ -272,6 +272,7 @@ int nh_contact_solve_static(nh_contact *c, nh_system *sys, const nh_integrator *
   c->statics = 1;
   nh_tools_stop(c);
   int rc = NH_OK, iter = 0, redos = 0, converged = 0, consistent_steps = 0;
+  nh_newton_watch watch = {0}; /* the long no-progress rule */
   double residual = INFINITY, tool_rel = 0.0;
   for (iter = 0; iter < in->max_iterations && !rc && !converged; iter++) {
     memcpy(u_iter, u, sizeof(double) * (size_t)n);
@@ -332,6 +333,20 @@ int nh_contact_solve_static(nh_contact *c, nh_system *sys, const nh_integrator *
     nh_tools_stop(c);
     converged = residual <= in->tolerance && tool_rel <= in->tolerance &&
                 !(c->solve.mcp.residual > NH_MCP_ACCEPT);
+    /* the long no-progress rule on the larger of the two measures (tools
+     * nested in a cannula converge with the tissue's residual at round-off) */
+    if (!converged && nh_newton_stalled(&watch, iter, fmax(residual, tool_rel))) {
+      char msg[2048];
+      snprintf(msg, sizeof msg,
+               "quasi-static Newton with constraints makes no progress: relative residual %.3g "
+               "and tool correction %.3g at iteration %d, none of the last %d with the larger "
+               "below %.3g (iteration %d); %d constraint rows, constraint residual %.3g; the "
+               "last increment",
+               residual, tool_rel, iter + 1, NH_NEWTON_STALL_LONG, watch.best, watch.best_it + 1,
+               c->rows.m, c->solve.mcp.residual);
+      nh_system_where(sys, u, pred, &c->rows, msg, sizeof msg);
+      rc = NH_ERROR(NH_ERR_NUMERIC, "%s", msg);
+    }
   }
   free(saved);
   /* back to the corotational tangent, factorised at the solution (what the

@@ -233,8 +233,9 @@ typedef struct nh_tissue {
   int cap_cells;
   double *mass; /* lumped nodal mass, per node */
   int cap_nodes;
-  /* ties of fixed regions (nh_tissue_set_ties): per cell index into tie or -1 */
-  int *cell_tie, cap_cell_tie;
+  /* ties of fixed regions (nh_tissue_set_ties): per cell index into tie or
+   * -1, and the first region that ties it (-1: none; for messages) */
+  int *cell_tie, *cell_tie_region, cap_cell_tie;
   double *tie; /* 64 per tied cell: k ∫ χ Nₐ N_b dV (8x8) */
   int n_ties, cap_ties;
   /* cut cells of an immersed domain (docs/theory.md §5c): per cell an index

@@ -48,6 +48,7 @@ void nh_tissue_destroy(nh_tissue **tissue) {
   free(t->mass);
   free(t->label), free(t->label_material), free(t->Kl), free(t->Km), free(t->cell_material);
   free(t->cell_tie);
+  free(t->cell_tie_region);
   free(t->tie);
   free(t->cell_cut);
   free(t->cut);
@@ -469,9 +470,10 @@ int nh_tissue_set_ties(nh_tissue *t, int n_regions, const nh_region *regions, co
   const nh_mesh *m = t->mesh;
   if (m->n_cells > t->cap_cell_tie) {
     NH_TRY(nh_realloc((void **)&t->cell_tie, (size_t)m->n_cells, sizeof(int)));
+    NH_TRY(nh_realloc((void **)&t->cell_tie_region, (size_t)m->n_cells, sizeof(int)));
     t->cap_cell_tie = m->n_cells;
   }
-  for (int c = 0; c < m->n_cells; c++) t->cell_tie[c] = -1;
+  for (int c = 0; c < m->n_cells; c++) t->cell_tie[c] = t->cell_tie_region[c] = -1;
   t->n_ties = 0;
   if (volume)
     for (int r = 0; r < n_regions; r++) volume[r] = 0.0;
@@ -490,6 +492,7 @@ int nh_tissue_set_ties(nh_tissue *t, int n_regions, const nh_region *regions, co
         entry = t->n_ties++;
         memset(t->tie + 64 * entry, 0, 64 * sizeof(double));
         t->cell_tie[c] = entry;
+        t->cell_tie_region[c] = r;
       }
       for (int i = 0; i < 64; i++) t->tie[64 * entry + i] += k[r] * T[i];
     }

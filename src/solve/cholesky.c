@@ -54,7 +54,7 @@ int nh_system_factor(nh_system *s) {
     const int k = (int)s->L->minor, *perm = s->L->Perm;
     const int col = perm && k < s->n_free ? perm[k] : k;
     char where[1536] = "";
-    nh_system_diagnose(s, s->u_assembled, col < s->n_free ? s->dof_of[col] : -1, NULL, where,
+    nh_system_diagnose(s, s->u_assembled, col < s->n_free ? s->dof_of[col] : -1, NULL, NULL, where,
                        sizeof where);
     return NH_ERROR(NH_ERR_NUMERIC,
                     "the system matrix is not positive definite (CHOLMOD stopped at column %d "

@@ -22,9 +22,10 @@
  *   (a tie region small for its load, or a support on one side only).
  * - The cells around the node the failure points at (the factorisation's
  *   column, or the largest residual entry): each leaf with that corner, its
- *   tissue fraction (the cut-cell data's, else the fill fraction), whether
- *   a fixed region ties it, and whether it is inverted (det J ≤ 0 at a
- *   corner of the deformed cell, the check of sim/guard.c).
+ *   tissue fraction (the cut-cell data's, else the fill fraction), which
+ *   fixed region ties it, and whether it is inverted (det J ≤ 0 at a
+ *   corner of the deformed cell, the check of sim/guard.c); with the
+ *   step's constraint rows, those at the node (skull, each tool).
  * - The smallest tissue fraction of all leaves, and its cell.
  *
  * The likely cause is the first that applies of: a rigid mode not held; a
@@ -64,9 +65,67 @@ static double nh_diag_fraction(const nh_system *s, int c) {
   return cut ? cut->fraction : s->tissue->mesh->fill[c];
 }
 
+/* The fixed region (tissue.fixed index) that ties cell c, or -1. */
 static int nh_diag_tied(const nh_system *s, int c) {
   const nh_tissue *t = s->tissue;
-  return t->cell_tie && c < t->cap_cell_tie && t->cell_tie[c] >= 0;
+  return t->cell_tie && c < t->cap_cell_tie && t->cell_tie[c] >= 0 ? t->cell_tie_region[c] : -1;
+}
+
+/* The fixed regions that tie cells, each with its count of leaves:
+ * " (tissue.fixed[0] ties 1 leaf, [2] 14)"; nothing without ties. */
+static void nh_diag_ties(const nh_system *s, char *buf, size_t size) {
+  enum { REGIONS = 16 };
+  const nh_mesh *m = s->tissue->mesh;
+  int count[REGIONS] = {0}, any = 0, more = 0;
+  for (int l = 0; l < m->n_leaves; l++) {
+    const int r = nh_diag_tied(s, m->leaves[l]);
+    if (r >= 0 && r < REGIONS) count[r]++, any = 1;
+    more |= r >= REGIONS;
+  }
+  if (!any) return;
+  nh_diag_add(buf, size, "; the fixed regions tie");
+  for (int r = 0, first = 1; r < REGIONS; r++)
+    if (count[r])
+      nh_diag_add(buf, size, "%s tissue.fixed[%d]: %d leaf cell%s", first ? "" : ",", r, count[r],
+                  count[r] == 1 ? "" : "s"),
+          first = 0;
+  if (more) nh_diag_add(buf, size, ", and further regions");
+}
+
+/* The constraint rows whose tissue part has `node`: how many, how many of
+ * them press or stick (λ ≠ 0 in the last solve), of the skull (no tool
+ * part) and of each tool. */
+static void nh_diag_rows(const nh_rows *rows, int node, char *buf, size_t size) {
+  enum { TOOLS = 8 };
+  if (!rows) return;
+  int skull = 0, skull_on = 0, tool[TOOLS] = {0}, tool_on[TOOLS] = {0}, other = 0;
+  for (int i = 0; i < rows->m; i++) {
+    int has = 0;
+    for (int k = rows->start[i]; k < rows->start[i + 1] && !has; k++)
+      has = rows->node[k] == node && rows->N[k] != 0.0;
+    if (!has) continue;
+    const int on = rows->lambda[i] != 0.0, k = rows->tool[i];
+    if (k < 0)
+      skull++, skull_on += on;
+    else if (k < TOOLS)
+      tool[k]++, tool_on[k] += on;
+    else
+      other++;
+  }
+  nh_diag_add(buf, size, "; constraint rows at that node:");
+  if (skull + other == 0) {
+    int any = 0;
+    for (int k = 0; k < TOOLS; k++) any |= tool[k];
+    if (!any) {
+      nh_diag_add(buf, size, " none (%d in all)", rows->m);
+      return;
+    }
+  }
+  if (skull) nh_diag_add(buf, size, " %d of the skull (%d pressing)", skull, skull_on);
+  for (int k = 0; k < TOOLS; k++)
+    if (tool[k]) nh_diag_add(buf, size, " %d of tool %d (%d with a force)", tool[k], k, tool_on[k]);
+  if (other) nh_diag_add(buf, size, " %d of further tools", other);
+  nh_diag_add(buf, size, " (%d rows in all)", rows->m);
 }
 
 /* det J of the deformed cell c at its 8 corners: 1 if one is <= 0. */
@@ -149,7 +208,7 @@ nh_rigid nh_system_rigid(nh_system *s, const double *u, const double *b) {
 }
 
 nh_cause nh_system_diagnose(nh_system *s, const double *u, int dof, const nh_rigid *rigid,
-                            char *buf, size_t size) {
+                            const nh_rows *rows, char *buf, size_t size) {
   const nh_mesh *m = s->tissue->mesh;
   static const char *const mode_name[6] = {"translation along x", "translation along y",
                                            "translation along z", "rotation about x",
@@ -177,12 +236,14 @@ nh_cause nh_system_diagnose(nh_system *s, const double *u, int dof, const nh_rig
   if (n_around > 0) {
     nh_diag_add(buf, size, "; cells around it (tissue fraction):");
     for (int k = 0; k < n_around && k < NH_DIAG_CELLS; k++) {
-      const int c = around[k];
-      nh_diag_add(buf, size, " %d (%.3g%s%s)", c, nh_diag_fraction(s, c),
-                  nh_diag_tied(s, c) ? ", tied by a fixed region" : "",
+      const int c = around[k], region = nh_diag_tied(s, c);
+      char tied[64] = "";
+      if (region >= 0) snprintf(tied, sizeof tied, ", tied by tissue.fixed[%d]", region);
+      nh_diag_add(buf, size, " %d (%.3g%s%s)", c, nh_diag_fraction(s, c), tied,
                   nh_diag_inverted(s, u, c) ? ", inverted" : "");
     }
   }
+  if (node >= 0) nh_diag_rows(rows, node, buf, size);
   if (small_cell >= 0 && small < 1.0)
     nh_diag_add(buf, size, "; the smallest tissue fraction is %.3g (cell %d)", small, small_cell);
   const nh_rigid rg = rigid ? *rigid : nh_system_rigid(s, u, NULL);
@@ -206,6 +267,7 @@ nh_cause nh_system_diagnose(nh_system *s, const double *u, int dof, const nh_rig
                 "support far softer than the tissue (a fixed region small for its load: make "
                 "it larger, or add one)",
                 mode_name[rg.mode]);
+    nh_diag_ties(s, buf, size);
     return NH_CAUSE_WEAK;
   }
   if (rg.turn_mode >= 0 && rg.turn > NH_DIAG_TURN) {
@@ -215,6 +277,7 @@ nh_cause nh_system_diagnose(nh_system *s, const double *u, int dof, const nh_rig
                 "step turns the body by that angle (a fixed region small for its load: make it "
                 "larger, or add one)",
                 mode_name[rg.turn_mode], rg.turn);
+    nh_diag_ties(s, buf, size);
     return NH_CAUSE_WEAK;
   }
   if (inverted) {
@@ -233,4 +296,14 @@ nh_cause nh_system_diagnose(nh_system *s, const double *u, int dof, const nh_rig
   nh_diag_add(buf, size,
               ". No likely cause found among the rigid modes, inverted cells and cut cells");
   return NH_CAUSE_NONE;
+}
+
+void nh_system_where(nh_system *s, const double *u, const double *f, const nh_rows *rows, char *msg,
+                     size_t size) {
+  const int n = 3 * s->tissue->mesh->n_nodes;
+  int worst = -1;
+  for (int i = 0; i < n; i++)
+    if (worst < 0 || fabs(f[i]) > fabs(f[worst])) worst = i;
+  nh_diag_add(msg, size, "; its largest entry, %.3g, is", worst >= 0 ? fabs(f[worst]) : 0.0);
+  nh_system_diagnose(s, u, worst, NULL, rows, msg, size);
 }

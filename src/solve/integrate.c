@@ -54,7 +54,8 @@ int nh_step_dynamic(nh_system *s, const nh_integrator *in, const double *f_ext, 
  * (sim.c). Without a cause the iteration goes on: a large load's Newton
  * can stall that long and converge (the cantilever of
  * cases/cantilever.yaml at 0.2 N: 1, 1, 0.998, 0.553, then 0.072 and 1e-13
- * at the 9th iteration). */
+ * at the 9th iteration), until the long rule (NH_NEWTON_STALL_LONG,
+ * nh_newton_stalled) ends it. */
 #define NH_NEWTON_STALL_ITERATIONS 3
 #define NH_NEWTON_STALL            0.5
 
@@ -68,7 +69,15 @@ static nh_cause nh_static_where(nh_system *s, const double *u, const double *b,
   size_t len = strlen(msg);
   snprintf(msg + len, size - len, "; the largest residual, %.3g N, is",
            s->n_free > 0 ? fabs(b[worst]) : 0.0);
-  return nh_system_diagnose(s, u, s->n_free > 0 ? s->dof_of[worst] : -1, start, msg, size);
+  return nh_system_diagnose(s, u, s->n_free > 0 ? s->dof_of[worst] : -1, start, NULL, msg, size);
+}
+
+int nh_newton_stalled(nh_newton_watch *w, int it, double rel) {
+  if (it == 0 || rel < w->best) {
+    w->best = rel, w->best_it = it;
+    return 0;
+  }
+  return it - w->best_it >= NH_NEWTON_STALL_LONG;
 }
 
 /* The no-progress rule at iteration `it` (rel[0..it]: the residuals so far):
@@ -147,6 +156,7 @@ int nh_solve_static(nh_system *s, const nh_integrator *in, const double *f_ext, 
   double t_sol = 0.0, rel = INFINITY, history[NH_NEWTON_STALL_ITERATIONS + 1];
   nh_step_stats st = {0};
   nh_rigid start = {.mode = -1};
+  nh_newton_watch watch = {0};
   if (stats) stats->diagnosed = 0;
   int it, rc = NH_OK, lu_steps = 0;
   nh_step_begin(s, in);
@@ -173,6 +183,16 @@ int nh_solve_static(nh_system *s, const nh_integrator *in, const double *f_ext, 
     if (it == NH_NEWTON_STALL_ITERATIONS &&
         (rc = nh_static_progress(s, u, b, history, it, &start, stats)))
       break;
+    if (nh_newton_stalled(&watch, it, rel)) {
+      char msg[1536];
+      snprintf(msg, sizeof msg,
+               "static Newton makes no progress: relative residual %.3g at iteration %d, none of "
+               "the last %d below %.3g (iteration %d)",
+               rel, it, NH_NEWTON_STALL_LONG, watch.best, watch.best_it);
+      nh_static_where(s, u, b, &start, msg, sizeof msg);
+      rc = NH_ERROR(NH_ERR_NUMERIC, "%s", msg);
+      break;
+    }
     if (it == in->max_iterations) break;
     double t2 = nh_time_now(), tf0 = st.t_factor;
     lu_steps += s->consistent && s->skew;

@@ -160,12 +160,14 @@ typedef enum {
 } nh_cause;
 /* Append to the message in buf (size bytes in all) where a failure sits:
  * " at node N, c, rest position (...)" for the nodal DOF `dof` (-1: none),
- * the cells around it (tissue fraction, tied, inverted at displacements
- * u), the smallest tissue fraction, the softest rigid mode (rigid: as
- * measured at the step's start, NULL: of the assembled A now) and the
- * likely cause, which it returns. Uses the PCG work vectors 0 and 1. */
+ * the cells around it (tissue fraction, the fixed region tying it,
+ * inverted at displacements u), the step's constraint rows at the node
+ * (rows may be NULL: not named), the smallest tissue fraction, the softest
+ * rigid mode (rigid: as measured at the step's start, NULL: of the
+ * assembled A now) and the likely cause, which it returns. Uses the PCG
+ * work vectors 0 and 1. */
 nh_cause nh_system_diagnose(nh_system *s, const double *u, int dof, const nh_rigid *rigid,
-                            char *buf, size_t size);
+                            const nh_rows *rows, char *buf, size_t size);
 
 /* ---- the preconditioner across a mesh change (inherit.c) ---- */
 typedef struct nh_inherited nh_inherited;
