@@ -37,7 +37,13 @@
  *     to 5 % (the bound of the region's own lattice, as for the h/4 ball),
  *     and the reaction is the weight to 1e-8 on every grid.
  *  5. Mass: Σ m_a = ρ × the quadrature's volume of the ball, which is
- *     within the reconstruction bound of 4πR³/3 (order 2, test_cutcell). */
+ *     within the reconstruction bound of 4πR³/3 (order 2, test_cutcell).
+ *  6. The ball's patch test (1's bounds, net force and torque, volume
+ *     within the reconstruction bound below 4πR³/3) on 9×10×11 and
+ *     13×12×14 cells over boxes padded unequally on every side, where its
+ *     centre sits at neither a node nor a cell centre (asserted: at least
+ *     0.05 cells from both on every axis); in 1 the grid spans the shape's
+ *     bounding box, so its centre is a node or a cell centre per axis. */
 #include "check.h"
 #include "fem/fem.h"
 #include "mesh/mesh.h"
@@ -422,6 +428,39 @@ int main(int argc, char **argv) {
             order);
       if (verbose) printf("%s: volume order %.2f over the six grids\n", names[di], order);
     }
+  }
+  /* the ball on grids over boxes larger than its own, padded unequally, so
+   * that its centre sits at no node and no cell centre on any axis */
+  const double pad_lo[2][3] = {{0.0041, 0.0017, 0.0063}, {0.0125, 0.0029, 0.0011}},
+               pad_hi[2][3] = {{0.0012, 0.0058, 0.0027}, {0.0031, 0.0077, 0.0049}};
+  const int pad_grid[2][3] = {{9, 10, 11}, {13, 12, 14}};
+  for (int q = 0; q < 2 * !anatomy; q++) {
+    nh_domain padded = ball;
+    padded.cut_cells = NH_CUT_CELLS_INTEGRATED;
+    double frac[3];
+    for (int k = 0; k < 3; k++) {
+      padded.min[k] -= pad_lo[q][k], padded.max[k] += pad_hi[q][k];
+      const double h = (padded.max[k] - padded.min[k]) / pad_grid[q][k],
+                   x = (c0[k] - padded.min[k]) / h;
+      frac[k] = x - floor(x);
+      CHECK(fabs(frac[k]) > 0.05 && fabs(frac[k] - 0.5) > 0.05 && fabs(frac[k] - 1) > 0.05,
+            "padded grid %d: the centre is within 0.05 cells of a node or a cell centre on axis %d",
+            q, k);
+    }
+    const double alpha[2] = {0.0, 0.0}, p[2] = {1e-10, 1e-6};
+    double r[2] = {0, 0}, F, T, V;
+    patch(&padded, pad_grid[q], 2, alpha, p, r, &F, &T, &V);
+    const double Vb = exact[0], s = (padded.max[0] - padded.min[0]) / pad_grid[q][0] / 4;
+    CHECK(r[0] <= 1e-11 && r[1] <= 1e-9, "ball, padded grid %d: patch test residual %g, %g", q,
+          r[0], r[1]);
+    CHECK(F <= 1e-12 && T <= 1e-12, "ball, padded grid %d: net force %g torque %g", q, F, T);
+    CHECK(V <= Vb && Vb - V <= 4 * M_PI * 0.03 * 0.03 * 1.5 * s * s / (0.03 - sqrt(3) * s),
+          "ball, padded grid %d: volume %.6e against %.6e", q, V, Vb);
+    if (verbose)
+      printf("ball, padded %dx%dx%d (centre at cell fractions %.2f, %.2f, %.2f): residual α=0 "
+             "%.2e (p 1e-10), %.2e (p 1e-6); net force %.1e torque %.1e; volume error %.2e\n",
+             pad_grid[q][0], pad_grid[q][1], pad_grid[q][2], frac[0], frac[1], frac[2], r[0], r[1],
+             F, T, V / Vb - 1);
   }
   const int tg[4] = {4, 5, 7, 9}, n_tg = anatomy ? 0 : 4;
   for (int i = 0; i < n_tg; i++) tie_test(tg[i], 0.0);
