@@ -71,8 +71,9 @@ static int nh_diag_tied(const nh_system *s, int c) {
   return t->cell_tie && c < t->cap_cell_tie && t->cell_tie[c] >= 0 ? t->cell_tie_region[c] : -1;
 }
 
-/* The fixed regions that tie cells, each with its count of leaves:
- * " (tissue.fixed[0] ties 1 leaf, [2] 14)"; nothing without ties. */
+/* The fixed regions that tie cells, each with its count of leaves: "; the
+ * fixed regions tie tissue.fixed[0]: 1 leaf cell, tissue.fixed[2]: 14 leaf
+ * cells"; nothing without ties. */
 static void nh_diag_ties(const nh_system *s, char *buf, size_t size) {
   enum { REGIONS = 16 };
   const nh_mesh *m = s->tissue->mesh;
@@ -84,11 +85,12 @@ static void nh_diag_ties(const nh_system *s, char *buf, size_t size) {
   }
   if (!any) return;
   nh_diag_add(buf, size, "; the fixed regions tie");
-  for (int r = 0, first = 1; r < REGIONS; r++)
-    if (count[r])
-      nh_diag_add(buf, size, "%s tissue.fixed[%d]: %d leaf cell%s", first ? "" : ",", r, count[r],
-                  count[r] == 1 ? "" : "s"),
-          first = 0;
+  for (int r = 0, first = 1; r < REGIONS; r++) {
+    if (!count[r]) continue;
+    nh_diag_add(buf, size, "%s tissue.fixed[%d]: %d leaf cell%s", first ? "" : ",", r, count[r],
+                count[r] == 1 ? "" : "s");
+    first = 0;
+  }
   if (more) nh_diag_add(buf, size, ", and further regions");
 }
 
