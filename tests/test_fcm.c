@@ -268,21 +268,40 @@ static int cholesky(double *A, int n) {
   return 0;
 }
 
+/* The ball of radius 30 mm at (1.3, −2.1, 0.7) mm, integrated cut cells, on
+ * g³ cells over its bounding box, with the tissue (E 3 kPa, ν 0.45, ρ 1000,
+ * B-bar) when t is not NULL. */
+static const double ball_c0[3] = {0.0013, -0.0021, 0.0007}, ball_R = 0.03;
+
+static void ball_on_grid(int g, nh_mesh **m, nh_tissue **t) {
+  nh_domain d;
+  nh_domain_sphere(ball_c0, ball_R, &d);
+  d.cut_cells = NH_CUT_CELLS_INTEGRATED;
+  const int grid[3] = {g, g, g};
+  CHECK_OK(nh_mesh_create(&d, grid, m));
+  nh_material mat = {3000.0, 0.45, 1000.0, NH_FORMULATION_BBAR};
+  if (t) CHECK_OK(nh_tissue_create(*m, &mat, t));
+}
+
+/* The sphere region of radius a centred on the ball's top. */
+static nh_region top_cap(double a) {
+  nh_region r;
+  memset(&r, 0, sizeof r);
+  r.kind = NH_REGION_SPHERE;
+  for (int k = 0; k < 3; k++) r.center[k] = ball_c0[k] + (k == 2 ? ball_R : 0.0);
+  r.radius = a;
+  return r;
+}
+
 /* The ball of radius R at c0 on g³ cells, tied by a sphere region and
  * loaded by gravity. radius > 0: the region's radius (fixed), centred on
  * the ball's surface along a skew direction, its tied volume against the
  * lens; radius 0: a quarter of a cell, 0.31 h above c0, against 4πr³/3. */
 static void tie_test(int g, double radius) {
-  const double c0[3] = {0.0013, -0.0021, 0.0007}, R = 0.03;
-  nh_domain d;
-  nh_domain_sphere(c0, R, &d);
-  d.cut_cells = NH_CUT_CELLS_INTEGRATED;
+  const double *c0 = ball_c0, R = ball_R;
   nh_mesh *m = NULL;
   nh_tissue *t = NULL;
-  const int grid[3] = {g, g, g};
-  CHECK_OK(nh_mesh_create(&d, grid, &m));
-  nh_material mat = {3000.0, 0.45, 1000.0, NH_FORMULATION_BBAR};
-  CHECK_OK(nh_tissue_create(m, &mat, &t));
+  ball_on_grid(g, &m, &t);
   const double h = 2.0 * R / g;
   nh_region r;
   memset(&r, 0, sizeof r);
@@ -363,22 +382,11 @@ static void tie_test(int g, double radius) {
  * gravity, solved linearly (CHOLMOD) on g³ cells: the mass-weighted mean
  * displacement (its centre of mass's, m) in com[3], the tied volume. */
 static void tie_hang(int g, double a, double com[3], double *tied) {
-  const double c0[3] = {0.0013, -0.0021, 0.0007}, R = 0.03, n[3] = {0.0, 0.0, 1.0};
-  nh_domain d;
-  nh_domain_sphere(c0, R, &d);
-  d.cut_cells = NH_CUT_CELLS_INTEGRATED;
   nh_mesh *m = NULL;
   nh_tissue *t = NULL;
-  const int grid[3] = {g, g, g};
-  CHECK_OK(nh_mesh_create(&d, grid, &m));
-  nh_material mat = {3000.0, 0.45, 1000.0, NH_FORMULATION_BBAR};
-  CHECK_OK(nh_tissue_create(m, &mat, &t));
-  nh_region r;
-  memset(&r, 0, sizeof r);
-  r.kind = NH_REGION_SPHERE;
-  for (int k = 0; k < 3; k++) r.center[k] = c0[k] + R * n[k];
-  r.radius = a;
-  const double kt = 1e3 * mat.young / (4 * a * a); /* docs/scene.md's tie stiffness */
+  ball_on_grid(g, &m, &t);
+  nh_region r = top_cap(a);
+  const double kt = 1e3 * 3000.0 / (4 * a * a); /* docs/scene.md's tie stiffness, E = 3 kPa */
   CHECK_OK(nh_tissue_set_ties(t, 1, &r, &kt, tied));
   unsigned char *fixed = calloc(m->n_nodes, 1);
   nh_system *sys = NULL;
@@ -407,17 +415,11 @@ static void tie_hang(int g, double a, double com[3], double *tied) {
  * the closed-form cap above it, π (R − d)² (2R + d) / 3. Returns the
  * relative error. */
 static double drained_error(int g) {
-  const double c0[3] = {0.0013, -0.0021, 0.0007}, R = 0.03, rho = 1000.0, d = 0.0117;
+  const double *c0 = ball_c0, R = ball_R, rho = 1000.0, d = 0.0117;
   const double up[3] = {0.28, -0.36, 0.8899438}; /* unit */
-  nh_domain dom;
-  nh_domain_sphere(c0, R, &dom);
-  dom.cut_cells = NH_CUT_CELLS_INTEGRATED;
   nh_mesh *m = NULL;
   nh_tissue *t = NULL;
-  const int grid[3] = {g, g, g};
-  CHECK_OK(nh_mesh_create(&dom, grid, &m));
-  nh_material mat = {3000.0, 0.45, rho, NH_FORMULATION_BBAR};
-  CHECK_OK(nh_tissue_create(m, &mat, &t));
+  ball_on_grid(g, &m, &t);
   double plane[6];
   for (int k = 0; k < 3; k++) plane[k] = c0[k] + d * up[k], plane[3 + k] = up[k];
   double drained = 0.0, mc[8];
@@ -459,18 +461,9 @@ static void test_drained(void) {
 
 /* The volume the cap of radius a on the ball's top ties, on g³ cells. */
 static double tie_volume(int g, double a) {
-  const double c0[3] = {0.0013, -0.0021, 0.0007}, R = 0.03;
-  nh_domain d;
-  nh_domain_sphere(c0, R, &d);
-  d.cut_cells = NH_CUT_CELLS_INTEGRATED;
   nh_mesh *m = NULL;
-  const int grid[3] = {g, g, g};
-  CHECK_OK(nh_mesh_create(&d, grid, &m));
-  nh_region r;
-  memset(&r, 0, sizeof r);
-  r.kind = NH_REGION_SPHERE;
-  for (int k = 0; k < 3; k++) r.center[k] = c0[k] + (k == 2 ? R : 0.0);
-  r.radius = a;
+  ball_on_grid(g, &m, NULL);
+  const nh_region r = top_cap(a);
   double vol = 0.0, T[64], v;
   for (int l = 0; l < m->n_leaves; l++) {
     CHECK_OK(nh_mesh_region_tie(m, m->leaves[l], &r, T, &v));
