@@ -77,4 +77,15 @@ __attribute__((unused)) static double nh_rand(void) {
   return 2.0 * (double)(nh_test_rng >> 11) / 9007199254740992.0 - 1.0;
 }
 
+/* The observed order of convergence: the least-squares slope of log |e|
+ * against log h over n grids. */
+__attribute__((unused)) static double nh_test_order(const double *h, const double *e, int n) {
+  double sx = 0, sy = 0, sxx = 0, sxy = 0;
+  for (int i = 0; i < n; i++) {
+    const double x = log(h[i]), y = log(fabs(e[i]));
+    sx += x, sy += y, sxx += x * x, sxy += x * y;
+  }
+  return (n * sxy - sx * sy) / (n * sxx - sx * sx);
+}
+
 #endif

@@ -138,31 +138,69 @@ dwr_dense_kkt(const nh_mesh *m, const nh_tissue *t, const unsigned char *fixed, 
   return A;
 }
 
-/* The constrained solution of K u + Jᵀλ = f, J u = −g on the active rows
- * (g the rows' gaps: each active row's c(u) = J u + g held at 0) by a dense
- * LU solve of dwr_dense_kkt: u[3 n_nodes] (0 at fixed DOFs), lambda[rows->m]
- * (may be NULL; 0 on inactive rows; the KKT multiplier, the force on the
- * tissue being −Jᵀλ). 0, or −1 (out of memory, or a singular matrix). */
+/* The LU factors of dwr_dense_kkt's matrix, kept for several right-hand
+ * sides; K: the matrix itself. */
+typedef struct {
+  int n, nf, N, *dof, *piv;
+  double *K, *LU;
+  const nh_rows *rows;
+  const unsigned char *active;
+} dwr_dense;
+
+__attribute__((unused)) static void dwr_dense_free(dwr_dense *d) {
+  free(d->dof), free(d->piv), free(d->K), free(d->LU);
+  memset(d, 0, sizeof *d);
+}
+
+/* Factorise [K Jᵀ; J 0] of the rows with active[i] != 0 (rows and active
+ * are kept, not copied). 0, or −1 (out of memory, or a singular matrix). */
+__attribute__((unused)) static int dwr_dense_factor(const nh_mesh *m, const nh_tissue *t,
+                                                    const unsigned char *fixed, const nh_rows *rows,
+                                                    const unsigned char *active, dwr_dense *d) {
+  memset(d, 0, sizeof *d);
+  d->n = 3 * m->n_nodes, d->rows = rows, d->active = active;
+  d->dof = malloc(sizeof(int) * d->n);
+  d->K = d->dof ? dwr_dense_kkt(m, t, fixed, rows, active, d->dof, &d->nf, &d->N) : NULL;
+  d->LU = d->K ? malloc(sizeof(double) * (size_t)d->N * d->N) : NULL;
+  d->piv = d->LU ? malloc(sizeof(int) * d->N) : NULL;
+  if (!d->piv) return dwr_dense_free(d), -1;
+  memcpy(d->LU, d->K, sizeof(double) * (size_t)d->N * d->N);
+  if (LAPACKE_dgetrf(LAPACK_COL_MAJOR, d->N, d->N, d->LU, d->N, d->piv) != 0)
+    return dwr_dense_free(d), -1;
+  return 0;
+}
+
+/* The solution of K u + Jᵀλ = f, J u = −g on the active rows (g the rows'
+ * gaps: each active row's c(u) = J u + g held at 0): u[3 n_nodes] (0 at
+ * fixed DOFs), lambda[rows->m] (may be NULL; 0 on inactive rows; the KKT
+ * multiplier, the force on the tissue being −Jᵀλ). 0, or −1. */
+__attribute__((unused)) static int dwr_dense_apply(const dwr_dense *d, const double *f, double *u,
+                                                   double *lambda) {
+  double *b = calloc(d->N, sizeof(double));
+  if (!b) return -1;
+  for (int i = 0; i < d->n; i++)
+    if (d->dof[i] >= 0) b[d->dof[i]] = f[i];
+  for (int i = 0, row = d->nf; i < d->rows->m; i++)
+    if (d->active[i]) b[row++] = -d->rows->gap[i];
+  const int rc = LAPACKE_dgetrs(LAPACK_COL_MAJOR, 'N', d->N, 1, d->LU, d->N, d->piv, b, d->N);
+  if (rc == 0) {
+    for (int i = 0; i < d->n; i++) u[i] = d->dof[i] >= 0 ? b[d->dof[i]] : 0.0;
+    for (int i = 0, row = d->nf; i < d->rows->m && lambda; i++)
+      lambda[i] = d->active[i] ? b[row++] : 0.0;
+  }
+  free(b);
+  return rc ? -1 : 0;
+}
+
+/* dwr_dense_apply with a factorisation of its own. */
 __attribute__((unused)) static int dwr_dense_solve(const nh_mesh *m, const nh_tissue *t,
                                                    const unsigned char *fixed, const double *f,
                                                    const nh_rows *rows, const unsigned char *active,
                                                    double *u, double *lambda) {
-  int n = 3 * m->n_nodes, *dof = malloc(sizeof(int) * n), nf, N, rc = -1;
-  double *A = dof ? dwr_dense_kkt(m, t, fixed, rows, active, dof, &nf, &N) : NULL;
-  double *b = A ? calloc(N, sizeof(double)) : NULL;
-  int *piv = b ? malloc(sizeof(int) * N) : NULL;
-  if (piv) {
-    for (int i = 0; i < n; i++)
-      if (dof[i] >= 0) b[dof[i]] = f[i];
-    for (int i = 0, row = nf; i < rows->m; i++)
-      if (active[i]) b[row++] = -rows->gap[i];
-    if (LAPACKE_dgesv(LAPACK_COL_MAJOR, N, 1, A, N, piv, b, N) == 0) {
-      for (int i = 0; i < n; i++) u[i] = dof[i] >= 0 ? b[dof[i]] : 0.0;
-      for (int i = 0, row = nf; i < rows->m && lambda; i++) lambda[i] = active[i] ? b[row++] : 0.0;
-      rc = 0;
-    }
-  }
-  free(dof), free(A), free(b), free(piv);
+  dwr_dense d;
+  if (dwr_dense_factor(m, t, fixed, rows, active, &d)) return -1;
+  const int rc = dwr_dense_apply(&d, f, u, lambda);
+  dwr_dense_free(&d);
   return rc;
 }
 

@@ -80,16 +80,6 @@ static double phys_central(const phys *P, const double c[3], int k, int l) {
   return P->xx[k][l] - c[k] * P->x[l] - c[l] * P->x[k] + c[k] * c[l] * P->v;
 }
 
-/* Least-squares slope of log e against log h (the observed order). */
-static double order_fit(const double *h, const double *e, int n) {
-  double sx = 0, sy = 0, sxx = 0, sxy = 0;
-  for (int i = 0; i < n; i++) {
-    double x = log(h[i]), y = log(fabs(e[i]));
-    sx += x, sy += y, sxx += x * x, sxy += x * y;
-  }
-  return (n * sxy - sx * sy) / (n * sxx - sx * sx);
-}
-
 /* Cell (i, j, k) of the n-grid over [lo, hi]. */
 static void grid_cell(const double lo[3], const double hi[3], const int n[3], const int ijk[3],
                       double a[3], double b[3]) {
@@ -390,7 +380,7 @@ static void test_quadrics(void) {
   for (int shape = 0; shape < 2; shape++)
     for (int q = 0; q < 6; q++) {
       if (q == 1 || q == 5) continue; /* zero by symmetry up to the lattice: printed only */
-      double p = order_fit(h, err[shape][q], N_GRIDS);
+      double p = nh_test_order(h, err[shape][q], N_GRIDS);
       CHECK(p >= 1.7 && p <= 2.5, "%s, %s: observed order %.3f, expected in [1.7, 2.5]",
             shape ? "ellipsoid" : "ball", what[q], p);
       if (verbose) {
@@ -416,7 +406,7 @@ static void test_quadrics(void) {
             shape ? "ellipsoid" : "ball", grid_sizes[g], err[shape][1][g], err[shape][5][g],
             err[shape][0][g]);
     }
-  double p = order_fit(h, area_err, N_GRIDS);
+  double p = nh_test_order(h, area_err, N_GRIDS);
   CHECK(p >= 1.7 && p <= 2.5, "ball area: observed order %.3f, expected in [1.7, 2.5]", p);
   if (verbose) printf("ball area: order %.3f\n", p);
 }
@@ -518,7 +508,7 @@ static void test_brain(void) {
   CHECK(p >= 1.7 && p <= 2.5, "brain: nested order %.3f, expected in [1.7, 2.5]", p);
   double err[NB];
   for (int g = 0; g < NB; g++) err[g] = V[g] - Vinf;
-  const double q = order_fit(h, err, NB);
+  const double q = nh_test_order(h, err, NB);
   CHECK(q >= 1.7 && q <= 2.5, "brain: order over the 7 grids %.3f, expected in [1.7, 2.5]", q);
   for (int g = 1; g < NB; g++)
     CHECK(fabs(err[g]) < fabs(err[g - 1]), "brain: error %.3g on grid %d not below %.3g", err[g], g,
@@ -548,7 +538,7 @@ static void test_brain(void) {
     const double zinf = com[6][2] + (com[6][2] - com[5][2]) / (pow(2.0, pz) - 1);
     double ez[NB];
     for (int g = 0; g < NB; g++) ez[g] = com[g][2] - zinf;
-    const double qz = order_fit(h, ez, NB);
+    const double qz = nh_test_order(h, ez, NB);
     CHECK(qz >= 1.5 && qz <= 2.5,
           "brain centre z: order over the 7 grids %.3f, expected in [1.5, 2.5]", qz);
     for (int g = 1; g < NB; g++)
@@ -724,7 +714,7 @@ static void test_image_and_surface(const char *dir) {
              n, 1e3 * s, Pb.v / V - 1, Pm.v / V - 1, Pm.v / Vmask - 1, Ps.v / V - 1,
              Ps.v / Vpoly - 1, bound / V);
   }
-  const double pm = order_fit(h, e_mask, NS), ps = order_fit(h, e_stl, NS);
+  const double pm = nh_test_order(h, e_mask, NS), ps = nh_test_order(h, e_stl, NS);
   CHECK(ps >= 1.7 && ps <= 2.5, "STL ball: observed order %.3f, expected in [1.7, 2.5]", ps);
   CHECK(pm >= 1.5 && pm <= 3.0, "mask ball: observed order %.3f, expected in [1.5, 3]", pm);
   if (verbose)

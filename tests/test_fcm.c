@@ -44,12 +44,6 @@
  *     centre sits at neither a node nor a cell centre (asserted: at least
  *     0.05 cells from both on every axis); in 1 the grid spans the shape's
  *     bounding box, so its centre is a node or a cell centre per axis.
- *  8. The drained mass (tissue.buoyancy.level; nh_tissue_corner_masses with
- *     a plane) of the ball above a tilted plane 11.7 mm from its centre, on
- *     6 grids from 5³ to 23³, against ρ × the cap's closed-form volume
- *     π (R − d)² (2R + d) / 3: below it and within the reconstruction's
- *     bound 2πR(R − d) · 1.5 s² / (R − √3 s) (the plane is exact), order in
- *     [1.5, 2.6] (measured −4.6e-3 … −2.2e-4, order 2.00).
  *  7. With the argument "tie-ladder" (test_fcm_tie, slow) instead: the ball
  *     hung by a cap of radius 8 mm centred on its top (the tie of
  *     docs/scene.md's stiffness, 10³ E / (2a)²; smaller than a cell up to
@@ -60,12 +54,21 @@
  *     increasing with order in [0.7, 1.5] and 32³ within 10 % of its
  *     extrapolation; no sideways motion (1e-9). Measured: order 1.10,
  *     extrapolated 12.69 mm, 32³ 5.8 % below it; the other nested triples
- *     0.68 … 1.47 (the tied volume moves by ±0.4 % between neighbouring
- *     grids as the cap falls differently on the lattice, and with it the
- *     sag by up to 1 %). The tied volume, the lens ball ∩ cap, against its
- *     closed form on 16³, 32³, 64³: negative (both reconstructions lie
- *     inside) and falling by at least 3 per halving (measured −8.5e-3,
- *     −2.1e-3, −5.3e-4: 4.0, 4.0). */
+ *     0.68 … 1.47 (the tied volume moves by up to ±0.4 % between
+ *     neighbouring grids, as follows, and with it the sag by up to 1 %). The tied volume, the lens
+ * ball ∩ cap, against its closed form on 16³, 32³, 64³: negative (both reconstructions lie inside)
+ * and falling by at least 3 per halving (measured −8.5e-3, −2.1e-3, −5.3e-4: 4.0, 4.0). Its error
+ * follows the cap's sub-box s (the smallest h/2^d ≤ a/8 with d ≥ 2), which is not monotone in h:
+ *     from 8³ to 32³ it is 0.96–1.26 % × (s/mm)² (s = 0.54 mm on 14³,
+ *     0.94 mm on 16³: 14³ ties −0.36 %, 16³ −0.85 %); on 4³–7³ the ball's
+ *     own reconstruction (h/4 = 2.1–3.75 mm) adds as much again; from 16³
+ *     on s = h/4.
+ *  8. The drained mass (tissue.buoyancy.level; nh_tissue_corner_masses with
+ *     a plane) of the ball above a tilted plane 11.7 mm from its centre, on
+ *     6 grids from 5³ to 23³, against ρ × the cap's closed-form volume
+ *     π (R − d)² (2R + d) / 3: below it and within the reconstruction's
+ *     bound 2πR(R − d) · 1.5 s² / (R − √3 s) (the plane is exact), order in
+ *     [1.5, 2.6] (measured −4.6e-3 … −2.2e-4, order 2.00). */
 #include "check.h"
 #include "fem/fem.h"
 #include "mesh/mesh.h"
@@ -271,7 +274,7 @@ static int cholesky(double *A, int n) {
 /* The ball of radius 30 mm at (1.3, −2.1, 0.7) mm, integrated cut cells, on
  * g³ cells over its bounding box, with the tissue (E 3 kPa, ν 0.45, ρ 1000,
  * B-bar) when t is not NULL. */
-static const double ball_c0[3] = {0.0013, -0.0021, 0.0007}, ball_R = 0.03;
+static const double ball_c0[3] = {0.0013, -0.0021, 0.0007}, ball_R = 0.03, ball_E = 3000.0;
 
 static void ball_on_grid(int g, nh_mesh **m, nh_tissue **t) {
   nh_domain d;
@@ -279,7 +282,7 @@ static void ball_on_grid(int g, nh_mesh **m, nh_tissue **t) {
   d.cut_cells = NH_CUT_CELLS_INTEGRATED;
   const int grid[3] = {g, g, g};
   CHECK_OK(nh_mesh_create(&d, grid, m));
-  nh_material mat = {3000.0, 0.45, 1000.0, NH_FORMULATION_BBAR};
+  nh_material mat = {ball_E, 0.45, 1000.0, NH_FORMULATION_BBAR};
   if (t) CHECK_OK(nh_tissue_create(*m, &mat, t));
 }
 
@@ -378,7 +381,7 @@ static void tie_test(int g, double radius) {
   nh_mesh_destroy(&m);
 }
 
-/* The ball hung by a cap (sphere region of radius a on its surface) under
+/* The ball hung by a cap (sphere region of radius a on its top) under
  * gravity, solved linearly (CHOLMOD) on g³ cells: the mass-weighted mean
  * displacement (its centre of mass's, m) in com[3], the tied volume. */
 static void tie_hang(int g, double a, double com[3], double *tied) {
@@ -386,7 +389,7 @@ static void tie_hang(int g, double a, double com[3], double *tied) {
   nh_tissue *t = NULL;
   ball_on_grid(g, &m, &t);
   nh_region r = top_cap(a);
-  const double kt = 1e3 * 3000.0 / (4 * a * a); /* docs/scene.md's tie stiffness, E = 3 kPa */
+  const double kt = 1e3 * ball_E / (4 * a * a); /* docs/scene.md's tie stiffness */
   CHECK_OK(nh_tissue_set_ties(t, 1, &r, &kt, tied));
   unsigned char *fixed = calloc(m->n_nodes, 1);
   nh_system *sys = NULL;
@@ -413,9 +416,12 @@ static void tie_hang(int g, double a, double com[3], double *tied) {
 /* 8. The drained mass: Σ of nh_tissue_corner_masses with the plane
  * through c0 + d·up (up tilted) over the ball on g³ cells, against ρ times
  * the closed-form cap above it, π (R − d)² (2R + d) / 3. Returns the
- * relative error. */
-static double drained_error(int g) {
-  const double *c0 = ball_c0, R = ball_R, rho = 1000.0, d = 0.0117;
+ * relative error; *bound: the reconstruction's, relative (the ball's
+ * reconstruction lies inside it, at most 1.5 s² / (R − √3 s) from it,
+ * test_cutcell, over the cap's spherical area 2πR(R − d); the plane is
+ * exact). */
+static double drained_error(int g, double *bound) {
+  const double *c0 = ball_c0, R = ball_R, rho = 1000.0, d = 0.0117, s = 2 * R / g / 4;
   const double up[3] = {0.28, -0.36, 0.8899438}; /* unit */
   nh_mesh *m = NULL;
   nh_tissue *t = NULL;
@@ -428,6 +434,7 @@ static double drained_error(int g) {
     for (int a = 0; a < 8; a++) drained += mc[a];
   }
   const double cap = M_PI * (R - d) * (R - d) * (2 * R + d) / 3.0;
+  *bound = 2 * M_PI * R * (R - d) * 1.5 * s * s / (R - sqrt(3) * s) / cap;
   nh_tissue_destroy(&t);
   nh_mesh_destroy(&m);
   return drained / (rho * cap) - 1.0;
@@ -438,23 +445,14 @@ static void test_drained(void) {
   const int grids[NG] = {5, 6, 8, 11, 16, 23};
   double h[NG], e[NG];
   for (int i = 0; i < NG; i++) {
-    e[i] = drained_error(grids[i]);
-    h[i] = 0.06 / grids[i];
-    /* the ball's reconstruction lies inside it, at most 1.5 s² / (R − √3 s)
-     * from it (test_cutcell), over the cap's spherical area 2πR(R − d); the
-     * plane is exact */
-    const double R = 0.03, d = 0.0117, s = h[i] / 4;
-    const double bound = 9 * R * s * s / ((R - sqrt(3) * s) * (R - d) * (2 * R + d));
+    double bound;
+    e[i] = drained_error(grids[i], &bound);
+    h[i] = 2 * ball_R / grids[i];
     CHECK(e[i] <= 0.0 && -e[i] <= bound, "drained mass on %d³: %+.3e of the cap's (bound %.2e)",
           grids[i], e[i], bound);
     if (verbose) printf("drained mass on %2d³: %+.3e of ρ × the cap's volume\n", grids[i], e[i]);
   }
-  double sx = 0, sy = 0, sxx = 0, sxy = 0;
-  for (int i = 0; i < NG; i++) {
-    const double x = log(h[i]), y = log(fabs(e[i]));
-    sx += x, sy += y, sxx += x * x, sxy += x * y;
-  }
-  const double order = (NG * sxy - sx * sy) / (NG * sxx - sx * sx);
+  const double order = nh_test_order(h, e, NG);
   CHECK(order >= 1.5 && order <= 2.6, "drained mass: order %.2f over the six grids", order);
   if (verbose) printf("drained mass: order %.2f\n", order);
 }
@@ -493,7 +491,7 @@ static void test_tie_ladder(void) {
   /* the tied volume (the lens ball ∩ cap) against its closed form on
    * nested grids: the reconstruction's O(s²) once s = h/4 is below the
    * cap's own lattice (radius / 8), from 16³ on */
-  const double Rb = 0.03, a = 0.008, lens = M_PI * a * a * (8 * a * Rb - 3 * a * a) / (12 * Rb);
+  const double Rb = ball_R, a = 0.008, lens = M_PI * a * a * (8 * a * Rb - 3 * a * a) / (12 * Rb);
   const int vg[3] = {16, 32, 64};
   double verr[3];
   for (int i = 0; i < 3; i++) {
@@ -563,9 +561,9 @@ int main(int argc, char **argv) {
     test_tie_ladder();
     return nh_test_failures ? 1 : 0;
   }
-  const double c0[3] = {0.0013, -0.0021, 0.0007};
+  const double *c0 = ball_c0;
   nh_domain ball, brain, stl, mask;
-  nh_domain_sphere(c0, 0.03, &ball);
+  nh_domain_sphere(c0, ball_R, &ball);
   const double bc[3] = {0, 0, 0}, bs[3] = {0.14, 0.17, 0.12};
   nh_domain_brain(bc, bs, &brain);
   /* argv: DIR (where the ellipsoid's files go) and "anatomy" for the STL and
@@ -577,7 +575,7 @@ int main(int argc, char **argv) {
   const nh_domain *doms[4] = {&ball, &brain, &stl, &mask};
   const char *names[4] = {"ball", "brain", "STL ellipsoid", "mask ellipsoid"};
   /* the volumes the quadrature converges to (0: none in closed form) */
-  const double exact[4] = {4.0 / 3.0 * M_PI * 0.03 * 0.03 * 0.03, 0.0, stl_volume, 0.0};
+  const double exact[4] = {4.0 / 3.0 * M_PI * ball_R * ball_R * ball_R, 0.0, stl_volume, 0.0};
   const int grids[6][3] = {{5, 5, 5}, {6, 6, 6}, {7, 6, 5}, {8, 8, 8}, {11, 10, 12}, {14, 14, 14}};
   for (int di = anatomy ? 2 : 0; di < (anatomy ? 4 : 2); di++) {
     ((nh_domain *)doms[di])->cut_cells = NH_CUT_CELLS_INTEGRATED;
@@ -610,12 +608,7 @@ int main(int argc, char **argv) {
       if (verbose) printf("\n");
     }
     if (exact[di] > 0.0) { /* the least-squares slope of log err against log h */
-      double sx = 0, sy = 0, sxx = 0, sxy = 0;
-      for (int gi = 0; gi < 6; gi++) {
-        double x = log(hs[gi]), y = log(err[gi]);
-        sx += x, sy += y, sxx += x * x, sxy += x * y;
-      }
-      double order = (6 * sxy - sx * sy) / (6 * sxx - sx * sx);
+      const double order = nh_test_order(hs, err, 6);
       CHECK(order >= 1.5, "%s: the quadrature's volume converges with order %.2f < 1.5", names[di],
             order);
       if (verbose) printf("%s: volume order %.2f over the six grids\n", names[di], order);
@@ -646,7 +639,7 @@ int main(int argc, char **argv) {
     CHECK(r[0] <= 1e-11 && r[1] <= 1e-9, "ball, padded grid %d: patch test residual %g, %g", q,
           r[0], r[1]);
     CHECK(F <= 1e-12 && T <= 1e-12, "ball, padded grid %d: net force %g torque %g", q, F, T);
-    CHECK(V <= Vb && Vb - V <= 4 * M_PI * 0.03 * 0.03 * 1.5 * s * s / (0.03 - sqrt(3) * s),
+    CHECK(V <= Vb && Vb - V <= 4 * M_PI * ball_R * ball_R * 1.5 * s * s / (ball_R - sqrt(3) * s),
           "ball, padded grid %d: volume %.6e against %.6e", q, V, Vb);
     if (verbose)
       printf("ball, padded %dx%dx%d (centre at cell fractions %.2f, %.2f, %.2f): residual α=0 "

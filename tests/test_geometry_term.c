@@ -317,13 +317,7 @@ static void test_ball_order(void) {
       printf("ball %2d³: Σ zᵀr %.4e, ΔV %.4e m³ (bound of V − V_d %.4e)\n", grids[i], G[i], dV,
              bound);
   }
-  /* least-squares slope of log |G| against log h */
-  double sx = 0, sy = 0, sxx = 0, sxy = 0;
-  for (int i = 0; i < NG; i++) {
-    double x = log(h[i]), y = log(fabs(G[i]));
-    sx += x, sy += y, sxx += x * x, sxy += x * y;
-  }
-  const double order = (NG * sxy - sx * sy) / (NG * sxx - sx * sx);
+  const double order = nh_test_order(h, G, NG); /* of |G| against h */
   CHECK(order >= 1.7 && order <= 2.5, "ball: observed order of the geometry term %.3f, expected 2",
         order);
   if (verbose) printf("ball: observed order %.3f\n", order);
@@ -459,48 +453,14 @@ static void geometry_residual_sum(const nh_mesh *m, const nh_tissue *t, const do
   }
 }
 
-/* The dense LU of K_d over the free DOFs (dwr_dense_kkt without rows). */
-typedef struct {
-  int n, nf, *dof, *piv;
-  double *K, *LU;
-} dense_lu;
-
-static void dense_lu_create(const nh_mesh *m, const nh_tissue *t, const unsigned char *fixed,
-                            dense_lu *d) {
-  nh_rows none = {0};
-  unsigned char dummy = 0;
-  int N = 0;
-  d->n = 3 * m->n_nodes;
-  d->dof = malloc(sizeof(int) * d->n);
-  d->K = dwr_dense_kkt(m, t, fixed, &none, &dummy, d->dof, &d->nf, &N);
-  d->LU = malloc(sizeof(double) * (size_t)N * N);
-  memcpy(d->LU, d->K, sizeof(double) * (size_t)N * N);
-  d->piv = malloc(sizeof(int) * N);
-  CHECK(LAPACKE_dgetrf(LAPACK_COL_MAJOR, N, N, d->LU, N, d->piv) == 0, "dense LU of K_d");
-}
-
-/* x = K_d⁻¹ b (full vectors; 0 at fixed DOFs); with K, y = K_d x too. */
-static void dense_lu_solve(const dense_lu *d, const double *b, double *x) {
-  double *v = malloc(sizeof(double) * d->nf);
-  for (int i = 0; i < d->n; i++)
-    if (d->dof[i] >= 0) v[d->dof[i]] = b[i];
-  CHECK(LAPACKE_dgetrs(LAPACK_COL_MAJOR, 'N', d->nf, 1, d->LU, d->nf, d->piv, v, d->nf) == 0,
-        "dense solve");
-  for (int i = 0; i < d->n; i++) x[i] = d->dof[i] >= 0 ? v[d->dof[i]] : 0.0;
-  free(v);
-}
-
-static void dense_lu_apply(const dense_lu *d, const double *x, double *y) {
+/* y = K_d x over the free DOFs (d: dwr_dense_factor without rows). */
+static void dense_product(const dwr_dense *d, const double *x, double *y) {
   for (int i = 0; i < d->n; i++) {
     y[i] = 0.0;
     if (d->dof[i] < 0) continue;
     for (int j = 0; j < d->n; j++)
       if (d->dof[j] >= 0) y[i] += d->K[(size_t)d->dof[j] * d->nf + d->dof[i]] * x[j];
   }
-}
-
-static void dense_lu_free(dense_lu *d) {
-  free(d->dof), free(d->piv), free(d->K), free(d->LU);
 }
 
 static void test_prediction(int g, double *worst) {
@@ -518,18 +478,19 @@ static void test_prediction(int g, double *worst) {
   double *j = calloc(3 * (size_t)n, sizeof(double)), *z = calloc(n, sizeof(double));
   for (int i = 0; i < m->n_nodes; i++)
     for (int k = 0; k < 3; k++) f[3 * i + k] = fixed[i] ? 0.0 : t->mass[i] * loads.body[k];
-  dense_lu lu;
-  dense_lu_create(m, t, fixed, &lu);
-  dense_lu_solve(&lu, f, ud);
+  const nh_rows none = {0};
+  dwr_dense lu;
+  CHECK(dwr_dense_factor(m, t, fixed, &none, NULL, &lu) == 0, "dense LU of K_d");
+  CHECK(dwr_dense_apply(&lu, f, ud, NULL) == 0, "dense solve");
   /* u_{d+1}: the fixed point of u ← u + K_d⁻¹ R_{d+1}(u) */
   memcpy(u, ud, sizeof(double) * n);
   double change = INFINITY, size = 0.0;
   int it = 0;
   for (; it < 40 && !(change <= 1e-10 * size); it++) {
     geometry_residual_sum(m, t, u, &loads, rr);
-    dense_lu_apply(&lu, u, Ku);
+    dense_product(&lu, u, Ku);
     for (int i = 0; i < n; i++) rr[i] += f[i] - Ku[i];
-    dense_lu_solve(&lu, rr, du);
+    CHECK(dwr_dense_apply(&lu, rr, du, NULL) == 0, "dense solve");
     change = size = 0.0;
     for (int i = 0; i < n; i++) u[i] += du[i], change += du[i] * du[i], size += u[i] * u[i];
     change = sqrt(change), size = sqrt(size);
@@ -549,7 +510,7 @@ static void test_prediction(int g, double *worst) {
   geometry_residual_sum(m, t, ud, &loads, rr);
   for (int k = 0; k < 3; k++) {
     CHECK_OK(nh_goal_functional(m, goal, radius, k, "goal", j + (size_t)n * k));
-    dense_lu_solve(&lu, j + (size_t)n * k, z);
+    CHECK(dwr_dense_apply(&lu, j + (size_t)n * k, z, NULL) == 0, "dense solve");
     const double pred = dwr_dot(n, z, rr);
     const double dJ = dwr_dot(n, j + (size_t)n * k, u) - dwr_dot(n, j + (size_t)n * k, ud);
     const double lin = fabs(dJ - pred) / fabs(dJ);
@@ -564,7 +525,7 @@ static void test_prediction(int g, double *worst) {
              g, k, dJ, 0.75 * G[k], 100 * lin, fabs(0.75 * G[k] - pred) / fabs(pred),
              fabs(dwr_dot(n, j + (size_t)n * k, ud)), it);
   }
-  dense_lu_free(&lu);
+  dwr_dense_free(&lu);
   free(fixed), free(f), free(ud), free(u), free(rr), free(Ku), free(du), free(j), free(z);
   free(zero);
   nh_system_destroy(&sys);
