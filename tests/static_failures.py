@@ -29,8 +29,9 @@ diagnosed"), instead of 30 iterations in up to 16 load steps.
 4. An inverted cell is not final: cases/dbs/dbs.yaml's brain (ties at the
    brainstem and the optic nerves) under its whole weight (buoyancy lost
    entirely) in one static step. The first linearised step from rest
-   inverts a cut cell at the brain's rim and the no-progress rule names
-   it; a load step too large is what load splitting exists for, so the step
+   folds cut cells at the brain's rim (in their fictitious parts: the
+   inversion test looks where the tissue is) and the iterations cycle at
+   1.2; a load step too large is what load splitting exists for, so the step
    must be solved again in smaller load steps (steps.csv: splits) and
    converge: exit 0, residual <= the tolerance 1e-8, splits >= 1.
 5. The long rule (NH_NEWTON_STALL_LONG, src/solve/solve.h): a Newton with

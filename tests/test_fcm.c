@@ -68,7 +68,12 @@
  *     6 grids from 5³ to 23³, against ρ × the cap's closed-form volume
  *     π (R − d)² (2R + d) / 3: below it and within the reconstruction's
  *     bound 2πR(R − d) · 1.5 s² / (R − √3 s) (the plane is exact), order in
- *     [1.5, 2.6] (measured −4.6e-3 … −2.2e-4, order 2.00). */
+ *     [1.5, 2.6] (measured −4.6e-3 … −2.2e-4, order 2.00).
+ *  9. Inversion where the tissue is (nh_tissue_cell_inverted), in every cut
+ *     cell and corner of the ball on 5³, 8³ and 11³ cells: a fold at a
+ *     corner in the tissue is reported, also where the centroid's det J
+ *     stays positive; a fold whose region holds no tissue is not, though
+ *     the whole cell's check reports it (closed form: test_inverted). */
 #include "check.h"
 #include "fem/fem.h"
 #include "mesh/mesh.h"
@@ -457,6 +462,85 @@ static void test_drained(void) {
   if (verbose) printf("drained mass: order %.2f\n", order);
 }
 
+/* Part 9: inversion is checked where the tissue is. In every cut cell of
+ * the ball on g³ cells, corner node a alone moves by s (X_o − X_a) (o the
+ * opposite corner): by the rank-one update of J, det J / det J₀ =
+ * 1 − s Σ_k Π_{j≠k} η_j, η_j = (1 + ξ_j ξ_{a,j}) / 2, which is negative at
+ * the corner (1 − 3s) and positive far from it. Expected: a corner in the
+ * tissue (level ≤ 0) makes the cell inverted; a corner outside whose
+ * inverted region holds no tissue (the level > 0 at every point of a 17³
+ * lattice of the cell where the closed form is ≤ 0) does not, though the
+ * whole cell's check (nh_hex_inverted) flags it. Counts: the tissue-corner
+ * cases where the centroid's det J stays positive (the cases a
+ * centroid-only check missed) and the folds confined to the fictitious
+ * part. */
+static void test_inverted(int g, int *missed, int *confined) {
+  const double s = 0.4;
+  nh_mesh *m = NULL;
+  nh_tissue *t = NULL;
+  ball_on_grid(g, &m, &t);
+  double *u = calloc(3 * (size_t)m->n_nodes, sizeof *u);
+  CHECK(u != NULL, "inversion test: out of memory");
+  for (int l = 0; l < m->n_leaves && u; l++) {
+    const int c = m->leaves[l];
+    const nh_tissue_cut *cut = nh_tissue_cell_cut(t, c);
+    if (!cut || !(cut->volume > 0.0)) continue;
+    double X[24];
+    nh_mesh_cell_coords(m, m->X, c, X);
+    for (int a = 0; a < 8; a++) {
+      const int node = m->cells[8 * c + a];
+      const double *xa = nh_hex_corner[a];
+      int o = 0; /* the opposite corner */
+      while (nh_hex_corner[o][0] != -xa[0] || nh_hex_corner[o][1] != -xa[1] ||
+             nh_hex_corner[o][2] != -xa[2])
+        o++;
+      /* the closed form's factor at ξ */
+      double ratio_c = 1.0;
+      {
+        double eta[3], sum = 0.0;
+        for (int j = 0; j < 3; j++) eta[j] = 0.5 * (1.0 + cut->xi[j] * xa[j]);
+        for (int k = 0; k < 3; k++) sum += eta[(k + 1) % 3] * eta[(k + 2) % 3];
+        ratio_c = 1.0 - s * sum;
+      }
+      int tissue_folds = 0;
+      for (int i = 0; i <= 16 && !tissue_folds; i++)
+        for (int j = 0; j <= 16 && !tissue_folds; j++)
+          for (int k = 0; k <= 16 && !tissue_folds; k++) {
+            const double xi[3] = {-1.0 + i / 8.0, -1.0 + j / 8.0, -1.0 + k / 8.0};
+            double eta[3], sum = 0.0, P[3] = {0, 0, 0}, N[8];
+            for (int q = 0; q < 3; q++) eta[q] = 0.5 * (1.0 + xi[q] * xa[q]);
+            for (int q = 0; q < 3; q++) sum += eta[(q + 1) % 3] * eta[(q + 2) % 3];
+            if (1.0 - s * sum > 0.0) continue;
+            nh_hex_shape(xi, N);
+            for (int b = 0; b < 8; b++)
+              for (int q = 0; q < 3; q++) P[q] += N[b] * X[3 * b + q];
+            tissue_folds = nh_domain_level(&m->domain, P) <= 0.0;
+          }
+      const int corner_in = nh_domain_level(&m->domain, X + 3 * a) <= 0.0;
+      for (int q = 0; q < 3; q++) u[3 * node + q] = s * (X[3 * o + q] - X[3 * a + q]);
+      double x[24];
+      for (int q = 0; q < 24; q++) x[q] = X[q];
+      for (int q = 0; q < 3; q++) x[3 * a + q] += u[3 * node + q];
+      const int flagged = nh_tissue_cell_inverted(t, c, u);
+      CHECK(nh_hex_inverted(x), "%d³ cell %d corner %d: the whole cell's check misses the fold", g,
+            c, a);
+      if (corner_in) {
+        CHECK(flagged, "%d³ cell %d: folded at its tissue corner %d, not reported inverted", g, c,
+              a);
+        *missed += ratio_c > 0.0;
+      } else if (!tissue_folds) {
+        CHECK(!flagged, "%d³ cell %d: folded at corner %d outside the tissue only, reported", g, c,
+              a);
+        (*confined)++;
+      }
+      for (int q = 0; q < 3; q++) u[3 * node + q] = 0.0;
+    }
+  }
+  free(u);
+  nh_tissue_destroy(&t);
+  nh_mesh_destroy(&m);
+}
+
 /* The volume the cap of radius a on the ball's top ties, on g³ cells. */
 static double tie_volume(int g, double a) {
   nh_mesh *m = NULL;
@@ -648,6 +732,18 @@ int main(int argc, char **argv) {
              F, T, V / Vb - 1);
   }
   if (!anatomy) test_drained();
+  const int ig[3] = {5, 8, 11};
+  for (int i = 0; i < 3 * !anatomy; i++) {
+    int missed = 0, confined = 0;
+    test_inverted(ig[i], &missed, &confined);
+    CHECK(missed > 0 && confined > 0,
+          "%d³: no tissue fold the centroid misses (%d) or no fold outside the tissue (%d)", ig[i],
+          missed, confined);
+    if (verbose)
+      printf("inversion on %2d³: %d folds at a tissue corner with the centroid's det J positive, "
+             "%d folds outside the tissue only\n",
+             ig[i], missed, confined);
+  }
   const int tg[4] = {4, 5, 7, 9}, n_tg = anatomy ? 0 : 4;
   for (int i = 0; i < n_tg; i++) tie_test(tg[i], 0.0);
   for (int i = 0; i < n_tg; i++) tie_test(tg[i], 0.008); /* h = 15 … 6.7 mm, a cap of 8 mm */

@@ -26,6 +26,8 @@
 #include "core/core.h"
 #include "mesh/mesh.h"
 
+#include <stdint.h>
+
 typedef struct {
   double young, poisson, density;
   nh_formulation formulation; /* scene/scene.h; default (0): B-bar */
@@ -207,6 +209,9 @@ typedef struct nh_tissue_cut {
   double corner[8];    /* ∫_tissue N_a dV */
   double volume, fraction; /* V_t and V_t / V_cell */
   double xi[3];            /* the centroid, natural coordinates */
+  /* which points lie in the tissue (level ≤ 0): bit q < 27 the fitted
+   * quadrature's point ξ_q (nh_cut_points), bit 27 + a corner a */
+  uint64_t inside;
 } nh_tissue_cut;
 
 /* The tissue model: material, per-cell element data and the lumped mass.
@@ -271,13 +276,23 @@ int nh_tissue_node_support(const nh_tissue *tissue, double *support);
 int nh_tissue_set_geometry_cache(nh_tissue *tissue, int on);
 /* Set the stabilisation α >= 0 and recompute every cut cell. NH_ERR_MEMORY. */
 int nh_tissue_set_stabilisation(nh_tissue *tissue, double alpha);
+/* At most this many points of a cut cell's tissue (nh_tissue_tissue_points). */
+#define NH_TISSUE_POINTS 36
 /* The natural points where leaf c holds tissue, for the inversion check:
  * returns -1 for a cell that is not cut (check the whole cell), else the
- * number n of points in xi[3n]: the tissue part's centroid (1), or 0 when
- * the cell holds no tissue. (The fitted Gauss points are not used: in a
- * cell with a small tissue part those of positive weight can lie in its
- * fictitious part.) */
-int nh_tissue_tissue_points(const nh_tissue *tissue, int c, double xi[3]);
+ * number n of points in xi[3n]: the tissue part's centroid, and those of the
+ * 27 points of the fitted quadrature (nh_cut_points) and of the 8 corners
+ * that lie in the tissue (the domain's level ≤ 0 there); 0 when the cell
+ * holds no tissue. (Inside-ness, not the fitted weights: in a cell with a
+ * small tissue part, points of positive weight can lie in its fictitious
+ * part.) */
+int nh_tissue_tissue_points(const nh_tissue *tissue, int c, double xi[3 * NH_TISSUE_POINTS]);
+/* Leaf c is inverted at the displacements u: !(det J > 0) at one of its
+ * tissue points (nh_tissue_tissue_points) for a cut cell, or at one of its
+ * corners or 2x2x2 Gauss points (nh_hex_inverted) otherwise. The fictitious
+ * part of a cut cell carries no load and may fold. The one inversion test of
+ * the guard (sim/guard.c) and the failure diagnosis (solve/diagnose.c). */
+int nh_tissue_cell_inverted(const nh_tissue *tissue, int c, const double *u);
 /* The rotation's gradients G0 (24) of leaf c: at the centre, or at a cut
  * cell's tissue centroid. */
 const double *nh_tissue_g0(const nh_tissue *tissue, int c);

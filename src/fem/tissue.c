@@ -600,6 +600,13 @@ static int nh_cut_data(const nh_tissue *t, int c, const double Xe[24], const nh_
   }
   if (!(nh_hex_gradients(Xe, e->xi, e->G0) > 0.0)) memcpy(e->G0, G, sizeof G);
   nh_cut_shape_integrals(w, e->corner, NULL);
+  e->inside = 0;
+  for (int q = 0; q < 35; q++) { /* 27 quadrature points, then the 8 corners */
+    const double *z = q < 27 ? xi + 3 * q : nh_hex_corner[q - 27];
+    double X[3];
+    for (int k = 0; k < 3; k++) X[k] = 0.5 * (lo[k] + hi[k]) + 0.5 * (hi[k] - lo[k]) * z[k];
+    if (nh_domain_level(&t->mesh->domain, X) <= 0.0) e->inside |= (uint64_t)1 << q;
+  }
   return NH_OK;
 }
 
@@ -740,12 +747,31 @@ int nh_tissue_set_stabilisation(nh_tissue *t, double alpha) {
   return nh_tissue_update(t);
 }
 
-int nh_tissue_tissue_points(const nh_tissue *t, int c, double xi[3]) {
+int nh_tissue_tissue_points(const nh_tissue *t, int c, double xi[3 * NH_TISSUE_POINTS]) {
   const nh_tissue_cut *cut = nh_tissue_cell_cut(t, c);
   if (!cut) return -1;
   if (!(cut->volume > 0.0)) return 0;
+  double q[81];
+  nh_cut_points(q);
   memcpy(xi, cut->xi, 3 * sizeof(double));
-  return 1;
+  int n = 1;
+  for (int p = 0; p < 35; p++)
+    if (cut->inside >> p & 1)
+      memcpy(xi + 3 * n++, p < 27 ? q + 3 * p : nh_hex_corner[p - 27], 3 * sizeof(double));
+  return n;
+}
+
+int nh_tissue_cell_inverted(const nh_tissue *t, int c, const double *u) {
+  const nh_mesh *m = t->mesh;
+  double X[24], x[24], pts[3 * NH_TISSUE_POINTS];
+  nh_mesh_cell_coords(m, m->X, c, X);
+  nh_mesh_cell_coords(m, u, c, x);
+  for (int i = 0; i < 24; i++) x[i] += X[i];
+  const int n = nh_tissue_tissue_points(t, c, pts);
+  if (n < 0) return nh_hex_inverted(x);
+  for (int p = 0; p < n; p++)
+    if (!(nh_hex_det(x, pts + 3 * p) > 0.0)) return 1;
+  return 0;
 }
 
 /* Leaf c's elastic force at u with the cut data e (the corotational

@@ -11,8 +11,10 @@
  * - inverted cells: det J <= 0 of the deformed cell at any of its 8 corners
  *   or 2x2x2 Gauss points (the corners catch a cell folded at one node that
  *   the Gauss points miss); a cut cell of an immersed domain only where its
- *   tissue is: the tissue part's centroid (nh_tissue_tissue_points; its fictitious part carries no
- *   load and may fold). Counted in steps.csv `inverted`;
+ *   tissue is: the tissue part's centroid and those of its corners and of
+ *   its 27 quadrature points that lie in the tissue (nh_tissue_cell_inverted;
+ *   its fictitious part carries no load and may fold). Counted in steps.csv
+ *   `inverted`;
  * - an implausible step: a node moved by more than NH_GUARD_STEP_FRACTION
  *   of the tissue's size (the diagonal of its rest bounding box) in one
  *   step. No physical insertion does that, and an implicit Euler step that
@@ -38,18 +40,7 @@
 
 /* Cell c inverted at the displacements u (see the top of this file). */
 static int nh_cell_inverted(const nh_sim *s, int c) {
-  const nh_mesh *m = s->mesh;
-  double X[24], x[24];
-  nh_mesh_cell_coords(m, m->X, c, X);
-  nh_mesh_cell_coords(m, s->u, c, x);
-  for (int i = 0; i < 24; i++) x[i] += X[i];
-  int bad = 0;
-  double pts[3];
-  int n_pts = nh_tissue_tissue_points(s->tissue, c, pts);
-  if (n_pts >= 0) /* a cut cell: where its tissue is */
-    for (int p = 0; p < n_pts && !bad; p++) bad = !(nh_hex_det(x, pts + 3 * p) > 0.0);
-  if (n_pts < 0) bad = nh_hex_inverted(x);
-  return bad;
+  return nh_tissue_cell_inverted(s->tissue, c, s->u);
 }
 
 /* Leaves from which the check runs on the solver's threads (a passive team

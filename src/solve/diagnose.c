@@ -23,8 +23,9 @@
  * - The cells around the node the failure points at (the factorisation's
  *   column, or the largest residual entry): each leaf with that corner, its
  *   tissue fraction (the cut-cell data's, else the fill fraction), which
- *   fixed region ties it, and whether it is inverted (det J ≤ 0 at a
- *   corner of the deformed cell, the check of sim/guard.c); with the
+ *   fixed region ties it, and whether it is inverted where it holds tissue
+ *   (nh_tissue_cell_inverted, the check of sim/guard.c: a cut cell's
+ *   fictitious part may fold, a cell without tissue is never inverted); with the
  *   step's constraint rows, those at the node (skull, each tool).
  * - The smallest tissue fraction of all leaves, and its cell.
  *
@@ -130,26 +131,6 @@ static void nh_diag_rows(const nh_rows *rows, int node, char *buf, size_t size) 
   nh_diag_add(buf, size, " (%d rows in all)", rows->m);
 }
 
-/* det J of the deformed cell c at its 8 corners: 1 if one is <= 0. */
-static int nh_diag_inverted(const nh_system *s, const double *u, int c) {
-  const nh_mesh *m = s->tissue->mesh;
-  const int *nodes = m->cells + 8 * c;
-  for (int q = 0; q < 8; q++) {
-    double dN[8][3], J[3][3] = {{0}};
-    nh_hex_dshape(nh_hex_corner[q], dN);
-    for (int a = 0; a < 8; a++)
-      for (int i = 0; i < 3; i++) {
-        double x = m->X[3 * nodes[a] + i] + u[3 * nodes[a] + i];
-        for (int j = 0; j < 3; j++) J[i][j] += x * dN[a][j];
-      }
-    double det = J[0][0] * (J[1][1] * J[2][2] - J[1][2] * J[2][1]) -
-                 J[0][1] * (J[1][0] * J[2][2] - J[1][2] * J[2][0]) +
-                 J[0][2] * (J[1][0] * J[2][1] - J[1][1] * J[2][0]);
-    if (!(det > 0.0)) return 1;
-  }
-  return 0;
-}
-
 nh_rigid nh_system_rigid(nh_system *s, const double *u, const double *b) {
   nh_rigid out = {.mode = -1, .rho = INFINITY, .loose = 0, .turn_mode = -1, .turn = 0.0};
   const int n = s->n_free, nn = s->n_nodes;
@@ -229,7 +210,7 @@ nh_cause nh_system_diagnose(nh_system *s, const double *u, int dof, const nh_rig
     int has = 0;
     for (int a = 0; a < 8 && node >= 0; a++) has |= m->cells[8 * c + a] == node;
     if (!has || n_around == 8) continue;
-    inverted |= nh_diag_inverted(s, u, c);
+    inverted |= nh_tissue_cell_inverted(s->tissue, c, u);
     small_near |= f <= NH_DIAG_SMALL_FILL;
     int k = n_around++;
     for (; k > 0 && nh_diag_fraction(s, around[k - 1]) > f; k--) around[k] = around[k - 1];
@@ -242,7 +223,7 @@ nh_cause nh_system_diagnose(nh_system *s, const double *u, int dof, const nh_rig
       char tied[64] = "";
       if (region >= 0) snprintf(tied, sizeof tied, ", tied by tissue.fixed[%d]", region);
       nh_diag_add(buf, size, " %d (%.3g%s%s)", c, nh_diag_fraction(s, c), tied,
-                  nh_diag_inverted(s, u, c) ? ", inverted" : "");
+                  nh_tissue_cell_inverted(s->tissue, c, u) ? ", inverted" : "");
     }
   }
   if (node >= 0) nh_diag_rows(rows, node, buf, size);
