@@ -38,6 +38,10 @@ set_tests_properties(sphere_pressure_goal PROPERTIES TIMEOUT 900)
 # residual for the immersed patch test.
 file(MAKE_DIRECTORY ${CMAKE_CURRENT_BINARY_DIR}/geometry_term_scratch)
 nh_add_c_test(test_geometry_term "unit;verify" ${CMAKE_CURRENT_BINARY_DIR}/geometry_term_scratch)
+# The stiffness's condition number with cut cells of shrinking tissue (tests/test_fcm.c, part 10).
+add_test(NAME test_fcm_conditioning COMMAND test_fcm ${CMAKE_CURRENT_BINARY_DIR} conditioning)
+set_tests_properties(test_fcm_conditioning PROPERTIES LABELS "unit;verify"
+  ENVIRONMENT "NH_SOURCE_DIR=${PROJECT_SOURCE_DIR}")
 # The sag of a ball hung by a sub-cell cap on 14 grids (tests/test_fcm.c, part 7).
 add_test(NAME test_fcm_tie COMMAND test_fcm ${CMAKE_CURRENT_BINARY_DIR} tie-ladder)
 set_tests_properties(test_fcm_tie PROPERTIES LABELS "verify;slow"

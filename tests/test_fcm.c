@@ -73,13 +73,16 @@
  *     cell and corner of the ball on 5³, 8³ and 11³ cells: a fold at a
  *     corner in the tissue is reported, also where the centroid's det J
  *     stays positive; a fold whose region holds no tissue is not, though
- *     the whole cell's check reports it (closed form: test_inverted). */
+ *     the whole cell's check reports it (closed form: test_inverted).
+ * 10. With the argument "conditioning" (test_fcm_conditioning): the
+ *     stiffness's condition number with slivers (test_conditioning). */
 #include "check.h"
 #include "fem/fem.h"
 #include "mesh/mesh.h"
 #include "scene/scene.h"
 #include "solve/solve.h"
 
+#include <lapacke.h>
 #include <nifti2_io.h>
 #include <stdio.h>
 #include <string.h>
@@ -541,6 +544,105 @@ static void test_inverted(int g, int *missed, int *confined) {
   nh_mesh_destroy(&m);
 }
 
+/* Part 10: conditioning of small cut parts. A ball of R = 30 mm on a
+ * fixed grid of g³ cells over [−40, 40]³ mm, its centre moved along x so
+ * that its pole enters the last cell layer by ε h (ε from 0.5 to 0.001):
+ * the cells there hold a cap of about π R (ε h)² / h³ ≈ 10 ε² of their
+ * volume. The stiffness at rest (element tangents, dense), its eigenvalues
+ * by LAPACK: six rigid modes (|λ| ≤ 1e-9 λ_max) and κ = λ_max / λ_7.
+ * Expected (docs/theory.md §5c, "Stabilisation"): the fictitious part's
+ * stiffness α K_cell keeps λ_7 ≥ about α times the uncut grid's, so
+ * κ ≤ κ_box / α (κ_box: the same grid with every cell full) at every ε,
+ * κ does not grow as the cap shrinks (within a factor 2 over the ε), and
+ * the floor is α's: κ at α = 1e-4 is 1e-2 of κ at 1e-6 (a factor 2). The
+ * grids also hold cells whose reconstruction has no tissue at all
+ * (fraction 0), which α alone holds: without α (α = 0) K is singular.
+ * Measured: smallest positive fractions 4.1e-8 … 1.9e-5 (the cap and the
+ * rest of the surface), 97–121 cut cells with no tissue, κ 1.11–1.16e8
+ * = 0.20–0.26 κ_box / α, κ(1e-4) / κ(1e-6) = 1.06–1.08 × 1e-2.
+ * Returns κ; *smallest the smallest positive tissue fraction of a cut
+ * cell, *empty the count of those with none. */
+static double stiffness_condition(int g, double eps, double alpha, int box, double *smallest,
+                                  int *empty) {
+  const double L = 0.04, h = 2 * L / g, R = ball_R;
+  nh_domain d;
+  if (box) {
+    const double lo[3] = {-L, -L, -L}, hi[3] = {L, L, L};
+    nh_domain_box(lo, hi, &d);
+  } else {
+    const double c[3] = {L - h + eps * h - R, 0.37 * h, -0.21 * h};
+    nh_domain_sphere(c, R, &d);
+    for (int k = 0; k < 3; k++) d.min[k] = -L, d.max[k] = L;
+    d.cut_cells = NH_CUT_CELLS_INTEGRATED;
+  }
+  const int grid[3] = {g, g, g};
+  nh_mesh *m = NULL;
+  nh_tissue *t = NULL;
+  CHECK_OK(nh_mesh_create(&d, grid, &m));
+  nh_material mat = {ball_E, 0.45, 1000.0, NH_FORMULATION_BBAR};
+  CHECK_OK(nh_tissue_create(m, &mat, &t));
+  CHECK_OK(nh_tissue_set_stabilisation(t, alpha));
+  const int n = 3 * m->n_nodes;
+  double *A = calloc((size_t)n * n, sizeof(double)), *u = calloc((size_t)n, sizeof(double)),
+         *w = calloc((size_t)n, sizeof(double));
+  *smallest = 1.0, *empty = 0;
+  for (int l = 0; l < m->n_leaves; l++) {
+    int c = m->leaves[l];
+    const nh_tissue_cut *cut = nh_tissue_cell_cut(t, c);
+    if (cut && cut->fraction > 0.0) *smallest = fmin(*smallest, cut->fraction);
+    if (cut) *empty += !(cut->fraction > 0.0);
+    double fe[24], frame[NH_HEX_FRAME], Kt[576];
+    nh_tissue_element_force(t, c, u, fe, frame);
+    nh_tissue_element_tangent(t, c, frame, Kt);
+    for (int i = 0; i < 24; i++)
+      for (int j = 0; j < 24; j++)
+        A[(size_t)(3 * m->cells[8 * c + i / 3] + i % 3) * n + 3 * m->cells[8 * c + j / 3] +
+          j % 3] += Kt[24 * i + j];
+  }
+  CHECK(LAPACKE_dsyevd(LAPACK_ROW_MAJOR, 'N', 'U', n, A, n, w) == 0, "eigenvalues of K");
+  const double top = w[n - 1];
+  CHECK(fabs(w[5]) <= 1e-9 * top, "grid %d, ε %g, α %g: λ_6 = %g of λ_max: not a rigid mode", g,
+        eps, alpha, w[5] / top);
+  const double kappa = w[6] > 1e-12 * top ? top / w[6] : INFINITY;
+  free(A), free(u), free(w);
+  nh_tissue_destroy(&t);
+  nh_mesh_destroy(&m);
+  nh_domain_release(&d);
+  return kappa;
+}
+
+static void test_conditioning(void) {
+  enum { NE = 6 };
+  const double eps[NE] = {0.5, 0.1, 0.03, 0.01, 0.003, 0.001}, a = NH_TISSUE_ALPHA;
+  const int grids[2] = {6, 7};
+  for (int gi = 0; gi < 2; gi++) {
+    const int g = grids[gi];
+    int empty;
+    double phi, lo = INFINITY, hi = 0.0;
+    const double kb = stiffness_condition(g, 0.0, 0.0, 1, &phi, &empty);
+    for (int e = 0; e < NE; e++) {
+      const double k = stiffness_condition(g, eps[e], a, 0, &phi, &empty);
+      lo = fmin(lo, k), hi = fmax(hi, k);
+      CHECK(k <= kb / a, "%d³, ε %g: κ %.3g with α = %g above κ_box / α = %.3g", g, eps[e], k, a,
+            kb / a);
+      if (verbose)
+        printf("conditioning %d³, pole %.3f h into the last layer: smallest positive fraction "
+               "%.2e, %d cut cells without tissue, κ %.3e (α = %g); κ_box %.3e\n",
+               g, eps[e], phi, empty, k, a, kb);
+    }
+    CHECK(phi <= 1e-4, "%d³: the smallest positive fraction %.2e at ε 0.001: no sliver", g, phi);
+    CHECK(hi <= 2.0 * lo, "%d³: κ from %.3g to %.3g as the cap shrinks", g, lo, hi);
+    const double k4 = stiffness_condition(g, eps[NE - 1], 1e-4, 0, &phi, &empty),
+                 k0 = stiffness_condition(g, eps[NE - 1], 0.0, 0, &phi, &empty);
+    const double ratio = k4 / stiffness_condition(g, eps[NE - 1], a, 0, &phi, &empty) / (a / 1e-4);
+    CHECK(ratio >= 0.5 && ratio <= 2.0, "%d³: κ(1e-4) / κ(1e-6) is %.3g of 1e-2", g, ratio);
+    CHECK(empty == 0 || isinf(k0), "%d³: α = 0 with %d empty cells, yet κ = %g", g, empty, k0);
+    if (verbose)
+      printf("conditioning %d³: κ(α = 1e-4) / κ(α = 1e-6) = %.3f × 1e-2; α = 0: κ = %g\n", g, ratio,
+             k0);
+  }
+}
+
 /* The volume the cap of radius a on the ball's top ties, on g³ cells. */
 static double tie_volume(int g, double a) {
   nh_mesh *m = NULL;
@@ -641,6 +743,10 @@ static void ellipsoid_domains(const char *dir, nh_domain *stl, nh_domain *mask,
 
 int main(int argc, char **argv) {
   verbose = getenv("NH_VERBOSE") != NULL;
+  if (argc > 2 && strcmp(argv[2], "conditioning") == 0) {
+    test_conditioning();
+    return nh_test_failures ? 1 : 0;
+  }
   if (argc > 2 && strcmp(argv[2], "tie-ladder") == 0) {
     test_tie_ladder();
     return nh_test_failures ? 1 : 0;
