@@ -102,6 +102,23 @@ static void internal_force(const nh_tissue *t, const double *u, double *f) {
   }
 }
 
+/* The tissue's tangent at u, dense (n × n, n = 3 × nodes, zeroed by the
+ * caller): the element tangents of every leaf added. */
+static void dense_tangent(const nh_tissue *t, const double *u, double *A) {
+  const nh_mesh *m = t->mesh;
+  const size_t n = 3 * (size_t)m->n_nodes;
+  for (int l = 0; l < m->n_leaves; l++) {
+    int c = m->leaves[l];
+    double fe[24], frame[NH_HEX_FRAME], Kt[576];
+    nh_tissue_element_force(t, c, u, fe, frame);
+    nh_tissue_element_tangent(t, c, frame, Kt);
+    for (int i = 0; i < 24; i++)
+      for (int j = 0; j < 24; j++)
+        A[(size_t)(3 * m->cells[8 * c + i / 3] + i % 3) * n + 3 * m->cells[8 * c + j / 3] +
+          j % 3] += Kt[24 * i + j];
+  }
+}
+
 static double max_abs(const double *v, int n) {
   double r = 0.0;
   for (int i = 0; i < n; i++) r = fmax(r, fabs(v[i]));
@@ -338,16 +355,7 @@ static void tie_test(int g, double radius) {
   const int n = 3 * m->n_nodes;
   double *A = calloc((size_t)n * n, sizeof(double)), *b = calloc((size_t)n, sizeof(double)),
          *u = calloc((size_t)n, sizeof(double));
-  for (int l = 0; l < m->n_leaves; l++) {
-    int c = m->leaves[l];
-    double fe[24], frame[NH_HEX_FRAME], Kt[576];
-    nh_tissue_element_force(t, c, u, fe, frame);
-    nh_tissue_element_tangent(t, c, frame, Kt);
-    for (int i = 0; i < 24; i++)
-      for (int j = 0; j < 24; j++)
-        A[(size_t)(3 * m->cells[8 * c + i / 3] + i % 3) * n + 3 * m->cells[8 * c + j / 3] +
-          j % 3] += Kt[24 * i + j];
-  }
+  dense_tangent(t, u, A);
   const double gz = -9.81;
   double weight = 0.0;
   for (int i = 0; i < m->n_nodes; i++) b[3 * i + 2] = t->mass[i] * gz, weight += t->mass[i] * gz;
@@ -591,14 +599,8 @@ static double stiffness_condition(int g, double eps, double alpha, int box, doub
     const nh_tissue_cut *cut = nh_tissue_cell_cut(t, c);
     if (cut && cut->fraction > 0.0) *smallest = fmin(*smallest, cut->fraction);
     if (cut) *empty += !(cut->fraction > 0.0);
-    double fe[24], frame[NH_HEX_FRAME], Kt[576];
-    nh_tissue_element_force(t, c, u, fe, frame);
-    nh_tissue_element_tangent(t, c, frame, Kt);
-    for (int i = 0; i < 24; i++)
-      for (int j = 0; j < 24; j++)
-        A[(size_t)(3 * m->cells[8 * c + i / 3] + i % 3) * n + 3 * m->cells[8 * c + j / 3] +
-          j % 3] += Kt[24 * i + j];
   }
+  dense_tangent(t, u, A);
   CHECK(LAPACKE_dsyevd(LAPACK_ROW_MAJOR, 'N', 'U', n, A, n, w) == 0, "eigenvalues of K");
   const double top = w[n - 1];
   CHECK(fabs(w[5]) <= 1e-9 * top, "grid %d, ε %g, α %g: λ_6 = %g of λ_max: not a rigid mode", g,
