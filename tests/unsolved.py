@@ -24,6 +24,16 @@
    residual 0.98-0.99, 140 of 290 steps flagged before the floor, whose
    rule of "1e-6 of the run's largest force" they passed at 5e-6); with
    the floor eps |x|_max ||diag K|| h no step is flagged.
+5. A dynamic step whose Newton iterations leave it unsolved stops the run
+   (solver.on_invalid: stop, the default; docs/outputs.md, "When a step is
+   not plausible"): dbs.yaml at nu = 0.4999 with solver.newton
+   {max_iterations: 1} (one iteration from the linearisation's 0.73-1.02
+   cannot reach the tolerance 1e-8: the rescue above takes 2-8): exit 1
+   before writing step 1, the message naming the step, the residual, the
+   one iteration, the node of the largest residual entry and a likely
+   cause. With solver.on_invalid: warn the run goes on: exit 0, every step
+   flagged, the guard's warning once and the summary counting them from
+   step 1.
 The column's rule, and these expectations, follow from the definition:
 unsolved = residual > 0.5 for a linearised dynamic step, unless the residual
 is below the round-off level of its internal forces (docs/outputs.md).
@@ -121,4 +131,23 @@ rows, err = run("rigid", os.path.join(WORK, "rigid.yaml"))
 flagged = [r["step"] for r in rows if int(float(r["unsolved"]))]
 check(len(rows) == 290 and not flagged and "unsolved" not in err,
       "rigid block: %d rows, steps flagged %s" % (len(rows), flagged[:10]))
+
+out = os.path.join(WORK, "one_iteration")
+p = subprocess.run([BIN, "run", os.path.join(SRC, "cases/dbs/dbs.yaml"), "--out", out, "--overwrite",
+                    "--quiet", "--set", "tissue.material.poisson=0.4999", "--set", "time.end=0.15",
+                    "--set", "solver.newton={max_iterations: 1}"], capture_output=True, text=True)
+with open(os.path.join(out, "steps.csv")) as f:
+    written = list(csv.DictReader(f))
+check(p.returncode == 1 and not written
+      and "step 1 (t = 0.05 s): the step's equations are not solved" in p.stderr
+      and "after 1 Newton iteration (at most 1 by solver.newton.max_iterations" in p.stderr
+      and "the largest residual entry is at node" in p.stderr and "Likely cause" in p.stderr,
+      "one Newton iteration: exit %d, %d rows written, stderr:\n%s"
+      % (p.returncode, len(written), p.stderr))
+rows, err = run("one_iteration_warn", "cases/dbs/dbs.yaml", "tissue.material.poisson=0.4999",
+                "time.end=0.15", "solver.newton={max_iterations: 1}", "solver.on_invalid=warn")
+flags = [int(float(r["unsolved"])) for r in rows]
+check(flags == [1, 1, 1] and err.count("are not solved") == 1
+      and "3 of 3 steps left unsolved (relative residual above its bound; the first: step 1)"
+      in err, "one Newton iteration, warn: unsolved %s, stderr:\n%s" % (flags, err))
 sys.exit(1 if failures else 0)

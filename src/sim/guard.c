@@ -20,13 +20,20 @@
  *   step. No physical insertion does that, and an implicit Euler step that
  *   does has left the range where its linearisation means anything;
  * - a tool reported punctured or cutting whose tip lies outside the
- *   tissue's current bounding box widened by one grid cell.
+ *   tissue's current bounding box widened by one grid cell;
+ * - a dynamic step whose Newton iterations left its equations unsolved
+ *   (steps.csv `unsolved`, nh_sim_step_unsolved; not with
+ *   solver.newton.max_iterations 0, which asks for one linearisation): the
+ *   message names the residual, the iterations, the node of the largest
+ *   residual entry, its cells and rows and the likely cause
+ *   (nh_system_where_dof).
  *
  * With solver.on_invalid: stop (the default) the first of these ends the run
  * with exit 1 naming the step, the cell, node or tool and the reason, before
  * the step writes anything: the frames and rows on disk are those of the
- * last plausible step. With warn, inverted cells, implausible steps and
- * tools are reported once each (a warning) and the run goes on. */
+ * last plausible step. With warn, inverted cells, implausible steps, tools
+ * and unsolved steps are reported once each (a warning) and the run goes
+ * on. */
 #include "sim/sim_impl.h"
 
 #include <math.h>
@@ -111,11 +118,28 @@ static double nh_tissue_size(const nh_mesh *m) {
               (hi[2] - lo[2]) * (hi[2] - lo[2]));
 }
 
+/* The bound (docs/outputs.md, `unsolved`): the Newton tolerance in static
+ * mode and with solver.newton, else NH_UNSOLVED_LINEAR (a linearised step
+ * that leaves that much is not a solution: solve.h); never below the
+ * round-off level of the internal forces (a stiff body at rest has forces
+ * at that level: a relative residual of round-off over round-off). */
+int nh_sim_step_unsolved(const nh_sim *s, const nh_step_stats *st, double *bound) {
+  const nh_scene *sc = s->scene;
+  *bound = sc->time.mode == NH_MODE_STATIC    ? sc->solver.tolerance
+           : sc->solver.newton_iterations > 0 ? sc->solver.newton_tolerance
+                                              : NH_UNSOLVED_LINEAR;
+  return st->residual > fmax(*bound, st->residual_floor);
+}
+
+int nh_sim_step_guarded(const nh_sim *s) {
+  return s->scene->time.mode != NH_MODE_STATIC && s->integrator.newton_iterations != 0;
+}
+
 /* Report an invalid step: an error (stop) or, once per kind, a warning. */
 static int nh_guard_report(nh_sim *s, int kind, const char *fmt, ...)
     __attribute__((format(printf, 3, 4)));
 static int nh_guard_report(nh_sim *s, int kind, const char *fmt, ...) {
-  char reason[1024];
+  char reason[2560];
   va_list ap;
   va_start(ap, fmt);
   vsnprintf(reason, sizeof reason, fmt, ap);
@@ -133,7 +157,7 @@ static int nh_guard_report(nh_sim *s, int kind, const char *fmt, ...) {
   return NH_OK;
 }
 
-int nh_sim_guard(nh_sim *s, const double *u_start) {
+int nh_sim_guard(nh_sim *s, const double *u_start, const nh_step_stats *st) {
   const nh_mesh *m = s->mesh;
   const int n = 3 * m->n_nodes;
   for (int i = 0; i < n; i++)
@@ -153,6 +177,22 @@ int nh_sim_guard(nh_sim *s, const double *u_start) {
                            "first: cell %d, level %d)%s: the load or the material is beyond what "
                            "the model can represent",
                            s->inverted, m->n_leaves, first, m->level[first], disc));
+  }
+  double bound;
+  if (nh_sim_step_guarded(s) && nh_sim_step_unsolved(s, st, &bound)) {
+    char where[1536] = "";
+    if (!s->scene->solver.on_invalid_warn || !(s->guard_warned & (1 << 3))) {
+      snprintf(where, sizeof where, "; the largest residual entry is");
+      nh_system_where_dof(s->system, s->u, st->residual_dof,
+                          s->contact ? nh_contact_rows(s->contact) : NULL, where, sizeof where);
+    }
+    const int its = st->iterations - 1, most = s->integrator.newton_iterations;
+    NH_TRY(nh_guard_report(
+        s, 3,
+        "the step's equations are not solved: relative residual %.3g above %g "
+        "after %d Newton iteration%s (at most %d %s; steps.csv `unsolved`)%s",
+        st->residual, bound, its, its == 1 ? "" : "s", most > 0 ? most : NH_DYNAMIC_NEWTON_MAX,
+        most > 0 ? "by solver.newton.max_iterations" : "without solver.newton", where));
   }
   double size = nh_tissue_size(m), worst = 0.0;
   int node = -1;

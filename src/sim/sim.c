@@ -1069,25 +1069,18 @@ static double *nh_sim_record_times(nh_sim *s, const nh_sim_record *r, double t_e
 
 /* Output of the step: its times and its row of steps.csv and of
  * results.h5. */
-/* The step's relative residual stayed above its bound: the Newton tolerance
- * (static mode; dynamic with solver.newton), else NH_UNSOLVED_LINEAR (a
- * linearised step that leaves that much is not a solution: solve.h), and
- * above the round-off level of its internal forces (a stiff body at rest
- * has forces at that level: a relative residual of round-off over
- * round-off). The first such step is warned about, every one counted (the
- * summary). */
+/* steps.csv `unsolved` (nh_sim_step_unsolved, guard.c): every such step
+ * counted (the summary); the first warned about, unless the guard reported
+ * it (nh_sim_step_guarded). */
 static int nh_sim_unsolved(nh_sim *s, const nh_step_stats *st) {
-  const nh_scene *sc = s->scene;
-  double bound = sc->time.mode == NH_MODE_STATIC    ? sc->solver.tolerance
-                 : sc->solver.newton_iterations > 0 ? sc->solver.newton_tolerance
-                                                    : NH_UNSOLVED_LINEAR;
-  if (!(st->residual > fmax(bound, st->residual_floor))) return 0;
-  if (s->unsolved_steps++ == 0) {
-    s->unsolved_first = s->step;
+  double bound;
+  if (!nh_sim_step_unsolved(s, st, &bound)) return 0;
+  /* a guarded step was reported by the guard (solver.on_invalid: warn) */
+  if (s->unsolved_steps++ == 0) s->unsolved_first = s->step;
+  if (s->unsolved_steps == 1 && !nh_sim_step_guarded(s))
     nh_log_warn("step %d (t = %g s): relative residual %.3g above %g: the step's equations are "
                 "not solved (steps.csv `unsolved`; docs/outputs.md)",
                 s->step, s->time, st->residual, bound);
-  }
   return 1;
 }
 
@@ -1182,7 +1175,7 @@ int nh_sim_step(nh_sim *s) {
    * back to its start like one stopped earlier, so that a continued run
    * computes it again and reports what the uninterrupted run reports. */
   if (!rc && isnan(r.st.residual) && nh_stop_requested()) rc = nh_stop_check();
-  if (!rc && (rc = nh_sim_guard(s, s->u_start))) return rc; /* its message names the step */
+  if (!rc && (rc = nh_sim_guard(s, s->u_start, &r.st))) return rc; /* its message names the step */
   r.t_guard = nh_time_now() - t_solved;
   /* adapt.resolve_tip: the step in which a tool punctures is estimated (and
    * re-solved at the tip) whatever adapt.every says: its tip meets cells no

@@ -143,11 +143,22 @@ double nh_sim_point_error(const nh_sim *sim, int i);
 /* Cells with det J <= 0 at a corner or Gauss point of their deformed shape
  * (*first: the first one, or -1). */
 int nh_sim_count_inverted(const nh_sim *sim, int *first);
-/* Check the step just solved (u, v; u_start: u before it): non-finite
- * values, inverted cells (sets sim->inverted), an implausible increment, a
- * tool inside tissue it has left. NH_ERR_NUMERIC naming the step and the
- * reason, or with solver.on_invalid: warn a warning and NH_OK. */
-int nh_sim_guard(nh_sim *sim, const double *u_start);
+/* Check the step just solved (u, v; u_start: u before it; st: its stats):
+ * non-finite values, inverted cells (sets sim->inverted), an implausible
+ * increment, a tool inside tissue it has left, a dynamic step whose Newton
+ * iterations left it unsolved (nh_sim_step_guarded). NH_ERR_NUMERIC naming
+ * the step and the reason, or with solver.on_invalid: warn a warning and
+ * NH_OK. */
+int nh_sim_guard(nh_sim *sim, const double *u_start, const nh_step_stats *st);
+/* The step's relative residual stayed above its bound (*bound: the Newton
+ * tolerance in static mode and with solver.newton, else
+ * NH_UNSOLVED_LINEAR) and above the round-off level of its internal forces
+ * (sim.c; steps.csv `unsolved`). */
+int nh_sim_step_unsolved(const nh_sim *sim, const nh_step_stats *st, double *bound);
+/* An unsolved step the guard judges: a dynamic step whose Newton iterations
+ * were allowed (not solver.newton.max_iterations 0, one linearisation
+ * asked for). */
+int nh_sim_step_guarded(const nh_sim *sim);
 
 /* ---- the progress line and the summary (sim/progress.c) ---- */
 void nh_progress_start(nh_sim *sim);

@@ -488,6 +488,7 @@ static void nh_coupled_residual(nh_step_work *w) {
   st->residual =
       nh_dynamic_residual(w->s, w->in, w->f_ext, w->u, w->v, w->full, w->m ? w->col : NULL, w->b);
   st->residual_floor = nh_system_residual_floor(w->s);
+  st->residual_dof = w->s->residual_dof;
   st->t_assemble += nh_time_now() - t7;
 }
 
@@ -600,6 +601,7 @@ static int nh_coupled_newton(nh_step_work *w) {
     if (m) nh_rows_tissue_force(w->Jt, w->rows->lambda, w->col, nf);
     st->residual = nh_dynamic_residual(s, in, w->f_ext, w->u, w->v, dvt, m ? w->col : NULL, w->b);
     st->residual_floor = nh_system_residual_floor(s);
+    st->residual_dof = s->residual_dof;
     st->t_assemble += nh_time_now() - t3;
     st->iterations++;
   }

@@ -290,3 +290,8 @@ void nh_system_where(nh_system *s, const double *u, const double *f, const nh_ro
   nh_diag_add(msg, size, "; its largest entry, %.3g, is", worst >= 0 ? fabs(f[worst]) : 0.0);
   nh_system_diagnose(s, u, worst, NULL, rows, msg, size);
 }
+
+void nh_system_where_dof(nh_system *s, const double *u, int dof, const nh_rows *rows, char *msg,
+                         size_t size) {
+  nh_system_diagnose(s, u, dof, NULL, rows, msg, size);
+}

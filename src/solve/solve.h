@@ -164,6 +164,8 @@ typedef struct {
                             equations at the end of the step (nh_dynamic_residual) */
   double residual_floor; /* dynamic: the round-off level of that residual
                             (nh_system_residual_floor), 0 static */
+  int residual_dof;      /* dynamic: the nodal DOF (3 node + axis) of that residual's largest
+                            entry, −1 when unknown */
   int factorised;        /* numeric factorisations of A in the step */
   int pcg_iterations;    /* PCG iterations of the step's solves with a reused factor */
   int corrections;       /* outer constraint corrections with a reused factor (0: exact W) */
@@ -435,6 +437,11 @@ int nh_newton_stalled(nh_newton_watch *w, int it, double rel);
  * assembled matrix and the likely cause (diagnose.c). */
 void nh_system_where(nh_system *sys, const double *u, const double *f, const nh_rows *rows,
                      char *msg, size_t size);
+/* The same for the nodal DOF `dof` (3 node + axis; e.g. a step's
+ * nh_step_stats.residual_dof): " at node …", its cells and rows, the rigid
+ * modes and the likely cause. */
+void nh_system_where_dof(nh_system *sys, const double *u, int dof, const nh_rows *rows, char *msg,
+                         size_t size);
 
 /* The dual of a constrained step: ncol problems
  *     A x + J_tᵀ μ = b,   J_t x = 0

@@ -115,7 +115,12 @@ double nh_dynamic_residual(nh_system *s, const nh_integrator *in, const double *
   if (reaction)
     for (int i = 0; i < nf; i++) b[i] += reaction[i];
   double r = 0.0;
-  for (int i = 0; i < nf; i++) r += b[i] * b[i];
+  int worst = -1;
+  for (int i = 0; i < nf; i++) {
+    r += b[i] * b[i];
+    if (worst < 0 || fabs(b[i]) > fabs(b[worst])) worst = i;
+  }
+  s->residual_dof = worst >= 0 ? s->dof_of[worst] : -1;
   double scale = fmax(fmax(h * sqrt(fe), h * sqrt(fi)), fmax(sqrt(md), 1e-300));
   s->residual_floor = nh_force_roundoff(s, u, h) / scale;
   return sqrt(r) / scale;

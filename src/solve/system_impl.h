@@ -6,7 +6,8 @@
 #include <cholmod.h>
 
 struct nh_system {
-  double residual_floor;   /* the last nh_dynamic_residual's round-off level (relative) */
+  double residual_floor; /* the last nh_dynamic_residual's round-off level (relative) */
+  int residual_dof;      /* the last nh_dynamic_residual's largest entry: its nodal DOF, or −1 */
   const nh_tissue *tissue; /* borrowed; tissue->mesh is the mesh */
   int n_nodes;
   int n_free;
