@@ -32,6 +32,10 @@ nh_add_c_test(test_aggregate "unit;verify")
 nh_add_py_test(sphere_pressure verify sphere_pressure.py 8 12 16)
 nh_add_py_test(sphere_pressure_goal "verify;slow" sphere_pressure.py 12 14 16 20 24)
 set_tests_properties(sphere_pressure_goal PROPERTIES TIMEOUT 900)
+# The same with an ellipsoid (30, 22, 16 mm, turned; tests/sphere_pressure.py --ellipsoid).
+nh_add_py_test(ellipsoid_pressure verify sphere_pressure.py --ellipsoid 8 12 16)
+nh_add_py_test(ellipsoid_pressure_ladder "verify;slow" sphere_pressure.py --ellipsoid 12 14 16 20 24)
+set_tests_properties(ellipsoid_pressure_ladder PROPERTIES TIMEOUT 900)
 # The geometry term of the goal estimate (tests/test_geometry_term.c): zero on
 # a box domain and with scaled, round-off in cut cells with a planar level set,
 # -ΔV ε(z):D:ε(u) for linear fields on a ball at order 2, and no net

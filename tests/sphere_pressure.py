@@ -26,7 +26,23 @@ Expected values, from analysis:
   e_g ≤ e_first · g_first / g, and, on a finest grid of 24³ or more (the
   slow variant), e ≤ 1 % against both the closed form and the linear field.
 
-Arguments: the grids (default 8 12 16). NH_VERBOSE=1 prints the table.
+With --ellipsoid: an ellipsoid of semi-axes 30, 22, 16 mm (the icosphere
+scaled, then turned by 30° about (1, 2, 3)), the same centre, material, tie
+and pressure; the probes at the same fractions of its radius along the same
+directions. The linear field is still exact without the tie (a closed
+surface under uniform pressure: the stress −p I), and the tie's
+perturbation is the inclusion's in an unbounded body under that field's
+strain (`tied_radial` with the remote condition f → −p r/(3K) instead of
+σ_rr(R) = −p): the boundary's image of it is of relative order (a/R)³ ≈
+1.3e-4 at the surface, below the errors measured. Asserted: order ≥ 1 from
+the first grid (the 1 % at 24³ is the sphere's goal; the ellipsoid's
+probes at 0.35 of its 16 mm semi-axis lie 5.6 mm from the tie, which a 24³
+grid of its smaller box resolves with cells of 1.6-2.3 mm). Measured on
+12, 14, 16, 20, 24: 3.97, 2.14, 1.85, 1.47, 1.18 % (0.93 % against the
+linear field at 24³), order 1.01-1.21 from 14³ on.
+
+Arguments: [--ellipsoid] the grids (default 8 12 16). NH_VERBOSE=1 prints
+the table.
 """
 import csv
 import math
@@ -47,6 +63,20 @@ DIRS = [(1, 0, 0), (0, -1, 0), (0, 0, 1), (1, 1, 1), (-1, 2, -1), (2, -1, -2), (
         (0, 1, -1)]
 RADII = [0.9, 0.75, 0.6, 0.45, 0.8, 0.35, 0.65, 0.5]
 failures = []
+AXES = np.array([0.030, 0.022, 0.016])
+
+
+def turn():
+    """The rotation by 30° about (1, 2, 3) (Rodrigues)."""
+    k = np.array([1.0, 2.0, 3.0]) / math.sqrt(14.0)
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    t = math.radians(30.0)
+    return np.eye(3) + math.sin(t) * K + (1 - math.cos(t)) * K @ K
+
+
+def shape(v, ellipsoid):
+    """Unit-sphere points to the body's surface (offsets from C, m)."""
+    return (turn() @ (AXES * v).T).T if ellipsoid else R * v
 
 
 def icosphere(levels):
@@ -75,9 +105,9 @@ def icosphere(levels):
     return np.array(v), f
 
 
-def write_stl(path):
+def write_stl(path, ellipsoid):
     v, f = icosphere(5)
-    x = C * 1e3 + R * 1e3 * v  # mm
+    x = (C + shape(v, ellipsoid)) * 1e3  # mm
     with open(path, "wb") as out:
         out.write(b"\0" * 80 + struct.pack("<I", len(f)))
         for tri in f:
@@ -90,8 +120,9 @@ def lame():
     return lam, mu
 
 
-def tied_radial(r):
-    """f(r) of the ball with the foundation k = 10³ E/a² over r < a."""
+def tied_radial(r, unbounded=False):
+    """f(r) of the ball with the foundation k = 10³ E/a² over r < a (unbounded:
+    of an unbounded body whose remote field is the linear one)."""
     lam, mu = lame()
     M, K, k = lam + 2 * mu, lam + 2 * mu / 3, 1e3 * E / A_TIE ** 2
     b = math.sqrt(k / M)
@@ -100,16 +131,17 @@ def tied_radial(r):
     x = b * A_TIE
     mat = np.array([[i1(x), -A_TIE, -1 / A_TIE ** 2],
                     [M * b * di1(x) + 2 * lam * i1(x) / A_TIE, -3 * K, 4 * mu / A_TIE ** 3],
-                    [0, 3 * K, -4 * mu / R ** 3]])
-    cc, a, bb = np.linalg.solve(mat, [0, 0, -P])
+                    [0, 3 * K, -4 * mu / R ** 3] if not unbounded else [0, 1, 0]])
+    cc, a, bb = np.linalg.solve(mat, [0, 0, -P if not unbounded else -P / (3 * K)])
     return cc * i1(b * r) if r < A_TIE else a * r + bb / r ** 2
 
 
-def scene(tmp):
+def scene(tmp, ellipsoid):
     probes = []
     for i, (d, s) in enumerate(zip(DIRS, RADII)):
         d = np.array(d, float) / np.linalg.norm(d)
-        probes.append("  - {name: p%d, point: [%.12g, %.12g, %.12g]}" % (i, *(C + s * R * d)))
+        probes.append("  - {name: p%d, point: [%.12g, %.12g, %.12g]}"
+                      % (i, *(C + s * shape(d, ellipsoid))))
     path = os.path.join(tmp, "sphere.yaml")
     with open(path, "w") as out:
         out.write(f"""name: sphere-pressure
@@ -130,7 +162,7 @@ probes:
     return path
 
 
-def errors(out):
+def errors(out, ellipsoid):
     """max over probes of |u_h − u|/|u|: against the tied closed form and
     against the linear field."""
     lam, mu = lame()
@@ -146,24 +178,25 @@ def errors(out):
         X = np.array([float(r[k]) for k in "xyz"]) - u
         d = X - C
         rr = np.linalg.norm(d)
-        exact, linear = tied_radial(rr) * d / rr, -P * d / (3 * K)
+        exact, linear = tied_radial(rr, ellipsoid) * d / rr, -P * d / (3 * K)
         tied = max(tied, np.linalg.norm(u - exact) / np.linalg.norm(exact))
         lin = max(lin, np.linalg.norm(u - linear) / np.linalg.norm(linear))
     return tied, lin
 
 
 def main():
-    grids = [int(g) for g in sys.argv[1:]] or [8, 12, 16]
+    ellipsoid = "--ellipsoid" in sys.argv[1:]
+    grids = [int(g) for g in sys.argv[1:] if g != "--ellipsoid"] or [8, 12, 16]
     tmp = tempfile.mkdtemp(prefix="nh-sphere-")
     try:
-        write_stl(os.path.join(tmp, "sphere.stl"))
-        path = scene(tmp)
+        write_stl(os.path.join(tmp, "sphere.stl"), ellipsoid)
+        path = scene(tmp, ellipsoid)
         table = []
         for g in grids:
             out = os.path.join(tmp, f"g{g}")
             subprocess.run([BIN, "run", path, "--quiet", "--overwrite", "--out", out, "--set",
                             f"tissue.grid=[{g},{g},{g}]"], check=True)
-            table.append((g,) + errors(out))
+            table.append((g,) + errors(out, ellipsoid))
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     g0, e0, _ = table[0]
@@ -172,9 +205,9 @@ def main():
             failures.append(f"{g}³: error {tied:.3e} against the tied closed form above the "
                             f"order-1 line {e0 * g0 / g:.3e} from {g0}³")
     g, tied, lin = table[-1]
-    if g >= 24 and not tied <= 0.01:
+    if g >= 24 and not ellipsoid and not tied <= 0.01:
         failures.append(f"{g}³ (finest): error {tied:.3e} against the tied closed form > 1 %")
-    if g >= 24 and not lin <= 0.01:
+    if g >= 24 and not ellipsoid and not lin <= 0.01:
         failures.append(f"{g}³: error {lin:.3e} against the linear field > 1 %")
     if VERBOSE:
         print("grid  error vs tied closed form  vs linear field")
