@@ -6,6 +6,7 @@ adapt_study.py, dbs_convergence.py, plot_cases.py).
     p, f_inf = observed(h, f)               # in the cell size h, coarse first (p None: no order)
     ref, bar, p, sane = extrapolate(h, f, order=(1.0, 5.99))   # with an error bar
     ref, bar, p, sane = per_step_reference(h, F, order)        # the same at every step
+    ref, bar, slope = ladder_reference(h, F)                   # a first-order fit over a ladder
 
 The spacings need not have a constant ratio: the order is found by bisection
 on p in (0.05, 6). When the differences change sign (not in the asymptotic
@@ -76,3 +77,24 @@ def per_step_reference(h, F, order):
     for i in range(n):
         ref[i], bar[i], p[i], sane[i] = extrapolate(h, F[:, i], order)
     return ref, bar, p, sane
+
+
+def ladder_reference(h, F):
+    """The converged reference of a quantity at every step from a ladder of uniform runs, nested
+    or not (tools/study.py convergence): per step the least-squares line f(h) = f∞ + a h
+    through all of them (the order the immersed ladders show: docs/dbs.md, "Convergence on
+    grids a reader picks"), f∞ the reference and twice the standard error of f∞ its error bar
+    (the scatter between neighbouring grids, which no three-grid extrapolation sees).
+    h: cell sizes (mm, at least three distinct); F: array (grids, steps). Returns (reference,
+    bar, slope a), arrays over the steps."""
+    h = np.asarray(h, float)
+    F = np.asarray(F, float)
+    if F.shape[0] != len(h) or len(h) < 3 or len(set(h)) < 3:
+        raise ValueError("ladder_reference: at least three distinct cell sizes, one row each")
+    A = np.column_stack([np.ones_like(h), h])
+    coef, _, _, _ = np.linalg.lstsq(A, F, rcond=None)
+    resid = F - A @ coef
+    dof = len(h) - 2
+    s2 = (resid ** 2).sum(axis=0) / dof if dof > 0 else np.zeros(F.shape[1])
+    cov00 = np.linalg.inv(A.T @ A)[0, 0]
+    return coef[0], 2.0 * np.sqrt(s2 * cov00), coef[1]

@@ -17,8 +17,15 @@ dbs_goal_error.png, dbs_goal_cost.png, dbs_goal_effectivity.png.
 NAME-from-NXxNYxNZ; the uniform and estimate runs are unchanged, so --restart
 into the same folder reuses them; report and plots in OUT/from-NXxNYxNZ);
 --steps N ends every run early (the shift alone for N ≤ 64: the report then
-cuts one phase).
+cuts one phase). --ladder DIR takes the reference from a ladder of uniform
+runs instead (tools/study.py convergence cases/dbs/dbs-skull.yaml --end 13.5
+--grids ... --out DIR: the whole procedure on grids nested or not): per step
+the least-squares line f∞ + a h through all of its complete runs
+(richardson.py, ladder_reference), its bar twice f∞'s standard error; the
+Richardson reference of the finest three uniform meshes is then reported
+beside it.
 """
+import json
 import os
 import re
 
@@ -27,7 +34,8 @@ import numpy as np
 import study_engine as engine
 from outputs import read_csv, read_points, read_steps, read_tools, speed
 from plotstyle import FIGSIZE, MARKER, plt, save, save_loglog
-from richardson import observed, per_step_reference
+from richardson import ladder_reference, observed, per_step_reference
+from study_convergence import grid_h, scene_box
 from study_dbs import phase_lines, phases
 
 ROOT = engine.ROOT
@@ -113,7 +121,7 @@ DBS_GOAL = {
 
 
 # the options only this study takes (tools/study.py refuses them for the others)
-OPTIONS = {"--base": "base"}
+OPTIONS = {"--base": "base", "--ladder": "ladder"}
 BASE = "tissue.grid=[10,12,9]"  # the grid the refining runs start from (the 14 mm mesh)
 
 
@@ -122,6 +130,10 @@ def add_arguments(ap):
     g.add_argument("--base", default=None, metavar="NXxNYxNZ",
                    help="dbs-goal: the grid the SPR and goal runs start from (default 10x12x9, "
                    "the 14 mm mesh; the uniform and estimate runs keep theirs)")
+    g.add_argument("--ladder", default=None, metavar="DIR",
+                   help="dbs-goal: the reference from the complete runs of a convergence "
+                   "ladder of the whole procedure in DIR (tools/study.py convergence "
+                   "--end 13.5 --out DIR) instead of the finest three uniform meshes")
 
 
 def adaptive_variants(base):
@@ -173,6 +185,49 @@ DBS_GOAL["adaptive"] += [
     if kind in ("goal", "estimate") and "adapt.local_dual=true" not in sets]
 
 
+def ladder_runs(a, binary, scene, n, load):
+    """The complete runs of the convergence ladder in a.ladder (folders NXxNYxNZ with exit 0
+    in run.json and n steps, the uniform runs' count), coarse first, each with its h (mm, the
+    longest cell edge, as study_convergence reports it)."""
+    done = []
+    for name in sorted(os.listdir(a.ladder)) if os.path.isdir(a.ladder) else []:
+        m = re.fullmatch(r"(\d+)x(\d+)x(\d+)", name)
+        path = os.path.join(a.ladder, name, "run.json")
+        if m and os.path.exists(path):
+            with open(path) as f:
+                if json.load(f).get("returncode") == 0:
+                    done.append((name, [int(v) for v in m.groups()]))
+    if len(done) < 3:
+        raise SystemExit("--ladder: %s holds %d complete runs (NXxNYxNZ folders with exit 0), "
+                         "fewer than three" % (a.ladder, len(done)))
+    lo, hi, _ = scene_box(binary, scene, [])
+    L = []
+    for name, grid in done:
+        r = load(name, name, "ladder", a.ladder)
+        if len(r["d"]) != n:
+            raise SystemExit("--ladder: %s has %d steps, the uniform runs %d (run the ladder "
+                             "with --end %g)" % (name, len(r["d"]), n, r["times"][-1]))
+        L.append(dict(r, h=grid_h(lo, hi, grid)))
+    L.sort(key=lambda r: -r["h"])
+    if len({r["h"] for r in L}) < 3:
+        raise SystemExit("--ladder: %s holds fewer than three complete runs of distinct h"
+                         % a.ladder)
+    return L
+
+
+def reference_ladder(L):
+    """The per-step reference from the ladder's runs L (coarse first): ladder_reference of the
+    distance and of each component of the STN's position."""
+    h = [r["h"] for r in L]
+    d, d_bar, d_a = ladder_reference(h, np.array([r["d"] for r in L]))
+    xs = [ladder_reference(h, np.array([r["x"][:, k] for r in L])) for k in range(3)]
+    ok = np.ones(len(d), bool)
+    return {"ladder": True, "h": h, "d": d, "d_bar": d_bar, "d_a": d_a,
+            "d_p": np.full(len(d), np.nan), "d_ok": ok,
+            "x": np.array([c[0] for c in xs]).T,
+            "x_bar": np.linalg.norm(np.array([c[1] for c in xs]).T, axis=1), "x_ok": ok}
+
+
 def run(a, binary):
     """The whole procedure of cases/dbs/dbs-skull.yaml (docs/dbs.md, "Goal-oriented
     refinement of the whole procedure"): the electrode tip–STN distance and the STN's
@@ -192,8 +247,8 @@ def run(a, binary):
     if any(n not in infos for n, *_ in st["uniform"]):
         raise SystemExit("dbs-goal needs every uniform run (the reference)")
 
-    def load(name, label, kind):
-        d = os.path.join(out, name)
+    def load(name, label, kind, where=out):
+        d = os.path.join(where, name)
         pos, steps, times = read_points(d, "targets.csv")
         rows = [r for r in read_csv(os.path.join(d, "targets.csv")) if r["name"] == st["target"]]
         sr = read_steps(d)
@@ -232,16 +287,22 @@ def run(a, binary):
                 "x_bar": np.linalg.norm(np.array([c[1] for c in xs]).T, axis=1),
                 "x_ok": xs[0][3] & xs[1][3] & xs[2][3]}
 
-    ref = reference(U[-3:])  # the finest three
-    prev = reference(U[-4:-1]) if len(U) > 3 else None  # the next coarser triple, for comparison
+    L = ladder_runs(a, binary, st["scene"], n, load) if a.ladder else None
+    if L:
+        ref = reference_ladder(L)
+        prev = reference(U[-3:])  # the uniform Richardson, for comparison
+    else:
+        ref = reference(U[-3:])  # the finest three
+        prev = reference(U[-4:-1]) if len(U) > 3 else None  # the next coarser triple
     d_ref, d_bar, x_ref, x_bar = ref["d"], ref["d_bar"], ref["x"], ref["x_bar"]
     runs = U + [dict(load(nm, l, k), sets=sets) for nm, l, sets, k in st["adaptive"]
                 if nm in infos]
     # the tools' branch (st["branch"]): steps where a reference mesh or the run itself is on
     # another branch than the finest mesh are not judged (their error is not a discretisation
     # error of the tissue)
-    finest = U[-1]["sep"]
-    ref_off = np.any([np.abs(r["sep"] - finest) > st["branch"] for r in U[-3:]], axis=0)
+    fam = L if L else U[-3:]  # the reference's meshes
+    finest = fam[-1]["sep"]
+    ref_off = np.any([np.abs(r["sep"] - finest) > st["branch"] for r in fam], axis=0)
     for r in runs:
         r["off"] = ref_off | (np.abs(r["sep"] - finest) > st["branch"])
     base = [r for r in U if r["name"] == st["baseline"]][0]
@@ -279,8 +340,21 @@ def run(a, binary):
           "alone, --steps): the distance's figures \"after the target\" below are those of the "
           "last step, and the phases are the shift." % (n - 1, U[0]["times"][-1]))
         p("")
-    for R, what in ((ref, "the reference"), (prev, "the next coarser triple")):
+    for R, what in ((ref, "the reference"),
+                    (prev, "the uniform meshes' Richardson" if L else "the next coarser triple")):
         if R is None:
+            continue
+        if R.get("ladder"):
+            p("The reference: per step, the least-squares line f∞ + a h through the %d complete "
+              "runs of the ladder %s (h %s mm; richardson.py, ladder_reference), its error bar "
+              "twice f∞'s standard error. Electrode tip–STN distance after the target (step %d, "
+              "t = %.2f s, on; %d steps): bar median %.4f mm, max %.4f mm; slope a median %.4f. "
+              "STN position: bar (norm) median %.4f mm, max %.4f mm." % (
+                  len(R["h"]), a.ladder, ", ".join("%.2f" % h for h in R["h"]), i0,
+                  U[0]["times"][i0], after.sum(), 1e3 * np.median(R["d_bar"][after]),
+                  1e3 * R["d_bar"][after].max(), np.median(R["d_a"][after]),
+                  1e3 * np.median(R["x_bar"][1:]), 1e3 * R["x_bar"][1:].max()))
+            p("")
             continue
         pa = R["d_p"][after & R["d_ok"]]
         q = (np.median(pa), *np.percentile(pa, [25, 75]), pa.min(), pa.max()) if len(pa) else \
@@ -302,9 +376,13 @@ def run(a, binary):
         p("")
     if prev is not None:
         dd = np.abs(prev["d"] - d_ref)[after]
-        p("The next coarser triple's distance reference against the finest three's after the target: "
-          "max difference %.4f mm (t = %.2f s), median %.4f mm." % (
-              1e3 * dd.max(), U[0]["times"][i0 + int(np.argmax(dd))], 1e3 * np.median(dd)))
+        dx = np.linalg.norm(prev["x"] - x_ref, axis=1)[1:]
+        p("%s distance reference against %s after the target: max difference %.4f mm "
+          "(t = %.2f s), median %.4f mm; STN position: max %.4f mm, median %.4f mm." % (
+              "The uniform meshes' Richardson" if L else "The next coarser triple's",
+              "the ladder's" if L else "the finest three's", 1e3 * dd.max(),
+              U[0]["times"][i0 + int(np.argmax(dd))], 1e3 * np.median(dd), 1e3 * dx.max(),
+              1e3 * np.median(dx)))
         p("")
     lines += engine.table_head(
         "phase (steps)", "d: sane orders", "d: bar median, max (mm)", "x: sane orders",
