@@ -153,7 +153,7 @@ int nh_sim_guard(nh_sim *sim, const double *u_start, const nh_step_stats *st);
 /* The step's relative residual stayed above its bound (*bound: the Newton
  * tolerance in static mode and with solver.newton, else
  * NH_UNSOLVED_LINEAR) and above the round-off level of its internal forces
- * (sim.c; steps.csv `unsolved`). */
+ * (steps.csv `unsolved`, which sim.c counts). */
 int nh_sim_step_unsolved(const nh_sim *sim, const nh_step_stats *st, double *bound);
 /* An unsolved step the guard judges: a dynamic step whose Newton iterations
  * were allowed (not solver.newton.max_iterations 0, one linearisation
