@@ -267,7 +267,7 @@ def run(a, binary):
                                   for r in rows]),
                 "speed": speed(sr), "rows": int(sr["constraints"].max()), "st": sr,
                 "i_shift": i_shift, "i_top": i_top, "i_back": i_back, "sep": sep,
-                "load": infos[name].get("load", [])}
+                "load": infos.get(name, {}).get("load", [])}
 
     U = [dict(load(nm, l, "uniform"), h=h) for nm, l, _, h in st["uniform"]]
     n = len(U[0]["d"])
@@ -348,11 +348,12 @@ def run(a, binary):
             p("The reference: per step, the least-squares line f∞ + a h through the %d complete "
               "runs of the ladder %s (h %s mm; richardson.py, ladder_reference), its error bar "
               "twice f∞'s standard error. Electrode tip–STN distance after the target (step %d, "
-              "t = %.2f s, on; %d steps): bar median %.4f mm, max %.4f mm; slope a median %.4f. "
+              "t = %.2f s, on; %d steps): bar median %.4f mm, max %.4f mm; slope a median %.4f "
+              "mm per mm of h. "
               "STN position: bar (norm) median %.4f mm, max %.4f mm." % (
                   len(R["h"]), a.ladder, ", ".join("%.2f" % h for h in R["h"]), i0,
                   U[0]["times"][i0], after.sum(), 1e3 * np.median(R["d_bar"][after]),
-                  1e3 * R["d_bar"][after].max(), np.median(R["d_a"][after]),
+                  1e3 * R["d_bar"][after].max(), 1e3 * np.median(R["d_a"][after]),
                   1e3 * np.median(R["x_bar"][1:]), 1e3 * R["x_bar"][1:].max()))
             p("")
             continue
@@ -384,8 +385,9 @@ def run(a, binary):
               U[0]["times"][i0 + int(np.argmax(dd))], 1e3 * np.median(dd), 1e3 * dx.max(),
               1e3 * np.median(dx)))
         p("")
+    fit = "fitted steps" if L else "sane orders"
     lines += engine.table_head(
-        "phase (steps)", "d: sane orders", "d: bar median, max (mm)", "x: sane orders",
+        "phase (steps)", "d: " + fit, "d: bar median, max (mm)", "x: " + fit,
         "x: bar median, max (mm)")
     for what, sl in phase_slices(U[-1], n):
         p("| %s (%d–%d) | %d | %.4f, %.4f | %d | %.4f, %.4f |" % (
@@ -393,16 +395,18 @@ def run(a, binary):
             1e3 * d_bar[sl].max(), ref["x_ok"][sl].sum(), 1e3 * np.median(x_bar[sl]),
             1e3 * x_bar[sl].max()))
     p("")
-    p("(the reference's bar per phase of the finest mesh's tools.csv; sane: an observed order "
-      "in [%g, 6), for x in all three components.)" % st["order"][0])
+    p("(the reference's bar per phase of the finest mesh's tools.csv; %s)" % (
+        "fitted: every step, the ladder's line" if L else
+        "sane: an observed order in [%g, 6), for x in all three components." % st["order"][0]))
     p("")
     i_s = base["i_shift"]
     shift = [float(np.linalg.norm(r["x"][i_s] - r["x"][0])) for r in U]
-    ps, s_ref = observed(ref["h"], shift[-3:])  # of the magnitude, as dbs_convergence.py
+    ps, s_ref = observed([r["h"] for r in U[-3:]], shift[-3:])  # as dbs_convergence.py
     p("Whole procedure (tools/dbs_convergence.py's quantities): final distance %s mm on %s mm "
       "→ %.4f mm (%s); STN shift |x(t_s) − X| at t_s = %.2f s %s mm → %.4f mm (%s)." % (
           ", ".join("%.4f" % (1e3 * r["d"][-1]) for r in U),
           ", ".join("%g" % h for *_, h in st["uniform"]), 1e3 * d_ref[-1],
+          "the ladder's line, bar %.4f mm" % (1e3 * d_bar[-1]) if L else
           "order %.2f" % ref["d_p"][-1] if ref["d_ok"][-1] else
           "fallback, bar %.4f mm" % (1e3 * d_bar[-1]), base["times"][i_s],
           ", ".join("%.4f" % (1e3 * v) for v in shift), 1e3 * s_ref,
