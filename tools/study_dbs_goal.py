@@ -524,7 +524,7 @@ def run(a, binary):
     ax.set_xlabel("time (s)")
     ax.set_ylabel("|d − d_ref| (mm)")
     ax.set_title("dbs-skull: error of the electrode tip–STN distance against the per-step "
-                 "Richardson reference", fontsize=9)
+                 "%s reference" % ("ladder's" if L else "Richardson"), fontsize=9)
     ax.grid(alpha=0.3, which="both")
     save(fig, os.path.join(img, "dbs_goal_error.png"), legend=ax)
 
