@@ -72,6 +72,7 @@
 
 #include "dwr_support.h"
 #include "hanging_mesh.h"
+#include "immersed.h"
 
 #define STEPS 30
 
@@ -98,12 +99,7 @@ static int linear(void *ctx, int n, const double *w, double *out) {
 /* The sphere of the header, integrated cut cells, on g³ cells over its
  * bounding box, with its tissue (E 60 kPa, ν 0.45, ρ 1000, B-bar). */
 static void sphere_on_grid(int g, nh_domain *d, nh_mesh **m, nh_tissue **t) {
-  nh_domain_sphere(centre, R, d);
-  d->cut_cells = NH_CUT_CELLS_INTEGRATED;
-  const int grid[3] = {g, g, g};
-  CHECK_OK(nh_mesh_create(d, grid, m));
-  nh_material mat = {60e3, 0.45, 1000, NH_FORMULATION_BBAR};
-  CHECK_OK(nh_tissue_create(*m, &mat, t));
+  immersed_ball(centre, R, g, 60e3, d, m, t);
 }
 
 static result run(int depth) {

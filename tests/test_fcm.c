@@ -80,6 +80,7 @@
  * 10. With the argument "conditioning" (test_fcm_conditioning): the
  *     stiffness's condition number with slivers (test_conditioning). */
 #include "check.h"
+#include "immersed.h"
 #include "fem/fem.h"
 #include "mesh/mesh.h"
 #include "scene/scene.h"
@@ -306,12 +307,7 @@ static const double ball_c0[3] = {0.0013, -0.0021, 0.0007}, ball_R = 0.03, ball_
 
 static void ball_on_grid(int g, nh_mesh **m, nh_tissue **t) {
   nh_domain d;
-  nh_domain_sphere(ball_c0, ball_R, &d);
-  d.cut_cells = NH_CUT_CELLS_INTEGRATED;
-  const int grid[3] = {g, g, g};
-  CHECK_OK(nh_mesh_create(&d, grid, m));
-  nh_material mat = {ball_E, 0.45, 1000.0, NH_FORMULATION_BBAR};
-  if (t) CHECK_OK(nh_tissue_create(*m, &mat, t));
+  immersed_ball(ball_c0, ball_R, g, ball_E, &d, m, t);
 }
 
 /* The sphere region of radius a centred on the ball's top. */

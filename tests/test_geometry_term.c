@@ -63,6 +63,7 @@
 #include <string.h>
 
 #include "dwr_support.h"
+#include "immersed.h"
 
 static int verbose;
 
@@ -259,12 +260,7 @@ static const double c0[3] = {0.0013, -0.0021, 0.0007}, R = 0.03;
 
 /* The ball integrated on g³ cells, B-bar, ν = 0.45. */
 static void ball_tissue(int g, nh_domain *d, nh_mesh **m, nh_tissue **t) {
-  nh_domain_sphere(c0, R, d);
-  d->cut_cells = NH_CUT_CELLS_INTEGRATED;
-  const int grid[3] = {g, g, g};
-  CHECK_OK(nh_mesh_create(d, grid, m));
-  nh_material mat = {3000.0, 0.45, 1000.0, NH_FORMULATION_BBAR};
-  CHECK_OK(nh_tissue_create(*m, &mat, t));
+  immersed_ball(c0, R, g, 3000.0, d, m, t);
 }
 
 /* Σ_K z_Kᵀ r_K (elastic part) and ΔV, on g³ cells. */
