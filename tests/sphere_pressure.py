@@ -39,7 +39,10 @@ the first grid (the 1 % at 24³ is the sphere's goal; the ellipsoid's
 probes at 0.35 of its 16 mm semi-axis lie 5.6 mm from the tie, which a 24³
 grid of its smaller box resolves with cells of 1.6-2.3 mm). Measured on
 12, 14, 16, 20, 24: 3.97, 2.14, 1.85, 1.47, 1.18 % (0.93 % against the
-linear field at 24³), order 1.01-1.21 from 14³ on.
+linear field at 24³), order 1.01-1.21 from 14³ on. Not on every sequence
+(docs/theory.md §5c): on 9, 10, 11, 13, 15, 18, 22 the errors are 2.39,
+8.48, 2.11, 1.48, 0.47, 1.66, 1.30 %, the order-1 line from 9³ failing at
+four of them; least-squares order 1.6 over all thirteen grids.
 
 Arguments: [--ellipsoid] the grids (default 8 12 16). NH_VERBOSE=1 prints
 the table.
