@@ -135,6 +135,7 @@ typedef struct nh_surface {
   double cell[3], yz_cell[2];
   int *xyz_start, *xyz_tri;
   int *yz_start, *yz_tri;
+  double *ball; /* 4 per triangle: a ball holding it (centre, radius) */
   int refs;
 } nh_surface;
 

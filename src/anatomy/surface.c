@@ -50,7 +50,7 @@ void nh_surface_release(nh_surface **surface) {
   nh_surface *s = *surface;
   *surface = NULL;
   if (--s->refs > 0) return;
-  free(s->v);
+  free(s->v), free(s->ball);
   free(s->yz_start), free(s->yz_tri), free(s->xyz_start), free(s->xyz_tri);
   free(s);
 }
@@ -318,6 +318,12 @@ static int nh_surface_check_closed(const nh_surface *s) {
 }
 
 /* ---- acceleration grids ---- */
+
+/* a · b, inlined in the distance query's inner loops. */
+static inline double nh_dot3(const double a[3], const double b[3]) {
+  return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+
 static int nh_clampi(int v, int lo, int hi) {
   return v < lo ? lo : (v > hi ? hi : v);
 }
@@ -401,6 +407,20 @@ static int nh_surface_index(nh_surface *s) {
   for (int i = 0; i < 3 * s->n_tri; i++)
     for (int k = 0; k < 3; k++)
       s->min[k] = fmin(s->min[k], s->v[3 * i + k]), s->max[k] = fmax(s->max[k], s->v[3 * i + k]);
+  /* Each triangle's bounding ball: its centroid and the farthest corner
+   * (grown by 1e-9 against round-off), the distance query's cheap test. */
+  s->ball = nh_calloc((size_t)(s->n_tri > 0 ? s->n_tri : 1), 4 * sizeof(double));
+  if (!s->ball) return NH_ERROR(NH_ERR_MEMORY, "out of memory: %s", s->path);
+  for (int t = 0; t < s->n_tri; t++) {
+    const double *v = s->v + 9 * t;
+    double *b = s->ball + 4 * t, r2 = 0.0;
+    for (int k = 0; k < 3; k++) b[k] = (v[k] + v[3 + k] + v[6 + k]) / 3.0;
+    for (int a = 0; a < 3; a++) {
+      const double e[3] = {v[3 * a] - b[0], v[3 * a + 1] - b[1], v[3 * a + 2] - b[2]};
+      r2 = fmax(r2, nh_dot3(e, e));
+    }
+    b[3] = sqrt(r2) * (1 + 1e-9);
+  }
   /* About n^(1/3) cells per axis in 3D and n^(1/2) per axis in (y, z). */
   int g3 = nh_clampi((int)ceil(cbrt((double)s->n_tri)), 1, 256);
   double ext = 0.0;
@@ -488,14 +508,14 @@ static double nh_tri_dist2(const double *t, const double p[3]) {
   const double *a = t, *b = t + 3, *c = t + 6;
   double ab[3], ac[3], ap[3], q[3];
   for (int k = 0; k < 3; k++) ab[k] = b[k] - a[k], ac[k] = c[k] - a[k], ap[k] = p[k] - a[k];
-  double d1 = nh_vec3_dot(ab, ap), d2 = nh_vec3_dot(ac, ap);
+  double d1 = nh_dot3(ab, ap), d2 = nh_dot3(ac, ap);
   if (d1 <= 0 && d2 <= 0) {
     for (int k = 0; k < 3; k++) q[k] = a[k];
     goto done;
   }
   double bp[3];
   for (int k = 0; k < 3; k++) bp[k] = p[k] - b[k];
-  double d3 = nh_vec3_dot(ab, bp), d4 = nh_vec3_dot(ac, bp);
+  double d3 = nh_dot3(ab, bp), d4 = nh_dot3(ac, bp);
   if (d3 >= 0 && d4 <= d3) {
     for (int k = 0; k < 3; k++) q[k] = b[k];
     goto done;
@@ -508,7 +528,7 @@ static double nh_tri_dist2(const double *t, const double p[3]) {
   }
   double cp[3];
   for (int k = 0; k < 3; k++) cp[k] = p[k] - c[k];
-  double d5 = nh_vec3_dot(ab, cp), d6 = nh_vec3_dot(ac, cp);
+  double d5 = nh_dot3(ab, cp), d6 = nh_dot3(ac, cp);
   if (d6 >= 0 && d5 <= d6) {
     for (int k = 0; k < 3; k++) q[k] = c[k];
     goto done;
@@ -531,7 +551,7 @@ static double nh_tri_dist2(const double *t, const double p[3]) {
   }
 done:;
   double d[3] = {p[0] - q[0], p[1] - q[1], p[2] - q[2]};
-  return nh_vec3_dot(d, d);
+  return nh_dot3(d, d);
 }
 
 double nh_surface_level(const nh_surface *s, const double x[3], double cap) {
@@ -548,7 +568,7 @@ double nh_surface_level(const nh_surface *s, const double x[3], double cap) {
   double hmin = fmin(s->cell[0], fmin(s->cell[1], s->cell[2]));
   for (int k = 0; k < 3; k++) c[k] = nh_surface_cell_of(s, k, x[k]);
   int rmax = s->g[0] + s->g[1] + s->g[2];
-  double best2 = INFINITY;
+  double best2 = INFINITY, best = INFINITY;
   for (int r = 0; r <= rmax; r++) {
     for (int k = c[2] - r; k <= c[2] + r; k++) {
       if (k < 0 || k >= s->g[2]) continue;
@@ -559,8 +579,15 @@ double nh_surface_level(const nh_surface *s, const double x[3], double cap) {
           int on_shell = abs(i - c[0]) == r || abs(j - c[1]) == r || abs(k - c[2]) == r;
           if (!on_shell) continue;
           size_t cell = (size_t)i + (size_t)s->g[0] * (j + (size_t)s->g[1] * k);
-          for (int q = s->xyz_start[cell]; q < s->xyz_start[cell + 1]; q++)
-            best2 = fmin(best2, nh_tri_dist2(s->v + 9 * s->xyz_tri[q], x));
+          for (int q = s->xyz_start[cell]; q < s->xyz_start[cell + 1]; q++) {
+            /* every point of the triangle lies within ball[3] of ball[0..2] */
+            const int t = s->xyz_tri[q];
+            const double *b = s->ball + 4 * t, lim = best + b[3];
+            const double e[3] = {x[0] - b[0], x[1] - b[1], x[2] - b[2]};
+            if (nh_dot3(e, e) > lim * lim) continue;
+            const double d2 = nh_tri_dist2(s->v + 9 * t, x);
+            if (d2 < best2) best2 = d2, best = sqrt(d2);
+          }
         }
       }
     }
