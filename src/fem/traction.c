@@ -189,6 +189,25 @@ static double nh_traction_immersed_cell(const nh_mesh *m, int c, const double Xe
                                  {0, 7, 4, 6}, {0, 4, 5, 6}, {0, 5, 1, 6}};
   enum { NV = (NH_TRACTION_SUB_MAX + 1) * (NH_TRACTION_SUB_MAX + 1) * (NH_TRACTION_SUB_MAX + 1) };
   double xi[NV][3], x[NV][3], F[NV];
+  /* The level's Lipschitz bound (1 for every domain, mesh.h's nh_cut_spec)
+   * at the centre, as the cut-cell quadrature uses it: a leaf wholly
+   * outside, or wholly inside and off the grid's box, holds no surface, and
+   * the lattice below would find none (one level call instead of (n + 1)³). */
+  {
+    const double zero[3] = {0.0, 0.0, 0.0};
+    double xc[3], r2 = 0.0;
+    const double Fc = nh_cell_level(&m->domain, Xe, zero, xc);
+    for (int a = 0; a < 8; a++) {
+      double d2 = 0.0;
+      for (int k = 0; k < 3; k++) d2 += (Xe[3 * a + k] - xc[k]) * (Xe[3 * a + k] - xc[k]);
+      r2 = fmax(r2, d2);
+    }
+    const double r = sqrt(r2) * (1 + 1e-12);
+    if (Fc > r) return 0.0;
+    int on_box = 0;
+    for (int face = 0; face < 6 && !on_box; face++) on_box = nh_face_on_box(m, Xe, face);
+    if (Fc < -r && !on_box) return 0.0;
+  }
   int neg = 0, pos = 0;
   for (int k = 0; k <= n; k++)
     for (int j = 0; j <= n; j++)
