@@ -36,6 +36,13 @@ set_tests_properties(sphere_pressure_goal PROPERTIES TIMEOUT 900)
 nh_add_py_test(ellipsoid_pressure verify sphere_pressure.py --ellipsoid 8 12 16)
 nh_add_py_test(ellipsoid_pressure_ladder "verify;slow" sphere_pressure.py --ellipsoid 12 14 16 20 24)
 set_tests_properties(ellipsoid_pressure_ladder PROPERTIES TIMEOUT 900)
+# Both bodies as NIfTI label masks (0.5 mm voxels; tests/sphere_pressure.py --mask).
+nh_add_py_test(sphere_pressure_mask verify sphere_pressure.py --mask 8 12 16)
+nh_add_py_test(sphere_pressure_mask_goal "verify;slow" sphere_pressure.py --mask 12 14 16 20 24)
+nh_add_py_test(ellipsoid_pressure_mask verify sphere_pressure.py --ellipsoid --mask 8 12 16)
+nh_add_py_test(ellipsoid_pressure_mask_ladder "verify;slow" sphere_pressure.py --ellipsoid --mask
+  12 14 16 20 24)
+set_tests_properties(sphere_pressure_mask_goal ellipsoid_pressure_mask_ladder PROPERTIES TIMEOUT 900)
 # The geometry term of the goal estimate (tests/test_geometry_term.c): zero on
 # a box domain and with scaled, round-off in cut cells with a planar level set,
 # -ΔV ε(z):D:ε(u) for linear fields on a ball at order 2, and no net
