@@ -17,7 +17,7 @@
  *     as the analytic inside.
  *     The level is the signed distance capped at `cap`: on 2000 random
  *     points of the grown box, |nh_surface_level| equals min(cap, the
- *     minimum over all 36672 triangles of the distance) to 1e-12 m, that
+ *     minimum over all 36480 triangles of the distance) to 1e-12 m, that
  *     distance computed here another way (the foot on the triangle's plane
  *     if its barycentric weights are ≥ 0, else the nearest of its edges), so
  *     the query's index and its pruning never miss the nearest triangle.
