@@ -49,6 +49,11 @@ set_tests_properties(sphere_pressure_mask_goal ellipsoid_pressure_mask_ladder PR
 # residual for the immersed patch test.
 file(MAKE_DIRECTORY ${CMAKE_CURRENT_BINARY_DIR}/geometry_term_scratch)
 nh_add_c_test(test_geometry_term "unit;verify" ${CMAKE_CURRENT_BINARY_DIR}/geometry_term_scratch)
+# Its part 7 alone (argument "drainage"): the body force on the mass above a
+# drainage plane, each depth's own half-space cut.
+add_test(NAME test_geometry_term_drainage COMMAND test_geometry_term
+  ${CMAKE_CURRENT_BINARY_DIR}/geometry_term_scratch drainage)
+set_tests_properties(test_geometry_term_drainage PROPERTIES LABELS "unit;verify")
 # The stiffness's condition number with cut cells of shrinking tissue (tests/test_fcm.c, part 10).
 add_test(NAME test_fcm_conditioning COMMAND test_fcm ${CMAKE_CURRENT_BINARY_DIR} conditioning)
 set_tests_properties(test_fcm_conditioning PROPERTIES LABELS "unit;verify"

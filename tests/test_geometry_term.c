@@ -53,7 +53,21 @@
  *     component on every grid. Measured: G and the sum here agree to
  *     1e-14 … 3e-13; (3/4) G is 0.42 … 5.6 % off the change (the fixed
  *     point in 6–8 iterations).
- * Argument: a scratch folder for the STL. NH_VERBOSE=1 prints numbers. */
+ *  7. The drained mass (test_drainage): the ball's body force acts only on
+ *     the tissue above a drainage plane z = c_z + R/3 (tissue.buoyancy.level),
+ *     which cuts cells the ball's surface cuts too. At u = 0 (no elastic
+ *     part) on 5³ … 9³ cells: r_K is exactly 0 in every cut leaf wholly
+ *     below the plane (no drained mass there at either depth), and the
+ *     assembled body force's change is ρ g (V⁺_{d+1} − V⁺_d) to 1e-12,
+ *     V⁺_d the volume of the depth-d reconstruction above the plane summed
+ *     leaf by leaf (nh_cut_domain_cell_at with the half-space: volumes, not
+ *     the nodes' shares); and (4/3)(V⁺_{d+1} − V⁺_d), what the term
+ *     stands for, is within 2 % of V_cap − V⁺_d, V_cap the spherical cap's
+ *     closed form (measured 0.2 … 0.3 %). The former rule, each node's
+ *     drained share of its mass times the change of its corner integrals,
+ *     fails the first two (NH_VERBOSE prints by how much).
+ * Arguments: a scratch folder for the STL; "drainage" runs part 7 alone
+ * (test_geometry_term_drainage), else parts 1–6. NH_VERBOSE=1 prints numbers. */
 #include "check.h"
 #include "adapt/adapt.h"
 #include "fem/fem.h"
@@ -530,8 +544,79 @@ static void test_prediction(int g, double *worst) {
   nh_domain_release(&d);
 }
 
+/* ---- 7. the drained mass ---- */
+static void test_drainage(int g) {
+  nh_domain d;
+  nh_mesh *m = NULL;
+  nh_tissue *t = NULL;
+  ball_tissue(g, &d, &m, &t);
+  const double up = c0[2] + R / 3.0, rho = 1000.0;
+  const double plane[6] = {c0[0], c0[1], up, 0.0, 0.0, 1.0};
+  const double half[6] = {c0[0], c0[1], up, 0.0, 0.0, -1.0}; /* the set (x − p)·n < 0: above */
+  nh_geometry_loads loads = {.body = {0.0, 0.0, -9.81}, .plane = plane};
+  const size_t n3 = 3 * (size_t)m->n_nodes;
+  double *u = calloc(n3, sizeof(double)), force = 0.0, dV = 0.0, V_d = 0.0;
+  int below = 0, below_nonzero = 0;
+  /* the former rule, for the verbose report: each node's drained share */
+  double *drained = calloc((size_t)m->n_nodes, sizeof(double)), old_force = 0.0;
+  int old_below_nonzero = 0;
+  for (int l = 0; l < m->n_leaves; l++) {
+    double mc[8];
+    CHECK_OK(nh_tissue_corner_masses(t, m->leaves[l], plane, mc));
+    for (int a = 0; a < 8; a++) drained[m->cells[8 * m->leaves[l] + a]] += mc[a];
+  }
+  nh_geometry_loads all = {.body = {0.0, 0.0, -9.81}};
+  for (int l = 0; l < m->n_leaves; l++) {
+    const int c = m->leaves[l];
+    double Xe[24], lo[3], hi[3], r[24];
+    nh_mesh_cell_coords(m, m->X, c, Xe);
+    CHECK(nh_hex_is_box(Xe, lo, hi), "leaf %d is not a box", c);
+    nh_cut_moments m2, m3;
+    CHECK_OK(nh_cut_domain_cell_at(&d, NH_CUT_DEPTH, lo, hi, NULL, half, &m2, NULL));
+    CHECK_OK(nh_cut_domain_cell_at(&d, NH_CUT_DEPTH + 1, lo, hi, NULL, half, &m3, NULL));
+    V_d += m2.volume, dV += m3.volume - m2.volume;
+    if (nh_tissue_geometry_residual(t, c, u, &loads, r) != 1) continue;
+    for (int a = 0; a < 8; a++) force += r[3 * a + 2];
+    double r_all[24], old_norm = 0.0;
+    CHECK(nh_tissue_geometry_residual(t, c, u, &all, r_all) == 1, "leaf %d: not cut", c);
+    for (int a = 0; a < 8; a++) {
+      const int n = m->cells[8 * c + a];
+      const double share = t->mass[n] > 0.0 ? drained[n] / t->mass[n] : 0.0;
+      old_force += share * r_all[3 * a + 2], old_norm += fabs(share * r_all[3 * a + 2]);
+    }
+    if (hi[2] < up) {
+      below++;
+      below_nonzero += norm24(r) != 0.0;
+      old_below_nonzero += old_norm != 0.0;
+    }
+  }
+  CHECK(below > 0, "%d³: no cut leaf below the plane", g);
+  CHECK(below_nonzero == 0, "%d³: r nonzero in %d of the %d cut leaves below the drainage plane", g,
+        below_nonzero, below);
+  const double want = rho * -9.81 * dV;
+  CHECK(fabs(force - want) <= 1e-12 * fabs(want) + 1e-30,
+        "%d³: body force change %.15e, ρ g ΔV⁺ %.15e", g, force, want);
+  /* the change the term stands for: (4/3) ΔV⁺ estimates V_cap − V⁺_d */
+  const double hc = R - R / 3.0, cap = M_PI * hc * hc * (3 * R - hc) / 3.0;
+  const double ratio = 4.0 / 3.0 * dV / (cap - V_d);
+  CHECK(fabs(ratio - 1.0) <= 0.02, "%d³: (4/3) ΔV⁺ / (V_cap − V⁺_d) = %.4f, not within 2 %% of 1",
+        g, ratio);
+  if (verbose)
+    printf("drainage %d³: %d cut leaves below; ΔV⁺ %.4e m³, (4/3) ΔV⁺ / (V_cap − V⁺_d) %.4f; the "
+           "former rule: %d of them nonzero, its force change %.4f of ρ g ΔV⁺\n",
+           g, below, dV, ratio, old_below_nonzero, old_force / want);
+  free(u), free(drained);
+  nh_tissue_destroy(&t);
+  nh_mesh_destroy(&m);
+  nh_domain_release(&d);
+}
+
 int main(int argc, char **argv) {
   verbose = getenv("NH_VERBOSE") != NULL;
+  if (argc > 2 && !strcmp(argv[2], "drainage")) { /* part 7 alone */
+    for (int g = 5; g <= 9; g++) test_drainage(g);
+    return nh_test_failures ? 1 : 0;
+  }
   test_exact_domains();
   test_planar(argc > 1 ? argv[1] : ".");
   test_ball_order();

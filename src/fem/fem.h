@@ -372,12 +372,13 @@ void nh_tissue_cell_stress(const nh_tissue *tissue, int c, const double *u, doub
 
 /* ---- the geometry term of the goal estimate (docs/theory.md §6.6, "Geometry") ----
  * The loads of a step that depend on the immersed geometry: the body force
- * per unit mass (gravity by its schedule, less the buoyed part), the share
- * of each node's mass it acts on (drained / mass with buoyancy; NULL: 1),
- * and the tractions with their schedule factors. */
+ * per unit mass (gravity by its schedule, less the buoyed part), the
+ * drainage plane {p[3], up[3]} above which the mass it acts on lies (NULL:
+ * all of it; nh_tissue_corner_masses), and the tractions with their
+ * schedule factors. */
 typedef struct nh_geometry_loads {
   double body[3];
-  const double *body_share;
+  const double *plane;
   int n_tractions;
   const nh_traction *tractions;
   const double *traction_factor;
@@ -387,8 +388,9 @@ typedef struct nh_geometry_loads {
  *     r = (f_ext' − f_ext) − (f_int'(u) − f_int(u))      (primes: depth + 1)
  * over the leaf's 8 nodes (r[24]): the elastic force (K0, B-bar's mean
  * gradients and volume, the centroid's frame), the body force on its mass
- * and the immersed tractions (loads may be NULL: elastic part only). Ties
- * and drainage planes are not re-integrated. The finer data come from the
+ * above the drainage plane (its half-space cut at each depth) and the
+ * immersed tractions (loads may be NULL: elastic part only). Ties are not
+ * re-integrated. The finer data come from the
  * cache of nh_tissue_set_geometry_cache when it is on (bit for bit what
  * would be computed). Returns 1 for a cut leaf, 0
  * (r zero) otherwise (a box domain, `scaled`, whole or not a box cell), or

@@ -276,11 +276,13 @@ const nh_tissue_cut *nh_tissue_cell_cut(const nh_tissue *t, int c) {
   return k >= 0 ? t->cut + k : NULL;
 }
 
-int nh_tissue_corner_masses(const nh_tissue *t, int c, const double *plane, double mc[8]) {
+/* nh_tissue_corner_masses with the cut data `cut` (NULL: not cut) of the
+ * lattice `depth`: the geometry term compares depth NH_CUT_DEPTH with + 1. */
+static int nh_corner_masses_at(const nh_tissue *t, int c, const nh_tissue_cut *cut, int depth,
+                               const double *plane, double mc[8]) {
   const nh_mesh *m = t->mesh;
   double rho;
   nh_tissue_cell_material(t, c, NULL, NULL, &rho);
-  const nh_tissue_cut *cut = nh_tissue_cell_cut(t, c);
   double Xe[24], lo[3], hi[3];
   int above = 8, box = 0;
   if (plane) {
@@ -298,7 +300,7 @@ int nh_tissue_corner_masses(const nh_tissue *t, int c, const double *plane, doub
     const double half[6] = {plane[0], plane[1], plane[2], -plane[3], -plane[4], -plane[5]};
     nh_cut_moments mom;
     double w[27];
-    NH_TRY(nh_cut_domain_cell(&m->domain, lo, hi, NULL, half, &mom, w));
+    NH_TRY(nh_cut_domain_cell_at(&m->domain, depth, lo, hi, NULL, half, &mom, w));
     nh_cut_shape_integrals(w, mc, NULL);
     for (int a = 0; a < 8; a++) mc[a] *= rho;
   } else {
@@ -308,6 +310,10 @@ int nh_tissue_corner_masses(const nh_tissue *t, int c, const double *plane, doub
                   : rho * nh_cell_phi(t, c) * t->volume[t->cell_shape[c]] / 8.0 * f;
   }
   return NH_OK;
+}
+
+int nh_tissue_corner_masses(const nh_tissue *t, int c, const double *plane, double mc[8]) {
+  return nh_corner_masses_at(t, c, nh_tissue_cell_cut(t, c), NH_CUT_DEPTH, plane, mc);
 }
 
 /* K₀ of leaf c: the shape's, or λ_c K_λ + μ_c K_μ with materials per label
@@ -805,13 +811,15 @@ int nh_tissue_geometry_residual(const nh_tissue *t, int c, const double *u,
   nh_cut_force(t, c, fine, u, f1);
   for (int i = 0; i < 24; i++) r[i] = f0[i] - f1[i];
   if (!loads) return 1;
-  double rho;
-  nh_tissue_cell_material(t, c, NULL, NULL, &rho);
-  for (int a = 0; a < 8; a++) {
-    const double share = loads->body_share ? loads->body_share[m->cells[8 * c + a]] : 1.0;
-    const double dm = rho * share * (fine->corner[a] - cut->corner[a]);
-    for (int k = 0; k < 3; k++) r[3 * a + k] += dm * loads->body[k];
-  }
+  /* the body force acts on the mass (above the drainage plane, if any),
+   * each lattice's own: its half-space cut at that depth where the plane
+   * crosses the leaf */
+  double m0[8], m1[8];
+  int rc = nh_corner_masses_at(t, c, cut, NH_CUT_DEPTH, loads->plane, m0);
+  if (!rc) rc = nh_corner_masses_at(t, c, fine, NH_CUT_DEPTH + 1, loads->plane, m1);
+  if (rc) return -rc;
+  for (int a = 0; a < 8; a++)
+    for (int k = 0; k < 3; k++) r[3 * a + k] += (m1[a] - m0[a]) * loads->body[k];
   for (int q = 0; q < loads->n_tractions; q++) {
     const double factor = loads->traction_factor ? loads->traction_factor[q] : 1.0;
     if (factor == 0.0) continue;

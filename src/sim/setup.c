@@ -231,15 +231,20 @@ static int nh_sim_ties(nh_sim *s, int first) {
   return rc;
 }
 
+int nh_sim_drainage_plane(const nh_scene *sc, double plane[6]) {
+  if (!sc->tissue.buoyant || !sc->tissue.buoyancy_has_level) return 0;
+  const double *g = sc->gravity;
+  double gn = sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
+  for (int k = 0; k < 3; k++) plane[k] = sc->tissue.buoyancy_level[k], plane[3 + k] = -g[k] / gn;
+  return 1;
+}
+
 /* The drained mass: all of it, or the part above the fluid level. */
 static int nh_sim_drained_mass(nh_sim *s) {
-  const nh_scene *sc = s->scene;
   const nh_mesh *m = s->mesh;
+  double plane[6];
   memcpy(s->drained, s->tissue->mass, sizeof(double) * (size_t)m->n_nodes);
-  if (!sc->tissue.buoyant || !sc->tissue.buoyancy_has_level) return NH_OK;
-  const double *g = sc->gravity;
-  double gn = sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]), plane[6];
-  for (int k = 0; k < 3; k++) plane[k] = sc->tissue.buoyancy_level[k], plane[3 + k] = -g[k] / gn;
+  if (!nh_sim_drainage_plane(s->scene, plane)) return NH_OK;
   memset(s->drained, 0, sizeof(double) * (size_t)m->n_nodes);
   for (int l = 0; l < m->n_leaves; l++) {
     int c = m->leaves[l];

@@ -652,19 +652,15 @@ static int nh_sim_estimate(nh_sim *s) {
   const double h = sc->time.step;
   double scale = sc->time.mode == NH_MODE_STATIC ? 1.0 : h * sc->tissue.damping_stiffness + h * h;
   /* the geometry term's loads at this step (docs/theory.md §6.6, "Geometry") */
-  const int nt = sc->tissue.n_tractions, nn = s->mesh->n_nodes;
+  const int nt = sc->tissue.n_tractions;
   nh_geometry_loads loads = {.n_tractions = nt, .tractions = sc->tissue.tractions};
   nh_scene_tissue_gravity(sc, s->time, loads.body);
-  double *buf = nh_calloc((size_t)nt + (sc->tissue.buoyant ? (size_t)nn : 0) + 1, sizeof(double));
+  double *buf = nh_calloc((size_t)nt + 1, sizeof(double)), plane[6];
   if (!buf) return NH_ERROR(NH_ERR_MEMORY, "out of memory: goal estimate loads");
   for (int q = 0; q < nt; q++)
     buf[q] = nh_schedule_eval(&sc->tissue.tractions[q].schedule, s->time);
   loads.traction_factor = buf;
-  if (sc->tissue.buoyant) { /* the drained share of each node's mass */
-    for (int i = 0; i < nn; i++)
-      buf[nt + i] = s->tissue->mass[i] > 0.0 ? s->drained[i] / s->tissue->mass[i] : 0.0;
-    loads.body_share = buf + nt;
-  }
+  if (nh_sim_drainage_plane(sc, plane)) loads.plane = plane; /* the drained mass's */
   nh_adapt_set_geometry_loads(s->adapt, &loads);
   /* the constraint-data term: the rows one level finer (§6.6, "Constraint data") */
   const nh_rows *rows = nh_contact_rows(s->contact);

@@ -178,6 +178,9 @@ int nh_sim_setup_mesh(nh_sim *sim, int first);
  * NH_ERR_INPUT (at the region) beyond limits.max_cells, as
  * nh_template_load and nh_mesh_refine. */
 int nh_sim_refine_fixed(nh_sim *sim);
+/* The drainage plane of tissue.buoyancy.level, {level, −g/|g|} (the drained
+ * mass is the tissue above it): 1, or 0 (plane untouched) without one. */
+int nh_sim_drainage_plane(const nh_scene *scene, double plane[6]);
 
 /* ---- tools (sim/tools.c) ---- */
 /* Create the tools (NULL contact without tools) and their outputs' handles. */
