@@ -207,6 +207,8 @@ typedef struct nh_tissue_cut {
   double G0[24];       /* ∇N at the tissue part's centroid (the rotation's F) */
   double Gbar[24];     /* (1/V_t) ∫_tissue ∇N dV (B-bar's dilatation) */
   double corner[8];    /* ∫_tissue N_a dV */
+  double above[8]; /* ∫ N_a dV over the tissue above the drainage plane (nh_tissue_set_drainage)
+                      on the entry's own lattice; NaN without a plane */
   double volume, fraction; /* V_t and V_t / V_cell */
   double xi[3];            /* the centroid, natural coordinates */
   /* which points lie in the tissue (level ≤ 0): bit q < 27 the fitted
@@ -254,6 +256,9 @@ typedef struct nh_tissue {
    * cut entry its data one lattice finer (NH_CUT_DEPTH + 1), kept with the
    * entry; NULL when not cached */
   nh_tissue_cut *fine;
+  /* the drainage plane {p, up} whose cut the entries hold (above[]) */
+  double drainage[6];
+  int has_drainage;
 } nh_tissue;
 enum { NH_CUT_NONE = -1, NH_CUT_WHOLE = -2 };
 
@@ -274,6 +279,14 @@ int nh_tissue_node_support(const nh_tissue *tissue, double *support);
  * They depend only on the leaf's rest box, its material and α, as the cut
  * entry does. NH_ERR_MEMORY, or the cut-cell quadrature's failure. */
 int nh_tissue_set_geometry_cache(nh_tissue *tissue, int on);
+/* The drainage plane {p[3], up[3]} (tissue.buoyancy.level; NULL: none):
+ * every cut entry, and its finer one, keeps ∫ N_a dV over its tissue above
+ * the plane on its own lattice (a half-space cut where the plane crosses
+ * the leaf), which nh_tissue_corner_masses and the geometry term then read
+ * instead of integrating again. Entries already holding this plane's are
+ * kept; later entries get theirs when made. Fails as the cut-cell
+ * quadrature. */
+int nh_tissue_set_drainage(nh_tissue *tissue, const double *plane);
 /* Set the stabilisation α >= 0 and recompute every cut cell. NH_ERR_MEMORY. */
 int nh_tissue_set_stabilisation(nh_tissue *tissue, double alpha);
 /* At most this many points of a cut cell's tissue (nh_tissue_tissue_points). */

@@ -283,6 +283,11 @@ static int nh_corner_masses_at(const nh_tissue *t, int c, const nh_tissue_cut *c
   const nh_mesh *m = t->mesh;
   double rho;
   nh_tissue_cell_material(t, c, NULL, NULL, &rho);
+  if (plane && cut && t->has_drainage && cut->above[0] == cut->above[0] &&
+      !memcmp(plane, t->drainage, sizeof t->drainage)) { /* held by the entry */
+    for (int a = 0; a < 8; a++) mc[a] = rho * cut->above[a];
+    return NH_OK;
+  }
   double Xe[24], lo[3], hi[3];
   int above = 8, box = 0;
   if (plane) {
@@ -570,8 +575,35 @@ const double *nh_tissue_gbar(const nh_tissue *t, int c) {
 /* The element data of a cut cell from the fitted weights w of its tissue
  * part: K0 = (1 − α) Σ_q w_q BᵀDB(ξ_q) + α K_cell, the mean gradients and
  * the centroid's gradients over the tissue part, ∫ N_a. */
+/* e->above of the cut entry e (its lo, hi, corner set) on the lattice of
+ * `depth`: NaN without a drainage plane. */
+static int nh_cut_above(const nh_tissue *t, nh_tissue_cut *e, int depth) {
+  const double *p = t->drainage;
+  if (!t->has_drainage) {
+    for (int a = 0; a < 8; a++) e->above[a] = NAN;
+    return NH_OK;
+  }
+  int above = 0;
+  for (int a = 0; a < 8; a++) {
+    double s = 0.0;
+    for (int k = 0; k < 3; k++)
+      s += ((nh_hex_corner[a][k] > 0 ? e->hi[k] : e->lo[k]) - p[k]) * p[3 + k];
+    above += s > 0;
+  }
+  if (above == 0 || above == 8) {
+    for (int a = 0; a < 8; a++) e->above[a] = above ? e->corner[a] : 0.0;
+    return NH_OK;
+  }
+  const double half[6] = {p[0], p[1], p[2], -p[3], -p[4], -p[5]};
+  nh_cut_moments mom;
+  double w[27];
+  NH_TRY(nh_cut_domain_cell_at(&t->mesh->domain, depth, e->lo, e->hi, NULL, half, &mom, w));
+  nh_cut_shape_integrals(w, e->above, NULL);
+  return NH_OK;
+}
+
 static int nh_cut_data(const nh_tissue *t, int c, const double Xe[24], const nh_cut_moments *mom,
-                       const double w[27], nh_tissue_cut *e) {
+                       const double w[27], int depth, nh_tissue_cut *e) {
   double lambda, mu, xi[81], Kf[576], G[24], Gb[24], v;
   nh_tissue_cell_material(t, c, &lambda, &mu, NULL);
   const int bbar = t->material.formulation == NH_FORMULATION_BBAR;
@@ -613,7 +645,7 @@ static int nh_cut_data(const nh_tissue *t, int c, const double Xe[24], const nh_
     for (int k = 0; k < 3; k++) X[k] = 0.5 * (lo[k] + hi[k]) + 0.5 * (hi[k] - lo[k]) * z[k];
     if (nh_domain_level(&t->mesh->domain, X) <= 0.0) e->inside |= (uint64_t)1 << q;
   }
-  return NH_OK;
+  return nh_cut_above(t, e, depth);
 }
 
 /* Leaf c's cut data one lattice finer (depth NH_CUT_DEPTH + 1), the
@@ -625,7 +657,7 @@ static int nh_cut_fine(const nh_tissue *t, int c, nh_tissue_cut *fine) {
   nh_mesh_cell_coords(m, m->X, c, Xe);
   nh_hex_is_box(Xe, lo, hi);
   int rc = nh_cut_domain_cell_at(&m->domain, NH_CUT_DEPTH + 1, lo, hi, NULL, NULL, &mom, w);
-  return rc ? rc : nh_cut_data(t, c, Xe, &mom, w, fine);
+  return rc ? rc : nh_cut_data(t, c, Xe, &mom, w, NH_CUT_DEPTH + 1, fine);
 }
 
 /* The finer data of every cut entry that has none yet (λ NaN), the leaves
@@ -706,7 +738,7 @@ static int nh_tissue_cuts(nh_tissue *t) {
       index[c] = NH_CUT_WHOLE;
       continue;
     }
-    rc = nh_cut_data(t, c, Xe, &mom, w, e);
+    rc = nh_cut_data(t, c, Xe, &mom, w, NH_CUT_DEPTH, e);
     if (rc)
       NH_ERROR(rc, "cut cell %d (level %d) has a non-positive Jacobian", c, m->level[c]);
     else {
@@ -745,6 +777,20 @@ int nh_tissue_set_geometry_cache(nh_tissue *t, int on) {
   if (!t->fine) return NH_ERROR(NH_ERR_MEMORY, "out of memory: cut cells' finer data");
   for (int k = 0; k < t->n_cut; k++) t->fine[k].lambda = NAN;
   return nh_tissue_fine_fill(t);
+}
+
+int nh_tissue_set_drainage(nh_tissue *t, const double *plane) {
+  const int same = plane && t->has_drainage && !memcmp(plane, t->drainage, sizeof t->drainage);
+  t->has_drainage = plane != NULL;
+  if (plane) memcpy(t->drainage, plane, sizeof t->drainage);
+  for (int k = 0; k < t->n_cut; k++) {
+    if (!same || t->cut[k].above[0] != t->cut[k].above[0])
+      NH_TRY(nh_cut_above(t, t->cut + k, NH_CUT_DEPTH));
+    nh_tissue_cut *f = t->fine ? t->fine + k : NULL;
+    if (f && f->lambda == f->lambda && (!same || f->above[0] != f->above[0]))
+      NH_TRY(nh_cut_above(t, f, NH_CUT_DEPTH + 1));
+  }
+  return NH_OK;
 }
 
 int nh_tissue_set_stabilisation(nh_tissue *t, double alpha) {

@@ -245,6 +245,7 @@ static int nh_sim_drained_mass(nh_sim *s) {
   double plane[6];
   memcpy(s->drained, s->tissue->mass, sizeof(double) * (size_t)m->n_nodes);
   if (!nh_sim_drainage_plane(s->scene, plane)) return NH_OK;
+  NH_TRY(nh_tissue_set_drainage(s->tissue, plane)); /* the cut entries keep their part above */
   memset(s->drained, 0, sizeof(double) * (size_t)m->n_nodes);
   for (int l = 0; l < m->n_leaves; l++) {
     int c = m->leaves[l];
