@@ -15,6 +15,9 @@ set_tests_properties(dbs_plan PROPERTIES TIMEOUT 600 LABELS "verify;slow")
 # settling amplitude; coarse 10 x 12 x 9 grid.
 nh_add_py_test(static_skull verify static_skull.py)
 set_tests_properties(static_skull PROPERTIES LABELS "verify;slow")
+# The same with a cannula at rest outside the tissue: the STN as without it
+# (tests/static_skull_tool.py; the quasi-static redo's lost predictor).
+nh_add_py_test(static_skull_tool verify static_skull_tool.py)
 
 # The skull's force in steps.csv balances the weight of a brain at rest in
 # its skull (tests/skull_force.py).

@@ -21,8 +21,9 @@ endif()
 # exit 1 naming where and why (an unsupported body: singular tangent; a
 # body held by a tiny tie off its centre of mass: no progress in 3
 # iterations); a hard but converging Newton (the cantilever at 0.2 N) is not
-# stopped by the rule.
-nh_add_py_test(static_failures verify static_failures.py)
+# stopped by the rule. Slow: the soft brain on the skull tries its first
+# load step in 1, 2, 4, 8 and 16 parts (about 11 s).
+nh_add_py_test(static_failures "verify;slow" static_failures.py)
 if(NH_SANITIZE)
   set_property(TEST static_failures APPEND PROPERTY ENVIRONMENT NH_SANITIZED=1)
 endif()

@@ -313,9 +313,15 @@ int nh_contact_solve_static(nh_contact *c, nh_system *sys, const nh_integrator *
     for (int i = 0; i < n; i++) pred[i] = u[i] - u_iter[i];
     if (c->skull && redos < NH_STATIC_REDOS && nh_skull_missed(c->skull, m, u) > NH_STATIC_MISSED) {
       /* a point went through the skull without its row: solve this
-       * iteration again from its start, the point's approach now known */
+       * iteration again from its start, the point's approach now known
+       * (the increment, kept past the state's load, which holds the
+       * predictor of the iteration's start: without it every redo
+       * repeated the iteration unchanged) */
       memcpy(u, u_iter, sizeof(double) * (size_t)n);
+      memcpy(u_iter, pred, sizeof(double) * (size_t)n);
       if ((rc = nh_contact_state_load(c, saved, saved_size))) break;
+      pred = c->du_last;
+      memcpy(pred, u_iter, sizeof(double) * (size_t)n);
       nh_tools_stop(c);
       redos++, iter--;
       continue;
