@@ -14,10 +14,10 @@ the shift, and the cannula's recorded forces must be zero.
 Found (session 28): the quasi-static loop's redo of an iteration that
 pushed skull points through the skull without rows reloaded the contact
 state, predictor included, so every redo repeated the iteration: the
-first iterate of step 1 moved the brain by 7 m, the recovery met the
-cannula's tip, and the runs with the tool converged, after splitting the
-step, to another equilibrium 0.59 and 1.33 mm away (0.76 mm on 10 x 12 x 9,
-2.8 mm on 14 x 17 x 13). Without the tool the same bad first iterate was
+first iterate of step 1 (0.23 m RMS per node on 10 x 12 x 9; 2 mm now)
+stood, the recovery met the cannula's tip, and the runs with the tool
+converged, after splitting the step, to another equilibrium 0.59 and 1.33
+mm away (0.76 mm on 10 x 12 x 9, 2.8 mm on 14 x 17 x 13). Without the tool the same bad first iterate was
 recovered from (18 iterations at step 1 on 10 x 12 x 9; 11 now).
 """
 import math
