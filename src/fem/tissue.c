@@ -276,6 +276,19 @@ const nh_tissue_cut *nh_tissue_cell_cut(const nh_tissue *t, int c) {
   return k >= 0 ? t->cut + k : NULL;
 }
 
+/* ∫ N_a dV over the tissue of the box leaf [lo, hi] above the plane
+ * {p, up} (the half-space as a set of the cut-cell quadrature), on the
+ * lattice `depth`. */
+static int nh_part_above(const nh_domain *d, const double lo[3], const double hi[3], int depth,
+                         const double *plane, double out[8]) {
+  const double half[6] = {plane[0], plane[1], plane[2], -plane[3], -plane[4], -plane[5]};
+  nh_cut_moments mom;
+  double w[27];
+  NH_TRY(nh_cut_domain_cell_at(d, depth, lo, hi, NULL, half, &mom, w));
+  nh_cut_shape_integrals(w, out, NULL);
+  return NH_OK;
+}
+
 /* nh_tissue_corner_masses with the cut data `cut` (NULL: not cut) of the
  * lattice `depth`: the geometry term compares depth NH_CUT_DEPTH with + 1. */
 static int nh_corner_masses_at(const nh_tissue *t, int c, const nh_tissue_cut *cut, int depth,
@@ -302,11 +315,7 @@ static int nh_corner_masses_at(const nh_tissue *t, int c, const nh_tissue_cut *c
   if (above == 0) {
     for (int a = 0; a < 8; a++) mc[a] = 0.0;
   } else if (above < 8 && box) { /* the level cuts an immersed box cell: tissue ∩ half-space */
-    const double half[6] = {plane[0], plane[1], plane[2], -plane[3], -plane[4], -plane[5]};
-    nh_cut_moments mom;
-    double w[27];
-    NH_TRY(nh_cut_domain_cell_at(&m->domain, depth, lo, hi, NULL, half, &mom, w));
-    nh_cut_shape_integrals(w, mc, NULL);
+    NH_TRY(nh_part_above(&m->domain, lo, hi, depth, plane, mc));
     for (int a = 0; a < 8; a++) mc[a] *= rho;
   } else {
     double f = above < 8 ? nh_mesh_cell_fraction_above(m, c, plane, plane + 3) : 1.0;
@@ -572,9 +581,6 @@ const double *nh_tissue_gbar(const nh_tissue *t, int c) {
 
 /* ---- cut cells (docs/theory.md §5c) ---- */
 
-/* The element data of a cut cell from the fitted weights w of its tissue
- * part: K0 = (1 − α) Σ_q w_q BᵀDB(ξ_q) + α K_cell, the mean gradients and
- * the centroid's gradients over the tissue part, ∫ N_a. */
 /* e->above of the cut entry e (its lo, hi, corner set) on the lattice of
  * `depth`: NaN without a drainage plane. */
 static int nh_cut_above(const nh_tissue *t, nh_tissue_cut *e, int depth) {
@@ -594,14 +600,13 @@ static int nh_cut_above(const nh_tissue *t, nh_tissue_cut *e, int depth) {
     for (int a = 0; a < 8; a++) e->above[a] = above ? e->corner[a] : 0.0;
     return NH_OK;
   }
-  const double half[6] = {p[0], p[1], p[2], -p[3], -p[4], -p[5]};
-  nh_cut_moments mom;
-  double w[27];
-  NH_TRY(nh_cut_domain_cell_at(&t->mesh->domain, depth, e->lo, e->hi, NULL, half, &mom, w));
-  nh_cut_shape_integrals(w, e->above, NULL);
-  return NH_OK;
+  return nh_part_above(&t->mesh->domain, e->lo, e->hi, depth, p, e->above);
 }
 
+/* The element data of a cut cell from the fitted weights w of its tissue
+ * part (on the lattice `depth`): K0 = (1 − α) Σ_q w_q BᵀDB(ξ_q) + α K_cell,
+ * the mean gradients and the centroid's gradients over the tissue part,
+ * ∫ N_a, and ∫ N_a above the drainage plane. */
 static int nh_cut_data(const nh_tissue *t, int c, const double Xe[24], const nh_cut_moments *mom,
                        const double w[27], int depth, nh_tissue_cut *e) {
   double lambda, mu, xi[81], Kf[576], G[24], Gb[24], v;
