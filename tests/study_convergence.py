@@ -16,6 +16,13 @@ Expected values from closed forms, not from the tool:
     (40×48×36, h = 130/36) whose steps.csv marks step 2 of 3 unsolved is a row
     "unsolved (Newton)", kept in the triples (its triple names it) and named
     in the verdict.
+ 5. --estimate 9 (the goal estimate on the grids with h ≥ 9 mm): runs whose STN
+    moves by a_i (2 − 0.01 h) mm at step i (a_i = i/3), exactly linear in h, so
+    the ladder's reference is a_i · 2 mm with a zero bar and the true error
+    a_i · 0.01 h mm; error_estimate written as given multiples of it (1.5, 0.4,
+    1 on 10×12×9; 3, 1, 0.5 on 14×17×13; none on the finer grids): the table
+    has those six effectivities, every step judged, and the summary counts 4
+    of 6 in [0.5, 2], median 1.00, range 0.40–3.00.
  4. nested(): 10×12×9 → 20×24×18 and 14×17×13 → 28×34×26 are nested (factor
     2 on every axis), 10×12×9 → 20×25×19 and 10×12×9 → 20×24×27 are not; the
     report lists those two nested pairs.
@@ -71,6 +78,79 @@ def fake_run(d, h, ok=True, unsolved=False):
         json.dump(info, j)
 
 
+def fake_linear_run(d, h, ratios):
+    """A run folder of 3 ok steps whose STN moves by a_i (2 − 0.01 h) mm in −y at step i
+    (a_i = i/3), with error_estimate = ratios[i − 1] × the true error a_i · 0.01 h mm (no
+    column without ratios)."""
+    os.makedirs(d)
+    with open(os.path.join(d, "steps.csv"), "w") as s:
+        s.write("step,time,dofs,cells,t_step,inverted,residual,unsolved\n")
+        for i in range(1, 4):
+            s.write("%d,%g,1000,200,0.5,0,1e-9,0\n" % (i, 0.05 * i))
+    with open(os.path.join(d, "targets.csv"), "w") as t, \
+            open(os.path.join(d, "probes.csv"), "w") as p:
+        t.write("step,time,name,x,y,z,distance%s\n" % (",error_estimate" if ratios else ""))
+        p.write("step,time,name,x,y,z,ux,uy,uz\n")
+        for i in range(0, 4):
+            a = i / 3
+            est = ",%.17g" % (ratios[i - 1] * a * 1e-5 * h) if ratios and i else \
+                (",nan" if ratios else "")
+            t.write("%d,%g,STN,0.012,%.17g,-0.01,0.09%s\n"
+                    % (i, 0.05 * i, -0.005 - a * 1e-3 * (2 - 0.01 * h), est))
+            p.write("%d,%g,convergence-cortex,0,0,0,0,0,%.17g\n" % (i, 0.05 * i, a * 0.006))
+    with open(os.path.join(d, "run.json"), "w") as j:
+        json.dump({"cmd": [], "wall": 1.0, "returncode": 0}, j)
+
+
+def effectivity_block():
+    """Item 5: the effectivity table and summary of --estimate 9 on synthetic runs."""
+    given = {"10x12x9": (130 / 9, (1.5, 0.4, 1.0)), "14x17x13": (10.0, (3.0, 1.0, 0.5)),
+             "20x24x18": (130 / 18, None), "28x34x26": (5.0, None)}
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, (h, ratios) in given.items():
+            fake_linear_run(os.path.join(tmp, name), h, ratios)
+        p = subprocess.run([sys.executable, os.path.join(SRC, "tools", "study.py"),
+                            "convergence", os.path.join(SRC, "cases", "dbs", "dbs.yaml"),
+                            "--binary", BIN, "--grids", ",".join(given), "--out", tmp,
+                            "--reuse", "--estimate", "9"], capture_output=True, text=True)
+        if p.returncode != 0:
+            print("FAIL: the study with --estimate exited %d: %s" % (p.returncode, p.stderr),
+                  file=sys.stderr)
+            failures.append("estimate")
+            return
+        rep = open(os.path.join(tmp, "report.md")).read()
+        if not os.path.exists(os.path.join(tmp, "img", "convergence-%s-effectivity.png"
+                                           % os.path.basename(tmp))):
+            failures.append("effectivity plot")
+            print("FAIL: no effectivity plot", file=sys.stderr)
+    got = {}
+    for line in rep.splitlines():
+        c = [x.strip() for x in line.strip("|").split("|")]
+        if len(c) == 7 and re.fullmatch(r"\d+x\d+x\d+", c[0]) and c[1].isdigit():
+            got[(c[0], int(c[1]))] = c
+    want = {(n, i): (ratios[i - 1], i / 3 * 0.01 * h) for n, (h, ratios) in given.items()
+            if ratios for i in (1, 2, 3)}
+    if set(got) != set(want):
+        failures.append("effectivity rows")
+        print("FAIL: effectivity rows %s, expected %s" % (sorted(got), sorted(want)),
+              file=sys.stderr)
+        return
+    for key, (ratio, err) in want.items():
+        c = got[key]
+        check("%s step %d: |x − x∞| mm" % key, float(c[2]), err, 6e-5)
+        check("%s step %d: bar mm" % key, float(c[3]), 0.0, 6e-5)
+        check("%s step %d: effectivity" % key, float(c[5]), ratio, 0.006)
+        if c[6] != "yes":
+            failures.append("judged")
+            print("FAIL: %s step %d not judged (zero bar)" % key, file=sys.stderr)
+    summary = "median 1.00, 0.40–3.00, 4 in [0.5, 2]. Judged (true error > 3 bars): 6 " \
+        "pairs, 4 of them in [0.5, 2]"
+    if summary not in rep:
+        failures.append("effectivity summary")
+        print("FAIL: the summary does not read '%s':\n%s" % (summary, rep), file=sys.stderr)
+
+
+effectivity_block()
 grids = {"10x12x9": 130 / 9, "14x17x13": 10.0, "17x21x16": 140 / 17, "20x24x18": 130 / 18,
          "28x34x26": 5.0, "40x48x36": 130 / 36}
 with tempfile.TemporaryDirectory() as tmp:

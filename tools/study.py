@@ -13,6 +13,7 @@ steps.csv / probes.csv / targets.csv and writes plots and a Markdown report.
     tools/study.py sweep SPEC.yaml [--out DIR] [--fresh] [--workers N | --scheduler ...]
     tools/study.py plan SPEC.yaml  [the same]: one `needlehex plan` per variant
     tools/study.py convergence SCENE --grids NXxNYxNZ,... [--set KEY=VAL ...] [--out DIR]
+                           [--end S] [--target NAME] [--cortex X,Y,Z] [--estimate MM]
 
 This is the command line; each study is one module, named in STUDIES below,
 whose docstring says what it runs and writes: study_phantom.py (docs/phantom.md),

@@ -29,11 +29,24 @@ extrapolated value (tools/richardson.py: f(h) = f∞ − C h^p through the three
 differences change sign or no p in (0.05, 6) fits); and the change between
 every two grids of which one refines the other (nested pairs).
 
+--estimate MM adds the goal-oriented estimate (adapt.estimator=goal with
+adapt.max_level=0: estimated at every step, never refined) on the grids with
+h ≥ MM, and judges it against the ladder: per step the least-squares line
+x(h) = x∞ + a h of the target's position through every grid that ran
+(richardson.py, ladder_reference; its bar twice x∞'s standard error, the
+components' bars combined), the true error |x_h − x∞| of each estimated grid,
+its error_estimate (targets.csv) and their ratio, the effectivity. A step is
+judged (issue 25's goal: effectivity in [0.5, 2]) where the true error
+exceeds 3 × the bar; the others are tabulated, not judged. The grids'
+shifts and the triples are those of the runs with the estimate, which leaves
+the solution unchanged (no refinement).
+
 Output (TAG: the scene's name and the values of the --set overrides, e.g.
 dbs-skull-integrated): OUT/GRID/ (one run each; OUT by default
 out/study/convergence-TAG), OUT/report.md (also printed), and in OUT/img (or
 --img DIR, docs/img with --docs) a PNG named after OUT (convergence-TAG.png
-by default): the shifts against h. --reuse reports on the runs already in
+by default): the shifts against h; with --estimate, NAME-effectivity.png:
+the effectivity against h per step. --reuse reports on the runs already in
 OUT; --restart runs only the missing ones.
 """
 import os
@@ -43,14 +56,19 @@ import subprocess
 import numpy as np
 
 import study_engine as engine
-from outputs import read_points, read_steps, target_shift
-from richardson import observed
+from outputs import read_csv, read_points, read_steps, target_shift
+from richardson import ladder_reference, observed
 
 POSITIONAL = ("SCENE", "a scene file (convergence)")
 WORKERS = 1
 # the options only this study takes (tools/study.py refuses them for the others)
-OPTIONS = {"--grids": "grids", "--end": "end", "--target": "target", "--cortex": "cortex"}
+OPTIONS = {"--grids": "grids", "--end": "end", "--target": "target", "--cortex": "cortex",
+           "--estimate": "estimate"}
 GOAL = 0.02  # issue 25: three consecutive STN shifts within 2 % of their mean
+# --estimate: the goal estimate without refinement; judged where the true error > RESOLVED bars
+ESTIMATE = ["adapt.estimator=goal", "adapt.max_level=0", "adapt.every=1"]
+RESOLVED = 3.0
+BAND = (0.5, 2.0)
 
 
 def add_arguments(ap):
@@ -63,6 +81,9 @@ def add_arguments(ap):
                    help="convergence: the target whose shift is tabulated (default the first)")
     g.add_argument("--cortex", default=None, metavar="X,Y,Z",
                    help="convergence: the cortical probe (m; default in the frontal lobe)")
+    g.add_argument("--estimate", type=float, default=None, metavar="MM",
+                   help="convergence: the goal estimate on the grids with h >= MM, its "
+                   "effectivity against the ladder")
 
 
 def parse_grids(text):
@@ -138,6 +159,10 @@ def measure(d, info, target, probe):
          "stn": float("nan"), "cortex": float("nan"), "t": float(st["time"][-1]) if st else 0.0}
     if ran(r):
         r["stn"] = 1e3 * float(np.linalg.norm(target_shift(d, target)))
+        r["x"] = read_points(d, "targets.csv")[0][target][:, :3]  # per step (m)
+        r["est"] = np.array([float(t.get("error_estimate", "nan"))
+                             for t in read_csv(os.path.join(d, "targets.csv"))
+                             if t["name"] == target])
         u = read_points(d, "probes.csv")[0]
         r["cortex"] = 1e3 * float(np.linalg.norm(u[probe][-1, :3]))
     return r
@@ -162,6 +187,95 @@ def triples(rows):
             t[key + "_order"], t[key + "_inf"] = observed(h, list(f))
         out.append(t)
     return out
+
+
+def effectivity(rows):
+    """--estimate: the per-step reference of the target's position from every grid that ran
+    ok to the same number of steps (ladder_reference per component; the bar the components'
+    bars combined), and for every estimated grid and step with an estimate: the true error
+    |x − x∞|, the bar, error_estimate, their ratio and whether the step is judged (true
+    error > RESOLVED bars). None with fewer than three distinct h."""
+    L = [r for r in rows if r["status"].startswith("ok") and "x" in r]
+    n = max((len(r["x"]) for r in L), default=0)
+    L = [r for r in L if len(r["x"]) == n]
+    if len({r["h"] for r in L}) < 3:
+        return None
+    h = [r["h"] for r in L]
+    comp = [ladder_reference(h, np.array([r["x"][:, k] for r in L])) for k in range(3)]
+    ref = np.array([c[0] for c in comp]).T
+    bar = np.linalg.norm(np.array([c[1] for c in comp]).T, axis=1)
+    pairs = []
+    for r in L:
+        if not r["estimated"]:
+            continue
+        for i in range(n):
+            if not np.isfinite(r["est"][i]):
+                continue
+            err = float(np.linalg.norm(r["x"][i] - ref[i]))
+            pairs.append({"name": r["name"], "h": r["h"], "step": i, "err": err,
+                          "bar": float(bar[i]), "est": float(r["est"][i]),
+                          "eff": r["est"][i] / err if err > 0 else float("inf"),
+                          "judged": err > RESOLVED * bar[i]})
+    return {"grids": [r["name"] for r in L], "ref": ref, "bar": bar, "pairs": pairs}
+
+
+def effectivity_report(E, target):
+    """The report's lines for --estimate: one row per (grid, step), then the summary."""
+    if E is None:
+        return ["Effectivity: fewer than three grids of distinct h ran ok to the same step; "
+                "no reference."]
+    P = E["pairs"]
+    lines = ["Effectivity of the goal estimate of %s against the ladder's reference (the line "
+             "x∞ + a h per step through the %d grids that ran ok: %s); judged where |x − x∞| > "
+             "%g × the bar:" % (target, len(E["grids"]), ", ".join(E["grids"]), RESOLVED), ""]
+    lines += engine.table_head("grid", "step", "\\|x − x∞\\| mm", "bar mm", "error_estimate mm",
+                               "effectivity", "judged")
+    for q in P:
+        lines.append("| %s | %d | %.4f | %.4f | %.4f | %.2f | %s |" % (
+            q["name"], q["step"], 1e3 * q["err"], 1e3 * q["bar"], 1e3 * q["est"], q["eff"],
+            "yes" if q["judged"] else "no"))
+    lines.append("")
+    if not P:
+        lines.append("No estimated step (--estimate MM selects the grids with h ≥ MM).")
+        return lines
+    eff = np.array([q["eff"] for q in P])
+    inside = (eff >= BAND[0]) & (eff <= BAND[1])
+    J = [q for q in P if q["judged"]]
+    jin = [q for q in J if BAND[0] <= q["eff"] <= BAND[1]]
+    lines.append(
+        "Effectivity over the %d estimated (grid, step) pairs: median %.2f, %.2f–%.2f, %d in "
+        "[%g, %g]. Judged (true error > %g bars): %d pairs, %d of them in [%g, %g]%s. The "
+        "reference's bar: %.4f–%.4f mm over the estimated steps." % (
+            len(P), float(np.median(eff)), eff.min(), eff.max(), int(inside.sum()), *BAND,
+            RESOLVED, len(J), len(jin), *BAND,
+            " (median %.2f)" % float(np.median([q["eff"] for q in J])) if J else "",
+            1e3 * min(q["bar"] for q in P), 1e3 * max(q["bar"] for q in P)))
+    return lines
+
+
+def plot_effectivity(E, path, title):
+    from plotstyle import plt, save
+    fig, ax = plt.subplots(figsize=(5.6, 3.8))
+    ax.axhspan(*BAND, color="tab:green", alpha=0.12, label="[%g, %g]" % BAND)
+    steps = sorted({q["step"] for q in E["pairs"]})
+    for s in steps:
+        Q = [q for q in E["pairs"] if q["step"] == s]
+        line, = ax.plot([q["h"] for q in Q], [q["eff"] for q in Q], "o-", mfc="none", lw=1,
+                        label="step %d" % s)
+        J = [q for q in Q if q["judged"]]
+        ax.plot([q["h"] for q in J], [q["eff"] for q in J], "o", color=line.get_color())
+    ax.set_yscale("log")
+    lo, hi = ax.get_ylim()
+    ticks = [t for t in (0.05, 0.1, 0.2, 0.5, 1, 2, 3, 5, 10, 20) if lo <= t <= hi]
+    ax.set_yticks(ticks, ["%g" % t for t in ticks])
+    ax.minorticks_off()
+    ax.set_xlabel("h (mm): the longest cell edge")
+    ax.set_ylabel("effectivity: error_estimate / |x − x∞|")
+    ax.invert_xaxis()
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8, frameon=False, title="filled: judged", title_fontsize=8)
+    fig.suptitle(title, fontsize=10)
+    return save(fig, path)
 
 
 def plot(rows, path, title):
@@ -261,13 +375,18 @@ def run(a, binary):
     common = ["time.end=%g" % end, "output.every=0", "adapt.every=1000000",
               "probes=[{name: %s, point: [%.6g, %.6g, %.6g]}]" % ((probe,) + tuple(cortex))]
     grids = sorted(parse_grids(a.grids), key=lambda g: -grid_h(lo, hi, g))
+
+    def estimated(g):
+        return a.estimate is not None and grid_h(lo, hi, g) >= a.estimate - 1e-9
+
     jobs = []
     for g in grids:
         name = "%dx%dx%d" % g
         if a.only and name not in a.only:
             continue
         cmd = [binary, "run", scene, "--quiet"]
-        for s in common + ["tissue.grid=[%d,%d,%d]" % g] + a.sets:
+        for s in common + ["tissue.grid=[%d,%d,%d]" % g] + \
+                (ESTIMATE if estimated(g) else []) + a.sets:
             cmd += ["--set", s]
         # exit 1 (the simulation failed: inverted cells, Newton) is a result, a row
         jobs.append(engine.Job(name, os.path.join(out, name), cmd, (0, 1)))
@@ -280,10 +399,13 @@ def run(a, binary):
         if name not in done:
             continue
         r = measure(os.path.join(out, name), done[name], target, probe)
-        r.update(name=name, grid=g, h=grid_h(lo, hi, g))
+        r.update(name=name, grid=g, h=grid_h(lo, hi, g), estimated=estimated(g))
         rows.append(r)
     tri = triples(rows)
     lines = report(os.path.relpath(scene, engine.ROOT), a.sets, rows, tri)
+    E = effectivity(rows) if a.estimate is not None else None
+    if a.estimate is not None:
+        lines += [""] + effectivity_report(E, target)
     lines.append("")
     lines.append("Target %s; cortical probe at [%s] m; %.0f s of wall time in the runs above "
                  "(the sum of their run.json; a shared machine)." % (
@@ -292,5 +414,8 @@ def run(a, binary):
     name = os.path.basename(os.path.normpath(out))  # the plot is named after the folder
     name = name if name.startswith("convergence") else "convergence-" + name
     plot(rows, os.path.join(img, name + ".png"), "%s %s" % (base, " ".join(a.sets)))
+    if E is not None and E["pairs"]:
+        plot_effectivity(E, os.path.join(img, name + "-effectivity.png"),
+                         "%s: goal estimate of %s, h ≥ %g mm" % (base, target, a.estimate))
     engine.write_report(out, lines)
     return engine.report_failures(failed)
