@@ -341,6 +341,49 @@ static int nh_plan_command(nh_args *a) {
   return rc ? nh_fail(rc) : 0;
 }
 
+/* The smallest size of a fixed region, m: a sphere's diameter, a cylinder's diameter or
+ * length, a box's shortest edge within the domain's bounding box; 0 for a label. */
+static double nh_region_smallest(const nh_region *g, const nh_domain *d) {
+  if (g->kind == NH_REGION_SPHERE) return 2.0 * g->radius;
+  if (g->kind == NH_REGION_CYLINDER) {
+    double len = 0.0;
+    for (int k = 0; k < 3; k++) len += (g->end[k] - g->start[k]) * (g->end[k] - g->start[k]);
+    return fmin(2.0 * g->radius, sqrt(len));
+  }
+  if (g->kind != NH_REGION_BOX) return 0.0;
+  double size = INFINITY;
+  for (int k = 0; k < 3; k++)
+    size = fmin(size, fmin(g->max[k], d->max[k]) - fmax(g->min[k], d->min[k]));
+  return fmax(size, 0.0);
+}
+
+/* check's note on each fixed region of an immersed domain whose cells do not resolve it: a
+ * leaf that meets it has an edge above 1/8 of its smallest size (docs/theory.md §5c, "With the
+ * tie resolved"): the region then ties the whole cells it meets, and its hold changes with
+ * the grid. */
+static void nh_check_print_ties(const nh_scene *sc, const nh_mesh *m) {
+  if (m->domain.kind == NH_DOMAIN_BOX) return;
+  for (int r = 0; r < sc->tissue.n_fixed; r++) {
+    const nh_region *g = &sc->tissue.fixed[r];
+    double size = nh_region_smallest(g, &m->domain), edge = 0.0, Xe[24];
+    if (!(size > 0.0)) continue;
+    for (int l = 0; l < m->n_leaves; l++) {
+      if (!nh_mesh_cell_coarser_at(m, m->leaves[l], g, size / 8.0)) continue;
+      nh_mesh_cell_coords(m, m->X, m->leaves[l], Xe);
+      for (int k = 0; k < 3; k++) {
+        double lo = Xe[k], hi = Xe[k];
+        for (int a = 1; a < 8; a++) lo = fmin(lo, Xe[3 * a + k]), hi = fmax(hi, Xe[3 * a + k]);
+        edge = fmax(edge, hi - lo);
+      }
+    }
+    if (edge > 0.0)
+      printf("note: tissue.fixed.%d, %.4g m across at its smallest, meets cells of edges up to "
+             "%.4g m: its tie holds their nodes, so its hold changes with the grid; "
+             "tissue.fixed.%d.refine: %.2g (1/8 of its size) resolves it (docs/theory.md §5c)\n",
+             r, size, edge, r, size / 8.0);
+  }
+}
+
 /* check's summary: the scene, the mesh built and the domain it covers. */
 static int nh_check_print(const nh_scene *scene, nh_sim *sim) {
   const nh_mesh *m = nh_sim_mesh(sim);
@@ -354,6 +397,7 @@ static int nh_check_print(const nh_scene *scene, nh_sim *sim) {
          "volume %.6g m^3 (sum of fill x cell volume) vs %.6g m^3 (the shape's)\n",
          nh_domain_name(d), d->max[0] - d->min[0], d->max[1] - d->min[1], d->max[2] - d->min[2],
          kept, lattice, NH_FILL_MIN, nh_mesh_fill_volume(m), nh_domain_volume(d));
+  nh_check_print_ties(scene, m);
   if (d->labels) NH_TRY(nh_image_print(d->labels, stdout));
   if (d->surface) nh_surface_print(d->surface, stdout);
   return NH_OK;

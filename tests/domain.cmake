@@ -69,3 +69,6 @@ set_tests_properties(test_fcm_conditioning PROPERTIES LABELS "unit;verify"
 add_test(NAME test_fcm_tie COMMAND test_fcm ${CMAKE_CURRENT_BINARY_DIR} tie-ladder)
 set_tests_properties(test_fcm_tie PROPERTIES LABELS "verify;slow"
   ENVIRONMENT "NH_SOURCE_DIR=${PROJECT_SOURCE_DIR}")
+# `needlehex check` notes each fixed region of an immersed domain that its cells do not resolve
+# (an edge above 1/8 of its smallest size) with the refine that does (tests/check_ties.py).
+nh_add_py_test(check_ties unit check_ties.py)
