@@ -242,7 +242,10 @@ def main():
     refine = None
     if "--tie-refine" in args:
         i = args.index("--tie-refine")
-        refine = float(args[i + 1]) * 1e-3 if i + 1 < len(args) else None
+        try:
+            refine = float(args[i + 1]) * 1e-3
+        except (IndexError, ValueError):
+            refine = None
         del args[i:i + 2]
     flags = [a for a in args if a.startswith("--")]
     if set(flags) - {"--ellipsoid", "--mask"} or (refine is not None and not refine > 0) or \

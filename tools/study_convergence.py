@@ -32,8 +32,8 @@ every two grids of which one refines the other (nested pairs).
 --estimate MM adds the goal-oriented estimate (adapt.estimator=goal with
 adapt.max_level=0: estimated at every step, never refined) on the grids with
 h ≥ MM, and judges it against the ladder: per step the least-squares line
-x(h) = x∞ + a h of the target's position through every grid that ran
-(richardson.py, ladder_reference; its bar twice x∞'s standard error, the
+x(h) = x∞ + a h of the target's position through every grid that ran ok
+to the same number of steps (richardson.py, ladder_reference; its bar twice x∞'s standard error, the
 components' bars combined), the true error |x_h − x∞| of each estimated grid,
 its error_estimate (targets.csv) and their ratio, the effectivity. A step is
 judged (issue 25's goal: effectivity in [0.5, 2]) where the true error
