@@ -9,8 +9,8 @@ its 10 x 12 x 8 grid over the 140 x 170 x 130 mm box (cells of 14, 14.17,
 16.25 mm): the brainstem, a cylinder of radius 15 mm and length 20 mm, is
 20 mm across at its smallest (refine 2.5 mm); the two spheres of radius 8
 mm are 16 mm across (refine 2 mm); every region meets cells of 16.25 mm.
-With tissue.fixed.0.refine = 0.0025 the brainstem's note goes and the
-spheres' stay; with all three refined there is none; a box domain's
+With tissue.fixed.0.refine = 0.0025 the brainstem's note goes, its line
+in the summary says it is refined to 0.0025 m, and the spheres' notes stay; with all three refined there is none; a box domain's
 fixed regions (cases/cantilever.yaml) get none (its nodes are tied, not
 a cut cell's sub-region).
 """
@@ -37,6 +37,9 @@ def notes(scene, sets=()):
     if p.returncode != 0:
         fail("check %s %s: exit %d: %s" % (scene, " ".join(sets), p.returncode, p.stderr))
         return {}
+    if "tissue.fixed.0.refine=0.0025" in sets and \
+            "radius 0.015 m, its cells refined to edges <= 0.0025 m before" not in p.stdout:
+        fail("check with %s: the brainstem's line does not say it is refined" % " ".join(sets))
     return {int(m.group(1)): m for m in NOTE.finditer(p.stdout)}
 
 

@@ -186,6 +186,8 @@ static void print_regions(FILE *f, const nh_scene *s) {
               fx->displacement[2]);
     if (fx->schedule.n > 0)
       fprintf(f, ", schedule of %d point%s", fx->schedule.n, fx->schedule.n == 1 ? "" : "s");
+    if (fx->refine > 0.0)
+      fprintf(f, ", its cells refined to edges <= %g m before the first step", fx->refine);
     fprintf(f, "\n");
   }
   fprintf(f, "loads     %d\n", s->tissue.n_loads);
