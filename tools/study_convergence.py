@@ -258,12 +258,24 @@ def plot_effectivity(E, path, title):
     fig, ax = plt.subplots(figsize=(5.6, 3.8))
     ax.axhspan(*BAND, color="tab:green", alpha=0.12, label="[%g, %g]" % BAND)
     steps = sorted({q["step"] for q in E["pairs"]})
-    for s in steps:
-        Q = [q for q in E["pairs"] if q["step"] == s]
-        line, = ax.plot([q["h"] for q in Q], [q["eff"] for q in Q], "o-", mfc="none", lw=1,
-                        label="step %d" % s)
-        J = [q for q in Q if q["judged"]]
-        ax.plot([q["h"] for q in J], [q["eff"] for q in J], "o", color=line.get_color())
+    if len(steps) <= 8:  # one line per step
+        for s in steps:
+            Q = [q for q in E["pairs"] if q["step"] == s]
+            line, = ax.plot([q["h"] for q in Q], [q["eff"] for q in Q], "o-", mfc="none", lw=1,
+                            label="step %d" % s)
+            J = [q for q in Q if q["judged"]]
+            ax.plot([q["h"] for q in J], [q["eff"] for q in J], "o", color=line.get_color())
+    else:  # every step a dot, the judged ones filled, the median per grid
+        P = E["pairs"]
+        ax.plot([q["h"] for q in P], [q["eff"] for q in P], ".", color="0.6", ms=3,
+                label="every step (%d)" % len(steps))
+        J = [q for q in P if q["judged"]]
+        if J:
+            ax.plot([q["h"] for q in J], [q["eff"] for q in J], "o", color="tab:red",
+                    label="judged")
+        hs = sorted({q["h"] for q in P}, reverse=True)
+        ax.plot(hs, [np.median([q["eff"] for q in P if q["h"] == h]) for h in hs], "s-",
+                color="tab:blue", label="median per grid")
     ax.set_yscale("log")
     lo, hi = ax.get_ylim()
     ticks = [t for t in (0.05, 0.1, 0.2, 0.5, 1, 2, 3, 5, 10, 20) if lo <= t <= hi]
@@ -273,7 +285,8 @@ def plot_effectivity(E, path, title):
     ax.set_ylabel("effectivity: error_estimate / |x − x∞|")
     ax.invert_xaxis()
     ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=8, frameon=False, title="filled: judged", title_fontsize=8)
+    ax.legend(fontsize=8, frameon=False, title="filled: judged" if len(steps) <= 8 else None,
+              title_fontsize=8)
     fig.suptitle(title, fontsize=10)
     return save(fig, path)
 
@@ -361,7 +374,9 @@ def run(a, binary):
     scene = os.path.abspath(a.spec)
     base = os.path.splitext(os.path.basename(scene))[0]
     out = engine.out_dir(a, "convergence-" + base)  # with the overrides' values
-    lo, hi, first = scene_box(binary, scene, a.sets)
+    # checked as the estimated grids run it (a key of the goal estimate, adapt.memory, is
+    # refused without adapt.estimator=goal: with --estimate 0 every grid takes it)
+    lo, hi, first = scene_box(binary, scene, (ESTIMATE if a.estimate is not None else []) + a.sets)
     target = a.target or first
     if target is None:
         raise SystemExit("%s has no target: the STN shift needs one (--target)" % scene)
