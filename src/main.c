@@ -359,8 +359,8 @@ static double nh_region_smallest(const nh_region *g, const nh_domain *d) {
 
 /* check's note on each fixed region of an immersed domain whose cells do not resolve it: a
  * leaf that meets it has an edge above 1/8 of its smallest size (docs/theory.md §5c, "With the
- * tie resolved"): the region then ties the whole cells it meets, and its hold changes with
- * the grid. */
+ * tie resolved"): its tie then holds the nodes of the cells it meets, and its hold changes
+ * with the grid. */
 static void nh_check_print_ties(const nh_scene *sc, const nh_mesh *m) {
   if (m->domain.kind == NH_DOMAIN_BOX) return;
   for (int r = 0; r < sc->tissue.n_fixed; r++) {
