@@ -341,22 +341,6 @@ static int nh_plan_command(nh_args *a) {
   return rc ? nh_fail(rc) : 0;
 }
 
-/* The smallest size of a fixed region, m: a sphere's diameter, a cylinder's diameter or
- * length, a box's shortest edge within the domain's bounding box; 0 for a label. */
-static double nh_region_smallest(const nh_region *g, const nh_domain *d) {
-  if (g->kind == NH_REGION_SPHERE) return 2.0 * g->radius;
-  if (g->kind == NH_REGION_CYLINDER) {
-    double len = 0.0;
-    for (int k = 0; k < 3; k++) len += (g->end[k] - g->start[k]) * (g->end[k] - g->start[k]);
-    return fmin(2.0 * g->radius, sqrt(len));
-  }
-  if (g->kind != NH_REGION_BOX) return 0.0;
-  double size = INFINITY;
-  for (int k = 0; k < 3; k++)
-    size = fmin(size, fmin(g->max[k], d->max[k]) - fmax(g->min[k], d->min[k]));
-  return fmax(size, 0.0);
-}
-
 /* check's note on each fixed region of an immersed domain whose cells do not resolve it: a
  * leaf that meets it has an edge above 1/8 of its smallest size (docs/theory.md §5c, "With the
  * tie resolved"): its tie then holds the nodes of the cells it meets, and its hold changes
@@ -365,8 +349,14 @@ static void nh_check_print_ties(const nh_scene *sc, const nh_mesh *m) {
   if (m->domain.kind == NH_DOMAIN_BOX) return;
   for (int r = 0; r < sc->tissue.n_fixed; r++) {
     const nh_region *g = &sc->tissue.fixed[r];
-    double size = nh_region_smallest(g, &m->domain), edge = 0.0, Xe[24];
-    if (!(size > 0.0)) continue;
+    /* its smallest size (twice nh_region_size), a box's within the domain's box */
+    nh_region clip = *g;
+    for (int k = 0; k < 3 && g->kind == NH_REGION_BOX; k++) {
+      clip.min[k] = fmax(g->min[k], m->domain.min[k]);
+      clip.max[k] = fmin(g->max[k], m->domain.max[k]);
+    }
+    double size = 2.0 * nh_region_size(&clip), edge = 0.0, Xe[24];
+    if (!(size > 0.0) || !isfinite(size)) continue; /* a label region has no size */
     for (int l = 0; l < m->n_leaves; l++) {
       if (!nh_mesh_cell_coarser_at(m, m->leaves[l], g, size / 8.0)) continue;
       nh_mesh_cell_coords(m, m->X, m->leaves[l], Xe);

@@ -56,7 +56,7 @@ import subprocess
 import numpy as np
 
 import study_engine as engine
-from outputs import read_csv, read_points, read_steps, target_shift
+from outputs import read_csv, read_points, read_steps
 from richardson import ladder_reference, observed
 
 POSITIONAL = ("SCENE", "a scene file (convergence)")
@@ -158,8 +158,8 @@ def measure(d, info, target, probe):
          "skull": int(st["skull_contacts"][-1]) if st and "skull_contacts" in st else 0,
          "stn": float("nan"), "cortex": float("nan"), "t": float(st["time"][-1]) if st else 0.0}
     if ran(r):
-        r["stn"] = 1e3 * float(np.linalg.norm(target_shift(d, target)))
         r["x"] = read_points(d, "targets.csv")[0][target][:, :3]  # per step (m)
+        r["stn"] = 1e3 * float(np.linalg.norm(r["x"][-1] - r["x"][0]))  # |x(end) − X|
         r["est"] = np.array([float(t.get("error_estimate", "nan"))
                              for t in read_csv(os.path.join(d, "targets.csv"))
                              if t["name"] == target])
