@@ -24,10 +24,11 @@ def fail(msg):
     print("FAIL:", msg, file=sys.stderr)
 
 
-def run_process(scene, out, sets=()):
-    """needlehex run SCENE --out OUT (--set S for each of sets): the finished
+def run_process(scene, out, sets=(), quiet=True):
+    """needlehex run SCENE --out OUT (--set S for each of sets; --quiet unless
+    quiet is false, which keeps the log's notes in stderr): the finished
     process (returncode, stdout, stderr) and the CPU seconds it used."""
-    cmd = [BIN, "run", scene, "--out", out, "--overwrite", "--quiet"]
+    cmd = [BIN, "run", scene, "--out", out, "--overwrite"] + (["--quiet"] if quiet else [])
     for s in sets:
         cmd += ["--set", s]
     before = resource.getrusage(resource.RUSAGE_CHILDREN)

@@ -48,6 +48,19 @@ diagnosed"), instead of 30 iterations in up to 16 load steps.
    steps come within 2e-8 of the tolerance 1e-8 but not to it in 30
    iterations; before, every attempt stayed near 1 and the rule's message
    was the run's error.)
+6. The quasi-static step with tools runs its own Newton (the coupled
+   loop, nh_contact_solve_static); while no constraint row is active the
+   tissue's A alone holds the body, and the 3-iteration rule applies as in
+   the static Newton. The small tie of part 2 with a needle that stays
+   outside the brain (its tip 2 cm above it, moving 5 mm in the step): no
+   row, the same Newton, so the run must exit 1 after 3 iterations with
+   "quasi-static Newton with constraints makes no progress", the same
+   cause (weakly held for its load) and the region named, within 2 s of
+   CPU, and without solving the step again in load steps (a support too
+   soft for its load is final: the log has no "solving it again"). And the
+   rule does not stop a hard Newton that converges: the cantilever of part
+   3 at 0.2 N with a needle above it converges (exit 0, residual <= 1e-8,
+   more than 3 iterations, no split).
 The small tie's message names the region that holds the body
 (tissue.fixed[0], one leaf cell).
 Silent on success; exit 1 on failure.
@@ -159,5 +172,43 @@ check(p.returncode == 1, "soft brain on the skull: exit %d, expected 1: %s"
 check_long_rule("soft brain on the skull", "quasi-static Newton with constraints", p.stderr)
 check(re.search(r"constraint rows at that node: (none|\d+ of the skull)", p.stderr) is not None,
       "soft brain on the skull: the rows at the node are not named:\n" + p.stderr)
+
+
+
+def needle(base, speed, until):
+    """A needle that stays outside the tissue in the step (part 6)."""
+    return ("tools=[{name: needle, length: 0.05, radius: 0.0005, elements: 8, material: "
+            "{young: 2.0e11, poisson: 0.3, density: 7800}, base: %s, direction: [0, 0, -1], "
+            "motion: [{until: %g, speed: %g}]}]" % (base, until, speed))
+
+
+# Not quiet: a split would be in the log ("solving it again").
+p, cpu = run_process(os.path.join(SRC, "tests/data/brain.yaml"), os.path.join(WORK, "small_tie_tool"),
+                     ["tissue.material.young=1000",
+                      "tissue.fixed=[{sphere: {center: [0.04, 0.03, 0.05], radius: 0.002}}]",
+                      needle("[0.01, -0.02, 0.15]", 0.005, 10.0)], quiet=False)
+err = p.stderr
+check(p.returncode == 1, "small tie with a tool: exit %d, expected 1: %s" % (p.returncode, err))
+check(cpu <= CPU_BOUND, "small tie with a tool: %.2f s of CPU, expected <= %g" % (cpu, CPU_BOUND))
+m = re.search(r"quasi-static Newton with constraints makes no progress: relative residual "
+              r"([0-9.e+, -]+) in (\d+) iterations", err)
+check(m is not None and len(m.group(1).split(",")) == 4 and m.group(2) == "3",
+      "small tie with a tool: no 'makes no progress' with 4 residuals after 3 iterations:\n" + err)
+check("Likely cause: the body is only weakly held" in err
+      and "the fixed regions tie tissue.fixed[0]: 1 leaf cell" in err
+      and re.search(r"the last increment's largest entry, [0-9.e+-]+ m, is at node \d+", err),
+      "small tie with a tool: the message does not say where, why and which region:\n" + err)
+check("solving it again" not in err,
+      "small tie with a tool: a final cause was solved again in load steps:\n" + err)
+
+tables = run(os.path.join(SRC, "cases/cantilever.yaml"), os.path.join(WORK, "cantilever_tool"),
+             ["tissue.loads.0.force=[0,0,-0.2]", "solver.on_invalid=warn",
+              needle("[0.05, 0.005, 0.1]", 0.004, 20.0)], tables=("steps",))
+if tables:
+    row = tables["steps"][-1]
+    check(float(row["residual"]) <= 1e-8 and int(float(row["iterations"])) > 3
+          and float(row["splits"]) == 0,
+          "cantilever 0.2 N with a tool: residual %s, iterations %s, splits %s: expected "
+          "<= 1e-8, > 3, 0" % (row["residual"], row["iterations"], row["splits"]))
 
 finish()

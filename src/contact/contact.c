@@ -198,7 +198,7 @@ int nh_contact_step(nh_contact *c, nh_system *sys, const nh_integrator *in, cons
   *stats = c->solve.step;
   if (rc) {
     if (c->rows.m > 0 && c->solve.mcp.sweeps >= NH_MCP_SWEEPS) { /* above NH_MCP_ACCEPT */
-      char why[512];
+      char why[2048];
       snprintf(why, sizeof why, "%s", nh_error_message());
       return NH_ERROR(rc, "constraint solve (%d rows): %s", c->rows.m, why);
     }
@@ -273,6 +273,11 @@ int nh_contact_solve_static(nh_contact *c, nh_system *sys, const nh_integrator *
   nh_tools_stop(c);
   int rc = NH_OK, iter = 0, redos = 0, converged = 0, consistent_steps = 0;
   nh_newton_watch watch = {0}; /* the long no-progress rule */
+  /* the no-progress rule, while no constraint row has been active (the rows
+   * may hold what A's rigid modes measure as loose) */
+  nh_rigid start = {.mode = -1};
+  double history[NH_NEWTON_STALL_ITERATIONS + 1];
+  int rows_seen = 0;
   double residual = INFINITY, tool_rel = 0.0;
   for (iter = 0; iter < in->max_iterations && !rc && !converged; iter++) {
     memcpy(u_iter, u, sizeof(double) * (size_t)n);
@@ -289,6 +294,7 @@ int nh_contact_solve_static(nh_contact *c, nh_system *sys, const nh_integrator *
       if ((rc = nh_contact_state_save(c, &saved, &saved_size))) break;
     }
     if ((rc = nh_contact_begin_step(c, m, u, pred, t, h, 1.0, iter == 0))) break;
+    it.measure_supports = iter == 0;
     /* A constraint solve that stalls is accepted here whatever its
      * residual: the next iteration starts from its forces, and only the
      * last one must meet NH_MCP_ACCEPT (below). */
@@ -302,7 +308,7 @@ int nh_contact_solve_static(nh_contact *c, nh_system *sys, const nh_integrator *
     sum.corrections += c->solve.step.corrections;
     if (rc) {
       if (c->rows.m > 0 && c->solve.mcp.sweeps >= NH_MCP_SWEEPS) {
-        char why[512];
+        char why[2048];
         snprintf(why, sizeof why, "%s", nh_error_message());
         rc = NH_ERROR(rc, "quasi-static iteration %d: constraint solve (%d rows): %s", iter + 1,
                       c->rows.m, why);
@@ -339,6 +345,13 @@ int nh_contact_solve_static(nh_contact *c, nh_system *sys, const nh_integrator *
     nh_tools_stop(c);
     converged = residual <= in->tolerance && tool_rel <= in->tolerance &&
                 !(c->solve.mcp.residual > NH_MCP_ACCEPT);
+    rows_seen |= c->rows.m > 0;
+    if (iter == 0 && !rows_seen) start = c->solve.supports; /* at the step's start */
+    if (iter <= NH_NEWTON_STALL_ITERATIONS) history[iter] = fmax(residual, tool_rel);
+    if (!converged && iter == NH_NEWTON_STALL_ITERATIONS && !rows_seen &&
+        (rc = nh_newton_progress(sys, "quasi-static Newton with constraints", u_iter, pred, &start,
+                                 history, iter, &sum)))
+      break;
     /* the long no-progress rule on the larger of the two measures (tools
      * nested in a cannula converge with the tissue's residual at round-off) */
     if (!converged && nh_newton_stalled(&watch, iter, fmax(residual, tool_rel))) {

@@ -755,7 +755,7 @@ static int nh_sim_solve_static(nh_sim *s, double t_new, nh_step_stats *st) {
     *st = sum;
     if (rc != NH_ERR_NUMERIC || depth == NH_STATIC_SPLITS || one.diagnosed) return rc;
     /* back to the step's start, and again in twice as many load steps */
-    char why[512];
+    char why[2048];
     snprintf(why, sizeof why, "%s", nh_error_message());
     nh_error_clear();
     memcpy(s->u, s->u_start, sizeof(double) * 3 * (size_t)s->mesh->n_nodes);

@@ -644,6 +644,9 @@ int nh_step_coupled(nh_system *s, const nh_integrator *in, const double *f_ext, 
     w.st.step.t_assemble = nh_time_now() - t0;
     rc = nh_stop_check(); /* an assembly cut short */
   }
+  w.st.supports.mode = -1;
+  if (!rc && w.statics && in->measure_supports && w.m == 0) /* before A is factorised */
+    w.st.supports = nh_system_rigid(s, u, w.b);
   s->rows_hint = w.m; /* what an inherited factor's W₀ would cost (reuse.c) */
   if (!rc) rc = nh_system_factor_symmetric(s, in, u, NH_FACTOR_STEP, &w.st.step);
   if (!rc) rc = nh_coupled_free_solve(&w);

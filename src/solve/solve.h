@@ -211,6 +211,8 @@ typedef struct {
   int consistent_tangent;  /* quasi_static: the tissue's block is the consistent tangent's
                               symmetric part S (Cholesky; the corotational one where S is
                               indefinite), not R K₀ Rᵀ (docs/theory.md §3) */
+  int measure_supports;    /* quasi_static without rows: measure the supports at the
+                              iteration's start (nh_coupled_stats.supports) */
 } nh_integrator;
 
 /* A dynamic step whose relative residual (below) stays above this bound
@@ -431,6 +433,36 @@ typedef struct {
 /* Call at iteration it = 0, 1, … with its relative residual rel: 1 when
  * the rule ends the solve. */
 int nh_newton_stalled(nh_newton_watch *w, int it, double rel);
+/* The no-progress rule of a Newton iteration (docs/reliability.md,
+ * "Failures diagnosed"; the static Newton's, integrate.c, and the
+ * quasi-static step's while no constraint row is active, contact.c): after
+ * NH_NEWTON_STALL_ITERATIONS iterations no relative residual has fallen
+ * below NH_NEWTON_STALL times the first, and the diagnosis names a cause. */
+#define NH_NEWTON_STALL_ITERATIONS 3
+#define NH_NEWTON_STALL            0.5
+/* The supports as a Newton step's start measured them (diagnose.c): the
+ * softest rigid mode of the assembled A, the six rigid fields at
+ * displacements u restricted to the unknowns: mode 0-2 translations along
+ * x, y, z, 3-5 rotations about them (-1: no unknown), rho its Rayleigh
+ * quotient over A's mean diagonal, loose a bit per mode with rho at
+ * round-off (not held at all). */
+typedef struct {
+  int mode;
+  double rho;
+  int loose;
+  int turn_mode; /* with a load b: the rotation the linearised step turns most (-1: none) */
+  double turn;   /* its angle |rᵀb| / rᵀAr, rad (r the unit-angle rotation, best centre) */
+} nh_rigid;
+/* The no-progress rule for a Newton that runs its own iterations (the
+ * quasi-static step with tools, contact.c, while no constraint row has been
+ * active, so that A alone holds the body): rel[0..it] the relative
+ * residuals of iterations 0..it, the last at u; du (3 per node) the last
+ * increment, whose largest entry names where; start the supports at the
+ * step's start. NH_OK to go on; else the failure, its message naming
+ * `what`, and stats->diagnosed set when the cause is final (a rigid mode
+ * not held or weakly held; an inverted cell is a load step too large). */
+int nh_newton_progress(nh_system *s, const char *what, const double *u, const double *du,
+                       const nh_rigid *start, const double *rel, int it, nh_step_stats *stats);
 /* Append to msg (size bytes in all) where the nodal field f (3 per node,
  * e.g. the last Newton increment) is largest: that node, the cells around
  * it, the constraint rows there (rows may be NULL), the rigid modes of the
@@ -512,7 +544,9 @@ typedef struct {
   double t_compliance; /* s: W = J A⁻¹ Jᵀ, tissue (Algorithm 3) and tools */
   double t_mcp;        /* s: the mixed complementarity solve */
   nh_mcp_stats mcp;    /* sweeps, residual, stick/slide/open counts */
-  int w_kept; /* 1: a reused factor's corrections took the W₀ kept from an earlier step */
+  int w_kept;        /* 1: a reused factor's corrections took the W₀ kept from an earlier step */
+  nh_rigid supports; /* in->measure_supports: A's rigid modes and the load's turn at the
+                        iteration's start (mode -1: not measured) */
 } nh_coupled_stats;
 
 /* One backward-Euler step of the tissue (nh_step_dynamic's form) and the

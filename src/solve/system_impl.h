@@ -137,19 +137,9 @@ struct nh_system {
 };
 
 /* ---- where and why a solve failed (diagnose.c) ---- */
-/* The softest rigid mode of the assembled A, the six rigid fields at
- * displacements u restricted to the unknowns: mode 0-2 translations along
- * x, y, z, 3-5 rotations about them (-1: no unknown), rho its Rayleigh
- * quotient over A's mean diagonal, loose a bit per mode with rho at
- * round-off (not held at all). Uses the PCG work vectors 0 and 1. */
-typedef struct {
-  int mode;
-  double rho;
-  int loose;
-  int turn_mode; /* with a load b: the rotation the linearised step turns most (-1: none) */
-  double turn;   /* its angle |rᵀb| / rᵀAr, rad (r the unit-angle rotation, best centre) */
-} nh_rigid;
-/* b: the step's residual (NULL: turn not computed). */
+/* nh_rigid (solve.h) of the assembled A at displacements u; b: the
+ * step's residual (NULL: turn not computed). Uses the PCG work vectors 0
+ * and 1. */
 nh_rigid nh_system_rigid(nh_system *s, const double *u, const double *b);
 /* The likely causes of a failed solve, as nh_system_diagnose names them. */
 typedef enum {
