@@ -180,14 +180,16 @@ void nh_sim_external_force(const nh_sim *s, double t, double *f) {
 }
 
 /* Prescribed displacements (tissue.fixed's displacement × schedule) of the
- * fixed components at time t, set in u before the step solves: the step
- * keeps fixed DOFs at their values (docs/theory.md §5). */
-static void nh_sim_prescribe(nh_sim *s, double t) {
+ * fixed components at time t, less lag times their values at t_old (a load
+ * step from rest, nh_sim_solve_static; else lag = 0), set in u before the
+ * step solves: the step keeps fixed DOFs at their values (docs/theory.md §5). */
+static void nh_sim_prescribe(nh_sim *s, double t, double lag, double t_old) {
   const nh_scene *sc = s->scene;
   for (int i = 0; i < s->mesh->n_nodes; i++) {
     if (s->moved[i] < 0) continue;
     const nh_fix *fx = &sc->tissue.fix[s->moved[i]];
     double factor = nh_schedule_eval(&fx->schedule, t);
+    if (lag != 0.0) factor -= lag * nh_schedule_eval(&fx->schedule, t_old);
     for (int k = 0; k < 3; k++)
       if (nh_fixed_component(s->fixed, i, k)) s->u[3 * i + k] = factor * fx->displacement[k];
   }
@@ -723,23 +725,40 @@ static int nh_sim_estimate(nh_sim *s) {
 /* Static mode: a step that does not converge is solved again from its
  * start in 2, 4, … up to 2^NH_STATIC_SPLITS equal load steps (pseudo-time
  * sub-steps: loads, prescribed displacements and the tools' travel at
- * their intermediate values, the constraints' states moved on at each). */
+ * their intermediate values, the constraints' states moved on at each).
+ * A later step starts in equilibrium with the loads at its start time; the
+ * first starts from rest, which carries none, so its k-th of n load steps
+ * takes the loads and prescribed displacements at its pseudo-time less
+ * (1 − k/n) times those at the step's start: a constant load (the default
+ * schedule) is ramped, where equal pseudo-times would repeat the step. */
 #define NH_STATIC_SPLITS 4
 
 /* The quasi-static step t_new − h → t_new (docs/theory.md §3, "Quasi-static
  * Newton"; docs/interaction.md, "Quasi-static mode" with tools or a skull). */
 static int nh_sim_solve_static(nh_sim *s, double t_new, nh_step_stats *st) {
   const double t_old = t_new - s->scene->time.step;
+  const int n = 3 * s->mesh->n_nodes, from_rest = s->step == 0;
+  double *f_old = NULL; /* the first step's loads at t_old, once it is split */
+  int rc = NH_OK;
   for (int depth = 0;; depth++) {
     const int parts = 1 << depth;
     nh_integrator in = s->integrator;
     in.dt = (t_new - t_old) / parts;
     nh_step_stats sum = {0}, one = {0};
-    int rc = NH_OK;
+    if (from_rest && parts > 1 && !f_old) {
+      if (!(f_old = nh_calloc((size_t)n, sizeof(double)))) {
+        rc = NH_ERROR(NH_ERR_MEMORY, "out of memory: the loads of a split step");
+        break;
+      }
+      nh_sim_external_force(s, t_old, f_old);
+    }
     for (int k = 1; k <= parts && !rc; k++) {
       double t = k == parts ? t_new : t_old + (t_new - t_old) * k / parts;
-      nh_sim_prescribe(s, t);
+      const double lag = from_rest ? 1.0 - (double)k / parts : 0.0;
+      nh_sim_prescribe(s, t, lag, t_old);
       nh_sim_external_force(s, t, s->f_ext);
+      if (lag > 0.0)
+        for (int i = 0; i < n; i++) s->f_ext[i] -= lag * f_old[i];
       rc = s->contact ? nh_contact_solve_static(s->contact, s->system, &in, s->mesh, s->f_ext, s->u,
                                                 s->v, t, &one)
                       : nh_solve_static(s->system, &in, s->f_ext, s->u, &one);
@@ -753,16 +772,20 @@ static int nh_sim_solve_static(nh_sim *s, double t_new, nh_step_stats *st) {
     sum.t_factor_reference = sum.factorised > 0 ? sum.t_factor / sum.factorised : 0.0;
     sum.load_steps = parts;
     *st = sum;
-    if (rc != NH_ERR_NUMERIC || depth == NH_STATIC_SPLITS || one.diagnosed) return rc;
+    if (rc != NH_ERR_NUMERIC || depth == NH_STATIC_SPLITS || one.diagnosed) break;
     /* back to the step's start, and again in twice as many load steps */
     char why[2048];
     snprintf(why, sizeof why, "%s", nh_error_message());
     nh_error_clear();
-    memcpy(s->u, s->u_start, sizeof(double) * 3 * (size_t)s->mesh->n_nodes);
-    if (s->contact) NH_TRY(nh_contact_state_load(s->contact, s->tools_start, s->tools_start_size));
+    rc = NH_OK;
+    memcpy(s->u, s->u_start, sizeof(double) * (size_t)n);
+    if (s->contact && (rc = nh_contact_state_load(s->contact, s->tools_start, s->tools_start_size)))
+      break;
     nh_log_info("step %d (t = %g s): %s; solving it again in %d load steps", s->step + 1, t_new,
                 why, 2 * parts);
   }
+  free(f_old);
+  return rc;
 }
 
 /* The step's solve (dynamic, static or with tools) at time t_new. */
@@ -954,7 +977,7 @@ static int nh_sim_timing_reserve(nh_sim *s) {
  * re-solves. */
 static int nh_sim_predict(nh_sim *s, nh_sim_record *r) {
   const size_t n = 3 * (size_t)s->mesh->n_nodes;
-  nh_sim_prescribe(s, r->t_new);
+  nh_sim_prescribe(s, r->t_new, 0.0, 0.0);
   memcpy(s->u_start, s->u, sizeof(double) * n);
   memcpy(s->v_start, s->v, sizeof(double) * n);
   if (s->contact) {
