@@ -251,7 +251,7 @@ check(m is not None and len(m.group(1).split(",")) == 4 and m.group(2) == "3",
       "small tie with a tool: no 'makes no progress' with 4 residuals after 3 iterations:\n" + err)
 check("Likely cause: the body is only weakly held" in err
       and "the fixed regions tie tissue.fixed[0]: 1 leaf cell" in err
-      and re.search(r"the last increment's largest entry, [0-9.e+-]+ m, is at node \d+", err),
+      and re.search(r"the last increment; its largest entry, [0-9.e+-]+, is at node \d+", err),
       "small tie with a tool: the message does not say where, why and which region:\n" + err)
 check("solving it again" not in err,
       "small tie with a tool: a final cause was solved again in load steps:\n" + err)

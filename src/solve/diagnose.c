@@ -281,14 +281,19 @@ nh_cause nh_system_diagnose(nh_system *s, const double *u, int dof, const nh_rig
   return NH_CAUSE_NONE;
 }
 
-void nh_system_where(nh_system *s, const double *u, const double *f, const nh_rows *rows, char *msg,
-                     size_t size) {
+nh_cause nh_system_where_field(nh_system *s, const double *u, const double *f, const nh_rows *rows,
+                               const nh_rigid *rigid, char *msg, size_t size) {
   const int n = 3 * s->tissue->mesh->n_nodes;
   int worst = -1;
   for (int i = 0; i < n; i++)
     if (worst < 0 || fabs(f[i]) > fabs(f[worst])) worst = i;
   nh_diag_add(msg, size, "; its largest entry, %.3g, is", worst >= 0 ? fabs(f[worst]) : 0.0);
-  nh_system_diagnose(s, u, worst, NULL, rows, msg, size);
+  return nh_system_diagnose(s, u, worst, rigid, rows, msg, size);
+}
+
+void nh_system_where(nh_system *s, const double *u, const double *f, const nh_rows *rows, char *msg,
+                     size_t size) {
+  nh_system_where_field(s, u, f, rows, NULL, msg, size);
 }
 
 void nh_system_where_dof(nh_system *s, const double *u, int dof, const nh_rows *rows, char *msg,

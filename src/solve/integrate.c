@@ -79,23 +79,24 @@ int nh_newton_stalled(nh_newton_watch *w, int it, double rel) {
   return it - w->best_it >= NH_NEWTON_STALL_LONG;
 }
 
-/* The no-progress rule at iteration `it` (rel[0..it]: the residuals so far;
- * where, size and dof: what points at the failure, e.g. the largest
- * residual, its size with unit, and its DOF): NH_OK to go on, else the
- * failure with its message. */
-static int nh_progress_rule(nh_system *s, const char *what, const double *u, const char *where,
-                            int dof, const double *rel, int it, const nh_rigid *start,
-                            nh_step_stats *stats) {
+/* The no-progress test at iteration `it` (rel[0..it]: the residuals so
+ * far): 1 when none of rel[1..it] is below NH_NEWTON_STALL times rel[0],
+ * the message's start, naming `what`, then in msg. */
+static int nh_no_progress(const char *what, const double *rel, int it, char *msg, size_t size) {
   double best = rel[1];
   for (int k = 2; k <= it; k++) best = fmin(best, rel[k]);
-  if (best < NH_NEWTON_STALL * rel[0]) return NH_OK;
-  char msg[1536];
-  snprintf(msg, sizeof msg, "%s makes no progress: relative residual", what);
+  if (best < NH_NEWTON_STALL * rel[0]) return 0;
+  snprintf(msg, size, "%s makes no progress: relative residual", what);
   for (int k = 0; k <= it; k++)
-    snprintf(msg + strlen(msg), sizeof msg - strlen(msg), "%s %.3g", k ? "," : "", rel[k]);
-  snprintf(msg + strlen(msg), sizeof msg - strlen(msg),
-           " in %d iterations (none below %g of the first); %s", it, NH_NEWTON_STALL, where);
-  nh_cause cause = nh_system_diagnose(s, u, dof, start, NULL, msg, sizeof msg);
+    snprintf(msg + strlen(msg), size - strlen(msg), "%s %.3g", k ? "," : "", rel[k]);
+  snprintf(msg + strlen(msg), size - strlen(msg), " in %d iterations (none below %g of the first)",
+           it, NH_NEWTON_STALL);
+  return 1;
+}
+
+/* The rule's decision on the cause the diagnosis named: NH_OK to go on,
+ * else the failure with its message. */
+static int nh_no_progress_stop(nh_cause cause, const char *msg, nh_step_stats *stats) {
   if (cause != NH_CAUSE_NOT_HELD && cause != NH_CAUSE_WEAK && cause != NH_CAUSE_INVERTED)
     return NH_OK;
   /* a support missing or too soft is final; an iterate that inverted a cell
@@ -107,26 +108,18 @@ static int nh_progress_rule(nh_system *s, const char *what, const double *u, con
 /* The static Newton's rule: where is the largest entry of the residual b. */
 static int nh_static_progress(nh_system *s, const double *u, const double *b, const double *rel,
                               int it, const nh_rigid *start, nh_step_stats *stats) {
-  int worst = 0;
-  for (int i = 1; i < s->n_free; i++)
-    if (fabs(b[i]) > fabs(b[worst])) worst = i;
-  char where[96];
-  snprintf(where, sizeof where, "the largest residual, %.3g N, is",
-           s->n_free > 0 ? fabs(b[worst]) : 0.0);
-  return nh_progress_rule(s, "static Newton", u, where, s->n_free > 0 ? s->dof_of[worst] : -1, rel,
-                          it, start, stats);
+  char msg[1536];
+  if (!nh_no_progress("static Newton", rel, it, msg, sizeof msg)) return NH_OK;
+  return nh_no_progress_stop(nh_static_where(s, u, b, start, msg, sizeof msg), msg, stats);
 }
 
 int nh_newton_progress(nh_system *s, const char *what, const double *u, const double *du,
                        const nh_rigid *start, const double *rel, int it, nh_step_stats *stats) {
-  const int n = 3 * s->tissue->mesh->n_nodes;
-  int worst = 0;
-  for (int i = 1; i < n; i++)
-    if (fabs(du[i]) > fabs(du[worst])) worst = i;
-  char where[96];
-  snprintf(where, sizeof where, "the last increment's largest entry, %.3g m, is",
-           n > 0 ? fabs(du[worst]) : 0.0);
-  return nh_progress_rule(s, what, u, where, n > 0 ? worst : -1, rel, it, start, stats);
+  char msg[1536];
+  if (!nh_no_progress(what, rel, it, msg, sizeof msg)) return NH_OK;
+  snprintf(msg + strlen(msg), sizeof msg - strlen(msg), "; the last increment");
+  return nh_no_progress_stop(nh_system_where_field(s, u, du, NULL, start, msg, sizeof msg), msg,
+                             stats);
 }
 
 int nh_system_factor_symmetric(nh_system *s, const nh_integrator *in, const double *u,

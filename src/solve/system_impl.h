@@ -159,6 +159,10 @@ typedef enum {
  * work vectors 0 and 1. */
 nh_cause nh_system_diagnose(nh_system *s, const double *u, int dof, const nh_rigid *rigid,
                             const nh_rows *rows, char *buf, size_t size);
+/* nh_system_where (solve.h) with the rigid modes as measured at the step's
+ * start (rigid; NULL: of the assembled A now), returning the cause. */
+nh_cause nh_system_where_field(nh_system *s, const double *u, const double *f, const nh_rows *rows,
+                               const nh_rigid *rigid, char *msg, size_t size);
 
 /* ---- the preconditioner across a mesh change (inherit.c) ---- */
 typedef struct nh_inherited nh_inherited;
