@@ -185,8 +185,7 @@ int nh_solve_static(nh_system *s, const nh_integrator *in, const double *f_ext, 
     double t0 = nh_time_now(), f_scale;
     /* the consistent tangent once the residual is below NH_NEWTON_CONSISTENT
      * (the iterations before take the corotational one, which does not
-     * diverge from far-off starts); a step that starts below it (a later
-     * load step) takes it from its first iteration, assembled again */
+     * diverge from far-off starts) */
     const int consistent = rel <= NH_NEWTON_CONSISTENT;
     nh_system_set_tangent(s, consistent ? NH_TANGENT_CONSISTENT : NH_TANGENT_COROTATIONAL);
     if (consistent && s->n_rows == 0 && (rc = nh_system_keep_skew(s))) break;
@@ -200,10 +199,6 @@ int nh_solve_static(nh_system *s, const nh_integrator *in, const double *f_ext, 
       break;
     }
     if (rel <= in->tolerance || nh_norm(b, s->n_free) == 0.0) break;
-    if (it == 0 && !consistent && rel <= NH_NEWTON_CONSISTENT) {
-      it--; /* a start near the solution: this iteration again, consistent */
-      continue;
-    }
     if (it == 0) start = nh_system_rigid(s, u, b); /* the supports, at the step's start */
     if (it <= NH_NEWTON_STALL_ITERATIONS) history[it] = rel;
     if (it == NH_NEWTON_STALL_ITERATIONS &&
